@@ -1,0 +1,292 @@
+"""The ``cnc-interp`` command line: option parsing and error-to-exit-code mapping only.
+
+Every command hands its options to one function of a stage package; nothing here
+computes. Stage modules are imported inside the commands so that ``--help`` and
+``import cnc_interp.cli`` stay fast and never import matplotlib, numba or USB.
+
+Exit status: 0 done, 1 the plan or the device failed, 2 bad input or usage.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+
+import click
+
+from . import __version__
+from .errors import CncInterpError
+
+PLANNERS = ("vpop", "constant", "variable")
+
+
+def _emit_json(obj) -> None:
+    click.echo(json.dumps(obj, indent=2, sort_keys=True, allow_nan=False))
+
+
+def _dt_option(f):
+    return click.option("--dt", "dt_s", type=click.FloatRange(min=0, min_open=True), default=None,
+                        help="Sample period in seconds (default: the machine's).")(f)
+
+
+def _tol_option(f):
+    return click.option("--tol", "tol_mm", type=click.FloatRange(min=0), default=None,
+                        help="Maximum permissible fit error in mm (default 0.001, or the machine's).")(f)
+
+
+def _machine_option(required: bool = False):
+    def deco(f):
+        return click.option("-m", "--machine", "machine_spec", required=required, default=None,
+                            metavar="MACHINE",
+                            help="Machine: TOML file, LinuxCNC INI file or preset name "
+                                 "(see `cnc-interp machines`).")(f)
+    return deco
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="cnc-interp")
+def main() -> None:
+    """G-code in, jerk-limited axis setpoints out.
+
+    \b
+    Pipeline: parse -> fit -> plan -> CSV / MCAP, or -> FPGA frames -> USB.
+    Errors are printed as FILE:LINE:COL: error: MESSAGE.
+    """
+
+
+# -- parse --------------------------------------------------------------------
+@main.command()
+@click.argument("part", type=click.Path(allow_dash=True, dir_okay=False))
+@_machine_option()
+@click.option("--json", "as_json", is_flag=True, help="Machine-readable summary on stdout.")
+def parse(part: str, machine_spec: str | None, as_json: bool) -> None:
+    """Read PART (a file or - for stdin) and summarise its runs and nodes."""
+    from .gcode.summary import format_summary, program_summary
+    from .pipeline import load_program_for
+
+    program, _ = load_program_for(part, machine_spec, require_machine=False)
+    summary = program_summary(program)
+    if as_json:
+        _emit_json(summary)
+    else:
+        click.echo(format_summary(summary))
+
+
+# -- fit ----------------------------------------------------------------------
+@main.command()
+@click.argument("part", type=click.Path(allow_dash=True, dir_okay=False))
+@_machine_option()
+@_tol_option
+@click.option("--corner-deg", type=click.FloatRange(min=0, max=180), default=None,
+              help="Turns sharper than this split the path (default 30).")
+@click.option("-o", "--output", "out", default=None, metavar="SEGMENTS.json",
+              help="Write the fitted segments as JSON.")
+@click.option("--json", "as_json", is_flag=True, help="Machine-readable statistics on stdout.")
+def fit(part, machine_spec, tol_mm, corner_deg, out, as_json) -> None:
+    """Fit PART's tool path with G2-continuous quintic segments."""
+    from .fit.report import fit_statistics, format_statistics, write_segments_json
+    from .fit.settings import FitSettings
+    from .pipeline import fit_loaded, load_program_for
+
+    program, machine = load_program_for(part, machine_spec, require_machine=False)
+    settings = FitSettings.from_options(tol_mm=tol_mm, corner_deg=corner_deg, machine=machine)
+    result = fit_loaded(program, settings)
+    if out:
+        write_segments_json(result, out)
+    stats = fit_statistics(result)
+    if as_json:
+        _emit_json(stats)
+    else:
+        click.echo(format_statistics(stats))
+
+
+# -- plan ---------------------------------------------------------------------
+@main.command()
+@click.argument("part", type=click.Path(allow_dash=True, dir_okay=False))
+@_machine_option()
+@click.option("--planner", type=click.Choice(PLANNERS), default="vpop", show_default=True)
+@_dt_option
+@_tol_option
+@click.option("--start", "start", default=None, metavar="X=..,Y=..",
+              help="Machine position before the program (default: the machine's, else all 0).")
+@click.option("-o", "--output", "out", default="-", metavar="OUT",
+              help="OUT.csv or OUT.mcap; - (default) writes CSV to stdout.")
+@click.option("--quiet", "-q", is_flag=True, help="No progress bar and no summary on stderr.")
+@click.option("--json", "as_json", is_flag=True, help="Summary as JSON on stderr.")
+def plan(part, machine_spec, planner, dt_s, tol_mm, start, out, quiet, as_json) -> None:
+    """Plan PART into setpoints every dt for MACHINE's axes."""
+    from .pipeline import PlanOptions, run_plan
+
+    opts = PlanOptions(part=part, machine_spec=machine_spec, planner=planner, dt_s=dt_s,
+                       tol_mm=tol_mm, start=start, out=out, quiet=quiet, summary_json=as_json)
+    run_plan(opts)
+
+
+# -- machines -----------------------------------------------------------------
+@main.command()
+@click.option("--json", "as_json", is_flag=True, help="Machine-readable list.")
+def machines(as_json: bool) -> None:
+    """List the built-in machine presets and their limits."""
+    from .plan.machine_io import format_presets, preset_table
+
+    table = preset_table()
+    if as_json:
+        _emit_json(table)
+    else:
+        click.echo(format_presets(table))
+
+
+# -- verify -------------------------------------------------------------------
+@main.command()
+@click.argument("plan_file", metavar="OUT", type=click.Path(exists=True, dir_okay=False))
+@_machine_option(required=True)
+@click.option("--json", "as_json", is_flag=True, help="Machine-readable report.")
+def verify(plan_file, machine_spec, as_json) -> None:
+    """Check a CSV or MCAP plan against MACHINE's limits (exit 1 on a violation)."""
+    from .export.verify_file import verify_file
+
+    report = verify_file(plan_file, machine_spec)
+    if as_json:
+        _emit_json(report.to_dict())
+    else:
+        click.echo(report.format())
+    if not report.ok:
+        sys.exit(1)
+
+
+# -- plot ---------------------------------------------------------------------
+@main.command()
+@click.argument("plan_file", metavar="OUT", type=click.Path(exists=True, dir_okay=False))
+@_machine_option()
+@click.option("-o", "--output", "out", default=None, metavar="FIG.png",
+              help="Image file (default: OUT with .png).")
+def plot(plan_file, machine_spec, out) -> None:
+    """Plot a plan: tool path coloured by feed, and axis limits against time."""
+    from .export.plot import plot_file
+
+    written = plot_file(plan_file, machine_spec, out)
+    click.echo(written)
+
+
+# -- FPGA ---------------------------------------------------------------------
+@main.command()
+@click.argument("frames", metavar="FRAMES.bin", type=click.Path(exists=True, dir_okay=False))
+@click.option("-o", "--output", "out", default="-", metavar="OUT.csv",
+              help="Setpoints CSV (default stdout).")
+def emulate(frames, out) -> None:
+    """Replay a frame file through the bit-exact FPGA model into plan CSV."""
+    from .fpga.commands import emulate_file
+
+    emulate_file(frames, out)
+
+
+@main.command()
+@click.argument("part", type=click.Path(allow_dash=True, dir_okay=False))
+@_machine_option(required=True)
+@click.option("--planner", type=click.Choice(PLANNERS), default="variable", show_default=True)
+@_dt_option
+@_tol_option
+@click.option("--device", default=None, metavar="VID:PID", help="USB device (hex VID:PID).")
+@click.option("--dry-run", "dry_run", default=None, metavar="FRAMES.bin",
+              help="Write the frames to a file instead of a device.")
+@click.option("--resume-from", "resume_from", type=int, default=None, metavar="SEQ",
+              help="Resume a broken stream after the last acknowledged sequence number.")
+@click.option("--quiet", "-q", is_flag=True)
+def stream(part, machine_spec, planner, dt_s, tol_mm, device, dry_run, resume_from, quiet) -> None:
+    """Quantize PART's plan to fixed point and stream it to the FPGA over USB."""
+    from .fpga.commands import StreamOptions, run_stream
+
+    run_stream(StreamOptions(part=part, machine_spec=machine_spec, planner=planner, dt_s=dt_s,
+                             tol_mm=tol_mm, device=device, dry_run=dry_run,
+                             resume_from=resume_from, quiet=quiet))
+
+
+# -- batch --------------------------------------------------------------------
+@main.command()
+@click.argument("paths", nargs=-1, required=True, type=click.Path(exists=True))
+@_machine_option(required=True)
+@click.option("--planner", type=click.Choice(PLANNERS), default="vpop", show_default=True)
+@_dt_option
+@_tol_option
+@click.option("--jobs", "-j", type=click.IntRange(min=1), default=None, help="Worker processes.")
+@click.option("--report", "report", default=None, metavar="FILE.json|FILE.csv")
+@click.option("--baseline", default=None, metavar="FILE.json")
+@click.option("--max-slowdown", default="1%", show_default=True)
+@click.option("--timeout", "timeout_s", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="Per-program time limit, s.")
+@click.option("--dask", "dask_address", default=None, metavar="ADDRESS",
+              help="Run on an existing Dask distributed scheduler.")
+@click.option("--quiet", "-q", is_flag=True)
+@click.option("--json", "as_json", is_flag=True)
+def batch(paths, machine_spec, planner, dt_s, tol_mm, jobs, report, baseline, max_slowdown,
+          timeout_s, dask_address, quiet, as_json) -> None:
+    """Run every program under PATHS through parse, fit, plan and verify."""
+    from .batch import BatchOptions, run_batch
+
+    code = run_batch(BatchOptions(paths=paths, machine_spec=machine_spec, planner=planner,
+                                  dt_s=dt_s, tol_mm=tol_mm, jobs=jobs, report=report,
+                                  baseline=baseline, max_slowdown=max_slowdown,
+                                  timeout_s=timeout_s, dask_address=dask_address, quiet=quiet,
+                                  as_json=as_json))
+    sys.exit(code)
+
+
+def run() -> None:
+    """Console-script entry point: map errors to exit codes, never a traceback for bad input."""
+    try:
+        main.main(standalone_mode=False)
+    except click.exceptions.Exit as exc:
+        sys.exit(exc.exit_code)
+    except click.ClickException as exc:
+        exc.show()
+        sys.exit(2)
+    except click.exceptions.Abort:
+        sys.exit(130)
+    except CncInterpError as exc:
+        _stderr(exc.format())
+        sys.exit(exc.exit_code)
+    except BrokenPipeError:
+        # The reader closed early (`| head`): stop quietly.
+        _silence_stdout()
+        sys.exit(0)
+    except KeyboardInterrupt:
+        _stderr("cnc-interp: interrupted")
+        sys.exit(130)
+    except MemoryError:
+        _stderr("cnc-interp: error: out of memory")
+        sys.exit(1)
+    except Exception as exc:  # a bug: one line, and the traceback only on request
+        if os.environ.get("CNC_INTERP_DEBUG"):
+            raise
+        _stderr(f"cnc-interp: internal error: {type(exc).__name__}: {exc} "
+                "(please report it; set CNC_INTERP_DEBUG=1 for the traceback)")
+        sys.exit(1)
+    _flush_stdout()
+
+
+def _stderr(msg: str) -> None:
+    try:
+        sys.stderr.write(msg + "\n")
+        sys.stderr.flush()
+    except Exception:  # pragma: no cover - stderr gone too
+        pass
+
+
+def _silence_stdout() -> None:
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except Exception:  # pragma: no cover
+        pass
+
+
+def _flush_stdout() -> None:
+    try:
+        sys.stdout.flush()
+    except BrokenPipeError:
+        _silence_stdout()
+
+
+if __name__ == "__main__":  # pragma: no cover
+    run()

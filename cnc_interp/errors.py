@@ -1,0 +1,79 @@
+"""One exception hierarchy for the whole tool.
+
+Every error a user can cause (bad G-code, bad machine file, bad option) is a
+``CncInterpError`` carrying a source location, so the CLI can print exactly one
+``FILE:LINE:COL: error: MESSAGE`` line and exit with ``exit_code``.
+Expected planner outcomes (e.g. a limit that cannot be met) are statuses on
+results, not exceptions; ``PlanError`` is for a plan that failed outright.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class SourceLocation:
+    """Where in an input file something happened (1-based line and column)."""
+
+    file: str = "<input>"
+    line: int = 0
+    col: int = 0
+    text: str = ""  # the offending source text, quoted in the message when present
+
+    def prefix(self) -> str:
+        if self.line > 0:
+            return f"{self.file}:{self.line}:{max(self.col, 1)}"
+        return f"{self.file}"
+
+
+class CncInterpError(Exception):
+    """Base of all errors the tool reports to its user."""
+
+    exit_code = 2
+
+    def __init__(self, message: str, location: SourceLocation | None = None):
+        super().__init__(message)
+        self.message = message
+        self.location = location or SourceLocation()
+
+    def format(self) -> str:
+        """The one-line ``FILE:LINE:COL: error: MESSAGE`` form the CLI prints."""
+        msg = self.message
+        text = self.location.text
+        if text:
+            if len(text) > 60:
+                text = text[:57] + "..."
+            msg = f"{msg}: '{text}'"
+        return f"{self.location.prefix()}: error: {msg}"
+
+    def __str__(self) -> str:  # pragma: no cover - convenience
+        return self.format()
+
+
+class GCodeError(CncInterpError):
+    """Malformed or unsupported G-code (location = file, line, column, text)."""
+
+
+class UnsupportedError(GCodeError):
+    """A valid RS274NGC construct this tool does not implement; names the construct."""
+
+
+class MachineError(CncInterpError):
+    """Bad machine description (TOML/INI/preset): missing axis, bad limit, unknown key."""
+
+
+class UsageError(CncInterpError):
+    """Bad command-line usage that click itself cannot detect."""
+
+
+class PlanError(CncInterpError):
+    """A plan that could not be produced or that failed verification (exit 1)."""
+
+    exit_code = 1
+
+
+class DeviceError(CncInterpError):
+    """USB device failure: disconnect, repeated CRC errors, protocol violation (exit 1)."""
+
+    exit_code = 1
