@@ -27,6 +27,36 @@ LOOP_ITERATION_LIMIT = 1_000_000
 MAX_CALL_DEPTH = 200
 #: longest source line accepted (characters); longer is an error, not a hang
 MAX_LINE_CHARS = 1_000_000
+#: numbered parameters are #1..#PARAM_NUMBERED_MAX (LinuxCNC: RS274NGC_MAX_PARAMETERS - 1)
+PARAM_NUMBERED_MAX = 5601
+#: #1..#30 are local to an O-word call (its arguments); saved and restored around it
+PARAM_LOCAL_COUNT = 30
+#: EQ / NE compare within this tolerance (LinuxCNC TOLERANCE_EQUAL)
+EXPR_EQUAL_TOL = 0.0001
+#: a value used as an integer (parameter number, repeat count) may be this far from one
+EXPR_INTEGER_TOL = 0.0001
+#: fast path: most digits of a number converted in bulk (exact while the mantissa < 2**53)
+FAST_MAX_DIGITS = 15
+#: fast path: source lines tokenised per numpy chunk (bounds memory on huge files)
+FAST_CHUNK_LINES = 32768
+#: an arc radius (start or end) below this is a "zero-radius arc" error (mm; LinuxCNC 0.00005 in)
+ARC_MIN_RADIUS_MM = 0.00127
+#: R-format arcs: how far the chord may exceed the diameter before "radius too small" (mm)
+ARC_R_REACH_TOL_MM = 0.00127
+#: most distance between sampled nodes and the exact arc/spline (sagitta), mm (deg for rotary)
+CURVE_CHORD_TOL_MM = 0.0001
+#: every arc gets at least this many node segments (so curvature shows in the nodes)
+ARC_MIN_SEGMENTS = 4
+#: longest angle one sampled arc segment may span, deg
+ARC_MAX_SEGMENT_DEG = 5.0
+#: every NURBS/spline knot span gets at least this many node segments
+SPLINE_MIN_SEGMENTS_PER_SPAN = 8
+#: refinement passes when sampling a spline to CURVE_CHORD_TOL_MM
+SPLINE_REFINE_PASSES = 16
+#: G73/G83 peck: rapid back down to this far above the previous depth (LinuxCNC: 0.010 in)
+PECK_CLEARANCE_MM = 0.254
+#: largest G2/G3 P (full turns) accepted; more is treated as a runaway expression
+ARC_MAX_TURNS = 10_000
 
 # --- fit ---------------------------------------------------------------------
 #: default maximum permissible error of the fit (mm); `--tol` overrides
@@ -43,6 +73,37 @@ ARC_LENGTH_REL_TOL = 1e-12
 ARC_LENGTH_MAX_SUB = 1024
 #: Newton iterations for u(s) inside one bracketing sub-interval
 ARC_LENGTH_NEWTON_ITERS = 8
+#: nodes closer than this (mm, combined metric) are merged before fitting
+FIT_DUPLICATE_NODE_MM = 1e-9
+#: a move whose linear axes travel less than this (mm) counts as rotary-only (zero speed in s)
+FIT_LINEAR_ZERO_MM = 1e-6
+#: turns below this (deg) count as collinear (G61 merges such moves into one line)
+FIT_COLLINEAR_DEG = 1e-6
+#: tolerance used for exact curves (arcs, NURBS) under G61 where 0 is unreachable (mm)
+FIT_EXACT_CURVE_TOL_MM = 1e-6
+#: N-axis fitter: weight of the 3rd-divided-difference smoothing term (in tolerance units)
+FIT_SMOOTHING = 1e-4
+#: N-axis fitter: most knot-insertion rounds before the fit falls back to a knot per node
+FIT_MAX_ROUNDS = 40
+#: N-axis fitter: nodes per span of the initial knot vector
+FIT_INITIAL_NODES_PER_SPAN = 24
+#: N-axis fitter: least fitted speed |dq/du| relative to the chord's, at nodes and mid-chords
+FIT_MIN_SPEED_RATIO = 0.25
+#: N-axis fitter: smallest knot span relative to the run's parameter length
+FIT_MIN_SPAN_REL = 1e-9
+#: share of the tolerance the fit aims for (the rest absorbs rounding)
+FIT_TOL_SAFETY = 0.98
+#: planar fit: inclinations are kept within ±this (rad/π) of the frame, as Eq. (1) guarantees
+PLANAR_MAX_INCLINATION_PI = 0.49
+#: planar fit: weight of the ∫p'''² smoothing term relative to the node residuals
+PLANAR_SMOOTHING = 1e-6
+#: planar fit: weight of the soft end conditions (slope, curvature from the neighbouring
+#: nodes) that keep the forward propagation of p', p'' stable; 0 = the paper's bare method
+PLANAR_END_WEIGHT = 1.0
+#: curves: exact-geometry check points per quintic piece when converting arcs / NURBS
+CURVE_CHECK_POINTS = 16
+#: curves: deepest halving of a curve piece before giving up (2**depth pieces)
+CURVE_MAX_DEPTH = 30
 
 # --- plan --------------------------------------------------------------------
 #: default sample period (s) when neither the machine nor --dt gives one
@@ -51,7 +112,93 @@ DEFAULT_DT_S = 0.001
 VERIFY_RATIO_SLACK = 1e-9
 #: default jerk (per axis, as a multiple of amax per second) when a LinuxCNC INI has none
 DEFAULT_JERK_PER_ACCEL_1_S = 10.0
+#: number of held (rest) copies of the first/last setpoint verify pads with:
+#: enough that every backward difference up to jerk sees the machine at rest
+VERIFY_REST_PADDING = 3
+#: rows per chunk when writing CSV (bounds memory of the string conversion)
+CSV_CHUNK_ROWS = 65_536
+#: relative tolerance on t[k] = t[0] + k*dt when reading a plan back
+CSV_TIME_REL_TOL = 1e-9
+
+# --- export ------------------------------------------------------------------
+#: a progress bar appears only once the work has run this long (s)
+PROGRESS_DELAY_S = 1.0
+#: least time between two redraws of the progress bar (s)
+PROGRESS_REFRESH_S = 0.1
+#: widest progress line drawn, characters
+PROGRESS_MAX_WIDTH = 80
+#: most tool-path points a plot draws (longer plans are decimated for the picture only)
+PLOT_MAX_PATH_POINTS = 20000
+#: time bins of the min/max envelope a plot draws for long plans
+PLOT_ENVELOPE_BINS = 2000
+#: MCAP chunk size (uncompressed bytes); fixed so the same plan gives the same file
+MCAP_CHUNK_BYTES = 4 * 1024 * 1024
 
 # --- numbers -----------------------------------------------------------------
 EPS = 1e-12
 PI = math.pi
+
+# --- plan: paper 000 (constant / variable feedrate) ----------------------------
+#: share of each axis's amax the centripetal term q''·v² may use at cruise (Eq. 6's A_m);
+#: the rest is left to the tangential acceleration of the feed transitions
+P000_CURV_ACCEL_SHARE = 0.8
+#: share of each axis's jmax the path-geometry jerk term q'''·v³ may use at cruise
+P000_CURV_JERK_SHARE = 0.5
+#: share of the jerk left after q'''·v³ that the cross term 3·q''·v·a_t may use
+P000_CROSS_JERK_SHARE = 0.5
+#: geometry samples per segment when taking the maxima of |q'|, |q''|, |q'''|
+P000_GEOM_SAMPLES = 33
+#: safety factor applied to those sampled maxima (grid may miss a peak slightly)
+P000_GEOM_MARGIN = 1.0
+#: golden-section iterations refining a numerical curvature peak
+P000_CURV_REFINE_ITERS = 40
+#: verify-and-replan rounds before a plan is declared failed
+P000_MAX_REPLANS = 40
+#: factor applied to a violating segment's feed cap (and its square to a_t, j_t) per round
+P000_REPLAN_FEED_FACTOR = 0.9
+#: bisection steps of the look-ahead passes (reach / cruise feed)
+P000_BISECT_ITERS = 80
+#: a segment/path shorter than this is treated as zero length (mm)
+P000_MIN_LENGTH_MM = 1e-12
+
+# --- fpga ----------------------------------------------------------------------
+#: fixed-point defaults (word bits, fraction bits); see cnc_interp/fpga/fixed.py
+FPGA_POS_FORMAT = (64, 32)  # positions, origins, x_end, increments: LSB 2.3e-10 mm
+FPGA_TRIG_FORMAT = (48, 46)  # cos θ, sin θ
+FPGA_PARAM_FORMAT = (48, 44)  # normalised abscissa ξ = x*/x_end and time τ, both in [0, 1]
+FPGA_COEF_WORD = 48  # polynomial coefficient mantissas (block exponent chosen per segment)
+FPGA_ACC_WORD = 96  # Horner accumulator width; overflow is an error naming the segment
+#: largest error the fitted parametric profile ξ(τ) may add along the path (mm)
+FPGA_PROFILE_TOL_MM = 2e-5
+#: a planar path is streamed as segments only if its samples lie on its planar form within this (mm)
+FPGA_PLANAR_MATCH_MM = 1e-7
+#: accuracy target of the round trip plan -> frames -> emulate (mm)
+FPGA_ROUNDTRIP_TARGET_MM = 1e-4
+#: largest frame payload (bytes); longer data is split over several frames
+FPGA_MAX_PAYLOAD = 4096
+#: emulated device receive buffer (bytes)
+FPGA_DEVICE_BUFFER = 16384
+#: USB transfer timeout (ms) and retry budget per frame
+FPGA_USB_TIMEOUT_MS = 1000
+FPGA_USB_RETRIES = 8
+#: polls of an unchanged full buffer before the link gives up (flow-control stall)
+FPGA_USB_STALL_POLLS = 10_000
+#: default USB ids of the controller (pid.codes test range)
+FPGA_USB_VID = 0x1209
+FPGA_USB_PID = 0x0001
+#: variable planner: consecutive segments whose feed caps lie within this relative band
+#: share one profile piece (0 = one piece per segment, the paper's literal form)
+P000_MERGE_BAND = 0.1
+
+# --- plan: VPOp (paper 001) ----------------------------------------------------
+#: VPOp plans against limits shrunk by this relative amount, so float rounding in
+#: verify's finite differences can never push a ratio past 1 + VERIFY_RATIO_SLACK
+VPOP_LIMIT_SHRINK = 1e-10
+#: largest deviation of VPOp's arc-length joint table from the true path (mm or deg)
+VPOP_TABLE_TOL = 1e-9
+#: longest piece of that table before refinement (mm or deg of arc length)
+VPOP_TABLE_MAX_PIECE = 2.0
+#: refinement rounds of the table (each halves the pieces that miss VPOP_TABLE_TOL)
+VPOP_TABLE_MAX_ROUNDS = 12
+#: share of each axis's jerk step the brake policy assumes it can use to end a stop
+VPOP_BRAKE_JERK_FRACTION = 0.9

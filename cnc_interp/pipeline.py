@@ -66,3 +66,213 @@ def fit_loaded(program, settings):
     from .fit import fit_program
 
     return fit_program(program, settings)
+
+
+# --- batch: one program from bytes to a result record (H3a, issue 7) ----------
+def process_program(name: str, data: bytes, machine, planner: str = "vpop",
+                    dt_s: float | None = None, tol_mm: float | None = None) -> dict:
+    """Parse, fit, plan and verify one program; the batch's per-program record.
+
+    Raises ``CncInterpError`` for bad input (the batch records it as an error).
+    Returns plain JSON-able values: ``status`` ("ok" or "violation"), ``lines``,
+    ``nodes``, ``segments``, ``path_length_mm`` (rapids included), ``cycle_time_s``,
+    ``worst_ratio`` (verify), ``worst`` (axis/limit/sample of it), ``max_fit_dev_mm``.
+    """
+    from .fit.settings import FitSettings
+    from .gcode import read_program
+    from .plan.settings import PlanSettings
+    from .plan.timeline import plan_program
+    from .plan.verify import verify
+
+    program = read_program(data, source=name, axes=machine.axes, start=machine.start)
+    fit_settings = FitSettings.from_options(tol_mm=tol_mm, machine=machine)
+    result = fit_loaded(program, fit_settings)
+    settings = PlanSettings.from_options(planner=planner, dt_s=dt_s, tol_mm=tol_mm, machine=machine)
+    traj = plan_program(result, machine.with_dt(settings.dt_s), settings)
+    report = verify(traj, machine)
+    axis, kind, ratio, sample = report.worst()
+    nodes = sum(int(r.nodes.shape[0]) for r in program.runs)
+    paths = result.paths
+    return {
+        "status": "ok" if report.ok else "violation",
+        "message": "" if report.ok else f"{axis} {kind} ratio {ratio:.9f} at sample {sample}",
+        "error_line": 0,
+        "lines": int(program.line_count),
+        "nodes": nodes,
+        "segments": sum(int(p.n_seg) for p in paths),
+        "path_length_mm": float(traj.s[-1]) if traj.s.size else 0.0,
+        "cycle_time_s": float(traj.duration_s),
+        "samples": int(traj.n_samples),
+        "worst_ratio": None if report.nan_found else float(report.worst_ratio),
+        "worst": {"axis": axis, "limit": kind, "sample": sample},
+        "max_fit_dev_mm": _max_fit_deviation(result.stats),
+        "plan_status": traj.status,
+    }
+
+
+def _max_fit_deviation(stats: dict) -> float | None:
+    """The fit's largest node deviation (mm) from its statistics, if it reports one."""
+    for key in ("max_deviation_mm", "max_dev_mm", "max_node_deviation_mm", "max_error_mm"):
+        value = stats.get(key) if isinstance(stats, dict) else None
+        if isinstance(value, (int, float)):
+            return float(value)
+    return None
+
+
+# -- plan ---------------------------------------------------------------------
+from dataclasses import dataclass  # noqa: E402
+
+
+@dataclass(frozen=True)
+class PlanOptions:
+    """What ``cnc-interp plan`` was asked to do (the CLI's options, unchanged)."""
+
+    part: str
+    machine_spec: str | None = None
+    planner: str = "vpop"
+    dt_s: float | None = None
+    tol_mm: float | None = None
+    start: str | None = None
+    out: str = "-"
+    quiet: bool = False
+    summary_json: bool = False
+
+
+@dataclass(frozen=True, eq=False)
+class PlanOutcome:
+    """A planned and verified program: the trajectory, its verify report, the
+    machine and settings used, the fit's statistics and the wall times (s) per stage."""
+
+    trajectory: object
+    report: object
+    machine: object
+    settings: object
+    fit_stats: dict
+    timings: dict
+    source: str
+
+    def summary(self) -> dict:
+        """Plain JSON-able summary (what ``plan`` prints on stderr)."""
+        traj, rep = self.trajectory, self.report
+        axis, kind, ratio, idx = rep.worst()
+        plan_s = self.timings.get("plan", 0.0)
+        return {
+            "part": self.source, "machine": self.machine.name, "planner": traj.planner,
+            "dt_s": traj.dt_s, "samples": traj.n_samples, "cycle_time_s": traj.duration_s,
+            "path_length_mm": float(traj.s[-1]) if traj.n_samples else 0.0,
+            "worst_ratio": rep.worst_ratio, "worst": {"axis": axis, "limit": kind, "sample": idx},
+            "status": traj.status, "timings_s": self.timings,
+            "x_real_time": (traj.duration_s / plan_s) if plan_s > 0 else None,
+        }
+
+
+def parse_start(spec: str | None, axes: str) -> np.ndarray | None:
+    """``--start "X=1,Y=2"`` -> (n,) position on ``axes`` (unnamed axes 0); ``None`` passes."""
+    if spec is None:
+        return None
+    out = np.zeros(len(axes))
+    for part in spec.replace(" ", "").split(","):
+        if not part:
+            continue
+        name, sep, value = part.partition("=")
+        name = name.upper()
+        if not sep or len(name) != 1 or name not in axes:
+            raise UsageError(f"bad --start item '{part}': expected AXIS=VALUE with AXIS in {axes}")
+        try:
+            v = float(value)
+        except ValueError:
+            raise UsageError(f"bad --start value in '{part}': not a number") from None
+        if not np.isfinite(v):
+            raise UsageError(f"bad --start value in '{part}': not finite")
+        out[axes.index(name)] = v
+    return out
+
+
+def plan_part(part: str, machine_spec: str | None = None, planner: str = "vpop",
+              dt_s: float | None = None, tol_mm: float | None = None,
+              start: str | np.ndarray | None = None, progress=None) -> PlanOutcome:
+    """Parse, fit, plan and verify one part program (no output written).
+
+    Raises ``PlanError`` (exit 1) when the plan violates a limit: that is a bug.
+    """
+    import time
+
+    from .errors import PlanError
+    from .fit.settings import FitSettings
+    from .plan.machine_io import DEFAULT_PRESET, load_machine
+    from .plan.settings import PlanSettings
+    from .plan.timeline import plan_program
+    from .plan.verify import verify
+
+    timings = {}
+    t0 = time.perf_counter()
+    machine = load_machine(machine_spec if machine_spec is not None else DEFAULT_PRESET)
+    if isinstance(start, str):
+        start = parse_start(start, machine.axes)
+    machine = machine.with_start(start)
+    settings = PlanSettings.from_options(planner=planner, dt_s=dt_s, tol_mm=tol_mm, machine=machine)
+    machine = machine.with_dt(settings.dt_s)
+    program, _ = _load_with(part, machine)
+    t1 = time.perf_counter()
+    timings["parse"] = t1 - t0
+    fit_settings = FitSettings.from_options(tol_mm=tol_mm, machine=machine)
+    fitted = fit_loaded(program, fit_settings)
+    t2 = time.perf_counter()
+    timings["fit"] = t2 - t1
+    traj = plan_program(fitted, machine, settings, progress=progress)
+    t3 = time.perf_counter()
+    timings["plan"] = t3 - t2
+    report = verify(traj, machine)
+    timings["verify"] = time.perf_counter() - t3
+    if not report.ok:
+        axis, kind, ratio, idx = report.worst()
+        raise PlanError(f"bug: plan violates the {axis} {kind} limit (ratio {ratio:.12g} at "
+                        f"sample {idx}, t = {idx * traj.dt_s:.6g} s); please report it",
+                        _loc(program.source))
+    return PlanOutcome(trajectory=traj, report=report, machine=machine, settings=settings,
+                       fit_stats=dict(getattr(fitted, "stats", {}) or {}), timings=timings,
+                       source=program.source)
+
+
+def _load_with(part: str, machine):
+    """Parse ``part`` for ``machine`` (its axes and start): (Program, Machine)."""
+    from .gcode import read_program
+
+    name, data = read_part(part)
+    return read_program(data, source=name, axes=machine.axes, start=machine.start), machine
+
+
+def run_plan(opts: PlanOptions) -> None:
+    """``cnc-interp plan``: plan, verify and write CSV or MCAP; summary on stderr."""
+    import json
+    import sys
+
+    from .export.progress import progress as progress_bar
+
+    with progress_bar(None, "plan", enabled=not opts.quiet) as tick:
+        outcome = plan_part(opts.part, opts.machine_spec, opts.planner, opts.dt_s, opts.tol_mm,
+                            opts.start, progress=tick)
+    traj = outcome.trajectory
+    out = opts.out or "-"
+    if out.lower().endswith(".mcap"):
+        from .export.mcap_io import write_mcap
+
+        write_mcap(traj, out, metadata={"planner": outcome.settings.to_dict()},
+                   machine=outcome.machine)
+    else:
+        from .export.csv_io import write_csv
+
+        write_csv(traj, out)
+    if opts.quiet:
+        return
+    summary = outcome.summary()
+    if opts.summary_json:
+        sys.stderr.write(json.dumps(summary, indent=2, sort_keys=True, allow_nan=False) + "\n")
+    else:
+        sys.stderr.write(
+            f"{summary['part']}: {traj.planner} on {summary['machine']}: "
+            f"cycle time {summary['cycle_time_s']:.6g} s, {summary['samples']} samples at "
+            f"dt = {traj.dt_s:g} s, path {summary['path_length_mm']:.6g} mm, "
+            f"worst limit ratio {summary['worst_ratio']:.9f} "
+            f"({summary['worst']['axis']} {summary['worst']['limit']})\n")
+    sys.stderr.flush()

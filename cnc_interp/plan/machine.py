@@ -6,7 +6,7 @@ module holds only the type.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -63,3 +63,33 @@ class Machine:
     def limits(self) -> np.ndarray:
         """(3, n) array of vmax, amax, jmax."""
         return np.stack([self.vmax, self.amax, self.jmax])
+
+    def with_dt(self, dt_s: float | None) -> "Machine":
+        """This machine with another sample period (``None`` keeps the current one)."""
+        if dt_s is None or dt_s == self.dt_s:
+            return self
+        return replace(self, dt_s=float(dt_s))
+
+    def with_start(self, start) -> "Machine":
+        """This machine with another start position ((n,) mm / deg; ``None`` keeps it)."""
+        if start is None:
+            return self
+        return replace(self, start=np.asarray(start, dtype=float).reshape(self.n_axes))
+
+    def to_dict(self) -> dict:
+        """Plain JSON-able description (for reports and MCAP metadata)."""
+        return {
+            "name": self.name,
+            "source": self.source,
+            "axes": self.axes,
+            "dt_s": float(self.dt_s),
+            "kinematics": self.kinematics,
+            "kinematics_params": {k: float(v) for k, v in self.kinematics_params.items()},
+            "tol_mm": None if self.tol_mm is None else float(self.tol_mm),
+            "start": {a: float(v) for a, v in zip(self.axes, self.start)},
+            "limits": {
+                a: {"vmax": float(v), "amax": float(acc), "jmax": float(j),
+                    "unit": "deg" if a in ROTARY_AXES else "mm"}
+                for a, v, acc, j in zip(self.axes, self.vmax, self.amax, self.jmax)
+            },
+        }

@@ -1,0 +1,80 @@
+"""Size and write speed of the MCAP output against the CSV of the same plan.
+
+Usage:
+    python benchmarks/export_mcap.py [SAMPLES]          synthetic smooth XYZ plan (default 10^6)
+    python benchmarks/export_mcap.py PLAN.csv [MACHINE] a real plan written by `cnc-interp plan`
+
+Prints, for CSV and MCAP (with /limits when a machine is known): seconds, samples/s,
+messages/s and file size; then MCAP read-back time.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+from cnc_interp.export.csv_io import read_csv, write_csv
+from cnc_interp.export.mcap_io import read_mcap, write_mcap
+from cnc_interp.plan.machine import Machine
+from cnc_interp.plan.trajectory import Trajectory
+
+
+def synthetic(k: int) -> tuple[Trajectory, Machine]:
+    """A helical arc over k samples at 1 ms (smooth, full-precision numbers)."""
+    dt = 1e-3
+    t = np.arange(k) * dt
+    tau = t / t[-1]
+    u = tau**4 * (35 - 84 * tau + 70 * tau**2 - 20 * tau**3)
+    phi = 40 * np.pi * u
+    q = np.column_stack([123.4 + 50 * np.cos(phi), -77.7 + 50 * np.sin(phi), -3.0 * u])
+    step = np.linalg.norm(np.diff(q, axis=0), axis=1)
+    s = np.concatenate([[0.0], np.cumsum(step)])
+    feed = np.concatenate([[0.0], step / dt])
+    line = 10 + (u * 5000).astype(np.int64)
+    traj = Trajectory(axes="XYZ", dt_s=dt, t=t, s=s, feed=feed, q=q, line=line, planner="bench")
+    machine = Machine(name="bench", axes="XYZ", vmax=[500.0] * 3, amax=[5000.0] * 3,
+                      jmax=[50000.0] * 3, dt_s=dt)
+    return traj, machine
+
+
+def timed(fn):
+    t0 = time.perf_counter()
+    out = fn()
+    return out, time.perf_counter() - t0
+
+
+def main() -> None:
+    arg = sys.argv[1] if len(sys.argv) > 1 else "1000000"
+    if arg.isdigit():
+        traj, machine = synthetic(int(arg))
+        name = f"synthetic helix, {traj.n_samples:,} samples"
+    else:
+        traj = read_csv(arg)
+        machine = None
+        if len(sys.argv) > 2:
+            from cnc_interp.plan.machine_io import load_machine
+
+            machine = load_machine(sys.argv[2])
+        name = f"{os.path.basename(arg)}, {traj.n_samples:,} samples, axes {traj.axes}"
+    k = traj.n_samples
+    print(name)
+    with tempfile.TemporaryDirectory() as d:
+        csv_path, mcap_path = os.path.join(d, "p.csv"), os.path.join(d, "p.mcap")
+        _, tc = timed(lambda: write_csv(traj, csv_path))
+        print(f"  CSV : {tc:6.2f} s  {k / tc:>10,.0f} rows/s  {os.path.getsize(csv_path) / 1e6:8.1f} MB")
+        for m, label in ((None, "MCAP (setpoints + segments)"), (machine, "MCAP (+ /limits)")):
+            if label.endswith("limits)") and machine is None:
+                continue
+            n, tm = timed(lambda: write_mcap(traj, mcap_path, {"input": {"name": name}}, m))
+            print(f"  {label}: {tm:6.2f} s  {k / tm:>10,.0f} samples/s  {n / tm:>10,.0f} msg/s  "
+                  f"{os.path.getsize(mcap_path) / 1e6:8.1f} MB  ({n:,} messages)")
+        _, tr = timed(lambda: read_mcap(mcap_path))
+        print(f"  MCAP read back: {tr:6.2f} s  {k / tr:>10,.0f} samples/s")
+
+
+if __name__ == "__main__":
+    main()

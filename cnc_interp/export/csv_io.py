@@ -1,0 +1,131 @@
+"""Plan CSV: ``t,s,feed,<axis letters>`` and one row per sample.
+
+Numbers are Python's shortest round-trip form (``repr(float)``), so reading the
+file back gives the same float64 values bit for bit and anyone can re-check the
+limits from the file. Units: s, mm, mm/s, then mm or deg per axis. No comment
+lines; ``\\n`` line ends. The same trajectory always gives the same bytes.
+"""
+
+from __future__ import annotations
+
+import io
+from typing import BinaryIO
+
+import numpy as np
+
+from ..constants import ALL_AXES, CSV_CHUNK_ROWS, CSV_TIME_REL_TOL
+from ..errors import CncInterpError, SourceLocation
+from .atomic import atomic_write
+
+_FIXED = ("t", "s", "feed")
+
+
+class PlanFileError(CncInterpError):
+    """A plan file (CSV) that cannot be read back: bad header, number or row length."""
+
+
+def _chunk_text(cols: list[np.ndarray], lo: int, hi: int) -> str:
+    # float.__repr__ on tolist() values is the fastest exact shortest-repr path
+    # in CPython (~10M values/s); joining column-wise lists keeps it in C loops.
+    strs = []
+    for c in cols:
+        part = c[lo:hi]
+        bits = part.view(np.uint64)
+        if part.size and (bits == bits[0]).all():  # axis at rest: one repr (bit-equal, so -0.0 kept)
+            strs.append([repr(float(part[0]))] * part.size)
+        else:
+            strs.append(list(map(repr, part.tolist())))
+    return "\n".join(map(",".join, zip(*strs))) + "\n"
+
+
+def write_csv_to(traj, fh: BinaryIO) -> int:
+    """Write ``traj`` as CSV to an open binary file; returns the number of rows."""
+    header = ",".join(_FIXED + tuple(traj.axes)) + "\n"
+    fh.write(header.encode("ascii"))
+    q = np.asarray(traj.q, dtype=float)
+    cols = [np.ascontiguousarray(traj.t, dtype=float), np.ascontiguousarray(traj.s, dtype=float),
+            np.ascontiguousarray(traj.feed, dtype=float)]
+    cols += [np.ascontiguousarray(q[:, i]) for i in range(q.shape[1])]
+    k = cols[0].shape[0]
+    for lo in range(0, k, CSV_CHUNK_ROWS):
+        fh.write(_chunk_text(cols, lo, min(k, lo + CSV_CHUNK_ROWS)).encode("ascii"))
+    return k
+
+
+def write_csv(traj, out: str) -> int:
+    """Write ``traj`` to the file ``out`` atomically (``-`` = stdout); returns the row count."""
+    with atomic_write(out) as fh:
+        return write_csv_to(traj, fh)
+
+
+def read_csv(path: str, dt_s: float | None = None):
+    """Read a plan CSV back into a ``Trajectory`` (planner ``"csv"``, axes from the header).
+
+    ``dt_s`` is needed only for a one-row file; otherwise it is taken from the
+    ``t`` column, which must be t[0] + k*dt.
+    """
+    from ..plan.trajectory import Trajectory
+
+    try:
+        with open(path, "rb") as fh:
+            raw = fh.read()
+    except OSError as exc:
+        raise PlanFileError(f"cannot read plan: {exc.strerror}", SourceLocation(file=path)) from None
+    first, _, body = raw.partition(b"\n")
+    header = first.decode("ascii", "replace").strip().split(",")
+    names = [h.strip() for h in header]
+    hloc = SourceLocation(path, 1, 1, first.decode("ascii", "replace").strip())
+    if tuple(names[:3]) != _FIXED:
+        raise PlanFileError("not a plan CSV: the header must start with t,s,feed", hloc)
+    axes = "".join(names[3:])
+    if len(axes) != len(names) - 3 or any(a not in ALL_AXES for a in axes) or len(set(axes)) != len(axes):
+        raise PlanFileError("plan CSV header: the columns after t,s,feed must be distinct "
+                            "axis letters", hloc)
+    ncol = len(names)
+    data = _parse_numbers(body, ncol, path)
+    k = data.shape[0]
+    if k == 0:
+        raise PlanFileError("plan CSV has no samples", hloc)
+    t = data[:, 0]
+    if k >= 2:
+        dt_s = float(t[1] - t[0])  # the writer stores t = k*dt, so t[1] - t[0] is dt exactly
+        expect = t[0] + np.arange(k) * dt_s
+        bad = np.abs(t - expect) > CSV_TIME_REL_TOL * max(1.0, abs(float(t[-1])))
+        if not dt_s > 0 or bad.any():
+            row = int(np.argmax(bad)) if bad.any() else 1
+            raise PlanFileError("plan CSV: t is not sampled at a fixed period",
+                                SourceLocation(path, row + 2, 1))
+    elif dt_s is None:
+        raise PlanFileError("plan CSV with one sample: the sample period is unknown", hloc)
+    return Trajectory(axes=axes, dt_s=float(dt_s), t=np.ascontiguousarray(t),
+                      s=np.ascontiguousarray(data[:, 1]), feed=np.ascontiguousarray(data[:, 2]),
+                      q=np.ascontiguousarray(data[:, 3:]), line=np.zeros(k, dtype=np.int64),
+                      planner="csv", settings={"source": path})
+
+
+def _parse_numbers(body: bytes, ncol: int, path: str) -> np.ndarray:
+    """Rows of ``ncol`` comma-separated floats; errors name the file line."""
+    if not body.strip():
+        return np.empty((0, ncol))
+    try:
+        data = np.loadtxt(io.BytesIO(body), delimiter=",", dtype=float, ndmin=2)
+    except ValueError:
+        data = None
+    if data is not None and data.shape[1] == ncol:
+        return data
+    # slow path only to find and report the first bad row
+    for i, line in enumerate(body.split(b"\n"), start=2):
+        text = line.decode("ascii", "replace").strip()
+        if not text:
+            continue
+        fields = text.split(",")
+        if len(fields) != ncol:
+            raise PlanFileError(f"row has {len(fields)} fields, the header has {ncol}",
+                                SourceLocation(path, i, 1, text))
+        for j, f in enumerate(fields):
+            try:
+                float(f)
+            except ValueError:
+                col = len(",".join(fields[:j])) + (1 if j else 0) + 1
+                raise PlanFileError("not a number", SourceLocation(path, i, col, f)) from None
+    raise PlanFileError("cannot read plan CSV", SourceLocation(path))

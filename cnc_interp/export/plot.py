@@ -1,0 +1,213 @@
+"""``cnc-interp plot``: a picture of a plan (matplotlib, imported only here, Agg backend).
+
+Left: the tool path in the plane of the two axes that move most, coloured by the planned
+feed (paper 001, figure 4). Right, against time: the feed, then every axis's velocity,
+acceleration and jerk divided by the machine's limit, with the ±1 bounds (paper 001,
+figures 6 and 8) when a machine is given.
+
+Long plans are drawn decimated: the path keeps every n-th sample, the ratio curves keep
+each bin's minimum and maximum (so no peak disappears from the picture).
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from ..constants import LINEAR_AXES, PLOT_ENVELOPE_BINS, PLOT_MAX_PATH_POINTS
+
+_KIND_LABELS = (("velocity", "v / vmax"), ("acceleration", "a / amax"), ("jerk", "j / jmax"))
+
+
+def plot_file(path: str, machine_spec: str | None, out: str | None = None) -> str:
+    """Plot the plan at ``path`` (CSV or MCAP) to ``out`` (default: ``path`` with ``.png``).
+
+    The image format follows ``out``'s extension (png, svg, pdf). Returns the file written.
+    """
+    from .verify_file import read_plan
+
+    machine = None
+    if machine_spec:
+        from ..plan.machine_io import load_machine
+
+        machine = load_machine(machine_spec)
+    traj = read_plan(path)
+    if out is None:
+        out = os.path.splitext(os.fspath(path))[0] + ".png"
+    title = os.path.basename(os.fspath(path))
+    plot_trajectory(traj, machine, out, title=title)
+    return out
+
+
+def plot_trajectory(traj, machine, out: str, title: str = "") -> str:
+    """Draw ``traj`` (and its limit ratios when ``machine`` is given) into ``out``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .atomic import atomic_write
+
+    fmt = os.path.splitext(out)[1].lstrip(".").lower() or "png"
+    with plt.rc_context(_STYLE):
+        fig = _figure(plt, traj, machine, title)
+        try:
+            with atomic_write(out) as fh:
+                # No dates or versions in the file: the same plan gives the same image.
+                fig.savefig(fh, format=fmt, dpi=_DPI, metadata=_metadata(fmt))
+        finally:
+            plt.close(fig)
+    return out
+
+
+_DPI = 110
+_STYLE = {"font.size": 9, "axes.grid": True, "grid.alpha": 0.3, "axes.titlesize": 10,
+          "axes.labelsize": 9, "legend.fontsize": 8, "svg.hashsalt": "cnc-interp"}
+
+
+def _metadata(fmt: str) -> dict | None:
+    if fmt == "png":
+        return {"Software": None}
+    if fmt == "pdf":
+        return {"Creator": None, "Producer": None, "CreationDate": None}
+    if fmt == "svg":
+        return {"Creator": None, "Date": None}
+    return None
+
+
+def _figure(plt, traj, machine, title):
+    from matplotlib.gridspec import GridSpec
+
+    n_right = 4 if machine is not None else 1
+    fig = plt.figure(figsize=(14, 7.5) if machine is not None else (13, 5.5))
+    gs = GridSpec(n_right, 2, figure=fig, width_ratios=(1.0, 1.15), wspace=0.3, hspace=0.12,
+                  left=0.06, right=0.98, top=0.9, bottom=0.08)
+    ax_path = fig.add_subplot(gs[:, 0])
+    _draw_path(fig, ax_path, traj)
+
+    ax_feed = fig.add_subplot(gs[0, 1])
+    t_f, f_lo, f_hi = _envelope(traj.t, traj.feed[:, None])
+    ax_feed.fill_between(t_f, f_lo[:, 0], f_hi[:, 0], color="tab:blue", lw=0.6, alpha=0.9)
+    ax_feed.plot(t_f, f_hi[:, 0], color="tab:blue", lw=0.6)
+    ax_feed.set_ylabel("feed (mm/s)")
+    ax_feed.set_xlim(traj.t[0] if traj.t.size else 0, traj.t[-1] if traj.t.size else 1)
+    axes_right = [ax_feed]
+    if machine is not None:
+        axes_right += _draw_ratios(fig, gs, traj, machine, ax_feed)
+    for ax in axes_right[:-1]:
+        ax.tick_params(labelbottom=False)
+    axes_right[-1].set_xlabel("time (s)")
+
+    sub = f"{traj.planner} planner, {traj.n_samples:,} samples at dt = {traj.dt_s * 1e3:g} ms, " \
+          f"cycle time {traj.duration_s:.3f} s"
+    if machine is not None:
+        sub += f", machine: {machine.name}"
+    if traj.status != "ok":
+        sub += f" [{traj.status}]"
+    fig.suptitle(f"{title}\n{sub}" if title else sub, fontsize=10)
+    return fig
+
+
+def _plane_axes(traj) -> tuple[int, int]:
+    """Indices of the two axes that move most (linear axes first), in machine order."""
+    q = traj.q
+    n = q.shape[1]
+    if n == 1:
+        return 0, 0
+    span = np.ptp(q, axis=0) if q.shape[0] else np.zeros(n)
+    span = np.where(np.isfinite(span), span, 0.0)
+    linear = np.array([a in LINEAR_AXES for a in traj.axes])
+    # Rank linear axes ahead of rotary ones, then by how far they move.
+    order = sorted(range(n), key=lambda i: (not linear[i] or span[i] == 0, -span[i], i))
+    i, j = sorted(order[:2])
+    return i, j
+
+
+def _draw_path(fig, ax, traj) -> None:
+    from matplotlib.collections import LineCollection
+
+    i, j = _plane_axes(traj)
+    K = traj.n_samples
+    step = max(1, -(-K // PLOT_MAX_PATH_POINTS))
+    idx = np.arange(0, K, step)
+    if K and idx[-1] != K - 1:
+        idx = np.append(idx, K - 1)
+    x = traj.q[idx, i]
+    y = traj.q[idx, j] if j != i else np.zeros(idx.size)
+    feed = traj.feed
+    # Colour each drawn piece by the fastest feed it covers, so short bursts stay visible.
+    seg_feed = np.maximum.reduceat(np.nan_to_num(feed), idx[:-1]) if idx.size > 1 else feed[:0]
+    pts = np.column_stack([x, y]).reshape(-1, 1, 2)
+    segs = np.concatenate([pts[:-1], pts[1:]], axis=1)
+    fmax = float(np.nanmax(feed)) if K and np.isfinite(feed).any() else 1.0
+    lc = LineCollection(segs, cmap="turbo", linewidths=1.4, capstyle="round")
+    lc.set_array(seg_feed)
+    lc.set_clim(0.0, fmax if fmax > 0 else 1.0)
+    ax.add_collection(lc)
+    if K:
+        ax.plot(x[:1], y[:1], "o", ms=5, color="k", label="start")
+        ax.plot(x[-1:], y[-1:], "s", ms=5, color="k", mfc="none", label="end")
+        ax.legend(loc="best", framealpha=0.8)
+    ax.autoscale()
+    if j != i:
+        ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel(f"{traj.axes[i]} ({_unit(traj.axes[i])})")
+    ax.set_ylabel(f"{traj.axes[j]} ({_unit(traj.axes[j])})" if j != i else "")
+    ax.set_title(f"tool path in {traj.axes[i]}{traj.axes[j] if j != i else ''}, "
+                 "coloured by feed")
+    cb = fig.colorbar(lc, ax=ax, fraction=0.046, pad=0.02)
+    cb.set_label("feed (mm/s)")
+
+
+def _draw_ratios(fig, gs, traj, machine, share):
+    from .ratios import limit_ratios
+
+    axes = "".join(a for a in traj.axes if a in machine.axes)
+    it = [traj.axes.index(a) for a in axes]
+    im = [machine.axes.index(a) for a in axes]
+    ratios = limit_ratios(traj.q[:, it], traj.dt_s, machine.limits()[:, im])
+    colors = [f"C{k}" for k in range(len(axes))]
+    out = []
+    for kind, (name, label) in enumerate(_KIND_LABELS):
+        ax = fig.add_subplot(gs[kind + 1, 1], sharex=share)
+        t_e, lo, hi = _envelope(traj.t, ratios[kind])
+        moved = np.abs(ratios[kind]).max(axis=0) > 0 if traj.n_samples else np.zeros(0, bool)
+        for c, a in enumerate(axes):
+            if not moved[c]:
+                continue
+            if t_e.size == traj.n_samples:
+                ax.plot(t_e, hi[:, c], lw=0.8, color=colors[c], label=a)
+            else:
+                ax.fill_between(t_e, lo[:, c], hi[:, c], color=colors[c], lw=0.4,
+                                alpha=0.55, label=a)
+        for bound in (-1.0, 1.0):
+            ax.axhline(bound, color="red", ls="--", lw=0.9)
+        worst = float(np.nanmax(np.abs(ratios[kind]))) if ratios[kind].size else 0.0
+        top = max(1.4, min(worst * 1.3, 10.0))  # headroom for the legend and the label
+        ax.set_ylim(-top, top)
+        ax.set_ylabel(label)
+        ax.text(0.995, 0.94, f"worst |{label.split(' ')[0]}|/limit = {worst:.3f}",
+                transform=ax.transAxes, ha="right", va="top", fontsize=8,
+                color="red" if worst > 1.0 else "black",
+                bbox={"facecolor": "white", "alpha": 0.75, "lw": 0})
+        if kind == 0:
+            ax.legend(loc="upper left", ncol=len(axes), framealpha=0.8)
+        out.append(ax)
+    return out
+
+
+def _envelope(t: np.ndarray, y: np.ndarray):
+    """Per-bin (time, min, max) of ``y`` (K, m): the samples themselves when K is small."""
+    K = t.shape[0]
+    if K <= 2 * PLOT_ENVELOPE_BINS:
+        return t, y, y
+    bins = PLOT_ENVELOPE_BINS
+    edges = np.linspace(0, K, bins + 1).astype(int)
+    lo = np.minimum.reduceat(y, edges[:-1], axis=0)
+    hi = np.maximum.reduceat(y, edges[:-1], axis=0)
+    return t[edges[:-1]], lo, hi
+
+
+def _unit(axis: str) -> str:
+    return "mm" if axis in LINEAR_AXES else "deg"

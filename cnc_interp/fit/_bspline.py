@@ -1,0 +1,246 @@
+"""Numba kernels of the N-axis fitter: quintic B-spline least squares with knot insertion.
+
+Everything here works on one section of nodes in a "scaled" space where the
+Euclidean norm is the fitter's metric (rotary axes multiplied by tol_mm/tol_deg).
+The spline is clamped, degree 5, so it is C4 in the parameter at simple knots.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+K = 5  # degree
+
+
+@njit(cache=True)
+def find_span(t, m, x):
+    """Index i with t[i] <= x < t[i+1], K <= i <= m-1 (m = number of coefficients)."""
+    if x >= t[m]:
+        return m - 1
+    if x <= t[K]:
+        return K
+    lo, hi = K, m
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if t[mid] <= x:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+@njit(cache=True)
+def basis(t, i, x, p, out):
+    """The p+1 non-zero B-spline basis values of degree p at x in span i (NURBS book A2.2)."""
+    left = np.empty(p + 1)
+    right = np.empty(p + 1)
+    out[0] = 1.0
+    for j in range(1, p + 1):
+        left[j] = x - t[i + 1 - j]
+        right[j] = t[i + j] - x
+        saved = 0.0
+        for r in range(j):
+            den = right[r + 1] + left[j - r]
+            temp = out[r] / den if den != 0.0 else 0.0
+            out[r] = saved + right[r + 1] * temp
+            saved = left[j - r] * temp
+        out[j] = saved
+
+
+@njit(cache=True)
+def end_coefs(t, m, c, y0, y1, d1s, d2s, d1e, d2e, start_mode, end_mode):
+    """Fill the fixed coefficients from end positions and (optional) u-derivatives.
+
+    mode 0: position only; 1: position, first and second derivative.
+    """
+    c[0, :] = y0
+    c[m - 1, :] = y1
+    if start_mode == 1:
+        c[1, :] = c[0, :] + d1s * (t[6] - t[1]) / 5.0
+        dp1 = d1s + d2s * (t[6] - t[2]) / 4.0
+        c[2, :] = c[1, :] + dp1 * (t[7] - t[2]) / 5.0
+    if end_mode == 1:
+        b = t[m + K]
+        c[m - 2, :] = c[m - 1, :] - d1e * (b - t[m - 1]) / 5.0
+        dpm3 = d1e - d2e * (b - t[m - 1]) / 4.0
+        c[m - 3, :] = c[m - 2, :] - dpm3 * (b - t[m - 2]) / 5.0
+
+
+@njit(cache=True)
+def solve_lsq(t, m, u, y, w, prior, fixed, c, lam, ridge):
+    """Weighted LS for the free coefficients (``fixed[i]`` False), in place in ``c``.
+
+    Minimises sum_j w_j^2 |q(u_j) - y_j|^2 + lam * sum_i |scaled DD3(c)_i|^2
+    + ridge * sum_i |c_i - prior_i|^2 (the ridge keeps empty spans well posed).
+    """
+    n, d = y.shape
+    idx = -np.ones(m, dtype=np.int64)
+    nf = 0
+    for i in range(m):
+        if not fixed[i]:
+            idx[i] = nf
+            nf += 1
+    if nf == 0:
+        return
+    ab = np.zeros((nf, 6))
+    rhs = np.zeros((nf, d))
+    nb = np.empty(6)
+    for j in range(n):
+        sp = find_span(t, m, u[j])
+        basis(t, sp, u[j], K, nb)
+        ww = w[j] * w[j]
+        # residual target after moving fixed coefficients to the right-hand side
+        tgt = y[j].copy()
+        for r in range(6):
+            ci = sp - K + r
+            if fixed[ci]:
+                tgt -= nb[r] * c[ci]
+        for r in range(6):
+            ci = sp - K + r
+            fi = idx[ci]
+            if fi < 0:
+                continue
+            rhs[fi] += ww * nb[r] * tgt
+            for s in range(r, 6):
+                cj = sp - K + s
+                fj = idx[cj]
+                if fj < 0:
+                    continue
+                if fj >= fi:
+                    ab[fi, fj - fi] += ww * nb[r] * nb[s]
+                else:
+                    ab[fj, fi - fj] += ww * nb[r] * nb[s]
+    # smoothing: third divided differences over the Greville abscissae, scaled by span^3
+    g = np.empty(m)
+    for i in range(m):
+        acc = 0.0
+        for r in range(1, K + 1):
+            acc += t[i + r]
+        g[i] = acc / K
+    dd = np.empty(4)
+    for i in range(m - 3):
+        span = g[i + 3] - g[i]
+        if span <= 0.0:
+            continue
+        for a in range(4):
+            prod = 1.0
+            for b in range(4):
+                if b != a:
+                    prod *= g[i + a] - g[i + b]
+            dd[a] = span ** 3 / prod
+        tgt = np.zeros(d)
+        for a in range(4):
+            if fixed[i + a]:
+                tgt -= dd[a] * c[i + a]
+        for a in range(4):
+            fa = idx[i + a]
+            if fa < 0:
+                continue
+            rhs[fa] += lam * dd[a] * tgt
+            for b in range(a, 4):
+                fb = idx[i + b]
+                if fb < 0:
+                    continue
+                ab[fa, fb - fa] += lam * dd[a] * dd[b]
+    for i in range(m):
+        fi = idx[i]
+        if fi >= 0:
+            ab[fi, 0] += ridge
+            rhs[fi] += ridge * prior[i]
+    # banded Cholesky: ab[i, k] = U[i, i+k]
+    for i in range(nf):
+        s = ab[i, 0]
+        for k in range(max(0, i - 5), i):
+            s -= ab[k, i - k] ** 2
+        if s <= 0.0:
+            s = 1e-300
+        ab[i, 0] = np.sqrt(s)
+        for j in range(i + 1, min(i + 6, nf)):
+            s = ab[i, j - i]
+            for k in range(max(0, j - 5), i):
+                s -= ab[k, i - k] * ab[k, j - k]
+            ab[i, j - i] = s / ab[i, 0]
+    # U^T z = rhs, then U x = z
+    for i in range(nf):
+        s = rhs[i].copy()
+        for k in range(max(0, i - 5), i):
+            s -= ab[k, i - k] * rhs[k]
+        rhs[i] = s / ab[i, 0]
+    for i in range(nf - 1, -1, -1):
+        s = rhs[i].copy()
+        for k in range(i + 1, min(i + 6, nf)):
+            s -= ab[i, k - i] * rhs[k]
+        rhs[i] = s / ab[i, 0]
+    for i in range(m):
+        if idx[i] >= 0:
+            c[i] = rhs[idx[i]]
+
+
+@njit(cache=True)
+def evaluate(t, m, c, x, val, der):
+    """Positions val (K, d) and first derivatives der (K, d) at sorted-or-not points x."""
+    d = c.shape[1]
+    nb = np.empty(6)
+    nd = np.empty(5)
+    for j in range(x.shape[0]):
+        sp = find_span(t, m, x[j])
+        basis(t, sp, x[j], K, nb)
+        for a in range(d):
+            acc = 0.0
+            for r in range(6):
+                acc += nb[r] * c[sp - K + r, a]
+            val[j, a] = acc
+        # derivative spline: degree 4 on t[1:], coefficient i' = 5 (c[i'+1]-c[i']) / (t[i'+6]-t[i'+1])
+        basis(t[1:], sp - 1, x[j], K - 1, nd)
+        for a in range(d):
+            acc = 0.0
+            for r in range(5):
+                ci = sp - 1 - (K - 1) + r
+                den = t[ci + 6] - t[ci + 1]
+                if den > 0.0:
+                    acc += nd[r] * K * (c[ci + 1, a] - c[ci, a]) / den
+            der[j, a] = acc
+
+
+@njit(cache=True)
+def check(t, m, c, xc, ref, tol_lin, tol_rot, lin, metric, exp_speed, exp_lin_speed, min_ratio, bad_span):
+    """Mark spans whose check points deviate or slow down too much; return max linear / rotary error.
+
+    xc (P,) check parameters, ref (P, d) reference positions, tol_lin (P,) allowed linear
+    deviation, tol_rot scalar allowed rotary deviation (scaled units), exp_speed (P,) and
+    exp_lin_speed (P,) the chord speeds expected there (all axes / the arc-length
+    metric's axes ``metric``).
+    """
+    P = xc.shape[0]
+    d = c.shape[1]
+    val = np.empty((P, d))
+    der = np.empty((P, d))
+    evaluate(t, m, c, xc, val, der)
+    worst_lin = 0.0
+    worst_rot = 0.0
+    for j in range(P):
+        e_lin = 0.0
+        e_rot = 0.0
+        sp_all = 0.0
+        sp_lin = 0.0
+        for a in range(d):
+            e = val[j, a] - ref[j, a]
+            sp_all += der[j, a] ** 2
+            if metric[a]:
+                sp_lin += der[j, a] ** 2
+            if lin[a]:
+                e_lin += e * e
+            else:
+                e_rot = max(e_rot, abs(e))
+        e_lin = np.sqrt(e_lin)
+        ok = e_lin <= tol_lin[j] and e_rot <= tol_rot
+        ok = ok and np.sqrt(sp_all) >= min_ratio * exp_speed[j]
+        ok = ok and np.sqrt(sp_lin) >= min_ratio * exp_lin_speed[j]
+        if not ok:
+            bad_span[find_span(t, m, xc[j])] = True
+        if e_lin > worst_lin:
+            worst_lin = e_lin
+        if e_rot > worst_rot:
+            worst_rot = e_rot
+    return worst_lin, worst_rot

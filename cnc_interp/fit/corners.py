@@ -1,0 +1,145 @@
+"""Corners and stops: where a feed run is split into paths planned from rest to rest.
+
+A run is prepared (duplicate nodes merged, per-node tolerance resolved, curve
+pieces re-indexed) and split at node j when
+
+* the turn between the move into j and the move out of j is sharper than
+  ``corner_deg`` (directions: chords, or a curve's exact end tangent);
+* the move into or out of j is under ``G61`` (tolerance 0) and j is not collinear
+  (so G61 gives exact straight lines with a stop at every real corner);
+* one move moves linear axes and the other only rotary axes (the arc-length
+  metric changes; a rotary-only path is measured in degrees).
+
+Turn angles are measured in the fitter's metric: linear axes in mm, rotary axes
+scaled to mm by ``tol_mm / tol_deg``. Nodes strictly inside a curve never split.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..constants import (
+    FIT_COLLINEAR_DEG,
+    FIT_DUPLICATE_NODE_MM,
+    FIT_EXACT_CURVE_TOL_MM,
+    FIT_LINEAR_ZERO_MM,
+    LINEAR_AXES,
+)
+from ..gcode.program import CurvePiece, Run
+from .nodes import turn_angles
+
+
+@dataclass(frozen=True)
+class PreparedRun:
+    """A feed run ready to fit (N' nodes after merging duplicates).
+
+    nodes (N', n), line/feed_mm_s (N',) of the move ending at each node (node 0
+    repeats node 1), tol_mm (N',) resolved tolerance (0 = G61), curves re-indexed,
+    lin (n,) linear axes, scale (n,) metric scale, rot_only (N'-1,) per move.
+    """
+
+    axes: str
+    nodes: np.ndarray
+    line: np.ndarray
+    feed_mm_s: np.ndarray
+    tol_mm: np.ndarray
+    curves: tuple[CurvePiece, ...]
+    lin: np.ndarray
+    scale: np.ndarray
+    rot_only: np.ndarray
+
+
+@dataclass(frozen=True)
+class SubRun:
+    """Nodes i0..i1 (inclusive) of a prepared run, fitted as one path.
+
+    kind: ``"straight"`` (collinear G61 moves: one exact line) or ``"fit"``;
+    rotary: the path moves rotary axes only (metric in degrees).
+    """
+
+    i0: int
+    i1: int
+    kind: str
+    rotary: bool
+    curves: tuple[CurvePiece, ...]
+
+
+def prepare_run(run: Run, settings) -> PreparedRun:
+    """Merge duplicate nodes, resolve tolerances and re-index curve pieces."""
+    nodes = np.asarray(run.nodes, dtype=float)
+    lin = np.array([a in LINEAR_AXES for a in run.axes], dtype=bool)
+    scale = np.where(lin, 1.0, settings.tol_mm / settings.tol_deg)
+    tol = settings.node_tolerance(run.tol_mm)
+    if tol.size > 1:
+        tol[0] = tol[1]
+    feed = np.asarray(run.feed_mm_s, dtype=float).copy()
+    line = np.asarray(run.line, dtype=np.int64)
+    n = nodes.shape[0]
+    if n >= 2:
+        step = np.linalg.norm(np.diff(nodes * scale, axis=0), axis=1)
+        keep = np.concatenate(([True], step > FIT_DUPLICATE_NODE_MM))
+    else:
+        keep = np.ones(n, dtype=bool)
+    # a merged node keeps the last block's line/feed/tolerance (the move that ends there)
+    new_index = np.cumsum(keep) - 1
+    last_of = np.zeros(int(keep.sum()), dtype=np.int64)
+    last_of[new_index] = np.arange(n)
+    nodes_k = nodes[keep]
+    line_k, feed_k, tol_k = line[last_of], feed[last_of], tol[last_of]
+    # the first node's line is the block that started the run
+    line_k[0] = line[0]
+    curves = []
+    for cp in run.curves:
+        f, l = int(new_index[cp.first]), int(new_index[cp.last])
+        if l > f:
+            curves.append(CurvePiece(f, l, cp.curve))
+    d = np.diff(nodes_k, axis=0)
+    lin_len = np.sqrt((d[:, lin] ** 2).sum(axis=1)) if lin.any() else np.zeros(len(d))
+    rot_only = (lin_len <= FIT_LINEAR_ZERO_MM) & (~lin).any()
+    if not (~lin).any():
+        rot_only = np.zeros(len(d), dtype=bool)
+    return PreparedRun(run.axes, nodes_k, line_k, feed_k, tol_k, tuple(sorted(curves, key=lambda c: c.first)),
+                       lin, scale, rot_only)
+
+
+def split_run(pr: PreparedRun, settings) -> list[SubRun]:
+    """Cut a prepared run into sub-runs at corners, G61 nodes and metric changes."""
+    from .curves import CurveEval, end_states
+
+    n = pr.nodes.shape[0]
+    if n < 2:
+        return []
+    chords = np.diff(pr.nodes * pr.scale, axis=0)
+    d_in = np.zeros((n, chords.shape[1]))
+    d_out = np.zeros((n, chords.shape[1]))
+    d_in[1:] = chords
+    d_out[:-1] = chords
+    inside = np.zeros(n, dtype=bool)
+    for cp in pr.curves:
+        (t0, _), (t1, _) = end_states(CurveEval(cp.curve), pr.scale)
+        d_out[cp.first] = t0
+        d_in[cp.last] = t1
+        inside[cp.first + 1:cp.last] = True
+    turn = np.degrees(turn_angles(d_in, d_out))
+    cut = np.zeros(n, dtype=bool)
+    j = np.arange(1, n - 1)
+    tol_move = pr.tol_mm  # tolerance of the move ending at each node
+    g61 = (tol_move[j] == 0) | (tol_move[j + 1] == 0)
+    cut[j] = (turn[j] > settings.corner_deg) | (g61 & (turn[j] > FIT_COLLINEAR_DEG))
+    cut[j] |= pr.rot_only[j - 1] != pr.rot_only[j]
+    cut &= ~inside
+    edges = np.concatenate(([0], np.nonzero(cut)[0], [n - 1]))
+    subs = []
+    for a, b in zip(edges[:-1], edges[1:]):
+        a, b = int(a), int(b)
+        cs = tuple(c for c in pr.curves if c.first >= a and c.last <= b)
+        exact = not cs and bool(np.all(pr.tol_mm[a + 1:b + 1] == 0))
+        subs.append(SubRun(a, b, "straight" if exact else "fit", bool(pr.rot_only[a]), cs))
+    return subs
+
+
+def fit_tolerance(tol_mm: np.ndarray) -> np.ndarray:
+    """Tolerances the fitter works with: G61's 0 becomes ``FIT_EXACT_CURVE_TOL_MM``."""
+    return np.where(tol_mm > 0, tol_mm, FIT_EXACT_CURVE_TOL_MM)

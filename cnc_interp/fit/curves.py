@@ -1,0 +1,196 @@
+"""Exact curves (G2/G3 arcs and helices, G5.2 NURBS, G5/G5.1 splines) -> quintic pieces.
+
+A curve is converted from its exact geometry, never from the sampled nodes:
+the curve's parameter range is cut into pieces (arcs: at most a quarter turn;
+NURBS: at every distinct knot) and each piece becomes the quintic Hermite
+interpolant of the exact position, first and second derivative at its two ends.
+Every piece is checked against the exact curve at ``CURVE_CHECK_POINTS``
+interior points and halved until it is within the tolerance. Inside a curve the
+pieces share exact end values, so the result is C2 in the parameter (G2).
+
+The parameter of the pieces is u = g·w (w the curve's own parameter: arc
+fraction or NURBS knot value) with one scale g per curve (its length over its
+parameter range), so |dq/du| ≈ 1 like the node fitter's chord length.
+
+At the two ends of a curve the caller may impose another tangent and curvature
+vector (a G2 junction with a neighbouring curve); the pieces touching the end
+are then subdivided until the modified interpolant is within tolerance too.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..constants import CURVE_CHECK_POINTS, CURVE_MAX_DEPTH, FIT_TOL_SAFETY
+from ..gcode.program import Arc, Nurbs
+from .nodes import PieceFit
+
+
+class CurveEval:
+    """Exact position and derivatives of one curve, vectorised over its parameter w."""
+
+    def __init__(self, curve):
+        self.curve = curve
+        if isinstance(curve, Arc):
+            self.w0, self.w1 = 0.0, 1.0
+            n_q = max(1, int(np.ceil(abs(curve.sweep_rad) / (0.5 * np.pi))))
+            self.breaks = np.linspace(0.0, 1.0, n_q + 1)
+        elif isinstance(curve, Nurbs):
+            from scipy.interpolate import BSpline
+
+            k = curve.order - 1
+            kn = np.asarray(curve.knots, dtype=float)
+            self.w0, self.w1 = float(kn[k]), float(kn[-k - 1])
+            w = np.asarray(curve.weights, dtype=float)
+            self._num = BSpline(kn, curve.control * w[:, None], k)
+            self._den = BSpline(kn, w, k)
+            inner = kn[(kn > self.w0) & (kn < self.w1)]
+            self.breaks = np.unique(np.concatenate(([self.w0], inner, [self.w1])))
+        else:  # pragma: no cover - the type is closed
+            raise TypeError(type(curve))
+
+    def eval(self, w: np.ndarray):
+        """(P, P', P'') at w (K,), each (K, n_axes), derivatives with respect to w."""
+        w = np.asarray(w, dtype=float)
+        c = self.curve
+        if isinstance(c, Arc):
+            i, j, _ = c.plane
+            P = c.points(w)
+            d = (c.end - c.start)[None, :]
+            P1 = np.repeat(d, w.size, axis=0)
+            P2 = np.zeros_like(P)
+            a0 = np.arctan2(c.start[j] - c.center[1], c.start[i] - c.center[0])
+            sw = c.sweep_rad
+            ang = a0 + sw * w
+            r0 = np.hypot(c.start[i] - c.center[0], c.start[j] - c.center[1])
+            r1 = np.hypot(c.end[i] - c.center[0], c.end[j] - c.center[1])
+            r = r0 + (r1 - r0) * w
+            dr = r1 - r0
+            co, si = np.cos(ang), np.sin(ang)
+            P1[:, i] = dr * co - r * sw * si
+            P1[:, j] = dr * si + r * sw * co
+            P2[:, i] = -2 * dr * sw * si - r * sw * sw * co
+            P2[:, j] = 2 * dr * sw * co - r * sw * sw * si
+            return P, P1, P2
+        A = self._num(w)
+        A1 = self._num(w, nu=1)
+        A2 = self._num(w, nu=2)
+        W = self._den(w)[:, None]
+        W1 = self._den(w, nu=1)[:, None]
+        W2 = self._den(w, nu=2)[:, None]
+        P = A / W
+        P1 = (A1 - W1 * P) / W
+        P2 = (A2 - 2 * W1 * P1 - W2 * P) / W
+        return P, P1, P2
+
+    def points(self, w: np.ndarray) -> np.ndarray:
+        return self.eval(w)[0]
+
+
+def end_states(ev: CurveEval, scale: np.ndarray):
+    """Unit tangent and curvature vector (scaled space) at the curve's start and end."""
+    P, P1, P2 = ev.eval(np.array([ev.w0, ev.w1]))
+    out = []
+    for k in range(2):
+        v = P1[k] * scale
+        a = P2[k] * scale
+        sp = np.linalg.norm(v)
+        T = v / sp
+        K = (a - (a @ T) * T) / sp**2
+        out.append((T, K))
+    return out
+
+
+def hermite(p0, v0, a0, p1, v1, a1, h):
+    """Quintic Hermite power coefficients (K, 6, d) on [0, h] (K,) from end values (K, d)."""
+    hh = h[:, None]
+    dp = p1 - p0
+    c = np.empty(p0.shape[:1] + (6,) + p0.shape[1:])
+    c[:, 0] = p0
+    c[:, 1] = v0
+    c[:, 2] = 0.5 * a0
+    c[:, 3] = (20 * dp - (8 * v1 + 12 * v0) * hh - (3 * a0 - a1) * hh**2) / (2 * hh**3)
+    c[:, 4] = (-30 * dp + (14 * v1 + 16 * v0) * hh + (3 * a0 - 2 * a1) * hh**2) / (2 * hh**4)
+    c[:, 5] = (12 * dp - 6 * (v1 + v0) * hh - (a0 - a1) * hh**2) / (2 * hh**5)
+    return c
+
+
+def _polyval(coef: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """coef (K, 6, d), t (K, M) -> (K, M, d)."""
+    acc = np.broadcast_to(coef[:, None, 5, :], t.shape + coef.shape[2:]).copy()
+    for i in range(4, -1, -1):
+        acc = acc * t[..., None] + coef[:, None, i, :]
+    return acc
+
+
+def _retarget(v, a, T, K):
+    """End derivatives (v, a) (scaled) turned to tangent T and curvature vector K, keeping
+    the speed and the tangential acceleration."""
+    sp = np.linalg.norm(v)
+    at = a @ (v / sp)
+    return sp * T, at * T + sp**2 * K
+
+
+def fit_curve(curve, scale: np.ndarray, lin: np.ndarray, tol_mm: float, tol_deg: float,
+              line: int, feed: float, start=None, end=None) -> PieceFit:
+    """Quintic pieces of one exact curve within ``tol_mm`` (linear, Euclidean) / ``tol_deg``.
+
+    ``scale`` (d,) maps machine units to the fitter's metric (1 on linear axes);
+    ``start``/``end`` optionally impose (T, K) unit tangent and curvature vector in
+    that metric at the curve's ends.
+    """
+    ev = CurveEval(curve)
+    wb = ev.breaks
+    # one parameter scale per curve: length / parameter range (from a fine chord sum)
+    ws = np.linspace(ev.w0, ev.w1, 8 * (wb.size - 1) * 8 + 1)
+    pts = ev.points(ws) * scale
+    length = float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum())
+    if not length > 0:
+        raise ValueError("zero-length curve")
+    g = length / (ev.w1 - ev.w0)
+    tl = tol_mm * FIT_TOL_SAFETY
+    tr = tol_deg * FIT_TOL_SAFETY
+    tfr = (np.arange(1, CURVE_CHECK_POINTS + 1) / (CURVE_CHECK_POINTS + 1))
+    max_mm = max_deg = 0.0
+    ok = True
+    for _ in range(CURVE_MAX_DEPTH + 1):
+        wa, wz = wb[:-1], wb[1:]
+        P, P1, P2 = ev.eval(wb)
+        Ps, V, A = P * scale, P1 * scale / g, P2 * scale / g**2
+        v0, a0 = V[:-1].copy(), A[:-1].copy()
+        v1, a1 = V[1:].copy(), A[1:].copy()
+        if start is not None:
+            v0[0], a0[0] = _retarget(v0[0], a0[0], *start)
+        if end is not None:
+            v1[-1], a1[-1] = _retarget(v1[-1], a1[-1], *end)
+        h = (wz - wa) * g
+        coef = hermite(Ps[:-1], v0, a0, Ps[1:], v1, a1, h)
+        tt = tfr[None, :] * h[:, None]
+        q = _polyval(coef, tt)
+        wc = wa[:, None] + tfr[None, :] * (wz - wa)[:, None]
+        ex = ev.points(wc.ravel()).reshape(wc.shape + (-1,)) * scale
+        dev = q - ex
+        e_lin = np.sqrt((dev[..., lin] ** 2).sum(axis=-1)).max(axis=1) if lin.any() else np.zeros(h.size)
+        e_rot = (np.abs(dev[..., ~lin]) / scale[~lin]).max(axis=(1, 2)) if (~lin).any() else np.zeros(h.size)
+        bad = (e_lin > tl) | (e_rot > tr)
+        max_mm, max_deg = float(e_lin.max()), float(e_rot.max())
+        if not bad.any():
+            break
+        if _ == CURVE_MAX_DEPTH:
+            ok = False
+            break
+        mids = 0.5 * (wa[bad] + wz[bad])
+        wb = np.sort(np.concatenate((wb, mids)))
+    coef = coef / scale[None, None, :]
+    coef[0, 0] = curve_start(curve)
+    breaks = np.concatenate(([0.0], np.cumsum(h)))
+    n = h.size
+    return PieceFit(breaks, coef, np.full(n, line, dtype=np.int64), np.full(n, feed),
+                    max_mm, max_deg, ok, 0)
+
+
+def curve_start(curve) -> np.ndarray:
+    """The exact first point of a curve (machine units)."""
+    if isinstance(curve, Arc):
+        return np.asarray(curve.start, dtype=float)
+    return CurveEval(curve).points(np.array([CurveEval(curve).w0]))[0]

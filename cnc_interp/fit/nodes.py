@@ -1,0 +1,238 @@
+"""General N-axis fitter: a clamped quintic B-spline fitted to the nodes.
+
+Method (robust, vectorised, O(n) per round):
+
+* parameter u = cumulative chord length in the fitter's metric (linear axes in mm,
+  rotary axes scaled to mm by tol_mm / tol_deg), so |dq/du| ≈ 1;
+* a clamped quintic B-spline with interior knots at every
+  ``FIT_INITIAL_NODES_PER_SPAN``-th node is fitted by weighted least squares
+  (weights tol_ref / tol_node) with a small third-divided-difference smoothing term
+  and a vanishing ridge (both keep knot spans without nodes well posed); its end
+  positions are the end nodes exactly, and optionally its end derivatives (u) are
+  imposed (a G2 junction with an exact curve);
+* every node, and three points on every chord, are checked: nodes within their
+  tolerance (Euclidean over linear axes in mm, each rotary axis in deg), chord
+  points within the tolerance plus the sagitta a smooth curve through the nodes
+  would have there (zero on straight stretches), and the speed |dq/du| (all axes
+  and the arc-length axes) at least ``FIT_MIN_SPEED_RATIO`` of the chord's
+  (no cusps, no zero speed in s);
+* every knot span with a failing point gets a knot at its middle node (or its
+  middle if it holds no node); repeat until everything passes.
+
+A quintic B-spline is C4 in u at simple knots, hence C2 in arc length and G2
+where the speed is positive. The result is converted to power-basis pieces for
+``Path``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..constants import (
+    FIT_INITIAL_NODES_PER_SPAN,
+    FIT_MAX_ROUNDS,
+    FIT_MIN_SPAN_REL,
+    FIT_MIN_SPEED_RATIO,
+    FIT_SMOOTHING,
+    FIT_TOL_SAFETY,
+)
+
+_FRACS = np.array([0.25, 0.5, 0.75])
+_RIDGE = 1e-10
+_FACT = np.array([1.0, 1.0, 2.0, 6.0, 24.0, 120.0])
+
+
+@dataclass(frozen=True)
+class EndState:
+    """Imposed end derivatives in the fitter's unit-speed parameter: tangent (d,), curvature vector (d,)."""
+
+    d1: np.ndarray
+    d2: np.ndarray
+
+
+@dataclass(frozen=True)
+class PieceFit:
+    """Power-basis pieces of one fitted section (local parameter starting at 0).
+
+    breaks (n_seg+1,), coef (n_seg, 6, d) in machine units, line (n_seg,),
+    feed_mm_s (n_seg,), max_dev_mm / max_dev_deg: worst node deviation found,
+    ok: every check passed.
+    """
+
+    breaks: np.ndarray
+    coef: np.ndarray
+    line: np.ndarray
+    feed_mm_s: np.ndarray
+    max_dev_mm: float
+    max_dev_deg: float
+    ok: bool
+    n_nodes: int
+
+
+def turn_angles(v_in: np.ndarray, v_out: np.ndarray) -> np.ndarray:
+    """Angle (rad) between direction vectors row by row; 0 where one is zero."""
+    n1 = np.linalg.norm(v_in, axis=-1)
+    n2 = np.linalg.norm(v_out, axis=-1)
+    dot = (v_in * v_out).sum(axis=-1)
+    cross = np.sqrt(np.maximum((n1 * n2) ** 2 - dot**2, 0.0))
+    ang = np.arctan2(cross, dot)
+    return np.where((n1 > 0) & (n2 > 0), ang, 0.0)
+
+
+def straight_piece(p0: np.ndarray, p1: np.ndarray, length: float, line: int, feed: float) -> PieceFit:
+    """One exact straight segment from p0 to p1 with parameter length ``length``."""
+    coef = np.zeros((1, 6, p0.shape[0]))
+    coef[0, 0] = p0
+    coef[0, 1] = (p1 - p0) / length
+    return PieceFit(np.array([0.0, length]), coef, np.array([line]), np.array([feed]),
+                    0.0, 0.0, True, 2)
+
+
+def fit_polyline(nodes: np.ndarray, tol_mm: np.ndarray, tol_deg: float, lin: np.ndarray,
+                 metric: np.ndarray, line: np.ndarray, feed: np.ndarray,
+                 tol_ref_mm: float, start: EndState | None = None,
+                 end: EndState | None = None) -> PieceFit:
+    """Fit one section of nodes (n, d) without corners or duplicate nodes.
+
+    ``tol_mm`` (n,) per node (tolerance of the move ending there; node 0 that of
+    move 1), ``tol_deg`` for rotary axes, ``lin`` (d,) bool linear axes,
+    ``metric`` (d,) bool axes of the arc-length metric, ``line``/``feed`` (n,)
+    per node. ``start``/``end`` impose u-derivatives in the scaled space.
+    """
+    from . import _bspline as bs
+
+    n, d = nodes.shape
+    scale = np.where(lin, 1.0, tol_ref_mm / tol_deg)
+    y = nodes * scale
+    chords = np.diff(y, axis=0)
+    clen = np.linalg.norm(chords, axis=1)
+    u = np.concatenate(([0.0], np.cumsum(clen)))
+    total = float(u[-1])
+    tol = np.asarray(tol_mm, dtype=float) * FIT_TOL_SAFETY
+    tol_rot = tol_deg * FIT_TOL_SAFETY * scale[~lin].max(initial=1.0) if (~lin).any() else np.inf
+
+    if n == 2 and start is None and end is None:
+        return straight_piece(nodes[0], nodes[1], total, int(line[1]), float(feed[1]))
+
+    # check points: nodes and fractions of each chord
+    metric_len = np.sqrt((chords[:, metric] ** 2).sum(axis=1))
+    lin_ratio = metric_len / clen
+    dirs = chords / clen[:, None]
+    delta = np.zeros(n)
+    if n > 2:
+        delta[1:-1] = turn_angles(dirs[:-1], dirs[1:])
+    if start is not None:
+        delta[0] = turn_angles(start.d1[None, :], dirs[:1])[0]
+    if end is not None:
+        delta[-1] = turn_angles(dirs[-1:], end.d1[None, :])[0]
+    sag = clen * np.maximum(delta[:-1], delta[1:]) / 8.0
+    f = _FRACS
+    xc_ch = (u[:-1, None] + clen[:, None] * f[None, :]).ravel()
+    ref_ch = (y[:-1, None, :] + chords[:, None, :] * f[None, :, None]).reshape(-1, d)
+    tol_ch = (tol[1:, None] + sag[:, None] * (4 * f * (1 - f))[None, :]).ravel()
+    node_ratio = np.empty(n)
+    node_ratio[0] = lin_ratio[0]
+    node_ratio[-1] = lin_ratio[-1]
+    node_ratio[1:-1] = np.minimum(lin_ratio[:-1], lin_ratio[1:])
+    xc = np.concatenate((u, xc_ch))
+    ref = np.concatenate((y, ref_ch))
+    tol_c = np.concatenate((tol, tol_ch))
+    exp_lin = np.concatenate((node_ratio, np.repeat(lin_ratio, f.size)))
+    exp_all = np.ones(xc.size)
+    # no minimum speed at the two ends of an unconstrained section is needed beyond the rest
+    w = tol_ref_mm / np.maximum(tol, 1e-12)
+
+    step = FIT_INITIAL_NODES_PER_SPAN
+    interior = u[step:n - 1:step].copy()
+    if interior.size and total - interior[-1] < 0.5 * (interior[-1] - (interior[-2] if interior.size > 1 else 0.0)):
+        interior = interior[:-1]
+    min_span = FIT_MIN_SPAN_REL * total
+    ok = False
+    zero = np.zeros(d)
+    d1s = start.d1 if start is not None else zero
+    d2s = start.d2 if start is not None else zero
+    d1e = end.d1 if end is not None else zero
+    d2e = end.d2 if end is not None else zero
+    for _ in range(FIT_MAX_ROUNDS + 1):
+        t = np.concatenate((np.zeros(6), interior, np.full(6, total)))
+        m = interior.size + 6
+        c = np.zeros((m, d))
+        bs.end_coefs(t, m, c, y[0], y[-1], d1s, d2s, d1e, d2e,
+                     0 if start is None else 1, 0 if end is None else 1)
+        fixed = np.zeros(m, dtype=np.bool_)
+        fixed[0] = fixed[-1] = True
+        if start is not None:
+            fixed[:3] = True
+        if end is not None:
+            fixed[-3:] = True
+        greville = np.array([t[i + 1:i + 6].mean() for i in range(m)]) if m < 64 else \
+            np.convolve(t[1:-1], np.ones(5) / 5.0, mode="valid")
+        prior = np.stack([np.interp(greville, u, y[:, a]) for a in range(d)], axis=1)
+        bs.solve_lsq(t, m, u, y, w, prior, fixed, c, FIT_SMOOTHING, _RIDGE)
+        bad = np.zeros(m + 1, dtype=np.bool_)
+        worst_lin, worst_rot = bs.check(t, m, c, xc, ref, tol_c, tol_rot, lin, metric,
+                                        exp_all, exp_lin, FIT_MIN_SPEED_RATIO, bad)
+        spans = np.nonzero(bad)[0]
+        if spans.size == 0:
+            ok = True
+            break
+        lo_t, hi_t = t[spans], t[spans + 1]
+        i_lo = np.searchsorted(u, lo_t, side="right")
+        i_hi = np.searchsorted(u, hi_t, side="left") - 1
+        has = i_hi >= i_lo
+        new = np.where(has, u[np.clip((i_lo + i_hi) // 2, 0, n - 1)], 0.5 * (lo_t + hi_t))
+        keep = (hi_t - lo_t) > 2 * min_span
+        if not keep.any():
+            break
+        interior = np.unique(np.concatenate((interior, new[keep])))
+    val = np.empty((n, d))
+    der = np.empty((n, d))
+    bs.evaluate(t, m, c, u, val, der)
+    dev = val - y
+    max_mm = float(np.sqrt((dev[:, lin] ** 2).sum(axis=1)).max()) if lin.any() else 0.0
+    max_deg = float(np.abs(dev[:, ~lin] / scale[~lin]).max()) if (~lin).any() else 0.0
+    return _to_pieces(t, c / scale, u, line, feed, nodes[0], max_mm, max_deg, ok)
+
+
+def _to_pieces(t, c, u, line, feed, p0, max_mm, max_deg, ok) -> PieceFit:
+    from scipy.interpolate import BSpline
+
+    spl = BSpline(t, c, 5, extrapolate=False)
+    x = np.unique(t)
+    left = x[:-1]
+    coef = np.empty((left.size, 6, c.shape[1]))
+    for i in range(6):
+        coef[:, i, :] = spl(left, nu=i) / _FACT[i]
+    coef[0, 0, :] = p0
+    seg_line, seg_feed = segment_sources(x, u, line, feed)
+    return PieceFit(x - x[0], coef, seg_line, seg_feed, max_mm, max_deg, ok, int(u.size))
+
+
+def segment_sources(x: np.ndarray, u: np.ndarray, line: np.ndarray, feed: np.ndarray):
+    """Source line (block whose move contains the segment's end) and least feed of the
+    moves each segment [x_k, x_k+1] overlaps; u (n,) node parameters."""
+    n = u.size
+    j_end = np.clip(np.searchsorted(u, x[1:], side="left"), 1, n - 1)
+    j_first = np.clip(np.searchsorted(u, x[:-1], side="right"), 1, n - 1)
+    j_first = np.minimum(j_first, j_end)
+    seg_line = line[j_end].astype(np.int64)
+    return seg_line, range_min(np.asarray(feed, dtype=float), j_first, j_end)
+
+
+def range_min(a: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """min(a[lo_k..hi_k]) (inclusive) for every k, with a sparse table (vectorised)."""
+    levels = [a]
+    while (1 << len(levels)) <= a.size:
+        h = 1 << (len(levels) - 1)
+        prev = levels[-1]
+        levels.append(np.minimum(prev[:-h], prev[h:]))
+    length = hi - lo + 1
+    lev = np.floor(np.log2(np.maximum(length, 1))).astype(np.int64)
+    out = np.empty(lo.size)
+    for k in np.unique(lev):
+        sel = lev == k
+        tab = levels[k]
+        out[sel] = np.minimum(tab[lo[sel]], tab[hi[sel] - (1 << k) + 1])
+    return out

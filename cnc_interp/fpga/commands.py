@@ -1,0 +1,135 @@
+"""``cnc-interp emulate`` and ``cnc-interp stream``: the FPGA stage's command functions."""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..constants import LINEAR_AXES
+from ..errors import SourceLocation, UsageError
+
+
+@dataclass(frozen=True)
+class StreamOptions:
+    """Options of ``cnc-interp stream`` (same planning options as ``plan``)."""
+
+    part: str
+    machine_spec: str | None
+    planner: str = "variable"
+    dt_s: float | None = None
+    tol_mm: float | None = None
+    device: str | None = None
+    dry_run: str | None = None
+    resume_from: int | None = None
+    quiet: bool = False
+
+
+def _say(quiet: bool, msg: str) -> None:
+    if not quiet:
+        sys.stderr.write(msg + "\n")
+        sys.stderr.flush()
+
+
+# -- emulate ---------------------------------------------------------------------------------
+def emulate_frames(frames, source: str = "<frames>"):
+    """Feed decoded frames to a device core in order; returns the core (raises UsageError on a reject)."""
+    from .device import DONE, DeviceCore
+    from .frames import ErrorFlag
+
+    core = DeviceCore(buffer_bytes=1 << 62)
+    for i, f in enumerate(frames):
+        if not core.handle(f):
+            flags = ErrorFlag(core.status().errors)
+            raise UsageError(f"frame {i + 1} (seq {f.seq}, {f.type.name}) rejected by the device model: "
+                             f"{flags!r}", SourceLocation(file=source))
+    if core.state != DONE:
+        raise UsageError("the frame file ends before its STOP frame (truncated?)", SourceLocation(file=source))
+    return core
+
+
+def trajectory_from_device(core, planner: str = "fpga-emulate"):
+    """The device's setpoints as a ``Trajectory`` (s = chord length of the emulated samples)."""
+    from ..plan.trajectory import Trajectory
+    from .model import to_mm
+
+    dp = core.datapath
+    out = dp.output()
+    q = to_mm(out.q, dp.formats)
+    dt = float(core.dt_s)
+    K = q.shape[0]
+    lin = np.array([a in LINEAR_AXES for a in dp.axes], dtype=bool)
+    d = np.diff(q, axis=0)
+    step_lin = np.sqrt((d[:, lin] ** 2).sum(axis=1)) if lin.any() else np.zeros(max(K - 1, 0))
+    step_rot = np.sqrt((d[:, ~lin] ** 2).sum(axis=1)) if (~lin).any() else np.zeros(max(K - 1, 0))
+    step = np.where(step_lin > 0, step_lin, step_rot)
+    s = np.concatenate(([0.0], np.cumsum(step))) if K else np.zeros(0)
+    feed = np.concatenate(([0.0], step / dt)) if K else np.zeros(0)
+    return Trajectory(axes=dp.axes, dt_s=dt, t=np.arange(K) * dt, s=s, feed=feed, q=q,
+                      line=out.line, planner=planner)
+
+
+def emulate_file(frames_path: str, out: str) -> None:
+    """Replay a frame file through the bit-exact model and write its setpoints as plan CSV."""
+    from ..export.csv_io import write_csv
+    from .frames import read_frame_file
+
+    frames = read_frame_file(frames_path)
+    core = emulate_frames(frames, frames_path)
+    write_csv(trajectory_from_device(core), out)
+
+
+# -- stream ----------------------------------------------------------------------------------
+def plan_for_stream(opts: StreamOptions):
+    """Parse, fit and plan like ``plan`` does: (FitResult, Trajectory)."""
+    from ..pipeline import plan_part
+
+    return plan_part(opts.part, opts.machine_spec, planner=opts.planner, dt_s=opts.dt_s,
+                     tol_mm=opts.tol_mm)
+
+
+def build_stream(opts: StreamOptions):
+    """Plan and quantize: (FpgaProgram, frames, frame infos)."""
+    from .frames import program_frames
+    from .program import build_program
+
+    fit, traj = plan_for_stream(opts)
+    source = "<stdin>" if opts.part == "-" else opts.part
+    prog = build_program(traj, fit.paths, source=source)
+    frames, infos = program_frames(prog)
+    return prog, frames, infos
+
+
+def summary_line(prog, frames) -> str:
+    st = prog.stats
+    return (f"fpga: {len(frames)} frames, {sum(map(len, frames))} bytes, {st['segments']} segments "
+            f"({st['profile_pieces']} profile pieces), {st['setpoint_samples']} of {prog.n_samples} "
+            f"samples as setpoint blocks; worst deviation from the float plan "
+            f"{st['max_dev_mm'] * 1e3:.4f} µm, segment-end drift {st['max_segment_end_drift_mm'] * 1e3:.2e} µm")
+
+
+def run_stream(opts: StreamOptions, backend=None) -> None:
+    """``cnc-interp stream``: plan, quantize, then write frames (``--dry-run``) or send them over USB."""
+    from ..export.atomic import atomic_write
+
+    if opts.dry_run and opts.resume_from is not None:
+        raise UsageError("--resume-from applies to a device, not to --dry-run")
+    prog, frames, infos = build_stream(opts)
+    _say(opts.quiet, summary_line(prog, frames))
+    for why in prog.stats.get("fallback_paths", []):
+        _say(opts.quiet, f"fpga: sent as setpoints: {why}")
+    if opts.dry_run:
+        with atomic_write(opts.dry_run) as fh:
+            fh.write(b"".join(frames))
+        return
+    from .usb_link import UsbLink
+
+    link = UsbLink.open(opts.device, backend=backend)
+    source = "<stdin>" if opts.part == "-" else opts.part
+    rep = link.send(frames, infos, resume_from=opts.resume_from, source=source)
+    fin = rep.final
+    _say(opts.quiet, f"usb: sent frames {rep.first_seq}..{len(frames)} ({rep.bytes_sent} bytes); "
+                     f"retries {rep.retries}, timeouts {rep.timeouts}, stalls {rep.stalls}, "
+                     f"CRC rejects {rep.crc_rejects}; device accepted {fin.bytes_accepted} bytes, "
+                     f"{fin.samples_done} samples")

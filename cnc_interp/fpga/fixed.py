@@ -1,0 +1,220 @@
+"""Fixed-point formats and the integer primitives the FPGA datapath is built from.
+
+A value v in format Q(word, frac) is the signed integer ``round(v * 2**frac)``
+held in ``word`` bits (two's complement). Rounding is "round half up"
+(``floor(x + 1/2)``), the cheap hardware rounding: add half an LSB, then shift
+arithmetically right. Products are formed at full width and rounded once.
+
+Polynomial coefficients use a *block exponent* per polynomial: the mantissas
+m_i (``coef_word`` bits) share one fraction length ``e`` chosen so that the
+largest |m_i| fills the word (``choose_exponent``). The polynomial variable is
+always normalised to [0, 1] (time τ within a profile piece, abscissa
+ξ = x*/x_end within a segment), so the Horner accumulator never grows past
+sum |c_i| and the word is used well whatever the segment's length or duration.
+
+Integer arrays are numpy ``object`` arrays of Python ints where a product needs
+more than 64 bits; everything here is exact.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..constants import (
+    FPGA_ACC_WORD,
+    FPGA_COEF_WORD,
+    FPGA_PARAM_FORMAT,
+    FPGA_POS_FORMAT,
+    FPGA_TRIG_FORMAT,
+)
+from ..errors import PlanError, SourceLocation
+
+#: block exponents are sent as int8; this range keeps shifts in a small barrel shifter
+EXP_MIN = -16
+EXP_MAX = 120
+
+
+class FixedPointOverflow(PlanError):
+    """A quantity does not fit its fixed-point word (names the segment and source line)."""
+
+
+@dataclass(frozen=True)
+class FixedFormat:
+    """Signed two's complement Q format: ``word`` bits in total, ``frac`` of them fractional."""
+
+    word: int
+    frac: int
+
+    def __post_init__(self) -> None:
+        if not (2 <= self.word <= 128) or not (0 <= self.frac < 128):
+            raise ValueError(f"bad fixed-point format Q({self.word},{self.frac})")
+
+    @property
+    def lsb(self) -> float:
+        """Value of one least significant bit."""
+        return math.ldexp(1.0, -self.frac)
+
+    @property
+    def max_int(self) -> int:
+        return (1 << (self.word - 1)) - 1
+
+    @property
+    def min_int(self) -> int:
+        return -(1 << (self.word - 1))
+
+    def quantize(self, x, what: str, where: "Where | None" = None):
+        """Round float(s) to this format; an int for a scalar, an object array otherwise.
+
+        Raises ``FixedPointOverflow`` naming ``what`` and ``where`` when a value
+        does not fit the word.
+        """
+        arr = np.asarray(x, dtype=float)
+        if not np.all(np.isfinite(arr)):
+            raise FixedPointOverflow(f"{what} is not finite{_where(where)}", _loc(where))
+        ints = to_ints(np.floor(np.ldexp(arr, self.frac) + 0.5))
+        self.check(ints, what, where)
+        return ints
+
+    def check(self, ints, what: str, where: "Where | None" = None) -> None:
+        """Raise ``FixedPointOverflow`` if any integer does not fit ``word`` bits."""
+        flat = np.asarray(ints, dtype=object).reshape(-1)
+        if flat.size == 0:
+            return
+        hi, lo = max(flat), min(flat)
+        if hi > self.max_int or lo < self.min_int:
+            worst = hi if hi > self.max_int else lo
+            raise FixedPointOverflow(
+                f"{what} = {math.ldexp(float(worst), -self.frac):.6g} overflows "
+                f"Q{self.word - self.frac}.{self.frac} ({self.word} bits){_where(where)}",
+                _loc(where))
+
+    def to_float(self, ints) -> np.ndarray:
+        """Integers of this format back to floats (exact up to float64 rounding)."""
+        return np.ldexp(np.asarray(ints, dtype=object).astype(float), -self.frac)
+
+
+@dataclass(frozen=True)
+class Where:
+    """What an overflow message names: segment index, source line and file."""
+
+    segment: int = -1
+    line: int = 0
+    file: str = "<input>"
+
+
+def _where(where: Where | None) -> str:
+    if where is None:
+        return ""
+    parts = []
+    if where.segment >= 0:
+        parts.append(f"segment {where.segment}")
+    if where.line > 0:
+        parts.append(f"source line {where.line}")
+    return (" in " + ", ".join(parts)) if parts else ""
+
+
+def _loc(where: Where | None) -> SourceLocation:
+    if where is None:
+        return SourceLocation()
+    return SourceLocation(file=where.file, line=where.line, col=1 if where.line > 0 else 0)
+
+
+@dataclass(frozen=True)
+class FpgaFormats:
+    """Every fixed-point format of the datapath (defaults from ``constants``).
+
+    pos: positions, origins, x_end and per-sample increments (mm or deg).
+    trig: cos θ and sin θ of each segment's rotation.
+    param: the normalised variables τ (time in a profile piece) and ξ = x*/x_end.
+    coef_word: bits of each polynomial coefficient mantissa (block exponent per polynomial).
+    acc_word: bits of the Horner accumulators and of the position integrators.
+    """
+
+    pos: FixedFormat = FixedFormat(*FPGA_POS_FORMAT)
+    trig: FixedFormat = FixedFormat(*FPGA_TRIG_FORMAT)
+    param: FixedFormat = FixedFormat(*FPGA_PARAM_FORMAT)
+    coef_word: int = FPGA_COEF_WORD
+    acc_word: int = FPGA_ACC_WORD
+
+    @property
+    def acc(self) -> FixedFormat:
+        """Accumulator range check (fraction irrelevant for overflow)."""
+        return FixedFormat(self.acc_word, 0)
+
+    def as_tuple(self) -> tuple[int, ...]:
+        return (self.pos.word, self.pos.frac, self.trig.word, self.trig.frac,
+                self.param.word, self.param.frac, self.coef_word, self.acc_word)
+
+    @classmethod
+    def from_tuple(cls, t) -> "FpgaFormats":
+        return cls(FixedFormat(t[0], t[1]), FixedFormat(t[2], t[3]), FixedFormat(t[4], t[5]),
+                   int(t[6]), int(t[7]))
+
+
+# -- integer primitives -------------------------------------------------------------
+def to_ints(a) -> np.ndarray | int:
+    """Float array of integral values -> object array of Python ints (scalar -> int)."""
+    arr = np.asarray(a)
+    if arr.ndim == 0:
+        return int(arr)
+    out = np.empty(arr.shape, dtype=object)
+    out.reshape(-1)[:] = [int(v) for v in arr.reshape(-1)]
+    return out
+
+
+def obj(a) -> np.ndarray:
+    """Any integer array-like as an object array of Python ints."""
+    arr = np.asarray(a)
+    if arr.dtype == object:
+        return arr
+    return to_ints(arr) if arr.ndim else np.array(int(arr), dtype=object)
+
+
+def round_shift(x, shift: int):
+    """Round-half-up arithmetic right shift by ``shift`` >= 0 (left shift if negative)."""
+    if shift > 0:
+        return (x + (1 << (shift - 1))) >> shift
+    if shift < 0:
+        return x << (-shift)
+    return x
+
+
+def choose_exponent(coefs: np.ndarray, word: int) -> int:
+    """Block exponent (fraction bits) so that max |coef| * 2**e fills ``word`` signed bits."""
+    m = float(np.max(np.abs(coefs))) if np.size(coefs) else 0.0
+    if m == 0.0 or not math.isfinite(m):
+        return 0
+    _, e2 = math.frexp(m)  # m = f * 2**e2, 0.5 <= f < 1
+    e = word - 1 - e2
+    # rounding may push the largest mantissa to 2**(word-1): use one bit less then
+    if math.floor(math.ldexp(m, e) + 0.5) > (1 << (word - 1)) - 1:
+        e -= 1
+    return max(EXP_MIN, min(EXP_MAX, e))
+
+
+def quantize_block(coefs, word: int, what: str, where: Where | None = None) -> tuple[int, list[int]]:
+    """(exponent, mantissas) of a coefficient vector with one shared exponent."""
+    c = np.asarray(coefs, dtype=float)
+    e = choose_exponent(c, word)
+    mant = FixedFormat(word, 0).quantize(np.ldexp(c, e), what, where)
+    return e, [int(v) for v in np.asarray(mant, dtype=object).reshape(-1)]
+
+
+def horner(mant, exp: int, var, var_frac: int, out_frac: int, acc: FixedFormat,
+           what: str = "Horner accumulator", where: Where | None = None):
+    """Evaluate sum_i mant[i] 2**-exp var**i exactly as the hardware does.
+
+    ``var`` (ints, fraction ``var_frac``, in [0, 1]); each step is
+    ``acc = round_shift(acc * var, var_frac) + mant[i]``; the result is rounded
+    to ``out_frac`` fraction bits. Every intermediate accumulator is checked
+    against ``acc`` (raises ``FixedPointOverflow``).
+    """
+    var = obj(var)
+    a = np.full(var.shape, int(mant[-1]), dtype=object) if var.ndim else int(mant[-1])
+    for m in reversed(mant[:-1]):
+        a = round_shift(a * var, var_frac) + int(m)
+        acc.check(a, what, where)
+    return round_shift(a, exp - out_frac)

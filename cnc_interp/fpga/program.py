@@ -1,0 +1,254 @@
+"""Quantize a fitted and planned program into an ``FpgaProgram``.
+
+Planar paths (``path.planar`` from the paper-000 fit) become ``FixedSegment``s:
+rotation, origin, x_end and the normalised quintic P(ξ) = p(ξ·x_end), plus a
+*parametric profile*: piecewise quintics ξ(τ) fitted to the planned samples so
+that the device's profile generator reproduces the plan's abscissa at every
+sample within ``FPGA_PROFILE_TOL_MM`` along the path. The profile is built from
+the plan's samples, so any planner (constant, variable, VPOp) can drive it.
+
+Everything else (rapids, non-planar paths, dwells, held positions, and any path
+whose samples do not lie on its planar form) is sent as quantized setpoint
+blocks. Planned samples are matched to paths by cumulative arc length ``s``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..constants import FPGA_PLANAR_MATCH_MM, FPGA_PROFILE_TOL_MM
+from .fixed import FixedFormat, FpgaFormats, Where, obj, quantize_block
+from .model import (
+    FixedSegment,
+    FpgaProgram,
+    ProfilePiece,
+    SetpointBlock,
+    horner_rows,
+    run_program,
+    to_mm,
+)
+
+_DEG = 5
+
+
+def assign_paths(traj, paths) -> list[tuple[object, int, int, float]]:
+    """For each path in program order: (path, first sample, end sample, s at path start).
+
+    A path owns the samples with S0 < s <= S0 + length (S0: length of everything
+    before it); samples at rest where a path starts belong to whatever precedes it.
+    """
+    s = np.asarray(traj.s, dtype=float)
+    out = []
+    s0 = 0.0
+    for path in paths:
+        s1 = s0 + float(path.length)
+        eps = 1e-9 * max(1.0, abs(s1))
+        a = int(np.searchsorted(s, s0 + eps, side="right"))
+        b = int(np.searchsorted(s, s1 + eps, side="right"))
+        out.append((path, a, b, s0))
+        s0 = s1
+    return out
+
+
+def _poly_d1(p: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """p'(x) for rows p (K, 6) at x (K,)."""
+    acc = 5.0 * p[:, 5]
+    for i in range(4, 0, -1):
+        acc = acc * x + i * p[:, i]
+    return acc
+
+
+def _poly(p: np.ndarray, x: np.ndarray) -> np.ndarray:
+    acc = p[:, 5].copy()
+    for i in range(4, -1, -1):
+        acc = acc * x + p[:, i]
+    return acc
+
+
+def _planar_samples(path, q: np.ndarray, s_loc: np.ndarray, held: np.ndarray, pos: FixedFormat):
+    """Segment index and rotated abscissa of each sample, or a reason why the path is not planar."""
+    pl = path.planar
+    if pl is None or path.rapid:
+        return None, "not planar"
+    h, v = pl.plane
+    seg = path.segment_of_s(s_loc)
+    th = pl.theta[seg]
+    c, s = np.cos(th), np.sin(th)
+    d_h = q[:, h] - pl.origin[seg, 0]
+    d_v = q[:, v] - pl.origin[seg, 1]
+    x = d_h * c + d_v * s
+    z = -d_h * s + d_v * c
+    resid = np.abs(z - _poly(pl.p[seg], x))
+    x_end = pl.x_end[seg]
+    slack = FPGA_PLANAR_MATCH_MM
+    if resid.size and float(resid.max()) > slack:
+        return None, f"samples leave the planar form by {float(resid.max()):.3g} mm"
+    if np.any(x < -slack) or np.any(x > x_end + slack):
+        return None, "samples outside their segment"
+    others = [i for i in range(q.shape[1]) if i not in (h, v)]
+    if others:
+        qi = np.floor(np.ldexp(q[:, others], pos.frac) + 0.5)
+        hi = np.floor(np.ldexp(held[others], pos.frac) + 0.5)
+        if np.any(qi != hi[None, :]):
+            return None, "an axis outside the plane moves"
+    return (seg, np.clip(x, 0.0, x_end)), ""
+
+
+def _fit_piece(xi: np.ndarray, scale: np.ndarray, fmts: FpgaFormats, tol: float, where: Where):
+    """Fit one profile piece to ξ samples; (piece, max error along the path in mm) or (None, err)."""
+    n = xi.shape[0]
+    fx = fmts.param.frac
+    if n == 1:
+        dtau, deg = 0, 0
+        tau = np.zeros(1)
+    else:
+        dtau = int(np.floor(np.ldexp(1.0, fx) / (n - 1) + 0.5))
+        deg = min(_DEG, n - 1)
+        tau = np.ldexp(np.arange(n, dtype=float) * dtau, -fx)
+    if deg == 0:
+        coef = np.array([xi.mean()])
+    else:
+        # power basis on τ in [0, 1]; scaling by the column norms keeps lstsq accurate
+        vand = tau[:, None] ** np.arange(deg + 1)[None, :]
+        coef = np.linalg.lstsq(vand, xi, rcond=None)[0]
+    fl = np.polynomial.polynomial.polyval(tau, coef)
+    err_f = float(np.max(np.abs(fl - xi) * scale))
+    if err_f > 0.5 * tol and n > _DEG + 1:
+        return None, err_f
+    full = np.zeros(_DEG + 1)
+    full[: deg + 1] = coef
+    exp, mant = quantize_block(full, fmts.coef_word, "profile coefficient", where)
+    tau_i = obj(np.arange(n, dtype=np.int64)) * dtau
+    m = np.array([mant], dtype=object).repeat(n, axis=0)
+    xi_q = horner_rows(m, np.full(n, exp), tau_i, fx, fx, fmts.acc, "profile accumulator", where)
+    err = float(np.max(np.abs(fmts.param.to_float(xi_q) - xi) * scale))
+    return ProfilePiece(n, dtau, exp, tuple(mant)), err
+
+
+def fit_profile(xi: np.ndarray, scale: np.ndarray, fmts: FpgaFormats,
+                tol_mm: float, where: Where) -> tuple[list[ProfilePiece], float]:
+    """Piecewise quintic ξ(τ) through the samples; (pieces, worst error along the path, mm).
+
+    ``scale`` (n,) converts a ξ error into mm along the path (x_end·sqrt(1+p'²)).
+    Pieces grow geometrically from the last accepted length and halve on failure,
+    so the work stays linear in the number of samples.
+    """
+    pieces: list[ProfilePiece] = []
+    worst = 0.0
+    i, m = 0, xi.shape[0]
+    length = m
+    while i < m:
+        length = min(m - i, max(2 * length, _DEG + 1))
+        while True:
+            piece, err = _fit_piece(xi[i:i + length], scale[i:i + length], fmts, tol_mm, where)
+            if piece is not None and (err <= tol_mm or length <= _DEG + 1):
+                break
+            length = max(1, length // 2)
+        pieces.append(piece)
+        worst = max(worst, err)
+        i += length
+    return pieces, worst
+
+
+def _setpoint_block(q: np.ndarray, start: int, line: int, pos: FixedFormat, file: str) -> SetpointBlock:
+    qi = pos.quantize(q, "setpoint", Where(-1, line, file))
+    return SetpointBlock(start, int(line), np.asarray(qi, dtype=object).astype(np.int64))
+
+
+def build_program(traj, paths=(), formats: FpgaFormats | None = None, source: str = "<input>",
+                  start=None, profile_tol_mm: float = FPGA_PROFILE_TOL_MM) -> FpgaProgram:
+    """Quantize a planned ``Trajectory`` (and the ``Path``s it was planned from) for the FPGA.
+
+    ``paths``: the program's paths in order (rapids included), as in
+    ``FitResult.paths``; their planar parts become segments. ``start``: position
+    before the first sample (default ``traj.q[0]``).
+    """
+    fmts = formats or FpgaFormats()
+    pos = fmts.pos
+    q = np.asarray(traj.q, dtype=float)
+    K, n_axes = q.shape
+    lines = np.asarray(traj.line, dtype=np.int64) if traj.line is not None else np.zeros(K, np.int64)
+    start_f = q[0] if start is None else np.asarray(start, dtype=float)
+    start_i = tuple(int(v) for v in np.asarray(pos.quantize(start_f, "start position", Where(-1, 0, source)), dtype=object))
+
+    items: list = []
+    planar_mask = np.zeros(K, dtype=bool)
+    fallback: list[str] = []
+    seg_counter = 0
+    profile_err = 0.0
+    n_pieces = 0
+    cursor = 0
+
+    def flush_setpoints(upto: int) -> None:
+        nonlocal cursor
+        if upto > cursor:
+            items.append(_setpoint_block(q[cursor:upto], cursor, int(lines[cursor]), pos, source))
+            cursor = upto
+
+    for path, a, b, s0 in assign_paths(traj, paths):
+        n_seg_path = path.n_seg
+        if b <= a or path.planar is None or path.rapid:
+            seg_counter += n_seg_path if path.planar is not None else 0
+            continue
+        held = q[a - 1] if a > 0 else start_f
+        got, why = _planar_samples(path, q[a:b], traj.s[a:b] - s0, held, pos)
+        if got is None:
+            fallback.append(f"path ending on line {int(path.line[-1])}: {why}")
+            seg_counter += n_seg_path
+            continue
+        seg, x = got
+        flush_setpoints(a)
+        pl = path.planar
+        for k in range(n_seg_path):
+            idx = np.nonzero(seg == k)[0]
+            gid = seg_counter + k
+            if idx.size == 0:
+                continue
+            line = int(path.line[k])
+            where = Where(gid, line, source)
+            x_end = float(pl.x_end[k])
+            xk = x[idx]
+            xi = xk / x_end
+            scale = x_end * np.sqrt(1.0 + _poly_d1(np.repeat(pl.p[k][None, :], idx.size, 0), xk) ** 2)
+            pieces, err = fit_profile(xi, scale, fmts, profile_tol_mm, where)
+            profile_err = max(profile_err, err)
+            n_pieces += len(pieces)
+            pn = pl.p[k] * x_end ** np.arange(6)
+            p_exp, p_mant = quantize_block(pn, fmts.coef_word, "path coefficient", where)
+            th = float(pl.theta[k])
+            cos_i = int(fmts.trig.quantize(np.cos(th), "cos θ", where))
+            sin_i = int(fmts.trig.quantize(np.sin(th), "sin θ", where))
+            org = pos.quantize(pl.origin[k], "segment origin", where)
+            items.append(FixedSegment(
+                index=gid, line=line, plane=(int(pl.plane[0]), int(pl.plane[1])),
+                cos=cos_i, sin=sin_i, origin=(int(org[0]), int(org[1])),
+                x_end=int(pos.quantize(x_end, "segment x_end", where)),
+                p_exp=p_exp, p_mant=tuple(p_mant), start_sample=a + int(idx[0]),
+                pieces=tuple(pieces)))
+        planar_mask[a:b] = True
+        cursor = b
+        seg_counter += n_seg_path
+    flush_setpoints(K)
+
+    prog = FpgaProgram(axes=traj.axes, dt_s=float(traj.dt_s), formats=fmts, start=start_i,
+                       n_samples=K, items=tuple(items), source=source)
+    stats = deviation_stats(prog, q, planar_mask)
+    stats.update(segments=sum(isinstance(i, FixedSegment) for i in items),
+                 profile_pieces=n_pieces, profile_fit_err_mm=profile_err,
+                 setpoint_samples=int(K - planar_mask.sum()), planar_samples=int(planar_mask.sum()),
+                 fallback_paths=fallback)
+    return FpgaProgram(**{**prog.__dict__, "stats": stats})
+
+
+def deviation_stats(prog: FpgaProgram, q_plan: np.ndarray, planar_mask: np.ndarray | None = None) -> dict:
+    """Run the golden model and compare with the float plan: worst deviations and end drift (mm)."""
+    out = run_program(prog)
+    qe = to_mm(out.q, prog.formats)
+    dev = np.abs(qe - q_plan)
+    stats = {"max_dev_mm": float(dev.max()) if dev.size else 0.0,
+             "max_dev_euclid_mm": float(np.sqrt((dev ** 2).sum(axis=1)).max()) if dev.size else 0.0}
+    if planar_mask is not None and planar_mask.any():
+        stats["max_dev_planar_mm"] = float(dev[planar_mask].max())
+    gaps = np.array(out.segment_end_gap, dtype=float).reshape(-1, 2)
+    stats["max_segment_end_drift_mm"] = float(np.abs(gaps).max() * prog.formats.pos.lsb) if gaps.size else 0.0
+    return stats

@@ -1,0 +1,1009 @@
+"""The RS274NGC modal interpreter: evaluated blocks in, a ``Program`` timeline out.
+
+The language layer (``blocks.iter_blocks``) hands over one block at a time with
+every word already evaluated; this module keeps the modal state (motion mode,
+plane, units, distance modes, offsets, feed, path control, canned-cycle and
+NURBS state) and turns each block into machine-coordinate moves, dwells and
+stops, in RS274NGC's order of execution within a block.
+
+Internally positions are 9-axis machine coordinates (``ALL_AXES`` order: mm for
+XYZUVW, degrees for ABC); inch and per-minute values are converted here, once.
+
+Speed: a block that is a plain G0/G1 move (optionally with N, F, S words) takes
+a short path that appends floats to ``array('d')`` buffers, with no per-node
+objects; everything else goes through ``_general``.
+"""
+
+from __future__ import annotations
+
+import math
+from operator import itemgetter
+
+import numpy as np
+
+from ..constants import ALL_AXES, ARC_MAX_TURNS, LINEAR_AXES, MM_PER_INCH, SECONDS_PER_MINUTE
+from ..errors import GCodeError, SourceLocation, UnsupportedError
+from .arcs import GeometryError, arc_length_mm, centre_from_ijk, centre_from_r, make_arc
+from .canned import SUPPORTED as CYCLE_CODES, CycleError, expand_cycle
+from .program import Dwell, Program, Stop
+from .runs import RunBuilder, finish_run
+from .splines import bezier, make_nurbs, sample_nurbs
+
+INF = math.inf
+NAN = math.nan
+AXIS_INDEX = {a: i for i, a in enumerate(ALL_AXES)}
+IS_LINEAR9 = tuple(a in LINEAR_AXES for a in ALL_AXES)
+#: plane code -> (first, second, normal) axis indices (LinuxCNC: G18 is Z-X)
+PLANES = {170: (0, 1, 2), 180: (2, 0, 1), 190: (1, 2, 0)}
+#: plane code -> centre-offset letters of (first, second) axes, and the letter not allowed
+PLANE_IJK = {170: ("I", "J", "K"), 180: ("K", "I", "J"), 190: ("J", "K", "I")}
+PLANE_NAME = {170: "XY (G17)", 180: "XZ (G18)", 190: "YZ (G19)"}
+VALID_LETTERS = frozenset("ABCDFGHIJKLMNPQRSTUVWXYZ")
+
+#: G code (x10) -> modal group (0 = non-modal)
+G_GROUP = {
+    0: 1, 10: 1, 20: 1, 30: 1, 50: 1, 51: 1, 52: 1, 53: 1, 730: 1, 800: 1, 810: 1, 820: 1,
+    830: 1, 850: 1, 890: 1,
+    170: 2, 180: 2, 190: 2,
+    900: 3, 910: 3, 901: 4, 911: 4, 930: 5, 940: 5, 200: 6, 210: 6, 400: 7,
+    430: 8, 490: 8, 980: 10, 990: 10,
+    540: 12, 550: 12, 560: 12, 570: 12, 580: 12, 590: 12, 591: 12, 592: 12, 593: 12,
+    610: 13, 611: 13, 640: 13, 960: 14, 970: 14, 80: 15,
+    40: 0, 100: 0, 280: 0, 281: 0, 300: 0, 301: 0, 530: 0, 920: 0, 921: 0, 922: 0, 923: 0,
+}
+G_UNSUPPORTED = {
+    70: "G7 lathe diameter mode",
+    330: "G33 spindle-synchronized motion", 331: "G33.1 rigid tapping",
+    380: "G38 probing", 382: "G38.2 probing", 383: "G38.3 probing", 384: "G38.4 probing",
+    385: "G38.5 probing",
+    410: "G41 cutter radius compensation", 420: "G42 cutter radius compensation",
+    411: "G41.1 dynamic cutter radius compensation", 421: "G42.1 dynamic cutter radius compensation",
+    431: "G43.1 dynamic tool length offset", 432: "G43.2 additional tool length offset",
+    520: "G52 local coordinate offset",
+    700: "G70 lathe finishing cycle", 710: "G71 lathe roughing cycle", 711: "G71.1 lathe roughing cycle",
+    720: "G72 lathe roughing cycle", 721: "G72.1 lathe roughing cycle",
+    740: "G74 left-hand tapping cycle (spindle synchronized)", 760: "G76 threading cycle",
+    840: "G84 tapping cycle (spindle synchronized)", 860: "G86 boring cycle (spindle stop)",
+    870: "G87 back boring cycle", 880: "G88 boring cycle (manual retract)",
+    950: "G95 feed per revolution", 171: "G17.1 UV plane", 181: "G18.1 WU plane",
+    191: "G19.1 VW plane", 650: "G65 macro call", 680: "G68 coordinate rotation",
+    690: "G69 coordinate rotation",
+}
+#: M codes that do not affect motion (spindle, coolant, overrides, digital/analog I/O)
+M_NOOP = frozenset({3, 4, 5, 7, 8, 9, 19, 48, 49, 50, 51, 52, 53, 61, 62, 63, 64, 65, 67, 68})
+M_STOPS = {0: "M0", 1: "M1", 2: "M2", 30: "M30", 60: "M60"}
+M_GROUP = {0: 4, 1: 4, 2: 4, 30: 4, 60: 4, 6: 6, 61: 6, 3: 7, 4: 7, 5: 7, 19: 7}
+M_UNSUPPORTED = {66: "M66 wait on input", 70: "M70 save modal state", 71: "M71 invalidate modal state",
+                 72: "M72 restore modal state", 73: "M73 save and autorestore modal state",
+                 98: "M98 subprogram call (use O-word sub/call)",
+                 99: "M99 subprogram return (use O-word endsub)"}
+#: letter -> axis index (>= 0) or a negative tag for the fast path (N, F, S, G)
+_FAST_KIND = {a: i for i, a in enumerate(ALL_AXES)}
+_FAST_KIND.update({"N": -1, "F": -2, "S": -3, "G": -4})
+_PER_MIN = 1.0 / SECONDS_PER_MINUTE
+MOTION_USES_AXES = frozenset({0, 10, 20, 30, 50, 51, 52, 730, 810, 820, 830, 850, 890})
+
+
+def _gcode_name(code10: int) -> str:
+    return f"G{code10 // 10}" if code10 % 10 == 0 else f"G{code10 // 10}.{code10 % 10}"
+
+
+class Interpreter:
+    """Modal state of one program run. Use ``run(blocks)`` once."""
+
+    def __init__(self, source: str, params, axes: str | None, start9: list[float]):
+        self.source = source
+        self.params = params
+        self.fixed_axes = axes is not None
+        if axes is not None:
+            self.active = tuple(sorted(AXIS_INDEX[a] for a in axes))
+            self.out_order = tuple(AXIS_INDEX[a] for a in axes)  # machine order as given
+        else:
+            self.active = (0, 1, 2)
+            self.out_order = None
+        self.start9 = list(start9)
+        self.pos = list(start9)
+        # units and modes
+        self.len_unit = 1.0
+        self.units9 = [1.0] * 9
+        self.distance_incremental = False
+        self.arc_abs = False
+        self.plane = 170
+        self.motion = 800  # LinuxCNC starts with no motion mode (G80)
+        self.feed_inverse_time = False
+        self.f_word = 0.0
+        self.f_block = 0.0  # F given in the current block (G93 needs one per move)
+        self.retract_r_plane = False  # G98
+        self.tol = NAN  # G64 without P
+        self.naive = NAN
+        self.exact_stop = False
+        self.tool = 0
+        self.tool_selected = 0
+        # offsets (mm/deg, machine)
+        self.cs = 1
+        self.coord_off = [0.0] * 9
+        self.g92 = [0.0] * 9
+        self.off = [0.0] * 9
+        # canned cycles
+        self.cycle_il = None
+        self.cycle_r = 0.0
+        self.cycle_cc = 0.0
+        self.cycle_p = 0.0
+        self.cycle_q = 0.0
+        # splines
+        self.nurbs_cp: list | None = None
+        self.nurbs_w: list | None = None
+        self.nurbs_order = 3
+        self.nurbs_line = 0
+        self.nurbs_col = 0
+        self.g5_tangent: tuple[float, float] | None = None
+        # output
+        self.items: list = []
+        self.rb: RunBuilder | None = None
+        self.block_count = 0
+        self.line_count = 0
+        self.zero_length_moves = 0
+        self.zero_length_lines: list[int] = []
+        self.blk = None
+        self._set_units(1.0)
+        self._refresh_layout()
+        self._load_coordinate_system(1, write_current=True)
+
+    # -- small helpers ------------------------------------------------------------
+    def error(self, message: str, col: int = 0, unsupported: bool = False, text: str | None = None):
+        """A GCodeError at the current block (column ``col``), quoting its text."""
+        blk = self.blk
+        line = blk.line if blk is not None else 0
+        if text is None:
+            text = _word_text(blk, col) if blk is not None else ""
+        cls = UnsupportedError if unsupported else GCodeError
+        return cls(message, SourceLocation(self.source, line, col, text))
+
+    def unit_of(self, i: int) -> float:
+        return self.units9[i]
+
+    def _set_units(self, len_unit: float) -> None:
+        self.len_unit = len_unit
+        self.units9 = [len_unit if lin else 1.0 for lin in IS_LINEAR9]
+
+    def _refresh_layout(self) -> None:
+        self.getter = itemgetter(*self.active) if len(self.active) > 1 else (
+            lambda p, _i=self.active[0]: (p[_i],))
+        self.active_letters = frozenset(ALL_AXES[i] for i in self.active)
+        self.fast_keys = frozenset("NFS") | self.active_letters
+
+    def _activate(self, i: int, col: int) -> None:
+        if i in self.active:
+            return
+        if self.fixed_axes:
+            raise self.error(f"axis {ALL_AXES[i]} is not on this machine (axes "
+                             f"{''.join(ALL_AXES[k] for k in self.out_order)})", col)
+        self.active = tuple(sorted(self.active + (i,)))
+        if self.rb is not None:
+            self.rb.widen(self.active, self.pos)
+        self._refresh_layout()
+
+    def _pget(self, n: int) -> float:
+        p = self.params
+        try:
+            if p.exists(n):
+                return float(p.get(n))
+        except Exception:  # a store that does not know the number: treat as 0
+            return 0.0
+        return 0.0
+
+    def _pset(self, n: int, v: float) -> None:
+        self.params.set(n, float(v))
+
+    def _update_off(self) -> None:
+        self.off = [c + g for c, g in zip(self.coord_off, self.g92)]
+
+    def program_position(self) -> list[float]:
+        """Current position in program coordinates and units (for #5420-#5428)."""
+        return [(p - o) / u for p, o, u in zip(self.pos, self.off, self.units9)]
+
+    def sync_position_params(self) -> None:
+        for k, v in enumerate(self.program_position()):
+            self._pset(5420 + k, v)
+
+    # -- offsets ------------------------------------------------------------------
+    def _load_coordinate_system(self, cs: int, write_current: bool = True) -> None:
+        base = 5201 + 20 * cs
+        self.cs = cs
+        self.coord_off = [self._pget(base + k) * self.units9[k] for k in range(9)]
+        self._update_off()
+        if write_current:
+            self._pset(5220, cs)
+
+    def _write_offset_params(self) -> None:
+        """Rewrite the current-system and G92 parameters in the current units."""
+        base = 5201 + 20 * self.cs
+        for k in range(9):
+            self._pset(base + k, self.coord_off[k] / self.units9[k])
+            self._pset(5211 + k, self.g92[k] / self.units9[k])
+
+    def _switch_units(self, len_unit: float) -> None:
+        if len_unit == self.len_unit:
+            return
+        # LinuxCNC keeps offset parameters in the current length units: convert them
+        ratio = self.len_unit / len_unit
+        lin = [k for k in range(9) if IS_LINEAR9[k]]
+        nums = [5161 + k for k in lin] + [5181 + k for k in lin] + [5211 + k for k in lin]
+        nums += [5201 + 20 * cs + k for cs in range(1, 10) for k in lin]
+        for n in nums:
+            if self.params.exists(n):
+                self._pset(n, self._pget(n) * ratio)
+        self._set_units(len_unit)
+
+    # -- runs -----------------------------------------------------------------------
+    def _start_run(self, kind: str, line: int, col: int) -> RunBuilder:
+        rb = self.rb
+        if rb is not None:
+            self._close_run(kind)  # a rapid run ends because feed follows, and vice versa
+        rb = RunBuilder(kind, self.active, self.pos, line, col, self.tol, self.naive)
+        self.rb = rb
+        return rb
+
+    def _close_run(self, reason: str) -> None:
+        rb = self.rb
+        self.rb = None
+        if rb is not None and rb.n > 1:
+            self.items.append(("run", rb, reason))
+
+    def _feed_value(self, start9, end9, length_mm: float | None, col: int) -> float:
+        """Feed limit (mm/s, or deg/s for rotary-only moves) of one feed move."""
+        if self.feed_inverse_time:
+            if length_mm is None:
+                length_mm = _move_length(start9, end9)
+            return length_mm * self.f_block / SECONDS_PER_MINUTE
+        if self.f_word <= 0.0:
+            raise self.error("feed move with zero or missing feed rate (F)", col)
+        if self.len_unit != 1.0:
+            rotary_only = all(start9[k] == end9[k] for k in range(9) if IS_LINEAR9[k])
+            if rotary_only:
+                return self.f_word / SECONDS_PER_MINUTE
+        return self.f_word * self.len_unit / SECONDS_PER_MINUTE
+
+    def straight(self, kind: str, new: list[float], line: int, col: int) -> None:
+        """A G0 (``kind="rapid"``) or G1 (``"feed"``) move to 9-axis machine position ``new``."""
+        pos = self.pos
+        if kind == "feed":
+            feed = self._feed_value(pos, new, None, col)
+            tol, naive = self.tol, self.naive
+        else:
+            feed, tol, naive = INF, self.tol, self.naive
+        if new == pos:
+            self._zero_length(line)
+            return
+        rb = self.rb
+        if rb is None or rb.kind != kind:
+            rb = self._start_run(kind, line, col)
+        rb.nodes.extend(self.getter(new))
+        rb.line.append(line)
+        rb.col.append(col)
+        rb.feed.append(feed)
+        rb.tol.append(tol)
+        rb.naive.append(naive)
+        rb.n += 1
+        self.pos = new
+        if self.exact_stop:
+            self._close_run("exact-stop")
+
+    def _zero_length(self, line: int) -> None:
+        self.zero_length_moves += 1
+        if len(self.zero_length_lines) < 1000:
+            self.zero_length_lines.append(line)
+
+    def _curve(self, curve, pts9: np.ndarray, end9: list[float], line: int, col: int,
+               feed: float) -> None:
+        rb = self.rb
+        if rb is None or rb.kind != "feed":
+            rb = self._start_run("feed", line, col)
+        first, last = rb.add_many(pts9, line, col, feed, self.tol, self.naive)
+        rb.curves.append((first, last, curve))
+        self.pos = list(end9)
+        if self.exact_stop:
+            self._close_run("exact-stop")
+
+    # canned-cycle callbacks
+    def cycle_move(self, kind: str, target9: list[float], line: int, col: int) -> None:
+        tol, self.tol = self.tol, 0.0  # cycles run as exact path (G61)
+        try:
+            self.straight(kind, target9, line, col)
+        finally:
+            self.tol = tol
+
+    def cycle_dwell(self, seconds: float, line: int) -> None:
+        self._dwell(seconds, line)
+
+    def _dwell(self, seconds: float, line: int) -> None:
+        self._close_run("dwell")
+        self.items.append(("dwell", Dwell(line=line, seconds=float(seconds), position=None),
+                           list(self.pos)))
+
+    def _stop(self, code: str, line: int, reason: str) -> None:
+        self._close_run(reason)
+        self.items.append(("stop", Stop(line=line, code=code, position=None), list(self.pos)))
+
+    # -- the main loop ------------------------------------------------------------
+    def run(self, blocks) -> None:
+        """Interpret every block (stops after M2/M30, as LinuxCNC does)."""
+        kind_get = _FAST_KIND.get
+        nblocks = 0
+        fast_ok, off, u9, inc, act = self._fast_state()
+        for blk in blocks:
+            nblocks += 1
+            words = blk.words
+            if fast_ok:
+                # ---- fast path: a plain G0/G1 block of axis, N, F, S words ----
+                pos = self.pos
+                new = None
+                gcode = -1
+                gcol = 0
+                fw = None
+                seen = 0
+                slow = False
+                for w in words:
+                    k = kind_get(w[0], -9)
+                    if k >= 0:
+                        if not act[k] or (seen >> k) & 1:
+                            slow = True
+                            break
+                        seen |= 1 << k
+                        if new is None:
+                            new = pos[:]
+                            if gcol == 0:
+                                gcol = w[2]
+                        if inc:
+                            new[k] += w[1] * u9[k]
+                        else:
+                            new[k] = w[1] * u9[k] + off[k]
+                    elif k == -1 or k == -3:
+                        continue
+                    elif k == -2 and fw is None:
+                        fw = w
+                    elif k == -4 and gcode < 0:
+                        gv = w[1]
+                        if gv == 1.0:
+                            gcode = 10
+                        elif gv == 0.0:
+                            gcode = 0
+                        else:
+                            slow = True
+                            break
+                        gcol = w[2]
+                    else:
+                        slow = True
+                        break
+                if not slow:
+                    if fw is not None:
+                        if fw[1] < 0:
+                            self.blk = blk
+                            raise self.error("negative feed rate", fw[2])
+                        self.f_word = fw[1]
+                    if gcode < 0:
+                        gcode = self.motion
+                    else:
+                        self.motion = gcode
+                    if new is None:
+                        continue
+                    if gcode == 10:
+                        kind = "feed"
+                        f = self.f_word
+                        if f <= 0.0:
+                            self.blk = blk
+                            raise self.error("feed move with zero or missing feed rate (F)", gcol)
+                        if u9[0] != 1.0:
+                            feed = self._feed_value(pos, new, None, gcol)
+                        else:
+                            feed = f * _PER_MIN
+                    else:
+                        kind = "rapid"
+                        feed = INF
+                    if new == pos:
+                        self._zero_length(blk.line)
+                        continue
+                    rb = self.rb
+                    if rb is None or rb.kind != kind:
+                        rb = self._start_run(kind, blk.line, gcol)
+                    rb.nodes.extend(self.getter(new))
+                    rb.line.append(blk.line)
+                    rb.col.append(gcol)
+                    rb.feed.append(feed)
+                    rb.tol.append(self.tol)
+                    rb.naive.append(self.naive)
+                    rb.n += 1
+                    self.pos = new
+                    continue
+            # ---- everything else ----
+            self.blk = blk
+            if not words:
+                continue
+            gw, mw, d = self._split_words(words)
+            if self._general(blk, gw, mw, d):
+                break
+            fast_ok, off, u9, inc, act = self._fast_state()
+        self.block_count += nblocks
+        self.blk = None
+        if self.nurbs_cp is not None:
+            raise GCodeError("G5.2 NURBS block never ended (missing G5.3)",
+                             SourceLocation(self.source, self.nurbs_line, self.nurbs_col, "G5.2"))
+        self._close_run("end")
+
+    def _fast_state(self):
+        ok = (self.motion in (0, 10) and not self.feed_inverse_time and not self.exact_stop
+              and self.nurbs_cp is None)
+        act = [i in self.active for i in range(9)]
+        return ok, self.off, self.units9, self.distance_incremental, act
+
+    def _split_words(self, words):
+        """(G words, M words, {letter: word}) of a block; a repeated letter is an error."""
+        gw = []
+        mw = []
+        d = {}
+        for w in words:
+            L = w[0]
+            if L == "G":
+                gw.append(w)
+            elif L == "M":
+                mw.append(w)
+            elif L in d:
+                raise self.error(f"two {L} words in one block", w[2])
+            else:
+                d[L] = w
+        return gw, mw, d
+
+    # -- general blocks ---------------------------------------------------------
+    def _general(self, blk, gw, mw, d) -> bool:
+        """Execute one block in RS274NGC order; True when the program ends (M2/M30)."""
+        line = blk.line
+        for L, w in d.items():
+            if L not in VALID_LETTERS:
+                raise self.error(f"unknown word letter {L}", w[2])
+        # --- classify G codes ---
+        groups: dict[int, tuple[int, int]] = {}
+        g80 = False
+        for w in gw or ():
+            v = w[1]
+            code = int(round(v * 10))
+            if abs(v * 10 - code) > 1e-6 or code < 0:
+                raise self.error(f"unknown G-code G{v:g}", w[2])
+            if code in G_UNSUPPORTED and code not in G_GROUP:
+                raise self.error(f"{G_UNSUPPORTED[code]} is not supported", w[2], unsupported=True)
+            grp = G_GROUP.get(code)
+            if grp is None:
+                raise self.error(f"unknown G-code {_gcode_name(code)}", w[2])
+            if code == 430:
+                hw = d.get("H")
+                if hw is None or hw[1] != 0:
+                    raise self.error("G43 tool length offset is not supported (only G43 H0)",
+                                     w[2], unsupported=True)
+            if code == 800:
+                g80 = True
+                if 1 in groups:
+                    continue
+                groups[1] = (code, w[2])
+                continue
+            if grp in groups:
+                prev = groups[grp][0]
+                if grp == 1 and prev == 800:
+                    groups[1] = (code, w[2])
+                    continue
+                raise self.error(f"{_gcode_name(prev)} and {_gcode_name(code)} are in the same "
+                                 "modal group", w[2])
+            groups[grp] = (code, w[2])
+        # --- classify M codes ---
+        mgroups: dict[int, tuple[int, int]] = {}
+        for w in mw or ():
+            v = w[1]
+            code = int(round(v))
+            if abs(v - code) > 1e-9 or code < 0:
+                raise self.error(f"unknown M-code M{v:g}", w[2])
+            if code in M_UNSUPPORTED:
+                raise self.error(f"{M_UNSUPPORTED[code]} is not supported", w[2], unsupported=True)
+            if 100 <= code <= 199:
+                raise self.error(f"user-defined M-code M{code} is not supported", w[2],
+                                 unsupported=True)
+            if code not in M_NOOP and code not in M_STOPS and code != 6:
+                raise self.error(f"unknown M-code M{code}", w[2])
+            grp = M_GROUP.get(code, 100 + code)
+            if grp in mgroups:
+                raise self.error(f"M{mgroups[grp][0]} and M{code} are in the same modal group",
+                                 w[2])
+            mgroups[grp] = (code, w[2])
+
+        g0 = groups.get(0)
+        g0code = g0[0] if g0 else None
+        axis_words = [(L, w) for L, w in d.items() if L in AXIS_INDEX]
+        covets = g0code in (100, 280, 300, 920)
+        mcode = groups[1][0] if 1 in groups else None
+
+        # 1. feed mode
+        if 5 in groups:
+            self.feed_inverse_time = groups[5][0] == 930
+        # units before F and the coordinates (so 'G20 F10' is 10 in/min)
+        if 6 in groups:
+            self._switch_units(MM_PER_INCH if groups[6][0] == 200 else 1.0)
+        # 2. F
+        fw = d.get("F")
+        self.f_block = 0.0
+        if fw is not None:
+            if fw[1] < 0:
+                raise self.error("negative feed rate", fw[2])
+            self.f_word = fw[1]
+            self.f_block = fw[1]
+        # 3. S, T
+        tw = d.get("T")
+        if tw is not None:
+            if tw[1] < 0 or tw[1] != int(tw[1]):
+                raise self.error("tool number T must be a non-negative integer", tw[2])
+            self.tool_selected = int(tw[1])
+        # 4. M6 tool change
+        if 6 in mgroups and mgroups[6][0] == 6:
+            self.tool = self.tool_selected
+            self._pset(5400, self.tool)
+            self._stop("M6", line, "tool-change")
+        # 5. dwell
+        if g0code == 40:
+            pw = d.get("P")
+            if pw is None:
+                raise self.error("G4 dwell without P (seconds)", g0[1])
+            if pw[1] < 0:
+                raise self.error("negative dwell time P", pw[2])
+            self._dwell(pw[1], line)
+        # 6. plane
+        if 2 in groups:
+            newp = groups[2][0]
+            if self.nurbs_cp is not None and newp != self.plane:
+                raise self.error("plane change inside a G5.2 NURBS block", groups[2][1])
+            self.plane = newp
+        # 7. cutter comp G40 / tool length G49, G43 H0: nothing moves
+        # 8. coordinate system
+        if 12 in groups:
+            code = groups[12][0]
+            cs = {540: 1, 550: 2, 560: 3, 570: 4, 580: 5, 590: 6, 591: 7, 592: 8, 593: 9}[code]
+            self._load_coordinate_system(cs)
+        # 9. path control
+        if 13 in groups:
+            code = groups[13][0]
+            self.exact_stop = code == 611
+            if code == 610:
+                self.tol, self.naive = 0.0, NAN
+            elif code == 611:
+                self.tol, self.naive = 0.0, NAN
+            else:
+                self.tol, self.naive = NAN, NAN
+                pw, qw = d.get("P"), d.get("Q")
+                if pw is not None:
+                    if pw[1] < 0:
+                        raise self.error("negative G64 P tolerance", pw[2])
+                    self.tol = pw[1] * self.len_unit if pw[1] > 0 else NAN
+                if qw is not None:
+                    if qw[1] < 0:
+                        raise self.error("negative G64 Q tolerance", qw[2])
+                    self.naive = qw[1] * self.len_unit
+        # 10. distance modes, retract mode
+        if 3 in groups:
+            self.distance_incremental = groups[3][0] == 910
+        if 4 in groups:
+            self.arc_abs = groups[4][0] == 901
+        if 10 in groups:
+            self.retract_r_plane = groups[10][0] == 990
+
+        # axis-word bookkeeping (RS274NGC enhance_block rules)
+        if covets and mcode is not None and mcode != 800:
+            raise self.error(f"{_gcode_name(g0code)} and {_gcode_name(mcode)} both use the axis "
+                             "words", g0[1])
+        if g80 and axis_words and not covets and mcode == 800:
+            raise self.error("axis words with G80 (cycle cancel) and no motion", axis_words[0][1][2])
+        for L, w in axis_words:
+            self._activate(AXIS_INDEX[L], w[2])
+
+        # 11. non-modal group 0
+        g53 = False
+        if g0code is not None and g0code != 40:
+            g53 = self._group0(g0code, g0[1], d, axis_words, line)
+
+        # 12. motion
+        if mcode is not None:
+            if mcode != self.motion or mcode == 800:
+                if mcode not in (810, 820, 830, 730, 850, 890):
+                    self.cycle_il = None
+            if self.nurbs_cp is not None and mcode != 52:
+                if mcode == 53:
+                    self._nurbs_end(line, groups[1][1])
+                    self.motion = 800
+                else:
+                    raise GCodeError("G5.2 NURBS block never ended (missing G5.3)",
+                                     SourceLocation(self.source, self.nurbs_line, self.nurbs_col,
+                                                    "G5.2"))
+            elif mcode == 53:
+                raise self.error("G5.3 without an open G5.2 NURBS block", groups[1][1])
+            elif mcode == 800:
+                self.motion = 800
+            else:
+                if not axis_words and mcode not in (0, 10, 52):
+                    raise self.error(f"{_gcode_name(mcode)} without any axis word", groups[1][1])
+                self._motion(mcode, groups[1][1], d, axis_words, line, g53)
+        elif axis_words and not covets:
+            if self.motion == 800:
+                raise self.error("axis words without a motion mode (G0, G1, ...)",
+                                 axis_words[0][1][2])
+            self._motion(self.motion, 0, d, axis_words, line, g53)
+
+        # 13. stops
+        if 4 in mgroups:
+            code = mgroups[4][0]
+            if code in (2, 30):
+                if self.nurbs_cp is not None:
+                    raise GCodeError("G5.2 NURBS block never ended (missing G5.3)",
+                                     SourceLocation(self.source, self.nurbs_line, self.nurbs_col,
+                                                    "G5.2"))
+                self._stop(M_STOPS[code], line, "end")
+                return True
+            self._stop(M_STOPS[code], line, "stop")
+        return False
+
+    # -- group 0 ------------------------------------------------------------------
+    def _group0(self, code: int, col: int, d: dict, axis_words: list, line: int) -> bool:
+        u = self.units9
+        if code == 530:
+            if self.distance_incremental:
+                raise self.error("G53 in incremental distance mode (G91)", col)
+            return True
+        if code == 100:
+            self._g10(col, d, axis_words)
+        elif code == 920:
+            if not axis_words:
+                raise self.error("G92 without axis words", col)
+            for L, w in axis_words:
+                i = AXIS_INDEX[L]
+                self.g92[i] = self.pos[i] - self.coord_off[i] - w[1] * u[i]
+            self._update_off()
+            self._pset(5210, 1.0)
+            for k in range(9):
+                self._pset(5211 + k, self.g92[k] / u[k])
+        elif code in (921, 922):
+            self.g92 = [0.0] * 9
+            self._update_off()
+            self._pset(5210, 0.0)
+            if code == 921:
+                for k in range(9):
+                    self._pset(5211 + k, 0.0)
+        elif code == 923:
+            self.g92 = [self._pget(5211 + k) * u[k] for k in range(9)]
+            self._update_off()
+            self._pset(5210, 1.0)
+        elif code in (280, 300):
+            base = 5161 if code == 280 else 5181
+            if axis_words:
+                inter = self._target(axis_words)
+                self.straight("rapid", inter, line, col)
+                home = list(self.pos)
+                for L, _ in axis_words:
+                    i = AXIS_INDEX[L]
+                    home[i] = self._pget(base + i) * u[i]
+            else:
+                home = [self._pget(base + k) * u[k] for k in range(9)]
+                for k in range(9):
+                    if home[k] != self.pos[k]:
+                        self._activate(k, col)
+            self.straight("rapid", home, line, col)
+        elif code in (281, 301):
+            base = 5161 if code == 281 else 5181
+            for k in range(9):
+                self._pset(base + k, self.pos[k] / u[k])
+        return False
+
+    def _g10(self, col: int, d: dict, axis_words: list) -> None:
+        lw, pw = d.get("L"), d.get("P")
+        if lw is None:
+            raise self.error("G10 without L", col)
+        lv = lw[1]
+        if lv in (1.0, 10.0, 11.0):
+            return  # tool table entries: tool offsets are not applied (no G43), nothing moves
+        if lv not in (2.0, 20.0):
+            raise self.error(f"G10 L{lv:g} is not supported", lw[2], unsupported=True)
+        if pw is None:
+            raise self.error(f"G10 L{lv:g} without P (coordinate system)", col)
+        p = pw[1]
+        if p != int(p) or not 0 <= p <= 9:
+            raise self.error("G10 P must be a coordinate system 0-9", pw[2])
+        rw = d.get("R")
+        if rw is not None and rw[1] != 0:
+            raise self.error("G10 L2 R (coordinate system rotation) is not supported", rw[2],
+                             unsupported=True)
+        cs = int(p) or self.cs
+        base = 5201 + 20 * cs
+        u = self.units9
+        for L, w in axis_words:
+            i = AXIS_INDEX[L]
+            if lv == 2.0:
+                val_mm = w[1] * u[i]
+            else:
+                val_mm = self.pos[i] - w[1] * u[i] - self.g92[i]
+            self._pset(base + i, val_mm / u[i])
+            if cs == self.cs:
+                self.coord_off[i] = val_mm
+        self._update_off()
+
+    # -- motion -------------------------------------------------------------------
+    def _target(self, axis_words, machine: bool = False) -> list[float]:
+        new = self.pos[:]
+        u = self.units9
+        inc = self.distance_incremental and not machine
+        for L, w in axis_words:
+            i = AXIS_INDEX[L]
+            if inc:
+                new[i] += w[1] * u[i]
+            elif machine:
+                new[i] = w[1] * u[i]
+            else:
+                new[i] = w[1] * u[i] + self.off[i]
+        return new
+
+    def _motion(self, code: int, col: int, d: dict, axis_words: list, line: int,
+                g53: bool) -> None:
+        if col == 0:
+            col = axis_words[0][1][2] if axis_words else 0
+        if g53 and code not in (0, 10):
+            raise self.error("G53 needs G0 or G1", col)
+        if code in (0, 10):
+            self.motion = code
+            if axis_words:
+                if code == 10 and self.feed_inverse_time and self.f_block <= 0:
+                    raise self.error("G93 inverse time feed move without F", col)
+                self.straight("feed" if code == 10 else "rapid",
+                              self._target(axis_words, machine=g53), line, col)
+            return
+        if code in (20, 30):
+            self._arc(code, col, d, axis_words, line)
+            self.motion = code
+            return
+        if code in (50, 51):
+            self._bezier(code, col, d, axis_words, line)
+            self.motion = code
+            return
+        if code == 52:
+            self._nurbs_point(col, d, axis_words, line)
+            return
+        if code // 10 in CYCLE_CODES:
+            words = dict(d)
+            try:
+                expand_cycle(self, code // 10, words, line, col)
+            except CycleError as exc:
+                wcol = d[exc.letter][2] if exc.letter and exc.letter in d else col
+                raise self.error(str(exc), wcol) from None
+            self.motion = code
+            return
+        raise self.error(f"{_gcode_name(code)} is not supported", col, unsupported=True)
+
+    def _feed_check(self, col: int) -> None:
+        if self.feed_inverse_time:
+            if self.f_block <= 0:
+                raise self.error("G93 inverse time feed move without F", col)
+        elif self.f_word <= 0:
+            raise self.error("feed move with zero or missing feed rate (F)", col)
+
+    def _arc(self, code: int, col: int, d: dict, axis_words: list, line: int) -> None:
+        self._feed_check(col)
+        plane = PLANES[self.plane]
+        a, b, _ = plane
+        for k in (a, b):
+            self._activate(k, col)
+        fl, sl, bad = PLANE_IJK[self.plane]
+        if bad in d:
+            raise self.error(f"{bad} word in an arc in the {PLANE_NAME[self.plane]} plane",
+                             d[bad][2])
+        start = self.pos
+        end = self._target(axis_words)
+        turns = 1
+        pw = d.get("P")
+        if pw is not None:
+            p = pw[1]
+            if p != int(p) or p < 1 or p > ARC_MAX_TURNS:
+                raise self.error(f"arc turn count P must be a whole number from 1 to "
+                                 f"{ARC_MAX_TURNS}", pw[2])
+            turns = int(p)
+        ccw = code == 30
+        ua, ub = self.units9[a], self.units9[b]
+        rw = d.get("R")
+        try:
+            if rw is not None:
+                if fl in d or sl in d:
+                    raise self.error("arc with both R and I/J/K", rw[2])
+                if not any(ALL_AXES[k] in d for k in (a, b)):
+                    raise self.error("R-format arc without an end point in the plane", col)
+                c1, c2, r1, r2, sweep = centre_from_r(ccw, start[a], start[b], end[a], end[b],
+                                                      rw[1] * self.len_unit, turns)
+            else:
+                if fl not in d and sl not in d:
+                    raise self.error("arc without R or centre offsets "
+                                     f"{fl}/{sl}", col)
+                if self.arc_abs:
+                    for ltr in (fl, sl):
+                        if ltr not in d:
+                            raise self.error(f"{ltr} word missing in absolute-centre arc (G90.1)",
+                                             col)
+                    c1 = d[fl][1] * ua + self.off[a]
+                    c2 = d[sl][1] * ub + self.off[b]
+                else:
+                    c1 = start[a] + (d[fl][1] * ua if fl in d else 0.0)
+                    c2 = start[b] + (d[sl][1] * ub if sl in d else 0.0)
+                r1, r2, sweep = centre_from_ijk(ccw, start[a], start[b], end[a], end[b], c1, c2,
+                                                turns)
+        except GeometryError as exc:
+            raise self.error(str(exc), col) from None
+        arc, pts = make_arc(line, start, end, plane, c1, c2, r1, r2, sweep)
+        if self.feed_inverse_time:
+            feed = arc_length_mm(start, end, plane, r1, r2, sweep) * self.f_block / SECONDS_PER_MINUTE
+        else:
+            feed = self.f_word * self.len_unit / SECONDS_PER_MINUTE
+        self._curve(arc, pts, end, line, col, feed)
+
+    def _curve_feed(self, pts9: np.ndarray, start9) -> float:
+        if self.feed_inverse_time:
+            allp = np.vstack([np.asarray(start9)[None, :], pts9])
+            length = float(np.sqrt((np.diff(allp, axis=0) ** 2).sum(axis=1)).sum())
+            return length * self.f_block / SECONDS_PER_MINUTE
+        return self.f_word * self.len_unit / SECONDS_PER_MINUTE
+
+    def _bezier(self, code: int, col: int, d: dict, axis_words: list, line: int) -> None:
+        self._feed_check(col)
+        if self.plane != 170:
+            raise self.error(f"{_gcode_name(code)} splines must be in the XY plane (G17)", col,
+                             unsupported=True)
+        for L, w in axis_words:
+            if L not in "XY":
+                raise self.error(f"{_gcode_name(code)} splines may only move X and Y", w[2])
+        self._activate(0, col)
+        self._activate(1, col)
+        start = self.pos
+        end = self._target(axis_words)
+        u = self.len_unit
+        iw, jw = d.get("I"), d.get("J")
+        if code == 51:
+            if iw is None or jw is None:
+                raise self.error("G5.1 needs both I and J", col)
+            p1 = list(start)
+            p1[0] += iw[1] * u
+            p1[1] += jw[1] * u
+            ctrl = [start, p1, end]
+            self.g5_tangent = None
+        else:
+            pw, qw = d.get("P"), d.get("Q")
+            if pw is None or qw is None:
+                raise self.error("G5 needs both P and Q", col)
+            if iw is None and jw is None:
+                if self.g5_tangent is None or self.motion != 50:
+                    raise self.error("G5 without I and J must follow another G5", col)
+                di, dj = self.g5_tangent
+            elif iw is None or jw is None:
+                raise self.error("G5 needs both I and J, or neither", col)
+            else:
+                di, dj = iw[1] * u, jw[1] * u
+            p1 = list(start)
+            p1[0] += di
+            p1[1] += dj
+            p2 = list(end)
+            p2[0] += pw[1] * u
+            p2[1] += qw[1] * u
+            ctrl = [start, p1, p2, end]
+            self.g5_tangent = (-pw[1] * u, -qw[1] * u)
+        if end == start and all(c == start for c in ctrl):
+            self._zero_length(line)
+            return
+        curve = bezier(line, np.array(ctrl, dtype=float))
+        pts = sample_nurbs(curve)
+        self._curve(curve, pts, end, line, col, self._curve_feed(pts, start))
+
+    def _nurbs_point(self, col: int, d: dict, axis_words: list, line: int) -> None:
+        a, b, _ = PLANES[self.plane]
+        la, lb = ALL_AXES[a], ALL_AXES[b]
+        pw = d.get("P")
+        lw = d.get("L")
+        if self.nurbs_cp is None:
+            self._feed_check(col)
+            self._activate(a, col)
+            self._activate(b, col)
+            w0 = 1.0
+            if not axis_words and pw is not None:
+                w0 = pw[1]
+                if w0 <= 0:
+                    raise self.error("NURBS weight P must be positive", pw[2])
+            self.nurbs_cp = [list(self.pos)]
+            self.nurbs_w = [w0]
+            self.nurbs_order = 3
+            self.nurbs_line = line
+            self.nurbs_col = col
+            self.motion = 52
+        if lw is not None:
+            lv = lw[1]
+            if lv != int(lv) or lv < 1:
+                raise self.error("NURBS order L must be a positive integer", lw[2])
+            if lv > 3:
+                self.nurbs_order = int(lv)
+        if not axis_words:
+            if pw is not None and len(self.nurbs_cp) > 1:
+                raise self.error("P without a control point in a G5.2 block", pw[2])
+            return
+        for L, w in axis_words:
+            if L not in (la, lb):
+                raise self.error(f"{L} word in a G5.2 NURBS block (only {la} and {lb} in the "
+                                 f"{PLANE_NAME[self.plane]} plane)", w[2], unsupported=True)
+        if la not in d or lb not in d:
+            raise self.error(f"a NURBS control point needs both {la} and {lb}", col)
+        if pw is None or pw[1] <= 0:
+            raise self.error("every NURBS control point needs a positive weight P",
+                             pw[2] if pw else col)
+        cp = self._target(axis_words)
+        base = self.nurbs_cp[0]
+        pt = list(base)
+        pt[a], pt[b] = cp[a], cp[b]
+        self.nurbs_cp.append(pt)
+        self.nurbs_w.append(pw[1])
+
+    def _nurbs_end(self, line: int, col: int) -> None:
+        cps = np.array(self.nurbs_cp, dtype=float)
+        w = np.array(self.nurbs_w, dtype=float)
+        order = self.nurbs_order
+        self.nurbs_cp = None
+        self.nurbs_w = None
+        try:
+            curve = make_nurbs(self.nurbs_line, cps, w, order)
+            pts = sample_nurbs(curve)
+        except GeometryError as exc:
+            raise self.error(str(exc), col) from None
+        end = list(cps[-1])
+        start = list(self.pos)
+        if np.all(cps == cps[0]):
+            self._zero_length(line)
+            return
+        self._curve(curve, pts, end, line, col, self._curve_feed(pts, start))
+
+    # -- result -------------------------------------------------------------------
+    def program(self, line_count: int) -> Program:
+        if self.out_order is not None:
+            order = self.out_order
+        else:
+            order = tuple(sorted(self.active))
+        axes = "".join(ALL_AXES[i] for i in order)
+        sel = list(order)
+        items = []
+        for kind, obj, extra in self.items:
+            if kind == "run":
+                items.append(finish_run(obj, order, axes, extra))
+            elif kind == "dwell":
+                items.append(Dwell(line=obj.line, seconds=obj.seconds,
+                                   position=np.array(extra, dtype=float)[sel]))
+            else:
+                items.append(Stop(line=obj.line, code=obj.code,
+                                  position=np.array(extra, dtype=float)[sel]))
+        meta = {"zero_length_moves": self.zero_length_moves,
+                "zero_length_lines": list(self.zero_length_lines),
+                "final_position": [float(v) for v in np.array(self.pos)[sel]]}
+        return Program(source=self.source, axes=axes, items=tuple(items),
+                       start=np.array(self.start9, dtype=float)[sel], line_count=line_count,
+                       block_count=self.block_count, metadata=meta)
+
+
+def _move_length(s, e) -> float:
+    lin = 0.0
+    rot = 0.0
+    for k in range(9):
+        dv = e[k] - s[k]
+        if IS_LINEAR9[k]:
+            lin += dv * dv
+        else:
+            rot += dv * dv
+    return math.sqrt(lin) if lin > 0 else math.sqrt(rot)
+
+
+def _word_text(blk, col: int) -> str:
+    """The source text of the word starting at 1-based ``col`` of ``blk`` (or the block)."""
+    text = getattr(blk, "text", "") or ""
+    if col <= 0 or col > len(text):
+        return text.strip()
+    cols = sorted(c for _, _, c in blk.words if c > col)
+    end = cols[0] - 1 if cols else len(text)
+    return text[col - 1:end].strip()

@@ -1,0 +1,104 @@
+"""Assembling ``Run`` objects: growable flat arrays during interpretation, numpy at the end.
+
+The interpreter appends one node per move into ``array('d')`` buffers (no per-node
+Python objects, 8 bytes per value). Node values are stored for the axes that are
+*active* at that moment (``layout``, indices into ``ALL_AXES``); when a program
+names a new axis mid-run the buffer is re-laid out once (the new axis held still
+until then). ``finish`` maps every run onto the program's final axes.
+"""
+
+from __future__ import annotations
+
+from array import array
+
+import numpy as np
+
+from .program import Arc, CurvePiece, Nurbs, Run
+
+
+class RunBuilder:
+    """One run being built. ``start9`` is the 9-axis position before its first move."""
+
+    __slots__ = ("kind", "layout", "start9", "nodes", "line", "col", "feed", "tol", "naive",
+                 "curves", "n")
+
+    def __init__(self, kind: str, layout: tuple[int, ...], pos9: list[float], line: int, col: int,
+                 tol: float, naive: float):
+        self.kind = kind
+        self.layout = layout
+        self.start9 = list(pos9)
+        self.nodes = array("d", [pos9[i] for i in layout])
+        self.line = array("q", [line])
+        self.col = array("q", [col])
+        self.feed = array("d", [0.0])  # replaced by feed[1] in finish
+        self.tol = array("d", [tol])
+        self.naive = array("d", [naive])
+        self.curves: list[tuple[int, int, object]] = []  # (first, last, 9-axis curve)
+        self.n = 1
+
+    def widen(self, new_layout: tuple[int, ...], pos9: list[float]) -> None:
+        """Re-lay the buffer out for ``new_layout``; new axes get their (unchanged) value."""
+        old = np.frombuffer(self.nodes, dtype=float).reshape(self.n, len(self.layout))
+        out = np.empty((self.n, len(new_layout)))
+        for j, ax in enumerate(new_layout):
+            if ax in self.layout:
+                out[:, j] = old[:, self.layout.index(ax)]
+            else:
+                out[:, j] = pos9[ax]
+        self.nodes = array("d")
+        self.nodes.frombytes(out.tobytes())
+        self.layout = new_layout
+
+    def add_many(self, pts9: np.ndarray, line: int, col: int, feed: float, tol: float,
+                 naive: float) -> tuple[int, int]:
+        """Append sampled nodes (K, 9); returns (first, last) node indices of the piece."""
+        k = pts9.shape[0]
+        first = self.n - 1
+        sub = np.ascontiguousarray(pts9[:, list(self.layout)], dtype=float)
+        self.nodes.frombytes(sub.tobytes())
+        self.line.extend([line] * k)
+        self.col.extend([col] * k)
+        self.feed.extend([feed] * k)
+        self.tol.extend([tol] * k)
+        self.naive.extend([naive] * k)
+        self.n += k
+        return first, self.n - 1
+
+
+def finish_run(rb: RunBuilder, axes_idx: tuple[int, ...], axes: str, end_reason: str) -> Run:
+    """The frozen ``Run`` for builder ``rb`` in the final axes ``axes_idx``."""
+    n = rb.n
+    ncol = len(rb.layout)
+    raw = np.frombuffer(rb.nodes, dtype=float).reshape(n, ncol)
+    if rb.layout == axes_idx:
+        nodes = raw  # shares the buffer; the builder is dropped after this
+    else:
+        nodes = np.empty((n, len(axes_idx)))
+        for j, ax in enumerate(axes_idx):
+            if ax in rb.layout:
+                nodes[:, j] = raw[:, rb.layout.index(ax)]
+            else:
+                nodes[:, j] = rb.start9[ax]
+    feed = np.frombuffer(rb.feed, dtype=float)
+    if n > 1:
+        feed[0] = feed[1]
+    sel = list(axes_idx)
+    curves = []
+    for first, last, c in rb.curves:
+        if isinstance(c, Arc):
+            pos = {ax: j for j, ax in enumerate(axes_idx)}
+            plane = tuple(pos.get(p, -1) for p in c.plane)
+            cur = Arc(line=c.line, start=c.start[sel].copy(), end=c.end[sel].copy(), plane=plane,
+                      center=c.center, radius=c.radius, sweep_rad=c.sweep_rad)
+        else:
+            assert isinstance(c, Nurbs)
+            cur = Nurbs(line=c.line, control=np.ascontiguousarray(c.control[:, sel]),
+                        weights=c.weights, knots=c.knots, order=c.order)
+        curves.append(CurvePiece(first=first, last=last, curve=cur))
+    return Run(kind=rb.kind, axes=axes, nodes=nodes,
+               line=np.frombuffer(rb.line, dtype=np.int64),
+               col=np.frombuffer(rb.col, dtype=np.int64),
+               feed_mm_s=feed,
+               tol_mm=np.frombuffer(rb.tol, dtype=float),
+               naive_tol_mm=np.frombuffer(rb.naive, dtype=float),
+               curves=tuple(curves), end_reason=end_reason)

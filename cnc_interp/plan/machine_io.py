@@ -1,0 +1,484 @@
+"""Load a ``Machine`` from a TOML file, a LinuxCNC INI file or a built-in preset.
+
+TOML form (DESIGN.md)::
+
+    name = "My mill"          # optional (default: the file name)
+    dt = 0.001                # sample period, s (optional, default 0.001)
+    kinematics = "trivial"    # or a table: [kinematics] type = "xyzac-trt", z_offset = 12.5
+    tol = 0.001               # optional default fit tolerance, mm
+    [start]                   # optional machine position before the program
+    Z = 50.0
+    [axes.X]                  # one table per axis, in machine order
+    vmax = 500.0              # mm/s   (deg/s for A, B, C)
+    amax = 2500.0             # mm/s^2 (deg/s^2)
+    jmax = 5000.0             # mm/s^3 (deg/s^3)
+
+LinuxCNC INI: axis letters from ``[TRAJ] COORDINATES`` (duplicates, i.e. gantry
+joints, count once); limits from ``[AXIS_<letter>]`` (LinuxCNC >= 2.8), else the
+old ``[AXIS_<n>]`` (n = index of the letter in XYZABCUVW), else ``[JOINT_<n>]``
+(n = position in COORDINATES): ``MAX_VELOCITY``, ``MAX_ACCELERATION`` and, if
+present, ``MAX_JERK`` in machine units per s, s^2, s^3. ``[TRAJ] LINEAR_UNITS``
+(mm / inch / a number of units per mm) and ``ANGULAR_UNITS`` (degree / radian /
+grad) are converted to mm and deg. ``[EMCMOT] SERVO_PERIOD`` (ns) gives dt.
+Where the INI has no jerk limit the axis gets
+``jmax = DEFAULT_JERK_PER_ACCEL_1_S * amax`` (10/s: full acceleration is reached in
+0.1 s, a common S-curve setting for small machines; LinuxCNC's own trajectory
+planner is not jerk-limited, so the INI files usually have none).
+
+Every error is a ``MachineError`` with the file, line and column of the
+offending key where it can be found.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+
+import numpy as np
+
+from ..constants import (
+    ALL_AXES,
+    DEFAULT_DT_S,
+    DEFAULT_JERK_PER_ACCEL_1_S,
+    MM_PER_INCH,
+    ROTARY_AXES,
+)
+from ..errors import MachineError, SourceLocation
+from .kinematics import KINEMATICS, normalise_params
+from .machine import Machine
+from .presets import DEFAULT_PRESET, PRESETS
+
+__all__ = ["load_machine", "machine_from_data", "preset_table", "format_presets",
+           "DEFAULT_PRESET", "PRESETS"]
+
+_TOP_KEYS = ("name", "dt", "kinematics", "tol", "start", "axes", "description")
+_AXIS_KEYS = ("vmax", "amax", "jmax")
+_LIMIT_NAMES = {"vmax": "velocity", "amax": "acceleration", "jmax": "jerk"}
+#: longest sample period accepted (s); anything longer is certainly a unit mistake
+_MAX_DT_S = 1.0
+
+
+# --- entry point -------------------------------------------------------------
+def load_machine(spec: str) -> Machine:
+    """A ``Machine`` from a TOML path, a LinuxCNC INI path or a preset name."""
+    if spec in PRESETS:
+        return _preset(spec)
+    if not os.path.exists(spec):
+        if os.path.splitext(spec)[1] or os.sep in spec:
+            raise MachineError("machine file not found", SourceLocation(file=spec))
+        raise MachineError(f"no machine file or preset named '{spec}' "
+                           f"(presets: {', '.join(sorted(PRESETS))})", SourceLocation(file=spec))
+    try:
+        with open(spec, "rb") as fh:
+            raw = fh.read()
+    except OSError as exc:
+        raise MachineError(f"cannot read machine file: {exc.strerror}",
+                           SourceLocation(file=spec)) from None
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = raw[:exc.start].count(b"\n") + 1
+        raise MachineError("machine file is not UTF-8 text", SourceLocation(file=spec, line=line)) from None
+    ext = os.path.splitext(spec)[1].lower()
+    if ext == ".ini" or (ext != ".toml" and _looks_like_ini(text)):
+        return _load_ini(text, spec)
+    return _load_toml(text, spec)
+
+
+def _looks_like_ini(text: str) -> bool:
+    return bool(re.search(r"^\s*\[(TRAJ|EMCMOT|EMC|KINS)\]\s*$", text, re.M))
+
+
+def _preset(name: str) -> Machine:
+    _, data = PRESETS[name]
+    return machine_from_data(data, source=f"preset:{name}", locate=lambda *a: SourceLocation(f"preset:{name}"))
+
+
+# --- TOML --------------------------------------------------------------------
+def _load_toml(text: str, path: str) -> Machine:
+    import tomllib
+
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        line = getattr(exc, "lineno", None)
+        col = getattr(exc, "colno", None)
+        msg = str(exc)
+        m = re.search(r"\s*\(at line (\d+), column (\d+)\)\s*$", msg)
+        if m:
+            line = line or int(m.group(1))
+            col = col or int(m.group(2))
+            msg = msg[:m.start()]
+        elif re.search(r"\(at end of document\)\s*$", msg):
+            line = line or text.count("\n") + 1
+            msg = msg[:msg.rfind("(at end")].rstrip()
+        line = line or 0
+        src = _line_text(text, line)
+        raise MachineError(f"invalid TOML: {msg}", SourceLocation(path, line, col or 1, src)) from None
+    locator = _TomlLocator(text, path)
+    return machine_from_data(data, source=path, locate=locator, default_name=_stem(path))
+
+
+class _TomlLocator:
+    """Finds the line of ``[table] key`` in TOML text (best effort, for messages)."""
+
+    _HEADER = re.compile(r"^\s*\[\s*([^\[\]]+?)\s*\]\s*(#.*)?$")
+
+    def __init__(self, text: str, path: str):
+        self.path = path
+        self.lines = text.splitlines()
+        self.tables: list[tuple[int, tuple[str, ...]]] = []  # (line index, table path)
+        for i, line in enumerate(self.lines):
+            m = self._HEADER.match(line)
+            if m:
+                parts = tuple(p.strip().strip('"\'') for p in m.group(1).split("."))
+                self.tables.append((i, parts))
+
+    def __call__(self, table: tuple[str, ...] = (), key: str | None = None) -> SourceLocation:
+        spans = [(0, len(self.lines), ())]  # the root table runs up to the first header
+        if self.tables:
+            spans = [(0, self.tables[0][0], ())]
+        for j, (start, parts) in enumerate(self.tables):
+            end = self.tables[j + 1][0] if j + 1 < len(self.tables) else len(self.lines)
+            spans.append((start + 1, end, parts))
+        want = tuple(table)
+        for start, end, parts in spans:
+            if tuple(parts) != want:  # TOML keys are case-sensitive
+                continue
+            if key is None:
+                return self._loc(start - 1) if parts else SourceLocation(self.path)
+            pat = re.compile(r"^\s*[\"']?" + re.escape(key) + r"[\"']?\s*=", re.I)
+            for i in range(start, end):
+                if pat.match(self.lines[i]):
+                    return self._loc(i)
+            if parts:
+                return self._loc(start - 1)
+        # dotted or inline forms (axes.X.vmax = .., axes = {X = {..}}): search the key text
+        needle = key or (want[-1] if want else None)
+        if needle:
+            pat = re.compile(r"(^|[\s.{,])[\"']?" + re.escape(needle) + r"[\"']?\s*[=.\]]", re.I)
+            for i, line in enumerate(self.lines):
+                if pat.search(line):
+                    return self._loc(i)
+        return SourceLocation(self.path)
+
+    def _loc(self, i: int) -> SourceLocation:
+        if not (0 <= i < len(self.lines)):
+            return SourceLocation(self.path)
+        line = self.lines[i]
+        col = len(line) - len(line.lstrip()) + 1
+        return SourceLocation(self.path, i + 1, col, line.strip())
+
+
+def _line_text(text: str, line: int) -> str:
+    lines = text.splitlines()
+    return lines[line - 1].strip() if 1 <= line <= len(lines) else ""
+
+
+def _stem(path: str) -> str:
+    return os.path.splitext(os.path.basename(path))[0]
+
+
+# --- validation shared by TOML files and presets ----------------------------
+def _number(value, what: str, loc: SourceLocation, positive: bool = True) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise MachineError(f"{what} must be a number, not {type(value).__name__}", loc)
+    v = float(value)
+    if not math.isfinite(v):
+        raise MachineError(f"{what} must be finite, not {value}", loc)
+    if positive and v <= 0:
+        raise MachineError(f"{what} must be positive, not {value}", loc)
+    return v
+
+
+def machine_from_data(data: dict, source: str, locate, default_name: str = "machine") -> Machine:
+    """Validate TOML-shaped ``data`` into a ``Machine``.
+
+    ``locate(table_path, key)`` returns the ``SourceLocation`` used in errors.
+    """
+    unknown = [k for k in data if k not in _TOP_KEYS]
+    if unknown:
+        raise MachineError(f"unknown key '{unknown[0]}' (allowed: {', '.join(_TOP_KEYS)})",
+                           locate((), unknown[0]))
+    name = data.get("name", default_name)
+    if not isinstance(name, str):
+        raise MachineError("name must be a string", locate((), "name"))
+
+    dt_s = DEFAULT_DT_S
+    if "dt" in data:
+        dt_s = _number(data["dt"], "dt (sample period, s)", locate((), "dt"))
+        if dt_s > _MAX_DT_S:
+            raise MachineError(f"dt = {dt_s} s is longer than {_MAX_DT_S} s (dt is in seconds)",
+                               locate((), "dt"))
+
+    kind, params = "trivial", {}
+    kin = data.get("kinematics", "trivial")
+    if isinstance(kin, str):
+        kind = kin
+        kin_loc = locate((), "kinematics")
+    elif isinstance(kin, dict):
+        params = dict(kin)
+        kind = params.pop("type", None)
+        kin_loc = locate(("kinematics",), "type")
+        if not isinstance(kind, str):
+            raise MachineError("[kinematics] needs type = \"trivial\" or \"xyzac-trt\"",
+                               locate(("kinematics",), None))
+    else:
+        raise MachineError("kinematics must be a name or a table", locate((), "kinematics"))
+    if kind not in KINEMATICS:
+        raise MachineError(f"unknown kinematics '{kind}' (known: {', '.join(KINEMATICS)})", kin_loc)
+    try:
+        params = normalise_params(kind, params)
+    except MachineError as exc:
+        bad = re.search(r"'([^']+)'", exc.message)
+        raise MachineError(exc.message, locate(("kinematics",), bad.group(1) if bad else None)) from None
+
+    axes_data = data.get("axes")
+    if axes_data is None:
+        raise MachineError("no [axes.X] tables: the machine needs at least one axis", locate((), None))
+    if not isinstance(axes_data, dict) or not axes_data:
+        raise MachineError("axes must hold one table per axis, e.g. [axes.X]", locate((), "axes"))
+    letters: list[str] = []
+    limits = {k: [] for k in _AXIS_KEYS}
+    for raw_letter, table in axes_data.items():
+        letter = raw_letter.upper()
+        where = ("axes", raw_letter)
+        if len(letter) != 1 or letter not in ALL_AXES:
+            raise MachineError(f"unknown axis '{raw_letter}' (axes are {', '.join(ALL_AXES)})",
+                               locate(where, None))
+        if letter in letters:
+            raise MachineError(f"axis {letter} is defined twice", locate(where, None))
+        if not isinstance(table, dict):
+            raise MachineError(f"axis {letter} must be a table with vmax, amax, jmax",
+                               locate(("axes",), raw_letter))
+        for key in table:
+            if key not in _AXIS_KEYS:
+                raise MachineError(f"unknown key '{key}' in axis {letter} (allowed: vmax, amax, jmax)",
+                                   locate(where, key))
+        unit = "deg" if letter in ROTARY_AXES else "mm"
+        for key in _AXIS_KEYS:
+            if key not in table:
+                raise MachineError(f"axis {letter} has no {key} ({_LIMIT_NAMES[key]} limit)",
+                                   locate(where, None))
+            power = "/s" if key == "vmax" else "/s^2" if key == "amax" else "/s^3"
+            limits[key].append(_number(table[key], f"axis {letter} {key} ({unit}{power})",
+                                       locate(where, key)))
+        letters.append(letter)
+    axes = "".join(letters)
+    if kind == "xyzac-trt":
+        missing = [a for a in "XYZAC" if a not in axes]
+        if missing:
+            raise MachineError(f"kinematics 'xyzac-trt' needs axes X, Y, Z, A, C; missing "
+                               f"{', '.join(missing)}", kin_loc)
+
+    start = np.zeros(len(axes))
+    if "start" in data:
+        st = data["start"]
+        if not isinstance(st, dict):
+            raise MachineError("start must be a table of axis positions, e.g. start = {Z = 50}",
+                               locate((), "start"))
+        for key, value in st.items():
+            if key.upper() not in axes:
+                raise MachineError(f"start position for '{key}', which is not an axis of this machine "
+                                   f"({axes})", locate(("start",), key))
+            start[axes.index(key.upper())] = _number(value, f"start {key}", locate(("start",), key),
+                                                     positive=False)
+
+    tol_mm = None
+    if "tol" in data:
+        tol_mm = _number(data["tol"], "tol (mm)", locate((), "tol"))
+    if "description" in data and not isinstance(data["description"], str):
+        raise MachineError("description must be a string", locate((), "description"))
+
+    return Machine(name=name, axes=axes, vmax=limits["vmax"], amax=limits["amax"],
+                   jmax=limits["jmax"], dt_s=dt_s, kinematics=kind, kinematics_params=params,
+                   start=start, tol_mm=tol_mm, source=source)
+
+
+# --- LinuxCNC INI ------------------------------------------------------------
+class _Ini:
+    """LinuxCNC INI: sections of ``KEY = value`` (repeated keys kept in order), line numbers."""
+
+    def __init__(self, text: str, path: str):
+        self.path = path
+        self.lines = text.splitlines()
+        self.sections: dict[str, tuple[int, dict[str, list[tuple[str, int]]]]] = {}
+        current = None
+        for i, raw in enumerate(self.lines, start=1):
+            line = raw.strip()
+            if not line or line[0] in "#;":
+                continue
+            if line.startswith("["):
+                end = line.find("]")
+                if end < 0:
+                    raise MachineError("unterminated section header", self.loc(i))
+                name = line[1:end].strip().upper()
+                current = self.sections.setdefault(name, (i, {}))[1]
+                continue
+            if "=" not in line or current is None:
+                continue  # LinuxCNC ignores such lines too
+            key, _, value = line.partition("=")
+            current.setdefault(key.strip().upper(), []).append((value.strip(), i))
+
+    def loc(self, line: int) -> SourceLocation:
+        text = self.lines[line - 1].strip() if 1 <= line <= len(self.lines) else ""
+        raw = self.lines[line - 1] if 1 <= line <= len(self.lines) else ""
+        return SourceLocation(self.path, line, len(raw) - len(raw.lstrip()) + 1, text)
+
+    def get(self, section: str, key: str) -> tuple[str, int] | None:
+        sec = self.sections.get(section)
+        if sec is None or key not in sec[1]:
+            return None
+        return sec[1][key][0]
+
+    def number(self, section: str, key: str, positive: bool = True) -> float | None:
+        item = self.get(section, key)
+        if item is None:
+            return None
+        value, line = item
+        token = value.split()[0] if value.split() else ""
+        try:
+            v = float(token)
+        except ValueError:
+            raise MachineError(f"[{section}] {key} must be a number", self.loc(line)) from None
+        if not math.isfinite(v) or (positive and v <= 0):
+            raise MachineError(f"[{section}] {key} must be a positive finite number", self.loc(line))
+        return v
+
+
+_LINEAR_UNITS = {"mm": 1.0, "metric": 1.0, "millimeter": 1.0, "millimetre": 1.0,
+                 "inch": MM_PER_INCH, "in": MM_PER_INCH, "imperial": MM_PER_INCH}
+_ANGULAR_UNITS = {"degree": 1.0, "deg": 1.0, "degrees": 1.0,
+                  "radian": 180.0 / math.pi, "rad": 180.0 / math.pi, "radians": 180.0 / math.pi,
+                  "grad": 0.9, "gon": 0.9}
+
+
+def _units(ini: _Ini, key: str, table: dict[str, float]) -> float:
+    item = ini.get("TRAJ", key)
+    if item is None:
+        return 1.0
+    value, line = item
+    word = value.split()[0].lower() if value.split() else ""
+    if word in table:
+        return table[word]
+    try:  # old form: machine units per mm (or per degree)
+        per = float(word)
+    except ValueError:
+        raise MachineError(f"[TRAJ] {key}: unknown unit '{value}' "
+                           f"(known: {', '.join(table)})", ini.loc(line)) from None
+    if not math.isfinite(per) or per <= 0:
+        raise MachineError(f"[TRAJ] {key} must be positive", ini.loc(line))
+    return 1.0 / per
+
+
+def _load_ini(text: str, path: str) -> Machine:
+    ini = _Ini(text, path)
+    if "TRAJ" not in ini.sections:
+        raise MachineError("LinuxCNC INI file has no [TRAJ] section", SourceLocation(path, 1, 1))
+    coords = ini.get("TRAJ", "COORDINATES")
+    if coords is not None:
+        value, line = coords
+        letters = value.replace(",", " ").upper()
+        letters = "".join(letters.split())
+        bad = [c for c in letters if c not in ALL_AXES]
+        if bad or not letters:
+            raise MachineError(f"[TRAJ] COORDINATES: '{value}' is not a list of axis letters",
+                               ini.loc(line))
+        joint_letters = letters
+    else:
+        # no COORDINATES: the axes with an [AXIS_n] / [AXIS_L] section, in canonical order
+        present = set()
+        for sec in ini.sections:
+            m = re.fullmatch(r"AXIS_(\d|[XYZABCUVW])", sec)
+            if m:
+                tag = m.group(1)
+                present.add(ALL_AXES[int(tag)] if tag.isdigit() and int(tag) < 9 else tag)
+        joint_letters = "".join(a for a in ALL_AXES if a in present)
+        if not joint_letters:
+            raise MachineError("[TRAJ] has no COORDINATES and no [AXIS_n] sections define axes",
+                               ini.loc(ini.sections["TRAJ"][0]))
+    axes = "".join(dict.fromkeys(joint_letters))  # a gantry's second joint is the same axis
+
+    lin = _units(ini, "LINEAR_UNITS", _LINEAR_UNITS)
+    ang = _units(ini, "ANGULAR_UNITS", _ANGULAR_UNITS)
+
+    vmax, amax, jmax = [], [], []
+    for letter in axes:
+        candidates = [f"AXIS_{letter}", f"AXIS_{ALL_AXES.index(letter)}",
+                      f"JOINT_{joint_letters.index(letter)}"]
+        section = next((s for s in candidates if s in ini.sections), None)
+        if section is None:
+            raise MachineError(f"axis {letter} has no [{candidates[0]}] (or [{candidates[1]}], "
+                               f"[{candidates[2]}]) section", ini.loc(ini.sections["TRAJ"][0]))
+        scale = ang if letter in ROTARY_AXES else lin
+        v = ini.number(section, "MAX_VELOCITY")
+        a = ini.number(section, "MAX_ACCELERATION")
+        if v is None or a is None:
+            missing = "MAX_VELOCITY" if v is None else "MAX_ACCELERATION"
+            raise MachineError(f"[{section}] has no {missing}", ini.loc(ini.sections[section][0]))
+        j = ini.number(section, "MAX_JERK")
+        vmax.append(v * scale)
+        amax.append(a * scale)
+        # documented default: full acceleration reached in 1/DEFAULT_JERK_PER_ACCEL_1_S s
+        jmax.append(j * scale if j is not None else DEFAULT_JERK_PER_ACCEL_1_S * a * scale)
+
+    period = ini.number("EMCMOT", "SERVO_PERIOD")
+    dt_s = period * 1e-9 if period is not None else DEFAULT_DT_S
+    if dt_s > _MAX_DT_S:
+        item = ini.get("EMCMOT", "SERVO_PERIOD")
+        raise MachineError("[EMCMOT] SERVO_PERIOD is in nanoseconds; this is longer than 1 s",
+                           ini.loc(item[1]))
+    name_item = ini.get("EMC", "MACHINE")
+    name = name_item[0] if name_item else _stem(path)
+    kind = _ini_kinematics(ini, axes)
+    return Machine(name=name, axes=axes, vmax=vmax, amax=amax, jmax=jmax, dt_s=dt_s,
+                   kinematics=kind, kinematics_params=normalise_params(kind, {}), source=path)
+
+
+#: LinuxCNC kinematics module -> ours (pivot offsets are HAL pins, not INI keys: 0 here)
+_INI_KINS = {"trivkins": "trivial", "xyzac-trt-kins": "xyzac-trt"}
+
+
+def _ini_kinematics(ini: _Ini, axes: str) -> str:
+    item = ini.get("KINS", "KINEMATICS")
+    if item is None:
+        return "trivial"
+    value, line = item
+    module = value.split()[0] if value.split() else "trivkins"
+    if module not in _INI_KINS:
+        raise MachineError(f"[KINS] KINEMATICS: '{module}' is not supported "
+                           f"(supported: {', '.join(_INI_KINS)})", ini.loc(line))
+    kind = _INI_KINS[module]
+    if kind == "xyzac-trt" and any(a not in axes for a in "XYZAC"):
+        raise MachineError("xyzac-trt-kins needs axes X, Y, Z, A, C", ini.loc(line))
+    return kind
+
+
+# --- presets listing ---------------------------------------------------------
+def preset_table() -> list[dict]:
+    """One JSON-able dict per preset: name, description, dt, kinematics, per-axis limits."""
+    rows = []
+    for key in sorted(PRESETS):
+        m = _preset(key)
+        d = m.to_dict()
+        rows.append({"preset": key, "description": PRESETS[key][0], "name": m.name,
+                     "axes": m.axes, "dt_s": m.dt_s, "kinematics": m.kinematics,
+                     "default": key == DEFAULT_PRESET, "limits": d["limits"]})
+    return rows
+
+
+def format_presets(table: list[dict]) -> str:
+    """Human-readable listing of ``preset_table()``."""
+    out = []
+    for row in table:
+        tag = " (default)" if row.get("default") else ""
+        out.append(f"{row['preset']}{tag}: {row['name']} - {row['description']}")
+        out.append(f"  axes {row['axes']}, dt {row['dt_s'] * 1000:g} ms, kinematics {row['kinematics']}")
+        out.append(f"  {'axis':>4} {'vmax':>10} {'amax':>10} {'jmax':>10}  unit")
+        for axis, lim in row["limits"].items():
+            u = lim["unit"]
+            out.append(f"  {axis:>4} {lim['vmax']:>10.6g} {lim['amax']:>10.6g} {lim['jmax']:>10.6g}"
+                       f"  {u}/s, {u}/s^2, {u}/s^3")
+        out.append("")
+    return "\n".join(out).rstrip()

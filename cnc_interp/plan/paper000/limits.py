@@ -1,0 +1,100 @@
+"""Tangential limits of the feed derived from the machine's per-axis limits.
+
+Along the path, joint i moves as q_i(s(t)), so with feed v, tangential acceleration
+a_t and tangential jerk j_t (chain rule, q' = dq/ds):
+
+    velocity      q_i' v
+    acceleration  q_i'' v^2 + q_i' a_t
+    jerk          q_i''' v^3 + 3 q_i'' v a_t + q_i' j_t
+
+With g1, g2, g3 the maxima of |q_i'|, |q_i''|, |q_i'''| over a segment (``curvature``),
+the triangle inequality gives sufficient conditions, applied per segment and joint:
+
+- cruise feed cap V:  g1 V <= vmax,  g2 V^2 <= sa amax,  g3 V^3 <= sj jmax,
+  and paper 000 Eq. 6, V <= sqrt(sa A_m / kappa) with A_m the smallest amax of the
+  moving linear joints (sa = ``curv_accel_share``, sj = ``curv_jerk_share``);
+  the programmed feed F caps V too;
+- tangential acceleration at feeds <= V:
+  A_t = min_i min((amax - g2 V^2) / g1,  sx (jmax - g3 V^3) / (3 g2 V));
+- tangential jerk: J_t = min_i (jmax - g3 V^3 - 3 g2 V A_t) / g1.
+
+The shares keep A_t, J_t > 0. This is conservative (maxima taken over the whole
+segment, at the cruise feed); sampled output is still checked and replanned.
+
+At a junction where dq/ds (or d2q/ds2) jumps (a path that is only G0/G1 there), the
+sampled setpoints see a velocity (acceleration) step; its finite differences stay
+within limits if  w |dq'| <= amax dt / 2,  w |dq'| <= jmax dt^2 / 2  and
+w^2 |dq''| <= jmax dt / 2, which caps the junction feed w.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...constants import (
+    P000_CROSS_JERK_SHARE,
+    P000_CURV_ACCEL_SHARE,
+    P000_CURV_JERK_SHARE,
+)
+
+
+def _setting(settings, key: str, default: float) -> float:
+    if settings is None:
+        return default
+    if isinstance(settings, dict):
+        val = settings.get(key, default)
+    else:
+        val = getattr(settings, key, default)
+    return default if val is None else float(val)
+
+
+def shares(settings) -> tuple[float, float, float]:
+    """(curv_accel_share, curv_jerk_share, cross_jerk_share) from settings or the defaults."""
+    return (_setting(settings, "curv_accel_share", P000_CURV_ACCEL_SHARE),
+            _setting(settings, "curv_jerk_share", P000_CURV_JERK_SHARE),
+            _setting(settings, "cross_jerk_share", P000_CROSS_JERK_SHARE))
+
+
+def _safe_div(num, den):
+    return np.where(den > 0, num / np.where(den > 0, den, 1.0), np.inf)
+
+
+def feed_caps(geom, machine, feed_mm_s: np.ndarray, settings=None) -> np.ndarray:
+    """Cruise feed cap V (n_seg,) of every segment, mm/s (see module docstring)."""
+    sa, sj, _ = shares(settings)
+    vmax, amax, jmax = machine.vmax[None, :], machine.amax[None, :], machine.jmax[None, :]
+    cap_v = _safe_div(vmax, geom.g1).min(axis=1)
+    cap_a = np.sqrt(_safe_div(sa * amax, geom.g2)).min(axis=1)
+    cap_j = np.cbrt(_safe_div(sj * jmax, geom.g3)).min(axis=1)
+    # paper 000 Eq. 6 with A_m the smallest acceleration limit of the moving linear joints
+    a_m = np.where(geom.moving_linear, machine.amax[None, :], np.inf).min(axis=1)
+    cap_eq6 = np.where(np.isfinite(a_m), np.sqrt(_safe_div(sa * a_m, geom.kappa)), np.inf)
+    cap = np.minimum.reduce([cap_v, cap_a, cap_j, cap_eq6, np.asarray(feed_mm_s, dtype=float)])
+    # a segment that moves no joint (degenerate) gets the slowest axis speed
+    return np.where(np.isfinite(cap), cap, float(machine.vmax.min()))
+
+
+def tangential_limits(geom, machine, v: np.ndarray, settings=None) -> tuple[np.ndarray, np.ndarray]:
+    """Tangential acceleration and jerk limits (n_seg,) valid at every feed <= v (n_seg,)."""
+    _, _, sx = shares(settings)
+    v = np.asarray(v, dtype=float)[:, None]
+    amax, jmax = machine.amax[None, :], machine.jmax[None, :]
+    a_room = np.maximum(amax - geom.g2 * v**2, 0.0)
+    j_room = np.maximum(jmax - geom.g3 * v**3, 0.0)
+    a_t = np.minimum(_safe_div(a_room, geom.g1),
+                     _safe_div(sx * j_room, 3.0 * geom.g2 * v)).min(axis=1)
+    a_t = np.where(np.isfinite(a_t), a_t, float(machine.amax.min()))
+    j_t = _safe_div(np.maximum(j_room - 3.0 * geom.g2 * v * a_t[:, None], 0.0), geom.g1).min(axis=1)
+    j_t = np.where(np.isfinite(j_t), j_t, float(machine.jmax.min()))
+    tiny = 1e-300
+    return np.maximum(a_t, tiny), np.maximum(j_t, tiny)
+
+
+def junction_caps(geom, machine, dt_s: float) -> np.ndarray:
+    """Feed cap (n_seg+1,) at each junction from the jumps of dq/ds and d2q/ds2; 0 at both ends."""
+    amax, jmax = machine.amax[None, :], machine.jmax[None, :]
+    c1 = _safe_div(0.5 * np.minimum(amax * dt_s, jmax * dt_s**2), geom.jump1).min(axis=1)
+    c2 = np.sqrt(_safe_div(0.5 * jmax * dt_s, geom.jump2)).min(axis=1)
+    cap = np.minimum(c1, c2)
+    cap[0] = cap[-1] = 0.0
+    return cap

@@ -1,0 +1,119 @@
+"""``--planner variable``: per-segment feeds from the curvature peaks, with look-ahead.
+
+Each path segment k gets a cruise cap V_k (``limits.feed_caps``: Eq. 6 on its peak
+curvature, the per-axis limits and the programmed feed) and tangential limits A_k, J_k.
+Consecutive segments whose caps lie within ``merge_band`` of each other (and whose
+junction does not cap the feed lower) form one profile piece, so that a transition may
+span several short segments (``merge_band = 0`` gives one piece per segment, the
+paper's literal form). ``lookahead`` picks junction and cruise feeds so that every
+transition fits in its piece and every slow-down starts early enough. The resulting
+``SegmentProfiles`` are sampled every dt, checked against every axis limit (finite
+differences with rest padding), and any segment whose samples exceed a limit gets a
+lower cap and gentler transitions before replanning.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...constants import (
+    P000_MAX_REPLANS,
+    P000_MERGE_BAND,
+    P000_MIN_LENGTH_MM,
+    P000_REPLAN_FEED_FACTOR,
+    VERIFY_RATIO_SLACK,
+)
+from ...errors import PlanError
+from ..base import PathPlan
+from .common import joint_positions, sample_profile, sample_ratios, worst_ratio
+from .curvature import segment_geometry
+from .limits import feed_caps, junction_caps, tangential_limits
+from .profile import build_profiles, stretch_to_period
+
+
+def _band(settings) -> float:
+    if isinstance(settings, dict):
+        val = settings.get("merge_band")
+    else:
+        val = getattr(settings, "merge_band", None)
+    return P000_MERGE_BAND if val is None else float(val)
+
+
+def rest_plan(path, joint_map, planner: str) -> PathPlan:
+    """The plan of a path with (numerically) zero length: one sample at its start."""
+    s = np.zeros(1)
+    return PathPlan(s=s, q=joint_positions(path, joint_map, s), status="ok", profiles=None,
+                    stats={"planner": planner, "replans": 0, "n_seg": int(path.n_seg)})
+
+
+def check_axes(q_probe: np.ndarray, machine) -> None:
+    if q_probe.shape[-1] != machine.n_axes:
+        raise PlanError(f"path has {q_probe.shape[-1]} joints but machine "
+                        f"'{machine.name}' has {machine.n_axes} axes")
+
+
+def plan_path_variable(path, joint_map, machine, dt_s: float, settings=None) -> PathPlan:
+    """Variable-feed plan of one path: samples every ``dt_s`` from rest to rest.
+
+    Args:
+        path: ``fit.Path`` (program space).
+        joint_map: kinematics, (K, n) program positions -> (K, n) joint positions, or None.
+        machine: ``Machine`` (per-joint vmax, amax, jmax).
+        dt_s: sample period, s.
+        settings: optional dict / object with ``curv_accel_share``, ``curv_jerk_share``,
+            ``cross_jerk_share`` (see ``limits``) and ``merge_band``.
+    Returns:
+        ``PathPlan`` with ``profiles`` a ``SegmentProfiles`` (pieces of whole segments).
+    """
+    return plan_grouped(path, joint_map, machine, dt_s, settings, _band(settings), "variable")
+
+
+def plan_grouped(path, joint_map, machine, dt_s: float, settings, band: float,
+                 planner: str) -> PathPlan:
+    """Plan with segments grouped into profile pieces by ``band`` (see ``group_segments``)."""
+    if path.length <= P000_MIN_LENGTH_MM:
+        return rest_plan(path, joint_map, planner)
+    geom = segment_geometry(path, joint_map)
+    check_axes(geom.g1, machine)
+    from .lookahead import group_segments, lookahead
+
+    n = path.n_seg
+    vcap0 = feed_caps(geom, machine, path.feed_mm_s, settings)
+    wcap = junction_caps(geom, machine, dt_s)
+    fv = np.ones(n)
+    ft = np.ones(n)
+    limit = 1.0 + VERIFY_RATIO_SLACK
+    for it in range(P000_MAX_REPLANS + 1):
+        vcap = vcap0 * fv
+        first = group_segments(vcap, wcap, band)
+        last = np.r_[first[1:] - 1, n - 1]
+        # a piece's cap and tangential limits are the smallest of its segments' (at its cap)
+        gcap = np.minimum.reduceat(vcap, first)
+        a_s, j_s = tangential_limits(geom, machine, np.repeat(gcap, last - first + 1), settings)
+        a_t = np.minimum.reduceat(a_s * ft, first)
+        j_t = np.minimum.reduceat(j_s * ft, first)
+        glen = np.add.reduceat(geom.length, first)
+        gw = np.r_[wcap[first], 0.0]
+        w, c = lookahead(glen, gcap, a_t, j_t, gw)
+        prof = build_profiles(planner, first, last, path.s_breaks[first], glen,
+                              w[:-1], c, w[1:], a_t, j_t)
+        prof = stretch_to_period(prof, dt_s)
+        s, q = sample_profile(path, joint_map, prof, dt_s)
+        r = sample_ratios(q, dt_s, machine)
+        if r.max(initial=0.0) <= limit:
+            break
+        bad = np.unique(path.segment_of_s(s[r > limit]))
+        bad = np.unique(np.clip(np.concatenate([bad - 1, bad, bad + 1]), 0, n - 1))
+        fv[bad] *= P000_REPLAN_FEED_FACTOR
+        ft[bad] *= P000_REPLAN_FEED_FACTOR**2
+    else:
+        raise PlanError(f"{planner} feed plan still exceeds a limit after {P000_MAX_REPLANS} "
+                        f"replans (worst ratio {r.max():.6g})")
+    worst = worst_ratio(q, dt_s, machine)
+    if worst > limit:
+        raise PlanError(f"{planner} feed plan fails verify (worst ratio {worst:.6g})")
+    stats = {"planner": planner, "replans": it, "n_seg": int(n), "n_pieces": int(prof.n_pieces),
+             "duration_s": float((s.size - 1) * dt_s), "worst_ratio": worst,
+             "max_feed_mm_s": float(prof.v_cruise.max(initial=0.0)),
+             "min_cruise_mm_s": float(prof.v_cruise.min())}
+    return PathPlan(s=s, q=q, status="ok", profiles=prof, stats=stats)

@@ -1,0 +1,52 @@
+"""``PlanSettings``: which planner runs and at which sample period."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+
+from ..constants import DEFAULT_DT_S
+from ..errors import UsageError
+
+
+@dataclass(frozen=True)
+class PlanSettings:
+    """How a program is planned.
+
+    Attributes:
+        planner: ``"vpop"`` (paper 001), ``"constant"`` or ``"variable"`` (paper 000).
+        dt_s: sample period, s.
+        tol_mm: fit tolerance the plan was made for (informational), mm.
+        options: planner-specific extras (plain JSON-able values), read with ``get``.
+    """
+
+    planner: str = "vpop"
+    dt_s: float = DEFAULT_DT_S
+    tol_mm: float | None = None
+    options: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        from .planners import PLANNER_NAMES
+
+        if self.planner not in PLANNER_NAMES:
+            raise UsageError(f"unknown planner '{self.planner}' (known: {', '.join(PLANNER_NAMES)})")
+        if not (isinstance(self.dt_s, (int, float)) and math.isfinite(self.dt_s) and self.dt_s > 0):
+            raise UsageError(f"sample period must be a positive number of seconds, got {self.dt_s!r}")
+
+    @classmethod
+    def from_options(cls, planner: str = "vpop", dt_s: float | None = None,
+                     tol_mm: float | None = None, machine=None, **options) -> "PlanSettings":
+        """Settings from CLI options: ``--dt`` wins over the machine's period, then the default."""
+        if dt_s is None:
+            dt_s = float(machine.dt_s) if machine is not None and machine.dt_s else DEFAULT_DT_S
+        if tol_mm is None and machine is not None and getattr(machine, "tol_mm", None):
+            tol_mm = float(machine.tol_mm)
+        return cls(planner=planner, dt_s=float(dt_s), tol_mm=tol_mm, options=dict(options))
+
+    def get(self, key: str, default=None):
+        """A planner option (paper-000 planners read their extras this way)."""
+        return self.options.get(key, default)
+
+    def to_dict(self) -> dict:
+        """Plain JSON-able form (stored in ``Trajectory.settings``)."""
+        return asdict(self)

@@ -1,0 +1,145 @@
+"""The whole-program timeline: every fitted item planned onto one sample clock.
+
+``plan_program`` walks a ``FitResult``'s items in order:
+
+* ``Path`` (cutting): the chosen per-path planner (``plan.planners``) through the
+  machine's kinematics, from rest to rest;
+* ``Path(rapid=True)``: always VPOp with no feed limit (the axes' own limits),
+  straight in joint space;
+* ``Dwell``: the position held for ceil(seconds / dt) samples;
+* ``Stop`` (M0, M1, M6, ...): the machine is already at rest between paths; the
+  stop is marked by the held position (no extra time is modelled for the pause).
+
+The pieces are joined on t = k·dt. Between two motions there are always at least
+three equal samples, so every backward difference (up to jerk) across the joint
+sees the machine at rest, as each per-path plan assumed. ``s`` is the cumulative
+path length (rapids included), ``feed`` its backward difference and ``line`` the
+source line executed at each sample.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..errors import PlanError
+from .trajectory import Trajectory
+
+#: samples at rest needed between motions (v, a, j stencils all at rest)
+_REST_RUN = 3
+#: the start of a path may differ from where the machine is by float rounding only
+_JOIN_TOL = 1e-6
+
+
+def _item_kind(item) -> str:
+    from ..fit.path import Path
+    from ..gcode.program import Dwell, Stop
+
+    if isinstance(item, Path):
+        return "path"
+    if isinstance(item, Dwell):
+        return "dwell"
+    if isinstance(item, Stop):
+        return "stop"
+    raise PlanError(f"bug: unknown timeline item {type(item).__name__}")
+
+
+def plan_program(fit_result, machine, settings, progress=None) -> Trajectory:
+    """Plan every item of ``fit_result`` on one timeline (see module docstring).
+
+    Args:
+        fit_result: ``FitResult`` (items in program order).
+        machine: ``Machine`` (limits, kinematics); ``settings.dt_s`` is the period.
+        settings: ``PlanSettings``.
+        progress: optional callable ``progress(n)`` told how much path length (mm)
+            has been planned since its last call.
+    Returns:
+        ``Trajectory`` on the machine's axes, from rest at the start to rest at the end.
+    """
+    from .kinematics import make_kinematics
+    from .planners import get_planner
+    from .vpop import plan_path_vpop
+
+    dt = float(settings.dt_s)
+    kin = make_kinematics(machine)
+    joint_map = None if kin.is_identity else kin
+    planner = get_planner(settings.planner)
+    start_prog = np.asarray(fit_result.program.start, dtype=float).reshape(1, -1)
+    q_now = kin.to_joints(start_prog)[0] if joint_map is not None else start_prog[0].copy()
+    n = machine.n_axes
+    if q_now.shape[0] != n:
+        raise PlanError(f"bug: the program has {q_now.shape[0]} axes, the machine {n}")
+
+    qs = [q_now[None, :]]
+    ss = [np.zeros(1)]
+    lines = [np.zeros(1, dtype=np.int64)]
+    s_off = 0.0
+    rest = _REST_RUN  # the machine is at rest before the first sample
+    last_line = 0
+    status = "ok"
+    stats = {"paths": 0, "rapids": 0, "dwells": 0, "stops": 0}
+    profiles = []
+
+    def hold(count: int, line: int) -> None:
+        if count > 0:
+            qs.append(np.repeat(qs[-1][-1:], count, axis=0))
+            ss.append(np.full(count, s_off))
+            lines.append(np.full(count, line, dtype=np.int64))
+
+    for item in fit_result.items:
+        kind = _item_kind(item)
+        if kind == "path":
+            if item.axes != machine.axes:
+                raise PlanError(f"bug: path axes {item.axes} differ from machine axes {machine.axes}")
+            if item.rapid:
+                plan = plan_path_vpop(item, None, machine, dt, settings)
+                stats["rapids"] += 1
+            else:
+                plan = planner(item, joint_map, machine, dt, settings)
+                stats["paths"] += 1
+                if plan.profiles is not None:
+                    profiles.append(plan.profiles)
+            if plan.status != "ok":
+                status = plan.status
+            q0 = plan.q[0]
+            if not np.all(np.abs(q0 - q_now) <= _JOIN_TOL * np.maximum(1.0, np.abs(q_now))):
+                raise PlanError(f"bug: path at line {int(item.line[0])} starts at {q0.tolist()}, "
+                                f"the machine is at {q_now.tolist()}")
+            moves = plan.q.shape[0] > 1
+            if moves:
+                hold(_REST_RUN - rest, last_line)
+                seg = item.segment_of_s(plan.s[1:])
+                qs.append(plan.q[1:])
+                ss.append(s_off + plan.s[1:])
+                lines.append(item.line[seg])
+                last_line = int(item.line[-1])
+                q_now = plan.q[-1].copy()
+                rest = 1
+            s_off += float(item.length)
+            if progress is not None:
+                progress(float(item.length))
+        elif kind == "dwell":
+            count = int(math.ceil(item.seconds / dt - 1e-9)) if item.seconds > 0 else 0
+            last_line = int(item.line)
+            hold(count, last_line)
+            rest += count
+            stats["dwells"] += 1
+        else:  # stop: come to rest (already at rest between paths)
+            last_line = int(item.line)
+            hold(_REST_RUN - rest, last_line)
+            rest = max(rest, _REST_RUN)
+            stats["stops"] += 1
+
+    q = np.concatenate(qs, axis=0)
+    s = np.concatenate(ss)
+    line = np.concatenate(lines)
+    k = q.shape[0]
+    feed = np.zeros(k)
+    if k > 1:
+        feed[1:] = np.diff(s) / dt
+    settings_dict = settings.to_dict() if hasattr(settings, "to_dict") else dict(settings)
+    settings_dict["stats"] = stats
+    return Trajectory(axes=machine.axes, dt_s=dt, t=np.arange(k) * dt, s=s, feed=feed, q=q,
+                      line=line, planner=settings.planner, settings=settings_dict,
+                      status=status, profiles=profiles or None)

@@ -1,0 +1,172 @@
+"""Check emitted setpoints against the machine's limits (paper 001, Eq. 6).
+
+Velocity, acceleration and jerk of each axis are the backward finite differences
+of the setpoints q_k at the fixed period dt::
+
+    v_k = (q_k - q_{k-1}) / dt
+    a_k = (q_k - 2 q_{k-1} + q_{k-2}) / dt^2
+    j_k = (q_k - 3 q_{k-1} + 3 q_{k-2} - q_{k-3}) / dt^3
+
+with REST PADDING: the machine holds q_0 before the first sample and q_{K-1}
+after the last, so three held copies on each side are part of the sequence. A
+plan that starts or ends with a jump is therefore caught. The differences are
+taken as repeated ``np.diff`` of the stored float64 values; consecutive values
+are close, so each subtraction is exact (Sterbenz) and the check measures the
+stored numbers themselves, not a rounding artefact of a 4-term stencil.
+
+``where`` numbers a difference by the sample its stencil ends at: -2..-1 and
+K..K+2 denote the held positions before the start and after the end.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..constants import VERIFY_RATIO_SLACK, VERIFY_REST_PADDING
+
+_KINDS = ("velocity", "acceleration", "jerk")
+_UNITS = ("/s", "/s^2", "/s^3")
+
+
+@dataclass(frozen=True, eq=False)
+class VerifyReport:
+    """Worst limit ratios of a plan.
+
+    Attributes (n = number of axes):
+        axes: axis letters.
+        dt_s: sample period used for the differences, s.
+        n_samples: K, samples in the plan (padding excluded).
+        ratios: (n, 3) worst |v|/vmax, |a|/amax, |j|/jmax per axis (NaN if the plan has NaN).
+        values: (n, 3) the worst |v|, |a|, |j| themselves (mm or deg per s, s^2, s^3).
+        limits: (n, 3) vmax, amax, jmax.
+        where: (n, 3) int, sample index where each worst value occurs (see module doc).
+        ok: every ratio <= 1 + VERIFY_RATIO_SLACK and no NaN/inf.
+        nan_found: the setpoints contain NaN or inf.
+    """
+
+    axes: str
+    dt_s: float
+    n_samples: int
+    ratios: np.ndarray
+    values: np.ndarray
+    limits: np.ndarray
+    where: np.ndarray
+    ok: bool
+    nan_found: bool
+
+    @property
+    def worst_ratio(self) -> float:
+        """The largest ratio over all axes and limits (inf if the plan has NaN)."""
+        if self.nan_found:
+            return float("inf")
+        return float(self.ratios.max()) if self.ratios.size else 0.0
+
+    def worst(self) -> tuple[str, str, float, int]:
+        """(axis, kind, ratio, sample index) of the worst ratio."""
+        if not self.ratios.size:
+            return ("", "", 0.0, 0)
+        r = np.where(np.isnan(self.ratios), np.inf, self.ratios)
+        i, k = np.unravel_index(int(np.argmax(r)), r.shape)
+        return self.axes[i], _KINDS[k], float(self.ratios[i, k]), int(self.where[i, k])
+
+    def to_dict(self) -> dict:
+        """JSON-able form (no NaN: a NaN ratio becomes ``None``)."""
+        def num(x):
+            x = float(x)
+            return x if np.isfinite(x) else None
+
+        per_axis = {}
+        for i, a in enumerate(self.axes):
+            per_axis[a] = {
+                kind: {"ratio": num(self.ratios[i, k]), "worst": num(self.values[i, k]),
+                       "limit": num(self.limits[i, k]), "sample": int(self.where[i, k]),
+                       "t_s": float(self.where[i, k] * self.dt_s)}
+                for k, kind in enumerate(_KINDS)
+            }
+        axis, kind, ratio, idx = self.worst()
+        return {"ok": bool(self.ok), "nan_found": bool(self.nan_found),
+                "worst_ratio": num(self.worst_ratio) if not self.nan_found else None,
+                "worst": {"axis": axis, "limit": kind, "ratio": num(ratio), "sample": idx},
+                "dt_s": float(self.dt_s), "n_samples": int(self.n_samples),
+                "slack": VERIFY_RATIO_SLACK, "axes": per_axis}
+
+    def format(self) -> str:
+        """Human-readable table: one row per axis, worst ratio per limit."""
+        lines = [f"{'axis':>4}  {'v/vmax':>12} {'a/amax':>12} {'j/jmax':>12}   worst at"]
+        for i, a in enumerate(self.axes):
+            k = int(np.nanargmax(self.ratios[i])) if np.isfinite(self.ratios[i]).any() else 0
+            cells = " ".join(f"{r:>12.9f}" for r in self.ratios[i])
+            lines.append(f"{a:>4}  {cells}   {_KINDS[k]} t={self.where[i, k] * self.dt_s:.6g} s"
+                         f" (sample {self.where[i, k]})")
+        if self.nan_found:
+            lines.append("FAIL: the setpoints contain NaN or inf")
+        else:
+            axis, kind, ratio, idx = self.worst()
+            verdict = "ok" if self.ok else "FAIL: limit exceeded"
+            lines.append(f"{verdict}: worst {ratio:.9f} ({axis} {kind}, sample {idx}); "
+                         f"{self.n_samples} samples at dt = {self.dt_s:g} s")
+        return "\n".join(lines)
+
+
+def _axis_extremes(col: np.ndarray, pad: int):
+    """Worst |d^m q| for m = 1..3 of one axis with rest padding: (values (3,), where (3,))."""
+    x = np.concatenate([np.full(pad, col[0]), col, np.full(pad, col[-1])])
+    vals = np.empty(3)
+    where = np.empty(3, dtype=np.int64)
+    for m in range(3):
+        x = np.diff(x)
+        ax = np.abs(x)
+        i = int(np.argmax(ax))
+        vals[m] = ax[i]
+        # x[i] is the difference whose stencil ends at padded index i + m + 1
+        where[m] = i + m + 1 - pad
+    return vals, where
+
+
+def verify_arrays(q: np.ndarray, dt_s: float, vmax, amax, jmax, axes: str | None = None) -> VerifyReport:
+    """Verify setpoints ``q`` (K, n) at period ``dt_s`` against per-axis limits (n,) each."""
+    q = np.asarray(q, dtype=float)
+    if q.ndim == 1:
+        q = q[:, None]
+    k, n = q.shape
+    limits = np.stack([np.broadcast_to(np.asarray(x, dtype=float), (n,))
+                       for x in (vmax, amax, jmax)], axis=1)  # (n, 3)
+    axes = axes if axes is not None else "".join(f"{i}" for i in range(n))
+    scale = np.array([dt_s, dt_s ** 2, dt_s ** 3])
+    values = np.zeros((n, 3))
+    where = np.zeros((n, 3), dtype=np.int64)
+    nan_found = False
+    if k:
+        finite = np.isfinite(q)
+        nan_found = not bool(finite.all())
+        for i in range(n):
+            col = np.ascontiguousarray(q[:, i])
+            if not finite[:, i].all():
+                values[i] = np.nan
+                where[i] = int(np.argmin(finite[:, i]))
+                continue
+            d, w = _axis_extremes(col, VERIFY_REST_PADDING)
+            values[i] = d / scale
+            where[i] = w
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratios = values / limits
+    ok = (not nan_found) and bool(np.all(ratios <= 1.0 + VERIFY_RATIO_SLACK))
+    return VerifyReport(axes=axes, dt_s=float(dt_s), n_samples=int(k), ratios=ratios,
+                        values=values, limits=limits, where=where, ok=ok, nan_found=nan_found)
+
+
+def verify(traj, machine) -> VerifyReport:
+    """Verify a ``Trajectory`` against a ``Machine``'s limits (axes matched by letter)."""
+    from ..errors import MachineError, SourceLocation
+
+    idx = []
+    for a in traj.axes:
+        if a not in machine.axes:
+            raise MachineError(f"the plan has axis {a}, which machine '{machine.name}' "
+                               f"({machine.axes}) does not have", SourceLocation(machine.source or "<machine>"))
+        idx.append(machine.axes.index(a))
+    idx = np.array(idx, dtype=int)
+    return verify_arrays(traj.q, traj.dt_s, machine.vmax[idx], machine.amax[idx],
+                         machine.jmax[idx], axes=traj.axes)

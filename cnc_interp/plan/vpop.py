@@ -1,0 +1,206 @@
+"""VPOp (paper 001): maximum-feed interpolation under per-axis V/A/J limits.
+
+``plan_path_vpop`` plans one ``Path`` from rest to rest at a fixed period dt:
+
+1. The joint positions along the path, q(s) = kin(path(s)), are tabulated as quintic
+   Hermite pieces in arc length s (values, first and second s-derivatives at the
+   knots, taken from ``Path.derivatives_s`` through the kinematics). Pieces are split
+   until the table matches the true path to ``VPOP_TABLE_TOL`` (mm or deg) at every
+   piece's quarter points; the knots are exact path points and the last one is the
+   exact programmed end. The setpoints emitted are the table's positions, so they
+   lie within ``VPOP_TABLE_TOL`` of the fitted path (far below the fit tolerance),
+   and ``verify`` checks exactly these numbers.
+2. ``vpop_core.plan_core`` (numba) runs the step loop: max step in the allowed
+   set, dichotomy back to the last step from which a brake reaches rest.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..constants import (
+    VPOP_BRAKE_JERK_FRACTION,
+    VPOP_LIMIT_SHRINK,
+    VPOP_TABLE_MAX_PIECE,
+    VPOP_TABLE_MAX_ROUNDS,
+    VPOP_TABLE_TOL,
+)
+from ..errors import PlanError
+from .base import PathPlan
+
+
+# -- the arc-length table -------------------------------------------------------
+def _joint_derivs(path, u: np.ndarray, joint_map) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """q, q_s, q_ss (each (K, n)) in joint space at parameter values u."""
+    d = path.derivatives_s(u, 2)
+    p, ps, pss = d[0], d[1], d[2]
+    identity = joint_map is None or getattr(joint_map, "is_identity", False)
+    if identity:
+        return p, ps, pss
+    q = joint_map.to_joints(p)
+    jac = getattr(joint_map, "jacobian", None)
+    if jac is None:
+        raise PlanError("kinematics without a jacobian cannot be planned by VPOp")
+    J = jac(p)
+    qs = np.einsum("kij,kj->ki", J, ps)
+    # directional derivative of J along p_s by a central difference
+    h = 1e-4
+    Jp = jac(p + h * ps)
+    Jm = jac(p - h * ps)
+    dJ = (Jp - Jm) / (2 * h)
+    qss = np.einsum("kij,kj->ki", J, pss) + np.einsum("kij,kj->ki", dJ, ps)
+    return q, qs, qss
+
+
+def _hermite(S, Q, Q1, Q2) -> np.ndarray:
+    """Quintic Hermite power coefficients (m, 6, n) in s - S[p] for each piece."""
+    h = np.diff(S)[:, None]
+    c0, c1, c2 = Q[:-1], Q1[:-1], 0.5 * Q2[:-1]
+    d0 = Q[1:] - (c0 + h * (c1 + h * c2))
+    d1 = Q1[1:] - (c1 + 2.0 * h * c2)
+    d2 = Q2[1:] - 2.0 * c2
+    c3 = (20.0 * d0 - 8.0 * d1 * h + d2 * h * h) / (2.0 * h**3)
+    c4 = (-30.0 * d0 + 14.0 * d1 * h - 2.0 * d2 * h * h) / (2.0 * h**4)
+    c5 = (12.0 * d0 - 6.0 * d1 * h + d2 * h * h) / (2.0 * h**5)
+    return np.ascontiguousarray(np.stack([c0, c1, c2, c3, c4, c5], axis=1))
+
+
+def _eval_table(S, C, s):
+    p = np.clip(np.searchsorted(S, s, side="right") - 1, 0, C.shape[0] - 1)
+    t = (s - S[p])[:, None]
+    c = C[p]
+    acc = c[:, 5]
+    for i in range(4, -1, -1):
+        acc = acc * t + c[:, i]
+    return acc
+
+
+class JointTable:
+    """q(s) of one path as quintic pieces: knots ``S`` (m+1,), coefficients ``C`` (m, 6, n),
+    exact end point ``qend`` (n,), and the largest deviation found at the check points
+    ``max_err`` (mm / deg)."""
+
+    def __init__(self, path, joint_map, tol: float = VPOP_TABLE_TOL):
+        # initial knots: every segment break, then at most VPOP_TABLE_MAX_PIECE of s apart
+        seg_len = np.diff(path.s_breaks)
+        n_sub = np.maximum(1, np.ceil(seg_len / VPOP_TABLE_MAX_PIECE)).astype(np.int64)
+        u = [np.linspace(path.breaks[i], path.breaks[i + 1], n_sub[i] + 1)[:-1]
+             for i in range(path.n_seg)]
+        u = np.concatenate(u + [path.breaks[-1:]])
+        err = np.inf
+        for _ in range(VPOP_TABLE_MAX_ROUNDS):
+            S = path.s_of_u(u)
+            S[0] = 0.0
+            S[-1] = path.length
+            keep = np.concatenate(([True], np.diff(S) > 0))
+            keep[-1] = True
+            if not keep.all():  # drop knots that coincide in s (degenerate pieces)
+                keep[-2] = keep[-2] and S[-2] < S[-1]
+                u, S = u[keep], S[keep]
+            Q, Q1, Q2 = _joint_derivs(path, u, joint_map)
+            C = _hermite(S, Q, Q1, Q2)
+            # check at the quarter points of each piece against the true path
+            fr = np.array([0.25, 0.5, 0.75])
+            uc = (u[:-1, None] + np.diff(u)[:, None] * fr[None, :]).reshape(-1)
+            sc = path.s_of_u(uc)
+            qc = _positions(path, uc, joint_map)
+            e = np.abs(_eval_table(S, C, sc) - qc).max(axis=1).reshape(-1, 3).max(axis=1)
+            err = float(e.max()) if e.size else 0.0
+            bad = e > tol
+            if not bad.any():
+                break
+            mids = 0.5 * (u[:-1][bad] + u[1:][bad])
+            u = np.sort(np.concatenate((u, mids)))
+        self.S = np.ascontiguousarray(S)
+        self.C = C
+        self.qend = np.ascontiguousarray(_positions(path, path.breaks[-1:], joint_map)[0])
+        self.qstart = C[0, 0].copy()
+        self.max_err = err
+        self.length = float(path.length)
+
+
+def _positions(path, u, joint_map):
+    p = path.derivatives_u(np.asarray(u, dtype=float), 0)[0]
+    if joint_map is None or getattr(joint_map, "is_identity", False):
+        return p
+    return joint_map.to_joints(p)
+
+
+# -- the planner --------------------------------------------------------------------
+def _core():
+    from . import vpop_core
+
+    return vpop_core
+
+
+def plan_path_vpop(path, joint_map, machine, dt_s: float, settings=None) -> PathPlan:
+    """Plan one path from rest to rest with VPOp (see module docstring).
+
+    ``joint_map`` maps program coordinates to joints (``None`` or an identity map for
+    rapids, which are already in joint space). Returns a ``PathPlan`` whose q[0] and
+    q[-1] are the path's exact joint start and end; the machine is at rest before and
+    after, and every backward-difference limit holds.
+    """
+    core = _core()
+    if path.rapid:
+        joint_map = None
+    n = path.n_axes
+    dt = float(dt_s)
+    shrink = 1.0 - VPOP_LIMIT_SHRINK
+    vl = np.ascontiguousarray(machine.vmax * dt * shrink, dtype=float)
+    al = np.ascontiguousarray(machine.amax * dt * dt * shrink, dtype=float)
+    jl = np.ascontiguousarray(machine.jmax * dt**3 * shrink, dtype=float)
+    if path.length <= 0.0:
+        q0 = _positions(path, path.breaks[:1], joint_map)
+        return PathPlan(s=np.zeros(1), q=q0, stats={"samples": 1})
+    table = JointTable(path, joint_map)
+    L = table.length
+    FB = np.ascontiguousarray(path.s_breaks, dtype=float).copy()
+    FB[-1] = L
+    FV = np.where(np.isfinite(path.feed_mm_s) & (path.feed_mm_s > 0), path.feed_mm_s * shrink, 1e300)
+    FV = np.ascontiguousarray(FV, dtype=float)
+    # rough duration: travel at the slowest of feed and axis speeds, plus ramps
+    dq = np.abs(table.qend - table.qstart)
+    tv = float(np.max(dq / machine.vmax)) + L / float(np.min(FV))
+    ramp = float(np.max(machine.vmax / machine.amax + machine.amax / machine.jmax))
+    est = int((tv + 2 * ramp) / dt) + 16
+    cap = max(64, 2 * est)
+    brake_cap = 8 * int(ramp / dt) + 4096
+    max_steps = 200 * est + 100_000
+    tol = max(4.0 * np.spacing(max(L, 1.0)), 1e-7 * float(np.min(jl)))
+    sh = np.zeros(cap)
+    qh = np.zeros((cap, n))
+    sh[0] = 0.0
+    qh[0] = table.qstart
+    bs = np.zeros(brake_cap)
+    bq = np.zeros((brake_cap, n))
+    stats = np.zeros(4, dtype=np.int64)
+    js = np.ascontiguousarray(jl * VPOP_BRAKE_JERK_FRACTION)
+    k, b = 1, 0
+    while True:
+        status, k, b = core.plan_core(table.S, table.C, table.qend, vl, al, jl, js, dt, L, FB, FV,
+                                      sh, qh, k, b, tol, max_steps, bs, bq, stats)
+        if status == core.NEED_SPACE:
+            grow = sh.shape[0] * 2
+            sh = np.concatenate((sh, np.zeros(grow - sh.shape[0])))
+            qh = np.concatenate((qh, np.zeros((grow - qh.shape[0], n))))
+            continue
+        break
+    if status != core.OK:
+        what = {core.STUCK: "made no progress", core.INFEASIBLE: "found no feasible step"}[status]
+        raise PlanError(f"VPOp {what} on the path ending at line {int(path.line[-1])} "
+                        f"(s = {sh[max(k - 1, 0)]:.6g} of {L:.6g})")
+    # trailing repeats of the end point are the rest the contract already implies
+    last = k - 1
+    while last > 0 and sh[last - 1] == L:
+        last -= 1
+    s = sh[: last + 1].copy()
+    q = qh[: last + 1].copy()
+    q[-1] = table.qend
+    return PathPlan(s=s, q=q, stats={
+        "samples": int(s.shape[0]), "backtracks": int(stats[0]), "brake_runs": int(stats[1]),
+        "brake_steps": int(stats[2]), "max_steps": int(stats[3]),
+        "table_pieces": int(table.C.shape[0]), "table_err": float(table.max_err),
+    })

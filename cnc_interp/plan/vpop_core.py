@@ -1,0 +1,420 @@
+"""VPOp's sequential step loop, compiled with numba (imported lazily by ``vpop``).
+
+Everything here works in *step units*: a position difference per sample. For axis i
+with limits V, A, J and period dt the planner is given ``vl = V dt``, ``al = A dt²``
+and ``jl = J dt³`` (already shrunk by ``VPOP_LIMIT_SHRINK``), and checks exactly the
+float operations ``verify`` performs on the emitted setpoints::
+
+    e  = q_new - q_prev        |e|  <= vl     (velocity)
+    a  = e - d1                |a|  <= al     (acceleration, d1 = previous e)
+    jk = a - d2                |jk| <= jl     (jerk, d2 = previous a)
+
+The path is a table of quintic pieces in arc length s (``S`` knots, ``C`` power
+coefficients in s - S[p]); ``q(L)`` is returned as the exact end point ``QEND``.
+
+The policies:
+* max: the largest s' in [s, s_cap] whose joint positions satisfy every limit
+  (s_cap = min(L, s + F dt) with F the lowest feed of the segments crossed);
+* brake (the "minimum" of the paper, made jerk-aware): the value of the allowed
+  interval closest to the no-reversal bound (after which a jerk ramp back to zero
+  path acceleration still leaves ṡ >= 0), or s itself once ṡ is below one jerk step.
+  A brake run succeeds when it reaches rest (three equal samples) without an empty set.
+When the max step's set is empty, a dichotomy finds the latest step j from which
+the brake run succeeds; step j is fixed at its brake value and max resumes at j+1.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+# status codes returned by plan_core
+OK = 0
+NEED_SPACE = 1
+STUCK = 2
+INFEASIBLE = 3
+
+_HUGE = 1e300
+
+
+@njit(cache=True)
+def _piece(S, x, hint):
+    """Index p with S[p] <= x < S[p+1] (clipped), searching from ``hint``."""
+    m = S.shape[0] - 1
+    p = hint
+    if p < 0:
+        p = 0
+    if p > m - 1:
+        p = m - 1
+    # the next sample is almost always in the same piece or the next one
+    for _ in range(2):
+        if x < S[p]:
+            if p == 0:
+                return 0
+            p -= 1
+        elif p < m - 1 and x >= S[p + 1]:
+            p += 1
+        else:
+            return p
+    lo = 0
+    hi = m - 1
+    while lo < hi:
+        mid = (lo + hi + 1) // 2
+        if S[mid] <= x:
+            lo = mid
+        else:
+            hi = mid - 1
+    return lo
+
+
+@njit(cache=True)
+def _eval(S, C, QEND, x, hint, q, qs):
+    """q(x) and dq/ds(x) into ``q``, ``qs``; returns the piece index (new hint)."""
+    m = S.shape[0] - 1
+    n = q.shape[0]
+    p = _piece(S, x, hint)
+    if x >= S[m]:
+        for i in range(n):
+            q[i] = QEND[i]
+        t = S[m] - S[p]
+        for i in range(n):
+            qs[i] = (((5.0 * C[p, 5, i] * t + 4.0 * C[p, 4, i]) * t + 3.0 * C[p, 3, i]) * t
+                     + 2.0 * C[p, 2, i]) * t + C[p, 1, i]
+        return p
+    t = x - S[p]
+    for i in range(n):
+        q[i] = ((((C[p, 5, i] * t + C[p, 4, i]) * t + C[p, 3, i]) * t + C[p, 2, i]) * t
+                + C[p, 1, i]) * t + C[p, 0, i]
+        qs[i] = (((5.0 * C[p, 5, i] * t + 4.0 * C[p, 4, i]) * t + 3.0 * C[p, 3, i]) * t
+                 + 2.0 * C[p, 2, i]) * t + C[p, 1, i]
+    return p
+
+
+@njit(cache=True)
+def _bounds(qh, k, vl, al, jl, lo, hi):
+    """Allowed interval [lo, hi] of e = q_new - q[k-1] per axis; False if one is empty.
+
+    ``qh`` holds samples 0..k-1; samples before 0 are the rest position q[0].
+    """
+    n = qh.shape[1]
+    ok = True
+    for i in range(n):
+        q1 = qh[k - 1, i]
+        q2 = qh[k - 2, i] if k >= 2 else qh[0, i]
+        q3 = qh[k - 3, i] if k >= 3 else qh[0, i]
+        d1 = q1 - q2
+        d2 = d1 - (q2 - q3)
+        l = -vl[i]
+        h = vl[i]
+        if d1 - al[i] > l:
+            l = d1 - al[i]
+        if d1 + al[i] < h:
+            h = d1 + al[i]
+        if d1 + d2 - jl[i] > l:
+            l = d1 + d2 - jl[i]
+        if d1 + d2 + jl[i] < h:
+            h = d1 + d2 + jl[i]
+        lo[i] = l
+        hi[i] = h
+        if l > h:
+            ok = False
+    return ok
+
+
+@njit(cache=True)
+def _feasible(qh, k, q, vl, al, jl):
+    """Exact check, in verify's own float operations, of q as sample k."""
+    n = q.shape[0]
+    for i in range(n):
+        q1 = qh[k - 1, i]
+        q2 = qh[k - 2, i] if k >= 2 else qh[0, i]
+        q3 = qh[k - 3, i] if k >= 3 else qh[0, i]
+        e = q[i] - q1
+        d1 = q1 - q2
+        d2 = d1 - (q2 - q3)
+        a = e - d1
+        jk = a - d2
+        if abs(e) > vl[i] or abs(a) > al[i] or abs(jk) > jl[i]:
+            return False
+    return True
+
+
+@njit(cache=True)
+def _lin_interval(q, qs, qprev, lo, hi, x, a, b):
+    """Linearised allowed s-interval around x, intersected with [a, b]: (lo_s, hi_s)."""
+    n = q.shape[0]
+    L = a
+    H = b
+    for i in range(n):
+        e = q[i] - qprev[i]
+        g = qs[i]
+        if g > 1e-14:
+            l = x + (lo[i] - e) / g
+            h = x + (hi[i] - e) / g
+        elif g < -1e-14:
+            l = x + (hi[i] - e) / g
+            h = x + (lo[i] - e) / g
+        else:
+            if e < lo[i] or e > hi[i]:
+                # a stationary axis outside its window: only the exact check can tell
+                continue
+            continue
+        if l > L:
+            L = l
+        if h < H:
+            H = h
+    return L, H
+
+
+@njit(cache=True)
+def _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, a, b, guess, want_max, hint, q, qs, tol):
+    """Largest (want_max) or smallest feasible s' in [a, b] of the allowed set's component
+    found from ``guess``. Returns (found, s', hint); ``q`` holds q(s') when found."""
+    n = q.shape[0]
+    qprev = qh[k - 1]
+    ends = b if want_max else a
+    hint = _eval(S, C, QEND, ends, hint, q, qs)
+    if _feasible(qh, k, q, vl, al, jl):
+        return True, ends, hint
+    # find one feasible point by repeated linearisation
+    x = guess
+    if x < a:
+        x = a
+    if x > b:
+        x = b
+    f = -1.0
+    have_f = False
+    for _ in range(8):
+        hint = _eval(S, C, QEND, x, hint, q, qs)
+        if _feasible(qh, k, q, vl, al, jl):
+            f = x
+            have_f = True
+            break
+        L, H = _lin_interval(q, qs, qprev, lo, hi, x, a, b)
+        if L > H:
+            # linear model says empty: try the middle of the overlap once more, else give up
+            xn = 0.5 * (L + H)
+            if xn < a:
+                xn = a
+            if xn > b:
+                xn = b
+        else:
+            xn = 0.5 * (L + H)
+        if xn == x:
+            break
+        x = xn
+    if not have_f:
+        return False, a, hint
+    # move from f to the wanted end: Newton on the linearised boundary, safeguarded by a bracket
+    u = ends  # known infeasible
+    x = f
+    for _ in range(60):
+        if abs(u - f) <= tol:
+            break
+        hint = _eval(S, C, QEND, x, hint, q, qs)
+        L, H = _lin_interval(q, qs, qprev, lo, hi, x, a, b)
+        xn = H if want_max else L
+        # stay strictly inside the bracket; fall back to bisection
+        if want_max:
+            if not (xn > f and xn < u):
+                xn = 0.5 * (f + u)
+        else:
+            if not (xn < f and xn > u):
+                xn = 0.5 * (f + u)
+        hint = _eval(S, C, QEND, xn, hint, q, qs)
+        if _feasible(qh, k, q, vl, al, jl):
+            f = xn
+            # nudge past the boundary so the bracket closes from both sides
+            step = tol if want_max else -tol
+            xt = f + step
+            if (want_max and xt < u) or ((not want_max) and xt > u):
+                hint = _eval(S, C, QEND, xt, hint, q, qs)
+                if _feasible(qh, k, q, vl, al, jl):
+                    f = xt
+                else:
+                    u = xt
+        else:
+            u = xn
+        x = f
+    hint = _eval(S, C, QEND, f, hint, q, qs)
+    return True, f, hint
+
+
+@njit(cache=True)
+def _cap(s, dt, L, FB, FV):
+    """Largest s' allowed by the feed: s' - s <= min(F over segments crossed) dt, s' <= L."""
+    m = FB.shape[0] - 1
+    p = 0
+    lo = 0
+    hi = m - 1
+    while lo < hi:  # segment containing s
+        mid = (lo + hi + 1) // 2
+        if FB[mid] <= s:
+            lo = mid
+        else:
+            hi = mid - 1
+    p = lo
+    f = FV[p]
+    c = s + f * dt
+    while p < m - 1 and c > FB[p + 1]:
+        p += 1
+        if FV[p] < f:
+            f = FV[p]
+            c = s + f * dt
+    if c > L:
+        c = L
+    if c < s:
+        c = s
+    return c
+
+
+@njit(cache=True)
+def _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, brake, hint, q, qs,
+          lo, hi, tol):
+    """Choose sample k (max or brake policy). Returns (ok, s', hint); q holds q(s')."""
+    if not _bounds(qh, k, vl, al, jl, lo, hi):
+        return False, sh[k - 1], hint
+    s0 = sh[k - 1]
+    s1 = sh[k - 2] if k >= 2 else sh[0]
+    s2 = sh[k - 3] if k >= 3 else sh[0]
+    d1 = s0 - s1
+    d2 = d1 - (s1 - s2)
+    b = _cap(s0, dt, L, FB, FV)
+    guess = s0 + d1 + d2
+    if not brake:
+        return _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, True, hint, q, qs, tol)
+    # brake: path-jerk bound of one step from the tightest axis at s0
+    hint = _eval(S, C, QEND, s0, hint, q, qs)
+    jd = _HUGE
+    for i in range(q.shape[0]):
+        g = abs(qs[i])
+        if g > 1e-14:
+            v = js_lim[i] / g
+            if v < jd:
+                jd = v
+    if d1 <= jd:
+        target = s0
+    else:
+        target = s0 + d1 + jd - np.sqrt(jd * (2.0 * d1 + jd))
+    okl, xl, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, False, hint,
+                            q, qs, tol)
+    if not okl:
+        return False, s0, hint
+    if target <= xl:
+        return True, xl, hint
+    oku, xu, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, True, hint,
+                            q, qs, tol)
+    if target >= xu:
+        return True, xu, hint
+    hint = _eval(S, C, QEND, target, hint, q, qs)
+    if _feasible(qh, k, q, vl, al, jl):
+        return True, target, hint
+    hint = _eval(S, C, QEND, xu, hint, q, qs)
+    return True, xu, hint
+
+
+@njit(cache=True)
+def _brake_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq, max_steps,
+               q, qs, lo, hi, tol, stats):
+    """Does braking from step j (samples < j fixed) reach rest? Uses scratch bs/bq.
+
+    The scratch holds copies of samples j-3..j-1 at indices 0..2 so that the same
+    step code runs on it; returns (ok, brake value of step j, q at it in bq[3]).
+    """
+    n = qh.shape[1]
+    for r in range(3):
+        src = j - 3 + r
+        if src < 0:
+            src = 0
+        bs[r] = sh[src]
+        for i in range(n):
+            bq[r, i] = qh[src, i]
+    hint = 0
+    kk = 3
+    first = sh[j - 1]
+    cap = bs.shape[0]
+    while True:
+        ok, x, hint = _step(S, C, QEND, bs, bq, kk, vl, al, jl, js_lim, dt, L, FB, FV, True,
+                            hint, q, qs, lo, hi, tol)
+        if not ok:
+            return False, first
+        bs[kk] = x
+        stats[2] += 1
+        for i in range(n):
+            bq[kk, i] = q[i]
+        if kk == 3:
+            first = x
+        kk += 1
+        if bs[kk - 1] == bs[kk - 2] and bs[kk - 2] == bs[kk - 3]:
+            return True, first
+        if kk >= cap or kk >= max_steps:
+            return False, first
+
+
+@njit(cache=True)
+def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol, max_steps,
+              bs, bq, stats):
+    """Run VPOp from sample k0 (samples < k0 fixed, b0 the last brake-fixed sample).
+
+    Fills ``sh`` (K,), ``qh`` (K, n). Returns (status, k, b). Status NEED_SPACE asks the
+    caller to grow ``sh``/``qh`` (or the scratch ``bs``/``bq``) and call again with (k, b).
+    stats: [backtracks, brake runs, brake-run steps, max steps] (accumulated).
+    """
+    n = qh.shape[1]
+    q = np.empty(n)
+    qs = np.empty(n)
+    lo = np.empty(n)
+    hi = np.empty(n)
+    k = k0
+    b = b0
+    hint = 0
+    cap = sh.shape[0]
+    while True:
+        # done: three equal samples at the end point
+        if k >= 3 and sh[k - 1] == L and sh[k - 2] == L and sh[k - 3] == L:
+            return OK, k, b
+        if k >= cap:
+            return NEED_SPACE, k, b
+        if k >= max_steps:
+            return STUCK, k, b
+        ok, x, hint = _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, False,
+                            hint, q, qs, lo, hi, tol)
+        stats[3] += 1
+        if ok:
+            sh[k] = x
+            for i in range(n):
+                qh[k, i] = q[i]
+            k += 1
+            continue
+        # empty set at k: latest j in [b+1, k-1] from which braking reaches rest
+        stats[0] += 1
+        lo_j = b + 1
+        hi_j = k  # braking from k is impossible (its set is empty)
+        if lo_j >= hi_j:
+            return INFEASIBLE, k, b
+        # most backtracks land just after the previous one: test lo_j + 1 first
+        if lo_j + 1 < hi_j:
+            r = _brake_run(S, C, QEND, sh, qh, lo_j + 1, vl, al, jl, js_lim, dt, L, FB,
+                           FV, bs, bq, max_steps, q, qs, lo, hi, tol, stats)
+            stats[1] += 1
+            if r[0]:
+                lo_j = lo_j + 1
+                while hi_j - lo_j > 1:
+                    mid = (lo_j + hi_j) // 2
+                    r = _brake_run(S, C, QEND, sh, qh, mid, vl, al, jl, js_lim, dt, L, FB, FV,
+                                   bs, bq, max_steps, q, qs, lo, hi, tol, stats)
+                    stats[1] += 1
+                    if r[0]:
+                        lo_j = mid
+                    else:
+                        hi_j = mid
+        j = lo_j
+        ok, x, hint = _step(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, True,
+                            hint, q, qs, lo, hi, tol)
+        if not ok:
+            return INFEASIBLE, j, b
+        sh[j] = x
+        for i in range(n):
+            qh[j, i] = q[i]
+        k = j + 1
+        b = j

@@ -1,0 +1,309 @@
+"""MCAP export: read back with the mcap reader (CRCs validated) and compare with the CSV."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from numpy.testing import assert_allclose, assert_array_equal
+
+import cnc_interp
+from cnc_interp.export.csv_io import read_csv, write_csv
+from cnc_interp.export.mcap_io import input_metadata, read_mcap, write_mcap
+from cnc_interp.plan.trajectory import Trajectory
+from cnc_interp.plan.verify import verify
+
+from ._export_synth import arc_trajectory, machine_for
+
+PROGRAM = b"G21 G90\nG1 X20 Y0 F600\nG2 X0 Y-20 I-20 J0\nM2\n"
+
+
+def _strict_json(data: bytes):
+    """json.loads that rejects NaN/Infinity (which are not JSON)."""
+    def bad(name):
+        raise ValueError(f"non-JSON constant {name}")
+    return json.loads(data, parse_constant=bad)
+
+
+def _read_all(path):
+    with open(path, "rb") as fh:
+        reader = make_reader(fh, validate_crcs=True)
+        summary = reader.get_summary()
+        meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+        msgs = {}
+        for schema, channel, msg in reader.iter_messages(log_time_order=True):
+            msgs.setdefault(channel.topic, []).append(msg)
+    return summary, meta, msgs
+
+
+@pytest.fixture(scope="module")
+def written(tmp_path_factory):
+    d = tmp_path_factory.mktemp("mcap")
+    traj = arc_trajectory(duration_s=1.5, axes="XYZC")
+    machine = machine_for(traj, 1.25, name="test mill")
+    mcap_path = str(d / "plan.mcap")
+    csv_path = str(d / "plan.csv")
+    n = write_mcap(traj, mcap_path, {"input": input_metadata("part.ngc", PROGRAM)}, machine)
+    write_csv(traj, csv_path)
+    return traj, machine, mcap_path, csv_path, n
+
+
+def test_channels_and_schemas(written):
+    traj, machine, path, _, n = written
+    summary, _, msgs = _read_all(path)
+    topics = {c.topic: c for c in summary.channels.values()}
+    assert set(topics) == {"/setpoints", "/segments", "/limits"}
+    for ch in topics.values():
+        assert ch.message_encoding == "json"
+        schema = summary.schemas[ch.schema_id]
+        assert schema.encoding == "jsonschema"
+        body = _strict_json(schema.data)
+        assert body["type"] == "object"
+        assert set(body["required"]) == set(body["properties"])
+    sp = _strict_json(summary.schemas[topics["/setpoints"].schema_id].data)
+    assert list(sp["properties"]) == ["t", "s", "feed", "line", "X", "Y", "Z", "C"]
+    lim = _strict_json(summary.schemas[topics["/limits"].schema_id].data)
+    assert set(lim["properties"]) == {"v", "a", "j", "worst"}
+    assert list(lim["properties"]["j"]["properties"]) == list("XYZC")
+    assert topics["/setpoints"].metadata["axes"] == "XYZC"
+    # Every message is strict JSON, and the statistics agree with what is in the file.
+    counts = summary.statistics.channel_message_counts
+    for topic, ch in topics.items():
+        assert counts[ch.id] == len(msgs[topic])
+        for m in msgs[topic]:
+            _strict_json(m.data)
+    assert sum(counts.values()) == n == summary.statistics.message_count
+
+
+def test_setpoints_match_csv(written):
+    traj, _, path, csv_path, _ = written
+    _, _, msgs = _read_all(path)
+    csv = read_csv(csv_path)
+    sp = msgs["/setpoints"]
+    assert len(sp) == traj.n_samples == csv.n_samples
+    rows = [_strict_json(m.data) for m in sp]
+    for key, col in (("t", csv.t), ("s", csv.s), ("feed", csv.feed)):
+        assert_array_equal(np.array([r[key] for r in rows]), col)  # repr round-trips exactly
+    for i, a in enumerate(csv.axes):
+        assert_array_equal(np.array([r[a] for r in rows]), csv.q[:, i])
+    assert_array_equal(np.array([r["line"] for r in rows]), traj.line)
+    times = np.array([m.log_time for m in sp])
+    assert_array_equal(times, np.array([m.publish_time for m in sp]))
+    assert_array_equal(times, np.rint(traj.t * 1e9).astype(np.int64))
+    assert times[1] - times[0] == 1_000_000  # dt = 1 ms in ns
+
+
+def test_limits_channel_agrees_with_verify(written):
+    traj, machine, path, _, _ = written
+    _, _, msgs = _read_all(path)
+    rows = [_strict_json(m.data) for m in msgs["/limits"]]
+    assert len(rows) == traj.n_samples
+    report = verify(traj, machine)
+    for k, kind in enumerate("vaj"):
+        worst = np.array([[abs(r[kind][a]) for a in traj.axes] for r in rows]).max(axis=0)
+        # The synthetic motion starts and ends smoothly, so the worst values are inside
+        # the plan and the per-sample ratios reach exactly verify's worst ratio.
+        assert_allclose(worst, report.ratios[:, k], rtol=1e-12)
+    overall = max(r["worst"] for r in rows)
+    assert_allclose(overall, report.worst_ratio, rtol=1e-12)
+    assert overall == pytest.approx(0.8, rel=1e-9)  # machine_for(margin=1.25)
+    # Signed: the velocity ratio of X is v_X / vmax_X at each sample.
+    vx = np.diff(traj.q[:, 0], prepend=traj.q[0, 0]) / traj.dt_s / machine.vmax[0]
+    assert_allclose([r["v"]["X"] for r in rows], vx, rtol=1e-9, atol=1e-15)
+
+
+def test_segments_channel(written):
+    traj, _, path, _, _ = written
+    _, _, msgs = _read_all(path)
+    rows = [_strict_json(m.data) for m in msgs["/segments"]]
+    runs = np.flatnonzero(np.diff(traj.line)) + 1
+    assert len(rows) == len(runs) + 1
+    assert [r["line"] for r in rows] == [int(traj.line[0])] + traj.line[runs].tolist()
+    assert rows[0]["s_start"] == 0.0 and rows[-1]["s_end"] == traj.s[-1]
+    for r, nxt in zip(rows, rows[1:]):
+        assert r["s_end"] == nxt["s_start"]  # contiguous
+        assert r["t_end"] == nxt["t_start"]
+    for r, m in zip(rows, msgs["/segments"]):
+        sel = (traj.t >= r["t_start"]) & (traj.t <= r["t_end"])
+        assert r["feed_min"] == traj.feed[sel].min() and r["feed_max"] == traj.feed[sel].max()
+        assert r["samples"] == sel.sum()
+        assert m.log_time == round(r["t_start"] * 1e9)
+
+
+def test_metadata_records(written):
+    traj, machine, path, _, _ = written
+    _, meta, _ = _read_all(path)
+    assert set(meta) == {"input", "machine", "planner", "tool"}
+    assert meta["input"]["sha256"] == hashlib.sha256(PROGRAM).hexdigest()
+    assert meta["input"]["lines"] == "4" and meta["input"]["name"] == "part.ngc"
+    assert meta["machine"]["name"] == "test mill"
+    assert float(meta["machine"]["C.jmax"]) == machine.jmax[3]
+    assert float(meta["machine"]["X.vmax"]) == machine.vmax[0]
+    assert meta["planner"]["name"] == "synthetic"
+    assert json.loads(meta["planner"]["settings"]) == traj.settings
+    assert meta["tool"]["version"] == cnc_interp.__version__
+
+
+def test_read_mcap_round_trip(written):
+    traj, _, path, _, _ = written
+    back = read_mcap(path)
+    assert isinstance(back, Trajectory)
+    assert back.axes == traj.axes and back.planner == traj.planner
+    assert back.dt_s == traj.dt_s and back.settings == traj.settings
+    for name in ("t", "s", "feed", "q", "line"):
+        assert_array_equal(getattr(back, name), getattr(traj, name))
+
+
+def test_byte_identical_repeat(tmp_path):
+    traj = arc_trajectory(duration_s=0.5)
+    machine = machine_for(traj, 2.0)
+    meta = {"input": input_metadata("a.ngc", PROGRAM)}
+    a, b = str(tmp_path / "a.mcap"), str(tmp_path / "b.mcap")
+    write_mcap(traj, a, meta, machine)
+    write_mcap(arc_trajectory(duration_s=0.5), b, meta, machine)
+    assert open(a, "rb").read() == open(b, "rb").read()
+
+
+def test_many_chunks_valid(tmp_path, monkeypatch):
+    """A plan spread over many chunks (small chunk size) reads back whole and in order."""
+    import cnc_interp.export.mcap_io as mio
+
+    monkeypatch.setattr(mio, "MCAP_CHUNK_BYTES", 4096)
+    monkeypatch.setattr(mio, "_BATCH", 1000)
+    traj = arc_trajectory(duration_s=3.0)
+    path = str(tmp_path / "c.mcap")
+    write_mcap(traj, path, None, machine_for(traj, 1.1))
+    summary, _, msgs = _read_all(path)
+    assert summary.statistics.chunk_count > 20
+    assert len(msgs["/setpoints"]) == traj.n_samples
+    assert_array_equal(read_mcap(path).q, traj.q)
+
+
+def test_nan_written_as_null(tmp_path):
+    traj = arc_trajectory(duration_s=0.2)
+    q = traj.q.copy()
+    q[50, 1] = np.nan
+    bad = Trajectory(axes=traj.axes, dt_s=traj.dt_s, t=traj.t, s=traj.s, feed=traj.feed, q=q,
+                     line=traj.line, planner="x", settings={"w": float("inf")})
+    path = str(tmp_path / "n.mcap")
+    write_mcap(bad, path, {"input": {"note": float("nan")}}, machine_for(traj, 1.5))
+    _, meta, msgs = _read_all(path)
+    row = _strict_json(msgs["/setpoints"][50].data)
+    assert row["Y"] is None and row["X"] == q[50, 0]
+    lim = [_strict_json(m.data) for m in msgs["/limits"]]
+    assert lim[50]["v"]["Y"] is None and lim[50]["worst"] is None
+    assert lim[49]["v"]["Y"] is not None
+    assert json.loads(meta["planner"]["settings"]) == {"w": None}
+    assert meta["input"]["note"] == "null"
+    assert np.isnan(read_mcap(path).q[50, 1])
+
+
+def test_without_machine_and_explicit_segments(tmp_path):
+    traj = arc_trajectory(duration_s=0.4)
+    path = str(tmp_path / "s.mcap")
+    L = traj.s[-1]
+    write_mcap(traj, path, {}, None, segments=[(7, 0.0, L / 2), (9, L / 2, L)])
+    summary, meta, msgs = _read_all(path)
+    assert {c.topic for c in summary.channels.values()} == {"/setpoints", "/segments"}
+    assert "machine" not in meta
+    segs = [_strict_json(m.data) for m in msgs["/segments"]]
+    assert [s["line"] for s in segs] == [7, 9]
+    assert segs[0]["s_start"] == 0.0 and segs[1]["s_end"] == L
+    assert segs[0]["t_end"] == segs[1]["t_start"] > 0
+
+
+def test_write_to_stdout(capfdbinary):
+    traj = arc_trajectory(duration_s=0.1)
+    write_mcap(traj, "-", None, None)
+    out = capfdbinary.readouterr().out
+    assert out.startswith(b"\x89MCAP0\r\n") and out.endswith(b"\x89MCAP0\r\n")
+
+
+def test_interrupted_write_leaves_no_file(tmp_path):
+    traj = arc_trajectory(duration_s=0.3)
+    path = tmp_path / "x.mcap"
+
+    def tick(n):
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        write_mcap(traj, str(path), None, None, progress=tick)
+    assert os.listdir(tmp_path) == []
+
+
+def test_bad_mcap_is_usage_error(tmp_path):
+    from cnc_interp.errors import CncInterpError
+
+    p = tmp_path / "junk.mcap"
+    p.write_bytes(b"not an mcap file at all")
+    with pytest.raises(CncInterpError) as ei:
+        read_mcap(str(p))
+    assert ei.value.exit_code == 2 and "junk.mcap" in ei.value.format()
+
+
+@pytest.mark.parametrize("chunk_size", [1, 300, 5000, 1 << 20])
+def test_bulk_writer_matches_mcap_writer(chunk_size):
+    """The bulk writer produces exactly the bytes of mcap's own Writer for the same calls."""
+    import io
+
+    from mcap.writer import CompressionType, Writer
+
+    from cnc_interp.export.mcap_bulk import BulkMcapWriter
+
+    rng = np.random.default_rng(chunk_size)
+    n = 700
+    chans = rng.integers(1, 4, size=n)
+    chans[:5] = [3, 3, 1, 2, 1]  # first appearance order differs from registration order
+    times = np.sort(rng.integers(0, 10**9, size=n))
+    times[100:110] = times[100]  # equal times
+    datas = [bytes(rng.integers(32, 127, size=int(rng.integers(0, 90))).astype(np.uint8))
+             for _ in range(n)]
+
+    def calls(w):
+        w.start(profile="", library="test")
+        s1 = w.register_schema("a", "jsonschema", b'{"type":"object"}')
+        s2 = w.register_schema("b", "jsonschema", b"{}")
+        w.register_channel("/one", "json", s1, {"k": "v"})
+        w.register_channel("/two", "json", s2, {})
+        w.register_channel("/three", "json", s1, {"x": "1", "y": "2"})
+        w.add_metadata("m1", {"a": "1"})
+        w.add_metadata("m2", {"b": "2", "c": "3"})
+
+    ref = io.BytesIO()
+    w = Writer(ref, chunk_size=chunk_size, compression=CompressionType.ZSTD)
+    calls(w)
+    for c, t, d in zip(chans.tolist(), times.tolist(), datas):
+        w.add_message(c, t, d, t)
+    w.finish()
+
+    out = io.BytesIO()
+    b = BulkMcapWriter(out, chunk_size=chunk_size)
+    calls(b)
+    for lo, hi in ((0, 1), (1, 250), (250, 251), (251, 700)):  # uneven batches
+        b.add_messages(chans[lo:hi], times[lo:hi], datas[lo:hi])
+    b.finish()
+    assert out.getvalue() == ref.getvalue()
+
+
+def test_bulk_writer_no_messages_matches_mcap_writer():
+    import io
+
+    from mcap.writer import CompressionType, Writer
+
+    from cnc_interp.export.mcap_bulk import BulkMcapWriter
+
+    outs = []
+    for cls in (Writer, BulkMcapWriter):
+        buf = io.BytesIO()
+        w = cls(buf, chunk_size=1024) if cls is BulkMcapWriter else \
+            cls(buf, chunk_size=1024, compression=CompressionType.ZSTD)
+        w.start(profile="", library="x")
+        w.register_channel("/c", "json", w.register_schema("s", "jsonschema", b"{}"), {})
+        w.add_metadata("m", {})
+        w.finish()
+        outs.append(buf.getvalue())
+    assert outs[0] == outs[1]

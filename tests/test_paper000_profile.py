@@ -1,0 +1,125 @@
+"""Paper 000's polynomial feed transition, profile data and look-ahead."""
+
+import math
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from cnc_interp.plan.paper000.profile import (
+    ACC_PEAK,
+    JERK_PEAK,
+    SegmentProfiles,
+    build_profiles,
+    stretch_to_period,
+    transition_distance,
+    transition_time,
+)
+
+
+def test_peak_constants_closed_form():
+    tau = np.linspace(0, 1, 200001)
+    hp = 30 * tau**2 * (1 - tau) ** 2
+    hpp = 60 * tau * (1 - tau) * (1 - 2 * tau)
+    assert_allclose(hp.max(), ACC_PEAK, rtol=1e-9)
+    assert_allclose(np.abs(hpp).max(), JERK_PEAK, rtol=1e-8)
+
+
+@pytest.mark.parametrize("v0,v1,a,j", [(0, 100, 1000, 1e6), (0, 100, 1e5, 1e4), (80, 10, 500, 2e4)])
+def test_transition_respects_limits_and_distance(v0, v1, a, j):
+    T = float(transition_time(v1 - v0, a, j))
+    length = float(transition_distance(v0, v1, a, j)) + 1.0
+    prof = build_profiles("t", [0], [0], [0.0], [length], [v0], [v0], [v1], np.array([a]),
+                          np.array([j]))
+    # a cruise at v0 then the transition: look at the transition only
+    t0 = prof.t_acc[0] + prof.t_cruise[0]
+    assert_allclose(prof.t_dec[0], T)
+    t = t0 + np.linspace(0, T, 20001)
+    s, v, acc = prof.evaluate(t)
+    assert_allclose(v[0], v0, atol=1e-9)
+    assert_allclose(v[-1], v1, atol=1e-9)
+    assert_allclose(s[-1] - s[0], 0.5 * (v0 + v1) * T, rtol=1e-12)
+    assert_allclose(s[-1] - s[0], transition_distance(v0, v1, a, j), rtol=1e-12)
+    dt = t[1] - t[0]
+    jerk = np.gradient(acc, dt)
+    assert np.abs(acc).max() <= a * (1 + 1e-9)
+    assert np.abs(jerk).max() <= j * (1 + 1e-3)
+    # the binding limit is reached
+    assert max(np.abs(acc).max() / a, np.abs(jerk).max() / j) > 0.999
+    # v is the derivative of s, a of v
+    assert_allclose(np.gradient(s, dt)[1:-1], v[1:-1], rtol=1e-6, atol=1e-6 * abs(v1 - v0))
+    assert_allclose(np.gradient(v, dt)[2:-2], acc[2:-2], atol=1e-4 * a)
+
+
+def test_acc_coef_matches_evaluate():
+    prof = build_profiles("t", [0, 1], [0, 1], [0.0, 50.0], [50.0, 80.0], [0.0, 40.0],
+                          [60.0, 70.0], [40.0, 0.0], np.array([800.0, 900.0]),
+                          np.array([1e4, 2e4]))
+    c = prof.acc_coef()
+    for m in range(2):
+        for ph, (t0, T) in enumerate(((prof.t_start[m], prof.t_acc[m]),
+                                      (prof.t_start[m] + prof.t_acc[m] + prof.t_cruise[m],
+                                       prof.t_dec[m]))):
+            lt = np.linspace(0, T, 101)[1:-1]
+            a_eval = prof.evaluate(t0 + lt)[2]
+            a_poly = np.polynomial.polynomial.polyval(lt, c[m, ph])
+            assert_allclose(a_poly, a_eval, rtol=1e-9, atol=1e-9)
+
+
+def test_profiles_continuous_in_feed_and_acceleration():
+    rng = np.random.default_rng(4)
+    n = 12
+    w = np.r_[0.0, rng.uniform(5, 50, n - 1), 0.0]
+    c = np.maximum(np.maximum(w[:-1], w[1:]), rng.uniform(10, 80, n))
+    a, j = rng.uniform(300, 3000, n), rng.uniform(3e3, 5e4, n)
+    need = transition_distance(w[:-1], c, a, j) + transition_distance(c, w[1:], a, j)
+    length = need * rng.uniform(1.0, 3.0, n)
+    prof = build_profiles("t", np.arange(n), np.arange(n), np.r_[0, np.cumsum(length)[:-1]],
+                          length, w[:-1], c, w[1:], a, j)
+    t = np.linspace(0, prof.duration_s, 400001)
+    s, v, acc = prof.evaluate(t)
+    dt = t[1] - t[0]
+    assert np.all(np.diff(s) >= -1e-12)
+    assert_allclose(s[-1], length.sum(), rtol=1e-12)
+    assert np.abs(np.diff(v)).max() <= (a.max() * dt) * 1.01
+    assert np.abs(np.diff(acc)).max() <= (j.max() * dt) * 1.01
+    assert abs(v[0]) < 1e-12 and abs(v[-1]) < 1e-9
+
+
+def test_stretch_to_period():
+    prof = build_profiles("t", [0], [0], [0.0], [10.0], [0.0], [30.0], [0.0],
+                          np.array([500.0]), np.array([5e3]))
+    dt = 0.001
+    st = stretch_to_period(prof, dt)
+    k = st.duration_s / dt
+    assert abs(k - round(k)) < 1e-6
+    assert st.duration_s >= prof.duration_s
+    assert st.v_cruise[0] <= prof.v_cruise[0]
+    s_end = st.evaluate(np.array([st.duration_s]))[0][0]
+    assert_allclose(s_end, 10.0, rtol=1e-12)
+    assert isinstance(st, SegmentProfiles)
+
+
+def test_lookahead_random_sweep():
+    from cnc_interp.plan.paper000.lookahead import group_segments, lookahead
+
+    rng = np.random.default_rng(7)
+    for _ in range(30):
+        n = int(rng.integers(1, 40))
+        length = rng.uniform(0.01, 20, n)
+        vcap = rng.uniform(1, 300, n)
+        a, j = rng.uniform(100, 5000, n), rng.uniform(1e3, 1e5, n)
+        wcap = np.r_[0.0, rng.uniform(0, 400, n - 1), 0.0]
+        w, c = lookahead(length, vcap, a, j, wcap)
+        assert w[0] == 0 and w[-1] == 0
+        assert np.all(w <= wcap + 1e-12)
+        assert np.all(w[1:-1] <= np.minimum(vcap[:-1], vcap[1:]) + 1e-12)
+        assert np.all(c <= vcap + 1e-12) and np.all(c >= np.maximum(w[:-1], w[1:]))
+        need = transition_distance(w[:-1], c, a, j) + transition_distance(c, w[1:], a, j)
+        assert np.all(need <= length * (1 + 1e-12))
+        first = group_segments(vcap, wcap, 0.1)
+        assert first[0] == 0 and np.all(np.diff(first) > 0)
+        # per piece the caps lie within the band
+        for lo, hi in zip(first, np.r_[first[1:], n]):
+            assert vcap[lo:hi].min() >= 0.9 * vcap[lo:hi].max() - 1e-12
+    assert math.isfinite(float(c.sum()))
