@@ -2,7 +2,9 @@
 
 Usage:
     python benchmarks/export_mcap.py [SAMPLES]          synthetic smooth XYZ plan (default 10^6)
-    python benchmarks/export_mcap.py PLAN.csv [MACHINE] a real plan written by `cnc-interp plan`
+    python benchmarks/export_mcap.py PART.ngc [MACHINE] plan a part program first (not timed)
+    python benchmarks/export_mcap.py PLAN.csv [MACHINE] a plan written by `cnc-interp plan`
+                                                        (a CSV has no source lines: no segments)
 
 Prints, for CSV and MCAP (with /limits when a machine is known): seconds, samples/s,
 messages/s and file size; then MCAP read-back time.
@@ -52,7 +54,7 @@ def main() -> None:
     if arg.isdigit():
         traj, machine = synthetic(int(arg))
         name = f"synthetic helix, {traj.n_samples:,} samples"
-    else:
+    elif arg.lower().endswith(".csv"):
         traj = read_csv(arg)
         machine = None
         if len(sys.argv) > 2:
@@ -60,6 +62,13 @@ def main() -> None:
 
             machine = load_machine(sys.argv[2])
         name = f"{os.path.basename(arg)}, {traj.n_samples:,} samples, axes {traj.axes}"
+    else:
+        from cnc_interp.pipeline import plan_part
+
+        outcome, tp = timed(lambda: plan_part(arg, sys.argv[2] if len(sys.argv) > 2 else None))
+        traj, machine = outcome.trajectory, outcome.machine
+        name = (f"{os.path.basename(arg)} on {machine.name}: {traj.n_samples:,} samples, "
+                f"axes {traj.axes} (planned in {tp:.1f} s)")
     k = traj.n_samples
     print(name)
     with tempfile.TemporaryDirectory() as d:

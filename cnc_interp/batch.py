@@ -42,6 +42,8 @@ FIELDS = ("key", "status", "message", "error_line", "lines", "nodes", "segments"
           "peak_mem_mb")
 #: fields that differ from run to run (excluded when comparing runs for identity)
 VOLATILE_FIELDS = ("wall_s", "peak_mem_mb")
+#: how long to try to reach a Dask scheduler before giving up (s)
+DASK_CONNECT_TIMEOUT_S = 20
 #: statuses that count as a regression by themselves
 _BAD_STATUS = ("violation",)
 
@@ -144,15 +146,26 @@ def _make_jobs(programs, machine, opts: BatchOptions, embed: bool) -> list[dict]
     return jobs
 
 
-def warm_up(machine, planner: str) -> None:
+def warm_up_program(axes: str) -> bytes:
+    """A tiny program on ``axes`` touching every stage: a rapid, lines, an arc, a dwell."""
+    if "X" in axes and ("Y" in axes or "Z" in axes):
+        b, plane, off = ("Y", "G17", "J") if "Y" in axes else ("Z", "G18", "K")
+        text = (f"G21 G90 {plane}\nG0 X1 {b}1\nG1 X2 {b}1 F600\nG2 X4 {b}1 I1 {off}0\n"
+                f"G4 P0.01\nG1 X4 {b}2\nM2\n")
+    else:
+        a = axes[0]
+        text = f"G21 G90\nG0 {a}1\nG1 {a}2 F600\nG4 P0.01\nG1 {a}3\nM2\n"
+    return text.encode("ascii")
+
+
+def warm_up(machine, planner: str) -> dict:
     """Import the stages and run a tiny program once, so forked children start warm
     (compiled numba functions and imported modules are inherited, not rebuilt)."""
     from .batch_workers import run_job
 
     # run_job never raises for a program's own failure; warming is best effort anyway
-    run_job({"key": "warm-up", "path": "<warm-up>", "machine": machine, "planner": planner,
-             "dt_s": None, "tol_mm": None,
-             "data": b"G21 G90 G17\nG0 X0 Y0 Z0\nG1 X1 Y1 F600\nG2 X2 Y0 I0.5 J-1\nM2\n"})
+    return run_job({"key": "warm-up", "path": "<warm-up>", "machine": machine, "planner": planner,
+                    "dt_s": None, "tol_mm": None, "data": warm_up_program(machine.axes)})
 
 
 def _run_local(jobs, opts: BatchOptions, on_done) -> list[dict]:
@@ -180,7 +193,7 @@ def _run_dask(jobs, opts: BatchOptions, on_done) -> list[dict]:
         raise UsageError("--dask needs the 'distributed' package "
                          "(pip install 'cnc-interp[dask]')") from None
     try:
-        client = Client(opts.dask_address, timeout="20s")
+        client = Client(opts.dask_address, timeout=f"{DASK_CONNECT_TIMEOUT_S}s")
     except Exception as exc:  # noqa: BLE001 - any connection failure is the user's address
         raise UsageError(f"cannot connect to the Dask scheduler at {opts.dask_address}: {exc}") from None
     results: list[dict | None] = [None] * len(jobs)

@@ -17,9 +17,14 @@ LINEAR_AXES = frozenset("XYZUVW")
 ROTARY_AXES = frozenset("ABC")
 
 # --- gcode -------------------------------------------------------------------
-#: |distance from start to centre - distance from end to centre| allowed on an arc (mm)
-ARC_RADIUS_TOL_MM = 0.0005
-#: relative form of the same check (LinuxCNC uses 0.001 relative)
+#: I/J/K arcs, LinuxCNC's documented rule: |r_start - r_end| is an error when it exceeds
+#: ARC_RADIUS_TOL_MAX_* or (ARC_RADIUS_TOL_* and ARC_RADIUS_TOL_REL * radius). mm programs:
+ARC_RADIUS_TOL_MM = 0.005
+ARC_RADIUS_TOL_MAX_MM = 0.5
+#: the same for inch programs (G20), in inches
+ARC_RADIUS_TOL_INCH = 0.0005
+ARC_RADIUS_TOL_MAX_INCH = 0.05
+#: relative part of the rule (0.1 % of the radius)
 ARC_RADIUS_TOL_REL = 0.001
 #: upper bound on iterations of one while/do/repeat loop
 LOOP_ITERATION_LIMIT = 1_000_000
@@ -35,16 +40,15 @@ PARAM_LOCAL_COUNT = 30
 EXPR_EQUAL_TOL = 0.0001
 #: a value used as an integer (parameter number, repeat count) may be this far from one
 EXPR_INTEGER_TOL = 0.0001
-#: fast path: most digits of a number converted in bulk (exact while the mantissa < 2**53)
-FAST_MAX_DIGITS = 15
 #: fast path: source lines tokenised per numpy chunk (bounds memory on huge files)
 FAST_CHUNK_LINES = 32768
 #: an arc radius (start or end) below this is a "zero-radius arc" error (mm; LinuxCNC 0.00005 in)
 ARC_MIN_RADIUS_MM = 0.00127
 #: R-format arcs: how far the chord may exceed the diameter before "radius too small" (mm)
 ARC_R_REACH_TOL_MM = 0.00127
-#: most distance between sampled nodes and the exact arc/spline (sagitta), mm (deg for rotary)
-CURVE_CHORD_TOL_MM = 0.0001
+#: most distance between sampled nodes and the exact arc/spline (sagitta), mm: a quarter
+#: of DEFAULT_TOL_MM, so a fit through the nodes stays close to the exact curve
+CURVE_CHORD_TOL_MM = 0.00025
 #: every arc gets at least this many node segments (so curvature shows in the nodes)
 ARC_MIN_SEGMENTS = 4
 #: longest angle one sampled arc segment may span, deg
@@ -89,8 +93,13 @@ FIT_MAX_ROUNDS = 40
 FIT_INITIAL_NODES_PER_SPAN = 24
 #: N-axis fitter: least fitted speed |dq/du| relative to the chord's, at nodes and mid-chords
 FIT_MIN_SPEED_RATIO = 0.25
+#: N-axis fitter: chord points may deviate by the tolerance plus this many times the
+#: sagitta a circle through the neighbouring nodes would have there
+FIT_SAGITTA_ALLOWANCE = 2.0
+#: N-axis fitter: rounds without fewer chord-point failures before refinement stops
+FIT_SOFT_STALE_ROUNDS = 3
 #: N-axis fitter: smallest knot span relative to the run's parameter length
-FIT_MIN_SPAN_REL = 1e-9
+FIT_MIN_SPAN_REL = 1e-6
 #: share of the tolerance the fit aims for (the rest absorbs rounding)
 FIT_TOL_SAFETY = 0.98
 #: planar fit: inclinations are kept within ±this (rad/π) of the frame, as Eq. (1) guarantees
@@ -128,7 +137,7 @@ PROGRESS_REFRESH_S = 0.1
 #: widest progress line drawn, characters
 PROGRESS_MAX_WIDTH = 80
 #: most tool-path points a plot draws (longer plans are decimated for the picture only)
-PLOT_MAX_PATH_POINTS = 20000
+PLOT_MAX_PATH_POINTS = 100_000
 #: time bins of the min/max envelope a plot draws for long plans
 PLOT_ENVELOPE_BINS = 2000
 #: MCAP chunk size (uncompressed bytes); fixed so the same plan gives the same file
@@ -151,7 +160,7 @@ P000_GEOM_SAMPLES = 33
 #: safety factor applied to those sampled maxima (grid may miss a peak slightly)
 P000_GEOM_MARGIN = 1.0
 #: golden-section iterations refining a numerical curvature peak
-P000_CURV_REFINE_ITERS = 40
+P000_CURV_REFINE_ITERS = 30
 #: verify-and-replan rounds before a plan is declared failed
 P000_MAX_REPLANS = 40
 #: factor applied to a violating segment's feed cap (and its square to a_t, j_t) per round
@@ -197,8 +206,14 @@ VPOP_LIMIT_SHRINK = 1e-10
 #: largest deviation of VPOp's arc-length joint table from the true path (mm or deg)
 VPOP_TABLE_TOL = 1e-9
 #: longest piece of that table before refinement (mm or deg of arc length)
-VPOP_TABLE_MAX_PIECE = 2.0
+VPOP_TABLE_MAX_PIECE = 20.0
 #: refinement rounds of the table (each halves the pieces that miss VPOP_TABLE_TOL)
 VPOP_TABLE_MAX_ROUNDS = 12
 #: share of each axis's jerk step the brake policy assumes it can use to end a stop
 VPOP_BRAKE_JERK_FRACTION = 0.9
+#: a brake run may end early once curvature uses at most this share of any axis's
+#: acceleration and jerk over the rest of its stop (exact re-plan if that ever misleads)
+VPOP_EASY_FRACTION = 0.25
+#: an end-of-path "aim" run is committed when it stops within this many jerk steps
+#: (jmax dt³ of the tightest axis) short of the end; the rest is crept from rest
+VPOP_AIM_GAP_JERK_STEPS = 4.0

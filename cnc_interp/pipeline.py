@@ -112,7 +112,7 @@ def process_program(name: str, data: bytes, machine, planner: str = "vpop",
 
 def _max_fit_deviation(stats: dict) -> float | None:
     """The fit's largest node deviation (mm) from its statistics, if it reports one."""
-    for key in ("max_deviation_mm", "max_dev_mm", "max_node_deviation_mm", "max_error_mm"):
+    for key in ("max_node_dev_mm", "max_deviation_mm", "max_dev_mm"):
         value = stats.get(key) if isinstance(stats, dict) else None
         if isinstance(value, (int, float)):
             return float(value)

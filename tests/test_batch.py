@@ -98,3 +98,158 @@ def test_bad_baseline(tmp_path):
 def test_options_defaults():
     o = BatchOptions(paths=("a",), machine_spec="generic-mill")
     assert o.planner == "vpop" and o.max_slowdown == "1%" and o.dask_address is None
+
+
+# --- full runs through parse, fit, plan, verify --------------------------------
+PROGRAMS = {
+    "square.ngc": "G21 G90 G17\nG0 X0 Y0 Z1\nG1 Z0 F600\nG1 X20 F3000\nG1 Y20\nG1 X0\nG1 Y0\nM2\n",
+    "arc.ngc": "G21 G90 G17\nG0 X20 Y10\nG1 X20 Y10 F2400\nG2 X30 Y0 I5 J-5\nG4 P0.05\nG1 X40 Y5\nM2\n",
+    "sub/broken.ngc": "G21 G90\nG1 X5 F1000\nG1 X10 Q\nM2\n",
+}
+
+MACHINE = """\
+name = "batch test mill"
+dt = 0.001
+[axes.X]
+vmax = 200.0
+amax = 2000.0
+jmax = {jmax}
+[axes.Y]
+vmax = 200.0
+amax = 2000.0
+jmax = {jmax}
+[axes.Z]
+vmax = 100.0
+amax = 1000.0
+jmax = {jmax}
+"""
+
+
+@pytest.fixture()
+def folder(tmp_path):
+    root = tmp_path / "progs"
+    for name, text in PROGRAMS.items():
+        p = root / name
+        p.parent.mkdir(parents=True, exist_ok=True)
+        p.write_text(text)
+    return root
+
+
+def machine_file(tmp_path, jmax, name="m.toml"):
+    p = tmp_path / name
+    p.write_text(MACHINE.format(jmax=jmax))
+    return str(p)
+
+
+def run_cli(args):
+    from click.testing import CliRunner
+
+    from cnc_interp.cli import main
+
+    return CliRunner().invoke(main, args, catch_exceptions=False)
+
+
+def stable(report):
+    return [{k: v for k, v in r.items() if k not in VOLATILE_FIELDS} for r in report["programs"]]
+
+
+def test_batch_with_broken_program_and_baseline_rules(tmp_path, folder):
+    m = machine_file(tmp_path, 20000.0)
+    rep = str(tmp_path / "r.json")
+    res = run_cli(["batch", str(folder), "-m", m, "--jobs", "2", "--report", rep, "-q"])
+    assert res.exit_code == 0, res.output           # a broken program alone is no regression
+    report = json.load(open(rep))
+    by = {r["key"]: r for r in report["programs"]}
+    assert sorted(by) == ["progs/arc.ngc", "progs/square.ngc", "progs/sub/broken.ngc"]
+    bad = by["progs/sub/broken.ngc"]
+    assert bad["status"] == "error" and bad["error_line"] == 3 and "broken.ngc:3:" in bad["message"]
+    for key in ("progs/arc.ngc", "progs/square.ngc"):
+        r = by[key]
+        assert r["status"] == "ok" and r["worst_ratio"] <= 1 + 1e-9
+        assert r["cycle_time_s"] > 0 and r["segments"] >= 1 and r["lines"] >= 7
+        assert r["path_length_mm"] > 20 and r["peak_mem_mb"] > 0 and r["wall_s"] > 0
+    assert "progs/sub/broken.ngc" in res.output and "1 error, 2 ok" in res.output
+    # same run against itself: no regression; CSV report too
+    res2 = run_cli(["batch", str(folder), "-m", m, "--baseline", rep, "--report",
+                    str(tmp_path / "r.csv"), "-q"])
+    assert res2.exit_code == 0, res2.output
+    assert "0 regression(s)" in res2.output
+    assert open(tmp_path / "r.csv").readline().startswith("key,status,message")
+    # the broken program fixed: its status changed -> regression by the baseline rules
+    (folder / "sub" / "broken.ngc").write_text("G21 G90\nG1 X5 F1000\nM2\n")
+    res3 = run_cli(["batch", str(folder), "-m", m, "--baseline", rep, "-q", "--json"])
+    assert res3.exit_code == 1
+    out = json.loads(res3.output)
+    assert [c["key"] for c in out["comparison"]["status_changed"]] == ["progs/sub/broken.ngc"]
+
+
+def test_baseline_flags_lowered_jerk_as_slower(tmp_path, folder):
+    (folder / "sub" / "broken.ngc").unlink()
+    rep = str(tmp_path / "base.json")
+    assert run_cli(["batch", str(folder), "-m", machine_file(tmp_path, 20000.0), "--report", rep,
+                    "-q"]).exit_code == 0
+    slow = machine_file(tmp_path, 2000.0, "slow.toml")
+    res = run_cli(["batch", str(folder), "-m", slow, "--baseline", rep, "--max-slowdown", "1%",
+                   "-q", "--json"])
+    assert res.exit_code == 1
+    out = json.loads(res.output)
+    assert sorted(s["key"] for s in out["comparison"]["slower"]) == ["progs/arc.ngc", "progs/square.ngc"]
+    assert all(s["change"] > 0.01 for s in out["comparison"]["slower"])
+    # a generous allowance accepts the same slowdown
+    worst = max(s["change"] for s in out["comparison"]["slower"])
+    res2 = run_cli(["batch", str(folder), "-m", slow, "--baseline", rep, "--max-slowdown",
+                    f"{worst * 100 + 1:.3f}%", "-q"])
+    assert res2.exit_code == 0, res2.output
+
+
+def test_timeout_is_a_status_not_a_failure(tmp_path, folder):
+    from cnc_interp.batch import build_report
+
+    report = build_report(BatchOptions(paths=(str(folder),), machine_spec=machine_file(tmp_path, 20000.0),
+                                       jobs=2, timeout_s=1e-4, quiet=True))
+    assert {r["status"] for r in report["programs"]} <= {"timeout", "error"}
+    assert any(r["status"] == "timeout" for r in report["programs"])
+
+
+def test_bad_machine_and_usage_exit_2(tmp_path, folder):
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, "-m", "cnc_interp.cli", "batch", str(folder), "-m",
+                           "no-such-preset"], capture_output=True, text=True)
+    assert proc.returncode == 2 and "error: no machine file or preset named" in proc.stderr
+    from cnc_interp.batch import run_batch
+    from cnc_interp.errors import MachineError
+
+    with pytest.raises(MachineError):
+        run_batch(BatchOptions(paths=(str(folder),), machine_spec="no-such-preset"))
+    with pytest.raises(UsageError):
+        run_batch(BatchOptions(paths=(str(folder),), machine_spec="generic-mill", max_slowdown="x"))
+
+
+def test_dask_local_cluster_matches_local(tmp_path, folder):
+    distributed = pytest.importorskip("distributed")
+    from cnc_interp.batch import build_report
+
+    m = machine_file(tmp_path, 20000.0)
+    local = build_report(BatchOptions(paths=(str(folder),), machine_spec=m, jobs=2, quiet=True))
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  host="127.0.0.1", dashboard_address=None) as cluster:
+        remote = build_report(BatchOptions(paths=(str(folder),), machine_spec=m, quiet=True,
+                                           dask_address=cluster.scheduler_address))
+    assert remote["executor"] == "dask" and local["executor"] == "local"
+    assert stable(remote) == stable(local)
+    assert remote["comparison"] == local["comparison"]
+    assert {r["status"] for r in local["programs"]} == {"ok", "error"}
+
+
+def test_dask_unreachable_scheduler_is_usage_error(tmp_path, folder, monkeypatch):
+    pytest.importorskip("distributed")
+    import cnc_interp.batch as batch_mod
+    from cnc_interp.batch import run_batch
+
+    monkeypatch.setattr(batch_mod, "DASK_CONNECT_TIMEOUT_S", 1)
+
+    with pytest.raises(UsageError, match="cannot connect"):
+        run_batch(BatchOptions(paths=(str(folder),), machine_spec="generic-mill", quiet=True,
+                               dask_address="tcp://127.0.0.1:9"))

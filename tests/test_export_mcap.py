@@ -106,14 +106,15 @@ def test_limits_channel_agrees_with_verify(written):
     for k, kind in enumerate("vaj"):
         worst = np.array([[abs(r[kind][a]) for a in traj.axes] for r in rows]).max(axis=0)
         # The synthetic motion starts and ends smoothly, so the worst values are inside
-        # the plan and the per-sample ratios reach exactly verify's worst ratio.
-        assert_allclose(worst, report.ratios[:, k], rtol=1e-12)
+        # the plan and the per-sample ratios reach verify's worst ratio (to the 9
+        # significant digits the channel carries).
+        assert_allclose(worst, report.ratios[:, k], rtol=1e-8)
     overall = max(r["worst"] for r in rows)
-    assert_allclose(overall, report.worst_ratio, rtol=1e-12)
-    assert overall == pytest.approx(0.8, rel=1e-9)  # machine_for(margin=1.25)
+    assert_allclose(overall, report.worst_ratio, rtol=1e-8)
+    assert overall == pytest.approx(0.8, rel=1e-8)  # machine_for(margin=1.25)
     # Signed: the velocity ratio of X is v_X / vmax_X at each sample.
     vx = np.diff(traj.q[:, 0], prepend=traj.q[0, 0]) / traj.dt_s / machine.vmax[0]
-    assert_allclose([r["v"]["X"] for r in rows], vx, rtol=1e-9, atol=1e-15)
+    assert_allclose([r["v"]["X"] for r in rows], vx, rtol=1e-8, atol=1e-15)
 
 
 def test_segments_channel(written):
@@ -307,3 +308,71 @@ def test_bulk_writer_no_messages_matches_mcap_writer():
         w.finish()
         outs.append(buf.getvalue())
     assert outs[0] == outs[1]
+
+
+def _copy_with_mcap_writer(src, dst, **writer_options):
+    """Rewrite ``src`` with mcap's own Writer (e.g. without indexes)."""
+    from mcap.writer import CompressionType, Writer
+
+    with open(src, "rb") as fh, open(dst, "wb") as out:
+        reader = make_reader(fh, validate_crcs=True)
+        summary = reader.get_summary()
+        w = Writer(out, compression=CompressionType.ZSTD, **writer_options)
+        w.start(profile="", library="copy")
+        for sc in summary.schemas.values():
+            w.register_schema(sc.name, sc.encoding, sc.data)
+        for ch in summary.channels.values():
+            w.register_channel(ch.topic, ch.message_encoding, ch.schema_id, ch.metadata)
+        for m in reader.iter_metadata():
+            w.add_metadata(m.name, m.metadata)
+        for _, ch, msg in reader.iter_messages(log_time_order=False):
+            w.add_message(ch.id, msg.log_time, msg.data, msg.publish_time)
+        w.finish()
+
+
+def test_fast_reader_matches_mcap_reader(tmp_path, monkeypatch):
+    import cnc_interp.export.mcap_io as mio
+    from cnc_interp.export.mcap_bulk import read_channel
+
+    monkeypatch.setattr(mio, "MCAP_CHUNK_BYTES", 20_000)
+    traj = arc_trajectory(duration_s=1.0)
+    path = str(tmp_path / "f.mcap")
+    write_mcap(traj, path, None, machine_for(traj, 1.1))
+    with open(path, "rb") as fh:
+        reader = make_reader(fh, validate_crcs=True)
+        summary = reader.get_summary()
+        assert len(summary.chunk_indexes) > 5
+        cid = next(c.id for c in summary.channels.values() if c.topic == "/setpoints")
+        times, datas = read_channel(fh, summary, cid)
+        ref = [(m.log_time, m.data) for _, _, m in reader.iter_messages(topics=["/setpoints"])]
+    assert datas == [d for _, d in ref]
+    assert times.tolist() == [t for t, _ in ref]
+
+
+def test_unindexed_file_read_with_generic_reader(tmp_path):
+    from mcap.writer import IndexType
+
+    traj = arc_trajectory(duration_s=0.3)
+    src, dst = str(tmp_path / "a.mcap"), str(tmp_path / "b.mcap")
+    write_mcap(traj, src, None, machine_for(traj, 1.1))
+    _copy_with_mcap_writer(src, dst, index_types=IndexType.NONE, chunk_size=5000)
+    back = read_mcap(dst)
+    assert_array_equal(back.q, traj.q)
+    assert_array_equal(back.line, traj.line)
+
+
+def test_corrupted_chunk_is_detected(tmp_path):
+    from cnc_interp.errors import CncInterpError
+
+    traj = arc_trajectory(duration_s=0.3)
+    path = tmp_path / "c.mcap"
+    write_mcap(traj, str(path), None, None)
+    data = bytearray(path.read_bytes())
+    with open(path, "rb") as fh:
+        ci = make_reader(fh).get_summary().chunk_indexes[0]
+    # flip a byte in the middle of the compressed chunk body
+    data[ci.chunk_start_offset + ci.chunk_length // 2] ^= 0xFF
+    path.write_bytes(bytes(data))
+    with pytest.raises(CncInterpError) as ei:
+        read_mcap(str(path))
+    assert ei.value.exit_code == 2

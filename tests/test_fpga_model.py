@@ -124,3 +124,33 @@ def test_overflow_names_segment_and_line():
         build_program(traj, [path], formats=small, source="wave.nc")
     msg = ei.value.format()
     assert msg.startswith("wave.nc:10:1: error:") and "overflows" in msg and "segment 0" in msg
+
+
+def _line_path(points, axes="XYZ", rapid=False):
+    from cnc_interp.fit.path import Path
+
+    pts = np.asarray(points, float)
+    n = pts.shape[0] - 1
+    coef = np.zeros((n, 6, len(axes)))
+    coef[:, 0, :] = pts[:-1]
+    coef[:, 1, :] = np.diff(pts, axis=0)  # u in [0, 1] per segment
+    return Path(axes=axes, breaks=np.arange(n + 1, dtype=float), coef=coef, line=np.arange(n) + 5,
+                feed_mm_s=np.full(n, 50.0), rapid=rapid)
+
+
+def test_straight_moves_in_a_plane_become_segments():
+    from cnc_interp.fpga.program import planar_form
+
+    path = _line_path([[0, 0, 1], [10, 5, 1], [12, -3, 1], [12, -3, 1.0 + 1e-300]][:3])
+    pl = planar_form(path)
+    assert pl.plane == (0, 1)
+    np.testing.assert_allclose(pl.x_end, [np.hypot(10, 5), np.hypot(2, 8)])
+    assert not np.any(pl.p)
+    traj = quintic_plan(path, feed_mm_s=30.0)
+    prog = build_program(traj, [path])
+    assert prog.stats["segments"] == 2 and prog.stats["max_dev_mm"] < FPGA_ROUNDTRIP_TARGET_MM
+    # one moving axis: paired with another axis; three moving axes: not planar
+    assert planar_form(_line_path([[0, 0, 0], [0, 0, 7]])).plane == (0, 2)
+    assert planar_form(_line_path([[0, 0, 0], [1, 2, 3]])) is None
+    rapid = _line_path([[0, 0, 0], [4, 0, 3]], rapid=True)
+    assert planar_form(rapid).plane == (0, 2)

@@ -123,3 +123,15 @@ def test_lookahead_random_sweep():
         for lo, hi in zip(first, np.r_[first[1:], n]):
             assert vcap[lo:hi].min() >= 0.9 * vcap[lo:hi].max() - 1e-12
     assert math.isfinite(float(c.sum()))
+
+
+def test_pos_coef_matches_evaluate():
+    prof = build_profiles("t", [0, 1], [0, 1], [0.0, 50.0], [50.0, 80.0], [0.0, 40.0],
+                          [60.0, 70.0], [40.0, 0.0], np.array([800.0, 900.0]),
+                          np.array([1e4, 2e4]))
+    c = prof.pos_coef()
+    t0, s0, v0, dv, T = prof.phases()
+    for i in range(t0.size):
+        lt = np.linspace(0, T[i], 51)
+        assert_allclose(np.polynomial.polynomial.polyval(lt, c.reshape(-1, 7)[i]),
+                        prof.evaluate(t0[i] + lt)[0], rtol=1e-12, atol=1e-9)

@@ -53,13 +53,27 @@ def test_plot_csv_with_machine(plan_files):
     _check_picture(out)
 
 
-def test_plot_mcap_without_machine(plan_files):
+def test_plot_without_machine(plan_files):
     d, _, _ = plan_files
-    out = plot_file(str(d / "p.mcap"), None, str(d / "no_machine.png"))
+    out = plot_file(str(d / "p.csv"), None, str(d / "no_machine.png"))
     assert out == str(d / "no_machine.png")
     img = _check_picture(out, min_bytes=15_000)
-    with_machine = _pixels(plot_file(str(d / "p.mcap"), str(d / "m.toml"), str(d / "wm.png")))
+    with_machine = _pixels(plot_file(str(d / "p.csv"), str(d / "m.toml"), str(d / "wm.png")))
     assert img.shape != with_machine.shape  # the limit panels make a taller figure
+    # An MCAP plan carries its machine: without -m its limits are used.
+    recorded = _pixels(plot_file(str(d / "p.mcap"), None, str(d / "rec.png")))
+    assert recorded.shape == with_machine.shape
+
+
+def test_recorded_machine(plan_files):
+    from cnc_interp.export.mcap_io import read_mcap_machine
+
+    d, _, machine = plan_files
+    rec = read_mcap_machine(str(d / "p.mcap"))
+    assert rec.axes == machine.axes and rec.name == machine.name
+    for lim in ("vmax", "amax", "jmax"):
+        np.testing.assert_array_equal(getattr(rec, lim), getattr(machine, lim))
+    assert read_mcap_machine(str(d / "p.csv")) is None
 
 
 def test_plot_is_reproducible(plan_files, tmp_path):

@@ -65,9 +65,12 @@ def test_unknown_total_and_large_counts():
     bar = ProgressBar(None, "read", stream=FakeTTY(), clock=Clock())
     bar(2_500_000)
     assert bar.line().startswith("read 2.5M done")
-    bar = ProgressBar(3_000_000, "", stream=FakeTTY(), clock=Clock())
+    bar = ProgressBar(3_000_000, "", stream=FakeTTY(), clock=Clock(), unit="samples")
     bar(1_500_000)
-    assert "1.5M/3.0M" in bar.line()
+    assert "1.5M/3.0M samples" in bar.line()
+    bar = ProgressBar(None, "plan", stream=FakeTTY(), clock=Clock(), unit="paths")
+    bar(25)
+    assert bar.line() == "plan 25 paths, 0s"
 
 
 def test_erased_on_exception():

@@ -19,8 +19,10 @@ Metadata records: ``machine`` (name, axes, kinematics, dt, and every axis's vmax
 ``planner`` (name, status, dt, settings) and ``tool`` (name, version, mcap library).
 
 The file is a pure function of its inputs: fixed chunk size, no wall-clock times,
-fixed key order, floats written with ``repr`` (shortest round-trip form), non-finite
-numbers written as ``null``.
+fixed key order, non-finite numbers written as ``null``. Setpoint numbers are written
+with ``repr`` (the shortest form that reads back as the same float64, as in the CSV), so
+``verify`` of the MCAP checks exactly the planned values; the ``/limits`` ratios, which are
+for looking at, carry 9 significant digits.
 """
 
 from __future__ import annotations
@@ -29,12 +31,13 @@ import hashlib
 import io
 import json
 import math
+import operator
 from typing import Iterable, Mapping
 
 import numpy as np
 
 from ..constants import MCAP_CHUNK_BYTES
-from ..errors import UsageError, SourceLocation
+from ..errors import SourceLocation, UsageError
 
 #: samples formatted per batch (bounds memory for very long plans)
 _BATCH = 65536
@@ -42,6 +45,9 @@ _BATCH = 65536
 SETPOINTS_TOPIC = "/setpoints"
 SEGMENTS_TOPIC = "/segments"
 LIMITS_TOPIC = "/limits"
+
+#: ratios are for looking at: 9 significant digits (half the size and time of repr)
+RATIO_FORMAT = "%.9g"
 
 _SEG_FIELDS = ("line", "s_start", "s_end", "t_start", "t_end", "feed_min", "feed_max", "samples")
 
@@ -63,8 +69,8 @@ def write_mcap(traj, out: str, metadata: Mapping | None = None, machine=None,
         out: output path, or ``-`` for standard output.
         metadata: extra metadata records, ``{record name: {key: value}}``; values that are
             not strings are stored as compact JSON. Pass ``{"input": input_metadata(...)}``
-            for the part program. Records named ``machine``, ``planner`` or ``tool``
-            override the ones built here.
+            for the part program. Keys given for the ``machine``, ``planner`` or ``tool``
+            records are added to (and override) the ones built here.
         machine: the ``Machine`` the plan was made for: adds ``/limits`` and the
             ``machine`` record.
         segments: optional (m, 3) array-like of ``(line, s_start_mm, s_end_mm)`` in the
@@ -94,6 +100,7 @@ def read_mcap(path: str):
     from mcap.reader import make_reader
 
     from ..plan.trajectory import Trajectory
+    from .mcap_bulk import read_channel
 
     loc = SourceLocation(file=str(path))
     try:
@@ -101,9 +108,17 @@ def read_mcap(path: str):
             reader = make_reader(fh, validate_crcs=True)
             summary = reader.get_summary()
             meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
-            axes = _axes_from_summary(summary, loc)
-            datas = [msg.data for _, _, msg in
-                     reader.iter_messages(topics=[SETPOINTS_TOPIC], log_time_order=True)]
+            axes, channel_id = _axes_from_summary(summary, loc)
+            found = read_channel(fh, summary, channel_id)
+            if found is None:  # not indexed the way write_mcap indexes: the generic reader
+                msgs = [(msg.log_time, msg.data) for _, _, msg in
+                        reader.iter_messages(topics=[SETPOINTS_TOPIC], log_time_order=False)]
+                found = (np.array([m[0] for m in msgs], dtype=np.uint64), [m[1] for m in msgs])
+            # File order, then a stable sort by time (mcap's own time ordering is a Python
+            # heap, slower than everything else here).
+            times, payloads = found
+            order = np.argsort(times, kind="stable")
+            datas = [payloads[i] for i in order.tolist()]
     except OSError as exc:
         raise UsageError(f"cannot read MCAP file: {exc.strerror or exc}", loc) from None
     except UsageError:
@@ -114,9 +129,11 @@ def read_mcap(path: str):
         raise UsageError(f"MCAP file has no {SETPOINTS_TOPIC} messages", loc)
     try:
         rows = json.loads(b"[" + b",".join(datas) + b"]")
-        keys = ("t", "s", "feed", *axes)
-        table = np.array([[r.get(k) for k in keys] for r in rows], dtype=float)
+        pick = operator.itemgetter("t", "s", "feed", *axes)
+        table = np.array(list(map(pick, rows)), dtype=float).reshape(len(rows), 3 + len(axes))
         line = np.array([r.get("line") or 0 for r in rows], dtype=np.int64)
+    except KeyError as exc:
+        raise UsageError(f"a {SETPOINTS_TOPIC} message lacks the field {exc}", loc) from None
     except (ValueError, TypeError, AttributeError) as exc:
         raise UsageError(f"bad {SETPOINTS_TOPIC} message: {exc}", loc) from None
     planner = meta.get("planner", {})
@@ -129,6 +146,31 @@ def read_mcap(path: str):
     return Trajectory(axes=axes, dt_s=dt_s, t=t, s=table[:, 1], feed=table[:, 2],
                       q=table[:, 3:], line=line, planner=planner.get("name", "unknown"),
                       settings=settings, status=planner.get("status", "ok"))
+
+
+def read_mcap_machine(path: str):
+    """The ``Machine`` recorded in an MCAP plan's ``machine`` metadata, or ``None``."""
+    from mcap.reader import make_reader
+
+    from ..plan.machine import Machine
+
+    try:
+        with open(path, "rb") as fh:
+            rec = next((dict(m.metadata) for m in make_reader(fh).iter_metadata()
+                        if m.name == "machine"), None)
+    except Exception:  # noqa: BLE001 - unreadable: read_mcap reports it properly
+        return None
+    if not rec or "axes" not in rec:
+        return None
+    axes = rec["axes"]
+    try:
+        limits = [[float(rec[f"{a}.{lim}"]) for a in axes] for lim in ("vmax", "amax", "jmax")]
+        return Machine(name=rec.get("name", "machine"), axes=axes, vmax=limits[0],
+                       amax=limits[1], jmax=limits[2], dt_s=float(rec.get("dt_s", "nan")),
+                       kinematics=rec.get("kinematics", "trivial"),
+                       source=f"{path} (recorded machine)")
+    except (KeyError, ValueError):
+        return None
 
 
 # -- writing -------------------------------------------------------------------------------
@@ -192,7 +234,7 @@ def _write_messages(writer, traj, machine, lim_axes, segments, sp_chan, seg_chan
         times = [ns[b0:b1]]
         keys = [3 * k + 1]
         if ratios is not None:
-            datas += _format_rows(lim_fmt, list(ratios[b0:b1].T))
+            datas += _format_rows(lim_fmt, list(ratios[b0:b1].T), RATIO_FORMAT)
             chans.append(np.full(k.size, lim_chan))
             times.append(ns[b0:b1])
             keys.append(3 * k + 2)
@@ -232,18 +274,20 @@ def _limits_template(lim_axes: str) -> str:
     return "{" + ",".join(groups) + ',"worst":%s}'
 
 
-def _format_rows(fmt: str, columns: list[np.ndarray]) -> list[bytes]:
-    """Format row k of the given columns with ``fmt``.
+def _format_rows(fmt: str, columns: list[np.ndarray], spec: str = "%r") -> list[bytes]:
+    """Format row k of the given columns into ``fmt`` (a template of ``%s`` slots).
 
-    Floats print as ``repr`` (shortest round-trip form), integer columns as integers,
-    non-finite values as ``null``.
+    Values print with ``spec``: ``%r`` (default) is the shortest form that reads back as
+    the same float64 (integer columns print as integers); non-finite values print as
+    ``null``.
     """
     finite = all(c.dtype.kind in "iub" or bool(np.isfinite(c).all()) for c in columns)
     rows = zip(*(c.tolist() for c in columns))
     if finite:
-        out = [fmt % r for r in rows]
+        fast = fmt.replace("%s", spec)
+        out = [fast % r for r in rows]
     else:
-        out = [fmt % tuple(v if math.isfinite(v) else "null" for v in r) for r in rows]
+        out = [fmt % tuple(spec % v if math.isfinite(v) else "null" for v in r) for r in rows]
     return [m.encode() for m in out]
 
 
@@ -379,7 +423,8 @@ def _metadata_records(traj, metadata, machine, mcap_version) -> list[tuple[str, 
     records["tool"] = {"name": "cnc-interp", "version": __version__,
                        "mcap_library": f"mcap-python/{mcap_version}"}
     for name, rec in (metadata or {}).items():
-        records[str(name)] = dict(rec)
+        # The caller's keys add to (and override) the ones built here.
+        records.setdefault(str(name), {}).update(rec)
     return [(name, {str(k): _meta_value(v) for k, v in sorted(rec.items())})
             for name, rec in sorted(records.items())]
 
@@ -419,7 +464,8 @@ def _finite(obj):
 
 
 # -- reading helpers -----------------------------------------------------------------------
-def _axes_from_summary(summary, loc) -> str:
+def _axes_from_summary(summary, loc) -> tuple[str, int]:
+    """(axis letters, channel id) of the ``/setpoints`` channel."""
     if summary is None:
         raise UsageError("MCAP file has no summary section", loc)
     for ch in summary.channels.values():
@@ -429,7 +475,7 @@ def _axes_from_summary(summary, loc) -> str:
                 schema = summary.schemas[ch.schema_id]
                 props = json.loads(schema.data)["properties"]
                 axes = "".join(k for k in props if len(k) == 1 and k.isupper())
-            return axes
+            return axes, ch.id
     raise UsageError(f"MCAP file has no {SETPOINTS_TOPIC} channel", loc)
 
 

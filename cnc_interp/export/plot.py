@@ -23,7 +23,8 @@ _KIND_LABELS = (("velocity", "v / vmax"), ("acceleration", "a / amax"), ("jerk",
 def plot_file(path: str, machine_spec: str | None, out: str | None = None) -> str:
     """Plot the plan at ``path`` (CSV or MCAP) to ``out`` (default: ``path`` with ``.png``).
 
-    The image format follows ``out``'s extension (png, svg, pdf). Returns the file written.
+    Without ``machine_spec`` an MCAP plan's recorded machine gives the limits. The image
+    format follows ``out``'s extension (png, svg, pdf). Returns the file written.
     """
     from .verify_file import read_plan
 
@@ -33,6 +34,10 @@ def plot_file(path: str, machine_spec: str | None, out: str | None = None) -> st
 
         machine = load_machine(machine_spec)
     traj = read_plan(path)
+    if machine is None and os.fspath(path).lower().endswith(".mcap"):
+        from .mcap_io import read_mcap_machine
+
+        machine = read_mcap_machine(path)
     if out is None:
         out = os.path.splitext(os.fspath(path))[0] + ".png"
     title = os.path.basename(os.fspath(path))
@@ -99,7 +104,8 @@ def _figure(plt, traj, machine, title):
         ax.tick_params(labelbottom=False)
     axes_right[-1].set_xlabel("time (s)")
 
-    sub = f"{traj.planner} planner, {traj.n_samples:,} samples at dt = {traj.dt_s * 1e3:g} ms, " \
+    who = "CSV plan" if traj.planner == "csv" else f"{traj.planner} planner"
+    sub = f"{who}, {traj.n_samples:,} samples at dt = {traj.dt_s * 1e3:g} ms, " \
           f"cycle time {traj.duration_s:.3f} s"
     if machine is not None:
         sub += f", machine: {machine.name}"
@@ -110,13 +116,19 @@ def _figure(plt, traj, machine, title):
 
 
 def _plane_axes(traj) -> tuple[int, int]:
-    """Indices of the two axes that move most (linear axes first), in machine order."""
+    """Indices of the axes to draw the path in, in machine order: X and Y when both move
+    (the top view of a mill, as in paper 001), else the two that move most (linear axes
+    first: X and Z on a lathe)."""
     q = traj.q
     n = q.shape[1]
     if n == 1:
         return 0, 0
     span = np.ptp(q, axis=0) if q.shape[0] else np.zeros(n)
     span = np.where(np.isfinite(span), span, 0.0)
+    if "X" in traj.axes and "Y" in traj.axes:
+        ix, iy = traj.axes.index("X"), traj.axes.index("Y")
+        if span[ix] > 0 and span[iy] > 0:
+            return ix, iy
     linear = np.array([a in LINEAR_AXES for a in traj.axes])
     # Rank linear axes ahead of rotary ones, then by how far they move.
     order = sorted(range(n), key=lambda i: (not linear[i] or span[i] == 0, -span[i], i))

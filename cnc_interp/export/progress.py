@@ -28,16 +28,18 @@ from ..constants import PROGRESS_DELAY_S, PROGRESS_MAX_WIDTH, PROGRESS_REFRESH_S
 class ProgressBar:
     """Counts work done and redraws a one-line bar at most every ``refresh_s``.
 
-    ``total`` may be ``None`` (unknown): the bar then shows the count only.
-    ``clock`` is injectable for tests (seconds, monotonic).
+    ``total`` may be ``None`` (unknown): the bar then shows the count only. ``unit``
+    names what is counted (``"samples"``, ``"paths"``). ``clock`` is injectable for tests
+    (seconds, monotonic).
     """
 
     def __init__(self, total: int | float | None, label: str = "", enabled: bool = True,
-                 stream: TextIO | None = None, delay_s: float = PROGRESS_DELAY_S,
+                 stream: TextIO | None = None, unit: str = "", delay_s: float = PROGRESS_DELAY_S,
                  refresh_s: float = PROGRESS_REFRESH_S,
                  clock: Callable[[], float] = time.monotonic) -> None:
         self.total = total if total is None or total > 0 else None
         self.label = label
+        self.unit = f" {unit}" if unit else ""
         self.stream = stream if stream is not None else sys.stderr
         self.delay_s = delay_s
         self.refresh_s = refresh_s
@@ -65,11 +67,12 @@ class ProgressBar:
         elapsed = max(now - self._start, 0.0)
         label = f"{self.label} " if self.label else ""
         if self.total is None:
-            return f"{label}{_count(self.done)} done, {elapsed:.0f}s"
+            return f"{label}{_count(self.done)}{self.unit or ' done'}, {elapsed:.0f}s"
         frac = min(max(self.done / self.total, 0.0), 1.0)
         eta = elapsed * (1.0 - frac) / frac if frac > 0 else float("nan")
         eta_txt = f"ETA {_duration(eta)}" if eta == eta else "ETA ?"
-        tail = f" {frac * 100:3.0f}% {_count(self.done)}/{_count(self.total)} {eta_txt}"
+        tail = (f" {frac * 100:3.0f}% {_count(self.done)}/{_count(self.total)}{self.unit} "
+                f"{eta_txt}")
         width = min(_terminal_width(), PROGRESS_MAX_WIDTH) - 1
         bar_w = max(width - len(label) - len(tail) - 2, 5)
         filled = int(round(frac * bar_w))
@@ -96,9 +99,9 @@ class ProgressBar:
 
 @contextmanager
 def progress(total: int | float | None, label: str = "", enabled: bool = True,
-             stream: TextIO | None = None, **kwargs) -> Iterator[ProgressBar]:
+             stream: TextIO | None = None, unit: str = "", **kwargs) -> Iterator[ProgressBar]:
     """Context manager yielding a ``tick(n)`` callable (a ``ProgressBar``); see module doc."""
-    bar = ProgressBar(total, label, enabled=enabled, stream=stream, **kwargs)
+    bar = ProgressBar(total, label, enabled=enabled, stream=stream, unit=unit, **kwargs)
     try:
         yield bar
     finally:

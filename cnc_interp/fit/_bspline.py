@@ -31,10 +31,11 @@ def find_span(t, m, x):
 
 
 @njit(cache=True)
-def basis(t, i, x, p, out):
-    """The p+1 non-zero B-spline basis values of degree p at x in span i (NURBS book A2.2)."""
-    left = np.empty(p + 1)
-    right = np.empty(p + 1)
+def basis(t, i, x, p, out, left, right):
+    """The p+1 non-zero B-spline basis values of degree p at x in span i (NURBS book A2.2).
+
+    ``left``/``right`` are work arrays of length >= p+1.
+    """
     out[0] = 1.0
     for j in range(1, p + 1):
         left[j] = x - t[i + 1 - j]
@@ -86,31 +87,37 @@ def solve_lsq(t, m, u, y, w, prior, fixed, c, lam, ridge):
     ab = np.zeros((nf, 6))
     rhs = np.zeros((nf, d))
     nb = np.empty(6)
+    wl = np.empty(6)
+    wr = np.empty(6)
+    tgt = np.empty(d)
     for j in range(n):
         sp = find_span(t, m, u[j])
-        basis(t, sp, u[j], K, nb)
+        basis(t, sp, u[j], K, nb, wl, wr)
         ww = w[j] * w[j]
         # residual target after moving fixed coefficients to the right-hand side
-        tgt = y[j].copy()
+        for a in range(d):
+            tgt[a] = y[j, a]
         for r in range(6):
             ci = sp - K + r
             if fixed[ci]:
-                tgt -= nb[r] * c[ci]
+                for a in range(d):
+                    tgt[a] -= nb[r] * c[ci, a]
         for r in range(6):
             ci = sp - K + r
             fi = idx[ci]
             if fi < 0:
                 continue
-            rhs[fi] += ww * nb[r] * tgt
-            for s in range(r, 6):
-                cj = sp - K + s
-                fj = idx[cj]
+            f = ww * nb[r]
+            for a in range(d):
+                rhs[fi, a] += f * tgt[a]
+            for s_ in range(r, 6):
+                fj = idx[sp - K + s_]
                 if fj < 0:
                     continue
                 if fj >= fi:
-                    ab[fi, fj - fi] += ww * nb[r] * nb[s]
+                    ab[fi, fj - fi] += f * nb[s_]
                 else:
-                    ab[fj, fi - fj] += ww * nb[r] * nb[s]
+                    ab[fj, fi - fj] += f * nb[s_]
     # smoothing: third divided differences over the Greville abscissae, scaled by span^3
     g = np.empty(m)
     for i in range(m):
@@ -129,15 +136,18 @@ def solve_lsq(t, m, u, y, w, prior, fixed, c, lam, ridge):
                 if b != a:
                     prod *= g[i + a] - g[i + b]
             dd[a] = span ** 3 / prod
-        tgt = np.zeros(d)
+        for a in range(d):
+            tgt[a] = 0.0
         for a in range(4):
             if fixed[i + a]:
-                tgt -= dd[a] * c[i + a]
+                for e in range(d):
+                    tgt[e] -= dd[a] * c[i + a, e]
         for a in range(4):
             fa = idx[i + a]
             if fa < 0:
                 continue
-            rhs[fa] += lam * dd[a] * tgt
+            for e in range(d):
+                rhs[fa, e] += lam * dd[a] * tgt[e]
             for b in range(a, 4):
                 fb = idx[i + b]
                 if fb < 0:
@@ -147,7 +157,8 @@ def solve_lsq(t, m, u, y, w, prior, fixed, c, lam, ridge):
         fi = idx[i]
         if fi >= 0:
             ab[fi, 0] += ridge
-            rhs[fi] += ridge * prior[i]
+            for a in range(d):
+                rhs[fi, a] += ridge * prior[i, a]
     # banded Cholesky: ab[i, k] = U[i, i+k]
     for i in range(nf):
         s = ab[i, 0]
@@ -162,16 +173,17 @@ def solve_lsq(t, m, u, y, w, prior, fixed, c, lam, ridge):
                 s -= ab[k, i - k] * ab[k, j - k]
             ab[i, j - i] = s / ab[i, 0]
     # U^T z = rhs, then U x = z
-    for i in range(nf):
-        s = rhs[i].copy()
-        for k in range(max(0, i - 5), i):
-            s -= ab[k, i - k] * rhs[k]
-        rhs[i] = s / ab[i, 0]
-    for i in range(nf - 1, -1, -1):
-        s = rhs[i].copy()
-        for k in range(i + 1, min(i + 6, nf)):
-            s -= ab[i, k - i] * rhs[k]
-        rhs[i] = s / ab[i, 0]
+    for a in range(d):
+        for i in range(nf):
+            s = rhs[i, a]
+            for k in range(max(0, i - 5), i):
+                s -= ab[k, i - k] * rhs[k, a]
+            rhs[i, a] = s / ab[i, 0]
+        for i in range(nf - 1, -1, -1):
+            s = rhs[i, a]
+            for k in range(i + 1, min(i + 6, nf)):
+                s -= ab[i, k - i] * rhs[k, a]
+            rhs[i, a] = s / ab[i, 0]
     for i in range(m):
         if idx[i] >= 0:
             c[i] = rhs[idx[i]]
@@ -183,16 +195,19 @@ def evaluate(t, m, c, x, val, der):
     d = c.shape[1]
     nb = np.empty(6)
     nd = np.empty(5)
+    wl = np.empty(6)
+    wr = np.empty(6)
+    t1 = t[1:]
     for j in range(x.shape[0]):
         sp = find_span(t, m, x[j])
-        basis(t, sp, x[j], K, nb)
+        basis(t, sp, x[j], K, nb, wl, wr)
         for a in range(d):
             acc = 0.0
             for r in range(6):
                 acc += nb[r] * c[sp - K + r, a]
             val[j, a] = acc
         # derivative spline: degree 4 on t[1:], coefficient i' = 5 (c[i'+1]-c[i']) / (t[i'+6]-t[i'+1])
-        basis(t[1:], sp - 1, x[j], K - 1, nd)
+        basis(t1, sp - 1, x[j], K - 1, nd, wl, wr)
         for a in range(d):
             acc = 0.0
             for r in range(5):
@@ -204,8 +219,13 @@ def evaluate(t, m, c, x, val, der):
 
 
 @njit(cache=True)
-def check(t, m, c, xc, ref, tol_lin, tol_rot, lin, metric, exp_speed, exp_lin_speed, min_ratio, bad_span):
-    """Mark spans whose check points deviate or slow down too much; return max linear / rotary error.
+def check(t, m, c, xc, ref, tol_lin, tol_rot, lin, metric, exp_speed, exp_lin_speed, min_ratio, bad_span,
+          n_hard):
+    """Mark spans whose check points deviate or slow down too much.
+
+    Returns (max linear error, max rotary error, hard failures, soft failures): the
+    first ``n_hard`` check points (the nodes) and every speed check are hard, the
+    deviation of the other points (chord points) is soft.
 
     xc (P,) check parameters, ref (P, d) reference positions, tol_lin (P,) allowed linear
     deviation, tol_rot scalar allowed rotary deviation (scaled units), exp_speed (P,) and
@@ -219,6 +239,8 @@ def check(t, m, c, xc, ref, tol_lin, tol_rot, lin, metric, exp_speed, exp_lin_sp
     evaluate(t, m, c, xc, val, der)
     worst_lin = 0.0
     worst_rot = 0.0
+    hard = 0
+    soft = 0
     for j in range(P):
         e_lin = 0.0
         e_rot = 0.0
@@ -234,13 +256,18 @@ def check(t, m, c, xc, ref, tol_lin, tol_rot, lin, metric, exp_speed, exp_lin_sp
             else:
                 e_rot = max(e_rot, abs(e))
         e_lin = np.sqrt(e_lin)
-        ok = e_lin <= tol_lin[j] and e_rot <= tol_rot
-        ok = ok and np.sqrt(sp_all) >= min_ratio * exp_speed[j]
-        ok = ok and np.sqrt(sp_lin) >= min_ratio * exp_lin_speed[j]
-        if not ok:
+        dev_ok = e_lin <= tol_lin[j] and e_rot <= tol_rot
+        speed_ok = np.sqrt(sp_all) >= min_ratio * exp_speed[j] and \
+            np.sqrt(sp_lin) >= min_ratio * exp_lin_speed[j]
+        if not (dev_ok and speed_ok):
             bad_span[find_span(t, m, xc[j])] = True
-        if e_lin > worst_lin:
-            worst_lin = e_lin
-        if e_rot > worst_rot:
-            worst_rot = e_rot
-    return worst_lin, worst_rot
+            if not speed_ok or j < n_hard:
+                hard += 1
+            else:
+                soft += 1
+        if j < n_hard:
+            if e_lin > worst_lin:
+                worst_lin = e_lin
+            if e_rot > worst_rot:
+                worst_rot = e_rot
+    return worst_lin, worst_rot, hard, soft

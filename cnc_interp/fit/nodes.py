@@ -35,7 +35,9 @@ from ..constants import (
     FIT_MAX_ROUNDS,
     FIT_MIN_SPAN_REL,
     FIT_MIN_SPEED_RATIO,
+    FIT_SAGITTA_ALLOWANCE,
     FIT_SMOOTHING,
+    FIT_SOFT_STALE_ROUNDS,
     FIT_TOL_SAFETY,
 )
 
@@ -131,7 +133,7 @@ def fit_polyline(nodes: np.ndarray, tol_mm: np.ndarray, tol_deg: float, lin: np.
     f = _FRACS
     xc_ch = (u[:-1, None] + clen[:, None] * f[None, :]).ravel()
     ref_ch = (y[:-1, None, :] + chords[:, None, :] * f[None, :, None]).reshape(-1, d)
-    tol_ch = (tol[1:, None] + sag[:, None] * (4 * f * (1 - f))[None, :]).ravel()
+    tol_ch = (tol[1:, None] + FIT_SAGITTA_ALLOWANCE * sag[:, None] * (4 * f * (1 - f))[None, :]).ravel()
     node_ratio = np.empty(n)
     node_ratio[0] = lin_ratio[0]
     node_ratio[-1] = lin_ratio[-1]
@@ -143,6 +145,13 @@ def fit_polyline(nodes: np.ndarray, tol_mm: np.ndarray, tol_deg: float, lin: np.
     exp_all = np.ones(xc.size)
     # no minimum speed at the two ends of an unconstrained section is needed beyond the rest
     w = tol_ref_mm / np.maximum(tol, 1e-12)
+    # chord points are data too (else a span without nodes follows only the smoothing),
+    # weighted by their own (sagitta-widened) tolerance
+    w_ch = 0.5 * tol_ref_mm / (tol_ch + 1e-12)
+    order = np.argsort(np.concatenate((u, xc_ch)), kind="stable")
+    u_data = np.concatenate((u, xc_ch))[order]
+    y_data = np.concatenate((y, ref_ch))[order]
+    w_data = np.concatenate((w, w_ch))[order]
 
     step = FIT_INITIAL_NODES_PER_SPAN
     interior = u[step:n - 1:step].copy()
@@ -155,6 +164,7 @@ def fit_polyline(nodes: np.ndarray, tol_mm: np.ndarray, tol_deg: float, lin: np.
     d2s = start.d2 if start is not None else zero
     d1e = end.d1 if end is not None else zero
     d2e = end.d2 if end is not None else zero
+    stale, last_soft = 0, np.inf
     for _ in range(FIT_MAX_ROUNDS + 1):
         t = np.concatenate((np.zeros(6), interior, np.full(6, total)))
         m = interior.size + 6
@@ -167,17 +177,23 @@ def fit_polyline(nodes: np.ndarray, tol_mm: np.ndarray, tol_deg: float, lin: np.
             fixed[:3] = True
         if end is not None:
             fixed[-3:] = True
-        greville = np.array([t[i + 1:i + 6].mean() for i in range(m)]) if m < 64 else \
-            np.convolve(t[1:-1], np.ones(5) / 5.0, mode="valid")
+        greville = np.convolve(t[1:-1], np.full(5, 0.2), mode="valid")
         prior = np.stack([np.interp(greville, u, y[:, a]) for a in range(d)], axis=1)
-        bs.solve_lsq(t, m, u, y, w, prior, fixed, c, FIT_SMOOTHING, _RIDGE)
+        bs.solve_lsq(t, m, u_data, y_data, w_data, prior, fixed, c, FIT_SMOOTHING, _RIDGE)
         bad = np.zeros(m + 1, dtype=np.bool_)
-        worst_lin, worst_rot = bs.check(t, m, c, xc, ref, tol_c, tol_rot, lin, metric,
-                                        exp_all, exp_lin, FIT_MIN_SPEED_RATIO, bad)
+        worst_lin, worst_rot, hard, soft = bs.check(t, m, c, xc, ref, tol_c, tol_rot, lin, metric,
+                                                    exp_all, exp_lin, FIT_MIN_SPEED_RATIO, bad, n)
+        if hard == 0:
+            # chord points are a heuristic against bulges: stop refining for them once
+            # a few rounds no longer help (the nodes are within tolerance)
+            stale = stale + 1 if soft >= last_soft else 0
+            last_soft = soft
+            if soft == 0 or stale >= FIT_SOFT_STALE_ROUNDS:
+                ok = True
+                break
+        else:
+            stale, last_soft = 0, np.inf
         spans = np.nonzero(bad)[0]
-        if spans.size == 0:
-            ok = True
-            break
         lo_t, hi_t = t[spans], t[spans + 1]
         i_lo = np.searchsorted(u, lo_t, side="right")
         i_hi = np.searchsorted(u, hi_t, side="left") - 1

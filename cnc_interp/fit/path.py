@@ -161,42 +161,10 @@ class Path:
         return half * (sp @ _GL_W)
 
     def _build_arc_length(self) -> None:
-        h = np.diff(self.breaks)
-        n_seg = self.n_seg
-        n_sub = np.full(n_seg, 2, dtype=np.int64)
-        done = np.zeros(n_seg, dtype=bool)
-        totals = np.zeros(n_seg)
-        pending = np.arange(n_seg)
-        prev = None
-        while pending.size:
-            m = n_sub[pending]
-            seg = np.repeat(pending, m)
-            j = _ragged_arange(m)
-            hh = h[seg] / m.repeat(m)
-            a = j * hh
-            vals = self._gl_integrals(seg, a, a + hh)
-            tot = np.add.reduceat(vals, np.concatenate(([0], np.cumsum(m)[:-1])))
-            if prev is not None:
-                ok = np.abs(tot - prev) <= ARC_LENGTH_REL_TOL * np.maximum(tot, 1e-300) + 1e-300
-                ok |= m >= ARC_LENGTH_MAX_SUB
-                totals[pending[ok]] = tot[ok]
-                done[pending[ok]] = True
-                n_sub[pending[ok]] = m[ok]
-                keep = ~ok
-                pending, prev = pending[keep], tot[keep]
-                n_sub[pending] *= 2
-            else:
-                prev = tot
-                n_sub[pending] *= 2
-        # Flattened sub-interval table: knots in global u, cumulative s, owning segment.
-        seg = np.repeat(np.arange(n_seg), n_sub)
-        j = _ragged_arange(n_sub)
-        hh = h[seg] / n_sub[seg]
-        a_loc = j * hh
-        vals = self._gl_integrals(seg, a_loc, a_loc + hh)
-        sub_u = np.concatenate((self.breaks[seg] + a_loc, self.breaks[-1:]))
-        sub_s = np.concatenate(([0.0], np.cumsum(vals)))
-        starts = np.concatenate(([0], np.cumsum(n_sub)))
+        from ._arclen import arc_length_table
+
+        sub_u, sub_s, seg, starts = arc_length_table(
+            self.coef, self.breaks, self.weights, _GL_X, _GL_W, ARC_LENGTH_REL_TOL, ARC_LENGTH_MAX_SUB)
         object.__setattr__(self, "_sub_u", sub_u)
         object.__setattr__(self, "_sub_s", sub_s)
         object.__setattr__(self, "_sub_seg", seg)

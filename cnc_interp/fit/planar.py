@@ -61,9 +61,12 @@ def rotation_angle(alpha):
 def rotation_angles(alpha: np.ndarray) -> np.ndarray:
     """Vectorised Eq. (1): θ (K,) for tangential angles α (K,) in [-π, π]."""
     a = np.asarray(alpha, dtype=float)
-    return np.select(
-        [a <= -0.51 * np.pi, a <= -0.02 * np.pi, a <= 0.47 * np.pi, a <= 0.96 * np.pi],
-        [np.pi, -0.5 * np.pi, 0.0, 0.5 * np.pi], np.pi)
+    return _THETA_OF_BIN[np.searchsorted(_EQ1_EDGES, a, side="left")]
+
+
+# Eq. (1)'s interval ends (each interval is closed on the right) and θ per interval
+_EQ1_EDGES = np.array([-0.51, -0.02, 0.47, 0.96]) * np.pi
+_THETA_OF_BIN = np.array([np.pi, -0.5 * np.pi, 0.0, 0.5 * np.pi, np.pi])
 
 
 def wrap_angle(a):
@@ -249,7 +252,13 @@ def _try(xs, zs, tol, constrained, rho1, rho2, mu, b, e, th, tau, kap, max_incl,
 
 
 @njit(cache=True)
-def planar_fit_kernel(H, V, tol, theta_chord, tau, kap, w_end, max_incl, mu, out_theta, out_start, out_end, out_b):
+def _wrap(a):
+    return _PI - ((_PI - a) % (2.0 * _PI))
+
+
+@njit(cache=True)
+def planar_fit_kernel(H, V, tol, alpha, theta_chord, tau, kap, w_end, max_incl, mu,
+                      out_theta, out_start, out_end, out_b):
     """Segment and fit nodes (H, V) (n,); returns (n_seg, status, max_dev).
 
     status 0 = ok; 1 = an inherited tangent cannot be represented in the next frame.
@@ -266,11 +275,32 @@ def planar_fit_kernel(H, V, tol, theta_chord, tau, kap, w_end, max_incl, mu, out
     bt = np.zeros(6)
     xs_all = np.empty(n)
     zs_all = np.empty(n)
+    phi_abs = 0.0
+    kappa = 0.0
     while s < n - 1:
         th = theta_chord[s]
+        alt = False
+        if constrained:
+            # the inherited tangent in this frame (DESIGN.md: the tangent angle rotates,
+            # the curvature is invariant)
+            phi = _wrap(phi_abs - th)
+            if abs(phi) > max_incl:
+                # Eq. (1) applied to the inherited tangent instead of the chord: the
+                # segment then takes the following chords that this frame can represent
+                th = rotation_angle(_wrap(phi_abs))
+                phi = _wrap(phi_abs - th)
+                alt = True
+                if abs(phi) > max_incl or abs(_wrap(alpha[s] - th)) >= max_incl:
+                    return k, 1, max_dev
+            rho1 = math.tan(phi)
+            rho2 = kappa * (1.0 + rho1 * rho1) ** 1.5
         g_end = s + 1
-        while g_end < n - 1 and theta_chord[g_end] == th:
-            g_end += 1
+        if alt:
+            while g_end < n - 1 and abs(_wrap(alpha[g_end] - th)) < max_incl:
+                g_end += 1
+        else:
+            while g_end < n - 1 and theta_chord[g_end] == th:
+                g_end += 1
         c = math.cos(th)
         sn = math.sin(th)
         for j in range(s, g_end + 1):
@@ -324,18 +354,11 @@ def planar_fit_kernel(H, V, tol, theta_chord, tau, kap, w_end, max_incl, mu, out
         k += 1
         if e >= n - 1:
             break
-        # hand p'(x_end), p''(x_end) to the next frame (DESIGN.md: tangent angle rotates,
-        # curvature is invariant)
+        # hand the end tangent angle (absolute) and curvature to the next segment
         p1 = _dpoly(b, 1.0) / X
         p2 = _ddpoly(b, 1.0) / (X * X)
         kappa = p2 / (1.0 + p1 * p1) ** 1.5
-        th_next = theta_chord[e]
-        phi = math.atan(p1) + th - th_next
-        phi = _PI - ((_PI - phi) % (2.0 * _PI))
-        if abs(phi) > max_incl:
-            return k, 1, max_dev
-        rho1 = math.tan(phi)
-        rho2 = kappa * (1.0 + rho1 * rho1) ** 1.5
+        phi_abs = math.atan(p1) + th
         constrained = True
         s = e
     return k, 0, max_dev
@@ -364,9 +387,10 @@ def fit_planar(nodes: np.ndarray, plane: tuple[int, int], tol_mm: np.ndarray, ax
                line: np.ndarray, feed: np.ndarray, weights: np.ndarray | None = None):
     """Fit a 2-axis polyline (n, n_axes) in ``plane`` = (h, v) axis indices.
 
-    Returns ``(path, max_dev_mm)`` or ``None`` when the method cannot continue (an
-    inherited tangent outside the next frame's ±0.49π); the caller then uses the
-    N-axis fitter.
+    Returns ``(planar, coef, line, feed_mm_s, max_dev_mm)`` (build the ``Path`` with
+    ``planar_to_path`` or from ``coef`` and ``breaks_of(planar)``), or ``None`` when
+    the method cannot continue (an inherited tangent outside the next frame's
+    ±0.49π); the caller then uses the N-axis fitter.
     """
     h, v = plane
     H = np.ascontiguousarray(nodes[:, h], dtype=float)
@@ -380,7 +404,7 @@ def fit_planar(nodes: np.ndarray, plane: tuple[int, int], tol_mm: np.ndarray, ax
     out_end = np.empty(n - 1, dtype=np.int64)
     out_b = np.empty((n - 1, 6))
     tau, kap = node_tangents(H, V)
-    k, status, max_dev = planar_fit_kernel(H, V, tol, theta_chord, tau, kap, PLANAR_END_WEIGHT,
+    k, status, max_dev = planar_fit_kernel(H, V, tol, alpha, theta_chord, tau, kap, PLANAR_END_WEIGHT,
                                            PLANAR_MAX_INCLINATION_PI * np.pi, PLANAR_SMOOTHING,
                                            out_theta, out_start, out_end, out_b)
     if status != 0:
@@ -404,8 +428,7 @@ def fit_planar(nodes: np.ndarray, plane: tuple[int, int], tol_mm: np.ndarray, ax
     u[en] = breaks[1:]
     u = np.maximum.accumulate(u)
     seg_line, seg_feed = segment_sources(breaks, u, line, feed)
-    path = planar_to_path(planar, nodes[0], axes, seg_line, seg_feed, weights)
-    return path, float(max_dev)
+    return planar, planar_coef(planar, nodes[0], len(axes)), seg_line, seg_feed, float(max_dev)
 
 
 def planar_to_path(planar: PlanarSegments, fixed: np.ndarray, axes: str, line: np.ndarray,
@@ -413,12 +436,25 @@ def planar_to_path(planar: PlanarSegments, fixed: np.ndarray, axes: str, line: n
     """Exact coefficient-wise conversion of planar segments into a ``Path``.
 
     ``fixed`` (n_axes,) gives the constant value of every axis outside the plane.
+    """
+    return Path(axes=axes, breaks=breaks_of(planar), coef=planar_coef(planar, fixed, len(axes)),
+                line=line, feed_mm_s=feed_mm_s, weights=weights, planar=planar)
+
+
+def breaks_of(planar: PlanarSegments) -> np.ndarray:
+    """Path breakpoints of planar segments: the cumulated x_end."""
+    return np.concatenate(([0.0], np.cumsum(planar.x_end)))
+
+
+def planar_coef(planar: PlanarSegments, fixed: np.ndarray, n_axes: int) -> np.ndarray:
+    """Power-basis coefficients (n_seg, 6, n_axes) of planar segments.
+
     Segment k's local parameter is x* in [0, x_end[k]]:
     q_h = o_h + x* cos θ - p(x*) sin θ,  q_v = o_v + x* sin θ + p(x*) cos θ.
     """
     h, v = planar.plane
     n_seg = planar.theta.size
-    coef = np.zeros((n_seg, 6, len(axes)))
+    coef = np.zeros((n_seg, 6, n_axes))
     coef[:, 0, :] = fixed[None, :]
     c = np.cos(planar.theta)[:, None]
     s = np.sin(planar.theta)[:, None]
@@ -429,6 +465,4 @@ def planar_to_path(planar: PlanarSegments, fixed: np.ndarray, axes: str, line: n
     coef[:, 0, v] += planar.origin[:, 1]
     coef[:, 1, h] += c[:, 0]
     coef[:, 1, v] += s[:, 0]
-    breaks = np.concatenate(([0.0], np.cumsum(planar.x_end)))
-    return Path(axes=axes, breaks=breaks, coef=coef, line=line, feed_mm_s=feed_mm_s,
-                weights=weights, planar=planar)
+    return coef

@@ -82,11 +82,34 @@ def emulate_file(frames_path: str, out: str) -> None:
 
 # -- stream ----------------------------------------------------------------------------------
 def plan_for_stream(opts: StreamOptions):
-    """Parse, fit and plan like ``plan`` does: (FitResult, Trajectory)."""
-    from ..pipeline import plan_part
+    """Parse, fit, plan and verify like ``plan`` does: (FitResult, Trajectory).
 
-    return plan_part(opts.part, opts.machine_spec, planner=opts.planner, dt_s=opts.dt_s,
-                     tol_mm=opts.tol_mm)
+    The same steps as ``pipeline.plan_part``, kept here because the stream needs
+    the fitted paths (their planar form), which ``PlanOutcome`` does not carry.
+    """
+    from ..errors import PlanError
+    from ..fit.settings import FitSettings
+    from ..gcode import read_program
+    from ..pipeline import fit_loaded, read_part
+    from ..plan.machine_io import DEFAULT_PRESET, load_machine
+    from ..plan.settings import PlanSettings
+    from ..plan.timeline import plan_program
+    from ..plan.verify import verify
+
+    machine = load_machine(opts.machine_spec if opts.machine_spec is not None else DEFAULT_PRESET)
+    settings = PlanSettings.from_options(planner=opts.planner, dt_s=opts.dt_s, tol_mm=opts.tol_mm,
+                                         machine=machine)
+    machine = machine.with_dt(settings.dt_s)
+    name, data = read_part(opts.part)
+    program = read_program(data, source=name, axes=machine.axes, start=machine.start)
+    fitted = fit_loaded(program, FitSettings.from_options(tol_mm=opts.tol_mm, machine=machine))
+    traj = plan_program(fitted, machine, settings)
+    report = verify(traj, machine)
+    if not report.ok:
+        axis, kind, ratio, idx = report.worst()
+        raise PlanError(f"bug: plan violates the {axis} {kind} limit (ratio {ratio:.12g} at "
+                        f"sample {idx}); please report it", SourceLocation(file=name))
+    return fitted, traj
 
 
 def build_stream(opts: StreamOptions):

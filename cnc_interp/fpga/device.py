@@ -27,6 +27,7 @@ from .frames import (
     decode_profile,
     decode_segment,
     decode_setpoints,
+    status_frame,
 )
 from .model import DatapathState
 
@@ -59,6 +60,7 @@ class DeviceCore:
         self._fifo: deque[int] = deque()  # sizes of accepted, not yet executed frames
         self._used = 0
         self._pending = None  # (segment, n_pieces, pieces so far)
+        self.responses: deque[bytes] = deque()  # STATUS frames waiting for IN transfers
         self._crc_seen = 0
 
     # -- flow control ------------------------------------------------------------------
@@ -75,11 +77,12 @@ class DeviceCore:
             if budget is not None:
                 budget -= n
 
-    def status(self) -> Status:
+    def status(self, poll_id: int = 0) -> Status:
         """Current status; error flags are cleared once reported."""
         self.drain()
         done = self.datapath.next_sample if self.datapath is not None else 0
-        st = Status(self.free_bytes, self.last_seq, self.errors, self.state, done, self.bytes_accepted)
+        st = Status(self.free_bytes, self.last_seq, self.errors, self.state, done, self.bytes_accepted,
+                    poll_id)
         self.errors = 0
         return st
 
@@ -101,6 +104,10 @@ class DeviceCore:
     def handle(self, f: Frame) -> bool:
         """Apply one decoded frame if it is the next in sequence; True if accepted."""
         size = HEADER_SIZE + len(f.payload) + TRAILER_SIZE
+        if f.type == FrameType.POLL:
+            # unsequenced: answer with exactly one STATUS on the IN endpoint
+            self.responses.append(status_frame(self.status(f.seq)))
+            return False
         restart = f.type == FrameType.CONFIG and f.seq == 1 and self.state in (IDLE, DONE)
         if restart and self.state == DONE:
             self.reset()

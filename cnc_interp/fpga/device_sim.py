@@ -13,7 +13,8 @@ random with a seed:
 - ``corrupt``: one byte is flipped on the wire, the call reports success;
 - ``stall``: the endpoint halts (``USBError`` EPIPE) until ``clear_halt``;
 - ``disconnect``: the device vanishes (``USBError`` ENODEV) until ``reconnect()``;
-- ``read_timeout``: a status read times out.
+- ``read_timeout``: a status read times out (its answer stays queued: the host
+  must then recognise it as stale by its poll id).
 """
 
 from __future__ import annotations
@@ -28,7 +29,6 @@ import usb.core
 
 from ..constants import FPGA_USB_PID, FPGA_USB_VID
 from .device import DeviceCore
-from .frames import status_frame
 
 EP_OUT = 0x01
 EP_IN = 0x81
@@ -179,6 +179,7 @@ class SimBackend(usb.backend.IBackend):
         return taken
 
     def bulk_read(self, dev_handle, ep, intf, buff, timeout):
+        """IN transfer: the next queued STATUS answer, or a timeout when none is queued."""
         self.reads += 1
         self._check()
         kind = self.faults.at_read.get(self.reads)
@@ -188,9 +189,9 @@ class SimBackend(usb.backend.IBackend):
         if kind == "disconnect":
             self.connected = False
             self._check()
-        if kind == "read_timeout":
+        if kind == "read_timeout" or not self.core.responses:
             raise usb.core.USBTimeoutError("Operation timed out", -7, errno.ETIMEDOUT)
-        out = status_frame(self.core.status())
+        out = self.core.responses.popleft()
         n = min(len(out), len(buff))
         buff[:n] = type(buff)(buff.typecode, out[:n]) if hasattr(buff, "typecode") else out[:n]
         return n

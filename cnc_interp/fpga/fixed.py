@@ -160,6 +160,8 @@ def to_ints(a) -> np.ndarray | int:
     arr = np.asarray(a)
     if arr.ndim == 0:
         return int(arr)
+    if arr.dtype.kind in "iu" or (arr.size and np.abs(arr).max() < 2.0**62):
+        return arr.astype(np.int64).astype(object)  # exact: integral values below 2**62
     out = np.empty(arr.shape, dtype=object)
     out.reshape(-1)[:] = [int(v) for v in arr.reshape(-1)]
     return out

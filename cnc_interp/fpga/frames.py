@@ -45,6 +45,7 @@ class FrameType(enum.IntEnum):
     START = 5
     STOP = 6
     STATUS = 7
+    POLL = 8  # host asks for one STATUS; unsequenced (seq field = poll id)
 
 
 class ErrorFlag(enum.IntFlag):
@@ -67,7 +68,9 @@ PIECE = struct.Struct("<IQb6q")  # n_samples, dtau, exp, mant[6]
 SETPOINTS_HEAD = struct.Struct("<QIBI")  # start sample, n samples, n_axes, source line
 START = struct.Struct("<Q")  # total samples
 STOP = struct.Struct("<QI")  # total samples, number of items
-STATUS = struct.Struct("<IIIIQQ")  # free bytes, last seq, errors, state, samples done, bytes accepted
+STATUS = struct.Struct("<IIIIQQI")  # free bytes, last seq, errors, state, samples done,
+#                                     bytes accepted, poll id answered
+POLL = struct.Struct("<I")  # poll id
 
 
 class FrameError(ValueError):
@@ -94,10 +97,11 @@ class Status:
     state: int  # 0 idle, 1 configured, 2 running, 3 done
     samples_done: int
     bytes_accepted: int
+    poll_id: int = 0
 
     def pack(self) -> bytes:
         return STATUS.pack(self.free_bytes, self.last_seq, self.errors, self.state,
-                           self.samples_done, self.bytes_accepted)
+                           self.samples_done, self.bytes_accepted, self.poll_id)
 
 
 def encode_frame(ftype: int, seq: int, payload: bytes) -> bytes:
@@ -303,6 +307,10 @@ def decode_status(payload: bytes) -> Status:
 
 def status_frame(st: Status) -> bytes:
     return encode_frame(FrameType.STATUS, st.last_seq, st.pack())
+
+
+def poll_frame(poll_id: int) -> bytes:
+    return encode_frame(FrameType.POLL, poll_id, POLL.pack(poll_id & 0xFFFFFFFF))
 
 
 def read_frame_file(path: str) -> list[Frame]:

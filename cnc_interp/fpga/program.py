@@ -1,6 +1,7 @@
 """Quantize a fitted and planned program into an ``FpgaProgram``.
 
-Planar paths (``path.planar`` from the paper-000 fit) become ``FixedSegment``s:
+Planar paths (``path.planar`` from the paper-000 fit, and straight moves of at
+most two axes, rapids included, which are planar with p ≡ 0) become ``FixedSegment``s:
 rotation, origin, x_end and the normalised quintic P(ξ) = p(ξ·x_end), plus a
 *parametric profile*: piecewise quintics ξ(τ) fitted to the planned samples so
 that the device's profile generator reproduces the plan's abscissa at every
@@ -36,15 +37,16 @@ def assign_paths(traj, paths) -> list[tuple[object, int, int, float]]:
 
     A path owns the samples with S0 < s <= S0 + length (S0: length of everything
     before it); samples at rest where a path starts belong to whatever precedes it.
+    S0 is summed in the same order as the timeline sums it, so the comparisons are
+    exact (a jerk-limited start moves by far less than any relative epsilon).
     """
     s = np.asarray(traj.s, dtype=float)
     out = []
     s0 = 0.0
     for path in paths:
         s1 = s0 + float(path.length)
-        eps = 1e-9 * max(1.0, abs(s1))
-        a = int(np.searchsorted(s, s0 + eps, side="right"))
-        b = int(np.searchsorted(s, s1 + eps, side="right"))
+        a = int(np.searchsorted(s, s0, side="right"))
+        b = int(np.searchsorted(s, s1, side="right"))
         out.append((path, a, b, s0))
         s0 = s1
     return out
@@ -65,11 +67,42 @@ def _poly(p: np.ndarray, x: np.ndarray) -> np.ndarray:
     return acc
 
 
-def _planar_samples(path, q: np.ndarray, s_loc: np.ndarray, held: np.ndarray, pos: FixedFormat):
+def planar_form(path):
+    """The path's paper-000 planar form: the fit's own, or exact for straight moves.
+
+    A path whose segments are all straight (no t² .. t⁵ terms) and that moves at
+    most two axes (rapids included) is a planar path with p ≡ 0 and θ the
+    direction of each line. Returns ``None`` when neither applies.
+    """
+    if path.planar is not None and not path.rapid:
+        return path.planar
+    coef = path.coef
+    n_axes = coef.shape[2]
+    if n_axes < 2:
+        return None
+    scale = max(1.0, float(np.abs(coef[:, 0, :]).max()))
+    if np.any(np.abs(coef[:, 2:, :]) > 1e-12 * scale):
+        return None
+    moving = np.nonzero(np.any(np.abs(coef[:, 1, :]) > 0, axis=0))[0].tolist()
+    if len(moving) > 2:
+        return None
+    others = [i for i in range(n_axes) if i not in moving]
+    plane = tuple(sorted((moving + others)[:2]))
+    h, v = plane
+    du = np.diff(path.breaks)
+    d = coef[:, 1, :][:, [h, v]] * du[:, None]
+    length = np.hypot(d[:, 0], d[:, 1])
+    if np.any(length <= 0):
+        return None
+    from ..fit.path import PlanarSegments
+
+    return PlanarSegments(plane=plane, theta=np.arctan2(d[:, 1], d[:, 0]),
+                          origin=coef[:, 0, :][:, [h, v]].copy(), x_end=length,
+                          p=np.zeros((coef.shape[0], 6)))
+
+
+def _planar_samples(path, pl, q: np.ndarray, s_loc: np.ndarray, held: np.ndarray, pos: FixedFormat):
     """Segment index and rotated abscissa of each sample, or a reason why the path is not planar."""
-    pl = path.planar
-    if pl is None or path.rapid:
-        return None, "not planar"
     h, v = pl.plane
     seg = path.segment_of_s(s_loc)
     th = pl.theta[seg]
@@ -187,18 +220,18 @@ def build_program(traj, paths=(), formats: FpgaFormats | None = None, source: st
 
     for path, a, b, s0 in assign_paths(traj, paths):
         n_seg_path = path.n_seg
-        if b <= a or path.planar is None or path.rapid:
-            seg_counter += n_seg_path if path.planar is not None else 0
+        pl = planar_form(path) if b > a else None
+        if pl is None:
+            seg_counter += n_seg_path
             continue
         held = q[a - 1] if a > 0 else start_f
-        got, why = _planar_samples(path, q[a:b], traj.s[a:b] - s0, held, pos)
+        got, why = _planar_samples(path, pl, q[a:b], traj.s[a:b] - s0, held, pos)
         if got is None:
             fallback.append(f"path ending on line {int(path.line[-1])}: {why}")
             seg_counter += n_seg_path
             continue
         seg, x = got
         flush_setpoints(a)
-        pl = path.planar
         for k in range(n_seg_path):
             idx = np.nonzero(seg == k)[0]
             gid = seg_counter + k

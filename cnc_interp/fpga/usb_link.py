@@ -25,7 +25,16 @@ from ..constants import (
     FPGA_USB_VID,
 )
 from ..errors import DeviceError, SourceLocation, UsageError
-from .frames import ErrorFlag, FrameError, FrameInfo, FrameType, Status, decode_frame, decode_status
+from .frames import (
+    ErrorFlag,
+    FrameError,
+    FrameInfo,
+    FrameType,
+    Status,
+    decode_frame,
+    decode_status,
+    poll_frame,
+)
 
 _STATUS_READ_BYTES = 512
 _NO_DEVICE_CODES = {-4}  # LIBUSB_ERROR_NO_DEVICE
@@ -59,6 +68,7 @@ class LinkReport:
     stalls: int = 0
     crc_rejects: int = 0
     status_polls: int = 0
+    stale_status: int = 0
     device_errors: int = 0
     final: Status | None = None
     notes: list = field(default_factory=list)
@@ -86,6 +96,7 @@ class UsbLink:
         self.dev, self.ep_out, self.ep_in = dev, ep_out, ep_in
         self.timeout_ms, self.retries, self.stall_polls = timeout_ms, retries, stall_polls
         self.report = LinkReport()
+        self._poll_id = 0
 
     @classmethod
     def open(cls, device: str | None = None, backend=None, **kw) -> "UsbLink":
@@ -124,32 +135,47 @@ class UsbLink:
 
     # -- status ------------------------------------------------------------------------------
     def status(self) -> Status:
-        """Read one status frame (retrying timeouts and damaged reads)."""
+        """Ask for and read one status frame (POLL -> STATUS with the same poll id).
+
+        Answers to older polls (left over after a timeout) are read and dropped;
+        a poll without an answer is repeated with a new id.
+        """
         import usb.core
 
         for _ in range(self.retries + 1):
+            self._poll_id += 1
+            pid = self._poll_id
             self.report.status_polls += 1
-            try:
-                raw = bytes(self.ep_in.read(_STATUS_READ_BYTES, self.timeout_ms))
-                f = decode_frame(raw)
-                if f.type != FrameType.STATUS:
-                    raise FrameError("not a status frame")
-                st = decode_status(f.payload)
+            if not self._write_all(poll_frame(pid), count=False):
+                continue
+            for _ in range(self.retries + 1):
+                try:
+                    raw = bytes(self.ep_in.read(_STATUS_READ_BYTES, self.timeout_ms))
+                except usb.core.USBTimeoutError:
+                    self.report.timeouts += 1
+                    break
+                except usb.core.USBError as exc:
+                    if _is_disconnect(exc):
+                        raise _Disconnected() from None
+                    if _is_stall(exc):
+                        self._clear(self.ep_in)
+                        break
+                    raise DeviceError(f"USB read failed: {exc}") from None
+                try:
+                    f = decode_frame(raw)
+                    if f.type != FrameType.STATUS:
+                        raise FrameError("not a status frame")
+                    st = decode_status(f.payload)
+                except FrameError:
+                    self.report.crc_rejects += 1
+                    continue
+                if st.poll_id != pid:
+                    self.report.stale_status += 1
+                    continue
                 if st.errors:
                     self.report.device_errors += 1
                 return st
-            except usb.core.USBTimeoutError:
-                self.report.timeouts += 1
-            except FrameError:
-                self.report.crc_rejects += 1
-            except usb.core.USBError as exc:
-                if _is_disconnect(exc):
-                    raise _Disconnected() from None
-                if _is_stall(exc):
-                    self._clear(self.ep_in)
-                else:
-                    raise DeviceError(f"USB read failed: {exc}") from None
-        raise DeviceError(f"the device sent no status after {self.retries + 1} attempts")
+        raise DeviceError(f"the device answered no status request in {self.retries + 1} attempts")
 
     def _clear(self, ep) -> None:
         import usb.core
@@ -174,7 +200,7 @@ class UsbLink:
                                   f"{need} needed) and it reports no progress")
         return st
 
-    def _write_all(self, data: bytes) -> bool:
+    def _write_all(self, data: bytes, count: bool = True) -> bool:
         """Write a whole frame; False if it must be resent (timeout, stall, no progress)."""
         import usb.core
 
@@ -197,7 +223,8 @@ class UsbLink:
             if off + n < len(data):
                 self.report.short_writes += 1
             off += n
-        self.report.bytes_sent += len(data)
+        if count:
+            self.report.bytes_sent += len(data)
         return True
 
     # -- the stream ------------------------------------------------------------------------------
@@ -213,14 +240,22 @@ class UsbLink:
             for i in range(acked, len(frames)):
                 seq, data = i + 1, frames[i]
                 attempts = 0
+                ok_last = True
                 while True:
                     if attempts > self.retries:
                         raise DeviceError(
                             f"frame {seq} ({_describe(infos[i], source)}) was not accepted after "
                             f"{attempts} attempts (last device error flags: {ErrorFlag(st.errors)!r})",
                             _loc(infos[i], source))
-                    st = self._wait_room(len(data), st)
-                    ok = self._write_all(data)
+                    if ok_last:
+                        st = self._wait_room(len(data), st)
+                    ok = ok_last = self._write_all(data)
+                    if not ok:
+                        # resend at once: part of this frame may sit in the device's
+                        # parser, and the full copy completes it and is found after it
+                        attempts += 1
+                        rep.retries += 1
+                        continue
                     st = self.status()
                     if st.last_seq >= seq:
                         break

@@ -34,8 +34,6 @@ def read_program(data: bytes | str, source: str, axes: str | None = None,
     """
     from .blocks import iter_blocks
     from .interp import Interpreter
-    from .params import ParamStore
-
     if axes is not None:
         axes = axes.upper()
         bad = [a for a in axes if a not in ALL_AXES]
@@ -49,11 +47,48 @@ def read_program(data: bytes | str, source: str, axes: str | None = None,
             raise UsageError(f"start position needs {len(names)} finite values for axes {names}")
         for a, v in zip(names, st):
             start9[ALL_AXES.index(a)] = float(v)
-    if params is None:
-        params = ParamStore()
+    live = params is None
+    if live:
+        params = _LiveParams()
     interp = Interpreter(source, params, axes, start9)
+    if live:
+        params.interp = interp
     interp.run(iter_blocks(data, source, params))
     return interp.program(_count_lines(data))
+
+
+def _live_params_class():
+    from .params import ParamStore
+
+    class LiveParams(ParamStore):
+        """A ParamStore whose #5420-#5428 read the interpreter's current position.
+
+        The interpreter's hot path does not write those nine parameters after every
+        move; they are computed when a program reads them.
+        """
+
+        __slots__ = ("interp",)
+
+        def __init__(self) -> None:
+            super().__init__()
+            self.interp = None
+
+        def get(self, key, loc=None):
+            if key.__class__ is int and 5420 <= key <= 5428 and self.interp is not None:
+                return self.interp.program_position()[key - 5420]
+            return super().get(key, loc)
+
+    return LiveParams
+
+
+def _LiveParams():
+    global _LIVE
+    if _LIVE is None:
+        _LIVE = _live_params_class()
+    return _LIVE()
+
+
+_LIVE = None
 
 
 def _count_lines(data: bytes | str) -> int:

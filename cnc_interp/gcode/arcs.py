@@ -17,9 +17,10 @@ import math
 
 import numpy as np
 
-from ..constants import (ARC_MAX_SEGMENT_DEG, ARC_MIN_RADIUS_MM, ARC_MIN_SEGMENTS,
-                         ARC_R_REACH_TOL_MM, ARC_RADIUS_TOL_MM, ARC_RADIUS_TOL_REL,
-                         CURVE_CHORD_TOL_MM, LINEAR_AXES, ALL_AXES)
+from ..constants import (ALL_AXES, ARC_MAX_SEGMENT_DEG, ARC_MIN_RADIUS_MM, ARC_MIN_SEGMENTS,
+                         ARC_R_REACH_TOL_MM, ARC_RADIUS_TOL_INCH, ARC_RADIUS_TOL_MAX_INCH,
+                         ARC_RADIUS_TOL_MAX_MM, ARC_RADIUS_TOL_MM, ARC_RADIUS_TOL_REL,
+                         CURVE_CHORD_TOL_MM, LINEAR_AXES, MM_PER_INCH)
 from .program import Arc
 
 TWO_PI = 2.0 * math.pi
@@ -30,24 +31,34 @@ class GeometryError(Exception):
     """A geometric problem with one block (the caller adds file/line/col)."""
 
 
+def radius_tolerances(inch: bool) -> tuple[float, float]:
+    """(tol_mm, max_mm) of the start/end radius check for mm or inch programs."""
+    if inch:
+        return ARC_RADIUS_TOL_INCH * MM_PER_INCH, ARC_RADIUS_TOL_MAX_INCH * MM_PER_INCH
+    return ARC_RADIUS_TOL_MM, ARC_RADIUS_TOL_MAX_MM
+
+
 def centre_from_ijk(ccw: bool, s1: float, s2: float, e1: float, e2: float,
-                    c1: float, c2: float, turns: int) -> tuple[float, float, float]:
+                    c1: float, c2: float, turns: int,
+                    inch: bool = False) -> tuple[float, float, float]:
     """Check an I/J/K arc with centre (c1, c2): returns (radius_start, radius_end, sweep_rad).
 
     Raises ``GeometryError`` when a radius is ~0 or the end point does not lie on the
-    circle through the start point (|r1-r2| beyond ``ARC_RADIUS_TOL_MM`` or, relatively,
-    ``ARC_RADIUS_TOL_REL`` — LinuxCNC rejects an arc failing either test).
+    circle through the start point. LinuxCNC's documented rule: the two radii may differ
+    by at most 0.5 mm (0.05 in), and by more than 0.005 mm (0.0005 in) only if that is
+    within 0.1 % of the radius (constants ``ARC_RADIUS_TOL_*``).
     """
     r1 = math.hypot(s1 - c1, s2 - c2)
     r2 = math.hypot(e1 - c1, e2 - c2)
     if r1 < ARC_MIN_RADIUS_MM or r2 < ARC_MIN_RADIUS_MM:
         raise GeometryError(f"zero-radius arc (start radius {r1:.6g} mm, end radius {r2:.6g} mm)")
     err = abs(r1 - r2)
-    if err > ARC_RADIUS_TOL_MM or err > ARC_RADIUS_TOL_REL * max(r1, r2):
+    tol, tol_max = radius_tolerances(inch)
+    if err > tol_max or (err > tol and err > ARC_RADIUS_TOL_REL * max(r1, r2)):
         raise GeometryError(
             f"arc end point is not on the circle: radius to start {r1:.6f} mm, to end {r2:.6f} mm "
-            f"(differ by {err:.3g} mm; tolerance {ARC_RADIUS_TOL_MM:g} mm and "
-            f"{ARC_RADIUS_TOL_REL:g} relative)")
+            f"(differ by {err:.3g} mm; allowed {tol:g} mm, or {ARC_RADIUS_TOL_REL:.1%} of the "
+            f"radius up to {tol_max:g} mm)")
     return r1, r2, _sweep(ccw, s1, s2, e1, e2, c1, c2, turns)
 
 
@@ -126,13 +137,32 @@ def segment_count(radius: float, sweep: float) -> int:
 
 
 def make_arc(line: int, start9, end9, plane, c1: float, c2: float, r1: float, r2: float,
-             sweep: float) -> tuple[Arc, np.ndarray]:
-    """The exact 9-axis ``Arc`` and its sampled nodes (K, 9) after the start (last = end)."""
-    s = np.array(start9, dtype=float)
-    e = np.array(end9, dtype=float)
-    arc = Arc(line=line, start=s, end=e, plane=tuple(plane), center=np.array([c1, c2]),
-              radius=0.5 * (r1 + r2), sweep_rad=float(sweep))
+             sweep: float) -> Arc:
+    """The exact 9-axis ``Arc`` (radius = mean of the start and end radii)."""
+    return Arc(line=line, start=np.array(start9, dtype=float), end=np.array(end9, dtype=float),
+               plane=tuple(plane), center=np.array([c1, c2]), radius=0.5 * (r1 + r2),
+               sweep_rad=float(sweep))
+
+
+def arc_nodes(start9, end9, plane, c1: float, c2: float, r1: float, r2: float, sweep: float,
+              layout: tuple[int, ...]) -> np.ndarray:
+    """Sampled nodes (K, len(layout)) of an arc after its start; the last is the exact end.
+
+    Same formula as ``Arc.points`` (angle linear in the fraction, radius varying
+    linearly from start to end, other axes linear), evaluated only for the ``layout``
+    columns; K from ``segment_count``.
+    """
     n = segment_count(max(r1, r2), sweep)
-    pts = arc.points(np.arange(1, n + 1, dtype=float) / n)
+    a, b, _ = plane
+    frac = np.arange(1, n + 1, dtype=float) / n
+    s = np.array([start9[i] for i in layout])
+    e = np.array([end9[i] for i in layout])
+    pts = s + np.multiply.outer(frac, e - s)
+    ang = math.atan2(start9[b] - c2, start9[a] - c1) + sweep * frac
+    r = r1 + (r2 - r1) * frac
+    if a in layout:
+        pts[:, layout.index(a)] = c1 + r * np.cos(ang)
+    if b in layout:
+        pts[:, layout.index(b)] = c2 + r * np.sin(ang)
     pts[-1] = e  # the end point is exact, not a rounding of cos/sin
-    return arc, pts
+    return pts

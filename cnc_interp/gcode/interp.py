@@ -23,7 +23,7 @@ import numpy as np
 
 from ..constants import ALL_AXES, ARC_MAX_TURNS, LINEAR_AXES, MM_PER_INCH, SECONDS_PER_MINUTE
 from ..errors import GCodeError, SourceLocation, UnsupportedError
-from .arcs import GeometryError, arc_length_mm, centre_from_ijk, centre_from_r, make_arc
+from .arcs import GeometryError, arc_length_mm, arc_nodes, centre_from_ijk, centre_from_r
 from .canned import SUPPORTED as CYCLE_CODES, CycleError, expand_cycle
 from .program import Dwell, Program, Stop
 from .runs import RunBuilder, finish_run
@@ -79,7 +79,7 @@ M_UNSUPPORTED = {66: "M66 wait on input", 70: "M70 save modal state", 71: "M71 i
                  99: "M99 subprogram return (use O-word endsub)"}
 #: letter -> axis index (>= 0) or a negative tag for the fast path (N, F, S, G)
 _FAST_KIND = {a: i for i, a in enumerate(ALL_AXES)}
-_FAST_KIND.update({"N": -1, "F": -2, "S": -3, "G": -4})
+_FAST_KIND.update({"N": -1, "F": -2, "S": -3, "G": -4, "I": -5, "J": -5, "R": -5, "P": -5})
 _PER_MIN = 1.0 / SECONDS_PER_MINUTE
 MOTION_USES_AXES = frozenset({0, 10, 20, 30, 50, 51, 52, 730, 810, 820, 830, 850, 890})
 
@@ -284,7 +284,6 @@ class Interpreter:
         rb.feed.append(feed)
         rb.tol.append(tol)
         rb.naive.append(naive)
-        rb.n += 1
         self.pos = new
         if self.exact_stop:
             self._close_run("exact-stop")
@@ -327,27 +326,33 @@ class Interpreter:
 
     # -- the main loop ------------------------------------------------------------
     def run(self, blocks) -> None:
-        """Interpret every block (stops after M2/M30, as LinuxCNC does)."""
+        """Interpret every block (stops after M2/M30, as LinuxCNC does).
+
+        The loop keeps the fast path's state in local variables (CPython looks them up
+        far faster than attributes) and reloads them after every general block.
+        """
         kind_get = _FAST_KIND.get
         nblocks = 0
         fast_ok, off, u9, inc, act = self._fast_state()
+        rb = self.rb
+        rb_kind = None
+        getter = self.getter
+        pos = self.pos
         for blk in blocks:
             nblocks += 1
             words = blk.words
             if fast_ok:
                 # ---- fast path: a plain G0/G1 block of axis, N, F, S words ----
-                pos = self.pos
                 new = None
                 gcode = -1
                 gcol = 0
                 fw = None
                 seen = 0
-                slow = False
+                arcw = False
                 for w in words:
                     k = kind_get(w[0], -9)
                     if k >= 0:
                         if not act[k] or (seen >> k) & 1:
-                            slow = True
                             break
                         seen |= 1 << k
                         if new is None:
@@ -360,6 +365,8 @@ class Interpreter:
                             new[k] = w[1] * u9[k] + off[k]
                     elif k == -1 or k == -3:
                         continue
+                    elif k == -5:
+                        arcw = True
                     elif k == -2 and fw is None:
                         fw = w
                     elif k == -4 and gcode < 0:
@@ -368,53 +375,78 @@ class Interpreter:
                             gcode = 10
                         elif gv == 0.0:
                             gcode = 0
+                        elif gv == 2.0:
+                            gcode = 20
+                        elif gv == 3.0:
+                            gcode = 30
                         else:
-                            slow = True
                             break
                         gcol = w[2]
                     else:
-                        slow = True
                         break
-                if not slow:
-                    if fw is not None:
-                        if fw[1] < 0:
-                            self.blk = blk
-                            raise self.error("negative feed rate", fw[2])
-                        self.f_word = fw[1]
+                else:
+                    # no break: the block is plain
                     if gcode < 0:
                         gcode = self.motion
+                        explicit = False
                     else:
-                        self.motion = gcode
-                    if new is None:
-                        continue
-                    if gcode == 10:
-                        kind = "feed"
-                        f = self.f_word
-                        if f <= 0.0:
-                            self.blk = blk
-                            raise self.error("feed move with zero or missing feed rate (F)", gcol)
-                        if u9[0] != 1.0:
-                            feed = self._feed_value(pos, new, None, gcol)
+                        explicit = True
+                    if (gcode == 20 or gcode == 30) and self.plane == 170:
+                        # a plain G2/G3 block in G17: skip the general classification
+                        if self._fast_arc(blk, words, gcode, gcol, fw):
+                            rb = None
+                            pos = self.pos
+                            continue
+                    elif arcw:
+                        pass  # I/J/K/R/P with G0/G1: the general path reports it
+                    elif gcode == 10 or gcode == 0:
+                        if explicit and self.motion != gcode:
+                            self.motion = gcode
+                            self.cycle_il = None
+                        if fw is not None:
+                            if fw[1] < 0:
+                                self.blk = blk
+                                raise self.error("negative feed rate", fw[2])
+                            self.f_word = fw[1]
+                        if new is None:
+                            continue
+                        if gcode == 10:
+                            kind = "feed"
+                            if self.f_word <= 0.0:
+                                self.blk = blk
+                                raise self.error("feed move with zero or missing feed rate (F)",
+                                                 gcol)
+                            if u9[0] != 1.0:
+                                feed = self._feed_value(pos, new, None, gcol)
+                            else:
+                                feed = self.f_word * _PER_MIN
                         else:
-                            feed = f * _PER_MIN
-                    else:
-                        kind = "rapid"
-                        feed = INF
-                    if new == pos:
-                        self._zero_length(blk.line)
+                            kind = "rapid"
+                            feed = INF
+                        if new == pos:
+                            self._zero_length(blk.line)
+                            continue
+                        if rb is None or rb_kind != kind:
+                            rb = self.rb
+                            if rb is None or rb.kind != kind:
+                                rb = self._start_run(kind, blk.line, gcol)
+                            rb_kind = kind
+                            ext_nodes = rb.nodes.extend
+                            app_line = rb.line.append
+                            app_col = rb.col.append
+                            app_feed = rb.feed.append
+                            app_tol = rb.tol.append
+                            app_naive = rb.naive.append
+                            tol = self.tol
+                            naive = self.naive
+                        ext_nodes(getter(new))
+                        app_line(blk.line)
+                        app_col(gcol)
+                        app_feed(feed)
+                        app_tol(tol)
+                        app_naive(naive)
+                        self.pos = pos = new
                         continue
-                    rb = self.rb
-                    if rb is None or rb.kind != kind:
-                        rb = self._start_run(kind, blk.line, gcol)
-                    rb.nodes.extend(self.getter(new))
-                    rb.line.append(blk.line)
-                    rb.col.append(gcol)
-                    rb.feed.append(feed)
-                    rb.tol.append(self.tol)
-                    rb.naive.append(self.naive)
-                    rb.n += 1
-                    self.pos = new
-                    continue
             # ---- everything else ----
             self.blk = blk
             if not words:
@@ -423,6 +455,9 @@ class Interpreter:
             if self._general(blk, gw, mw, d):
                 break
             fast_ok, off, u9, inc, act = self._fast_state()
+            rb = None  # re-bind the appenders on the next fast move
+            getter = self.getter
+            pos = self.pos
         self.block_count += nblocks
         self.blk = None
         if self.nurbs_cp is not None:
@@ -430,9 +465,32 @@ class Interpreter:
                              SourceLocation(self.source, self.nurbs_line, self.nurbs_col, "G5.2"))
         self._close_run("end")
 
+    def _fast_arc(self, blk, words, gcode: int, gcol: int, fw) -> bool:
+        """A G17 G2/G3 block of axis, I, J, R, P, F, N, S words; False: use the general path."""
+        d = {}
+        for w in words:
+            if w[0] in d:
+                return False
+            d[w[0]] = w
+        axis_words = [(L, w) for L, w in d.items() if L in AXIS_INDEX]
+        if not axis_words and "I" not in d and "J" not in d:
+            return False  # the general path reports the missing words
+        self.blk = blk
+        if fw is not None:
+            if fw[1] < 0:
+                raise self.error("negative feed rate", fw[2])
+            self.f_word = fw[1]
+            self.f_block = fw[1]
+        if gcol == 0:
+            gcol = axis_words[0][1][2] if axis_words else words[0][2]
+        self._arc(gcode, gcol, d, axis_words, blk.line)
+        if self.motion != gcode:
+            self.motion = gcode
+            self.cycle_il = None
+        return True
+
     def _fast_state(self):
-        ok = (self.motion in (0, 10) and not self.feed_inverse_time and not self.exact_stop
-              and self.nurbs_cp is None)
+        ok = not self.feed_inverse_time and not self.exact_stop and self.nurbs_cp is None
         act = [i in self.active for i in range(9)]
         return ok, self.off, self.units9, self.distance_incremental, act
 
@@ -517,6 +575,8 @@ class Interpreter:
         axis_words = [(L, w) for L, w in d.items() if L in AXIS_INDEX]
         covets = g0code in (100, 280, 300, 920)
         mcode = groups[1][0] if 1 in groups else None
+
+        self._check_unused_words(d, groups, mgroups, mcode, g0code, covets, axis_words)
 
         # 1. feed mode
         if 5 in groups:
@@ -622,7 +682,8 @@ class Interpreter:
             elif mcode == 800:
                 self.motion = 800
             else:
-                if not axis_words and mcode not in (0, 10, 52):
+                full_circle = mcode in (20, 30) and any(k in d for k in "IJK")
+                if not axis_words and mcode not in (0, 10, 52) and not full_circle:
                     raise self.error(f"{_gcode_name(mcode)} without any axis word", groups[1][1])
                 self._motion(mcode, groups[1][1], d, axis_words, line, g53)
         elif axis_words and not covets:
@@ -643,6 +704,32 @@ class Interpreter:
                 return True
             self._stop(M_STOPS[code], line, "stop")
         return False
+
+    def _check_unused_words(self, d, groups, mgroups, mcode, g0code, covets, axis_words):
+        """LinuxCNC rejects a parameter word no code of the block uses (e.g. I with G1)."""
+        motion = mcode if mcode is not None else (
+            self.motion if axis_words and not covets else None)
+        if motion == 800:
+            motion = None
+        cycle = motion is not None and motion // 10 in CYCLE_CODES
+        path = groups.get(13, (None,))[0]
+        ms = {c for c, _ in mgroups.values()}
+        use = {
+            "I": motion in (20, 30, 50, 51),
+            "J": motion in (20, 30, 50, 51),
+            "K": motion in (20, 30),
+            "R": motion in (20, 30) or cycle or g0code == 100,
+            "P": (g0code in (40, 100) or path == 640 or motion in (20, 30, 50, 52, 820, 890)
+                  or bool(ms & {62, 63, 64, 65})),
+            "Q": path == 640 or motion in (830, 730, 50) or bool(ms & {67, 68}),
+            "L": g0code == 100 or cycle or motion == 52,
+            "H": 8 in groups,
+            "D": False,
+            "E": bool(ms & {67, 68}),
+        }
+        for L, w in d.items():
+            if not use.get(L, True):
+                raise self.error(f"{L} word with no code in the block that uses it", w[2])
 
     # -- group 0 ------------------------------------------------------------------
     def _group0(self, code: int, col: int, d: dict, axis_words: list, line: int) -> bool:
@@ -831,10 +918,12 @@ class Interpreter:
                     c1 = start[a] + (d[fl][1] * ua if fl in d else 0.0)
                     c2 = start[b] + (d[sl][1] * ub if sl in d else 0.0)
                 r1, r2, sweep = centre_from_ijk(ccw, start[a], start[b], end[a], end[b], c1, c2,
-                                                turns)
+                                                turns, inch=self.len_unit != 1.0)
         except GeometryError as exc:
             raise self.error(str(exc), col) from None
-        arc, pts = make_arc(line, start, end, plane, c1, c2, r1, r2, sweep)
+        # the exact Arc is built when the run is finished (see runs.finish_run)
+        arc = (line, start, end, plane, c1, c2, r1, r2, sweep)
+        pts = arc_nodes(start, end, plane, c1, c2, r1, r2, sweep, self.active)
         if self.feed_inverse_time:
             feed = arc_length_mm(start, end, plane, r1, r2, sweep) * self.f_block / SECONDS_PER_MINUTE
         else:

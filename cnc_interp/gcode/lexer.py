@@ -181,7 +181,7 @@ def lex_line(raw: str, lineno: int, source: str, block_delete: bool = True) -> L
                 if pos >= n or s[pos] != "=":
                     raise GCodeError(
                         "expected '=' after a parameter (a parameter value needs a word letter)",
-                        loc(col_of(min(pos, n - 1))),
+                        loc(col_of(tpos)),
                     )
                 value, pos = parse_value(s, pos + 1, col_of)
             except ExprSyntax as e:

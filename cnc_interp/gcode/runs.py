@@ -13,6 +13,7 @@ from array import array
 
 import numpy as np
 
+from .arcs import make_arc
 from .program import Arc, CurvePiece, Nurbs, Run
 
 
@@ -20,7 +21,7 @@ class RunBuilder:
     """One run being built. ``start9`` is the 9-axis position before its first move."""
 
     __slots__ = ("kind", "layout", "start9", "nodes", "line", "col", "feed", "tol", "naive",
-                 "curves", "n")
+                 "curves")
 
     def __init__(self, kind: str, layout: tuple[int, ...], pos9: list[float], line: int, col: int,
                  tol: float, naive: float):
@@ -34,7 +35,11 @@ class RunBuilder:
         self.tol = array("d", [tol])
         self.naive = array("d", [naive])
         self.curves: list[tuple[int, int, object]] = []  # (first, last, 9-axis curve)
-        self.n = 1
+
+    @property
+    def n(self) -> int:
+        """Number of nodes so far (the hot path appends without counting)."""
+        return len(self.line)
 
     def widen(self, new_layout: tuple[int, ...], pos9: list[float]) -> None:
         """Re-lay the buffer out for ``new_layout``; new axes get their (unchanged) value."""
@@ -49,19 +54,19 @@ class RunBuilder:
         self.nodes.frombytes(out.tobytes())
         self.layout = new_layout
 
-    def add_many(self, pts9: np.ndarray, line: int, col: int, feed: float, tol: float,
+    def add_many(self, pts: np.ndarray, line: int, col: int, feed: float, tol: float,
                  naive: float) -> tuple[int, int]:
-        """Append sampled nodes (K, 9); returns (first, last) node indices of the piece."""
-        k = pts9.shape[0]
+        """Append sampled nodes (K, 9) or (K, len(layout)); returns the piece's (first, last)."""
+        k = pts.shape[0]
         first = self.n - 1
-        sub = np.ascontiguousarray(pts9[:, list(self.layout)], dtype=float)
-        self.nodes.frombytes(sub.tobytes())
-        self.line.extend([line] * k)
-        self.col.extend([col] * k)
-        self.feed.extend([feed] * k)
-        self.tol.extend([tol] * k)
-        self.naive.extend([naive] * k)
-        self.n += k
+        if pts.shape[1] != len(self.layout):
+            pts = pts[:, list(self.layout)]
+        self.nodes.frombytes(np.ascontiguousarray(pts, dtype=float).tobytes())
+        self.line.extend(array("q", (line,)) * k)
+        self.col.extend(array("q", (col,)) * k)
+        self.feed.extend(array("d", (feed,)) * k)
+        self.tol.extend(array("d", (tol,)) * k)
+        self.naive.extend(array("d", (naive,)) * k)
         return first, self.n - 1
 
 
@@ -85,6 +90,8 @@ def finish_run(rb: RunBuilder, axes_idx: tuple[int, ...], axes: str, end_reason:
     sel = list(axes_idx)
     curves = []
     for first, last, c in rb.curves:
+        if c.__class__ is tuple:  # an arc recorded by the interpreter: make the exact Arc
+            c = make_arc(*c)
         if isinstance(c, Arc):
             pos = {ax: j for j, ax in enumerate(axes_idx)}
             plane = tuple(pos.get(p, -1) for p in c.plane)

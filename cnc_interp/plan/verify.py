@@ -98,6 +98,9 @@ class VerifyReport:
         for i, a in enumerate(self.axes):
             k = int(np.nanargmax(self.ratios[i])) if np.isfinite(self.ratios[i]).any() else 0
             cells = " ".join(f"{r:>12.9f}" for r in self.ratios[i])
+            if np.isfinite(self.ratios[i]).all() and not self.ratios[i].any():
+                lines.append(f"{a:>4}  {cells}   (does not move)")
+                continue
             lines.append(f"{a:>4}  {cells}   {_KINDS[k]} t={self.where[i, k] * self.dt_s:.6g} s"
                          f" (sample {self.where[i, k]})")
         if self.nan_found:
@@ -121,7 +124,8 @@ def _axis_extremes(col: np.ndarray, pad: int):
         i = int(np.argmax(ax))
         vals[m] = ax[i]
         # x[i] is the difference whose stencil ends at padded index i + m + 1
-        where[m] = i + m + 1 - pad
+        # an axis that never moves has no "worst" sample: report sample 0
+        where[m] = i + m + 1 - pad if ax[i] > 0 else 0
     return vals, where
 
 

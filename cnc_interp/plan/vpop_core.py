@@ -35,6 +35,7 @@ STUCK = 2
 INFEASIBLE = 3
 
 _HUGE = 1e300
+_BIG = 1 << 62
 
 
 @njit(cache=True)
@@ -269,9 +270,51 @@ def _cap(s, dt, L, FB, FV):
 
 
 @njit(cache=True)
-def _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, brake, hint, q, qs,
+def _path_limits(qs, js_lim, al):
+    """One-step path jerk and acceleration (s units) the tightest axis allows at q_s = qs."""
+    jd = _HUGE
+    ad = _HUGE
+    for i in range(qs.shape[0]):
+        g = abs(qs[i])
+        if g > 1e-14:
+            v = js_lim[i] / g
+            if v < jd:
+                jd = v
+            v = al[i] / g
+            if v < ad:
+                ad = v
+    return jd, ad
+
+
+@njit(cache=True)
+def _stop_distance(v, a, J, A):
+    """Distance of the time-optimal jerk-limited stop from speed v, acceleration a (continuous,
+    step units); -1 when the state already brakes too hard to stop without reversing."""
+    if a < 0.0 and v < a * a / (2.0 * J):
+        return -1.0
+    ap = np.sqrt(J * v + 0.5 * a * a)
+    t2 = 0.0
+    if ap > A:
+        ap = A
+        t2 = (v + a * a / (2.0 * J) - A * A / J) / A
+        if t2 < 0.0:
+            t2 = 0.0
+    t1 = (a + ap) / J
+    d = v * t1 + a * t1 * t1 / 2.0 - J * t1 ** 3 / 6.0
+    v1 = v + a * t1 - J * t1 * t1 / 2.0
+    d += v1 * t2 - ap * t2 * t2 / 2.0
+    v2 = v1 - ap * t2
+    t3 = ap / J
+    d += v2 * t3 - ap * t3 * t3 / 2.0 + J * t3 ** 3 / 6.0
+    return d
+
+
+@njit(cache=True)
+def _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, mode, hint, q, qs,
           lo, hi, tol):
-    """Choose sample k (max or brake policy). Returns (ok, s', hint); q holds q(s')."""
+    """Choose sample k. mode 0: max; 1: brake; 2: aim at rest exactly at L.
+
+    Returns (ok, s', hint); q holds q(s')."""
     if not _bounds(qh, k, vl, al, jl, lo, hi):
         return False, sh[k - 1], hint
     s0 = sh[k - 1]
@@ -281,46 +324,107 @@ def _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, brake, hint,
     d2 = d1 - (s1 - s2)
     b = _cap(s0, dt, L, FB, FV)
     guess = s0 + d1 + d2
-    if not brake:
+    if mode == 0:
         return _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, True, hint, q, qs, tol)
-    # brake: path-jerk bound of one step from the tightest axis at s0
     hint = _eval(S, C, QEND, s0, hint, q, qs)
-    jd = _HUGE
-    for i in range(q.shape[0]):
-        g = abs(qs[i])
-        if g > 1e-14:
-            v = js_lim[i] / g
-            if v < jd:
-                jd = v
-    if d1 <= jd:
-        target = s0
-    else:
-        target = s0 + d1 + jd - np.sqrt(jd * (2.0 * d1 + jd))
-    okl, xl, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, False, hint,
-                            q, qs, tol)
+    jd, ad = _path_limits(qs, js_lim, al)
+    if mode == 1:
+        # brake: the least step after which a jerk ramp back to zero path acceleration
+        # still leaves a non-negative speed (or a full stop once the speed is one jerk step)
+        if d1 <= jd:
+            target = s0
+        else:
+            target = s0 + d1 + jd - np.sqrt(jd * (2.0 * d1 + jd))
+        okl, xl, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, False,
+                                hint, q, qs, tol)
+        if not okl:
+            return False, s0, hint
+        if target <= xl:
+            return True, xl, hint
+        hint = _eval(S, C, QEND, target, hint, q, qs)
+        if target <= b and _feasible(qh, k, q, vl, al, jl):
+            return True, target, hint
+        oku, xu, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, True, hint,
+                                q, qs, tol)
+        return True, xu, hint
+    # aim: the largest step whose continuous stop distance still fits before L
+    okl, xl, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, False,
+                            hint, q, qs, tol)
     if not okl:
         return False, s0, hint
-    if target <= xl:
-        return True, xl, hint
     oku, xu, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, True, hint,
                             q, qs, tol)
-    if target >= xu:
-        return True, xu, hint
-    hint = _eval(S, C, QEND, target, hint, q, qs)
+    ad = 0.9 * ad
+    x = xl
+    if xu >= L and L - s0 <= jd:
+        x = L  # close enough to land in one jerk step
+    elif L - xu >= _stop_distance(xu - s0, xu - s0 - d1, jd, ad):
+        x = xu
+    elif L - xl >= _stop_distance(xl - s0, xl - s0 - d1, jd, ad):
+        a_ = xl
+        b_ = xu
+        for _ in range(50):
+            m_ = 0.5 * (a_ + b_)
+            if L - m_ >= _stop_distance(m_ - s0, m_ - s0 - d1, jd, ad):
+                a_ = m_
+            else:
+                b_ = m_
+            if b_ - a_ <= tol:
+                break
+        x = a_
+    hint = _eval(S, C, QEND, x, hint, q, qs)
     if _feasible(qh, k, q, vl, al, jl):
-        return True, target, hint
-    hint = _eval(S, C, QEND, xu, hint, q, qs)
-    return True, xu, hint
+        return True, x, hint
+    hint = _eval(S, C, QEND, xl, hint, q, qs)
+    return True, xl, hint
+
+
+@njit(cache=True)
+def _window_max(S, K, s, D, hint):
+    """Largest K[p] over the table pieces meeting [s, s + D]."""
+    p = _piece(S, s, hint)
+    m = S.shape[0] - 1
+    best = K[p]
+    while p < m - 1 and S[p + 1] < s + D:
+        p += 1
+        if K[p] > best:
+            best = K[p]
+    return best
+
+
+@njit(cache=True)
+def _easy(S, C, QEND, K2, K3, K23, bs, kk, al, js_lim, L, easy_frac, q, qs):
+    """Early end of a brake run: braking, slow enough that the path's curvature uses at most
+    ``easy_frac`` of any axis's acceleration and jerk over the whole remaining stop, and
+    the stop ends before L. (A heuristic; a plan it misleads is re-planned exactly.)"""
+    s0 = bs[kk - 1]
+    d1 = s0 - bs[kk - 2]
+    d2 = d1 - (bs[kk - 2] - bs[kk - 3])
+    if d2 > 0.0 or d1 <= 0.0:
+        return False
+    _eval(S, C, QEND, s0, 0, q, qs)
+    jd, ad = _path_limits(qs, js_lim, al)
+    ab = 2.0 * ad
+    D = d1 * (d1 / ad + 2.0 * ab / jd) + d1
+    if s0 + 2.0 * D >= L:
+        return False
+    k2 = _window_max(S, K2, s0, D, 0)
+    if k2 * d1 * d1 > easy_frac:
+        return False
+    k3 = _window_max(S, K3, s0, D, 0)
+    k23 = _window_max(S, K23, s0, D, 0)
+    return k3 * d1 ** 3 + k23 * d1 * ab <= easy_frac
 
 
 @njit(cache=True)
 def _brake_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq, max_steps,
-               q, qs, lo, hi, tol, stats):
-    """Does braking from step j (samples < j fixed) reach rest? Uses scratch bs/bq.
+               q, qs, lo, hi, tol, stats, mode, K2, K3, K23, easy_frac, horizon):
+    """Does the brake (mode 1) or aim (mode 2) policy from step j (samples < j fixed) reach
+    rest? Uses scratch bs/bq, which start with copies of samples j-3..j-1 at 0..2.
 
-    The scratch holds copies of samples j-3..j-1 at indices 0..2 so that the same
-    step code runs on it; returns (ok, brake value of step j, q at it in bq[3]).
-    """
+    ``horizon`` > 0 (fast mode): a run that survives until main-sequence index ``horizon``
+    and is no longer speeding up counts as a success. Returns (ok, scratch index after the last sample, main-sequence
+    index up to which the brake continuation is certified (_BIG: to rest))."""
     n = qh.shape[1]
     for r in range(3):
         src = j - 3 + r
@@ -331,34 +435,48 @@ def _brake_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq,
             bq[r, i] = qh[src, i]
     hint = 0
     kk = 3
-    first = sh[j - 1]
     cap = bs.shape[0]
     while True:
-        ok, x, hint = _step(S, C, QEND, bs, bq, kk, vl, al, jl, js_lim, dt, L, FB, FV, True,
+        ok, x, hint = _step(S, C, QEND, bs, bq, kk, vl, al, jl, js_lim, dt, L, FB, FV, mode,
                             hint, q, qs, lo, hi, tol)
         if not ok:
-            return False, first
+            return False, kk, 0
         bs[kk] = x
         stats[2] += 1
         for i in range(n):
             bq[kk, i] = q[i]
-        if kk == 3:
-            first = x
         kk += 1
         if bs[kk - 1] == bs[kk - 2] and bs[kk - 2] == bs[kk - 3]:
-            return True, first
+            return True, kk, _BIG
+        if easy_frac > 0.0 and mode == 1 and _easy(S, C, QEND, K2, K3, K23, bs, kk, al, js_lim,
+                                                   L, easy_frac, q, qs):
+            return True, kk, _BIG
+        if horizon > 0 and j + kk - 3 >= horizon and \
+                bs[kk - 1] - 2.0 * bs[kk - 2] + bs[kk - 3] <= 0.0:
+            return True, kk, j + kk - 3
         if kk >= cap or kk >= max_steps:
-            return False, first
+            return False, kk, 0
+
+
+@njit(cache=True)
+def _horizon(k, j, fast):
+    """Fast mode: a brake run from j that outlives the failed max run (index k) by as many
+    steps again (+8) is taken as safe; 0 (exact mode) asks for rest."""
+    if not fast:
+        return 0
+    return k + (k - j) + 8
 
 
 @njit(cache=True)
 def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol, max_steps,
-              bs, bq, stats):
+              bs, bq, stats, K2, K3, K23, easy_frac, gap_tol, fast):
     """Run VPOp from sample k0 (samples < k0 fixed, b0 the last brake-fixed sample).
 
     Fills ``sh`` (K,), ``qh`` (K, n). Returns (status, k, b). Status NEED_SPACE asks the
-    caller to grow ``sh``/``qh`` (or the scratch ``bs``/``bq``) and call again with (k, b).
-    stats: [backtracks, brake runs, brake-run steps, max steps] (accumulated).
+    caller to grow ``sh``/``qh`` and call again with (k, b).
+    stats: [backtracks, brake runs, brake-run steps, max steps, aim runs committed].
+    ``easy_frac`` > 0 lets brake runs end early (see ``_easy``); ``gap_tol`` is how far
+    short of L a committed aim run may stop; ``fast`` bounds brake runs by ``_horizon``.
     """
     n = qh.shape[1]
     q = np.empty(n)
@@ -369,6 +487,7 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol
     b = b0
     hint = 0
     cap = sh.shape[0]
+    cert = _BIG  # sample 0 is at rest
     while True:
         # done: three equal samples at the end point
         if k >= 3 and sh[k - 1] == L and sh[k - 2] == L and sh[k - 3] == L:
@@ -377,7 +496,7 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol
             return NEED_SPACE, k, b
         if k >= max_steps:
             return STUCK, k, b
-        ok, x, hint = _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, False,
+        ok, x, hint = _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, 0,
                             hint, q, qs, lo, hi, tol)
         stats[3] += 1
         if ok:
@@ -393,23 +512,64 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol
         if lo_j >= hi_j:
             return INFEASIBLE, k, b
         # most backtracks land just after the previous one: test lo_j + 1 first
+        tested = False
         if lo_j + 1 < hi_j:
             r = _brake_run(S, C, QEND, sh, qh, lo_j + 1, vl, al, jl, js_lim, dt, L, FB,
-                           FV, bs, bq, max_steps, q, qs, lo, hi, tol, stats)
+                           FV, bs, bq, max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23,
+                           easy_frac, _horizon(k, lo_j + 1, fast))
             stats[1] += 1
             if r[0]:
                 lo_j = lo_j + 1
+                tested = True
+                cert = r[2]
                 while hi_j - lo_j > 1:
                     mid = (lo_j + hi_j) // 2
                     r = _brake_run(S, C, QEND, sh, qh, mid, vl, al, jl, js_lim, dt, L, FB, FV,
-                                   bs, bq, max_steps, q, qs, lo, hi, tol, stats)
+                                   bs, bq, max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23,
+                                   easy_frac, _horizon(k, mid, fast))
                     stats[1] += 1
                     if r[0]:
                         lo_j = mid
+                        cert = r[2]
                     else:
                         hi_j = mid
         j = lo_j
-        ok, x, hint = _step(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, True,
+        if not tested and j + 1 >= cert:
+            # fast mode: the brake chain has run past what its last run certified
+            r = _brake_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV,
+                           bs, bq, max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23,
+                           easy_frac, _horizon(k, j, fast))
+            stats[1] += 1
+            if not r[0]:
+                return INFEASIBLE, k, b
+            cert = r[2]
+        # the end is what stops us: try to land on it with the aim policy in one run
+        if gap_tol > 0.0 and k >= 2 and sh[k - 1] >= L - 2.0 * (sh[k - 1] - sh[k - 2]) - tol:
+            done = False
+            for back in range(4):
+                jj = j - back
+                if jj <= b:
+                    break
+                r = _brake_run(S, C, QEND, sh, qh, jj, vl, al, jl, js_lim, dt, L, FB, FV,
+                               bs, bq, max_steps, q, qs, lo, hi, tol, stats, 2, K2, K3, K23,
+                               0.0, 0)
+                kk = r[1]
+                if r[0] and L - bs[kk - 1] <= gap_tol:
+                    need = jj + kk - 3
+                    if need + 3 > cap:
+                        return NEED_SPACE, k, b
+                    for t in range(3, kk):
+                        sh[jj + t - 3] = bs[t]
+                        for i in range(n):
+                            qh[jj + t - 3, i] = bq[t, i]
+                    k = need
+                    b = k - 1
+                    stats[4] += 1
+                    done = True
+                    break
+            if done:
+                continue
+        ok, x, hint = _step(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, 1,
                             hint, q, qs, lo, hi, tol)
         if not ok:
             return INFEASIBLE, j, b

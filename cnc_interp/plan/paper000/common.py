@@ -12,7 +12,9 @@ _PAD = 3
 
 def joint_positions(path, joint_map, s: np.ndarray) -> np.ndarray:
     """Joint setpoints (K, n) at arc lengths s; the last one is exactly the path's end."""
-    p = path(s)
+    from .arclength import positions
+
+    p = positions(path, s)
     if s.size and s[-1] >= path.length:
         p[-1] = path.end
     if s.size and s[0] <= 0.0:

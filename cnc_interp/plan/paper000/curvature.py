@@ -101,13 +101,21 @@ def planar_curvature_peaks(p: np.ndarray, x_end: np.ndarray, n_grid: int = 64,
     return best, where
 
 
-def _local_derivs(coef: np.ndarray, seg: np.ndarray, t: np.ndarray, order: int) -> np.ndarray:
+def _dcoefs(coef: np.ndarray, order: int) -> list[np.ndarray]:
+    """Coefficients of the u-derivatives 0..order: list of (n_seg, n, 6-d) arrays."""
+    c = np.moveaxis(coef, 1, 2)
+    return [np.ascontiguousarray(_pder(c, d)) for d in range(order + 1)]
+
+
+def _local_derivs(coef: np.ndarray, seg: np.ndarray, t: np.ndarray, order: int,
+                  dc: list[np.ndarray] | None = None) -> np.ndarray:
     """u-derivatives (order+1, K, n) of segment ``seg`` (K,) at local parameter t (K,)."""
-    c = coef[seg]  # (K, 6, n)
+    if dc is None:
+        dc = _dcoefs(coef, order)
     tt = t[:, None]
     out = np.empty((order + 1, t.shape[0], coef.shape[2]))
     for d in range(order + 1):
-        cd = _pder(np.moveaxis(c, 1, 2), d)  # (K, n, 6-d)
+        cd = dc[d][seg]  # (K, n, 6-d)
         acc = cd[..., -1]
         for i in range(cd.shape[-1] - 2, -1, -1):
             acc = acc * tt + cd[..., i]
@@ -124,8 +132,10 @@ def general_curvature_peaks(path, n_grid: int = 64) -> np.ndarray:
     seg = np.repeat(np.arange(n), n_grid)
     t = (h[:, None] * frac[None, :]).reshape(-1)
 
+    dc = _dcoefs(path.coef, 2)
+
     def kappa(seg, t):
-        d = _local_derivs(path.coef, seg, t, 2)
+        d = _local_derivs(path.coef, seg, t, 2, dc)
         qu, quu = d[1], d[2]
         a = (qu * qu * w).sum(-1)
         b = (quu * quu * w).sum(-1)
@@ -140,13 +150,17 @@ def general_curvature_peaks(path, n_grid: int = 64) -> np.ndarray:
     lo = h * frac[np.maximum(j - 1, 0)]
     hi = h * frac[np.minimum(j + 1, n_grid - 1)]
     segs = np.arange(n)
+    x1 = hi - _GOLD * (hi - lo)
+    x2 = lo + _GOLD * (hi - lo)
+    f1, f2 = kappa(segs, x1), kappa(segs, x2)
     for _ in range(P000_CURV_REFINE_ITERS):
-        x1 = hi - _GOLD * (hi - lo)
-        x2 = lo + _GOLD * (hi - lo)
-        f1, f2 = kappa(segs, x1), kappa(segs, x2)
-        left = f1 >= f2  # the maximum lies in [lo, x2]
+        left = f1 >= f2  # the maximum lies in [lo, x2]: x1 becomes the new x2
         hi = np.where(left, x2, hi)
         lo = np.where(left, lo, x1)
+        xn = np.where(left, hi - _GOLD * (hi - lo), lo + _GOLD * (hi - lo))
+        fn = kappa(segs, xn)
+        x1, x2, f1, f2 = (np.where(left, xn, x2), np.where(left, x1, xn),
+                          np.where(left, fn, f2), np.where(left, f1, fn))
     return np.maximum(best, np.maximum(f1, f2))
 
 

@@ -38,25 +38,27 @@ from ...constants import (
 )
 
 
-def _setting(settings, key: str, default: float) -> float:
+def option(settings, key: str, default: float) -> float:
+    """A numeric planner option from a dict, a ``PlanSettings`` (``get``) or attributes."""
     if settings is None:
         return default
-    if isinstance(settings, dict):
-        val = settings.get(key, default)
+    if hasattr(settings, "get"):
+        val = settings.get(key, None)
     else:
-        val = getattr(settings, key, default)
+        val = getattr(settings, key, None)
     return default if val is None else float(val)
 
 
 def shares(settings) -> tuple[float, float, float]:
     """(curv_accel_share, curv_jerk_share, cross_jerk_share) from settings or the defaults."""
-    return (_setting(settings, "curv_accel_share", P000_CURV_ACCEL_SHARE),
-            _setting(settings, "curv_jerk_share", P000_CURV_JERK_SHARE),
-            _setting(settings, "cross_jerk_share", P000_CROSS_JERK_SHARE))
+    return (option(settings, "curv_accel_share", P000_CURV_ACCEL_SHARE),
+            option(settings, "curv_jerk_share", P000_CURV_JERK_SHARE),
+            option(settings, "cross_jerk_share", P000_CROSS_JERK_SHARE))
 
 
 def _safe_div(num, den):
-    return np.where(den > 0, num / np.where(den > 0, den, 1.0), np.inf)
+    with np.errstate(over="ignore"):  # a tiny divisor means no limit: inf is right
+        return np.where(den > 0, num / np.where(den > 0, den, 1.0), np.inf)
 
 
 def feed_caps(geom, machine, feed_mm_s: np.ndarray, settings=None) -> np.ndarray:

@@ -130,6 +130,26 @@ class SegmentProfiles:
             out[:, ph, 4] = np.where(ok, 30.0 * dv / Ts**5, 0.0)
         return out
 
+    def pos_coef(self) -> np.ndarray:
+        """(m, 3, 7) power-basis coefficients of s(t) (mm) in local phase time (s).
+
+        Phases: acceleration, cruise, deceleration; c_0 is the arc length at the phase
+        start, c_1 its feed; s(t) = c_0 + v0 t + dv (5/2 t^4/T^3 - 3 t^5/T^4 + t^6/T^5).
+        """
+        t0, s0, v0, dv, T = self._phases()
+        ok = T > 0
+        Ts = np.where(ok, T, 1.0)
+        c = np.zeros((t0.size, 7))
+        c[:, 0], c[:, 1] = s0, v0
+        c[:, 4] = np.where(ok, 2.5 * dv / Ts**3, 0.0)
+        c[:, 5] = np.where(ok, -3.0 * dv / Ts**4, 0.0)
+        c[:, 6] = np.where(ok, dv / Ts**5, 0.0)
+        return c.reshape(self.n_pieces, 3, 7)
+
+    def phases(self):
+        """Flattened phases (3m,) in time order: start time, start s, start feed, dv, duration."""
+        return self._phases()
+
     def _phases(self):
         """Flattened phases: start time, start s, v at start, dv, duration (3m,)."""
         m = self.n_pieces

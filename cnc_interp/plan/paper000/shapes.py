@@ -94,3 +94,52 @@ def circle(radius: float, turns: float = 1.0, n_per_turn: int = 12, feed_mm_s=np
     """A full circle (or several turns) of ``radius`` starting at (radius, 0) heading +Y."""
     return chain([("arc", radius, 2 * math.pi * turns)], start=(radius, 0.0),
                  heading_rad=math.pi / 2, feed_mm_s=feed_mm_s, n_arc=n_per_turn)
+
+
+def hermite_path(u_nodes, d0, d1, d2, axes: str, feed_mm_s=np.inf):
+    """General (``planar=None``) C2 quintic path interpolating a parametric curve.
+
+    ``d0, d1, d2`` are callables u (K,) -> (K, n): the curve and its first two
+    u-derivatives. Each segment matches position, first and second derivative at both
+    of its nodes, so the path is C2 in u (G2).
+    """
+    from ...fit.path import Path
+
+    u = np.asarray(u_nodes, dtype=float)
+    h = np.diff(u)
+    p0, p1, p2 = d0(u[:-1]), d1(u[:-1]), d2(u[:-1])
+    e0, e1, e2 = d0(u[1:]), d1(u[1:]), d2(u[1:])
+    n_seg, n = p0.shape
+    coef = np.zeros((n_seg, 6, n))
+    coef[:, 0], coef[:, 1], coef[:, 2] = p0, p1, 0.5 * p2
+    hh = h[:, None]
+    r0 = e0 - (p0 + p1 * hh + 0.5 * p2 * hh**2)
+    r1 = e1 - (p1 + p2 * hh)
+    r2 = e2 - p2
+    # rows: t^3, t^4, t^5 and their first two derivatives at t = h
+    m = np.stack([np.stack([h**3, h**4, h**5], -1),
+                  np.stack([3 * h**2, 4 * h**3, 5 * h**4], -1),
+                  np.stack([6 * h, 12 * h**2, 20 * h**3], -1)], 1)  # (n_seg, 3, 3)
+    rhs = np.stack([r0, r1, r2], 1)  # (n_seg, 3, n)
+    coef[:, 3:] = np.linalg.solve(m, rhs)
+    feed = np.broadcast_to(np.asarray(feed_mm_s, dtype=float), (n_seg,))
+    return Path(axes=axes, breaks=u, coef=coef, line=np.arange(1, n_seg + 1), feed_mm_s=feed)
+
+
+def bump(height: float = 3.0, width: float = 2.0, half_span: float = 60.0, n_seg: int = 120,
+         feed_mm_s=np.inf):
+    """G2 path y = height exp(-(x/width)^2) on |x| <= half_span: long straights, one tight bump.
+
+    Peak curvature 2 height / width^2 at x = 0.
+    """
+    x = np.sinh(np.linspace(-1, 1, n_seg + 1) * np.arcsinh(half_span / width)) * width
+
+    def f(k):
+        def g(u):
+            e = height * np.exp(-((u / width) ** 2))
+            y = [e, -2 * u / width**2 * e, (4 * u * u / width**4 - 2 / width**2) * e][k]
+            xs = [u, np.ones_like(u), np.zeros_like(u)][k]
+            return np.stack([xs, y], -1)
+        return g
+
+    return hermite_path(x, f(0), f(1), f(2), "XY", feed_mm_s=feed_mm_s)

@@ -27,16 +27,12 @@ from ...errors import PlanError
 from ..base import PathPlan
 from .common import joint_positions, sample_profile, sample_ratios, worst_ratio
 from .curvature import segment_geometry
-from .limits import feed_caps, junction_caps, tangential_limits
+from .limits import feed_caps, junction_caps, option, tangential_limits
 from .profile import build_profiles, stretch_to_period
 
 
 def _band(settings) -> float:
-    if isinstance(settings, dict):
-        val = settings.get("merge_band")
-    else:
-        val = getattr(settings, "merge_band", None)
-    return P000_MERGE_BAND if val is None else float(val)
+    return option(settings, "merge_band", P000_MERGE_BAND)
 
 
 def rest_plan(path, joint_map, planner: str) -> PathPlan:
@@ -71,6 +67,8 @@ def plan_path_variable(path, joint_map, machine, dt_s: float, settings=None) -> 
 def plan_grouped(path, joint_map, machine, dt_s: float, settings, band: float,
                  planner: str) -> PathPlan:
     """Plan with segments grouped into profile pieces by ``band`` (see ``group_segments``)."""
+    if not (np.isfinite(path.length) and np.all(np.isfinite(path.coef))):
+        raise PlanError(f"path ending at line {int(path.line[-1])} is not finite (fit failed?)")
     if path.length <= P000_MIN_LENGTH_MM:
         return rest_plan(path, joint_map, planner)
     geom = segment_geometry(path, joint_map)

@@ -1,0 +1,55 @@
+"""Fit-stage throughput: nodes fitted per second (best of several runs).
+
+Usage: .venv/bin/python benchmarks/fit.py [FILE.ngc ...] [--tol MM] [--method auto|planar|nodes] [--repeat N]
+
+Defaults to the two corpus files of issue 3 (circle_small_segments_ncd.ngc and
+3D_Chips.ngc). Parsing is excluded from the timing; building the Paths (their
+arc-length tables) is included. Numba kernels are compiled (or loaded from the
+cache) by one warm-up run that is not timed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+CORPUS = os.environ.get("CNC_CORPUS", "/work/shared/corpus/linuxcnc")
+DEFAULT_FILES = [
+    os.path.join(CORPUS, "performance", "circle_small_segments_ncd.ngc"),
+    os.path.join(CORPUS, "performance", "3D_Chips.ngc"),
+]
+
+
+def main(argv=None) -> int:
+    from cnc_interp.fit import FitSettings, fit_program
+    from cnc_interp.fit.report import fit_statistics
+    from cnc_interp.gcode import read_program
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("files", nargs="*", default=DEFAULT_FILES)
+    ap.add_argument("--tol", type=float, default=None, help="fit tolerance, mm (default 0.001)")
+    ap.add_argument("--method", default="auto", choices=("auto", "planar", "nodes"))
+    ap.add_argument("--repeat", type=int, default=5)
+    args = ap.parse_args(argv)
+    settings = FitSettings.from_options(tol_mm=args.tol, method=args.method)
+    print(f"{'file':40s} {'nodes':>8s} {'segs':>7s} {'seg/node':>8s} {'best s':>8s} {'nodes/s':>10s} {'max dev mm':>10s}")
+    for f in args.files:
+        with open(f, "rb") as fh:
+            prog = read_program(fh.read(), source=f)
+        fit_program(prog, settings)  # warm-up: numba compile / cache load
+        best = float("inf")
+        for _ in range(args.repeat):
+            t0 = time.perf_counter()
+            res = fit_program(prog, settings)
+            best = min(best, time.perf_counter() - t0)
+        st = fit_statistics(res)
+        n = st["nodes_in"]
+        print(f"{os.path.basename(f)[:40]:40s} {n:8d} {st['segments_out']:7d} {st['segments_per_node']:8.3f} "
+              f"{best:8.3f} {n / best:10.0f} {st['max_node_dev_mm']:10.2e}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,267 @@
+"""``fit_program`` / ``fit_run``: the fit stage's entry points.
+
+Which fitter handles what:
+
+* rapid runs: one straight ``Path(rapid=True)`` per G0 move;
+* G61 stretches: exact straight lines, a stop at every non-collinear node;
+* feed paths without exact curves that move exactly two axes: paper 000's
+  planar method (``planar.py``; ``FitSettings.method`` = "auto"/"planar"), with
+  the N-axis fitter as fallback when an inherited tangent leaves the next frame;
+* everything else: sections — exact curves (``curves.py``) and the polylines
+  between them (``nodes.py``), joined G2: a polyline next to a curve takes the
+  curve's exact tangent and curvature vector at the junction, two curves meet at
+  their averaged tangent / curvature.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..gcode.program import Dwell, Program, Run, Stop
+from .corners import PreparedRun, SubRun, fit_tolerance, prepare_run, split_run
+from .nodes import EndState, PieceFit, fit_polyline, straight_piece
+from .path import Path, PlanarSegments
+from .result import FitResult
+from .settings import FitSettings
+
+
+@dataclass
+class _Raw:
+    """A path before construction (so that its start can be chained exactly)."""
+
+    axes: str
+    breaks: np.ndarray
+    coef: np.ndarray
+    line: np.ndarray
+    feed: np.ndarray
+    weights: np.ndarray
+    rapid: bool = False
+    planar: PlanarSegments | None = None
+
+    def build(self, start: np.ndarray | None = None) -> Path:
+        coef = self.coef
+        planar = self.planar
+        if start is not None:
+            coef = coef.copy()
+            delta = start - coef[0, 0]
+            coef[0, 0] = start
+            if planar is not None:
+                h, v = planar.plane
+                origin = planar.origin.copy()
+                origin[0] += delta[[h, v]]
+                planar = replace(planar, origin=origin)
+        return Path(axes=self.axes, breaks=self.breaks, coef=coef, line=self.line,
+                    feed_mm_s=self.feed, weights=self.weights, rapid=self.rapid, planar=planar)
+
+
+def fit_program(program: Program, settings: FitSettings | None = None) -> FitResult:
+    """Fit every run of ``program``; dwells and stops pass through (see ``FitResult``)."""
+    settings = settings or FitSettings()
+    items = []
+    runs_info = []
+    prev_end = None
+    totals = dict(nodes_in=0, segments_out=0, feed_paths=0, rapid_moves=0,
+                  max_node_dev_mm=0.0, max_node_dev_deg=0.0, within_tolerance=True)
+    for idx, it in enumerate(program.items):
+        if isinstance(it, Run):
+            raws, info = _fit_run_raw(it, settings)
+            info["item"] = idx
+            runs_info.append(info)
+            for raw in raws:
+                path = raw.build(prev_end)
+                items.append(path)
+                prev_end = path.end
+            if it.kind == "rapid":
+                totals["rapid_moves"] += len(raws)
+            else:
+                totals["nodes_in"] += info["nodes_in"]
+                totals["segments_out"] += info["segments_out"]
+                totals["feed_paths"] += len(raws)
+                totals["max_node_dev_mm"] = max(totals["max_node_dev_mm"], info["max_node_dev_mm"])
+                totals["max_node_dev_deg"] = max(totals["max_node_dev_deg"], info["max_node_dev_deg"])
+                totals["within_tolerance"] &= info["within_tolerance"]
+        elif isinstance(it, (Dwell, Stop)):
+            items.append(it)
+            prev_end = None
+        else:  # pragma: no cover - the item type is closed
+            raise TypeError(type(it))
+    stats = dict(totals)
+    stats["segments_per_node"] = (totals["segments_out"] / totals["nodes_in"]) if totals["nodes_in"] else 0.0
+    stats["tol_mm"] = settings.tol_mm
+    stats["tol_deg"] = settings.tol_deg
+    stats["corner_deg"] = settings.corner_deg
+    stats["tol_mode"] = settings.tol_mode
+    stats["method"] = settings.method
+    stats["runs"] = runs_info
+    return FitResult(program=program, items=tuple(items), stats=stats)
+
+
+def fit_run(run: Run, settings: FitSettings | None = None) -> list[Path]:
+    """Fit one run: a list of paths, planned rest to rest, each starting where the last ended."""
+    raws, _ = _fit_run_raw(run, settings or FitSettings())
+    out = []
+    prev = None
+    for raw in raws:
+        p = raw.build(prev)
+        out.append(p)
+        prev = p.end
+    return out
+
+
+def _weights(lin: np.ndarray, rotary: bool) -> np.ndarray:
+    w = lin.astype(float)
+    return (1.0 - w) if rotary else w
+
+
+def _fit_run_raw(run: Run, settings: FitSettings):
+    lin = np.array([a in "XYZUVW" for a in run.axes], dtype=bool)
+    info = dict(kind=run.kind, first_line=int(run.line[0]) if run.n_nodes else 0,
+                last_line=int(run.line[-1]) if run.n_nodes else 0, nodes_in=0, segments_out=0,
+                paths=0, methods=[], max_node_dev_mm=0.0, max_node_dev_deg=0.0,
+                within_tolerance=True)
+    if run.kind == "rapid":
+        return _rapid_raws(run, lin), info
+    pr = prepare_run(run, settings)
+    info["nodes_in"] = int(run.n_nodes)
+    raws = []
+    for sub in split_run(pr, settings):
+        raw, meth, dmm, ddeg, ok = _fit_sub(pr, sub, settings)
+        raws.append(raw)
+        info["methods"].append(meth)
+        info["max_node_dev_mm"] = max(info["max_node_dev_mm"], dmm)
+        info["max_node_dev_deg"] = max(info["max_node_dev_deg"], ddeg)
+        info["within_tolerance"] &= bool(ok)
+        info["segments_out"] += int(raw.coef.shape[0])
+    info["paths"] = len(raws)
+    info["methods"] = sorted(set(info["methods"]))
+    return raws, info
+
+
+def _rapid_raws(run: Run, lin: np.ndarray) -> list[_Raw]:
+    out = []
+    nodes = np.asarray(run.nodes, dtype=float)
+    for j in range(1, nodes.shape[0]):
+        d = nodes[j] - nodes[j - 1]
+        ll = float(np.sqrt((d[lin] ** 2).sum()))
+        rotary = not ll > 0
+        length = ll if not rotary else float(np.sqrt((d[~lin] ** 2).sum()))
+        if not length > 0:
+            continue
+        pf = straight_piece(nodes[j - 1], nodes[j], length, int(run.line[j]), np.inf)
+        out.append(_Raw(run.axes, pf.breaks, pf.coef, pf.line, pf.feed_mm_s,
+                        _weights(lin, rotary), rapid=True))
+    return out
+
+
+def _fit_sub(pr: PreparedRun, sub: SubRun, settings: FitSettings):
+    """Fit one sub-run: (raw path, method name, max dev mm, max dev deg, ok)."""
+    a, b = sub.i0, sub.i1
+    nodes = pr.nodes[a:b + 1]
+    line = pr.line[a:b + 1]
+    feed = pr.feed_mm_s[a:b + 1]
+    weights = _weights(pr.lin, sub.rotary)
+    metric = weights > 0
+    if sub.kind == "straight" or (b - a == 1 and not sub.curves):
+        chord = (nodes[-1] - nodes[0]) * pr.scale
+        length = float(np.linalg.norm(chord))
+        # collinear G61 chain: the straight line from the first to the last node
+        pf = straight_piece(nodes[0], nodes[-1], length, int(line[-1]), float(feed[1:].min()))
+        dev = _line_dev(nodes, pr.lin)
+        raw = _Raw(pr.axes, pf.breaks, pf.coef, pf.line, pf.feed_mm_s, weights)
+        return raw, "line", dev, 0.0, True
+    tol = fit_tolerance(pr.tol_mm[a:b + 1])
+    moving = np.ptp(nodes, axis=0) > 0
+    if (not sub.curves and settings.method in ("auto", "planar") and int(moving.sum()) == 2
+            and bool(np.all(pr.lin[moving]) or not np.any(pr.lin[moving]))):
+        from .planar import breaks_of, fit_planar
+
+        plane = tuple(int(i) for i in np.nonzero(moving)[0])
+        got = fit_planar(nodes, plane, tol, pr.axes, line, feed, weights)
+        if got is not None:
+            planar, coef, seg_line, seg_feed, dev = got
+            raw = _Raw(pr.axes, breaks_of(planar), coef, seg_line, seg_feed, weights, planar=planar)
+            return raw, "planar-" + pr.axes[plane[0]] + pr.axes[plane[1]], dev, 0.0, True
+    pieces, dmm, ddeg, ok = _fit_sections(pr, sub, tol, metric, settings)
+    breaks = [np.zeros(1)]
+    off = 0.0
+    for pf in pieces:
+        breaks.append(pf.breaks[1:] + off)
+        off += pf.breaks[-1]
+    raw = _Raw(pr.axes, np.concatenate(breaks), np.concatenate([p.coef for p in pieces]),
+               np.concatenate([p.line for p in pieces]), np.concatenate([p.feed_mm_s for p in pieces]),
+               weights)
+    return raw, ("curves+nodes" if sub.curves else "nodes"), dmm, ddeg, ok
+
+
+def _line_dev(nodes: np.ndarray, lin: np.ndarray) -> float:
+    """Largest distance (linear axes) of the nodes from the chord first -> last."""
+    p = nodes[:, lin]
+    if p.shape[0] <= 2 or p.shape[1] == 0:
+        return 0.0
+    d = p[-1] - p[0]
+    L2 = float(d @ d)
+    if L2 == 0:
+        return float(np.linalg.norm(p - p[0], axis=1).max())
+    t = np.clip((p - p[0]) @ d / L2, 0, 1)
+    return float(np.linalg.norm(p - (p[0] + t[:, None] * d), axis=1).max())
+
+
+def _fit_sections(pr: PreparedRun, sub: SubRun, tol: np.ndarray, metric: np.ndarray,
+                  settings: FitSettings):
+    """Curves and the polylines between them, joined G2 (see module docstring)."""
+    from .curves import CurveEval, end_states, fit_curve
+
+    a, b = sub.i0, sub.i1
+    secs = []  # ("poly", i, j) or ("curve", CurvePiece)
+    pos = a
+    for cp in sub.curves:
+        if cp.first > pos:
+            secs.append(("poly", pos, cp.first))
+        secs.append(("curve", cp))
+        pos = cp.last
+    if pos < b:
+        secs.append(("poly", pos, b))
+    # exact end states of the curves, then the states imposed at each junction
+    states = [end_states(CurveEval(s[1].curve), pr.scale) if s[0] == "curve" else None for s in secs]
+    start_of = [None] * len(secs)
+    end_of = [None] * len(secs)
+    for k in range(len(secs) - 1):
+        ca, cb = secs[k][0] == "curve", secs[k + 1][0] == "curve"
+        if ca and cb:
+            (t1, k1), (t2, k2) = states[k][1], states[k + 1][0]
+            T = t1 + t2
+            T = T / np.linalg.norm(T)
+            K = 0.5 * (k1 + k2)
+            K = K - (K @ T) * T
+            end_of[k] = (T, K)
+            start_of[k + 1] = (T, K)
+        elif ca:
+            T, K = states[k][1]
+            start_of[k + 1] = (T, K)
+        elif cb:
+            T, K = states[k + 1][0]
+            end_of[k] = (T, K)
+    pieces = []
+    dmm = ddeg = 0.0
+    ok = True
+    tol_ref = settings.tol_mm
+    for k, s in enumerate(secs):
+        if s[0] == "curve":
+            cp = s[1]
+            t_c = float(tol[cp.last - a])
+            pf = fit_curve(cp.curve, pr.scale, pr.lin, t_c, settings.tol_deg, cp.curve.line,
+                           float(pr.feed_mm_s[cp.last]),
+                           start=start_of[k], end=end_of[k])
+        else:
+            i, j = s[1], s[2]
+            st = EndState(*start_of[k]) if start_of[k] is not None else None
+            en = EndState(*end_of[k]) if end_of[k] is not None else None
+            pf = fit_polyline(pr.nodes[i:j + 1], tol[i - a:j - a + 1], settings.tol_deg, pr.lin,
+                              metric, pr.line[i:j + 1], pr.feed_mm_s[i:j + 1], tol_ref, st, en)
+        pieces.append(pf)
+        dmm = max(dmm, pf.max_dev_mm)
+        ddeg = max(ddeg, pf.max_dev_deg)
+        ok &= pf.ok
+    return pieces, dmm, ddeg, ok

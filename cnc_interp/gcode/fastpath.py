@@ -1,0 +1,136 @@
+"""Bulk tokeniser for plain CAM lines (``N123 G1 X1.234 Y-5.6 F1200``), in numpy.
+
+A *plain* line holds only word letters (not E, O), digits, ``. + -`` and blanks,
+and every letter is followed directly by a number (optionally signed, at most one
+dot), with ``N`` only as the line's first character and unsigned. Such a line needs no parameters, expressions, comments or O-words, so
+its words are computed for a whole chunk of lines at once:
+
+* :func:`scan` finds, for the whole file, where lines start and which lines are
+  *special* (contain any other character: comments, ``#``, ``[``, O-words, ``%``,
+  ``/``, lower-case ``e``/``o``, control or non-ASCII bytes) or are too long;
+* :func:`tokenize_chunk` tokenises a range of lines, sends every line that breaks
+  the plain grammar to the slow path (:mod:`.lexer`, which then reports the error
+  or handles the unusual spelling), and returns per-line slices of ready
+  ``(LETTER, value, col)`` tuples.
+
+Values are exact: numbers are converted by ``np.fromstring`` (Python's correctly
+rounded string-to-double), the same float as ``float(text)`` on the slow path; a
+number that overflows to infinity sends its line to the slow path, which reports it.
+"""
+
+from __future__ import annotations
+
+from ..constants import MAX_LINE_CHARS
+
+#: bytes a plain line may contain (besides the newline)
+PLAIN_BYTES = b"ABCDFGHIJKLMNPQRSTUVWXYZabcdfghijklmnpqrstuvwxyz0123456789.+- \t\r"
+
+
+def scan(b: bytes):
+    """Line starts and special-line mask of the whole text ``b`` (ends with b'\\n').
+
+    Returns ``(line_starts, special)``: ``line_starts`` (n_lines + 1,) int64 byte
+    offsets (the last is ``len(b)``) and ``special`` (n_lines,) bool.
+    """
+    import numpy as np
+
+    a = np.frombuffer(b, np.uint8)
+    nl = np.flatnonzero(a == 10)
+    line_starts = np.empty(len(nl) + 1, np.int64)
+    line_starts[0] = 0
+    line_starts[1:] = nl + 1
+    special = np.zeros(len(nl), bool)
+    left = np.frombuffer(b.translate(None, PLAIN_BYTES), np.uint8)
+    if len(left) > len(nl):
+        lnl = left == 10
+        lid = np.cumsum(lnl) - lnl
+        special[lid[~lnl]] = True
+    special |= np.diff(line_starts) > MAX_LINE_CHARS
+    return line_starts, special
+
+
+def tokenize_chunk(b: bytes, text: str, line_starts, special, l0: int, l1: int):
+    """Tokenise lines ``l0 .. l1-1`` (0-based) of ``b`` / ``text``.
+
+    Returns ``(slow, offs, tuples, lines)``: ``slow`` (n,) bool array (True: use
+    the slow path), ``offs`` (n+1,) int array, the words of plain line j being
+    ``tuples[offs[j]:offs[j+1]]`` (N words dropped), and ``lines`` the raw line
+    strings. Callers building many objects should pause the cyclic GC around it.
+    """
+    import numpy as np
+
+    s0 = int(line_starts[l0])
+    s1 = int(line_starts[l1])
+    nlines = l1 - l0
+    lines = text[s0:s1].split("\n")
+    starts = line_starts[l0:l1] - s0  # local start of each line
+    nl_pos = line_starts[l0 + 1 : l1 + 1] - 1 - s0  # local position of each newline
+    lens = np.diff(line_starts[l0 : l1 + 1])
+    a = np.frombuffer(b, np.uint8, count=s1 - s0, offset=s0).copy()
+
+    def blank(mask) -> None:
+        a[np.repeat(mask, lens)] = 32
+        a[nl_pos] = 10
+
+    sp = special[l0:l1]
+    if sp.any():
+        blank(sp)
+
+    def prev(x, first):
+        return np.concatenate(([first], x[:-1]))
+
+    def nxt(x):
+        return np.concatenate((x[1:], [False]))
+
+    letter = a >= 65  # after blanking only word letters are >= 65
+    digit = (a >= 48) & (a <= 57)
+    dot = a == 46
+    numch = digit | dot
+    sign = (a == 43) | (a == 45)
+    is_n = (a == 78) | (a == 110)
+    p_letter = prev(letter, False)
+    n_numch = nxt(numch)
+    viol = sign & ~(p_letter & n_numch)  # a sign sits between a letter and a number
+    viol |= numch & ~(p_letter | prev(sign, False) | prev(numch, False))  # number after letter
+    viol |= letter & ~(nxt(sign) | n_numch)  # letter before a number
+    viol |= is_n & ~(prev(a == 10, True) & n_numch)  # N first on the line, unsigned
+    vpos = [np.flatnonzero(viol)]
+    dots = np.flatnonzero(dot)
+    breaks = np.flatnonzero(~numch)  # the chunk ends with a newline, so every run ends
+    if len(dots) > 1:  # two dots in one number
+        run_end = breaks[np.searchsorted(breaks, dots[:-1])]
+        vpos.append(dots[:-1][dots[1:] < run_end])
+    vpos = np.concatenate(vpos)
+    slow = sp.copy()
+    if len(vpos):
+        slow[np.searchsorted(nl_pos, vpos)] = True
+        blank(slow & ~sp)  # now every letter has exactly one number and no number is stray
+
+    P = np.flatnonzero(a >= 65)
+    vals = np.fromstring(a.tobytes().translate(_TO_SPACE), sep=" ")
+    if len(vals) != len(P):  # cannot happen after the checks above; stay correct anyway
+        return np.ones(nlines, bool), np.zeros(nlines + 1, np.int64), [], lines
+    tok_line = np.searchsorted(nl_pos, P)
+    bad = ~np.isfinite(vals)  # overflowing numbers: the slow path reports them
+    is_nt = is_n[P]
+    if len(dots) and is_nt.any():  # N10.5: line numbers are integers
+        pn = P[is_nt]
+        run_end = breaks[np.searchsorted(breaks, pn + 1)]
+        bad[np.flatnonzero(is_nt)[np.searchsorted(dots, run_end) > np.searchsorted(dots, pn)]] = True
+    if bad.any():
+        slow[tok_line[bad]] = True
+    keep = ~is_nt & ~slow[tok_line]
+    P = P[keep]
+    tok_line = tok_line[keep]
+    cols = P - starts[tok_line] + 1
+    letters = (a[P] & 0xDF).tobytes().decode("ascii")
+    tuples = list(zip(letters, vals[keep].tolist(), cols.tolist()))
+    counts = np.bincount(tok_line, minlength=nlines)
+    offs = np.concatenate(([0], np.cumsum(counts)))
+    return slow, offs, tuples, lines
+
+
+_LETTERS = b"ABCDFGHIJKLMNPQRSTUVWXYZabcdfghijklmnpqrstuvwxyz"
+#: letters and line breaks become blanks, leaving only the numbers for np.fromstring
+_TO_SPACE = bytes.maketrans(_LETTERS + b"\n\t\r", b" " * (len(_LETTERS) + 3))
+

@@ -1,0 +1,74 @@
+"""Every program of the shared corpus parses, or ends in a clean, located CncInterpError.
+
+The corpus lives outside the repository (``../shared/corpus``, see its README). The
+table below lists the programs known to use a construct this reader rejects on
+purpose; every other program must parse. A traceback (any other exception) fails.
+"""
+
+from __future__ import annotations
+
+import glob
+import os
+
+import numpy as np
+import pytest
+
+from cnc_interp.errors import CncInterpError
+from cnc_interp.gcode import Run, read_program
+
+CORPUS = os.path.normpath(os.path.join(os.path.dirname(__file__), "..", "..", "shared", "corpus"))
+FILES = sorted(glob.glob(os.path.join(CORPUS, "**", "*.ngc"), recursive=True))
+
+#: program (relative to the corpus) -> text its error message must contain
+EXPECTED_ERRORS = {
+    "linuxcnc/arc-feed/full_xy.ngc": "coordinate system rotation",
+    "linuxcnc/arc-feed/full_xz.ngc": "coordinate system rotation",
+    "linuxcnc/arc-feed/full_yz.ngc": "coordinate system rotation",
+    "linuxcnc/violation_checks/sam_vel_violation.ngc": "coordinate system rotation",
+    "linuxcnc/examples/cone.ngc": "G43.1",
+    "linuxcnc/examples/hole-circle.ngc": "polar coordinates",
+    "linuxcnc/quick-tests/sam-circle_lines.ngc": "polar coordinates",
+    "linuxcnc/nurbs-g5/Curva_Stella #1=1_G5.ngc": "unknown G-code G2.2",
+    "linuxcnc/performance/Cereal.ngc": "G43 tool length offset",
+    "linuxcnc/performance/Pasta.ngc": "G43 tool length offset",
+    "linuxcnc/violation_checks/sam_violation2_verbatim.ngc": "G43 tool length offset",
+    "linuxcnc/violation_checks/sam_zero_length_move.ngc": "G43 tool length offset",
+    "linuxcnc/violation_checks/z_jump_tangent_improvement.ngc": "G43 tool length offset",
+    "linuxcnc/violation_checks/tap-discrimant-error-orig.ngc": "G7 lathe diameter mode",
+    "linuxcnc/violation_checks/spreadsheeterrors.ngc": "not on the circle",
+}
+
+
+def _rel(path: str) -> str:
+    return os.path.relpath(path, CORPUS).replace(os.sep, "/")
+
+
+@pytest.mark.skipif(not FILES, reason=f"corpus not found at {CORPUS}")
+def test_corpus_is_there():
+    assert len(FILES) >= 100
+
+
+@pytest.mark.parametrize("path", FILES, ids=[_rel(f) for f in FILES])
+def test_corpus_program(path):
+    rel = _rel(path)
+    with open(path, "rb") as fh:
+        data = fh.read()
+    expected = EXPECTED_ERRORS.get(rel)
+    try:
+        prog = read_program(data, source=rel)
+    except CncInterpError as exc:
+        assert expected is not None, f"unexpected error: {exc.format()}"
+        assert expected in exc.message, exc.format()
+        loc = exc.location
+        assert loc.file == rel and loc.line > 0 and loc.col > 0
+        return
+    assert expected is None, f"expected an error containing {expected!r}"
+    for it in prog.items:
+        if isinstance(it, Run):
+            assert it.nodes.shape[1] == len(prog.axes)
+            assert np.all(np.isfinite(it.nodes))
+            assert np.all(it.feed_mm_s > 0)
+            assert it.n_nodes >= 2
+            assert it.line.shape == (it.n_nodes,)
+            for cp in it.curves:
+                assert 0 <= cp.first < cp.last < it.n_nodes
