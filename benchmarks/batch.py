@@ -1,6 +1,7 @@
 """Batch throughput: programs per minute over the LinuxCNC corpus.
 
 Usage: python benchmarks/batch.py [CORPUS_DIR] [--machine SPEC] [--timeout S] [--skip-dask]
+                                  [--report FILE.json]
 
 Runs `cnc-interp batch`'s engine twice over every program under CORPUS_DIR
 (default ../shared/corpus/linuxcnc): with 2 local worker processes, and on a
@@ -39,12 +40,17 @@ def main() -> None:
     ap.add_argument("--machine", default=DEFAULT_MACHINE)
     ap.add_argument("--timeout", type=float, default=120.0)
     ap.add_argument("--skip-dask", action="store_true")
+    ap.add_argument("--report", default=None, help="also write the local run's JSON report here")
     args = ap.parse_args()
 
     base = dict(paths=(args.corpus,), machine_spec=args.machine, jobs=2, timeout_s=args.timeout,
                 quiet=True)
     local = build_report(BatchOptions(**base))
     print(_line("local, 2 workers:", local))
+    if args.report:
+        from cnc_interp.batch import write_report
+
+        write_report(local, args.report)
     if args.skip_dask:
         return
     from distributed import LocalCluster

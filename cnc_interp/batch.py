@@ -11,7 +11,8 @@ Report (``--report FILE.json`` / ``.csv``, or ``--json`` on stdout): per program
 argument's name), ``status`` (ok / violation / error / timeout / crash), message
 and line of an error, lines, nodes, segments, path length (mm), cycle time (s),
 worst limit ratio, max fit deviation (mm), planning wall time (s) and the worker's
-peak memory (MB). Wall time and memory vary run to run; everything else is
+peak memory (MB), and the number of Python warnings the stages raised (with the
+first one; they are counted, not printed). Wall time and memory vary run to run; everything else is
 deterministic, so local and Dask runs give the same report apart from those.
 
 Exit status: 1 when there is a regression — a program violating a limit, or,
@@ -38,8 +39,8 @@ GCODE_SUFFIXES = (".ngc", ".nc", ".gcode", ".gc", ".g", ".tap", ".cnc")
 REPORT_VERSION = 1
 #: result fields, in report / CSV column order
 FIELDS = ("key", "status", "message", "error_line", "lines", "nodes", "segments",
-          "path_length_mm", "cycle_time_s", "samples", "worst_ratio", "max_fit_dev_mm", "wall_s",
-          "peak_mem_mb")
+          "path_length_mm", "cycle_time_s", "samples", "worst_ratio", "max_fit_dev_mm", "warnings",
+          "first_warning", "wall_s", "peak_mem_mb")
 #: fields that differ from run to run (excluded when comparing runs for identity)
 VOLATILE_FIELDS = ("wall_s", "peak_mem_mb")
 #: how long to try to reach a Dask scheduler before giving up (s)
@@ -301,6 +302,8 @@ def format_table(report: dict) -> str:
                     f"{_fmt(r['wall_s'], '.2f'):>7} {_fmt(r['peak_mem_mb'], '.0f'):>7}  {r['key']}")
         if r["message"] and r["status"] != "ok":
             rows.append(f"{'':<9} {r['message']}")
+        if r.get("warnings"):
+            rows.append(f"{'':<9} {r['warnings']} warning(s), first: {r.get('first_warning')}")
     s = report["summary"]
     counts = ", ".join(f"{n} {k}" for k, n in s["status_counts"].items())
     ppm = s["programs_per_minute"]

@@ -28,6 +28,22 @@ _READ_CHUNK = 1 << 16
 
 
 def run_job(job: dict) -> dict:
+    """``_run_job`` with Python warnings counted into the result instead of printed
+    (a batch's standard error is for its progress bar and its own errors)."""
+    import warnings
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = _run_job(job)
+    result["warnings"] = len(caught)
+    if caught:
+        first = caught[0]
+        result["first_warning"] = (f"{first.category.__name__}: {first.message} "
+                                   f"({os.path.basename(first.filename)}:{first.lineno})")
+    return result
+
+
+def _run_job(job: dict) -> dict:
     """Run one program through parse, fit, plan and verify; never raises for bad input.
 
     Returns the per-program result dict of ``pipeline.process_program`` with

@@ -55,12 +55,14 @@ ARC_MIN_SEGMENTS = 4
 ARC_MAX_SEGMENT_DEG = 5.0
 #: every NURBS/spline knot span gets at least this many node segments
 SPLINE_MIN_SEGMENTS_PER_SPAN = 8
-#: refinement passes when sampling a spline to CURVE_CHORD_TOL_MM
-SPLINE_REFINE_PASSES = 16
+#: most bisection passes when sampling a spline to CURVE_CHORD_TOL_MM (CURVE_MAX_NODES bounds the work)
+SPLINE_REFINE_PASSES = 48
 #: G73/G83 peck: rapid back down to this far above the previous depth (LinuxCNC: 0.010 in)
 PECK_CLEARANCE_MM = 0.254
 #: largest G2/G3 P (full turns) accepted; more is treated as a runaway expression
 ARC_MAX_TURNS = 10_000
+#: most nodes one arc or spline may be sampled into (a bigger one is an error, not a hang)
+CURVE_MAX_NODES = 1_000_000
 
 # --- fit ---------------------------------------------------------------------
 #: default maximum permissible error of the fit (mm); `--tol` overrides

@@ -219,7 +219,12 @@ def plan_part(part: str, machine_spec: str | None = None, planner: str = "vpop",
     fitted = fit_loaded(program, fit_settings)
     t2 = time.perf_counter()
     timings["fit"] = t2 - t1
-    traj = plan_program(fitted, machine, settings, progress=progress)
+    try:
+        traj = plan_program(fitted, machine, settings, progress=progress)
+    except PlanError as exc:
+        if exc.location.file == "<input>":  # name the part program
+            raise PlanError(exc.message, _loc(program.source)) from None
+        raise
     t3 = time.perf_counter()
     timings["plan"] = t3 - t2
     report = verify(traj, machine)

@@ -36,21 +36,30 @@ def distance_to_path(path: Path, points: np.ndarray, axes_mask: np.ndarray | Non
     q = _eval(path.coef[seg], t, 0)[:, mask]
     tree = cKDTree(q)
     _, idx = tree.query(points[:, mask])
-    k = seg[idx]
-    tt = t[idx].copy()
-    c = path.coef[k][:, :, mask]
-    for _ in range(12):
-        p0 = _eval(c, tt, 0)
-        p1 = _eval(c, tt, 1)
-        p2 = _eval(c, tt, 2)
-        r = p0 - points[:, mask]
-        g = (r * p1).sum(axis=1)
-        hh = (p1 * p1).sum(axis=1) + (r * p2).sum(axis=1)
-        step = np.where(hh > 0, g / np.where(hh > 0, hh, 1.0), 0.0)
-        tt = np.clip(tt - step, 0.0, h[k])
-    d_newton = np.linalg.norm(_eval(c, tt, 0) - points[:, mask], axis=1)
-    d_sample = np.linalg.norm(q[idx] - points[:, mask], axis=1)
-    return np.minimum(d_newton, d_sample)
+    k0 = seg[idx]
+    best = np.linalg.norm(q[idx] - points[:, mask], axis=1)
+    # Newton on the nearest sample's segment and on both neighbours (the nearest point
+    # may lie just across a break)
+    for dk, t_start in ((0, None), (-1, "end"), (1, "start")):
+        k = np.clip(k0 + dk, 0, path.n_seg - 1)
+        if t_start is None:
+            tt = t[idx].copy()
+        elif t_start == "end":
+            tt = h[k].copy()
+        else:
+            tt = np.zeros(k.size)
+        c = path.coef[k][:, :, mask]
+        for _ in range(16):
+            p0 = _eval(c, tt, 0)
+            p1 = _eval(c, tt, 1)
+            p2 = _eval(c, tt, 2)
+            r = p0 - points[:, mask]
+            g = (r * p1).sum(axis=1)
+            hh = (p1 * p1).sum(axis=1) + (r * p2).sum(axis=1)
+            hh = np.where(hh > 0, hh, (p1 * p1).sum(axis=1) + 1e-300)
+            tt = np.clip(tt - g / hh, 0.0, h[k])
+        best = np.minimum(best, np.linalg.norm(_eval(c, tt, 0) - points[:, mask], axis=1))
+    return best
 
 
 def continuity(path: Path) -> tuple[float, float, float]:

@@ -79,6 +79,34 @@ def test_channels_and_schemas(written):
     assert sum(counts.values()) == n == summary.statistics.message_count
 
 
+def _foxglove_fields(schema: dict, path: str = "") -> list[str]:
+    """Check a schema the way Foxglove's JSON-schema reader does (mcap-support
+    parseJsonSchema): objects all the way down, one type name per field, from the types
+    it knows. Returns the field paths."""
+    assert schema["type"] == "object", path
+    fields = []
+    for name, field in schema["properties"].items():
+        kind = field["type"]
+        assert kind in ("boolean", "string", "number", "integer", "object", "array"), \
+            f"{path}.{name}: Foxglove cannot read type {kind!r}"
+        if kind == "object":
+            fields += _foxglove_fields(field, f"{path}.{name}")
+        else:
+            fields.append(f"{path}.{name}")
+    return fields
+
+
+def test_schemas_readable_by_foxglove(written):
+    _, _, path, _, _ = written
+    summary, _, _ = _read_all(path)
+    paths = {}
+    for ch in summary.channels.values():
+        paths[ch.topic] = _foxglove_fields(_strict_json(summary.schemas[ch.schema_id].data))
+    assert ".X" in paths["/setpoints"] and ".feed" in paths["/setpoints"]
+    assert ".j.C" in paths["/limits"] and ".worst" in paths["/limits"]
+    assert ".feed_max" in paths["/segments"]
+
+
 def test_setpoints_match_csv(written):
     traj, _, path, csv_path, _ = written
     _, _, msgs = _read_all(path)

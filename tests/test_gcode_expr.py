@@ -211,3 +211,10 @@ def test_param_store_frames():
     assert p.get(1) == 1.0 and p.get("loc") == 2.0 and p.get(31) == 32.0
     with pytest.raises(GCodeError, match="#<zz>"):
         p.get("zz")
+
+
+def test_ini_and_hal_parameters_unsupported():
+    from cnc_interp.errors import UnsupportedError
+
+    with pytest.raises(UnsupportedError, match="INI/HAL"):
+        run("G1 X#<_ini[axis_x]max_velocity>\n")

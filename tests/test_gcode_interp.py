@@ -32,6 +32,8 @@ def test_rapid_then_feed_runs_start_where_the_machine_is():
     assert_allclose(r1.feed_mm_s, [10.0, 10.0, 10.0])  # 600 mm/min
     assert np.all(np.isinf(r0.feed_mm_s))
     assert list(r1.line) == [3, 3, 4]
+    assert list(r1.col) == [1, 1, 1]
+    assert list(prog("G21\nF60 Y0 G1 X1\n   Y2\n").runs[0].col) == [8, 8, 4]
     assert isinstance(p.items[-1], Stop) and p.items[-1].code == "M2"
     assert p.axes == "XYZ"
 
@@ -221,6 +223,18 @@ def test_g28_home_and_g28_1():
     assert_allclose(all_nodes(p)[-2:], [[5, 5, 10], [5, 5, 0]])
 
 
+def test_g30_uses_its_own_home_and_m60_stops():
+    p = prog("#5181=7 #5182=8 #5183=9\nG0 X1 Y1 Z1\nG30\nM60\n")
+    assert_allclose(p.metadata["final_position"], [7, 8, 9])
+    assert isinstance(p.items[-1], Stop) and p.items[-1].code == "M60"
+    assert p.runs[-1].end_reason == "stop"
+
+
+def test_tool_and_coordinate_system_parameters():
+    p = prog("T7 M6\nG55\nG0 X#5400 Y#5220\n")
+    assert_allclose(p.metadata["final_position"], [7, 2, 0])
+
+
 def test_parameters_from_the_language_layer():
     p = prog("#1=5\n#<depth>=-2\nG1 X[#1*2] Z#<depth> F[60*2]\n")
     assert_allclose(p.runs[0].nodes[-1], [10, 0, -2])
@@ -235,3 +249,87 @@ def test_position_and_offset_parameters_are_readable():
 def test_units_switch_keeps_offsets_physical():
     p = prog("G21 G10 L2 P1 X25.4\nG20\nG0 X1\n")
     assert_allclose(p.metadata["final_position"], [50.8, 0, 0])
+
+
+@pytest.mark.parametrize("text,letter", [
+    ("G1 X1 I5 F60\n", "I"), ("G0 X1 R2\n", "R"), ("G1 X1 Q1 F60\n", "Q"), ("G0 X1 L2\n", "L"),
+    ("G0 X1 P1\n", "P"), ("G1 X1 D1 F60\n", "D"), ("G0 X1 H1\n", "H"),
+])
+def test_words_no_code_uses_are_errors(text, letter):
+    with pytest.raises(GCodeError, match=f"{letter} word with no code") as ei:
+        prog(text)
+    assert ei.value.location.col == text.index(letter) + 1
+
+
+def _random_program(rng) -> str:
+    lines = ["G21 G90 G17", "G0 X0 Y0 Z5", "G1 Z0 F300"]
+    x = y = 0.0
+    for k in range(300):
+        r = rng.random()
+        if r < 0.15:
+            # a tangent-ish arc with an exactly representable centre
+            i, j = rng.uniform(-3, 3), rng.uniform(-3, 3)
+            cx, cy = x + i, y + j
+            ang = rng.uniform(-3, 3)
+            rad = math.hypot(i, j)
+            a0 = math.atan2(y - cy, x - cx)
+            ex, ey = cx + rad * math.cos(a0 + ang), cy + rad * math.sin(a0 + ang)
+            code = "G3" if rng.random() < 0.5 else "G2"
+            lines.append(f"{code} X{ex!r} Y{ey!r} I{i!r} J{j!r}" + (" F500" if k % 7 == 0 else ""))
+            x, y = ex, ey
+            lines.append("G1")
+        elif r < 0.2:
+            lines.append(f"G0 Z{rng.uniform(1, 5)!r}")
+            lines.append(f"G1 Z0 F{rng.choice([100, 200])}")
+        else:
+            x += rng.uniform(-1, 1)
+            y += rng.uniform(-1, 1)
+            z = rng.uniform(-1, 0) if rng.random() < 0.3 else None
+            w = f"X{x!r} Y{y!r}" + (f" Z{z!r}" if z is not None else "")
+            lines.append(("G1 " if rng.random() < 0.3 else "") + w)
+        if rng.random() < 0.05:
+            lines.append(f"G91 G1 X0.5\nG90")
+            x += 0.5
+    return "\n".join(lines) + "\nM2\n"
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_fast_and_general_paths_agree(seed):
+    """Adding a no-op G94 to every block sends it through the general path: same result."""
+    import random
+
+    text = _random_program(random.Random(seed))
+    a = prog(text)
+    slow = "\n".join((ln + " G94") if ln.strip() and not ln.startswith("M2") else ln
+                     for ln in text.split("\n"))
+    b = prog(slow)
+    assert len(a.items) == len(b.items)
+    for ra, rb_ in zip(a.runs, b.runs):
+        assert ra.kind == rb_.kind and ra.end_reason == rb_.end_reason
+        assert_allclose(ra.nodes, rb_.nodes, rtol=0, atol=0)
+        assert_allclose(ra.feed_mm_s, rb_.feed_mm_s)
+        assert list(ra.line) == list(rb_.line)
+        assert len(ra.curves) == len(rb_.curves)
+    assert sum(len(r.curves) for r in a.runs) > 10
+    assert np.all(np.isfinite(all_nodes(a)))
+
+
+def test_coordinate_system_rotation_g10_l2_r():
+    # G54 rotated 90 deg about its origin at X10: program +X is machine +Y
+    p = prog("G10 L2 P1 X10 R90\nG0 X1 Y0\nG1 X1 Y2 F60\nG91 X1\nG90\n#1=#5420\n#2=#5421\n"
+             "G0 X#1 Y[#2+1]\n")
+    assert_allclose(p.runs[0].nodes[-1], [10, 1, 0], atol=1e-12)
+    assert_allclose(p.runs[1].nodes[1:], [[8, 1, 0], [8, 2, 0]], atol=1e-12)
+    assert_allclose(p.metadata["final_position"], [7, 2, 0], atol=1e-12)
+
+
+def test_rotation_with_arcs_and_g92():
+    p = prog("G10 L2 P1 R90\nG0 X1 Y0\nG3 X0 Y1 I-1 J0 F60\nG92 X0 Y0\nG0 X1\n")
+    arc = [cp.curve for r in p.runs for cp in r.curves][0]
+    assert_allclose(arc.center, [0, 0], atol=1e-12)
+    assert_allclose(arc.sweep_rad, math.pi / 2)
+    assert_allclose(arc.end, [-1, 0, 0], atol=1e-12)
+    # after G92 the current point reads 0,0; program +X is machine +Y
+    assert_allclose(p.metadata["final_position"], [-1, 1, 0], atol=1e-12)
+    with pytest.raises(UnsupportedError, match="rotated"):
+        prog("G10 L2 P1 R30\nG0 Z5\nG81 X1 Y1 Z-1 R1 F60\n")

@@ -274,3 +274,11 @@ def test_g5_cubic_and_g5_1_quadratic_beziers():
         prog("G1 X0 Y0 F60\nG5 P-1 Q2 X4 Y0\n")
     with pytest.raises(GCodeError, match="XY plane"):
         prog("G18 G1 X0 Y0 F60\nG5.1 I1 J1 X2 Y0\n")
+
+
+def test_huge_curves_are_errors_not_hangs():
+    with pytest.raises(GCodeError, match="too large"):
+        prog("G0 X1000000\nG3 I-1000000 J0 P9000 F60\n")
+    with pytest.raises(GCodeError, match="too large"):
+        prog("G0 X0\nF60 G5.2 P1 L3\nX1000000000000 Y1000000000000 P1\n"
+             "X-1000000000000 Y1000000000000 P0.000000001\nX0 Y1 P1000000000\nG5.3\n")

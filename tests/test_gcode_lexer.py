@@ -95,7 +95,7 @@ def test_percent_delimiters():
 
 
 def test_block_delete_switch():
-    src = "G0 X1\n/G0 X2\n  / G0 X3\n"
+    src = "G0 X1\n/G0 X2\n  / G0 X3 (MSG, skipped)\n"
     assert [b.line for b in blocks(src)] == [1]  # default: switch on, lines deleted
     assert [b.words[1][1] for b in blocks(src, block_delete=False)] == [1.0, 2.0, 3.0]
 
@@ -235,6 +235,19 @@ def test_fast_path_takes_plain_cam_lines():
     assert tuples[offs[2] : offs[3]] == [("X", 1.0, 1), ("Y", 2.0, 4)]
 
 
+def test_fast_path_sends_only_bad_lines_to_slow_path():
+    lines = ["G1 X1", "G1 X1.2.3", "G1 X2", "G1 X.", "N10.5 G1 X3", "N.5 X1", "G1 X4 (c)", "G1 X5"]
+    text = "\n".join(lines) + "\n"
+    b = text.encode()
+    ls, sp = scan(b)
+    slow, offs, tuples, _ = tokenize_chunk(b, text, ls, sp, 0, len(lines))
+    assert slow.tolist() == [False, True, False, True, False, True, True, False]
+    assert tuples[offs[4] : offs[5]] == [("G", 1.0, 7), ("X", 3.0, 10)]
+    assert tuples[offs[7] : offs[8]] == [("G", 1.0, 1), ("X", 5.0, 4)]
+    e = err("G1 X.\n")
+    assert e.location.col == 5
+
+
 def test_whole_program_mixed_paths_keep_order():
     rng = random.Random(7)
     good = []
@@ -253,3 +266,77 @@ def test_whole_program_mixed_paths_keep_order():
         if lc.words or lc.comment is not None:
             expect.append((i + 1, lc.words))
     assert [(b.line, b.words) for b in bs] == expect
+
+
+def test_random_text_never_crashes():
+    """Seeded fuzz: arbitrary G-code-like text reads or ends in a clean GCodeError."""
+    rng = random.Random(99)
+    alphabet = list("GXYZIJKFNOE#[]<>()=+-*/.;%0123456789 \t") + [
+        "o1 ", "if", "while", "endwhile", "endif", "sub", "endsub", "call", "repeat",
+        "endrepeat", "do", "break", "continue", "return", "else", "elseif", "#<a>", "#<_b>",
+        "sin", "atan", "mod", "eq", "and", "exists", "\x00", "\xe9", "\n", "\n", "\n",
+    ]
+    outcomes = {"ok": 0, "error": 0}
+    for _ in range(1500):
+        text = "".join(rng.choice(alphabet) for _ in range(rng.randint(1, 60)))
+        try:
+            blocks(text)
+            outcomes["ok"] += 1
+        except GCodeError as e:
+            assert e.location.line >= 1 and e.location.col >= 1, e.format()
+            assert "\n" not in e.format()
+            outcomes["error"] += 1
+    assert outcomes["ok"] > 10 and outcomes["error"] > 500
+
+
+_VALID = """%
+#<n> = 3 #1 = 0
+o<f> sub
+  o1 if [#1 GT 2]
+    o<f> return [#1 * 2]
+  o1 elseif [#1 EQ 1]
+    G1 X[SIN[30] + #1] Y#<_g>
+  o1 else
+    G2 X1 Y1 I0.5 J0 F100
+  o1 endif
+o<f> endsub
+#<_g> = 1.5
+o2 repeat [#<n>]
+  o<f> call [#1]
+  #1 = [#1 + 1]
+  o3 while [#1 LT 2]
+    #1 = [#1 + 1]
+    o3 continue
+  o3 endwhile
+o2 endrepeat
+o4 do
+  G0 Z[ATAN[1]/[2] MOD 7]
+o4 while [0]
+N100 G1 X1.5 Y-2 F1200 (done)
+%
+"""
+
+
+def test_mutated_programs_never_crash():
+    """Seeded fuzz: small mutations of a valid program read or end in a clean error."""
+    assert blocks(_VALID)
+    rng = random.Random(2024)
+    pieces = list("#[]<>()=+-*/.;%0123456789 \nGXo") + ["if", "endif", "while", "sub", "call", "\x00"]
+    errors = 0
+    for _ in range(1200):
+        text = list(_VALID)
+        for _ in range(rng.randint(1, 3)):
+            i = rng.randrange(len(text))
+            op = rng.random()
+            if op < 0.4:
+                del text[i]
+            elif op < 0.8:
+                text.insert(i, rng.choice(pieces))
+            else:
+                text[i] = rng.choice(pieces)
+        try:
+            blocks("".join(text))
+        except GCodeError as e:
+            assert e.location.line >= 1 and e.location.col >= 1, e.format()
+            errors += 1
+    assert errors > 200

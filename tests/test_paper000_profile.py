@@ -101,28 +101,67 @@ def test_stretch_to_period():
 
 
 def test_lookahead_random_sweep():
-    from cnc_interp.plan.paper000.lookahead import group_segments, lookahead
+    from cnc_interp.plan.paper000.lookahead import group_segments, lookahead, tangential_at
 
     rng = np.random.default_rng(7)
     for _ in range(30):
-        n = int(rng.integers(1, 40))
+        n, nj = int(rng.integers(1, 40)), 2
         length = rng.uniform(0.01, 20, n)
-        vcap = rng.uniform(1, 300, n)
-        a, j = rng.uniform(100, 5000, n), rng.uniform(1e3, 1e5, n)
+        g1 = rng.uniform(0.1, 1.0, (n, nj))
+        g2 = rng.uniform(0.0, 0.5, (n, nj))
+        g3 = rng.uniform(0.0, 0.3, (n, nj))
+        amax, jmax = rng.uniform(500, 5000, nj), rng.uniform(1e4, 1e5, nj)
+        # caps that leave room (as limits.feed_caps does with its shares)
+        vcap = np.minimum(rng.uniform(1, 300, n),
+                          np.sqrt(0.8 * amax / np.maximum(g2, 1e-9)).min(axis=1))
+        vcap = np.minimum(vcap, np.cbrt(0.5 * jmax / np.maximum(g3, 1e-9)).min(axis=1))
+        scale = rng.uniform(0.5, 1.0, n)
         wcap = np.r_[0.0, rng.uniform(0, 400, n - 1), 0.0]
-        w, c = lookahead(length, vcap, a, j, wcap)
+        first = np.arange(n + 1)  # one segment per piece
+        w, c, a, j = lookahead(first, length, vcap, g1, g2, g3, amax, jmax, 0.5, scale, wcap)
         assert w[0] == 0 and w[-1] == 0
         assert np.all(w <= wcap + 1e-12)
         assert np.all(w[1:-1] <= np.minimum(vcap[:-1], vcap[1:]) + 1e-12)
         assert np.all(c <= vcap + 1e-12) and np.all(c >= np.maximum(w[:-1], w[1:]))
         need = transition_distance(w[:-1], c, a, j) + transition_distance(c, w[1:], a, j)
         assert np.all(need <= length * (1 + 1e-12))
+        # the limits used at c are the tangential limits at c, and lower at a higher feed
+        for k in range(n):
+            assert (a[k], j[k]) == tangential_at(c[k], g1[k], g2[k], g3[k], amax, jmax, 0.5, scale[k])
+            hi = tangential_at(vcap[k], g1[k], g2[k], g3[k], amax, jmax, 0.5, scale[k])
+            assert hi[0] <= a[k] + 1e-9 and hi[1] <= j[k] + 1e-9
+        # two segments per piece: the piece's limits are its segments' smallest
+        pairs = np.r_[np.arange(0, n, 2), n]
+        plen = np.add.reduceat(length, pairs[:-1])
+        pcap = np.minimum.reduceat(vcap, pairs[:-1])
+        w2, c2, a2, j2 = lookahead(pairs, plen, pcap, g1, g2, g3, amax, jmax, 0.5, scale,
+                                   np.r_[wcap[pairs[:-1]], 0.0])
+        for k in range(pairs.size - 1):
+            per = [tangential_at(c2[k], g1[s], g2[s], g3[s], amax, jmax, 0.5, scale[s])
+                   for s in range(pairs[k], pairs[k + 1])]
+            assert_allclose([a2[k], j2[k]], np.min(per, axis=0))
+        need2 = transition_distance(w2[:-1], c2, a2, j2) + transition_distance(c2, w2[1:], a2, j2)
+        assert np.all(need2 <= plen * (1 + 1e-12))
         first = group_segments(vcap, wcap, 0.1)
         assert first[0] == 0 and np.all(np.diff(first) > 0)
-        # per piece the caps lie within the band
         for lo, hi in zip(first, np.r_[first[1:], n]):
             assert vcap[lo:hi].min() >= 0.9 * vcap[lo:hi].max() - 1e-12
-    assert math.isfinite(float(c.sum()))
+
+
+def test_numba_limits_match_numpy_limits():
+    from types import SimpleNamespace
+
+    from cnc_interp.plan.paper000.limits import tangential_limits
+    from cnc_interp.plan.paper000.lookahead import tangential_at
+
+    rng = np.random.default_rng(3)
+    g1, g2, g3 = rng.uniform(0.1, 1, (5, 3)), rng.uniform(0, 0.3, (5, 3)), rng.uniform(0, 0.1, (5, 3))
+    m = SimpleNamespace(amax=np.array([1000.0, 2000.0, 1500.0]), jmax=np.array([2e4, 5e4, 3e4]))
+    v = rng.uniform(1, 40, 5)
+    a_np, j_np = tangential_limits(SimpleNamespace(g1=g1, g2=g2, g3=g3), m, v)
+    for k in range(5):
+        a_nb, j_nb = tangential_at(v[k], g1[k], g2[k], g3[k], m.amax, m.jmax, 0.5, 1.0)
+        assert_allclose([a_nb, j_nb], [a_np[k], j_np[k]], rtol=1e-12)
 
 
 def test_pos_coef_matches_evaluate():

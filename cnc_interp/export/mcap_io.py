@@ -360,7 +360,9 @@ def _units(axes: str) -> str:
 
 
 def _number(desc: str, nullable: bool = False) -> dict:
-    return {"type": ["number", "null"] if nullable else "number", "description": desc}
+    # One type name only: Foxglove's JSON-schema reader rejects type lists such as
+    # ["number", "null"]. A null value still parses (and plots as a gap).
+    return {"type": "number", "description": desc + (" (null if not finite)" if nullable else "")}
 
 
 def _setpoint_schema(axes: str) -> dict:

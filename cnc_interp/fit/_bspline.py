@@ -244,10 +244,12 @@ def check(t, m, c, xc, ref, tol_lin, tol_rot, lin, metric, exp_speed, exp_lin_sp
     for j in range(P):
         e_lin = 0.0
         e_rot = 0.0
+        e_all = 0.0
         sp_all = 0.0
         sp_lin = 0.0
         for a in range(d):
             e = val[j, a] - ref[j, a]
+            e_all += e * e
             sp_all += der[j, a] ** 2
             if metric[a]:
                 sp_lin += der[j, a] ** 2
@@ -255,8 +257,13 @@ def check(t, m, c, xc, ref, tol_lin, tol_rot, lin, metric, exp_speed, exp_lin_sp
                 e_lin += e * e
             else:
                 e_rot = max(e_rot, abs(e))
+        e_all = np.sqrt(e_all)
         e_lin = np.sqrt(e_lin)
-        dev_ok = e_lin <= tol_lin[j] and e_rot <= tol_rot
+        if j < n_hard:
+            dev_ok = e_lin <= tol_lin[j] and e_rot <= tol_rot
+        else:
+            # chord points: one Euclidean allowance in the scaled metric (it holds the sagitta)
+            dev_ok = e_all <= tol_lin[j]
         speed_ok = np.sqrt(sp_all) >= min_ratio * exp_speed[j] and \
             np.sqrt(sp_lin) >= min_ratio * exp_lin_speed[j]
         if not (dev_ok and speed_ok):

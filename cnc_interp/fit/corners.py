@@ -131,11 +131,18 @@ def split_run(pr: PreparedRun, settings) -> list[SubRun]:
     cut[j] |= pr.rot_only[j - 1] != pr.rot_only[j]
     cut &= ~inside
     edges = np.concatenate(([0], np.nonzero(cut)[0], [n - 1]))
+    # curves never straddle a cut (their inner nodes do not split): sub-run of each curve
+    firsts = np.array([c.first for c in pr.curves], dtype=np.int64)
+    owner = np.searchsorted(edges, firsts, side="right") - 1
+    by_sub: dict[int, list] = {}
+    for c, o in zip(pr.curves, owner):
+        by_sub.setdefault(int(o), []).append(c)
+    zero = pr.tol_mm == 0
+    n_zero = np.concatenate(([0], np.cumsum(zero)))
     subs = []
-    for a, b in zip(edges[:-1], edges[1:]):
-        a, b = int(a), int(b)
-        cs = tuple(c for c in pr.curves if c.first >= a and c.last <= b)
-        exact = not cs and bool(np.all(pr.tol_mm[a + 1:b + 1] == 0))
+    for k, (a, b) in enumerate(zip(edges[:-1].tolist(), edges[1:].tolist())):
+        cs = tuple(by_sub.get(k, ()))
+        exact = not cs and (n_zero[b + 1] - n_zero[a + 1]) == b - a
         subs.append(SubRun(a, b, "straight" if exact else "fit", bool(pr.rot_only[a]), cs))
     return subs
 

@@ -156,3 +156,37 @@ def run_stream(opts: StreamOptions, backend=None) -> None:
                      f"retries {rep.retries}, timeouts {rep.timeouts}, stalls {rep.stalls}, "
                      f"CRC rejects {rep.crc_rejects}; device accepted {fin.bytes_accepted} bytes, "
                      f"{fin.samples_done} samples")
+
+
+# -- sending a frame file ------------------------------------------------------------------------
+def frame_infos(frames) -> list:
+    """``FrameInfo`` (kind, segment, source line) of decoded frames, for link messages."""
+    import struct as _struct
+
+    from .frames import FrameInfo, FrameType
+
+    infos = []
+    for f in frames:
+        seg, line = -1, 0
+        if f.type in (FrameType.SEGMENT, FrameType.PROFILE) and len(f.payload) >= 8:
+            seg = _struct.unpack_from("<I", f.payload)[0]
+            if f.type == FrameType.SEGMENT:
+                line = _struct.unpack_from("<I", f.payload, 4)[0]
+            elif infos and infos[-1].segment == seg:
+                line = infos[-1].line
+        elif f.type == FrameType.SETPOINTS and len(f.payload) >= 17:
+            line = _struct.unpack_from("<I", f.payload, 13)[0]
+        infos.append(FrameInfo(f.seq, f.type.name.lower(), seg, line))
+    return infos
+
+
+def send_frame_file(frames_path: str, device: str | None = None, resume_from: int | None = None,
+                    backend=None):
+    """Send a ``--dry-run`` frame file to the device as it is; returns the ``LinkReport``."""
+    from .frames import read_frame_file
+    from .usb_link import UsbLink
+
+    frames = read_frame_file(frames_path)
+    raw = [f.encode() for f in frames]
+    link = UsbLink.open(device, backend=backend)
+    return link.send(raw, frame_infos(frames), resume_from=resume_from, source=frames_path)

@@ -71,11 +71,14 @@ class DeviceCore:
     def drain(self, budget: int | None = None) -> None:
         """Execute accepted frames (frees their buffer space)."""
         budget = self.drain_per_poll if budget is None else budget
-        while self._fifo and (budget is None or budget >= self._fifo[0]):
-            n = self._fifo.popleft()
-            self._used -= n
+        while self._fifo and (budget is None or budget > 0):
+            take = self._fifo[0] if budget is None else min(budget, self._fifo[0])
+            self._fifo[0] -= take
+            self._used -= take
             if budget is not None:
-                budget -= n
+                budget -= take
+            if self._fifo[0] == 0:
+                self._fifo.popleft()
 
     def status(self, poll_id: int = 0) -> Status:
         """Current status; error flags are cleared once reported."""

@@ -39,7 +39,8 @@ WRITE_FAULTS = ("timeout", "timeout_partial", "short", "corrupt", "stall")
 class FaultPlan:
     """Which faults to inject.
 
-    at_write / at_read: {call number (1-based): fault kind} for OUT / IN transfers.
+    at_write / at_read: {call number (1-based): fault kind} for OUT / IN transfers
+    (status polls are OUT transfers too).
     rate: probability of a random fault per OUT transfer, drawn from ``kinds`` with ``seed``.
     """
 
@@ -49,6 +50,7 @@ class FaultPlan:
     kinds: tuple = WRITE_FAULTS
     read_timeout_rate: float = 0.0
     seed: int = 0
+    disconnect_after_seq: int | None = None  # vanish at the first write once this seq is accepted
 
 
 class SimBackend(usb.backend.IBackend):
@@ -67,6 +69,7 @@ class SimBackend(usb.backend.IBackend):
         self.reads = 0
         self.injected: list[tuple[int, str]] = []  # (write call, kind) actually injected
         self._dev = object()
+        self._dropped_once = False
 
     # -- fault control ---------------------------------------------------------------------
     def reconnect(self) -> None:
@@ -143,6 +146,10 @@ class SimBackend(usb.backend.IBackend):
     # -- transfers -----------------------------------------------------------------------------
     def _write_fault(self) -> str | None:
         kind = self.faults.at_write.get(self.writes)
+        after = self.faults.disconnect_after_seq
+        if after is not None and self.core.last_seq >= after and not self._dropped_once:
+            self._dropped_once = True
+            return "disconnect"
         if kind is None and self.faults.rate > 0 and self.rng.random() < self.faults.rate:
             kind = self.rng.choice(self.faults.kinds)
         return kind

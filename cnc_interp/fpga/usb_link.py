@@ -296,10 +296,10 @@ class UsbLink:
 
 def _describe(info: FrameInfo, source: str) -> str:
     if info.segment >= 0:
-        return f"{info.kind} of segment {info.segment}, {source} line {info.line}"
+        return f"{info.kind} frame of segment {info.segment}, {source} line {info.line}"
     if info.line > 0:
-        return f"{info.kind}, {source} line {info.line}"
-    return info.kind
+        return f"{info.kind} frame, {source} line {info.line}"
+    return f"{info.kind} frame"
 
 
 def _loc(info: FrameInfo, source: str) -> SourceLocation:

@@ -20,10 +20,11 @@ import numpy as np
 from ..constants import (ALL_AXES, ARC_MAX_SEGMENT_DEG, ARC_MIN_RADIUS_MM, ARC_MIN_SEGMENTS,
                          ARC_R_REACH_TOL_MM, ARC_RADIUS_TOL_INCH, ARC_RADIUS_TOL_MAX_INCH,
                          ARC_RADIUS_TOL_MAX_MM, ARC_RADIUS_TOL_MM, ARC_RADIUS_TOL_REL,
-                         CURVE_CHORD_TOL_MM, LINEAR_AXES, MM_PER_INCH)
+                         CURVE_CHORD_TOL_MM, CURVE_MAX_NODES, LINEAR_AXES, MM_PER_INCH)
 from .program import Arc
 
 TWO_PI = 2.0 * math.pi
+_FRACS: dict[int, np.ndarray] = {}  # k / n for k = 1..n, by n (read-only arrays)
 _LINEAR9 = [a in LINEAR_AXES for a in ALL_AXES]
 
 
@@ -153,13 +154,21 @@ def arc_nodes(start9, end9, plane, c1: float, c2: float, r1: float, r2: float, s
     columns; K from ``segment_count``.
     """
     n = segment_count(max(r1, r2), sweep)
+    if n > CURVE_MAX_NODES:
+        raise GeometryError(f"arc too large: it needs {n} nodes at {CURVE_CHORD_TOL_MM} mm chord "
+                            f"error (limit {CURVE_MAX_NODES})")
     a, b, _ = plane
-    frac = np.arange(1, n + 1, dtype=float) / n
+    frac = _FRACS.get(n)
+    if frac is None:
+        frac = np.arange(1, n + 1, dtype=float) / n
+        frac.setflags(write=False)
+        if len(_FRACS) < 4096:
+            _FRACS[n] = frac
     s = np.array([start9[i] for i in layout])
     e = np.array([end9[i] for i in layout])
     pts = s + np.multiply.outer(frac, e - s)
     ang = math.atan2(start9[b] - c2, start9[a] - c1) + sweep * frac
-    r = r1 + (r2 - r1) * frac
+    r = r1 + (r2 - r1) * frac if r2 != r1 else r1
     if a in layout:
         pts[:, layout.index(a)] = c1 + r * np.cos(ang)
     if b in layout:

@@ -84,6 +84,9 @@ class _Source:
         if "\r" in text:
             text = text.replace("\r\n", "\n")
             b = b.replace(b"\r\n", b"\n")
+            if text.endswith("\r"):  # a last line ended by CR alone
+                text = text[:-1]
+                b = b[:-1]
         if not text.endswith("\n"):
             text += "\n"
             b += b"\n"
@@ -98,14 +101,8 @@ class _Source:
         ls = self.line_starts
         return self.text[int(ls[i]) : int(ls[i + 1]) - 1]
 
-    def chunk(self, k: int) -> tuple:
-        """Chunk ``k`` of FAST_CHUNK_LINES lines: ``(next_slow, bidx, blocks, lines)``.
-
-        ``blocks`` holds the ready Blocks of the chunk's plain lines with words, in
-        order; ``bidx[j]`` is the number of them before local line j; ``next_slow[j]``
-        is the first local line >= j that needs the slow path (or the chunk size);
-        ``lines`` the raw lines.
-        """
+    def chunk(self, k: int) -> _Chunk:
+        """Chunk ``k`` (FAST_CHUNK_LINES lines), tokenised in bulk."""
         got = self._chunks.get(k)
         if got is None:
             import gc
@@ -116,7 +113,7 @@ class _Source:
             enabled = gc.isenabled()
             gc.disable()
             try:
-                got = self._build_chunk(l0, l1)
+                got = _Chunk(self, l0, l1)
             finally:
                 if enabled:
                     gc.enable()
@@ -125,26 +122,44 @@ class _Source:
             self._chunks[k] = got
         return got
 
-    def _build_chunk(self, l0: int, l1: int) -> tuple:
+
+class _Chunk:
+    """The bulk-tokenised plain lines of source lines ``l0 .. l1-1``.
+
+    ``next_slow[j]``: first local line >= j that needs the slow path (or the chunk
+    size). ``bidx[j]``: number of plain lines with words before local line j; the
+    Blocks of those lines are made on demand by :meth:`blocks` (short-lived objects
+    keep the cyclic GC cheap).
+    """
+
+    __slots__ = ("next_slow", "bidx", "lines", "_tuples", "_starts", "_ends", "_numbers", "_texts")
+
+    def __init__(self, src: _Source, l0: int, l1: int):
         import numpy as np
 
         from .fastpath import tokenize_chunk
 
-        slow, offs, tuples, lines = tokenize_chunk(
-            self.b, self.text, self.line_starts, self.special, l0, l1
+        slow, offs, self._tuples, lines = tokenize_chunk(
+            src.b, src.text, src.line_starts, src.special, l0, l1
         )
         n = l1 - l0
         has = (offs[1:] > offs[:-1]) & ~slow
         idx = np.flatnonzero(has)
-        # all Blocks of the chunk built by C-level iterators, no bytecode per line
-        words = map(tuples.__getitem__, map(slice, offs[idx].tolist(), offs[idx + 1].tolist()))
-        texts = map(lines.__getitem__, idx.tolist())
-        numbers = (idx + (l0 + 1)).tolist()
-        blocks = list(map(_new, repeat(Block), zip(numbers, words, texts, repeat(None))))
-        bidx = np.concatenate(([0], np.cumsum(has))).tolist()
+        self._starts = offs[idx].tolist()
+        self._ends = offs[idx + 1].tolist()
+        self._numbers = (idx + (l0 + 1)).tolist()
+        self._texts = list(map(lines.__getitem__, idx.tolist()))
+        self.bidx = np.concatenate(([0], np.cumsum(has))).tolist()
         slow_at = np.flatnonzero(slow)
-        next_slow = np.append(slow_at, n)[np.searchsorted(slow_at, np.arange(n))].tolist()
-        return next_slow, bidx, blocks, lines
+        self.next_slow = np.append(slow_at, n)[np.searchsorted(slow_at, np.arange(n))].tolist()
+        self.lines = lines
+
+    def blocks(self, j0: int, j1: int) -> Iterator[Block]:
+        """Blocks of the plain lines among local lines ``j0 .. j1-1`` (C-level iterators)."""
+        a = self.bidx[j0]
+        b = self.bidx[j1]
+        words = map(self._tuples.__getitem__, map(slice, self._starts[a:b], self._ends[a:b]))
+        return map(_new, repeat(Block), zip(self._numbers[a:b], words, self._texts[a:b], repeat(None)))
 
 
 # ------------------------------------------------------------------------ structure
@@ -280,30 +295,38 @@ def _run(data, source: str, params: ParamStore, block_delete: bool) -> Iterator[
     def code_at(i: int) -> LineCode:
         lc = codes.get(i)
         if lc is None:
-            lc = codes[i] = lex_line(src.line(i), i + 1, source, block_delete)
+            lc = lex_line(src.line(i), i + 1, source, block_delete)
+            if cache_all or lc.kind != WORDS:
+                codes[i] = lc
         return lc
 
+    # Programs with loops or subroutines run lines again: keep every compiled line.
+    # Straight-line programs only keep O-word / % lines (bounded memory on huge files).
+    cache_all = False
     st = _Structure(src, code_at, source, block_delete)
+    cache_all = bool(st.loop_end or st.subs)
     ex = _Executor(st, params, source, src, code_at)
     end = st.end
     pc = 0
     cur = -1
     base = top = 0
-    next_slow = bidx = cblocks = lines = None
+    ch = next_slow = lines = None
     CH = FAST_CHUNK_LINES
     while pc < end:
         k = pc // CH
         if k != cur:
-            next_slow, bidx, cblocks, lines = src.chunk(k)
+            ch = src.chunk(k)
+            next_slow = ch.next_slow
+            lines = ch.lines
             cur = k
             base = k * CH
             top = min(base + CH, end) - base
         j = pc - base
         js = next_slow[j]
-        if js > j:  # plain lines up to the next slow one: their Blocks are ready-made
+        if js > j:  # plain lines up to the next slow one: Blocks from the bulk tokeniser
             if js > top:
                 js = top
-            yield from cblocks[bidx[j] : bidx[js]]
+            yield from ch.blocks(j, js)
             pc = base + js
             if js >= top:
                 continue
@@ -356,10 +379,10 @@ class _Executor:
         self.loops: dict[int, int] = {}  # loop head -> iterations so far / repeats left
 
     def where_at(self, i: int):
-        raw = self.src.line(i)
+        """Error-location builder for line index ``i`` (reads the line only on error)."""
 
         def where(col: int) -> SourceLocation:
-            return SourceLocation(self.source, i + 1, col, snippet(raw, col))
+            return SourceLocation(self.source, i + 1, col, snippet(self.src.line(i), col))
 
         return where
 

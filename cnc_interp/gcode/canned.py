@@ -74,8 +74,9 @@ def expand_cycle(ip, code: int, words: dict, line: int, col: int) -> None:
     reps = 1
     if "L" in words:
         lv = words["L"][1]
-        if lv != int(lv) or lv < 1:
-            raise CycleError(f"cycle repeat L must be a positive integer, got {lv:g}", "L")
+        if lv != int(lv) or lv < 1 or lv > LOOP_ITERATION_LIMIT:
+            raise CycleError(f"cycle repeat L must be a whole number from 1 to "
+                             f"{LOOP_ITERATION_LIMIT}, got {lv:g}", "L")
         reps = int(lv)
     p_s = None
     if code in (82, 89):

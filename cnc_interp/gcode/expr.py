@@ -39,7 +39,7 @@ from ..constants import EXPR_EQUAL_TOL, EXPR_INTEGER_TOL
 from ..errors import GCodeError, SourceLocation
 
 # opcodes of the reverse Polish code: tuples (opcode, argument, source column)
-CONST, NUMREAD, NAMEREAD, EXISTS, NEG, FUNC, BIN, ATAN = range(8)
+CONST, NUMREAD, NAMEREAD, EXISTS, NEG, FUNC, BIN, ATAN, NUMREAD_K = range(9)
 # operator-stack-only markers
 _LBR, _ATAN1, _ATAN2 = 100, 101, 102
 _PREFIX = frozenset((NEG, NUMREAD, FUNC, _ATAN2))
@@ -115,6 +115,8 @@ def parse_value(s: str, pos: int, col_of: Callable[[int], int]) -> tuple[float |
                 name = s[pos + 2 : j]
                 if not name:
                     raise ExprSyntax(pos, "empty parameter name #<>")
+                if name.startswith(("_ini[", "_hal[")):
+                    raise ExprSyntax(pos, f"#<{name}> (INI/HAL parameters) is not supported", True)
                 out.append((NAMEREAD, name, col_of(pos)))
                 pos = j + 1
             else:
@@ -158,7 +160,7 @@ def parse_value(s: str, pos: int, col_of: Callable[[int], int]) -> tuple[float |
         # ---- an operand is complete
         while True:
             while ops and ops[-1][0] in _PREFIX:
-                out.append(_emit(ops.pop()))
+                out.append(_emit(ops.pop(), out))
             if depth == 0:
                 return _finish(out, reads), pos
             if pos < n and s[pos] == "]":
@@ -199,8 +201,18 @@ def _open_bracket(ops: list[tuple]) -> int:
     return 0
 
 
-def _emit(op: tuple) -> tuple:
-    return (ATAN, None, op[2]) if op[0] == _ATAN2 else op
+def _emit(op: tuple, out: list) -> tuple:
+    kind = op[0]
+    if kind == _ATAN2:
+        return (ATAN, None, op[2])
+    if kind == NUMREAD and out and out[-1][0] == CONST:
+        # "#5": the parameter number is a constant; check it once, read directly
+        v = out[-1][1]
+        r = round(v)
+        if abs(v - r) <= EXPR_INTEGER_TOL:
+            out.pop()
+            return (NUMREAD_K, int(r), op[2])
+    return op
 
 
 def _no_where(col: int) -> SourceLocation:
@@ -237,6 +249,11 @@ def evaluate(code: float | Code, params, where: Where) -> float:
             push(_binary(arg, pop(), b, col, where))
         elif op == NEG:
             push(-pop())
+        elif op == NUMREAD_K:
+            try:
+                push(params.get(arg))
+            except GCodeError as e:
+                raise GCodeError(e.message, where(col)) from None
         elif op == NAMEREAD:
             try:
                 push(params.get(arg))

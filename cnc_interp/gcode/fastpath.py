@@ -2,7 +2,8 @@
 
 A *plain* line holds only word letters (not E, O), digits, ``. + -`` and blanks,
 and every letter is followed directly by a number (optionally signed, at most one
-dot), with ``N`` only as the line's first character and unsigned. Such a line needs no parameters, expressions, comments or O-words, so
+dot, a digit next to the dot), with ``N`` only as the line's first character and
+unsigned. Such a line needs no parameters, expressions, comments or O-words, so
 its words are computed for a whole chunk of lines at once:
 
 * :func:`scan` finds, for the whole file, where lines start and which lines are
@@ -93,32 +94,32 @@ def tokenize_chunk(b: bytes, text: str, line_starts, special, l0: int, l1: int):
     viol = sign & ~(p_letter & n_numch)  # a sign sits between a letter and a number
     viol |= numch & ~(p_letter | prev(sign, False) | prev(numch, False))  # number after letter
     viol |= letter & ~(nxt(sign) | n_numch)  # letter before a number
-    viol |= is_n & ~(prev(a == 10, True) & n_numch)  # N first on the line, unsigned
-    vpos = [np.flatnonzero(viol)]
-    dots = np.flatnonzero(dot)
-    breaks = np.flatnonzero(~numch)  # the chunk ends with a newline, so every run ends
-    if len(dots) > 1:  # two dots in one number
-        run_end = breaks[np.searchsorted(breaks, dots[:-1])]
-        vpos.append(dots[:-1][dots[1:] < run_end])
-    vpos = np.concatenate(vpos)
+    viol |= is_n & ~(prev(a == 10, True) & nxt(digit))  # N first on the line, unsigned
+    viol |= dot & ~(prev(digit, False) | nxt(digit))  # a number has a digit next to its dot
     slow = sp.copy()
+    vpos = np.flatnonzero(viol)
     if len(vpos):
         slow[np.searchsorted(nl_pos, vpos)] = True
-        blank(slow & ~sp)  # now every letter has exactly one number and no number is stray
-
+        blank(slow & ~sp)  # now every letter has exactly one number and no number is stray...
     P = np.flatnonzero(a >= 65)
-    vals = np.fromstring(a.tobytes().translate(_TO_SPACE), sep=" ")
-    if len(vals) != len(P):  # cannot happen after the checks above; stay correct anyway
-        return np.ones(nlines, bool), np.zeros(nlines + 1, np.int64), [], lines
+    vals = _numbers(a)
+    if vals is None or len(vals) != len(P):
+        # ...except a number with two dots ("1.2.3"): find those lines, blank them too
+        dots = np.flatnonzero(a == 46)
+        breaks = np.flatnonzero(~numch)  # the chunk ends with a newline: every run ends
+        run_end = breaks[np.searchsorted(breaks, dots[:-1])]
+        twice = dots[:-1][dots[1:] < run_end]
+        slow[np.searchsorted(nl_pos, twice)] = True
+        blank(slow & ~sp)
+        P = np.flatnonzero(a >= 65)
+        vals = _numbers(a)
+        if vals is None or len(vals) != len(P):  # cannot happen; stay correct anyway
+            return np.ones(nlines, bool), np.zeros(nlines + 1, np.int64), [], lines
     tok_line = np.searchsorted(nl_pos, P)
     bad = ~np.isfinite(vals)  # overflowing numbers: the slow path reports them
-    is_nt = is_n[P]
-    if len(dots) and is_nt.any():  # N10.5: line numbers are integers
-        pn = P[is_nt]
-        run_end = breaks[np.searchsorted(breaks, pn + 1)]
-        bad[np.flatnonzero(is_nt)[np.searchsorted(dots, run_end) > np.searchsorted(dots, pn)]] = True
     if bad.any():
         slow[tok_line[bad]] = True
+    is_nt = is_n[P]
     keep = ~is_nt & ~slow[tok_line]
     P = P[keep]
     tok_line = tok_line[keep]
@@ -128,6 +129,21 @@ def tokenize_chunk(b: bytes, text: str, line_starts, special, l0: int, l1: int):
     counts = np.bincount(tok_line, minlength=nlines)
     offs = np.concatenate(([0], np.cumsum(counts)))
     return slow, offs, tuples, lines
+
+
+def _numbers(a):
+    """All numbers of the (blanked) chunk ``a``, or None if one does not parse."""
+    import warnings
+
+    import numpy as np
+
+    with warnings.catch_warnings():
+        # numpy warns (future versions raise) when text is left over, e.g. "1.2.3"
+        warnings.simplefilter("error", DeprecationWarning)
+        try:
+            return np.fromstring(a.tobytes().translate(_TO_SPACE), sep=" ")
+        except (DeprecationWarning, ValueError):
+            return None
 
 
 _LETTERS = b"ABCDFGHIJKLMNPQRSTUVWXYZabcdfghijklmnpqrstuvwxyz"

@@ -9,9 +9,10 @@ stops, in RS274NGC's order of execution within a block.
 Internally positions are 9-axis machine coordinates (``ALL_AXES`` order: mm for
 XYZUVW, degrees for ABC); inch and per-minute values are converted here, once.
 
-Speed: a block that is a plain G0/G1 move (optionally with N, F, S words) takes
-a short path that appends floats to ``array('d')`` buffers, with no per-node
-objects; everything else goes through ``_general``.
+Speed: a block that is a plain G0/G1 move (axis words with optional N, F, S)
+takes a short path that appends floats to ``array('d')`` buffers, with no
+per-node objects; a plain G2/G3 block skips the general classification too;
+everything else goes through ``_general``.
 """
 
 from __future__ import annotations
@@ -77,11 +78,13 @@ M_UNSUPPORTED = {66: "M66 wait on input", 70: "M70 save modal state", 71: "M71 i
                  72: "M72 restore modal state", 73: "M73 save and autorestore modal state",
                  98: "M98 subprogram call (use O-word sub/call)",
                  99: "M99 subprogram return (use O-word endsub)"}
-#: letter -> axis index (>= 0) or a negative tag for the fast path (N, F, S, G)
+#: letter -> axis index (>= 0) or a negative tag for the fast path (N, F, S, G, arc words)
 _FAST_KIND = {a: i for i, a in enumerate(ALL_AXES)}
-_FAST_KIND.update({"N": -1, "F": -2, "S": -3, "G": -4, "I": -5, "J": -5, "R": -5, "P": -5})
+_FAST_KIND.update({"N": -1, "F": -2, "S": -3, "G": -4, "I": -5, "J": -5, "K": -5, "R": -5,
+                   "P": -5})
 _PER_MIN = 1.0 / SECONDS_PER_MINUTE
-MOTION_USES_AXES = frozenset({0, 10, 20, 30, 50, 51, 52, 730, 810, 820, 830, 850, 890})
+#: G value -> motion code handled by the fast path
+_FAST_G = {0.0: 0, 1.0: 10, 2.0: 20, 3.0: 30}
 
 
 def _gcode_name(code10: int) -> str:
@@ -124,6 +127,10 @@ class Interpreter:
         self.coord_off = [0.0] * 9
         self.g92 = [0.0] * 9
         self.off = [0.0] * 9
+        # XY rotation of the current coordinate system (G10 L2 R), LinuxCNC order:
+        # machine_xy = offset_xy + Rot(rot) (program_xy + g92_xy)
+        self.rot_deg = 0.0
+        self.rot_cs = (1.0, 0.0)  # cos, sin
         # canned cycles
         self.cycle_il = None
         self.cycle_r = 0.0
@@ -169,8 +176,6 @@ class Interpreter:
     def _refresh_layout(self) -> None:
         self.getter = itemgetter(*self.active) if len(self.active) > 1 else (
             lambda p, _i=self.active[0]: (p[_i],))
-        self.active_letters = frozenset(ALL_AXES[i] for i in self.active)
-        self.fast_keys = frozenset("NFS") | self.active_letters
 
     def _activate(self, i: int, col: int) -> None:
         if i in self.active:
@@ -200,9 +205,35 @@ class Interpreter:
 
     def program_position(self) -> list[float]:
         """Current position in program coordinates and units (for #5420-#5428)."""
-        return [(p - o) / u for p, o, u in zip(self.pos, self.off, self.units9)]
+        return [q / u for q, u in zip(self._to_prog_mm(self.pos), self.units9)]
+
+    def _to_prog_mm(self, m9: list[float]) -> list[float]:
+        """Program coordinates (mm/deg, before unit scaling) of machine position ``m9``."""
+        q = [m - o for m, o in zip(m9, self.off)]
+        if self.rot_deg:
+            c, s = self.rot_cs
+            dx, dy = m9[0] - self.coord_off[0], m9[1] - self.coord_off[1]
+            q[0] = c * dx + s * dy - self.g92[0]
+            q[1] = -s * dx + c * dy - self.g92[1]
+        return q
+
+    def _to_machine(self, q9: list[float]) -> list[float]:
+        """Machine position of program coordinates ``q9`` (mm/deg)."""
+        m = [q + o for q, o in zip(q9, self.off)]
+        if self.rot_deg:
+            c, s = self.rot_cs
+            vx, vy = q9[0] + self.g92[0], q9[1] + self.g92[1]
+            m[0] = self.coord_off[0] + c * vx - s * vy
+            m[1] = self.coord_off[1] + s * vx + c * vy
+        return m
+
+    def _set_rotation(self, deg: float) -> None:
+        self.rot_deg = float(deg) % 360.0
+        r = math.radians(self.rot_deg)
+        self.rot_cs = (math.cos(r), math.sin(r))
 
     def sync_position_params(self) -> None:
+        """Write #5420-#5428 (the hot path does not; ``read_program``'s store computes them)."""
         for k, v in enumerate(self.program_position()):
             self._pset(5420 + k, v)
 
@@ -211,16 +242,10 @@ class Interpreter:
         base = 5201 + 20 * cs
         self.cs = cs
         self.coord_off = [self._pget(base + k) * self.units9[k] for k in range(9)]
+        self._set_rotation(self._pget(base + 9))
         self._update_off()
         if write_current:
             self._pset(5220, cs)
-
-    def _write_offset_params(self) -> None:
-        """Rewrite the current-system and G92 parameters in the current units."""
-        base = 5201 + 20 * self.cs
-        for k in range(9):
-            self._pset(base + k, self.coord_off[k] / self.units9[k])
-            self._pset(5211 + k, self.g92[k] / self.units9[k])
 
     def _switch_units(self, len_unit: float) -> None:
         if len_unit == self.len_unit:
@@ -262,7 +287,7 @@ class Interpreter:
             rotary_only = all(start9[k] == end9[k] for k in range(9) if IS_LINEAR9[k])
             if rotary_only:
                 return self.f_word / SECONDS_PER_MINUTE
-        return self.f_word * self.len_unit / SECONDS_PER_MINUTE
+        return self.f_word * (self.len_unit * _PER_MIN)
 
     def straight(self, kind: str, new: list[float], line: int, col: int) -> None:
         """A G0 (``kind="rapid"``) or G1 (``"feed"``) move to 9-axis machine position ``new``."""
@@ -331,9 +356,8 @@ class Interpreter:
         The loop keeps the fast path's state in local variables (CPython looks them up
         far faster than attributes) and reloads them after every general block.
         """
-        kind_get = _FAST_KIND.get
         nblocks = 0
-        fast_ok, off, u9, inc, act = self._fast_state()
+        fast_ok, off, u9, inc, kind_get, feed_scale = self._fast_state()
         rb = self.rb
         rb_kind = None
         getter = self.getter
@@ -349,39 +373,31 @@ class Interpreter:
                 fw = None
                 seen = 0
                 arcw = False
-                for w in words:
-                    k = kind_get(w[0], -9)
+                for L, v, c in words:
+                    k = kind_get(L, -9)
                     if k >= 0:
-                        if not act[k] or (seen >> k) & 1:
+                        if (seen >> k) & 1:
                             break
                         seen |= 1 << k
                         if new is None:
                             new = pos[:]
                             if gcol == 0:
-                                gcol = w[2]
+                                gcol = c
                         if inc:
-                            new[k] += w[1] * u9[k]
+                            new[k] += v * u9[k]
                         else:
-                            new[k] = w[1] * u9[k] + off[k]
+                            new[k] = v * u9[k] + off[k]
                     elif k == -1 or k == -3:
                         continue
                     elif k == -5:
                         arcw = True
                     elif k == -2 and fw is None:
-                        fw = w
+                        fw = (L, v, c)
                     elif k == -4 and gcode < 0:
-                        gv = w[1]
-                        if gv == 1.0:
-                            gcode = 10
-                        elif gv == 0.0:
-                            gcode = 0
-                        elif gv == 2.0:
-                            gcode = 20
-                        elif gv == 3.0:
-                            gcode = 30
-                        else:
+                        gcode = _FAST_G.get(v, -2)
+                        if gcode == -2:
                             break
-                        gcol = w[2]
+                        gcol = c
                     else:
                         break
                 else:
@@ -391,8 +407,8 @@ class Interpreter:
                         explicit = False
                     else:
                         explicit = True
-                    if (gcode == 20 or gcode == 30) and self.plane == 170:
-                        # a plain G2/G3 block in G17: skip the general classification
+                    if gcode == 20 or gcode == 30:
+                        # a plain G2/G3 block: skip the general classification
                         if self._fast_arc(blk, words, gcode, gcol, fw):
                             rb = None
                             pos = self.pos
@@ -416,10 +432,10 @@ class Interpreter:
                                 self.blk = blk
                                 raise self.error("feed move with zero or missing feed rate (F)",
                                                  gcol)
-                            if u9[0] != 1.0:
+                            if feed_scale is None:
                                 feed = self._feed_value(pos, new, None, gcol)
                             else:
-                                feed = self.f_word * _PER_MIN
+                                feed = self.f_word * feed_scale
                         else:
                             kind = "rapid"
                             feed = INF
@@ -454,7 +470,7 @@ class Interpreter:
             gw, mw, d = self._split_words(words)
             if self._general(blk, gw, mw, d):
                 break
-            fast_ok, off, u9, inc, act = self._fast_state()
+            fast_ok, off, u9, inc, kind_get, feed_scale = self._fast_state()
             rb = None  # re-bind the appenders on the next fast move
             getter = self.getter
             pos = self.pos
@@ -466,14 +482,14 @@ class Interpreter:
         self._close_run("end")
 
     def _fast_arc(self, blk, words, gcode: int, gcol: int, fw) -> bool:
-        """A G17 G2/G3 block of axis, I, J, R, P, F, N, S words; False: use the general path."""
+        """A G2/G3 block of axis, I, J, K, R, P, F, N, S words; False: use the general path."""
         d = {}
         for w in words:
             if w[0] in d:
                 return False
             d[w[0]] = w
         axis_words = [(L, w) for L, w in d.items() if L in AXIS_INDEX]
-        if not axis_words and "I" not in d and "J" not in d:
+        if not axis_words and "I" not in d and "J" not in d and "K" not in d:
             return False  # the general path reports the missing words
         self.blk = blk
         if fw is not None:
@@ -490,9 +506,17 @@ class Interpreter:
         return True
 
     def _fast_state(self):
-        ok = not self.feed_inverse_time and not self.exact_stop and self.nurbs_cp is None
-        act = [i in self.active for i in range(9)]
-        return ok, self.off, self.units9, self.distance_incremental, act
+        ok = (not self.feed_inverse_time and not self.exact_stop and self.nurbs_cp is None
+              and not self.rot_deg)
+        # letters of inactive axes send the block to the general path (it activates or rejects)
+        kinds = dict(_FAST_KIND)
+        for i, a in enumerate(ALL_AXES):
+            if i not in self.active:
+                kinds[a] = -9
+        # mm/min -> mm/s factor of F, or None when a rotary-only move may need deg/min
+        rotary = any(i in self.active for i in (3, 4, 5))
+        feed_scale = None if (rotary and self.len_unit != 1.0) else self.len_unit * _PER_MIN
+        return ok, self.off, self.units9, self.distance_incremental, kinds.get, feed_scale
 
     def _split_words(self, words):
         """(G words, M words, {letter: word}) of a block; a repeated letter is an error."""
@@ -743,9 +767,11 @@ class Interpreter:
         elif code == 920:
             if not axis_words:
                 raise self.error("G92 without axis words", col)
+            q = self._to_prog_mm(self.pos)
             for L, w in axis_words:
                 i = AXIS_INDEX[L]
-                self.g92[i] = self.pos[i] - self.coord_off[i] - w[1] * u[i]
+                # keep the machine still: program value w becomes the current position
+                self.g92[i] = q[i] + self.g92[i] - w[1] * u[i]
             self._update_off()
             self._pset(5210, 1.0)
             for k in range(9):
@@ -797,25 +823,63 @@ class Interpreter:
         if p != int(p) or not 0 <= p <= 9:
             raise self.error("G10 P must be a coordinate system 0-9", pw[2])
         rw = d.get("R")
-        if rw is not None and rw[1] != 0:
-            raise self.error("G10 L2 R (coordinate system rotation) is not supported", rw[2],
-                             unsupported=True)
         cs = int(p) or self.cs
         base = 5201 + 20 * cs
         u = self.units9
-        for L, w in axis_words:
-            i = AXIS_INDEX[L]
-            if lv == 2.0:
+        if lv == 20.0:
+            if rw is not None:
+                raise self.error("R (rotation) with G10 L20 is not supported", rw[2],
+                                 unsupported=True)
+            q = self._to_prog_mm(self.pos)
+            for L, w in axis_words:
+                q[AXIS_INDEX[L]] = w[1] * u[AXIS_INDEX[L]]
+            # offsets that make the current machine position read as q
+            rot = self.rot_deg if cs == self.cs else self._pget(base + 9) % 360.0
+            r = math.radians(rot)
+            c, s_ = math.cos(r), math.sin(r)
+            new = [self.pos[k] - q[k] - self.g92[k] for k in range(9)]
+            vx, vy = q[0] + self.g92[0], q[1] + self.g92[1]
+            new[0] = self.pos[0] - (c * vx - s_ * vy)
+            new[1] = self.pos[1] - (s_ * vx + c * vy)
+            named = [AXIS_INDEX[L] for L, _ in axis_words]
+            if rot and (0 in named or 1 in named):
+                named = sorted(set(named) | {0, 1})
+            for i in named:
+                self._pset(base + i, new[i] / u[i])
+                if cs == self.cs:
+                    self.coord_off[i] = new[i]
+        else:
+            for L, w in axis_words:
+                i = AXIS_INDEX[L]
                 val_mm = w[1] * u[i]
-            else:
-                val_mm = self.pos[i] - w[1] * u[i] - self.g92[i]
-            self._pset(base + i, val_mm / u[i])
-            if cs == self.cs:
-                self.coord_off[i] = val_mm
+                self._pset(base + i, val_mm / u[i])
+                if cs == self.cs:
+                    self.coord_off[i] = val_mm
+            if rw is not None:
+                self._pset(base + 9, rw[1])
+                if cs == self.cs:
+                    self._set_rotation(rw[1])
         self._update_off()
 
     # -- motion -------------------------------------------------------------------
     def _target(self, axis_words, machine: bool = False) -> list[float]:
+        """Machine position after a move to ``axis_words`` (program values, current modes)."""
+        if self.rot_deg and not machine:
+            q = self._to_prog_mm(self.pos)
+            u = self.units9
+            for L, w in axis_words:
+                i = AXIS_INDEX[L]
+                if self.distance_incremental:
+                    q[i] += w[1] * u[i]
+                else:
+                    q[i] = w[1] * u[i]
+            new = self._to_machine(q)
+            # axes the block does not name stay exactly where they are
+            named = {AXIS_INDEX[L] for L, _ in axis_words}
+            for k in range(9):
+                if k not in named and not (k < 2 and (0 in named or 1 in named)):
+                    new[k] = self.pos[k]
+            return new
         new = self.pos[:]
         u = self.units9
         inc = self.distance_incremental and not machine
@@ -835,6 +899,9 @@ class Interpreter:
             col = axis_words[0][1][2] if axis_words else 0
         if g53 and code not in (0, 10):
             raise self.error("G53 needs G0 or G1", col)
+        if self.rot_deg and code not in (0, 10, 20, 30):
+            raise self.error(f"{_gcode_name(code)} with a rotated coordinate system (G10 L2 R) "
+                             "is not supported", col, unsupported=True)
         if code in (0, 10):
             self.motion = code
             if axis_words:
@@ -874,6 +941,9 @@ class Interpreter:
 
     def _arc(self, code: int, col: int, d: dict, axis_words: list, line: int) -> None:
         self._feed_check(col)
+        if self.rot_deg and self.plane != 170:
+            raise self.error("arcs outside the XY plane with a rotated coordinate system "
+                             "(G10 L2 R) are not supported", col, unsupported=True)
         plane = PLANES[self.plane]
         a, b, _ = plane
         for k in (a, b):
@@ -912,22 +982,36 @@ class Interpreter:
                         if ltr not in d:
                             raise self.error(f"{ltr} word missing in absolute-centre arc (G90.1)",
                                              col)
-                    c1 = d[fl][1] * ua + self.off[a]
-                    c2 = d[sl][1] * ub + self.off[b]
+                    if self.rot_deg:
+                        q = self._to_prog_mm(start)
+                        q[a], q[b] = d[fl][1] * ua, d[sl][1] * ub
+                        cm = self._to_machine(q)
+                        c1, c2 = cm[a], cm[b]
+                    else:
+                        c1 = d[fl][1] * ua + self.off[a]
+                        c2 = d[sl][1] * ub + self.off[b]
                 else:
-                    c1 = start[a] + (d[fl][1] * ua if fl in d else 0.0)
-                    c2 = start[b] + (d[sl][1] * ub if sl in d else 0.0)
+                    o1 = d[fl][1] * ua if fl in d else 0.0
+                    o2 = d[sl][1] * ub if sl in d else 0.0
+                    if self.rot_deg:  # the offset is a vector in the rotated program frame
+                        c, s_ = self.rot_cs
+                        o1, o2 = c * o1 - s_ * o2, s_ * o1 + c * o2
+                    c1 = start[a] + o1
+                    c2 = start[b] + o2
                 r1, r2, sweep = centre_from_ijk(ccw, start[a], start[b], end[a], end[b], c1, c2,
                                                 turns, inch=self.len_unit != 1.0)
         except GeometryError as exc:
             raise self.error(str(exc), col) from None
         # the exact Arc is built when the run is finished (see runs.finish_run)
         arc = (line, start, end, plane, c1, c2, r1, r2, sweep)
-        pts = arc_nodes(start, end, plane, c1, c2, r1, r2, sweep, self.active)
+        try:
+            pts = arc_nodes(start, end, plane, c1, c2, r1, r2, sweep, self.active)
+        except GeometryError as exc:
+            raise self.error(str(exc), col) from None
         if self.feed_inverse_time:
             feed = arc_length_mm(start, end, plane, r1, r2, sweep) * self.f_block / SECONDS_PER_MINUTE
         else:
-            feed = self.f_word * self.len_unit / SECONDS_PER_MINUTE
+            feed = self.f_word * (self.len_unit * _PER_MIN)
         self._curve(arc, pts, end, line, col, feed)
 
     def _curve_feed(self, pts9: np.ndarray, start9) -> float:
@@ -935,7 +1019,7 @@ class Interpreter:
             allp = np.vstack([np.asarray(start9)[None, :], pts9])
             length = float(np.sqrt((np.diff(allp, axis=0) ** 2).sum(axis=1)).sum())
             return length * self.f_block / SECONDS_PER_MINUTE
-        return self.f_word * self.len_unit / SECONDS_PER_MINUTE
+        return self.f_word * (self.len_unit * _PER_MIN)
 
     def _bezier(self, code: int, col: int, d: dict, axis_words: list, line: int) -> None:
         self._feed_check(col)
@@ -983,7 +1067,10 @@ class Interpreter:
             self._zero_length(line)
             return
         curve = bezier(line, np.array(ctrl, dtype=float))
-        pts = sample_nurbs(curve)
+        try:
+            pts = sample_nurbs(curve)
+        except GeometryError as exc:
+            raise self.error(str(exc), col) from None
         self._curve(curve, pts, end, line, col, self._curve_feed(pts, start))
 
     def _nurbs_point(self, col: int, d: dict, axis_words: list, line: int) -> None:

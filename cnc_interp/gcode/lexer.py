@@ -42,7 +42,7 @@ O_KEYWORDS = {
 
 _COMMENT_CHARS = re.compile(r"[();]")
 _CHUNK = re.compile(r"[^ \t\r\f\v]+")
-_LINE_NUMBER = re.compile(r"n[0-9]+")
+_LINE_NUMBER = re.compile(r"n[0-9]+(?:\.[0-9]*)?")  # LinuxCNC ignores a fraction
 _KEYWORD = re.compile(r"[a-z]+")
 _OWORD_NUMBER = re.compile(r"[0-9]+")
 
@@ -130,7 +130,7 @@ def lex_line(raw: str, lineno: int, source: str, block_delete: bool = True) -> L
     pos = 0
     if s[0] == "/":
         if block_delete:
-            return LineCode(EMPTY, comment=comment)
+            return LineCode(EMPTY)  # deleted, comment included
         pos = 1
     if pos < n and s[pos] == "%":
         return LineCode(PERCENT, comment=comment)
@@ -139,8 +139,6 @@ def lex_line(raw: str, lineno: int, source: str, block_delete: bool = True) -> L
         if m is None:
             raise GCodeError("line number N needs digits", loc(col_of(pos)))
         pos = m.end()
-        if pos < n and s[pos] == ".":
-            raise GCodeError("line number N must be an integer", loc(col_of(pos)))
     if pos < n and s[pos] == "o":
         try:
             return _oword(s, pos, comment, col_of, loc)

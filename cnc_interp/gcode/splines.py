@@ -21,7 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..constants import CURVE_CHORD_TOL_MM, SPLINE_MIN_SEGMENTS_PER_SPAN, SPLINE_REFINE_PASSES
+from ..constants import (CURVE_CHORD_TOL_MM, CURVE_MAX_NODES, SPLINE_MIN_SEGMENTS_PER_SPAN,
+                         SPLINE_REFINE_PASSES)
 from .arcs import GeometryError
 from .program import Nurbs
 
@@ -64,6 +65,8 @@ def sample_nurbs(curve: Nurbs) -> np.ndarray:
     k = curve.order - 1
     u0, u1 = float(knots[k]), float(knots[-k - 1])
     spans = np.unique(knots[k:len(knots) - k])
+    if spans.size * SPLINE_MIN_SEGMENTS_PER_SPAN > CURVE_MAX_NODES:
+        raise GeometryError(f"spline too large: more than {CURVE_MAX_NODES} nodes")
     u = np.concatenate([np.linspace(a, b, SPLINE_MIN_SEGMENTS_PER_SPAN + 1)[:-1]
                         for a, b in zip(spans[:-1], spans[1:])] + [np.array([u1])])
     if u.size < 2:
@@ -76,6 +79,9 @@ def sample_nurbs(curve: Nurbs) -> np.ndarray:
         bad = dev > CURVE_CHORD_TOL_MM
         if not bad.any():
             break
+        if u.size + int(bad.sum()) > CURVE_MAX_NODES:
+            raise GeometryError(f"spline too large: more than {CURVE_MAX_NODES} nodes at "
+                                f"{CURVE_CHORD_TOL_MM} mm chord error")
         u = np.insert(u, np.nonzero(bad)[0] + 1, um[bad])
         pts = curve.points(u)
     pts = pts[1:].copy()

@@ -196,6 +196,8 @@ def plan_path_vpop(path, joint_map, machine, dt_s: float, settings=None) -> Path
     vl = np.ascontiguousarray(machine.vmax * dt * shrink, dtype=float)
     al = np.ascontiguousarray(machine.amax * dt * dt * shrink, dtype=float)
     jl = np.ascontiguousarray(machine.jmax * dt**3 * shrink, dtype=float)
+    if not (np.isfinite(path.length) and np.all(np.isfinite(path.coef))):
+        raise PlanError(f"bug: the fitted path ending at line {int(path.line[-1])} is not finite")
     if path.length <= 0.0:
         q0 = _positions(path, path.breaks[:1], joint_map)
         return PathPlan(s=np.zeros(1), q=q0, stats={"samples": 1})

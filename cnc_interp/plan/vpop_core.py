@@ -311,7 +311,7 @@ def _stop_distance(v, a, J, A):
 
 @njit(cache=True)
 def _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, mode, hint, q, qs,
-          lo, hi, tol):
+          lo, hi, tol, aim_jerk=1.0):
     """Choose sample k. mode 0: max; 1: brake; 2: aim at rest exactly at L.
 
     Returns (ok, s', hint); q holds q(s')."""
@@ -327,7 +327,10 @@ def _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, mode, hint, 
     if mode == 0:
         return _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, True, hint, q, qs, tol)
     hint = _eval(S, C, QEND, s0, hint, q, qs)
-    jd, ad = _path_limits(qs, js_lim, al)
+    if mode == 1:
+        jd, ad = _path_limits(qs, js_lim, al)
+    else:
+        jd, ad = _path_limits(qs, jl, al)
     if mode == 1:
         # brake: the least step after which a jerk ramp back to zero path acceleration
         # still leaves a non-negative speed (or a full stop once the speed is one jerk step)
@@ -354,7 +357,7 @@ def _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, mode, hint, 
         return False, s0, hint
     oku, xu, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, True, hint,
                             q, qs, tol)
-    ad = 0.9 * ad
+    jd = jd * aim_jerk
     x = xl
     if xu >= L and L - s0 <= jd:
         x = L  # close enough to land in one jerk step
@@ -452,7 +455,7 @@ def _brake_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq,
                                                    L, easy_frac, q, qs):
             return True, kk, _BIG
         if horizon > 0 and j + kk - 3 >= horizon and \
-                bs[kk - 1] - 2.0 * bs[kk - 2] + bs[kk - 3] <= 0.0:
+                _easy(S, C, QEND, K2, K3, K23, bs, kk, al, js_lim, L, 0.6, q, qs):
             return True, kk, j + kk - 3
         if kk >= cap or kk >= max_steps:
             return False, kk, 0
@@ -461,7 +464,8 @@ def _brake_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq,
 @njit(cache=True)
 def _horizon(k, j, fast):
     """Fast mode: a brake run from j that outlives the failed max run (index k) by as many
-    steps again (+8) is taken as safe; 0 (exact mode) asks for rest."""
+    steps again (+8) and then meets ``_easy`` at a 60% share is taken as safe; 0 (exact
+    mode) asks for rest."""
     if not fast:
         return 0
     return k + (k - j) + 8

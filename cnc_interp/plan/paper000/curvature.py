@@ -115,7 +115,7 @@ def _local_derivs(coef: np.ndarray, seg: np.ndarray, t: np.ndarray, order: int,
     tt = t[:, None]
     out = np.empty((order + 1, t.shape[0], coef.shape[2]))
     for d in range(order + 1):
-        cd = dc[d][seg]  # (K, n, 6-d)
+        cd = dc[d] if seg is None else dc[d][seg]  # (K, n, 6-d); None: every segment once
         acc = cd[..., -1]
         for i in range(cd.shape[-1] - 2, -1, -1):
             acc = acc * tt + cd[..., i]
@@ -149,7 +149,7 @@ def general_curvature_peaks(path, n_grid: int = 64) -> np.ndarray:
     # golden-section refinement on the two grid cells around each maximum
     lo = h * frac[np.maximum(j - 1, 0)]
     hi = h * frac[np.minimum(j + 1, n_grid - 1)]
-    segs = np.arange(n)
+    segs = None  # one point per segment, in order
     x1 = hi - _GOLD * (hi - lo)
     x2 = lo + _GOLD * (hi - lo)
     f1, f2 = kappa(segs, x1), kappa(segs, x2)

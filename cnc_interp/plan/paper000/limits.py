@@ -16,7 +16,12 @@ the triangle inequality gives sufficient conditions, applied per segment and joi
   the programmed feed F caps V too;
 - tangential acceleration at feeds <= V:
   A_t = min_i min((amax - g2 V^2) / g1,  sx (jmax - g3 V^3) / (3 g2 V));
-- tangential jerk: J_t = min_i (jmax - g3 V^3 - 3 g2 V A_t) / g1.
+- tangential jerk: J_t = min_i max(jmax - g3 V^3 - 3 g2 V A0, (1 - sx)(jmax - g3 V^3)) / g1
+  with A0 = min_i amax / g1 >= A_t: the cross term is at most both 3 g2 V A0 and, by
+  the choice of A_t, sx (jmax - g3 V^3). On a straight segment J_t = min_i jmax / g1.
+
+A_t and J_t only decrease as V grows, so the look-ahead may evaluate them at the
+feed a transition actually reaches (its larger end) instead of the segment's cap.
 
 The shares keep A_t, J_t > 0. This is conservative (maxima taken over the whole
 segment, at the cruise feed); sampled output is still checked and replanned.
@@ -85,8 +90,12 @@ def tangential_limits(geom, machine, v: np.ndarray, settings=None) -> tuple[np.n
     j_room = np.maximum(jmax - geom.g3 * v**3, 0.0)
     a_t = np.minimum(_safe_div(a_room, geom.g1),
                      _safe_div(sx * j_room, 3.0 * geom.g2 * v)).min(axis=1)
+    a0 = _safe_div(amax, geom.g1).min(axis=1)  # a_t at v = 0: an upper bound of a_t
     a_t = np.where(np.isfinite(a_t), a_t, float(machine.amax.min()))
-    j_t = _safe_div(np.maximum(j_room - 3.0 * geom.g2 * v * a_t[:, None], 0.0), geom.g1).min(axis=1)
+    a0 = np.where(np.isfinite(a0), a0, a_t)
+    # the cross term 3 g2 v a_t is at most min(3 g2 v a0, sx j_room) by the choice of a_t
+    left = np.maximum(j_room - 3.0 * geom.g2 * v * a0[:, None], (1.0 - sx) * j_room)
+    j_t = _safe_div(left, geom.g1).min(axis=1)
     j_t = np.where(np.isfinite(j_t), j_t, float(machine.jmax.min()))
     tiny = 1e-300
     return np.maximum(a_t, tiny), np.maximum(j_t, tiny)

@@ -27,7 +27,7 @@ from ...errors import PlanError
 from ..base import PathPlan
 from .common import joint_positions, sample_profile, sample_ratios, worst_ratio
 from .curvature import segment_geometry
-from .limits import feed_caps, junction_caps, option, tangential_limits
+from .limits import feed_caps, junction_caps, option, shares
 from .profile import build_profiles, stretch_to_period
 
 
@@ -78,6 +78,7 @@ def plan_grouped(path, joint_map, machine, dt_s: float, settings, band: float,
     n = path.n_seg
     vcap0 = feed_caps(geom, machine, path.feed_mm_s, settings)
     wcap = junction_caps(geom, machine, dt_s)
+    sx = shares(settings)[2]
     fv = np.ones(n)
     ft = np.ones(n)
     limit = 1.0 + VERIFY_RATIO_SLACK
@@ -85,14 +86,11 @@ def plan_grouped(path, joint_map, machine, dt_s: float, settings, band: float,
         vcap = vcap0 * fv
         first = group_segments(vcap, wcap, band)
         last = np.r_[first[1:] - 1, n - 1]
-        # a piece's cap and tangential limits are the smallest of its segments' (at its cap)
-        gcap = np.minimum.reduceat(vcap, first)
-        a_s, j_s = tangential_limits(geom, machine, np.repeat(gcap, last - first + 1), settings)
-        a_t = np.minimum.reduceat(a_s * ft, first)
-        j_t = np.minimum.reduceat(j_s * ft, first)
+        gcap = np.minimum.reduceat(vcap, first)  # a piece's cap: its slowest segment's
         glen = np.add.reduceat(geom.length, first)
         gw = np.r_[wcap[first], 0.0]
-        w, c = lookahead(glen, gcap, a_t, j_t, gw)
+        w, c, a_t, j_t = lookahead(np.r_[first, n], glen, gcap, geom.g1, geom.g2, geom.g3,
+                                   machine.amax, machine.jmax, sx, ft, gw)
         prof = build_profiles(planner, first, last, path.s_breaks[first], glen,
                               w[:-1], c, w[1:], a_t, j_t)
         prof = stretch_to_period(prof, dt_s)

@@ -1,0 +1,120 @@
+"""Planning speed and near-optimality: setpoints per second and "x real time".
+
+    .venv/bin/python benchmarks/plan.py                  # trident + a corpus selection
+    .venv/bin/python benchmarks/plan.py --sweep          # every corpus program (slow)
+    .venv/bin/python benchmarks/plan.py --json out.json
+
+For each program: parse + fit + plan (VPOp) + verify, with the plan stage timed on
+its own (numba compiled beforehand). "x real time" = cycle time / planning wall time.
+The sweep plans every corpus program that parses on a LinuxCNC configuration
+(corpus ``configs/*.ini``, default jerk where the INI has none), checks every limit,
+and lists failures with their error message.
+"""
+
+from __future__ import annotations
+
+import argparse
+import glob
+import json
+import os
+import sys
+import time
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
+
+CORPUS = os.environ.get("CNC_CORPUS", os.path.join(os.path.dirname(__file__), "..", "..",
+                                                     "shared", "corpus", "linuxcnc"))
+TRIDENT = os.path.join(CORPUS, "nurbs-g5", "trident-xy.ngc")
+SELECTION = [
+    ("nurbs-g5/trident-xy.ngc", "mikron-ucp710"),
+    ("nurbs-g5/trident-xy.ngc", "generic-mill"),
+    ("nurbs-g5/butterfly-xy.ngc", "generic-mill"),
+    ("examples/spiral.ngc", "generic-mill"),
+    ("arc-feed", "generic-mill"),
+]
+
+
+def corpus_programs():
+    exts = ("*.ngc", "*.nc", "*.gcode", "*.tap")
+    files = []
+    for e in exts:
+        files += glob.glob(os.path.join(CORPUS, "**", e), recursive=True)
+    return sorted(set(files))
+
+
+def plan_one(path: str, machine: str, dt_s: float | None = 0.001, optimality: bool = False) -> dict:
+    from cnc_interp.errors import CncInterpError
+    from cnc_interp.pipeline import plan_part
+
+    t0 = time.perf_counter()
+    try:
+        out = plan_part(path, machine, "vpop", dt_s)
+    except CncInterpError as exc:
+        return {"program": os.path.relpath(path, CORPUS), "machine": machine,
+                "status": "error", "exit_code": exc.exit_code, "message": exc.format(),
+                "wall_s": time.perf_counter() - t0}
+    traj = out.trajectory
+    plan_s = out.timings["plan"]
+    rec = {"program": os.path.relpath(path, CORPUS), "machine": machine, "status": "ok",
+           "samples": traj.n_samples, "cycle_time_s": traj.duration_s,
+           "plan_s": plan_s, "setpoints_per_s": traj.n_samples / plan_s if plan_s else None,
+           "x_real_time": traj.duration_s / plan_s if plan_s else None,
+           "worst_ratio": out.report.worst_ratio, "timings": out.timings,
+           "wall_s": time.perf_counter() - t0}
+    if optimality:
+        from cnc_interp.plan.optimality import program_lower_bound
+
+        lb = program_lower_bound(out)
+        rec["lower_bound_s"] = lb
+        rec["ratio_to_bound"] = traj.duration_s / lb if lb > 0 else None
+    return rec
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sweep", action="store_true", help="every corpus program on a LinuxCNC INI")
+    ap.add_argument("--ini", default=os.path.join(CORPUS, "configs", "axis_mm.ini"))
+    ap.add_argument("--json", default=None)
+    args = ap.parse_args()
+    # compile once outside the timings
+    plan_one(TRIDENT, "generic-mill")
+    rows = []
+    if args.sweep:
+        for f in corpus_programs():
+            rec = plan_one(f, args.ini)
+            rows.append(rec)
+            _print(rec)
+    else:
+        for rel, machine in SELECTION:
+            targets = [os.path.join(CORPUS, rel)]
+            if os.path.isdir(targets[0]):
+                targets = sorted(glob.glob(os.path.join(targets[0], "*.ngc")))[:3]
+            for f in targets:
+                rec = plan_one(f, machine, optimality=True)
+                rows.append(rec)
+                _print(rec)
+    ok = [r for r in rows if r["status"] == "ok"]
+    if ok:
+        tot_cycle = sum(r["cycle_time_s"] for r in ok)
+        tot_plan = sum(r["plan_s"] for r in ok)
+        tot_samples = sum(r["samples"] for r in ok)
+        print(f"TOTAL {len(ok)}/{len(rows)} ok: {tot_samples} setpoints, cycle {tot_cycle:.2f} s, "
+              f"plan {tot_plan:.2f} s -> {tot_samples / tot_plan:,.0f} setpoints/s, "
+              f"{tot_cycle / tot_plan:.1f}x real time")
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump(rows, fh, indent=1)
+
+
+def _print(r: dict) -> None:
+    if r["status"] != "ok":
+        print(f"{r['program']:48s} {r['machine'][-20:]:>20s} ERROR {r['message'][:100]}", flush=True)
+        return
+    extra = f" bound-ratio {r['ratio_to_bound']:.3f}" if r.get("ratio_to_bound") else ""
+    print(f"{r['program']:48s} {os.path.basename(r['machine'])[-20:]:>20s} {r['samples']:8d} samples "
+          f"cycle {r['cycle_time_s']:8.3f} s plan {r['plan_s']:7.3f} s "
+          f"{r['x_real_time']:7.1f}x RT worst {r['worst_ratio']:.9f}{extra}", flush=True)
+
+
+if __name__ == "__main__":
+    main()

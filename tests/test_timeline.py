@@ -1,0 +1,118 @@
+"""The whole-program timeline: rapids, cuts, dwells and stops on one sample clock."""
+
+import math
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+
+from cnc_interp.errors import PlanError
+from cnc_interp.fit.result import FitResult
+from cnc_interp.gcode.program import Dwell, Program, Stop
+from cnc_interp.plan.machine import Machine
+from cnc_interp.plan.settings import PlanSettings
+from cnc_interp.plan.timeline import plan_program
+from cnc_interp.plan.verify import verify
+
+from ._vpop_paths import circle_fun, hermite_path, line_path
+
+DT = 0.001
+MILL = Machine(name="mill", axes="XYZ", vmax=[200, 200, 100], amax=[2000, 2000, 1000],
+               jmax=[20000, 20000, 10000], dt_s=DT)
+
+
+def program(start, items):
+    return Program(source="<test>", axes="XYZ", items=(), start=np.asarray(start, float),
+                   line_count=20)
+
+
+def build():
+    """rapid -> cut (line) -> dwell 0.25 s -> M0 -> cut (circle) -> rapid -> M2."""
+    start = np.array([0.0, 0.0, 10.0])
+    circle = hermite_path(circle_fun(10.0), 8, 80.0, line0=10)
+    c0 = circle.start
+    items = [
+        line_path(start, [30.0, 0.0, 0.0], np.inf, line=2, rapid=True),
+        line_path([30.0, 0.0, 0.0], c0, 50.0, line=3),
+        Dwell(line=4, seconds=0.25, position=c0.copy()),
+        Stop(line=5, code="M0", position=c0.copy()),
+        circle,
+        line_path(circle.end, [0.0, 0.0, 10.0], np.inf, line=19, rapid=True),
+        Stop(line=20, code="M2", position=np.array([0.0, 0.0, 10.0])),
+    ]
+    return FitResult(program=program(start, items), items=tuple(items)), items
+
+
+def test_program_with_rapids_dwell_and_stop():
+    fit, items = build()
+    settings = PlanSettings(planner="vpop", dt_s=DT)
+    done = []
+    traj = plan_program(fit, MILL, settings, progress=done.append)
+    rep = verify(traj, MILL)
+    assert rep.ok, rep.format()
+    k = traj.n_samples
+    assert_allclose(traj.t, np.arange(k) * DT, rtol=0, atol=0)
+    assert_array_equal(traj.q[0], [0.0, 0.0, 10.0])
+    assert_array_equal(traj.q[-1], [0.0, 0.0, 10.0])
+    # s is cumulative over every path, rapids included; feed is its backward difference
+    total = sum(it.length for it in items if hasattr(it, "length"))
+    assert traj.s[-1] == pytest.approx(total, rel=1e-12)
+    assert np.all(np.diff(traj.s) >= 0)
+    assert_allclose(traj.feed[1:], np.diff(traj.s) / DT)
+    assert traj.feed[0] == 0.0
+    assert sum(done) == pytest.approx(total)
+    # the dwell: at least ceil(0.25 / dt) samples held at the circle's start, on line 4
+    held = traj.line == 4
+    assert held.sum() >= math.ceil(0.25 / DT)
+    assert np.all(traj.q[held] == items[1].end)
+    # every line of the program shows up, in order
+    seen = [int(x) for x in np.unique(traj.line)]
+    for ln in (2, 3, 4, 10, 17, 19):
+        assert ln in seen
+    first = {ln: int(np.argmax(traj.line == ln)) for ln in (2, 3, 4, 10, 19)}
+    assert first[2] < first[3] < first[4] < first[10] < first[19]
+    # the cutting feed is respected on the cut, the rapid may go faster
+    on_cut = traj.line == 3
+    assert traj.feed[on_cut].max() <= 50.0 * (1 + 1e-9)
+    assert traj.feed.max() > 100.0
+    assert traj.planner == "vpop" and traj.settings["dt_s"] == DT
+
+
+def test_motions_are_separated_by_rest():
+    fit, _ = build()
+    traj = plan_program(fit, MILL, PlanSettings(dt_s=DT))
+    moving = np.any(np.diff(traj.q, axis=0) != 0, axis=1)
+    # wherever motion stops and restarts, at least two extra equal samples sit in between
+    idle = ~moving
+    runs, count = [], 0
+    for flag in idle:
+        if flag:
+            count += 1
+        elif count:
+            runs.append(count)
+            count = 0
+    assert runs and min(runs) >= 2
+
+
+def test_empty_program_is_one_sample_at_the_start():
+    fit = FitResult(program=program([1.0, 2.0, 3.0], []), items=())
+    traj = plan_program(fit, MILL, PlanSettings(dt_s=DT))
+    assert traj.n_samples == 1
+    assert_array_equal(traj.q[0], [1.0, 2.0, 3.0])
+
+
+def test_path_not_starting_where_the_machine_is_is_a_bug():
+    p = line_path([5.0, 0, 0], [10.0, 0, 0], 50.0)
+    fit = FitResult(program=program([0.0, 0.0, 0.0], [p]), items=(p,))
+    with pytest.raises(PlanError, match="starts at"):
+        plan_program(fit, MILL, PlanSettings(dt_s=DT))
+
+
+@pytest.mark.parametrize("planner", ["constant", "variable"])
+def test_paper000_planners_share_the_timeline(planner):
+    fit, _ = build()
+    traj = plan_program(fit, MILL, PlanSettings(planner=planner, dt_s=DT))
+    rep = verify(traj, MILL)
+    assert rep.ok, rep.format()
+    assert traj.planner == planner
+    assert_array_equal(traj.q[-1], [0.0, 0.0, 10.0])
