@@ -1,6 +1,7 @@
 """Cycle time of the three planners side by side: constant, variable (paper 000), VPOp (paper 001).
 
-Usage: python benchmarks/planners.py [PROGRAM[@PRESET] ...] [--dt S] [--tol MM] [--json FILE]
+Usage: python benchmarks/planners.py [PROGRAM[@PRESET] ...] [--dt S] [--tol MM] [--feed F]
+                                    [--json FILE]
 
 Each program is parsed and fitted once; the same fit is then planned by every planner
 (``plan.timeline.plan_program``) and the result checked with ``verify``. Prints a
@@ -14,6 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -30,11 +32,18 @@ DEFAULT_PROGRAMS = (
 )
 
 
-def run_one(spec: str, dt_s: float | None, tol_mm: float | None) -> dict:
+def _with_feed(data: bytes, feed_mm_min: float) -> bytes:
+    """The program with every F word replaced by ``feed_mm_min`` (benchmark what-if)."""
+    return re.sub(rb"([Ff])\s*[-+]?[0-9]*\.?[0-9]+", b"F%r" % feed_mm_min, data)
+
+
+def run_one(spec: str, dt_s: float | None, tol_mm: float | None,
+            feed_mm_min: float | None = None) -> dict:
     """Parse and fit ``spec`` (PATH[@PRESET]) once, plan it with every planner."""
     from cnc_interp.errors import CncInterpError
     from cnc_interp.fit.settings import FitSettings
-    from cnc_interp.pipeline import _load_with, fit_loaded
+    from cnc_interp.gcode import read_program
+    from cnc_interp.pipeline import fit_loaded
     from cnc_interp.plan.machine_io import load_machine
     from cnc_interp.plan.settings import PlanSettings
     from cnc_interp.plan.timeline import plan_program
@@ -43,11 +52,16 @@ def run_one(spec: str, dt_s: float | None, tol_mm: float | None) -> dict:
     path, _, preset = spec.partition("@")
     full = path if os.path.isabs(path) else os.path.join(CORPUS, path)
     machine = load_machine(preset or "mikron-ucp710")
-    row = {"program": path, "machine": preset or "mikron-ucp710"}
+    row = {"program": path + ("" if feed_mm_min is None else f" (F{feed_mm_min:g})"),
+           "machine": preset or "mikron-ucp710"}
     try:
         base = PlanSettings.from_options(planner="vpop", dt_s=dt_s, tol_mm=tol_mm, machine=machine)
         machine = machine.with_dt(base.dt_s)
-        program, _ = _load_with(full, machine)
+        with open(full, "rb") as fh:
+            data = fh.read()
+        if feed_mm_min is not None:
+            data = _with_feed(data, feed_mm_min)
+        program = read_program(data, source=full, axes=machine.axes, start=machine.start)
         t0 = time.perf_counter()
         fitted = fit_loaded(program, FitSettings.from_options(tol_mm=tol_mm, machine=machine))
         row["fit_s"] = time.perf_counter() - t0
@@ -102,10 +116,12 @@ def main() -> None:
     ap.add_argument("--dt", type=float, default=None, help="sample period, s (default: machine's)")
     ap.add_argument("--tol", type=float, default=None, help="fit tolerance, mm")
     ap.add_argument("--json", default=None, help="also write the raw rows as JSON here")
+    ap.add_argument("--feed", type=float, default=None,
+                    help="what-if: replace every F word by this feed (mm/min or the program's units)")
     args = ap.parse_args()
     rows = []
     for spec in args.programs:
-        rows.append(run_one(spec, args.dt, args.tol))
+        rows.append(run_one(spec, args.dt, args.tol, args.feed))
         print(f"done {spec}", flush=True)
     print(table(rows))
     errors = {r["program"]: {p: r[p]["error"] for p in PLANNERS if "error" in r.get(p, {})}

@@ -55,7 +55,8 @@ ARC_MIN_SEGMENTS = 4
 ARC_MAX_SEGMENT_DEG = 5.0
 #: every NURBS/spline knot span gets at least this many node segments
 SPLINE_MIN_SEGMENTS_PER_SPAN = 8
-#: most bisection passes when sampling a spline to CURVE_CHORD_TOL_MM (CURVE_MAX_NODES bounds the work)
+#: most bisection passes when sampling a spline to CURVE_CHORD_TOL_MM
+#: (CURVE_MAX_NODES bounds the work)
 SPLINE_REFINE_PASSES = 48
 #: G73/G83 peck: rapid back down to this far above the previous depth (LinuxCNC: 0.010 in)
 PECK_CLEARANCE_MM = 0.254

@@ -7,7 +7,8 @@ import pytest
 from numpy.testing import assert_allclose
 
 from cnc_interp.fit import FitSettings, fit_run
-from cnc_interp.fit.curves import CurveEval, fit_curve, hermite
+from cnc_interp.fit.curves import CurveEval, fit_curve
+from cnc_interp.fit.nodes import hermite
 from cnc_interp.fit.path import Path
 from cnc_interp.gcode.program import Arc, CurvePiece, Nurbs, Run
 

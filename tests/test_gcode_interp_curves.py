@@ -282,3 +282,15 @@ def test_huge_curves_are_errors_not_hangs():
     with pytest.raises(GCodeError, match="too large"):
         prog("G0 X0\nF60 G5.2 P1 L3\nX1000000000000 Y1000000000000 P1\n"
              "X-1000000000000 Y1000000000000 P0.000000001\nX0 Y1 P1000000000\nG5.3\n")
+
+
+def test_arc_nodes_survive_a_new_axis_later_in_the_run():
+    p = prog("G1 X1 Y0 F100\nG3 X0 Y1 I-1 J0\nG1 C30\nG2 X1 Y0 I0 J-1\n")
+    assert p.axes == "XYZC"
+    run = feed_run(p)
+    for piece in run.curves:
+        check_piece_nodes(run, piece)
+    first, second = run.curves
+    assert np.all(run.nodes[first.first:first.last + 1, 3] == 0.0)
+    assert np.all(run.nodes[second.first:second.last + 1, 3] == 30.0)
+    assert first.curve.plane == (0, 1, 2)

@@ -9,7 +9,7 @@ import pytest
 
 from cnc_interp.constants import LOOP_ITERATION_LIMIT, MAX_CALL_DEPTH
 from cnc_interp.errors import GCodeError, UnsupportedError
-from cnc_interp.gcode import blocks as blocks_mod
+from cnc_interp.gcode import oword
 from cnc_interp.gcode.blocks import iter_blocks
 from cnc_interp.gcode.params import ParamStore
 
@@ -64,8 +64,9 @@ G1 X#<_value> Y#<_value_returned>
 o200 call [7]
 G1 X#<_value> Y#<_value_returned>
 """
-    assert xs(src) == [42.0, 7.0, 42.0]
+    assert xs(src) == [42.0, 7.0, 0.0]  # endsub without a value returns 0
     assert xs(src, "Y") == [1.0, 0.0]
+    assert xs("G1 X#<_value> Y#<_value_returned>\n") == [0.0]  # defined from the start
 
 
 def test_call_frames_are_local():
@@ -231,7 +232,7 @@ def test_o_word_reads_interpreter_parameters_lazily():
 @pytest.fixture
 def small_limit(monkeypatch):
     # the mechanism, not the constant, is under test: keep the test fast
-    monkeypatch.setattr(blocks_mod, "LOOP_ITERATION_LIMIT", 1000)
+    monkeypatch.setattr(oword, "LOOP_ITERATION_LIMIT", 1000)
     return 1000
 
 

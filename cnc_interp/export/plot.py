@@ -138,6 +138,7 @@ def _plane_axes(traj) -> tuple[int, int]:
 
 def _draw_path(fig, ax, traj) -> None:
     from matplotlib.collections import LineCollection
+    from matplotlib.colors import PowerNorm
 
     i, j = _plane_axes(traj)
     K = traj.n_samples
@@ -153,9 +154,11 @@ def _draw_path(fig, ax, traj) -> None:
     pts = np.column_stack([x, y]).reshape(-1, 1, 2)
     segs = np.concatenate([pts[:-1], pts[1:]], axis=1)
     fmax = float(np.nanmax(feed)) if K and np.isfinite(feed).any() else 1.0
-    lc = LineCollection(segs, cmap="turbo", linewidths=1.4, capstyle="round")
+    # A square-root colour scale: rapids are often ten times the cutting feed, and on a
+    # linear scale every cutting feed would get the same dark colour.
+    norm = PowerNorm(gamma=0.5, vmin=0.0, vmax=fmax if fmax > 0 else 1.0)
+    lc = LineCollection(segs, cmap="turbo", norm=norm, linewidths=1.4, capstyle="round")
     lc.set_array(seg_feed)
-    lc.set_clim(0.0, fmax if fmax > 0 else 1.0)
     ax.add_collection(lc)
     if K:
         ax.plot(x[:1], y[:1], "o", ms=5, color="k", label="start")

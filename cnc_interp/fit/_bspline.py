@@ -278,3 +278,30 @@ def check(t, m, c, xc, ref, tol_lin, tol_rot, lin, metric, exp_speed, exp_lin_sp
             if e_rot > worst_rot:
                 worst_rot = e_rot
     return worst_lin, worst_rot, hard, soft
+
+
+@njit(cache=True)
+def segment_sources_kernel(x, u, line, feed):
+    """See ``nodes.segment_sources``: per segment [x_k, x_k+1], the line of the move
+    containing its end and the least feed of the moves it overlaps (move j ends at node j)."""
+    n = u.shape[0]
+    n_seg = x.shape[0] - 1
+    seg_line = np.empty(n_seg, dtype=np.int64)
+    seg_feed = np.empty(n_seg)
+    j = 1  # first move that may overlap the current segment
+    for k in range(n_seg):
+        a = x[k]
+        b = x[k + 1]
+        while j < n - 1 and u[j] <= a:
+            j += 1
+        f = np.inf
+        jj = j
+        while True:
+            if feed[jj] < f:
+                f = feed[jj]
+            if jj >= n - 1 or u[jj] >= b:
+                break
+            jj += 1
+        seg_line[k] = line[jj]
+        seg_feed[k] = f
+    return seg_line, seg_feed

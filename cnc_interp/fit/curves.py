@@ -23,7 +23,7 @@ import numpy as np
 
 from ..constants import CURVE_CHECK_POINTS, CURVE_MAX_DEPTH, FIT_TOL_SAFETY
 from ..gcode.program import Arc, Nurbs
-from .nodes import PieceFit
+from .nodes import PieceFit, hermite
 
 
 class CurveEval:
@@ -87,32 +87,60 @@ class CurveEval:
         return self.eval(w)[0]
 
 
+def _direction(ev: CurveEval, w: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """Unit direction of travel (K, d) at w from exact points a small step around it
+    (used where the curve's own derivative vanishes, e.g. repeated control points)."""
+    span = ev.w1 - ev.w0
+    dw = _DIR_STEP * span
+    lo = np.clip(w - dw, ev.w0, ev.w1)
+    hi = np.clip(w + dw, ev.w0, ev.w1)
+    d = (ev.points(hi) - ev.points(lo)) * scale
+    return d / np.linalg.norm(d, axis=1)[:, None]
+
+
+def _derivs(ev: CurveEval, w: np.ndarray, scale: np.ndarray, g: float):
+    """Scaled (P, dP/du, d²P/du²) at w with u = g·w; a vanishing speed is replaced by unit
+    speed along the direction of travel and zero acceleration (no cusp in the path)."""
+    P, P1, P2 = ev.eval(w)
+    Ps, V, A = P * scale, P1 * scale / g, P2 * scale / g**2
+    sp = np.linalg.norm(V, axis=1)
+    weak = sp < _MIN_SPEED
+    if weak.any():
+        V[weak] = _direction(ev, w[weak], scale)
+        A[weak] = 0.0
+    return Ps, V, A
+
+
+def param_scale(ev: CurveEval, scale: np.ndarray) -> float:
+    """g = curve length / parameter range (from a fine chord sum), cached on ``ev``."""
+    key = tuple(np.asarray(scale, dtype=float).tolist())
+    cache = ev.__dict__.setdefault("_g", {})
+    if key not in cache:
+        ws = np.linspace(ev.w0, ev.w1, 64 * (ev.breaks.size - 1) + 1)
+        pts = ev.points(ws) * scale
+        length = float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum())
+        if not length > 0:
+            raise ValueError("zero-length curve")
+        cache[key] = length / (ev.w1 - ev.w0)
+    return cache[key]
+
+
 def end_states(ev: CurveEval, scale: np.ndarray):
-    """Unit tangent and curvature vector (scaled space) at the curve's start and end."""
-    P, P1, P2 = ev.eval(np.array([ev.w0, ev.w1]))
+    """Unit tangent and curvature vector (scaled space) at the curve's start and end,
+    exactly as the quintic pieces see them (same stop-of-parameter treatment)."""
+    g = param_scale(ev, scale)
+    _, V, A = _derivs(ev, np.array([ev.w0, ev.w1]), scale, g)
     out = []
     for k in range(2):
-        v = P1[k] * scale
-        a = P2[k] * scale
-        sp = np.linalg.norm(v)
-        T = v / sp
-        K = (a - (a @ T) * T) / sp**2
+        sp = np.linalg.norm(V[k])
+        T = V[k] / sp
+        K = (A[k] - (A[k] @ T) * T) / sp**2
         out.append((T, K))
     return out
 
 
-def hermite(p0, v0, a0, p1, v1, a1, h):
-    """Quintic Hermite power coefficients (K, 6, d) on [0, h] (K,) from end values (K, d)."""
-    hh = h[:, None]
-    dp = p1 - p0
-    c = np.empty(p0.shape[:1] + (6,) + p0.shape[1:])
-    c[:, 0] = p0
-    c[:, 1] = v0
-    c[:, 2] = 0.5 * a0
-    c[:, 3] = (20 * dp - (8 * v1 + 12 * v0) * hh - (3 * a0 - a1) * hh**2) / (2 * hh**3)
-    c[:, 4] = (-30 * dp + (14 * v1 + 16 * v0) * hh + (3 * a0 - 2 * a1) * hh**2) / (2 * hh**4)
-    c[:, 5] = (12 * dp - 6 * (v1 + v0) * hh - (a0 - a1) * hh**2) / (2 * hh**5)
-    return c
+_MIN_SPEED = 1e-3  # |dP/du| below this (u ≈ arc length) counts as a stop of the parameter
+_DIR_STEP = 1e-7   # relative parameter step for the direction of travel there
 
 
 def _polyval(coef: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -121,6 +149,13 @@ def _polyval(coef: np.ndarray, t: np.ndarray) -> np.ndarray:
     for i in range(4, -1, -1):
         acc = acc * t[..., None] + coef[:, None, i, :]
     return acc
+
+
+def _derivative(coef: np.ndarray) -> np.ndarray:
+    """Coefficients (K, 6, d) of the t-derivative (degree 4, padded with a zero)."""
+    d = np.zeros_like(coef)
+    d[:, :5] = coef[:, 1:] * np.arange(1, 6)[None, :, None]
+    return d
 
 
 def _retarget(v, a, T, K):
@@ -139,15 +174,11 @@ def fit_curve(curve, scale: np.ndarray, lin: np.ndarray, tol_mm: float, tol_deg:
     ``start``/``end`` optionally impose (T, K) unit tangent and curvature vector in
     that metric at the curve's ends.
     """
-    ev = CurveEval(curve)
+    ev = curve if isinstance(curve, CurveEval) else CurveEval(curve)
+    curve = ev.curve
     wb = ev.breaks
-    # one parameter scale per curve: length / parameter range (from a fine chord sum)
-    ws = np.linspace(ev.w0, ev.w1, 8 * (wb.size - 1) * 8 + 1)
-    pts = ev.points(ws) * scale
-    length = float(np.linalg.norm(np.diff(pts, axis=0), axis=1).sum())
-    if not length > 0:
-        raise ValueError("zero-length curve")
-    g = length / (ev.w1 - ev.w0)
+    # one parameter scale per curve: length / parameter range
+    g = param_scale(ev, scale)
     tl = tol_mm * FIT_TOL_SAFETY
     tr = tol_deg * FIT_TOL_SAFETY
     tfr = (np.arange(1, CURVE_CHECK_POINTS + 1) / (CURVE_CHECK_POINTS + 1))
@@ -155,8 +186,7 @@ def fit_curve(curve, scale: np.ndarray, lin: np.ndarray, tol_mm: float, tol_deg:
     ok = True
     for _ in range(CURVE_MAX_DEPTH + 1):
         wa, wz = wb[:-1], wb[1:]
-        P, P1, P2 = ev.eval(wb)
-        Ps, V, A = P * scale, P1 * scale / g, P2 * scale / g**2
+        Ps, V, A = _derivs(ev, wb, scale, g)
         v0, a0 = V[:-1].copy(), A[:-1].copy()
         v1, a1 = V[1:].copy(), A[1:].copy()
         if start is not None:
@@ -172,7 +202,10 @@ def fit_curve(curve, scale: np.ndarray, lin: np.ndarray, tol_mm: float, tol_deg:
         dev = q - ex
         e_lin = np.sqrt((dev[..., lin] ** 2).sum(axis=-1)).max(axis=1) if lin.any() else np.zeros(h.size)
         e_rot = (np.abs(dev[..., ~lin]) / scale[~lin]).max(axis=(1, 2)) if (~lin).any() else np.zeros(h.size)
-        bad = (e_lin > tl) | (e_rot > tr)
+        # the pieces must not stop either (|dq/du| ≈ 1 by construction of g)
+        dq = _polyval(_derivative(coef), tt)
+        slow = np.linalg.norm(dq, axis=-1).min(axis=1) < _MIN_SPEED
+        bad = (e_lin > tl) | (e_rot > tr) | slow
         max_mm, max_deg = float(e_lin.max()), float(e_rot.max())
         if not bad.any():
             break

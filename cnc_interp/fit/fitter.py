@@ -224,7 +224,8 @@ def _fit_sections(pr: PreparedRun, sub: SubRun, tol: np.ndarray, metric: np.ndar
     if pos < b:
         secs.append(("poly", pos, b))
     # exact end states of the curves, then the states imposed at each junction
-    states = [end_states(CurveEval(s[1].curve), pr.scale) if s[0] == "curve" else None for s in secs]
+    evs = [CurveEval(s[1].curve) if s[0] == "curve" else None for s in secs]
+    states = [end_states(ev, pr.scale) if ev is not None else None for ev in evs]
     start_of = [None] * len(secs)
     end_of = [None] * len(secs)
     for k in range(len(secs) - 1):
@@ -251,7 +252,7 @@ def _fit_sections(pr: PreparedRun, sub: SubRun, tol: np.ndarray, metric: np.ndar
         if s[0] == "curve":
             cp = s[1]
             t_c = float(tol[cp.last - a])
-            pf = fit_curve(cp.curve, pr.scale, pr.lin, t_c, settings.tol_deg, cp.curve.line,
+            pf = fit_curve(evs[k], pr.scale, pr.lin, t_c, settings.tol_deg, cp.curve.line,
                            float(pr.feed_mm_s[cp.last]),
                            start=start_of[k], end=end_of[k])
         else:

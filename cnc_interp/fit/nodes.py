@@ -213,28 +213,45 @@ def fit_polyline(nodes: np.ndarray, tol_mm: np.ndarray, tol_deg: float, lin: np.
 
 
 def _to_pieces(t, c, u, line, feed, p0, max_mm, max_deg, ok) -> PieceFit:
+    """Power-basis pieces of the B-spline: each span is the quintic Hermite interpolant of
+    q, q', q'' at its two knots (exact for a quintic), so neighbouring pieces share the
+    very same end values and the joins are C2 up to the rounding of one Hermite solve
+    (converting via 5th derivatives would lose digits next to tiny spans)."""
     from scipy.interpolate import BSpline
 
     spl = BSpline(t, c, 5, extrapolate=False)
     x = np.unique(t)
-    left = x[:-1]
-    coef = np.empty((left.size, 6, c.shape[1]))
-    for i in range(6):
-        coef[:, i, :] = spl(left, nu=i) / _FACT[i]
-    coef[0, 0, :] = p0
+    d0, d1, d2 = spl(x, nu=0), spl(x, nu=1), spl(x, nu=2)
+    # the last knot: scipy evaluates at the end from the left (extrapolate=False keeps it)
+    d0[0] = p0
+    h = np.diff(x)
+    coef = hermite(d0[:-1], d1[:-1], d2[:-1], d0[1:], d1[1:], d2[1:], h)
     seg_line, seg_feed = segment_sources(x, u, line, feed)
     return PieceFit(x - x[0], coef, seg_line, seg_feed, max_mm, max_deg, ok, int(u.size))
+
+
+def hermite(p0, v0, a0, p1, v1, a1, h):
+    """Quintic Hermite power coefficients (K, 6, d) on [0, h] (K,) from end values (K, d)."""
+    hh = h[:, None]
+    dp = p1 - p0
+    c = np.empty(p0.shape[:1] + (6,) + p0.shape[1:])
+    c[:, 0] = p0
+    c[:, 1] = v0
+    c[:, 2] = 0.5 * a0
+    c[:, 3] = (20 * dp - (8 * v1 + 12 * v0) * hh - (3 * a0 - a1) * hh**2) / (2 * hh**3)
+    c[:, 4] = (-30 * dp + (14 * v1 + 16 * v0) * hh + (3 * a0 - 2 * a1) * hh**2) / (2 * hh**4)
+    c[:, 5] = (12 * dp - 6 * (v1 + v0) * hh - (a0 - a1) * hh**2) / (2 * hh**5)
+    return c
 
 
 def segment_sources(x: np.ndarray, u: np.ndarray, line: np.ndarray, feed: np.ndarray):
     """Source line (block whose move contains the segment's end) and least feed of the
     moves each segment [x_k, x_k+1] overlaps; u (n,) node parameters."""
-    n = u.size
-    j_end = np.clip(np.searchsorted(u, x[1:], side="left"), 1, n - 1)
-    j_first = np.clip(np.searchsorted(u, x[:-1], side="right"), 1, n - 1)
-    j_first = np.minimum(j_first, j_end)
-    seg_line = line[j_end].astype(np.int64)
-    return seg_line, range_min(np.asarray(feed, dtype=float), j_first, j_end)
+    from ._bspline import segment_sources_kernel
+
+    return segment_sources_kernel(np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(u, dtype=float),
+                                  np.ascontiguousarray(line, dtype=np.int64),
+                                  np.ascontiguousarray(feed, dtype=float))
 
 
 def range_min(a: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:

@@ -364,22 +364,28 @@ def planar_fit_kernel(H, V, tol, alpha, theta_chord, tau, kap, w_end, max_incl, 
     return k, 0, max_dev
 
 
-def node_tangents(H: np.ndarray, V: np.ndarray):
+@njit(cache=True)
+def node_tangents(H, V):
     """Tangent angle (rad) and signed curvature (1/mm) estimated at every node from its
     neighbours (bisector of the two chords; Menger curvature); zeros at the ends."""
-    n = H.size
+    n = H.shape[0]
     tau = np.zeros(n)
     kap = np.zeros(n)
-    if n < 3:
-        return tau, kap
-    d = np.stack([np.diff(H), np.diff(V)], axis=1)
-    L = np.linalg.norm(d, axis=1)
-    u = d / L[:, None]
-    bis = u[:-1] + u[1:]
-    tau[1:-1] = np.arctan2(bis[:, 1], bis[:, 0])
-    cross = u[:-1, 0] * u[1:, 1] - u[:-1, 1] * u[1:, 0]
-    span = np.hypot(H[2:] - H[:-2], V[2:] - V[:-2])
-    kap[1:-1] = 2.0 * cross / np.where(span > 0, span, np.inf)
+    for j in range(1, n - 1):
+        ax = H[j] - H[j - 1]
+        az = V[j] - V[j - 1]
+        bx = H[j + 1] - H[j]
+        bz = V[j + 1] - V[j]
+        la = math.sqrt(ax * ax + az * az)
+        lb = math.sqrt(bx * bx + bz * bz)
+        ax /= la
+        az /= la
+        bx /= lb
+        bz /= lb
+        tau[j] = math.atan2(az + bz, ax + bx)
+        span = math.hypot(H[j + 1] - H[j - 1], V[j + 1] - V[j - 1])
+        if span > 0.0:
+            kap[j] = 2.0 * (ax * bz - az * bx) / span
     return tau, kap
 
 

@@ -20,11 +20,8 @@ import numpy as np
 from ..constants import (ALL_AXES, ARC_MAX_SEGMENT_DEG, ARC_MIN_RADIUS_MM, ARC_MIN_SEGMENTS,
                          ARC_R_REACH_TOL_MM, ARC_RADIUS_TOL_INCH, ARC_RADIUS_TOL_MAX_INCH,
                          ARC_RADIUS_TOL_MAX_MM, ARC_RADIUS_TOL_MM, ARC_RADIUS_TOL_REL,
-                         CURVE_CHORD_TOL_MM, CURVE_MAX_NODES, LINEAR_AXES, MM_PER_INCH)
-from .program import Arc
-
+                         CURVE_CHORD_TOL_MM, LINEAR_AXES, MM_PER_INCH)
 TWO_PI = 2.0 * math.pi
-_FRACS: dict[int, np.ndarray] = {}  # k / n for k = 1..n, by n (read-only arrays)
 _LINEAR9 = [a in LINEAR_AXES for a in ALL_AXES]
 
 
@@ -137,41 +134,41 @@ def segment_count(radius: float, sweep: float) -> int:
     return max(ARC_MIN_SEGMENTS, int(math.ceil(abs(sweep) / max_ang - 1e-9)))
 
 
-def make_arc(line: int, start9, end9, plane, c1: float, c2: float, r1: float, r2: float,
-             sweep: float) -> Arc:
-    """The exact 9-axis ``Arc`` (radius = mean of the start and end radii)."""
-    return Arc(line=line, start=np.array(start9, dtype=float), end=np.array(end9, dtype=float),
-               plane=tuple(plane), center=np.array([c1, c2]), radius=0.5 * (r1 + r2),
-               sweep_rad=float(sweep))
+def fill_arc_nodes(nodes: np.ndarray, layout: tuple[int, ...], pieces: list) -> None:
+    """Fill the reserved node rows of many arcs at once (vectorised over all of them).
 
-
-def arc_nodes(start9, end9, plane, c1: float, c2: float, r1: float, r2: float, sweep: float,
-              layout: tuple[int, ...]) -> np.ndarray:
-    """Sampled nodes (K, len(layout)) of an arc after its start; the last is the exact end.
-
-    Same formula as ``Arc.points`` (angle linear in the fraction, radius varying
-    linearly from start to end, other axes linear), evaluated only for the ``layout``
-    columns; K from ``segment_count``.
+    ``nodes`` (N, len(layout)) is a run's node array; each piece is ``(first, last,
+    (line, start9, end9, plane, c1, c2, r1, r2, sweep))`` with rows first+1..last to
+    fill, n = last - first from ``segment_count``. Same formula as ``Arc.points``: angle
+    and radius linear in the fraction k/n, every other axis linear; the last row is the
+    exact end point.
     """
-    n = segment_count(max(r1, r2), sweep)
-    if n > CURVE_MAX_NODES:
-        raise GeometryError(f"arc too large: it needs {n} nodes at {CURVE_CHORD_TOL_MM} mm chord "
-                            f"error (limit {CURVE_MAX_NODES})")
-    a, b, _ = plane
-    frac = _FRACS.get(n)
-    if frac is None:
-        frac = np.arange(1, n + 1, dtype=float) / n
-        frac.setflags(write=False)
-        if len(_FRACS) < 4096:
-            _FRACS[n] = frac
-    s = np.array([start9[i] for i in layout])
-    e = np.array([end9[i] for i in layout])
-    pts = s + np.multiply.outer(frac, e - s)
-    ang = math.atan2(start9[b] - c2, start9[a] - c1) + sweep * frac
-    r = r1 + (r2 - r1) * frac if r2 != r1 else r1
-    if a in layout:
-        pts[:, layout.index(a)] = c1 + r * np.cos(ang)
-    if b in layout:
-        pts[:, layout.index(b)] = c2 + r * np.sin(ang)
-    pts[-1] = e  # the end point is exact, not a rounding of cos/sin
-    return pts
+    m = len(pieces)
+    firsts = np.fromiter((p[0] for p in pieces), dtype=np.int64, count=m)
+    counts = np.fromiter((p[1] - p[0] for p in pieces), dtype=np.int64, count=m)
+    specs = [p[2] for p in pieces]
+    start = np.array([[sp[1][i] for i in layout] for sp in specs], dtype=float)
+    end = np.array([[sp[2][i] for i in layout] for sp in specs], dtype=float)
+    col_a = np.fromiter((layout.index(sp[3][0]) for sp in specs), dtype=np.int64, count=m)
+    col_b = np.fromiter((layout.index(sp[3][1]) for sp in specs), dtype=np.int64, count=m)
+    c1 = np.fromiter((sp[4] for sp in specs), dtype=float, count=m)
+    c2 = np.fromiter((sp[5] for sp in specs), dtype=float, count=m)
+    r1 = np.fromiter((sp[6] for sp in specs), dtype=float, count=m)
+    r2 = np.fromiter((sp[7] for sp in specs), dtype=float, count=m)
+    sweep = np.fromiter((sp[8] for sp in specs), dtype=float, count=m)
+    rows_m = np.arange(m)
+    a0 = np.arctan2(start[rows_m, col_b] - c2, start[rows_m, col_a] - c1)
+
+    total = int(counts.sum())
+    seg = np.repeat(rows_m, counts)                                  # arc of each new row
+    k = np.arange(1, total + 1) - np.repeat(np.cumsum(counts) - counts, counts)  # 1..n
+    frac = k / counts[seg]
+    vals = start[seg] + (end - start)[seg] * frac[:, None]
+    ang = a0[seg] + sweep[seg] * frac
+    r = r1[seg] + (r2 - r1)[seg] * frac
+    idx = np.arange(total)
+    vals[idx, col_a[seg]] = c1[seg] + r * np.cos(ang)
+    vals[idx, col_b[seg]] = c2[seg] + r * np.sin(ang)
+    last = k == counts[seg]
+    vals[last] = end[seg[last]]                                       # exact end points
+    nodes[firsts[seg] + k] = vals

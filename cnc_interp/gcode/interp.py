@@ -22,9 +22,10 @@ from operator import itemgetter
 
 import numpy as np
 
-from ..constants import ALL_AXES, ARC_MAX_TURNS, LINEAR_AXES, MM_PER_INCH, SECONDS_PER_MINUTE
+from ..constants import (ALL_AXES, ARC_MAX_TURNS, CURVE_CHORD_TOL_MM, CURVE_MAX_NODES, LINEAR_AXES,
+                         MM_PER_INCH, SECONDS_PER_MINUTE)
 from ..errors import GCodeError, SourceLocation, UnsupportedError
-from .arcs import GeometryError, arc_length_mm, arc_nodes, centre_from_ijk, centre_from_r
+from .arcs import GeometryError, arc_length_mm, centre_from_ijk, centre_from_r, segment_count
 from .canned import SUPPORTED as CYCLE_CODES, CycleError, expand_cycle
 from .program import Dwell, Program, Stop
 from .runs import RunBuilder, finish_run
@@ -492,6 +493,7 @@ class Interpreter:
         if not axis_words and "I" not in d and "J" not in d and "K" not in d:
             return False  # the general path reports the missing words
         self.blk = blk
+        self.f_block = 0.0
         if fw is not None:
             if fw[1] < 0:
                 raise self.error("negative feed rate", fw[2])
@@ -506,6 +508,7 @@ class Interpreter:
         return True
 
     def _fast_state(self):
+        """(fast path allowed, offsets, units, incremental, letter-kind lookup, feed scale)."""
         ok = (not self.feed_inverse_time and not self.exact_stop and self.nurbs_cp is None
               and not self.rot_deg)
         # letters of inactive axes send the block to the general path (it activates or rejects)
@@ -651,9 +654,7 @@ class Interpreter:
         if 13 in groups:
             code = groups[13][0]
             self.exact_stop = code == 611
-            if code == 610:
-                self.tol, self.naive = 0.0, NAN
-            elif code == 611:
+            if code in (610, 611):  # exact path; G61.1 also stops at every block end
                 self.tol, self.naive = 0.0, NAN
             else:
                 self.tol, self.naive = NAN, NAN
@@ -1002,17 +1003,24 @@ class Interpreter:
                                                 turns, inch=self.len_unit != 1.0)
         except GeometryError as exc:
             raise self.error(str(exc), col) from None
-        # the exact Arc is built when the run is finished (see runs.finish_run)
-        arc = (line, start, end, plane, c1, c2, r1, r2, sweep)
-        try:
-            pts = arc_nodes(start, end, plane, c1, c2, r1, r2, sweep, self.active)
-        except GeometryError as exc:
-            raise self.error(str(exc), col) from None
+        n = segment_count(max(r1, r2), sweep)
+        if n > CURVE_MAX_NODES:
+            raise self.error(f"arc too large: it needs {n} nodes at {CURVE_CHORD_TOL_MM} mm chord "
+                             f"error (limit {CURVE_MAX_NODES})", col)
         if self.feed_inverse_time:
             feed = arc_length_mm(start, end, plane, r1, r2, sweep) * self.f_block / SECONDS_PER_MINUTE
         else:
             feed = self.f_word * (self.len_unit * _PER_MIN)
-        self._curve(arc, pts, end, line, col, feed)
+        # Node slots are reserved now and filled for all arcs of the run at once, and the
+        # exact Arc is built, when the run is finished (runs.finish_run).
+        rb = self.rb
+        if rb is None or rb.kind != "feed":
+            rb = self._start_run("feed", line, col)
+        first, last = rb.reserve(n, line, col, feed, self.tol, self.naive)
+        rb.curves.append((first, last, (line, start, end, plane, c1, c2, r1, r2, sweep)))
+        self.pos = end
+        if self.exact_stop:
+            self._close_run("exact-stop")
 
     def _curve_feed(self, pts9: np.ndarray, start9) -> float:
         if self.feed_inverse_time:

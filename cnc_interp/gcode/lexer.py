@@ -22,7 +22,7 @@ import re
 from bisect import bisect_right
 from dataclasses import dataclass, field
 
-from ..constants import MAX_LINE_CHARS, PARAM_LOCAL_COUNT, PARAM_NUMBERED_MAX
+from ..constants import EXPR_INTEGER_TOL, MAX_LINE_CHARS, PARAM_LOCAL_COUNT, PARAM_NUMBERED_MAX
 from ..errors import GCodeError, SourceLocation, UnsupportedError
 from .expr import ExprSyntax, parse_value
 
@@ -45,6 +45,8 @@ _CHUNK = re.compile(r"[^ \t\r\f\v]+")
 _LINE_NUMBER = re.compile(r"n[0-9]+(?:\.[0-9]*)?")  # LinuxCNC ignores a fraction
 _KEYWORD = re.compile(r"[a-z]+")
 _OWORD_NUMBER = re.compile(r"[0-9]+")
+_SIMPLE_WORD = re.compile(r"[abcdfghijklmpqrstuvwxyz]([-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+))")
+_INF = float("inf")
 
 
 @dataclass(slots=True)
@@ -150,6 +152,13 @@ def lex_line(raw: str, lineno: int, source: str, block_delete: bool = True) -> L
     const = True
     while pos < n:
         c = s[pos]
+        m = _SIMPLE_WORD.match(s, pos)
+        if m is not None:  # letter + plain number: no need for the expression parser
+            value = float(m.group(1))
+            if value != _INF and value != -_INF:
+                words.append((c.upper(), value, col_of(pos)))
+                pos = m.end()
+                continue
         if c in WORD_LETTERS:
             start = pos + 1
             try:
@@ -199,7 +208,7 @@ def _no_value(s: str, start: int, e: ExprSyntax) -> bool:
 
 def _param_number(value: float, loc: SourceLocation) -> int:
     r = round(value)
-    if abs(value - r) > 1e-4:
+    if abs(value - r) > EXPR_INTEGER_TOL:
         raise GCodeError(f"parameter number must be an integer, got {value:g}", loc)
     if not 0 < r <= PARAM_NUMBERED_MAX:
         raise GCodeError(f"parameter number #{r} out of range 1..{PARAM_NUMBERED_MAX}", loc)

@@ -9,7 +9,9 @@ Semantics follow LinuxCNC:
   starts with ``_`` is global, any other name is local to the current O-word call
   frame (the main program being frame 0);
 * ``#1..#30`` are local to an O-word call: :meth:`ParamStore.push_frame` saves
-  them and loads the call's arguments, :meth:`ParamStore.pop_frame` restores them.
+  them and loads the call's arguments, :meth:`ParamStore.pop_frame` restores them;
+* ``#<_value>`` / ``#<_value_returned>`` (the last O-word return value and whether
+  there was one) start at 0.
 """
 
 from __future__ import annotations
@@ -26,7 +28,8 @@ class ParamStore:
     def __init__(self) -> None:
         # index 0 is unused so that #n is numbered[n]
         self.numbered: list[float] = [0.0] * (PARAM_NUMBERED_MAX + 1)
-        self.globals: dict[str, float] = {}
+        # LinuxCNC starts a program with the O-word return value at 0
+        self.globals: dict[str, float] = {"_value": 0.0, "_value_returned": 0.0}
         self.locals: dict[str, float] = {}
         self._frames: list[tuple[list[float], dict[str, float]]] = []
 

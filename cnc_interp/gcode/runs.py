@@ -4,7 +4,9 @@ The interpreter appends one node per move into ``array('d')`` buffers (no per-no
 Python objects, 8 bytes per value). Node values are stored for the axes that are
 *active* at that moment (``layout``, indices into ``ALL_AXES``); when a program
 names a new axis mid-run the buffer is re-laid out once (the new axis held still
-until then). ``finish`` maps every run onto the program's final axes.
+until then). G2/G3 arcs only reserve their node rows; ``finish_run`` fills the rows
+of all arcs of a run in one vectorised pass, builds the exact ``Arc`` objects and
+maps the run onto the program's final axes.
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ from array import array
 
 import numpy as np
 
-from .arcs import make_arc
+from .arcs import fill_arc_nodes
 from .program import Arc, CurvePiece, Nurbs, Run
 
 
@@ -54,6 +56,18 @@ class RunBuilder:
         self.nodes.frombytes(out.tobytes())
         self.layout = new_layout
 
+    def reserve(self, k: int, line: int, col: int, feed: float, tol: float,
+                naive: float) -> tuple[int, int]:
+        """Append ``k`` node slots (zeros, filled by ``finish_run``); returns (first, last)."""
+        first = self.n - 1
+        self.nodes.frombytes(bytes(8 * k * len(self.layout)))
+        self.line.extend(array("q", (line,)) * k)
+        self.col.extend(array("q", (col,)) * k)
+        self.feed.extend(array("d", (feed,)) * k)
+        self.tol.extend(array("d", (tol,)) * k)
+        self.naive.extend(array("d", (naive,)) * k)
+        return first, self.n - 1
+
     def add_many(self, pts: np.ndarray, line: int, col: int, feed: float, tol: float,
                  naive: float) -> tuple[int, int]:
         """Append sampled nodes (K, 9) or (K, len(layout)); returns the piece's (first, last)."""
@@ -75,6 +89,9 @@ def finish_run(rb: RunBuilder, axes_idx: tuple[int, ...], axes: str, end_reason:
     n = rb.n
     ncol = len(rb.layout)
     raw = np.frombuffer(rb.nodes, dtype=float).reshape(n, ncol)
+    arcs = [p for p in rb.curves if p[2].__class__ is tuple]
+    if arcs:
+        fill_arc_nodes(raw, rb.layout, arcs)
     if rb.layout == axes_idx:
         nodes = raw  # shares the buffer; the builder is dropped after this
     else:
@@ -88,13 +105,17 @@ def finish_run(rb: RunBuilder, axes_idx: tuple[int, ...], axes: str, end_reason:
     if n > 1:
         feed[0] = feed[1]
     sel = list(axes_idx)
+    where = {ax: j for j, ax in enumerate(axes_idx)}
     curves = []
     for first, last, c in rb.curves:
         if c.__class__ is tuple:  # an arc recorded by the interpreter: make the exact Arc
-            c = make_arc(*c)
-        if isinstance(c, Arc):
-            pos = {ax: j for j, ax in enumerate(axes_idx)}
-            plane = tuple(pos.get(p, -1) for p in c.plane)
+            line, s9, e9, plane, c1, c2, r1, r2, sweep = c
+            cur = Arc(line=line, start=np.array([s9[i] for i in sel]),
+                      end=np.array([e9[i] for i in sel]),
+                      plane=tuple(where.get(p, -1) for p in plane), center=np.array((c1, c2)),
+                      radius=0.5 * (r1 + r2), sweep_rad=float(sweep))
+        elif isinstance(c, Arc):
+            plane = tuple(where.get(p, -1) for p in c.plane)
             cur = Arc(line=c.line, start=c.start[sel].copy(), end=c.end[sel].copy(), plane=plane,
                       center=c.center, radius=c.radius, sweep_rad=c.sweep_rad)
         else:

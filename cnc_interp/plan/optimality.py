@@ -33,7 +33,14 @@ def _line_feasible(length: float, k: int, v: float, a: float, j: float, dt: floa
     # padded sequence: 3 x 0, s_0=0, s_1..s_{k-1}, s_k=L, 3 x L  (length n + 8)
     m = n + 8
     full = np.zeros(m)
-    full[k + 1:] = length
+    full[k + 3:] = length
+    if n == 0:  # nothing to choose: check the fixed sequence
+        x = full
+        for lim in (v * dt, a * dt * dt, j * dt ** 3):
+            x = np.diff(x)
+            if np.abs(x).max() > lim:
+                return False
+        return True
     # E maps unknowns into the padded sequence
     rows = np.arange(4, 4 + n)
     from scipy.sparse import csr_matrix

@@ -224,7 +224,7 @@ def plan_path_vpop(path, joint_map, machine, dt_s: float, settings=None) -> Path
     bq = np.zeros((brake_cap, n))
     stats = np.zeros(5, dtype=np.int64)
     js = np.ascontiguousarray(jl * VPOP_BRAKE_JERK_FRACTION)
-    K2, K3, K23 = table.curvature_bounds(al, jl)
+    K2, K3, K23 = (core.range_max_table(x) for x in table.curvature_bounds(al, jl))
     gap_tol = VPOP_AIM_GAP_JERK_STEPS * float(np.min(jl))
     easy = VPOP_EASY_FRACTION
     fast = bool(getattr(settings, "get", lambda *_: None)("vpop_exact") is not True)

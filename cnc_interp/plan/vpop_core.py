@@ -383,16 +383,32 @@ def _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, mode, hint, 
 
 
 @njit(cache=True)
-def _window_max(S, K, s, D, hint):
-    """Largest K[p] over the table pieces meeting [s, s + D]."""
-    p = _piece(S, s, hint)
-    m = S.shape[0] - 1
-    best = K[p]
-    while p < m - 1 and S[p + 1] < s + D:
-        p += 1
-        if K[p] > best:
-            best = K[p]
-    return best
+def _window_max(S, T, s, D, hint):
+    """Largest value over the table pieces meeting [s, s + D]; ``T`` is the sparse table
+    (levels, m) of ``range_max_table`` (O(1) per query)."""
+    p0 = _piece(S, s, hint)
+    p1 = _piece(S, s + D, p0)
+    span = p1 - p0 + 1
+    lvl = 0
+    while (2 << lvl) <= span:
+        lvl += 1
+    a = T[lvl, p0]
+    b = T[lvl, p1 - (1 << lvl) + 1]
+    return a if a > b else b
+
+
+def range_max_table(K: np.ndarray) -> np.ndarray:
+    """Sparse table: row l holds max(K[p : p + 2**l]) (clipped at the end)."""
+    m = K.shape[0]
+    levels = max(1, int(np.floor(np.log2(max(m, 1)))) + 1)
+    T = np.empty((levels, m))
+    T[0] = K
+    for lvl in range(1, levels):
+        w = 1 << (lvl - 1)
+        prev = T[lvl - 1]
+        shifted = np.concatenate((prev[w:], np.full(w, -np.inf)))[:m]
+        T[lvl] = np.maximum(prev, shifted)
+    return T
 
 
 @njit(cache=True)

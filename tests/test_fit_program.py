@@ -1,0 +1,190 @@
+"""fit_program: timeline, corners, G61 / G64 P tolerances, rotary-only moves, report, CLI."""
+
+from __future__ import annotations
+
+import json
+import os
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from cnc_interp.errors import UsageError
+from cnc_interp.fit import FitResult, FitSettings, Path, fit_program, fit_run
+from cnc_interp.fit.report import fit_statistics, format_statistics, segments_document, write_segments_json
+from cnc_interp.gcode.program import Dwell, Program, Run, Stop
+
+from ._fit_helpers import all_finite, distance_to_path
+
+SAMPLES = os.path.join(os.path.dirname(__file__), "..", "samples", "gcode")
+
+
+def _run(nodes, axes="XYZ", tol=np.nan, kind="feed", feed=20.0):
+    nodes = np.asarray(nodes, float)
+    n = nodes.shape[0]
+    tol_arr = np.broadcast_to(np.asarray(tol, float), (n,)).copy()
+    return Run(kind, axes, nodes, np.arange(1, n + 1), np.ones(n, int),
+               np.full(n, np.inf if kind == "rapid" else feed), tol_arr, np.full(n, np.nan))
+
+
+def _polygon(n_sides, R=10.0, laps=1.0):
+    a = np.linspace(0, 2 * np.pi * laps, int(n_sides * laps) + 1)
+    return np.stack([R * np.cos(a), R * np.sin(a), np.zeros_like(a)], axis=1)
+
+
+def test_timeline_rapids_dwell_stop_and_exact_chaining():
+    feed_nodes = np.array([[0, 0, -1], [10, 0, -1], [10, 10, -1], [0, 10, -1.0]])
+    items = (
+        _run([[0, 0, 0], [0, 0, 5], [0, 0, -1]], kind="rapid"),
+        _run(feed_nodes),
+        Dwell(line=9, seconds=0.5, position=feed_nodes[-1]),
+        _run([[0, 10, -1], [0, 10, 5]], kind="rapid"),
+        Stop(line=12, code="M2", position=np.array([0, 10, 5.0])),
+    )
+    prog = Program("t.ngc", "XYZ", items, np.zeros(3), 12)
+    res = fit_program(prog, FitSettings())
+    assert isinstance(res, FitResult)
+    kinds = [type(it).__name__ + ("-rapid" if isinstance(it, Path) and it.rapid else "") for it in res.items]
+    # two rapid moves, three feed paths (90° corners stop), dwell, one rapid, stop
+    assert kinds == ["Path-rapid", "Path-rapid", "Path", "Path", "Path", "Dwell", "Path-rapid", "Stop"]
+    paths = [it for it in res.items if isinstance(it, Path)]
+    for a, b in zip(res.items[:-1], res.items[1:]):
+        if isinstance(a, Path) and isinstance(b, Path):
+            assert np.array_equal(a.end, b.start)
+    for p in paths:
+        assert all_finite(p)
+        if p.rapid:
+            assert p.n_seg == 1 and np.all(p.coef[0, 2:] == 0)
+            assert np.isinf(p.feed_mm_s).all()
+    st = fit_statistics(res)
+    assert st["nodes_in"] == 4 and st["rapid_moves"] == 3 and st["within_tolerance"]
+    assert "continuity" in st and st["paths"] == 6
+    text = format_statistics(st)
+    assert "segments out" in text and "max node deviation" in text
+
+
+def test_corner_threshold_splits_or_rounds():
+    sq = np.array([[0, 0, 0], [10, 0, 0], [10, 10, 0], [0, 10, 0], [0, 0, 0.0]])
+    split = fit_run(_run(sq), FitSettings(corner_deg=30))
+    assert len(split) == 4 and all(p.n_seg == 1 for p in split)
+    tol = 0.01
+    rounded = fit_run(_run(sq), FitSettings(tol_mm=tol, corner_deg=120, method="nodes"))
+    assert len(rounded) == 1
+    assert distance_to_path(rounded[0], sq).max() <= tol
+    s = np.linspace(0, rounded[0].length, 4000)
+    assert np.all(np.isfinite(rounded[0](s, 3)))
+
+
+def test_polygon_below_threshold_is_rounded_within_tolerance():
+    nodes = _polygon(36)  # 10° turns
+    tol = 0.005
+    (path,) = fit_run(_run(nodes), FitSettings(tol_mm=tol))
+    assert distance_to_path(path, nodes).max() <= tol
+
+
+def test_g61_exact_lines_stop_at_every_corner_and_merge_collinear():
+    nodes = np.array([[0, 0, 0], [5, 0, 0], [10, 0, 0], [15, 1, 0], [20, 2, 0], [25, 4, 0.0]])
+    paths = fit_run(_run(nodes, tol=0.0), FitSettings())
+    # (0..10 collinear) | 10->15->20 collinear | 20->25
+    assert len(paths) == 3
+    for p in paths:
+        assert p.n_seg == 1
+        assert np.all(p.coef[0, 2:] == 0)
+    assert_allclose(paths[0].end, [10, 0, 0], atol=1e-12)
+    assert_allclose(paths[1].end, [20, 2, 0], atol=1e-12)
+
+
+def test_g64_p_tolerance_modes():
+    rng = np.random.default_rng(3)
+    nodes = _polygon(400, R=20, laps=0.75) + np.concatenate([rng.normal(0, 0.01, (301, 2)), np.zeros((301, 1))], 1)
+    run = _run(nodes, tol=0.05)
+    st_strict = fit_statistics(fit_program(Program("a", "XYZ", (run,), nodes[0], 1), FitSettings(tol_mm=0.01)))
+    st_gcode = fit_statistics(fit_program(Program("a", "XYZ", (run,), nodes[0], 1),
+                                          FitSettings(tol_mm=0.01, tol_mode="gcode")))
+    assert st_strict["max_node_dev_mm"] <= 0.01
+    assert 0.01 < st_gcode["max_node_dev_mm"] <= 0.05
+    assert st_gcode["segments_out"] < st_strict["segments_out"]
+    # nan (G64 without P) takes --tol
+    st_nan = fit_statistics(fit_program(Program("a", "XYZ", (_run(nodes),), nodes[0], 1), FitSettings(tol_mm=0.02)))
+    assert st_nan["max_node_dev_mm"] <= 0.02
+
+
+def test_rotary_only_moves_get_their_own_path():
+    nodes = np.array([[0, 0, 0, 0], [5, 0, 0, 0], [5, 0, 0, 30], [5, 0, 0, 60], [10, 0, 0, 60.0]])
+    paths = fit_run(_run(nodes, axes="XYZA"), FitSettings())
+    assert len(paths) == 3
+    assert_allclose(paths[1].weights, [0, 0, 0, 1])
+    assert paths[1].length == pytest.approx(60.0)
+    assert_allclose(paths[0].weights, [1, 1, 1, 0])
+
+
+def test_duplicate_nodes_are_merged():
+    nodes = np.array([[0, 0, 0], [1, 0, 0], [1, 0, 0], [2, 0.1, 0], [2, 0.1, 0], [3, 0.3, 0.0]])
+    (p,) = fit_run(_run(nodes), FitSettings())
+    assert all_finite(p)
+    assert distance_to_path(p, nodes).max() <= 1e-3
+
+
+def test_settings_validation_and_from_options():
+    with pytest.raises(UsageError):
+        FitSettings(tol_mm=-1)
+    with pytest.raises(UsageError):
+        FitSettings(tol_mode="loose")
+    with pytest.raises(UsageError):
+        FitSettings(corner_deg=200)
+
+    class M:
+        tol_mm = 0.02
+
+    assert FitSettings.from_options(machine=M()).tol_mm == 0.02
+    assert FitSettings.from_options(tol_mm=0.005, machine=M()).tol_mm == 0.005
+    assert FitSettings.from_options(corner_deg=45).corner_deg == 45
+    exact = FitSettings.from_options(tol_mm=0.0)
+    assert exact.corner_deg == 0.0 and exact.tol_mm > 0
+    assert_allclose(FitSettings(tol_mm=0.01).node_tolerance(np.array([np.nan, 0.0, 0.005, 0.5])),
+                    [0.01, 0.0, 0.005, 0.01])
+
+
+def test_segments_json_is_documented_and_deterministic(tmp_path):
+    x = np.linspace(0, 2 * np.pi, 200)
+    nodes = np.stack([10 * np.cos(x), np.zeros_like(x), 10 * np.sin(x) * 0.5], axis=1)
+    prog = Program("lathe.ngc", "XYZ", (_run(nodes),), nodes[0], 200)
+    res = fit_program(prog, FitSettings())
+    out1, out2 = tmp_path / "a.json", tmp_path / "b.json"
+    write_segments_json(res, str(out1))
+    write_segments_json(fit_program(prog, FitSettings()), str(out2))
+    assert out1.read_bytes() == out2.read_bytes()
+    assert not [f for f in os.listdir(tmp_path) if f.endswith(".tmp")]
+    doc = json.loads(out1.read_text())
+    assert doc["format"] == "cnc-interp-segments" and doc["axes"] == "XYZ"
+    seg = doc["items"][0]["segments"][0]
+    assert set(seg) >= {"line", "u0", "u1", "coef", "feed_mm_s", "planar"}
+    assert len(seg["coef"]) == 3 and len(seg["coef"][0]) == 6
+    assert seg["planar"]["plane"] == "XZ" and len(seg["planar"]["p"]) == 6
+    # the planar extras reproduce the power-basis coefficients
+    pl = seg["planar"]
+    x_ = np.linspace(0, pl["x_end"], 5)
+    p = np.polynomial.polynomial.polyval(x_, pl["p"])
+    qh = pl["origin"][0] + x_ * np.cos(pl["theta_rad"]) - p * np.sin(pl["theta_rad"])
+    assert_allclose(np.polynomial.polynomial.polyval(x_, seg["coef"][0]), qh, atol=1e-12)
+    assert segments_document(res)["version"] == 1
+
+
+def test_cli_fit_on_samples(tmp_path):
+    from click.testing import CliRunner
+
+    from cnc_interp.cli import main
+
+    files = sorted(f for f in os.listdir(SAMPLES) if f.endswith(".ngc"))
+    assert files
+    runner = CliRunner()
+    for f in files:
+        out = tmp_path / (f + ".json")
+        r = runner.invoke(main, ["fit", os.path.join(SAMPLES, f), "--json", "-o", str(out)])
+        assert r.exit_code == 0, (f, r.output)
+        st = json.loads(r.output)
+        assert st["within_tolerance"], f
+        assert st["max_node_dev_mm"] <= st["tol_mm"]
+        assert json.loads(out.read_text())["format"] == "cnc-interp-segments"
+    r = runner.invoke(main, ["fit", os.path.join(SAMPLES, files[0]), "--tol", "0.01"])
+    assert r.exit_code == 0 and "segments out" in r.output
