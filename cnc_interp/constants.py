@@ -220,3 +220,6 @@ VPOP_EASY_FRACTION = 0.25
 #: an end-of-path "aim" run is committed when it stops within this many jerk steps
 #: (jmax dt³ of the tightest axis) short of the end; the rest is crept from rest
 VPOP_AIM_GAP_JERK_STEPS = 4.0
+#: a paper-000 plan longer than this many samples is refused (a degenerate path, e.g.
+#: a cusp with unbounded curvature, would otherwise crawl for days and exhaust memory)
+P000_MAX_SAMPLES = 20_000_000

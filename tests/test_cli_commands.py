@@ -123,6 +123,12 @@ def test_plot_bad_machine_exits_2(files, monkeypatch, capsys, tmp_path):
     assert code == 2 and not out.exists()
 
 
+def test_plot_unknown_image_format_exits_2(files, monkeypatch, capsys, tmp_path):
+    out = tmp_path / "fig.xyz"
+    code, _, err = _run_cli(monkeypatch, capsys, "plot", str(files / "plan.csv"), "-o", str(out))
+    assert code == 2 and "fig.xyz" in err and "png" in err and not out.exists()
+
+
 def test_exception_mid_write_leaves_no_file(tmp_path):
     target = tmp_path / "out.csv"
     with pytest.raises(RuntimeError):

@@ -96,3 +96,14 @@ def test_missing_file_is_a_usage_error():
     res = run_cli("parse", "no-such-file.ngc")
     assert res.returncode == 2
     assert "Traceback" not in res.stderr.decode()
+
+
+def test_binary_garbage_is_a_clean_error():
+    import random
+
+    data = bytes(random.Random(7).randrange(256) for _ in range(4000))
+    res = run_cli("parse", "-", stdin=data)
+    assert res.returncode == 2
+    err = res.stderr.decode("utf-8", "replace")
+    assert err.startswith("<stdin>:") and ": error: " in err
+    assert "Traceback" not in err

@@ -87,18 +87,22 @@ def test_rational_nurbs_circle_is_exact_within_tolerance():
     assert path.length == pytest.approx(10 * np.pi, rel=1e-6)
 
 
-def test_polynomial_cubic_nurbs_represented_exactly():
+def test_polynomial_cubic_nurbs_within_tolerance_and_g2():
     rng = np.random.default_rng(3)
     ctrl = np.cumsum(rng.normal(size=(7, 3)), axis=0)
     knots = np.array([0, 0, 0, 0, 0.2, 0.5, 0.7, 1, 1, 1, 1.0])
     nb = Nurbs(line=4, control=ctrl, weights=np.ones(7), knots=knots, order=4)
     pf = fit_curve(nb, np.ones(3), np.ones(3, bool), 1e-3, 1e-3, 4, 10.0)
     path = _path_of(pf)
-    # quintic Hermite of a cubic span reproduces it: one piece per knot span
-    assert path.n_seg == 4
     ev = CurveEval(nb)
-    w = np.linspace(0, 1, 500)
-    assert distance_to_path(path, ev.points(w)).max() < 1e-9
+    w = np.linspace(0, 1, 2000)
+    assert distance_to_path(path, ev.points(w)).max() <= 1e-3
+    pos, tan, curv = continuity(path)
+    assert pos < 1e-9 and tan < 1e-9 and curv < 1e-9
+    # unit speed at every break (arc-length-like pieces)
+    assert_allclose(np.linalg.norm(path.coef[:, 1, :], axis=1), 1.0, rtol=1e-12)
+    assert path.length == pytest.approx(np.linalg.norm(np.diff(ev.points(np.linspace(0, 1, 20001)), axis=0),
+                                                       axis=1).sum(), rel=1e-3)
 
 
 def test_run_line_arc_line_is_g2_and_within_tolerance():

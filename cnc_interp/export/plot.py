@@ -51,10 +51,17 @@ def plot_trajectory(traj, machine, out: str, title: str = "") -> str:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.backend_bases import FigureCanvasBase
 
     from .atomic import atomic_write
 
     fmt = os.path.splitext(out)[1].lstrip(".").lower() or "png"
+    supported = FigureCanvasBase.get_supported_filetypes()
+    if fmt not in supported:
+        from ..errors import SourceLocation, UsageError
+
+        raise UsageError(f"cannot write a .{fmt} image; use one of "
+                         f"{', '.join(sorted(supported))}", SourceLocation(file=out))
     with plt.rc_context(_STYLE):
         fig = _figure(plt, traj, machine, title)
         try:

@@ -140,6 +140,7 @@ def end_states(ev: CurveEval, scale: np.ndarray):
 
 
 _MIN_SPEED = 1e-3  # |dP/du| below this (u ≈ arc length) counts as a stop of the parameter
+_MIN_PIECE_SPEED = 0.25  # least |dq/dτ| inside a unit-speed piece
 _DIR_STEP = 1e-7   # relative parameter step for the direction of travel there
 
 
@@ -156,6 +157,51 @@ def _derivative(coef: np.ndarray) -> np.ndarray:
     d = np.zeros_like(coef)
     d[:, :5] = coef[:, 1:] * np.arange(1, 6)[None, :, None]
     return d
+
+
+def _geometric(ev: CurveEval, w: np.ndarray, scale: np.ndarray, g: float):
+    """At w (K,): scaled position, unit tangent T, curvature vector K, and dw/dσ, d²w/dσ²
+    of the arc-length reparametrisation σ (a parameter stop uses the direction of travel,
+    K = 0 and a finite dw/dσ)."""
+    P, P1, P2 = ev.eval(w)
+    Ps, V, A = P * scale, P1 * scale, P2 * scale
+    sp = np.linalg.norm(V, axis=1)
+    weak = sp < _MIN_SPEED * g
+    sp_safe = np.where(weak, _MIN_SPEED * g, sp)
+    T = V / sp_safe[:, None]
+    if weak.any():
+        T[weak] = _direction(ev, w[weak], scale)
+    at = (A * T).sum(axis=1)
+    K = (A - at[:, None] * T) / sp_safe[:, None] ** 2
+    K[weak] = 0.0
+    wd1 = 1.0 / sp_safe
+    wd2 = np.where(weak, 0.0, -at / sp_safe**3)
+    return Ps, T, K, wd1, wd2
+
+
+def _piece_lengths(ev: CurveEval, wa: np.ndarray, wz: np.ndarray, scale: np.ndarray):
+    """Arc length (K,) and displacement (K, d) (scaled metric) of each piece [wa, wz].
+
+    Both by 8-point Gauss–Legendre over P'(w): for a tiny piece far from the origin the
+    difference P(wz) - P(wa) of two absolute positions would lose digits (and the
+    Hermite's third to fifth coefficients divide it by h³..h⁵). Large pieces take the
+    difference of the exact end points, where quadrature would be the less accurate.
+    """
+    x, wts = np.polynomial.legendre.leggauss(8)
+    mid, half = 0.5 * (wa + wz), 0.5 * (wz - wa)
+    w = (mid[:, None] + half[:, None] * x[None, :]).ravel()
+    d1 = (ev.eval(w)[1] * scale).reshape(wa.size, x.size, -1)
+    sp = np.linalg.norm(d1, axis=2)
+    L = half * (sp @ wts)
+    dp_quad = half[:, None] * np.einsum("kgd,g->kd", d1, wts)
+    dp_diff = (ev.points(wz) - ev.points(wa)) * scale
+    chord = np.linalg.norm(dp_diff, axis=1)
+    small = chord < _SMALL_PIECE * np.maximum(1.0, np.abs(ev.points(wa) * scale).max(axis=1))
+    dp = np.where(small[:, None], dp_quad, dp_diff)
+    return np.maximum(L, chord), dp
+
+
+_SMALL_PIECE = 1e-2  # relative size below which a piece's displacement comes from quadrature
 
 
 def _retarget(v, a, T, K):
@@ -186,25 +232,30 @@ def fit_curve(curve, scale: np.ndarray, lin: np.ndarray, tol_mm: float, tol_deg:
     ok = True
     for _ in range(CURVE_MAX_DEPTH + 1):
         wa, wz = wb[:-1], wb[1:]
-        Ps, V, A = _derivs(ev, wb, scale, g)
-        v0, a0 = V[:-1].copy(), A[:-1].copy()
-        v1, a1 = V[1:].copy(), A[1:].copy()
+        Ps, T, K, wd1, wd2 = _geometric(ev, wb, scale, g)
+        v0, a0 = T[:-1].copy(), K[:-1].copy()
+        v1, a1 = T[1:].copy(), K[1:].copy()
         if start is not None:
-            v0[0], a0[0] = _retarget(v0[0], a0[0], *start)
+            v0[0], a0[0] = start
         if end is not None:
-            v1[-1], a1[-1] = _retarget(v1[-1], a1[-1], *end)
-        h = (wz - wa) * g
-        coef = hermite(Ps[:-1], v0, a0, Ps[1:], v1, a1, h)
+            v1[-1], a1[-1] = end
+        h, dp = _piece_lengths(ev, wa, wz, scale)
+        # unit-speed (arc-length-like) pieces: q(τ) ≈ P(w(τ)), with w(τ) the quintic
+        # Hermite of the arc-length reparametrisation's w, w', w'' at both ends
+        coef = hermite(Ps[:-1], v0, a0, Ps[1:], v1, a1, h, dp)
+        wcoef = hermite(wa[:, None], wd1[:-1, None], wd2[:-1, None], wz[:, None], wd1[1:, None],
+                        wd2[1:, None], h)
         tt = tfr[None, :] * h[:, None]
         q = _polyval(coef, tt)
-        wc = wa[:, None] + tfr[None, :] * (wz - wa)[:, None]
+        wc = np.clip(_polyval(wcoef, tt)[..., 0], ev.w0, ev.w1)
         ex = ev.points(wc.ravel()).reshape(wc.shape + (-1,)) * scale
         dev = q - ex
         e_lin = np.sqrt((dev[..., lin] ** 2).sum(axis=-1)).max(axis=1) if lin.any() else np.zeros(h.size)
         e_rot = (np.abs(dev[..., ~lin]) / scale[~lin]).max(axis=(1, 2)) if (~lin).any() else np.zeros(h.size)
-        # the pieces must not stop either (|dq/du| ≈ 1 by construction of g)
+        # no stop inside a piece (|dq/dτ| ≈ 1), and w(τ) must run forward
         dq = _polyval(_derivative(coef), tt)
-        slow = np.linalg.norm(dq, axis=-1).min(axis=1) < _MIN_SPEED
+        dw = _polyval(_derivative(wcoef), tt)[..., 0]
+        slow = (np.linalg.norm(dq, axis=-1).min(axis=1) < _MIN_PIECE_SPEED) | (dw.min(axis=1) <= 0)
         bad = (e_lin > tl) | (e_rot > tr) | slow
         max_mm, max_deg = float(e_lin.max()), float(e_rot.max())
         if not bad.any():

@@ -107,7 +107,8 @@ def fit_polyline(nodes: np.ndarray, tol_mm: np.ndarray, tol_deg: float, lin: np.
 
     n, d = nodes.shape
     scale = np.where(lin, 1.0, tol_ref_mm / tol_deg)
-    y = nodes * scale
+    # relative to the first node: differences of large absolute coordinates lose digits
+    y = (nodes - nodes[0]) * scale
     chords = np.diff(y, axis=0)
     clen = np.linalg.norm(chords, axis=1)
     u = np.concatenate(([0.0], np.cumsum(clen)))
@@ -209,10 +210,13 @@ def fit_polyline(nodes: np.ndarray, tol_mm: np.ndarray, tol_deg: float, lin: np.
     dev = val - y
     max_mm = float(np.sqrt((dev[:, lin] ** 2).sum(axis=1)).max()) if lin.any() else 0.0
     max_deg = float(np.abs(dev[:, ~lin] / scale[~lin]).max()) if (~lin).any() else 0.0
-    return _to_pieces(t, c / scale, u, line, feed, nodes[0], max_mm, max_deg, ok)
+    ends = (None if start is None else (start.d1 / scale, start.d2 / scale),
+            None if end is None else (end.d1 / scale, end.d2 / scale))
+    return _to_pieces(t, c / scale, u, line, feed, nodes[0], nodes[-1], max_mm, max_deg, ok,
+                      ends)
 
 
-def _to_pieces(t, c, u, line, feed, p0, max_mm, max_deg, ok) -> PieceFit:
+def _to_pieces(t, c, u, line, feed, p0, p_end, max_mm, max_deg, ok, ends=(None, None)) -> PieceFit:
     """Power-basis pieces of the B-spline: each span is the quintic Hermite interpolant of
     q, q', q'' at its two knots (exact for a quintic), so neighbouring pieces share the
     very same end values and the joins are C2 up to the rounding of one Hermite solve
@@ -222,18 +226,29 @@ def _to_pieces(t, c, u, line, feed, p0, max_mm, max_deg, ok) -> PieceFit:
     spl = BSpline(t, c, 5, extrapolate=False)
     x = np.unique(t)
     d0, d1, d2 = spl(x, nu=0), spl(x, nu=1), spl(x, nu=2)
-    # the last knot: scipy evaluates at the end from the left (extrapolate=False keeps it)
+    # (scipy evaluates the last knot from the left.) Exact end values: the end nodes and any imposed end derivatives
+    d0 += p0
     d0[0] = p0
+    d0[-1] = p_end
+    if ends[0] is not None:
+        d1[0], d2[0] = ends[0]
+    if ends[1] is not None:
+        d1[-1], d2[-1] = ends[1]
     h = np.diff(x)
     coef = hermite(d0[:-1], d1[:-1], d2[:-1], d0[1:], d1[1:], d2[1:], h)
     seg_line, seg_feed = segment_sources(x, u, line, feed)
     return PieceFit(x - x[0], coef, seg_line, seg_feed, max_mm, max_deg, ok, int(u.size))
 
 
-def hermite(p0, v0, a0, p1, v1, a1, h):
-    """Quintic Hermite power coefficients (K, 6, d) on [0, h] (K,) from end values (K, d)."""
+def hermite(p0, v0, a0, p1, v1, a1, h, dp=None):
+    """Quintic Hermite power coefficients (K, 6, d) on [0, h] (K,) from end values (K, d).
+
+    ``dp`` (K, d) may give p1 - p0 more accurately than the subtraction (tiny pieces far
+    from the origin).
+    """
     hh = h[:, None]
-    dp = p1 - p0
+    if dp is None:
+        dp = p1 - p0
     c = np.empty(p0.shape[:1] + (6,) + p0.shape[1:])
     c[:, 0] = p0
     c[:, 1] = v0

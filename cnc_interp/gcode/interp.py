@@ -59,10 +59,12 @@ G_UNSUPPORTED = {
     380: "G38 probing", 382: "G38.2 probing", 383: "G38.3 probing", 384: "G38.4 probing",
     385: "G38.5 probing",
     410: "G41 cutter radius compensation", 420: "G42 cutter radius compensation",
-    411: "G41.1 dynamic cutter radius compensation", 421: "G42.1 dynamic cutter radius compensation",
+    411: "G41.1 dynamic cutter radius compensation",
+    421: "G42.1 dynamic cutter radius compensation",
     431: "G43.1 dynamic tool length offset", 432: "G43.2 additional tool length offset",
     520: "G52 local coordinate offset",
-    700: "G70 lathe finishing cycle", 710: "G71 lathe roughing cycle", 711: "G71.1 lathe roughing cycle",
+    700: "G70 lathe finishing cycle", 710: "G71 lathe roughing cycle",
+    711: "G71.1 lathe roughing cycle",
     720: "G72 lathe roughing cycle", 721: "G72.1 lathe roughing cycle",
     740: "G74 left-hand tapping cycle (spindle synchronized)", 760: "G76 threading cycle",
     840: "G84 tapping cycle (spindle synchronized)", 860: "G86 boring cycle (spindle stop)",
@@ -75,7 +77,8 @@ G_UNSUPPORTED = {
 M_NOOP = frozenset({3, 4, 5, 7, 8, 9, 19, 48, 49, 50, 51, 52, 53, 61, 62, 63, 64, 65, 67, 68})
 M_STOPS = {0: "M0", 1: "M1", 2: "M2", 30: "M30", 60: "M60"}
 M_GROUP = {0: 4, 1: 4, 2: 4, 30: 4, 60: 4, 6: 6, 61: 6, 3: 7, 4: 7, 5: 7, 19: 7}
-M_UNSUPPORTED = {66: "M66 wait on input", 70: "M70 save modal state", 71: "M71 invalidate modal state",
+M_UNSUPPORTED = {66: "M66 wait on input", 70: "M70 save modal state",
+                 71: "M71 invalidate modal state",
                  72: "M72 restore modal state", 73: "M73 save and autorestore modal state",
                  98: "M98 subprogram call (use O-word sub/call)",
                  99: "M99 subprogram return (use O-word endsub)"}
@@ -680,7 +683,8 @@ class Interpreter:
             raise self.error(f"{_gcode_name(g0code)} and {_gcode_name(mcode)} both use the axis "
                              "words", g0[1])
         if g80 and axis_words and not covets and mcode == 800:
-            raise self.error("axis words with G80 (cycle cancel) and no motion", axis_words[0][1][2])
+            raise self.error("axis words with G80 (cycle cancel) and no motion",
+                             axis_words[0][1][2])
         for L, w in axis_words:
             self._activate(AXIS_INDEX[L], w[2])
 
@@ -1008,7 +1012,8 @@ class Interpreter:
             raise self.error(f"arc too large: it needs {n} nodes at {CURVE_CHORD_TOL_MM} mm chord "
                              f"error (limit {CURVE_MAX_NODES})", col)
         if self.feed_inverse_time:
-            feed = arc_length_mm(start, end, plane, r1, r2, sweep) * self.f_block / SECONDS_PER_MINUTE
+            length = arc_length_mm(start, end, plane, r1, r2, sweep)
+            feed = length * self.f_block / SECONDS_PER_MINUTE
         else:
             feed = self.f_word * (self.len_unit * _PER_MIN)
         # Node slots are reserved now and filled for all arcs of the run at once, and the

@@ -103,14 +103,16 @@ def format_summary(summary: dict) -> str:
         f"  dwells     {s['dwells']} ({s['dwell_time_s']:.3f} s)",
     ]
     if s["stops"]:
-        lines.append("  stops      " + ", ".join(f"{k} x{v}" for k, v in sorted(s["stops"].items())))
+        stops = ", ".join(f"{k} x{v}" for k, v in sorted(s["stops"].items()))
+        lines.append(f"  stops      {stops}")
     if s["zero_length_moves"]:
         lines.append(f"  dropped    {s['zero_length_moves']} zero-length moves")
     lines.append("  bounds")
     for a, (lo, hi) in s["bounds"].items():
         unit = "deg" if a in "ABC" else "mm"
         lines.append(f"    {a}  {lo:12.4f} .. {hi:12.4f} {unit}")
-    lines.append(f"  length     feed {s['feed_length_mm']:.3f} mm, rapid {s['rapid_length_mm']:.3f} mm")
+    lines.append(f"  length     feed {s['feed_length_mm']:.3f} mm, "
+                 f"rapid {s['rapid_length_mm']:.3f} mm")
     lines.append(f"  time       {_fmt_time(s['time_estimate_s'])} at programmed feed "
                  "(feed moves and dwells; rapids excluded)")
     return "\n".join(lines)

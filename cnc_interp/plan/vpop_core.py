@@ -170,74 +170,71 @@ def _lin_interval(q, qs, qprev, lo, hi, x, a, b):
 @njit(cache=True)
 def _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, a, b, guess, want_max, hint, q, qs, tol):
     """Largest (want_max) or smallest feasible s' in [a, b] of the allowed set's component
-    found from ``guess``. Returns (found, s', hint); ``q`` holds q(s') when found."""
+    found by linearisation. Returns (found, s', hint); ``q`` holds q(s') when found.
+
+    Newton on the linearised per-axis intervals (q and dq/ds come with every evaluation,
+    so each iteration costs one table evaluation), kept inside a bracket [f, u] of a
+    feasible f and an infeasible u; stops when the bracket or the Newton step is below tol.
+    """
     n = q.shape[0]
     qprev = qh[k - 1]
     ends = b if want_max else a
     hint = _eval(S, C, QEND, ends, hint, q, qs)
     if _feasible(qh, k, q, vl, al, jl):
         return True, ends, hint
-    # find one feasible point by repeated linearisation
+    # 1. a feasible point: the guess, then the middle of the linearised allowed interval
     x = guess
     if x < a:
         x = a
     if x > b:
         x = b
-    f = -1.0
+    f = 0.0
     have_f = False
-    for _ in range(8):
+    for _ in range(10):
         hint = _eval(S, C, QEND, x, hint, q, qs)
         if _feasible(qh, k, q, vl, al, jl):
             f = x
             have_f = True
             break
         L, H = _lin_interval(q, qs, qprev, lo, hi, x, a, b)
-        if L > H:
-            # linear model says empty: try the middle of the overlap once more, else give up
-            xn = 0.5 * (L + H)
-            if xn < a:
-                xn = a
-            if xn > b:
-                xn = b
-        else:
-            xn = 0.5 * (L + H)
+        xn = 0.5 * (L + H)
+        if xn < a:
+            xn = a
+        if xn > b:
+            xn = b
         if xn == x:
             break
         x = xn
     if not have_f:
         return False, a, hint
-    # move from f to the wanted end: Newton on the linearised boundary, safeguarded by a bracket
+    qf = q.copy()
     u = ends  # known infeasible
-    x = f
-    for _ in range(60):
-        if abs(u - f) <= tol:
-            break
-        hint = _eval(S, C, QEND, x, hint, q, qs)
+    # 2. Newton towards the wanted end of the interval
+    for _ in range(40):
         L, H = _lin_interval(q, qs, qprev, lo, hi, x, a, b)
         xn = H if want_max else L
-        # stay strictly inside the bracket; fall back to bisection
         if want_max:
+            if x == f and xn <= f + tol:
+                break
             if not (xn > f and xn < u):
                 xn = 0.5 * (f + u)
         else:
+            if x == f and xn >= f - tol:
+                break
             if not (xn < f and xn > u):
                 xn = 0.5 * (f + u)
-        hint = _eval(S, C, QEND, xn, hint, q, qs)
+        x = xn
+        hint = _eval(S, C, QEND, x, hint, q, qs)
         if _feasible(qh, k, q, vl, al, jl):
-            f = xn
-            # nudge past the boundary so the bracket closes from both sides
-            step = tol if want_max else -tol
-            xt = f + step
-            if (want_max and xt < u) or ((not want_max) and xt > u):
-                hint = _eval(S, C, QEND, xt, hint, q, qs)
-                if _feasible(qh, k, q, vl, al, jl):
-                    f = xt
-                else:
-                    u = xt
+            f = x
+            for i in range(n):
+                qf[i] = q[i]
         else:
-            u = xn
-        x = f
-    hint = _eval(S, C, QEND, f, hint, q, qs)
+            u = x
+        if abs(u - f) <= tol:
+            break
+    for i in range(n):
+        q[i] = qf[i]
     return True, f, hint
 
 

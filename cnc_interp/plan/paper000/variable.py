@@ -18,6 +18,7 @@ import numpy as np
 
 from ...constants import (
     P000_MAX_REPLANS,
+    P000_MAX_SAMPLES,
     P000_MERGE_BAND,
     P000_MIN_LENGTH_MM,
     P000_REPLAN_FEED_FACTOR,
@@ -61,19 +62,31 @@ def plan_path_variable(path, joint_map, machine, dt_s: float, settings=None) -> 
     Returns:
         ``PathPlan`` with ``profiles`` a ``SegmentProfiles`` (pieces of whole segments).
     """
-    return plan_grouped(path, joint_map, machine, dt_s, settings, _band(settings), "variable")
+    band = _band(settings)
+
+    def pieces(vcap, wcap, geom, path):
+        from .lookahead import group_segments
+
+        first = group_segments(vcap, wcap, band)
+        return first, np.minimum.reduceat(vcap, first)  # a piece's cap: its slowest segment's
+
+    return plan_grouped(path, joint_map, machine, dt_s, settings, pieces, "variable")
 
 
-def plan_grouped(path, joint_map, machine, dt_s: float, settings, band: float,
-                 planner: str) -> PathPlan:
-    """Plan with segments grouped into profile pieces by ``band`` (see ``group_segments``)."""
+def plan_grouped(path, joint_map, machine, dt_s: float, settings, pieces, planner: str) -> PathPlan:
+    """Plan with segments grouped into profile pieces.
+
+    ``pieces(vcap, wcap, geom, path) -> (first (m,), cap (m,))`` gives the first segment
+    and the cruise cap of every piece from the segment caps (n_seg,) and junction caps
+    (n_seg+1,).
+    """
     if not (np.isfinite(path.length) and np.all(np.isfinite(path.coef))):
         raise PlanError(f"path ending at line {int(path.line[-1])} is not finite (fit failed?)")
     if path.length <= P000_MIN_LENGTH_MM:
         return rest_plan(path, joint_map, planner)
     geom = segment_geometry(path, joint_map)
     check_axes(geom.g1, machine)
-    from .lookahead import group_segments, lookahead
+    from .lookahead import lookahead
 
     n = path.n_seg
     vcap0 = feed_caps(geom, machine, path.feed_mm_s, settings)
@@ -84,9 +97,8 @@ def plan_grouped(path, joint_map, machine, dt_s: float, settings, band: float,
     limit = 1.0 + VERIFY_RATIO_SLACK
     for it in range(P000_MAX_REPLANS + 1):
         vcap = vcap0 * fv
-        first = group_segments(vcap, wcap, band)
+        first, gcap = pieces(vcap, wcap, geom, path)
         last = np.r_[first[1:] - 1, n - 1]
-        gcap = np.minimum.reduceat(vcap, first)  # a piece's cap: its slowest segment's
         glen = np.add.reduceat(geom.length, first)
         gw = np.r_[wcap[first], 0.0]
         w, c, a_t, j_t = lookahead(np.r_[first, n], glen, gcap, geom.g1, geom.g2, geom.g3,
@@ -94,6 +106,13 @@ def plan_grouped(path, joint_map, machine, dt_s: float, settings, band: float,
         prof = build_profiles(planner, first, last, path.s_breaks[first], glen,
                               w[:-1], c, w[1:], a_t, j_t)
         prof = stretch_to_period(prof, dt_s)
+        if prof.duration_s / dt_s > P000_MAX_SAMPLES:
+            k = int(np.argmin(vcap))
+            raise PlanError(
+                f"{planner} feed plan would take {prof.duration_s:.3g} s: the feed must drop to "
+                f"{vcap[k]:.3g} mm/s on the segment ending at line {int(path.line[k])} "
+                f"(curvature {geom.kappa[k]:.3g} 1/mm over {geom.length[k]:.3g} mm); "
+                f"the path is degenerate there")
         s, q = sample_profile(path, joint_map, prof, dt_s)
         r = sample_ratios(q, dt_s, machine)
         if r.max(initial=0.0) <= limit:
