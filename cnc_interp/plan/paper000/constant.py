@@ -64,7 +64,7 @@ def constant_pieces(vcap, wcap, geom, path, machine):
     for a, b in zip(bounds[:-1], bounds[1:]):
         lo, hi = sb[a:b], sb[a + 1 : b + 1]
         cap = vcap[a:b]
-        v = cap.min()
+        v = cap.max()  # iterate down from above: the largest consistent (V, zone) pair
         zone = np.zeros(b - a, dtype=bool)
         for _ in range(_ZONE_ROUNDS):
             d = float(transition_distance(0.0, v, a0, j0))
