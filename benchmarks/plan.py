@@ -29,7 +29,8 @@ SELECTION = [
     ("nurbs-g5/trident-xy.ngc", "mikron-ucp710"),
     ("nurbs-g5/trident-xy.ngc", "generic-mill"),
     ("nurbs-g5/butterfly-xy.ngc", "generic-mill"),
-    ("examples/spiral.ngc", "generic-mill"),
+    ("examples/3dtest.ngc", "generic-mill"),
+    ("performance/cap.ngc", "generic-mill"),
     ("arc-feed", "generic-mill"),
 ]
 

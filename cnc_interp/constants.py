@@ -96,6 +96,8 @@ FIT_MAX_ROUNDS = 40
 FIT_INITIAL_NODES_PER_SPAN = 24
 #: N-axis fitter: least fitted speed |dq/du| relative to the chord's, at nodes and mid-chords
 FIT_MIN_SPEED_RATIO = 0.25
+#: N-axis fitter: a fitted speed below this share of the chord's is a stop and never accepted
+FIT_STOP_SPEED_RATIO = 0.01
 #: N-axis fitter: chord points may deviate by the tolerance plus this many times the
 #: sagitta a circle through the neighbouring nodes would have there
 FIT_SAGITTA_ALLOWANCE = 2.0
@@ -223,3 +225,7 @@ VPOP_AIM_GAP_JERK_STEPS = 4.0
 #: a paper-000 plan longer than this many samples is refused (a degenerate path, e.g.
 #: a cusp with unbounded curvature, would otherwise crawl for days and exhaust memory)
 P000_MAX_SAMPLES = 20_000_000
+#: most threads the timeline plans paths on (CNC_INTERP_THREADS overrides)
+PLAN_MAX_THREADS = 4
+#: a path shorter than this (mm or deg of arc length) is planned as a held position
+VPOP_MIN_LENGTH = 1e-12

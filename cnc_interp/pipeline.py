@@ -150,6 +150,7 @@ class PlanOutcome:
     fit_stats: dict
     timings: dict
     source: str
+    input_meta: dict | None = None
 
     def summary(self) -> dict:
         """Plain JSON-able summary (what ``plan`` prints on stderr)."""
@@ -212,7 +213,11 @@ def plan_part(part: str, machine_spec: str | None = None, planner: str = "vpop",
     machine = machine.with_start(start)
     settings = PlanSettings.from_options(planner=planner, dt_s=dt_s, tol_mm=tol_mm, machine=machine)
     machine = machine.with_dt(settings.dt_s)
-    program, _ = _load_with(part, machine)
+    from .gcode import read_program
+
+    name, data = read_part(part)
+    program = read_program(data, source=name, axes=machine.axes, start=machine.start)
+    input_meta = _input_meta(name, data)
     t1 = time.perf_counter()
     timings["parse"] = t1 - t0
     fit_settings = FitSettings.from_options(tol_mm=tol_mm, machine=machine)
@@ -236,7 +241,16 @@ def plan_part(part: str, machine_spec: str | None = None, planner: str = "vpop",
                         _loc(program.source))
     return PlanOutcome(trajectory=traj, report=report, machine=machine, settings=settings,
                        fit_stats=dict(getattr(fitted, "stats", {}) or {}), timings=timings,
-                       source=program.source)
+                       source=program.source, input_meta=input_meta)
+
+
+def _input_meta(name: str, data: bytes) -> dict:
+    """Name, size, line count and SHA-256 of the part program (MCAP ``input`` record)."""
+    import hashlib
+
+    lines = data.count(b"\n") + (1 if data and not data.endswith(b"\n") else 0)
+    return {"name": name, "sha256": hashlib.sha256(data).hexdigest(), "lines": lines,
+            "bytes": len(data)}
 
 
 def _load_with(part: str, machine):
@@ -262,8 +276,10 @@ def run_plan(opts: PlanOptions) -> None:
     if out.lower().endswith(".mcap"):
         from .export.mcap_io import write_mcap
 
-        write_mcap(traj, out, metadata={"planner": outcome.settings.to_dict()},
-                   machine=outcome.machine)
+        meta = {"planner": outcome.settings.to_dict()}
+        if outcome.input_meta:
+            meta["input"] = outcome.input_meta
+        write_mcap(traj, out, metadata=meta, machine=outcome.machine)
     else:
         from .export.csv_io import write_csv
 

@@ -103,7 +103,7 @@ def test_program_frames_replay_bit_exact(prog):
 
 def test_long_setpoint_and_profile_data_is_split():
     path = gentle_curve(2)
-    traj = quintic_plan(path, feed_mm_s=2.0, dt_s=1e-4)  # many samples
+    traj = quintic_plan(path, feed_mm_s=20.0, dt_s=1e-4)  # many samples
     program = build_program(traj)  # all setpoints
     frames, infos = program_frames(program)
     assert sum(i.kind == "setpoints" for i in infos) > 1

@@ -1,5 +1,7 @@
 """Near-optimality: VPOp against the exact discrete minimum (LP) and a lower bound."""
 
+import os
+
 import numpy as np
 import pytest
 
@@ -48,3 +50,19 @@ def test_lower_bound_is_below_the_plan(make):
     assert 0 < lb <= t
     # jerk costs time, but not an order of magnitude on these
     assert t / lb < 2.0
+
+
+TRIDENT = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "corpus", "linuxcnc",
+                       "nurbs-g5", "trident-xy.ngc")
+
+
+@pytest.mark.skipif(not os.path.exists(TRIDENT), reason="corpus not available")
+def test_trident_on_the_mikron_is_within_3_percent_of_a_lower_bound():
+    from cnc_interp.pipeline import plan_part
+    from cnc_interp.plan.optimality import program_lower_bound
+
+    out = plan_part(TRIDENT, "mikron-ucp710", dt_s=0.001)
+    assert out.report.ok
+    lb = program_lower_bound(out)
+    ratio = out.trajectory.duration_s / lb
+    assert 1.0 <= ratio <= 1.03, ratio

@@ -220,12 +220,13 @@ def evaluate(t, m, c, x, val, der):
 
 @njit(cache=True)
 def check(t, m, c, xc, ref, tol_lin, tol_rot, lin, metric, exp_speed, exp_lin_speed, min_ratio, bad_span,
-          n_hard):
+          n_hard, hard_ratio):
     """Mark spans whose check points deviate or slow down too much.
 
     Returns (max linear error, max rotary error, hard failures, soft failures): the
-    first ``n_hard`` check points (the nodes) and every speed check are hard, the
-    deviation of the other points (chord points) is soft.
+    deviation of the first ``n_hard`` check points (the nodes) and a speed below
+    ``hard_ratio`` of the expected one are hard; chord-point deviations and speeds
+    between ``hard_ratio`` and ``min_ratio`` of the expected one are soft.
 
     xc (P,) check parameters, ref (P, d) reference positions, tol_lin (P,) allowed linear
     deviation, tol_rot scalar allowed rotary deviation (scaled units), exp_speed (P,) and
@@ -266,9 +267,12 @@ def check(t, m, c, xc, ref, tol_lin, tol_rot, lin, metric, exp_speed, exp_lin_sp
             dev_ok = e_all <= tol_lin[j]
         speed_ok = np.sqrt(sp_all) >= min_ratio * exp_speed[j] and \
             np.sqrt(sp_lin) >= min_ratio * exp_lin_speed[j]
+        # a near-stop is never accepted; a mere slow-down (a rounded corner) may remain
+        stop = np.sqrt(sp_all) < hard_ratio * exp_speed[j] or \
+            np.sqrt(sp_lin) < hard_ratio * exp_lin_speed[j]
         if not (dev_ok and speed_ok):
             bad_span[find_span(t, m, xc[j])] = True
-            if not speed_ok or j < n_hard:
+            if stop or (j < n_hard and not dev_ok):
                 hard += 1
             else:
                 soft += 1

@@ -10,8 +10,9 @@ pieces re-indexed) and split at node j when
 * one move moves linear axes and the other only rotary axes (the arc-length
   metric changes; a rotary-only path is measured in degrees).
 
-Turn angles are measured in the fitter's metric: linear axes in mm, rotary axes
-scaled to mm by ``tol_mm / tol_deg``. Nodes strictly inside a curve never split.
+Turn angles are measured in the fitter's metric (linear axes in mm, rotary axes
+scaled to mm by ``tol_mm / tol_deg``) and, with rotary axes, also on the linear axes
+alone. Nodes strictly inside a curve never split.
 """
 
 from __future__ import annotations
@@ -123,6 +124,10 @@ def split_run(pr: PreparedRun, settings) -> list[SubRun]:
         d_in[cp.last] = t1
         inside[cp.first + 1:cp.last] = True
     turn = np.degrees(turn_angles(d_in, d_out))
+    if (~pr.lin).any() and pr.lin.any():
+        # the tool's own path (linear axes) must not turn sharply either, however much
+        # the rotary axes move: a corner there would be a near-stop of the arc length s
+        turn = np.maximum(turn, np.degrees(turn_angles(d_in[:, pr.lin], d_out[:, pr.lin])))
     cut = np.zeros(n, dtype=bool)
     j = np.arange(1, n - 1)
     tol_move = pr.tol_mm  # tolerance of the move ending at each node

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..gcode.program import Dwell, Program, Run, Stop
 from .corners import PreparedRun, SubRun, fit_tolerance, prepare_run, split_run
-from .nodes import EndState, PieceFit, fit_polyline, straight_piece
+from .nodes import EndState, fit_polyline, straight_piece
 from .path import Path, PlanarSegments
 from .result import FitResult
 from .settings import FitSettings
@@ -174,7 +174,7 @@ def _fit_sub(pr: PreparedRun, sub: SubRun, settings: FitSettings):
     tol = fit_tolerance(pr.tol_mm[a:b + 1])
     moving = np.ptp(nodes, axis=0) > 0
     if (not sub.curves and settings.method in ("auto", "planar") and int(moving.sum()) == 2
-            and bool(np.all(pr.lin[moving]) or not np.any(pr.lin[moving]))):
+            and bool(np.all(pr.lin[moving]))):
         from .planar import breaks_of, fit_planar
 
         plane = tuple(int(i) for i in np.nonzero(moving)[0])

@@ -1,29 +1,32 @@
 """General N-axis fitter: a clamped quintic B-spline fitted to the nodes.
 
-Method (robust, vectorised, O(n) per round):
+Method (robust, vectorised with numba kernels in ``_bspline.py``, O(n) per round):
 
 * parameter u = cumulative chord length in the fitter's metric (linear axes in mm,
   rotary axes scaled to mm by tol_mm / tol_deg), so |dq/du| ≈ 1;
 * a clamped quintic B-spline with interior knots at every
-  ``FIT_INITIAL_NODES_PER_SPAN``-th node is fitted by weighted least squares
-  (weights tol_ref / tol_node) with a small third-divided-difference smoothing term
-  and a vanishing ridge (both keep knot spans without nodes well posed); its end
-  positions are the end nodes exactly, and optionally its end derivatives (u) are
-  imposed (a G2 junction with an exact curve);
-* every node, and three points on every chord, are checked: nodes within their
-  tolerance (Euclidean over linear axes in mm, each rotary axis in deg), chord
-  points within the tolerance plus the sagitta a smooth curve through the nodes
-  would have there (zero on straight stretches), and the speed |dq/du| (all axes
-  and the arc-length axes) at least ``FIT_MIN_SPEED_RATIO`` of the chord's
-  (no cusps, no zero speed in s);
+  ``FIT_INITIAL_NODES_PER_SPAN``-th node is fitted by weighted least squares to the
+  nodes (weight tol_ref / tol_node) and to three points on every chord (weight from
+  their wider tolerance), with a small third-divided-difference smoothing term and a
+  vanishing ridge (both keep knot spans without data well posed); its end positions
+  are the end nodes exactly, and optionally its end derivatives in u are imposed (a
+  G2 junction with an exact curve);
+* checks: every node within its tolerance (Euclidean over linear axes in mm, each
+  rotary axis in deg) — hard; every chord point within the tolerance plus
+  ``FIT_SAGITTA_ALLOWANCE`` times the sagitta a circle of the smaller neighbouring
+  Menger curvature would have over at most the neighbouring chords' length (0 next
+  to a corner or on straight stretches: no bulges) — soft; the speed |dq/du| (all
+  axes and the arc-length axes) at least ``FIT_MIN_SPEED_RATIO`` of the chord's —
+  soft, and below ``FIT_STOP_SPEED_RATIO`` (a stop, a cusp) — hard;
 * every knot span with a failing point gets a knot at its middle node (or its
-  middle if it holds no node); repeat until everything passes.
+  middle if it holds no node); repeat until everything passes, or until only soft
+  checks fail and ``FIT_SOFT_STALE_ROUNDS`` rounds did not reduce them.
 
 A quintic B-spline is C4 in u at simple knots, hence C2 in arc length and G2
-where the speed is positive. The result is converted to power-basis pieces for
-``Path``.
+where the speed is positive. Each knot span becomes the quintic Hermite piece of
+q, q', q'' at its two knots (exact for a quintic; neighbours share the very same
+end values), in coordinates relative to the first node.
 """
-
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -38,6 +41,7 @@ from ..constants import (
     FIT_SAGITTA_ALLOWANCE,
     FIT_SMOOTHING,
     FIT_SOFT_STALE_ROUNDS,
+    FIT_STOP_SPEED_RATIO,
     FIT_TOL_SAFETY,
 )
 
@@ -81,6 +85,22 @@ def turn_angles(v_in: np.ndarray, v_out: np.ndarray) -> np.ndarray:
     cross = np.sqrt(np.maximum((n1 * n2) ** 2 - dot**2, 0.0))
     ang = np.arctan2(cross, dot)
     return np.where((n1 > 0) & (n2 > 0), ang, 0.0)
+
+
+def sagitta_allowance(clen: np.ndarray, kap: np.ndarray) -> np.ndarray:
+    """Expected bulge (K-1,) of a smooth curve through the nodes off each chord.
+
+    A circle of the smaller Menger curvature ``kap`` (K,) of the chord's two end nodes,
+    over at most the longer neighbouring chord's length: a chord much longer than its
+    neighbours is taken as a straight line (CAM output samples curves finely and
+    writes lines as long moves), so the curve may not swing away from it.
+    """
+    nb = np.zeros_like(clen)
+    if clen.size > 1:
+        nb[1:] = clen[:-1]
+        nb[:-1] = np.maximum(nb[:-1], clen[1:])
+    L = np.minimum(clen, nb)
+    return L**2 * np.minimum(kap[:-1], kap[1:]) / 8.0
 
 
 def straight_piece(p0: np.ndarray, p1: np.ndarray, length: float, line: int, feed: float) -> PieceFit:
@@ -130,7 +150,16 @@ def fit_polyline(nodes: np.ndarray, tol_mm: np.ndarray, tol_deg: float, lin: np.
         delta[0] = turn_angles(start.d1[None, :], dirs[:1])[0]
     if end is not None:
         delta[-1] = turn_angles(dirs[-1:], end.d1[None, :])[0]
-    sag = clen * np.maximum(delta[:-1], delta[1:]) / 8.0
+    # sagitta of a chord on a circle of the smaller Menger curvature of its two end nodes
+    # (0 next to a corner or a section end: the path must stay near a straight chord)
+    kap = np.zeros(n)
+    if n > 2:
+        kap[1:-1] = 2.0 * np.sin(delta[1:-1]) / np.maximum(np.linalg.norm(y[2:] - y[:-2], axis=1), 1e-300)
+    if start is not None:
+        kap[0] = np.linalg.norm(start.d2)
+    if end is not None:
+        kap[-1] = np.linalg.norm(end.d2)
+    sag = sagitta_allowance(clen, kap)
     f = _FRACS
     xc_ch = (u[:-1, None] + clen[:, None] * f[None, :]).ravel()
     ref_ch = (y[:-1, None, :] + chords[:, None, :] * f[None, :, None]).reshape(-1, d)
@@ -183,7 +212,8 @@ def fit_polyline(nodes: np.ndarray, tol_mm: np.ndarray, tol_deg: float, lin: np.
         bs.solve_lsq(t, m, u_data, y_data, w_data, prior, fixed, c, FIT_SMOOTHING, _RIDGE)
         bad = np.zeros(m + 1, dtype=np.bool_)
         worst_lin, worst_rot, hard, soft = bs.check(t, m, c, xc, ref, tol_c, tol_rot, lin, metric,
-                                                    exp_all, exp_lin, FIT_MIN_SPEED_RATIO, bad, n)
+                                                    exp_all, exp_lin, FIT_MIN_SPEED_RATIO, bad, n,
+                                                    FIT_STOP_SPEED_RATIO)
         if hard == 0:
             # chord points are a heuristic against bulges: stop refining for them once
             # a few rounds no longer help (the nodes are within tolerance)
@@ -204,6 +234,8 @@ def fit_polyline(nodes: np.ndarray, tol_mm: np.ndarray, tol_deg: float, lin: np.
         if not keep.any():
             break
         interior = np.unique(np.concatenate((interior, new[keep])))
+    # out of rounds or of refinable spans: fine if only soft checks still fail
+    ok = ok or hard == 0
     val = np.empty((n, d))
     der = np.empty((n, d))
     bs.evaluate(t, m, c, u, val, der)

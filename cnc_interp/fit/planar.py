@@ -34,11 +34,13 @@ import numpy as np
 from numba import njit
 
 from ..constants import (
+    FIT_SAGITTA_ALLOWANCE,
     FIT_TOL_SAFETY,
     PLANAR_END_WEIGHT,
     PLANAR_MAX_INCLINATION_PI,
     PLANAR_SMOOTHING,
 )
+from .nodes import sagitta_allowance, segment_sources
 from .path import Path, PlanarSegments
 
 _PI = math.pi
@@ -238,16 +240,28 @@ def _end_est(e, th, tau, kap, max_incl):
 
 
 @njit(cache=True)
-def _try(xs, zs, tol, constrained, rho1, rho2, mu, b, e, th, tau, kap, max_incl, w_end):
+def _try(xs, zs, tol, constrained, rho1, rho2, mu, b, e, th, tau, kap, max_incl, w_end, sag_allow, sag_mid):
     """Fit and return the largest node error minus its tolerance (<= 0 means accepted)."""
     has, d1, d2 = _end_est(e, th, tau, kap, max_incl)
     _fit_segment(xs, zs, constrained, rho1, rho2, mu, b, has and w_end > 0.0, d1, d2, w_end)
-    X = xs[xs.shape[0] - 1]
+    r = xs.shape[0]
+    X = xs[r - 1]
+    s0 = e - (r - 1)
     worst = -np.inf
-    for j in range(1, xs.shape[0] - 1):
-        e = _node_error(b, X, xs, zs, j) - tol[j]
-        if e > worst:
-            worst = e
+    for j in range(1, r - 1):
+        err = _node_error(b, X, xs, zs, j) - tol[j]
+        if err > worst:
+            worst = err
+    # between the nodes: the chord midpoints, within the tolerance plus the sagitta a
+    # curve of the smaller neighbouring node curvature would have (0 next to a corner)
+    for j in range(1, r):
+        xm = 0.5 * (xs[j - 1] + xs[j])
+        zm = 0.5 * (zs[j - 1] + zs[j])
+        sag = sag_mid[s0 + j - 1]
+        slope = _dpoly(b, xm / X) / X
+        err = abs(_poly(b, xm / X) - zm) / math.sqrt(1.0 + slope * slope) - (tol[j] + sag_allow * sag)
+        if err > worst:
+            worst = err
     return worst
 
 
@@ -258,7 +272,7 @@ def _wrap(a):
 
 @njit(cache=True)
 def planar_fit_kernel(H, V, tol, alpha, theta_chord, tau, kap, w_end, max_incl, mu,
-                      out_theta, out_start, out_end, out_b):
+                      out_theta, out_start, out_end, out_b, sag_allow, sag_mid):
     """Segment and fit nodes (H, V) (n,); returns (n_seg, status, max_dev).
 
     status 0 = ok; 1 = an inherited tangent cannot be represented in the next frame.
@@ -319,7 +333,7 @@ def planar_fit_kernel(H, V, tol, alpha, theta_chord, tau, kap, w_end, max_incl, 
                 break
             r = e - s + 1
             if _try(xs_all[:r], zs_all[:r], tl[:r], constrained, rho1, rho2, mu, bt,
-                    e, th, tau, kap, max_incl, w_end) <= 0.0:
+                    e, th, tau, kap, max_incl, w_end, sag_allow, sag_mid) <= 0.0:
                 lo = e
                 if e == g_end:
                     break
@@ -332,7 +346,7 @@ def planar_fit_kernel(H, V, tol, alpha, theta_chord, tau, kap, w_end, max_incl, 
             mid = (lo + hi) // 2
             r = mid - s + 1
             if _try(xs_all[:r], zs_all[:r], tl[:r], constrained, rho1, rho2, mu, bt,
-                    mid, th, tau, kap, max_incl, w_end) <= 0.0:
+                    mid, th, tau, kap, max_incl, w_end, sag_allow, sag_mid) <= 0.0:
                 lo = mid
             else:
                 hi = mid
@@ -412,7 +426,8 @@ def fit_planar(nodes: np.ndarray, plane: tuple[int, int], tol_mm: np.ndarray, ax
     tau, kap = node_tangents(H, V)
     k, status, max_dev = planar_fit_kernel(H, V, tol, alpha, theta_chord, tau, kap, PLANAR_END_WEIGHT,
                                            PLANAR_MAX_INCLINATION_PI * np.pi, PLANAR_SMOOTHING,
-                                           out_theta, out_start, out_end, out_b)
+                                           out_theta, out_start, out_end, out_b, FIT_SAGITTA_ALLOWANCE,
+                                           sagitta_allowance(np.hypot(np.diff(H), np.diff(V)), np.abs(kap)))
     if status != 0:
         return None
     theta = out_theta[:k].copy()
@@ -422,7 +437,6 @@ def fit_planar(nodes: np.ndarray, plane: tuple[int, int], tol_mm: np.ndarray, ax
     x_end = (H[en] - H[st]) * c + (V[en] - V[st]) * s_
     planar = PlanarSegments(plane=(h, v), theta=theta, origin=origin, x_end=x_end,
                             p=out_b[:k].copy())
-    from .nodes import segment_sources
 
     # node parameter along the path: x* of each node inside its segment, offset by the breaks
     breaks = np.concatenate(([0.0], np.cumsum(x_end)))

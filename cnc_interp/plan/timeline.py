@@ -32,6 +32,18 @@ _REST_RUN = 3
 _JOIN_TOL = 1e-6
 
 
+def _plan_threads() -> int:
+    """Threads planning paths at once: CNC_INTERP_THREADS, else the CPUs (at most PLAN_MAX_THREADS)."""
+    import os
+
+    from ..constants import PLAN_MAX_THREADS
+
+    env = os.environ.get("CNC_INTERP_THREADS")
+    if env and env.isdigit() and int(env) > 0:
+        return int(env)
+    return max(1, min(os.cpu_count() or 1, PLAN_MAX_THREADS))
+
+
 def _item_kind(item) -> str:
     from ..fit.path import Path
     from ..gcode.program import Dwell, Stop
@@ -87,16 +99,39 @@ def plan_program(fit_result, machine, settings, progress=None) -> Trajectory:
             ss.append(np.full(count, s_off))
             lines.append(np.full(count, line, dtype=np.int64))
 
+    def plan_one(item):
+        if item.rapid:
+            return plan_path_vpop(item, None, machine, dt, settings)
+        return planner(item, joint_map, machine, dt, settings)
+
+    paths = [it for it in fit_result.items if _item_kind(it) == "path"]
+    for it in paths:
+        if it.axes != machine.axes:
+            raise PlanError(f"bug: path axes {it.axes} differ from machine axes {machine.axes}")
+    # paths are planned independently (rest to rest): spread them over threads (the
+    # compiled step loop releases the GIL) and join them in program order
+    workers = min(_plan_threads(), len(paths))
+    if workers > 1:
+        from concurrent.futures import ThreadPoolExecutor
+
+        pool = ThreadPoolExecutor(max_workers=workers)
+        futures = iter([pool.submit(plan_one, it) for it in paths])
+    else:
+        pool = None
+        futures = None
+
     for item in fit_result.items:
         kind = _item_kind(item)
         if kind == "path":
-            if item.axes != machine.axes:
-                raise PlanError(f"bug: path axes {item.axes} differ from machine axes {machine.axes}")
+            try:
+                plan = next(futures).result() if futures is not None else plan_one(item)
+            except BaseException:
+                if pool is not None:
+                    pool.shutdown(wait=False, cancel_futures=True)
+                raise
             if item.rapid:
-                plan = plan_path_vpop(item, None, machine, dt, settings)
                 stats["rapids"] += 1
             else:
-                plan = planner(item, joint_map, machine, dt, settings)
                 stats["paths"] += 1
                 if plan.profiles is not None:
                     profiles.append(plan.profiles)
@@ -131,6 +166,8 @@ def plan_program(fit_result, machine, settings, progress=None) -> Trajectory:
             rest = max(rest, _REST_RUN)
             stats["stops"] += 1
 
+    if pool is not None:
+        pool.shutdown()
     q = np.concatenate(qs, axis=0)
     s = np.concatenate(ss)
     line = np.concatenate(lines)

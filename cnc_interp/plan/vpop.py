@@ -21,6 +21,7 @@ import math
 import numpy as np
 
 from ..constants import (
+    VPOP_MIN_LENGTH,
     VPOP_AIM_GAP_JERK_STEPS,
     VPOP_EASY_FRACTION,
     VPOP_BRAKE_JERK_FRACTION,
@@ -120,6 +121,9 @@ class JointTable:
             if not keep.all():  # drop pieces of zero length (the path stands still there)
                 u = np.concatenate((u[:-1][keep], u[-1:]))
                 seg, ds = seg[keep], ds[keep]
+            if ds.size == 0 or not ds.sum() > 0:
+                raise PlanError(f"bug: the path ending at line {int(path.line[-1])} has length "
+                                f"{path.length:g} but no measurable arc length")
             scale = path.length / ds.sum()  # agree with the path's own length to rounding
             S = np.concatenate(([0.0], np.cumsum(ds * scale)))
             S[-1] = path.length
@@ -198,7 +202,7 @@ def plan_path_vpop(path, joint_map, machine, dt_s: float, settings=None) -> Path
     jl = np.ascontiguousarray(machine.jmax * dt**3 * shrink, dtype=float)
     if not (np.isfinite(path.length) and np.all(np.isfinite(path.coef))):
         raise PlanError(f"bug: the fitted path ending at line {int(path.line[-1])} is not finite")
-    if path.length <= 0.0:
+    if path.length <= VPOP_MIN_LENGTH:
         q0 = _positions(path, path.breaks[:1], joint_map)
         return PathPlan(s=np.zeros(1), q=q0, stats={"samples": 1})
     table = JointTable(path, joint_map)

@@ -19,8 +19,23 @@ The policies:
   interval closest to the no-reversal bound (after which a jerk ramp back to zero
   path acceleration still leaves ṡ >= 0), or s itself once ṡ is below one jerk step.
   A brake run succeeds when it reaches rest (three equal samples) without an empty set.
+* aim: near the end, the largest step whose continuous jerk-limited stop distance
+  still fits before L (used to land exactly on the end point at rest).
 When the max step's set is empty, a dichotomy finds the latest step j from which
 the brake run succeeds; step j is fixed at its brake value and max resumes at j+1.
+
+Speed-ups (none changes what a committed sample must satisfy; every sample is
+checked exactly):
+* chain mode: right after a brake fix, the next max step is tested at once with one
+  brake run (the test the dichotomy would run first) instead of re-running max steps
+  up to the next failure;
+* end game: when the max run fails against the end point, an aim run from the
+  switch step that stops within ``gap_tol`` of L is committed whole;
+* fast mode (default): a brake run may end early once the state is "easy"
+  (``_easy``) or has outlived the failed max run (``_horizon``). These are
+  heuristics; the step just after a fix is re-certified when its certificate runs
+  out, and if a heuristic ever misleads (empty set with nothing left to back up to)
+  the caller re-plans the path in exact mode (brake runs to rest).
 """
 
 from __future__ import annotations
@@ -335,17 +350,33 @@ def _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, mode, hint, 
             target = s0
         else:
             target = s0 + d1 + jd - np.sqrt(jd * (2.0 * d1 + jd))
+        if target > b:
+            target = b
+        hint = _eval(S, C, QEND, target, hint, q, qs)
+        if _feasible(qh, k, q, vl, al, jl):
+            return True, target, hint
+        # which side of the allowed interval is the target on? (linearised at the target)
+        L, H = _lin_interval(q, qs, qh[k - 1], lo, hi, target, s0, b)
+        if target < L or L > H:
+            okl, xl, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, target, False,
+                                    hint, q, qs, tol)
+            if okl and xl >= target:
+                return True, xl, hint
+            if not okl:
+                return False, s0, hint
+        oku, xu, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, target, True,
+                                hint, q, qs, tol)
+        if not oku:
+            return False, s0, hint
+        if xu <= target:
+            return True, xu, hint
+        # the linear model misled: the target lies inside; fall back to the lower end
         okl, xl, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, False,
                                 hint, q, qs, tol)
         if not okl:
             return False, s0, hint
-        if target <= xl:
+        if xl >= target:
             return True, xl, hint
-        hint = _eval(S, C, QEND, target, hint, q, qs)
-        if target <= b and _feasible(qh, k, q, vl, al, jl):
-            return True, target, hint
-        oku, xu, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, True, hint,
-                                q, qs, tol)
         return True, xu, hint
     # aim: the largest step whose continuous stop distance still fits before L
     okl, xl, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, False,
@@ -484,7 +515,7 @@ def _horizon(k, j, fast):
     return k + (k - j) + 8
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol, max_steps,
               bs, bq, stats, K2, K3, K23, easy_frac, gap_tol, fast):
     """Run VPOp from sample k0 (samples < k0 fixed, b0 the last brake-fixed sample).
@@ -505,6 +536,9 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol
     hint = 0
     cap = sh.shape[0]
     cert = _BIG  # sample 0 is at rest
+    chain = False  # the last sample was fixed by a backtrack
+    last_k = 0  # where the last max run failed, and the step it was fixed at
+    last_j = 0
     while True:
         # done: three equal samples at the end point
         if k >= 3 and sh[k - 1] == L and sh[k - 2] == L and sh[k - 3] == L:
@@ -516,12 +550,48 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol
         ok, x, hint = _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, 0,
                             hint, q, qs, lo, hi, tol)
         stats[3] += 1
+        if ok and chain and k + 1 < cap:
+            # right after a brake fix the next failure is usually imminent: test the max
+            # step at once (the same test the dichotomy would run first) instead of
+            # re-running max steps up to the failure
+            sh[k] = x
+            for i in range(n):
+                qh[k, i] = q[i]
+            r = _brake_run(S, C, QEND, sh, qh, k + 1, vl, al, jl, js_lim, dt, L, FB, FV,
+                           bs, bq, max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23,
+                           easy_frac, (k + 1 + 2 * (last_k - last_j) + 8) if fast else 0)
+            stats[1] += 1
+            if r[0]:
+                cert = r[2]
+                chain = False
+                k += 1
+                continue
+            if k + 1 >= cert:
+                r = _brake_run(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV,
+                               bs, bq, max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23,
+                               easy_frac, (k + 2 * (last_k - last_j) + 8) if fast else 0)
+                stats[1] += 1
+                if not r[0]:
+                    return INFEASIBLE, k, b
+                cert = r[2]
+            ok, x, hint = _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, 1,
+                                hint, q, qs, lo, hi, tol)
+            if not ok:
+                return INFEASIBLE, k, b
+            sh[k] = x
+            for i in range(n):
+                qh[k, i] = q[i]
+            b = k
+            k += 1
+            continue
         if ok:
             sh[k] = x
             for i in range(n):
                 qh[k, i] = q[i]
             k += 1
             continue
+        chain = False
+        last_k = k
         # empty set at k: latest j in [b+1, k-1] from which braking reaches rest
         stats[0] += 1
         lo_j = b + 1
@@ -595,3 +665,5 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol
             qh[j, i] = q[i]
         k = j + 1
         b = j
+        last_j = j
+        chain = True

@@ -3,7 +3,9 @@
 # $1: frame file to send; $2: the repository root. Prints one "QEMU-USB-RESULT:" line.
 FRAMES="$1"; REPO="$2"
 PY="$REPO/.venv/bin/python"
-export PYTHONDONTWRITEBYTECODE=1 HOME=/run TMPDIR=/run NUMBA_CACHE_DIR=/run
+export PYTHONDONTWRITEBYTECODE=1 PYTHONHASHSEED=0 HOME=/run TMPDIR=/run NUMBA_CACHE_DIR=/run
+echo "QEMU-USB-STEP: guest up $(cat /proc/uptime)"
+"$PY" -c "import numpy" && echo "QEMU-USB-STEP: python+numpy $(cat /proc/uptime)"
 result() { echo "QEMU-USB-RESULT: $*"; }
 G=/sys/kernel/config/usb_gadget/cnc
 mkdir -p $G || { result "fail configfs"; exit 1; }

@@ -28,7 +28,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(os.path.dirname(HERE))
 MODULES = ["virtio_ring", "virtio", "virtio_pci_modern_dev", "virtio_pci_legacy_dev", "virtio_pci",
            "netfs", "fscache", "9pnet", "9pnet_virtio", "9p", "usb-common", "usbcore", "udc-core",
-           "dummy_hcd", "configfs", "libcomposite", "usb_f_fs"]
+           "dummy_hcd", "configfs", "libcomposite", "usb_f_fs", "virtio-rng"]
 
 
 def _skip(msg: str) -> int:
@@ -113,6 +113,7 @@ def main() -> int:
     initrd = _initramfs(a.work, mods, f"{REPO}/tests/qemu/guest.sh {frames} {REPO}")
     cmd = ["qemu-system-x86_64", "-accel", "tcg", "-m", "1024", "-smp", "2", "-kernel", vmlinuz,
            "-initrd", initrd, "-append", "console=ttyS0 panic=-1 quiet", "-nographic", "-no-reboot",
+           "-device", "virtio-rng-pci",
            "-virtfs", "local,path=/,mount_tag=hostroot,security_model=none,readonly=on,multidevs=remap"]
     try:
         p = subprocess.run(cmd, capture_output=True, text=True, timeout=a.timeout,
