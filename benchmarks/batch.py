@@ -16,7 +16,7 @@ import argparse
 import os
 import time
 
-from cnc_interp.batch import VOLATILE_FIELDS, BatchOptions, build_report
+from cnc_interp.batch import VOLATILE_FIELDS, BatchOptions, build_report, write_report
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 DEFAULT_CORPUS = os.path.normpath(os.path.join(HERE, "..", "..", "shared", "corpus", "linuxcnc"))
@@ -48,8 +48,6 @@ def main() -> None:
     local = build_report(BatchOptions(**base))
     print(_line("local, 2 workers:", local))
     if args.report:
-        from cnc_interp.batch import write_report
-
         write_report(local, args.report)
     if args.skip_dask:
         return
@@ -61,7 +59,15 @@ def main() -> None:
         dask = build_report(BatchOptions(**base, dask_address=cluster.scheduler_address))
         print(_line("dask LocalCluster, 2:", dask))
         print(f"  (cluster start-up excluded; total incl. first-task warm-up {time.monotonic() - t0:.1f} s)")
-    print("reports identical (wall time, memory excluded):", _stable(local) == _stable(dask))
+    if args.report:
+        write_report(dask, args.report.replace(".json", "") + ".dask.json")
+    same = _stable(local) == _stable(dask)
+    print("reports identical (wall time, memory excluded):", same)
+    if not same:
+        for a, b in zip(_stable(local), _stable(dask)):
+            if a != b:
+                diff = {k: (a[k], b[k]) for k in a if a[k] != b[k]}
+                print(f"  differs: {a['key']}: {diff}")
 
 
 if __name__ == "__main__":

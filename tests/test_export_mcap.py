@@ -433,3 +433,22 @@ def test_plan_command_mcap_matches_its_csv(tmp_path):
     assert meta["machine"]["axes"] == csv.axes and meta["tool"]["version"] == cnc_interp.__version__
     res = runner.invoke(cli.main, ["verify", str(tmp_path / "p.mcap"), "-m", "generic-mill"])
     assert res.exit_code == 0, res.output
+
+
+@pytest.mark.parametrize("batch", [2, 7, 500])
+def test_limits_batches_join_exactly(tmp_path, monkeypatch, batch):
+    """The ratios computed a batch at a time equal the ones of the whole plan at once."""
+    import cnc_interp.export.mcap_io as mio
+    from cnc_interp.export.ratios import limit_ratios
+
+    monkeypatch.setattr(mio, "_BATCH", batch)
+    traj = arc_trajectory(duration_s=0.05 if batch < 100 else 1.2)
+    machine = machine_for(traj, 1.3)
+    path = str(tmp_path / "b.mcap")
+    write_mcap(traj, path, None, machine)
+    _, _, msgs = _read_all(path)
+    got = np.array([[_strict_json(m.data)[k][a] for k in "vaj" for a in traj.axes]
+                    for m in msgs["/limits"]])
+    want = limit_ratios(traj.q, traj.dt_s, machine.limits())  # (3, K, n)
+    want = np.concatenate(list(want), axis=1)
+    assert_allclose(got, want, rtol=1e-8, atol=1e-300)

@@ -162,3 +162,11 @@ def test_test_vectors_round_trip(tmp_path, prog):
     assert [e[3] for e in expected[:first.n_samples]] == list(out.q[s0:s0 + first.n_samples, h])
     assert sorted(os.listdir(tmp_path / "tv")) == ["expected.hex", "layout.json", "pieces.hex",
                                                     "segments.hex"]
+
+
+def test_same_plan_gives_identical_frames():
+    path = gentle_curve(5, seed=11)
+    traj = quintic_plan(path, feed_mm_s=60.0)
+    a, _ = program_frames(build_program(traj, [path], source="wave.nc"))
+    b, _ = program_frames(build_program(traj, [path], source="wave.nc"))
+    assert b"".join(a) == b"".join(b)

@@ -149,3 +149,28 @@ def test_device_not_found_and_bad_ids():
     assert parse_device_id("CAFE:0b0e") == (0xCAFE, 0x0B0E)
     with pytest.raises(UsageError):
         parse_device_id("12345")
+
+
+def test_resume_refuses_a_different_program(job):
+    prog, frames, infos, prog2 = job
+    be = _device(faults=FaultPlan(disconnect_after_seq=3))
+    with pytest.raises(DeviceError):
+        UsbLink.open(backend=be).send(frames, infos)
+    be.reconnect()
+    frames2, infos2 = program_frames(prog2)
+    with pytest.raises(DeviceError, match="another program"):
+        UsbLink.open(backend=be).send(frames2, infos2, resume_from=3)
+
+
+def test_send_frame_file_and_infos(job, tmp_path):
+    from cnc_interp.fpga.commands import frame_infos, send_frame_file
+    from cnc_interp.fpga.frames import decode_frame
+
+    prog, frames, infos, _ = job
+    assert frame_infos([decode_frame(f) for f in frames]) == infos
+    f = tmp_path / "p.bin"
+    f.write_bytes(b"".join(frames))
+    be = _device(faults=FaultPlan(rate=0.2, seed=9))
+    rep = send_frame_file(str(f), backend=be)
+    assert rep.final.bytes_accepted == sum(map(len, frames))
+    assert_exact(be, prog, len(frames))

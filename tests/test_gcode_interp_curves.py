@@ -229,6 +229,16 @@ def test_g5_2_nurbs_first_control_point_is_the_current_position():
         assert np.min(np.hypot(*(dense[:, :2] - node[:2]).T)) < 2e-3
 
 
+def test_g5_2_nodes_carry_the_g5_2_line_like_the_curve():
+    # the run's nodes, the curve piece and so the fit and the plan all name the G5.2 block
+    p = prog("G0 X10 Y0\nF600\nG5.2 P1 L3\n  X22 Y20 P1\n  X13 Y9 P2\n  X10 Y0 P1\nG5.3\n")
+    piece = only_curve(p)
+    run = feed_run(p)
+    assert piece.curve.line == 3
+    assert set(run.line[piece.first + 1:piece.last + 1].tolist()) == {3}
+    assert set(run.col[piece.first + 1:piece.last + 1].tolist()) == {1}
+
+
 def test_g5_2_default_order_and_weight_on_the_first_line():
     p = prog("F60\nG5.2 X0 Y0 P1\nX1 Y1 P1\nX2 Y0 P1\nG5.3\n")
     c = only_curve(p).curve

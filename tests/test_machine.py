@@ -229,3 +229,14 @@ def test_ini_kins_section(tmp_path):
     with pytest.raises(MachineError, match="'corexykins' is not supported") as info:
         load_machine(write(tmp_path, base + "[KINS]\nKINEMATICS = corexykins\n", "k3.ini"))
     assert info.value.location.line == base.count("\n") + 2
+
+
+def test_ini_without_coordinates_uses_axis_sections_or_axes(tmp_path):
+    old = INI.replace("COORDINATES = X Y Y Z C\n", "").replace("[JOINT_3]", "[AXIS_Z]")
+    m = load_machine(write(tmp_path, old, "old.ini"))
+    assert m.axes == "XYZC"                       # the [AXIS_*] sections, canonical order
+    joints = ("[TRAJ]\nAXES = 2\nLINEAR_UNITS = inch\n[JOINT_0]\nMAX_VELOCITY = 1\nMAX_ACCELERATION = 2\n"
+              "[JOINT_1]\nMAX_VELOCITY = 3\nMAX_ACCELERATION = 4\n")
+    m = load_machine(write(tmp_path, joints, "joints.ini"))
+    assert m.axes == "XY" and m.dt_s == 0.001
+    assert_allclose(m.vmax, [25.4, 3 * 25.4])

@@ -296,3 +296,30 @@ def test_constant_feed_ignores_a_peak_inside_the_start_ramp():
     plan = plan_path_constant(path, None, m, 0.001)
     check_plan(plan, path, m, 0.001)
     assert plan.profiles.v_cruise.max() > 99.0
+
+
+CORPUS = __import__("pathlib").Path(__file__).resolve().parents[2] / "shared" / "corpus" / "linuxcnc"
+
+
+@pytest.mark.parametrize("planner", ["constant", "variable"])
+@pytest.mark.parametrize("part,preset", [
+    ("samples/gcode/lathe-profile.ngc", "xz-lathe"),
+    ("samples/gcode/nurbs-trident.ngc", "mikron-ucp710"),
+    (str(CORPUS / "nurbs-g5" / "trident-xy.ngc"), "mikron-ucp710"),
+    (str(CORPUS / "performance" / "spiral_lines.ngc"), "generic-mill"),
+])
+def test_golden_runs_verify(part, preset, planner):
+    """Whole programs through parse, fit, timeline and verify (plan_part raises on a violation)."""
+    import os
+
+    from cnc_interp.pipeline import plan_part
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    full = part if os.path.isabs(part) else os.path.join(root, part)
+    if not os.path.exists(full):
+        pytest.skip(f"corpus file not present: {full}")
+    out = plan_part(full, preset, planner=planner)
+    traj = out.trajectory
+    assert out.report.ok and traj.planner == planner
+    assert np.all(np.isfinite(traj.q))
+    assert traj.profiles is not None

@@ -220,7 +220,6 @@ def _write_messages(writer, traj, machine, lim_axes, segments, sp_chan, seg_chan
     seg_start, seg_msgs = _segment_messages(traj, segments)
     seg_start = np.asarray(seg_start, dtype=np.int64)
     sp_fmt = _template(("t", "s", "feed", "line", *axes))
-    ratios = _ratio_table(traj, machine, lim_axes) if lim_chan is not None else None
     lim_fmt = _limits_template(lim_axes) if lim_chan is not None else None
 
     count = 0
@@ -233,8 +232,9 @@ def _write_messages(writer, traj, machine, lim_axes, segments, sp_chan, seg_chan
         chans = [np.full(k.size, sp_chan)]
         times = [ns[b0:b1]]
         keys = [3 * k + 1]
-        if ratios is not None:
-            datas += _format_rows(lim_fmt, list(ratios[b0:b1].T), RATIO_FORMAT)
+        if lim_chan is not None:
+            ratios = _ratio_table(traj, machine, lim_axes, b0, b1)
+            datas += _format_rows(lim_fmt, list(ratios.T), RATIO_FORMAT)
             chans.append(np.full(k.size, lim_chan))
             times.append(ns[b0:b1])
             keys.append(3 * k + 2)
@@ -291,21 +291,24 @@ def _format_rows(fmt: str, columns: list[np.ndarray], spec: str = "%r") -> list[
     return [m.encode() for m in out]
 
 
-def _ratio_table(traj, machine, lim_axes: str) -> np.ndarray:
-    """(K, 3n+1): signed v, a, j ratios per axis (grouped by kind) and the worst |ratio|."""
+def _ratio_table(traj, machine, lim_axes: str, b0: int, b1: int) -> np.ndarray:
+    """(b1-b0, 3n+1): samples b0..b1-1's signed v, a, j ratios per axis (grouped by kind)
+    and the worst |ratio|. Computed a batch at a time to bound memory."""
     from .ratios import limit_ratios
 
     idx_t = [traj.axes.index(a) for a in lim_axes]
     idx_m = [machine.axes.index(a) for a in lim_axes]
     limits = machine.limits()[:, idx_m]  # (3, n)
-    r = limit_ratios(traj.q[:, idx_t], traj.dt_s, limits)  # (3, K, n)
-    K = traj.n_samples
-    table = np.empty((K, 3 * len(lim_axes) + 1))
+    # Three samples of history give the differences at b0 exactly; limit_ratios pads with
+    # rest only before sample 0.
+    h0 = max(b0 - 3, 0)
+    r = limit_ratios(traj.q[h0:b1, idx_t], traj.dt_s, limits)[:, b0 - h0:]  # (3, m, n)
+    n = len(lim_axes)
+    table = np.empty((b1 - b0, 3 * n + 1))
     for kind in range(3):
-        table[:, kind * len(lim_axes):(kind + 1) * len(lim_axes)] = r[kind]
+        table[:, kind * n:(kind + 1) * n] = r[kind]
     with np.errstate(invalid="ignore"):
-        worst = np.abs(r).max(axis=(0, 2)) if lim_axes else np.zeros(K)
-    table[:, -1] = worst
+        table[:, -1] = np.abs(r).max(axis=(0, 2)) if n else 0.0
     return table
 
 

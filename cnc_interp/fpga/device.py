@@ -56,6 +56,7 @@ class DeviceCore:
         self.datapath: DatapathState | None = None
         self.n_samples = 0
         self.dt_s = 0.0
+        self.program_id = 0
         self.applied: list[int] = []  # seq of every applied frame, in order (tests check it)
         self._fifo: deque[int] = deque()  # sizes of accepted, not yet executed frames
         self._used = 0
@@ -85,7 +86,7 @@ class DeviceCore:
         self.drain()
         done = self.datapath.next_sample if self.datapath is not None else 0
         st = Status(self.free_bytes, self.last_seq, self.errors, self.state, done, self.bytes_accepted,
-                    poll_id)
+                    poll_id, self.program_id)
         self.errors = 0
         return st
 
@@ -144,6 +145,7 @@ class DeviceCore:
             self.datapath = DatapathState(cfg.axes, cfg.formats, cfg.start, cfg.source)
             self.n_samples = cfg.n_samples
             self.dt_s = cfg.dt_s
+            self.program_id = cfg.program_id
             self.state = CONFIGURED
             return
         if self.datapath is None:

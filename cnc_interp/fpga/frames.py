@@ -68,8 +68,8 @@ PIECE = struct.Struct("<IQb6q")  # n_samples, dtau, exp, mant[6]
 SETPOINTS_HEAD = struct.Struct("<QIBI")  # start sample, n samples, n_axes, source line
 START = struct.Struct("<Q")  # total samples
 STOP = struct.Struct("<QI")  # total samples, number of items
-STATUS = struct.Struct("<IIIIQQI")  # free bytes, last seq, errors, state, samples done,
-#                                     bytes accepted, poll id answered
+STATUS = struct.Struct("<IIIIQQII")  # free bytes, last seq, errors, state, samples done,
+#                                      bytes accepted, poll id answered, program id
 POLL = struct.Struct("<I")  # poll id
 
 
@@ -98,10 +98,11 @@ class Status:
     samples_done: int
     bytes_accepted: int
     poll_id: int = 0
+    program_id: int = 0
 
     def pack(self) -> bytes:
         return STATUS.pack(self.free_bytes, self.last_seq, self.errors, self.state,
-                           self.samples_done, self.bytes_accepted, self.poll_id)
+                           self.samples_done, self.bytes_accepted, self.poll_id, self.program_id)
 
 
 def encode_frame(ftype: int, seq: int, payload: bytes) -> bytes:
@@ -206,12 +207,8 @@ def program_frames(prog: FpgaProgram) -> tuple[list[bytes], list[FrameInfo]]:
         infos.append(FrameInfo(seq, kind, seg, line))
 
     n_axes = len(prog.axes)
-    fm = prog.formats.as_tuple()
-    cfg = CONFIG.pack(n_axes, prog.axes.encode("ascii"), prog.dt_s, int(round(prog.dt_s * 1e9)),
-                      prog.n_samples, len(prog.items), *fm)
-    cfg += struct.pack(f"<{n_axes}q", *prog.start)
-    cfg += prog.source.encode("utf-8")[:255]
-    add(FrameType.CONFIG, cfg, "config")
+    frames.append(b"")  # CONFIG goes first; it carries the program id of all the others
+    infos.append(FrameInfo(1, "config", -1, 0))
     add(FrameType.START, START.pack(prog.n_samples), "start")
     per_block = (MAX_PAYLOAD - SETPOINTS_HEAD.size) // (8 * n_axes)
     per_profile = (MAX_PAYLOAD - PROFILE_HEAD.size) // PIECE.size
@@ -236,6 +233,12 @@ def program_frames(prog: FpgaProgram) -> tuple[list[bytes], list[FrameInfo]]:
                 add(FrameType.SETPOINTS, pay + blk.tobytes(), "setpoints", -1, item.line)
                 n_items += 1
     add(FrameType.STOP, STOP.pack(prog.n_samples, n_items), "stop")
+    program_id = zlib.crc32(b"".join(frames[1:]))
+    cfg = CONFIG.pack(n_axes, prog.axes.encode("ascii"), prog.dt_s, int(round(prog.dt_s * 1e9)),
+                      prog.n_samples, len(prog.items), *prog.formats.as_tuple())
+    cfg += struct.pack(f"<{n_axes}qI", *prog.start, program_id)
+    cfg += prog.source.encode("utf-8")[:255]
+    frames[0] = encode_frame(FrameType.CONFIG, 1, cfg)
     return frames, infos
 
 
@@ -248,15 +251,16 @@ class Config:
     formats: FpgaFormats
     start: tuple[int, ...]
     source: str
+    program_id: int = 0  # CRC-32 of every frame after CONFIG
 
 
 def decode_config(payload: bytes) -> Config:
     try:
         n_axes, axes, dt_s, _dt_ns, n_samples, n_items, *fm = CONFIG.unpack_from(payload)
-        start = struct.unpack_from(f"<{n_axes}q", payload, CONFIG.size)
-        src = payload[CONFIG.size + 8 * n_axes:].decode("utf-8", "replace")
+        *start, program_id = struct.unpack_from(f"<{n_axes}qI", payload, CONFIG.size)
+        src = payload[CONFIG.size + 8 * n_axes + 4:].decode("utf-8", "replace")
         return Config(axes.rstrip(b"\0").decode("ascii"), dt_s, n_samples, n_items,
-                      FpgaFormats.from_tuple(fm), tuple(start), src)
+                      FpgaFormats.from_tuple(fm), tuple(start), src, program_id)
     except (struct.error, UnicodeDecodeError, ValueError) as exc:
         raise FrameError(f"bad CONFIG payload: {exc}") from None
 

@@ -97,6 +97,7 @@ class UsbLink:
         self.timeout_ms, self.retries, self.stall_polls = timeout_ms, retries, stall_polls
         self.report = LinkReport()
         self._poll_id = 0
+        self.program_id: int | None = None
 
     @classmethod
     def open(cls, device: str | None = None, backend=None, **kw) -> "UsbLink":
@@ -233,6 +234,7 @@ class UsbLink:
         """Send every frame (or those after ``resume_from``) exactly once to the device."""
         rep = self.report
         acked = resume_from or 0
+        self.program_id = _program_id(frames)
         try:
             st = self.status()
             acked = self._first_seq(st, len(frames), resume_from, infos, source)
@@ -288,10 +290,22 @@ class UsbLink:
         if st.last_seq < resume_from:
             raise DeviceError(f"cannot resume from frame {resume_from}: the device acknowledges only "
                               f"up to frame {st.last_seq} (use --resume-from {st.last_seq})")
-        if st.last_seq > n_frames:
-            raise DeviceError(f"the device reports frame {st.last_seq}, but this program has only "
-                              f"{n_frames} frames: is it the same program and planning options?")
+        if st.last_seq > n_frames or (self.program_id is not None and st.program_id != self.program_id):
+            raise DeviceError(f"the device holds another program (id {st.program_id:08x}, frame "
+                              f"{st.last_seq}) than this one (id {self.program_id or 0:08x}, {n_frames} "
+                              "frames): resume with the same part, machine and planning options")
         return st.last_seq
+
+
+def _program_id(frames: list[bytes]) -> int | None:
+    """The program id a CONFIG frame announces (None if the first frame is not a CONFIG)."""
+    from .frames import decode_config
+
+    try:
+        f = decode_frame(frames[0])
+        return decode_config(f.payload).program_id if f.type == FrameType.CONFIG else None
+    except (FrameError, IndexError):
+        return None
 
 
 def _describe(info: FrameInfo, source: str) -> str:

@@ -1145,10 +1145,13 @@ class Interpreter:
             raise self.error(str(exc), col) from None
         end = list(cps[-1])
         start = list(self.pos)
+        # The motion belongs to the G5.2 block (as the curve's own ``line`` says), not to
+        # the G5.3 that closes it: nodes, runs and planned samples all name that line.
         if np.all(cps == cps[0]):
-            self._zero_length(line)
+            self._zero_length(self.nurbs_line)
             return
-        self._curve(curve, pts, end, line, col, self._curve_feed(pts, start))
+        self._curve(curve, pts, end, self.nurbs_line, self.nurbs_col,
+                    self._curve_feed(pts, start))
 
     # -- result -------------------------------------------------------------------
     def program(self, line_count: int) -> Program:

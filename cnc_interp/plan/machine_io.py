@@ -14,7 +14,8 @@ TOML form (DESIGN.md)::
     jmax = 5000.0             # mm/s^3 (deg/s^3)
 
 LinuxCNC INI: axis letters from ``[TRAJ] COORDINATES`` (duplicates, i.e. gantry
-joints, count once); limits from ``[AXIS_<letter>]`` (LinuxCNC >= 2.8), else the
+joints, count once; without it, the ``[AXIS_*]`` sections present, else the first
+``[TRAJ] AXES`` letters of XYZABCUVW); limits from ``[AXIS_<letter>]`` (LinuxCNC >= 2.8), else the
 old ``[AXIS_<n>]`` (n = index of the letter in XYZABCUVW), else ``[JOINT_<n>]``
 (n = position in COORDINATES): ``MAX_VELOCITY``, ``MAX_ACCELERATION`` and, if
 present, ``MAX_JERK`` in machine units per s, s^2, s^3. ``[TRAJ] LINEAR_UNITS``
@@ -395,6 +396,9 @@ def _load_ini(text: str, path: str) -> Machine:
                 tag = m.group(1)
                 present.add(ALL_AXES[int(tag)] if tag.isdigit() and int(tag) < 9 else tag)
         joint_letters = "".join(a for a in ALL_AXES if a in present)
+        n_axes = ini.number("TRAJ", "AXES")
+        if not joint_letters and n_axes is not None and float(n_axes).is_integer() and n_axes <= 9:
+            joint_letters = ALL_AXES[:int(n_axes)]  # old configs: AXES = n means the first n letters
         if not joint_letters:
             raise MachineError("[TRAJ] has no COORDINATES and no [AXIS_n] sections define axes",
                                ini.loc(ini.sections["TRAJ"][0]))

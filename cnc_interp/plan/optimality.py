@@ -81,39 +81,35 @@ def line_min_samples(length: float, v: float, a: float, j: float, dt: float,
 
 
 # -- a lower bound for any path ------------------------------------------------------------
-def _speed2_limits(qs: np.ndarray, qss: np.ndarray, vmax, amax, feed: float):
-    """Largest ṡ² at one point: velocity limits, feed, and some s̈ with every |q_s s̈ + q_ss ṡ²| <= A."""
-    w_hi = feed * feed if math.isfinite(feed) else np.inf
+def _speed2_limits(qs: np.ndarray, qss: np.ndarray, vmax, amax, feed: np.ndarray) -> np.ndarray:
+    """Largest ṡ² at each of K points (qs, qss (K, n)): the velocity limits, the feed, and
+    some s̈ with every |q_s s̈ + q_ss ṡ²| <= A (bisection on ṡ², vectorised)."""
     g = np.abs(qs)
-    with np.errstate(divide="ignore"):
-        w_hi = min(w_hi, float(np.min(np.where(g > 0, (vmax / np.where(g > 0, g, 1)) ** 2, np.inf))))
-    if not math.isfinite(w_hi):
-        w_hi = 1e12
+    with np.errstate(divide="ignore", invalid="ignore"):
+        wv = np.where(g > 0, (vmax[None, :] / np.where(g > 0, g, 1.0)) ** 2, np.inf).min(axis=1)
+    w_hi = np.minimum(np.where(np.isfinite(feed), feed * feed, np.inf), wv)
+    w_hi = np.where(np.isfinite(w_hi), w_hi, 1e12)
 
     def ok(w):
-        lo, hi = -np.inf, np.inf
-        for i in range(qs.shape[0]):
-            c = qss[i] * w
-            if abs(qs[i]) < 1e-12:
-                if abs(c) > amax[i]:
-                    return False
-                continue
-            x1 = (-amax[i] - c) / qs[i]
-            x2 = (amax[i] - c) / qs[i]
-            lo = max(lo, min(x1, x2))
-            hi = min(hi, max(x1, x2))
-        return lo <= hi
+        c = qss * w[:, None]
+        still = np.abs(qs) < 1e-12
+        bad = (still & (np.abs(c) > amax[None, :])).any(axis=1)
+        den = np.where(still, 1.0, qs)
+        x1 = (-amax[None, :] - c) / den
+        x2 = (amax[None, :] - c) / den
+        lo = np.where(still, -np.inf, np.minimum(x1, x2)).max(axis=1)
+        hi = np.where(still, np.inf, np.maximum(x1, x2)).min(axis=1)
+        return (lo <= hi) & ~bad
 
-    if ok(w_hi):
-        return w_hi
-    a, b = 0.0, w_hi
+    good = ok(w_hi)
+    a = np.zeros_like(w_hi)
+    b = w_hi.copy()
     for _ in range(60):
         m = 0.5 * (a + b)
-        if ok(m):
-            a = m
-        else:
-            b = m
-    return a
+        okm = ok(m)
+        a = np.where(okm, m, a)
+        b = np.where(okm, b, m)
+    return np.where(good, w_hi, a)
 
 
 def _accel_range(qs, qss, w, amax):
@@ -145,7 +141,7 @@ def path_lower_bound(path, joint_map, machine, n_grid: int = 2000) -> float:
     seg = path.segment_of_s(s)
     feed = np.where(np.isfinite(path.feed_mm_s), path.feed_mm_s, np.inf)[seg]
     vmax, amax = machine.vmax, machine.amax
-    mvc = np.array([_speed2_limits(qs[i], qss[i], vmax, amax, feed[i]) for i in range(s.size)])
+    mvc = _speed2_limits(qs, qss, vmax, amax, feed)
     ds = np.diff(s)
     w = mvc.copy()
     w[0] = 0.0
@@ -161,7 +157,7 @@ def path_lower_bound(path, joint_map, machine, n_grid: int = 2000) -> float:
     return float(np.sum(2.0 * ds / np.where(vm > 0, vm, np.inf)))
 
 
-def program_lower_bound(outcome) -> float:
+def program_lower_bound(outcome, n_grid: int = 2000) -> float:
     """Sum of ``path_lower_bound`` over a planned program's paths plus its dwell times, s.
 
     ``outcome`` is a ``pipeline.PlanOutcome``; the fit is re-run to get the paths.
@@ -182,5 +178,5 @@ def program_lower_bound(outcome) -> float:
         if isinstance(it, Dwell):
             total += it.seconds
         elif hasattr(it, "length"):
-            total += path_lower_bound(it, jm, machine)
+            total += path_lower_bound(it, jm, machine, n_grid)
     return total

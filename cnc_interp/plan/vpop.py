@@ -169,6 +169,20 @@ class JointTable:
         return k2, k3, k23
 
 
+    def speed_bounds(self, vl: np.ndarray, path, feed_step: np.ndarray) -> np.ndarray:
+        """Per piece: the largest of max_i |q_s,i|/vl_i (sampled, 2% margin) and
+        1/(feed step) of its path segment; d1 times it must stay <= 1 (step units)."""
+        C = self.C
+        h = np.diff(self.S)
+        t = (h[:, None] * np.linspace(0.0, 1.0, 5)[None, :])[..., None]
+        c = C[:, None, :, :]
+        q1 = c[:, :, 1] + t * (2 * c[:, :, 2] + t * (3 * c[:, :, 3] + t * (4 * c[:, :, 4] + t * 5 * c[:, :, 5])))
+        kv = (1.02 * np.abs(q1).max(axis=1) / vl).max(axis=1)
+        seg = path.segment_of_s(0.5 * (self.S[:-1] + self.S[1:]))
+        kf = 1.0 / feed_step[seg]
+        return np.ascontiguousarray(np.maximum(kv, kf))
+
+
 def _positions(path, u, joint_map):
     p = path.derivatives_u(np.asarray(u, dtype=float), 0)[0]
     if joint_map is None or getattr(joint_map, "is_identity", False):
@@ -229,6 +243,7 @@ def plan_path_vpop(path, joint_map, machine, dt_s: float, settings=None) -> Path
     stats = np.zeros(5, dtype=np.int64)
     js = np.ascontiguousarray(jl * VPOP_BRAKE_JERK_FRACTION)
     K2, K3, K23 = (core.range_max_table(x) for x in table.curvature_bounds(al, jl))
+    KV = core.range_max_table(table.speed_bounds(vl, path, FV * dt))
     gap_tol = VPOP_AIM_GAP_JERK_STEPS * float(np.min(jl))
     easy = VPOP_EASY_FRACTION
     fast = bool(getattr(settings, "get", lambda *_: None)("vpop_exact") is not True)
@@ -237,7 +252,7 @@ def plan_path_vpop(path, joint_map, machine, dt_s: float, settings=None) -> Path
     k, b = 1, 0
     while True:
         status, k, b = core.plan_core(table.S, table.C, table.qend, vl, al, jl, js, dt, L, FB, FV,
-                                      sh, qh, k, b, tol, max_steps, bs, bq, stats, K2, K3, K23,
+                                      sh, qh, k, b, tol, max_steps, bs, bq, stats, K2, K3, K23, KV,
                                       easy, gap_tol, fast)
         if status == core.NEED_SPACE:
             grow = sh.shape[0] * 2

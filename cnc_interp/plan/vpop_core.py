@@ -440,7 +440,7 @@ def range_max_table(K: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def _easy(S, C, QEND, K2, K3, K23, bs, kk, al, js_lim, L, easy_frac, q, qs):
+def _easy(S, C, QEND, K2, K3, K23, KV, bs, kk, al, js_lim, L, easy_frac, q, qs):
     """Early end of a brake run: braking, slow enough that the path's curvature uses at most
     ``easy_frac`` of any axis's acceleration and jerk over the whole remaining stop, and
     the stop ends before L. (A heuristic; a plan it misleads is re-planned exactly.)"""
@@ -451,9 +451,16 @@ def _easy(S, C, QEND, K2, K3, K23, bs, kk, al, js_lim, L, easy_frac, q, qs):
         return False
     _eval(S, C, QEND, s0, 0, q, qs)
     jd, ad = _path_limits(qs, js_lim, al)
+    # the ramp back to zero deceleration must not need a negative speed
+    if d1 < 2.0 * d2 * d2 / jd:
+        return False
     ab = 2.0 * ad
     D = d1 * (d1 / ad + 2.0 * ab / jd) + d1
     if s0 + 2.0 * D >= L:
+        return False
+    # speed limits ahead (axis velocities, segment feeds) must already be met: the
+    # brake only slows down from here
+    if _window_max(S, KV, s0, D, 0) * d1 > 1.0:
         return False
     k2 = _window_max(S, K2, s0, D, 0)
     if k2 * d1 * d1 > easy_frac:
@@ -465,7 +472,7 @@ def _easy(S, C, QEND, K2, K3, K23, bs, kk, al, js_lim, L, easy_frac, q, qs):
 
 @njit(cache=True)
 def _brake_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq, max_steps,
-               q, qs, lo, hi, tol, stats, mode, K2, K3, K23, easy_frac, horizon):
+               q, qs, lo, hi, tol, stats, mode, K2, K3, K23, KV, easy_frac, horizon):
     """Does the brake (mode 1) or aim (mode 2) policy from step j (samples < j fixed) reach
     rest? Uses scratch bs/bq, which start with copies of samples j-3..j-1 at 0..2.
 
@@ -495,11 +502,11 @@ def _brake_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq,
         kk += 1
         if bs[kk - 1] == bs[kk - 2] and bs[kk - 2] == bs[kk - 3]:
             return True, kk, _BIG
-        if easy_frac > 0.0 and mode == 1 and _easy(S, C, QEND, K2, K3, K23, bs, kk, al, js_lim,
+        if easy_frac > 0.0 and mode == 1 and _easy(S, C, QEND, K2, K3, K23, KV, bs, kk, al, js_lim,
                                                    L, easy_frac, q, qs):
             return True, kk, _BIG
         if horizon > 0 and j + kk - 3 >= horizon and \
-                _easy(S, C, QEND, K2, K3, K23, bs, kk, al, js_lim, L, 0.6, q, qs):
+                _easy(S, C, QEND, K2, K3, K23, KV, bs, kk, al, js_lim, L, 0.6, q, qs):
             return True, kk, j + kk - 3
         if kk >= cap or kk >= max_steps:
             return False, kk, 0
@@ -517,7 +524,7 @@ def _horizon(k, j, fast):
 
 @njit(cache=True, nogil=True)
 def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol, max_steps,
-              bs, bq, stats, K2, K3, K23, easy_frac, gap_tol, fast):
+              bs, bq, stats, K2, K3, K23, KV, easy_frac, gap_tol, fast):
     """Run VPOp from sample k0 (samples < k0 fixed, b0 the last brake-fixed sample).
 
     Fills ``sh`` (K,), ``qh`` (K, n). Returns (status, k, b). Status NEED_SPACE asks the
@@ -558,7 +565,7 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol
             for i in range(n):
                 qh[k, i] = q[i]
             r = _brake_run(S, C, QEND, sh, qh, k + 1, vl, al, jl, js_lim, dt, L, FB, FV,
-                           bs, bq, max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23,
+                           bs, bq, max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23, KV,
                            easy_frac, (k + 1 + 2 * (last_k - last_j) + 8) if fast else 0)
             stats[1] += 1
             if r[0]:
@@ -568,7 +575,7 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol
                 continue
             if k + 1 >= cert:
                 r = _brake_run(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV,
-                               bs, bq, max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23,
+                               bs, bq, max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23, KV,
                                easy_frac, (k + 2 * (last_k - last_j) + 8) if fast else 0)
                 stats[1] += 1
                 if not r[0]:
@@ -602,7 +609,7 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol
         tested = False
         if lo_j + 1 < hi_j:
             r = _brake_run(S, C, QEND, sh, qh, lo_j + 1, vl, al, jl, js_lim, dt, L, FB,
-                           FV, bs, bq, max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23,
+                           FV, bs, bq, max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23, KV,
                            easy_frac, _horizon(k, lo_j + 1, fast))
             stats[1] += 1
             if r[0]:
@@ -612,7 +619,7 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol
                 while hi_j - lo_j > 1:
                     mid = (lo_j + hi_j) // 2
                     r = _brake_run(S, C, QEND, sh, qh, mid, vl, al, jl, js_lim, dt, L, FB, FV,
-                                   bs, bq, max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23,
+                                   bs, bq, max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23, KV,
                                    easy_frac, _horizon(k, mid, fast))
                     stats[1] += 1
                     if r[0]:
@@ -624,7 +631,7 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol
         if not tested and j + 1 >= cert:
             # fast mode: the brake chain has run past what its last run certified
             r = _brake_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV,
-                           bs, bq, max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23,
+                           bs, bq, max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23, KV,
                            easy_frac, _horizon(k, j, fast))
             stats[1] += 1
             if not r[0]:
@@ -638,7 +645,7 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol
                 if jj <= b:
                     break
                 r = _brake_run(S, C, QEND, sh, qh, jj, vl, al, jl, js_lim, dt, L, FB, FV,
-                               bs, bq, max_steps, q, qs, lo, hi, tol, stats, 2, K2, K3, K23,
+                               bs, bq, max_steps, q, qs, lo, hi, tol, stats, 2, K2, K3, K23, KV,
                                0.0, 0)
                 kk = r[1]
                 if r[0] and L - bs[kk - 1] <= gap_tol:

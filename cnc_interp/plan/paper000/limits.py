@@ -24,7 +24,11 @@ A_t and J_t only decrease as V grows, so the look-ahead may evaluate them at the
 feed a transition actually reaches (its larger end) instead of the segment's cap.
 
 The shares keep A_t, J_t > 0. This is conservative (maxima taken over the whole
-segment, at the cruise feed); sampled output is still checked and replanned.
+segment). Bounds on the continuous derivatives carry over to the sampled setpoints:
+a k-th backward difference divided by dt^k is an average of the k-th derivative over
+its stencil with a non-negative (B-spline) weight, so it cannot exceed the derivative's
+bound. The sampled output is still checked, and replanned where the sampled maxima
+g1..g3 missed a peak.
 
 At a junction where dq/ds (or d2q/ds2) jumps (a path that is only G0/G1 there), the
 sampled setpoints see a velocity (acceleration) step; its finite differences stay
