@@ -76,12 +76,16 @@ def main() -> None:
     ap.add_argument("--sweep", action="store_true", help="every corpus program on a LinuxCNC INI")
     ap.add_argument("--ini", default=os.path.join(CORPUS, "configs", "axis_mm.ini"))
     ap.add_argument("--json", default=None)
+    ap.add_argument("--exclude", action="append", default=[], metavar="TEXT",
+                    help="skip sweep programs whose path contains TEXT (repeatable)")
     args = ap.parse_args()
     # compile once outside the timings
     plan_one(TRIDENT, "generic-mill")
     rows = []
     if args.sweep:
         for f in corpus_programs():
+            if any(x in f for x in args.exclude):
+                continue
             rec = plan_one(f, args.ini)
             rows.append(rec)
             _print(rec)

@@ -58,7 +58,13 @@ CASES = [
     _case("tangent_helix", os.path.join(CORPUS, "quick-tests", "tangent_helix.ngc"), XYZ_INI),
     _case("g0_corners", os.path.join(CORPUS, "quick-tests", "g0_corners.ngc"), XYZ_INI),
     _case("nurbs-xy", os.path.join(CORPUS, "nurbs-g5", "nurbs-xy.ngc"), XYZ_INI),
+    _case("short_segments", os.path.join(CORPUS, "performance", "short_segments_0.001.ngc"),
+          XYZ_INI),
 ]
+
+#: CAM-style programs of tiny moves: one fitted segment spans several blocks and names the
+#: last one, so only the geometry (not the set of lines) shows that nothing was lost
+MERGED_BLOCKS = {"short_segments_0.001.ngc"}
 
 #: the sample used where one program is enough (pipes, formats, determinism)
 MAIN_PART = os.path.join(SAMPLES, "mill-contour.ngc")
@@ -212,13 +218,22 @@ def test_nothing_lost(plans, part, machine):
     fit_lines = set()
     for p in fitted.paths:
         fit_lines.update(int(x) for x in p.line)
-    assert not motion_lines - fit_lines, f"motion lines the fit dropped: {sorted(motion_lines - fit_lines)}"
     assert not fit_lines - motion_lines, f"fit lines that are no motion block: {sorted(fit_lines - motion_lines)}"
-    # the plan (Python API) is the CLI's plan and runs through every motion block
+    # the plan (Python API) is the CLI's plan
     traj = plan_part(part, machine).trajectory
     assert np.array_equal(traj.q, csv.q), "plan_part and `cnc-interp plan` disagree"
     planned_lines = set(int(x) for x in traj.line) - {0}
-    assert not motion_lines - planned_lines, f"lines never executed: {sorted(motion_lines - planned_lines)}"
+    other_lines = {int(it.line) for it in program.items if not hasattr(it, "nodes")}
+    assert not planned_lines - motion_lines - other_lines
+    if os.path.basename(part) in MERGED_BLOCKS:
+        # a segment names the last block it covers: the last block of every run is there
+        missing = {int(r.line[-1]) for r in runs} - fit_lines
+        assert not missing, f"run ends the fit dropped: {sorted(missing)}"
+    else:
+        missing = motion_lines - fit_lines
+        assert not missing, f"motion lines the fit dropped: {sorted(missing)}"
+        missing = motion_lines - planned_lines
+        assert not missing, f"lines never executed: {sorted(missing)}"
     # geometry: every programmed node lies on the emitted setpoint polyline, within the fit
     # tolerance (plus a little chord sag between samples)
     fs = FitSettings.from_options(tol_mm=None, machine=mach)
@@ -227,6 +242,82 @@ def test_nothing_lost(plans, part, machine):
     bound = max(fs.tol_mm, fs.tol_deg if any(a in "ABC" for a in mach.axes) else 0) + 0.005
     worst = int(np.argmax(dist))
     assert dist[worst] <= bound, f"node {nodes[worst]} is {dist[worst]:.4g} from the plan"
+
+
+@pytest.mark.parametrize("planner", ["vpop", "constant", "variable"])
+def test_every_planner_keeps_the_contract(planner, tmp_path):
+    part = os.path.join(SAMPLES, "nurbs-trident.ngc")
+    out = tmp_path / "plan.csv"
+    res = run_inproc("plan", part, "--planner", planner, "-o", out)
+    assert res.code == 0, res.explain()
+    assert f"{planner} on " in res.err
+    csv = parse_plan_csv(out.read_bytes())
+    mach = _machine("generic-mill")
+    program = _program(part, mach)
+    assert csv.header == ["t", "s", "feed", "X", "Y", "Z"]
+    assert np.array_equal(csv.q[0], [0, 0, 0]) and csv.data[0, 2] == 0
+    np.testing.assert_allclose(csv.q[-1], _final_position(program), rtol=0, atol=1e-9)
+    assert np.array_equal(csv.q[-1], csv.q[-2])
+    assert run_inproc("verify", out, "-m", "generic-mill").code == 0
+
+
+def test_start_position_from_machine_file_and_option(tmp_path):
+    """The machine file's [start] table, else all 0; --start overrides it; the program's
+    opening rapid (from there to its first point) is part of the plan."""
+    mfile = tmp_path / "m.toml"
+    mfile.write_text('name = "with start"\n[start]\nX = 5.0\nZ = 50.0\n' + "".join(
+        f"[axes.{a}]\nvmax = 200.0\namax = 2000.0\njmax = 50000.0\n" for a in "XYZ"))
+    part = tmp_path / "p.ngc"
+    part.write_text("G21 G90\nG0 X10 Y10 Z5\nG1 Z0 F600\nG1 X20\nM2\n")
+    res = run_inproc("plan", part, "-m", mfile, "-q")
+    assert res.code == 0, res.explain()
+    csv = parse_plan_csv(res.out)
+    assert np.array_equal(csv.q[0], [5, 0, 50])
+    np.testing.assert_allclose(csv.q[-1], [20, 10, 0], rtol=0, atol=1e-9)
+    # the rapid from the start goes through (10, 10, 5)
+    assert np.min(np.linalg.norm(csv.q - [10, 10, 5], axis=1)) < 1e-9
+    res = run_inproc("plan", part, "-m", mfile, "-q", "--start", "X=1,Y=2,Z=3")
+    assert res.code == 0, res.explain()
+    assert np.array_equal(parse_plan_csv(res.out).q[0], [1, 2, 3])
+
+
+@pytest.mark.xfail(strict=True, reason="bug: a program that ends without M2/M30 ends its CSV "
+                   "in motion: `printf 'G21\\nG1 X1 Y1 F600\\n' | cnc-interp plan -` last rows "
+                   "0.165,...,0.9999518 / 0.166,...,1.0 (feed 0.068, q[-1] != q[-2]); with M2 "
+                   "two rest rows follow. plan/timeline.py adds the rest hold only before a "
+                   "stop/next motion, vpop.py strips trailing repeats")
+def test_program_without_m2_still_ends_at_rest():
+    res = run_inproc("plan", "-", "-q", stdin=b"G21\nG1 X1 Y1 F600\n")
+    assert res.code == 0, res.explain()
+    csv = parse_plan_csv(res.out)
+    np.testing.assert_allclose(csv.q[-1], [1, 1, 0], rtol=0, atol=1e-12)
+    assert csv.data[-1, 2] == 0.0 and np.array_equal(csv.q[-1], csv.q[-2])
+
+
+#: two 0.3 mm G1 moves in XZ at F25000 (cut down from stellabee1.ngc line 2197)
+VPOP_INFEASIBLE = b"G21 G90 G94 G64 G18\nF25000\nG1 X-0.2032 Z-0.0254\nX-0.3556 Z0.0254\nM2\n"
+
+
+@pytest.mark.xfail(strict=True, reason="bug: VPOp fails on a tiny zig-zag: `cnc-interp plan "
+                   "PART -m generic-mill` exits 1 with 'VPOp found no feasible step on the path "
+                   "ending at line 4 (s = 0.355506 of 0.608848)' (plan/vpop.py, vpop_core."
+                   "plan_core); same for stellabee1.ngc at line 2197. The stop must always be "
+                   "recoverable; --planner constant and other machines plan it")
+def test_tiny_zigzag_plans():
+    res = run_inproc("plan", "-", "-m", "generic-mill", stdin=VPOP_INFEASIBLE)
+    assert res.code == 0, res.explain()
+    csv = parse_plan_csv(res.out)
+    np.testing.assert_allclose(csv.q[-1], [-0.3556, 0, 0.0254], rtol=0, atol=1e-9)
+
+
+def test_failed_plan_is_exit_1_one_line():
+    """A plan that fails (whatever the cause) is exit 1 with one error line, no output."""
+    res = run_inproc("plan", "-", "-m", "generic-mill", stdin=VPOP_INFEASIBLE)
+    if res.code == 0:
+        pytest.xfail("the VPOp bug this test uses to fail a plan is fixed: find another")
+    assert res.code == 1, res.explain()
+    assert res.out == b"" and "Traceback" not in res.err
+    assert res.err.count("\n") == 1 and res.err.startswith("<stdin>: error: ")
 
 
 # -- stdin, stdout, formats, summaries -----------------------------------------------------
@@ -328,23 +419,40 @@ def test_reader_closing_early_is_quiet():
 
 
 STELLABEE = os.path.join(CORPUS, "performance", "stellabee1.ngc")
+#: a 1000 s straight move at F6: 1e6 samples, a ~70 MB CSV that takes seconds to write
+SLOW_LINE = b"G21\nG1 X100 F6\nM2\n"
 
 
-def test_ctrl_c_leaves_no_output_and_no_temp_file(tmp_path):
-    """SIGINT to a running ``plan -o out.csv`` of a big program: nothing left behind.
+@pytest.mark.parametrize("phase", ["plan", "write"])
+def test_ctrl_c_leaves_no_output_and_no_temp_file(tmp_path, phase):
+    """SIGINT to a running ``plan -o out.csv``: no output and no temporary file left.
 
-    The signal goes in as soon as the temporary output file appears (interrupting the
-    write), or after a few seconds of planning if it has not appeared by then.
+    ``plan``: stellabee1.ngc (169k lines) interrupted a few seconds in, while it is read,
+    fitted or planned. ``write``: a program with a million samples, interrupted as soon as
+    the temporary output file appears, i.e. in the middle of writing it.
     """
     work = tmp_path / "run"
     work.mkdir()
-    proc = subprocess.Popen([console_script(), "plan", STELLABEE, "-m", MAIN_MACHINE, "-o",
+    if phase == "plan":
+        part = STELLABEE
+    else:
+        part = str(tmp_path / "slow.ngc")
+        with open(part, "wb") as fh:
+            fh.write(SLOW_LINE)
+    proc = subprocess.Popen([console_script(), "plan", part, "-m", MAIN_MACHINE, "-o",
                              "out.csv"], cwd=work, stdin=subprocess.DEVNULL,
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     try:
         t0 = time.monotonic()
-        while proc.poll() is None and time.monotonic() - t0 < 8.0 and not os.listdir(work):
-            time.sleep(0.02)
+        if phase == "plan":
+            while proc.poll() is None and time.monotonic() - t0 < 4.0:
+                time.sleep(0.05)
+            assert not os.listdir(work), "stellabee1 reached its output within 4 s"
+        else:
+            while proc.poll() is None and time.monotonic() - t0 < 240 and not os.listdir(work):
+                time.sleep(0.005)
+            assert os.listdir(work), "no temporary output file appeared"
+            assert "out.csv" not in os.listdir(work), "the output appeared before the signal"
         assert proc.poll() is None, "the plan finished before it could be interrupted"
         proc.send_signal(signal.SIGINT)
         code = proc.wait(timeout=120)

@@ -174,3 +174,10 @@ def test_send_frame_file_and_infos(job, tmp_path):
     rep = send_frame_file(str(f), backend=be)
     assert rep.final.bytes_accepted == sum(map(len, frames))
     assert_exact(be, prog, len(frames))
+
+
+def test_resume_from_zero_on_a_fresh_device(job):
+    prog, frames, infos, _ = job
+    be = _device()
+    UsbLink.open(backend=be).send(frames, infos, resume_from=0)
+    assert_exact(be, prog, len(frames))

@@ -121,7 +121,7 @@ def read_mcap(path: str):
             datas = [payloads[i] for i in order.tolist()]
     except OSError as exc:
         raise UsageError(f"cannot read MCAP file: {exc.strerror or exc}", loc) from None
-    except UsageError:
+    except (UsageError, MemoryError):
         raise
     except Exception as exc:  # noqa: BLE001 - any decoding failure of the file is bad input
         raise UsageError(f"not a readable MCAP plan: {type(exc).__name__}: {exc}", loc) from None

@@ -290,7 +290,8 @@ class UsbLink:
         if st.last_seq < resume_from:
             raise DeviceError(f"cannot resume from frame {resume_from}: the device acknowledges only "
                               f"up to frame {st.last_seq} (use --resume-from {st.last_seq})")
-        if st.last_seq > n_frames or (self.program_id is not None and st.program_id != self.program_id):
+        other = self.program_id is not None and st.program_id != self.program_id
+        if st.last_seq > n_frames or (st.last_seq > 0 and other):
             raise DeviceError(f"the device holds another program (id {st.program_id:08x}, frame "
                               f"{st.last_seq}) than this one (id {self.program_id or 0:08x}, {n_frames} "
                               "frames): resume with the same part, machine and planning options")

@@ -5,7 +5,8 @@ FRAMES="$1"; REPO="$2"
 PY="$REPO/.venv/bin/python"
 export PYTHONDONTWRITEBYTECODE=1 PYTHONHASHSEED=0 HOME=/run TMPDIR=/run NUMBA_CACHE_DIR=/run
 echo "QEMU-USB-STEP: guest up $(cat /proc/uptime)"
-"$PY" -c "import numpy" && echo "QEMU-USB-STEP: python+numpy $(cat /proc/uptime)"
+"$PY" -c "import numpy" > /run/py.log 2>&1 && echo "QEMU-USB-STEP: python+numpy $(cat /proc/uptime)" \
+  || { tail -5 /run/py.log | sed 's/^/QEMU-USB-STEP: python: /'; ls -la "$PY" | sed 's/^/QEMU-USB-STEP: /'; }
 result() { echo "QEMU-USB-RESULT: $*"; }
 G=/sys/kernel/config/usb_gadget/cnc
 mkdir -p $G || { result "fail configfs"; exit 1; }
@@ -18,8 +19,8 @@ echo stream > $G/configs/c.1/strings/0x409/configuration
 ln -s $G/functions/ffs.cnc $G/configs/c.1/
 mkdir -p /run/ffs && mount -t functionfs cnc /run/ffs || { result "fail functionfs"; exit 1; }
 echo "QEMU-USB-STEP: device start $(cat /proc/uptime)"; "$PY" "$REPO/tests/qemu/ffs_device.py" /run/ffs /run/device.json > /run/device.log 2>&1 &
-i=0; while [ ! -e /run/ffs/ep1 ] && [ $i -lt 3000 ]; do sleep 0.1; i=$((i+1)); done
-[ -e /run/ffs/ep1 ] || { cat /run/device.log; result "fail device program"; exit 1; }
+i=0; while [ ! -e /run/ffs/ep1 ] && [ $i -lt 300 ]; do sleep 1; i=$((i+1)); done
+[ -e /run/ffs/ep1 ] || { sed 's/^/QEMU-USB-STEP: device: /' /run/device.log; result "fail device program"; exit 1; }
 echo "QEMU-USB-STEP: device ready $(cat /proc/uptime)"; ls /sys/class/udc | head -1 > $G/UDC
 i=0; while [ ! -e /dev/bus/usb/001/002 ] && [ $i -lt 100 ]; do sleep 0.1; i=$((i+1)); done
 "$PY" - "$FRAMES" <<'PYEOF'
@@ -36,5 +37,5 @@ print("QEMU-USB-LINK:", json.dumps({"frames": rep.frames_sent, "bytes": rep.byte
 print("QEMU-USB-DEVICE:", json.dumps(dev))
 PYEOF
 rc=$?
-[ $rc -eq 0 ] || { cat /run/device.log; result "fail host rc=$rc"; exit 1; }
+[ $rc -eq 0 ] || { sed 's/^/QEMU-USB-STEP: device: /' /run/device.log; result "fail host rc=$rc"; exit 1; }
 result "done"
