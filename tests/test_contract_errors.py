@@ -254,3 +254,26 @@ def test_plan_too_big_for_memory_is_exit_1(tmp_path):
     assert r.returncode == 1, err
     assert "Traceback" not in err and err.count("\n") == 1 and "error" in err, err
     assert sorted(os.listdir(tmp_path)) == ["slow.ngc"]
+
+
+# -- verify on a doctored plan file ---------------------------------------------------------
+@pytest.mark.parametrize("col,value,code,line", [
+    (4, "nan", 1, None),      # a NaN setpoint: the plan fails verify
+    (4, "inf", 1, None),
+    (0, "0.0495", 2, 51),     # t off the k*dt grid: not a plan file (bad input, its line)
+    (4, "abc", 2, 51),        # not a number
+])
+def test_verify_doctored_file(tmp_path, col, value, code, line):
+    res = run_inproc("plan", "-", "-q", stdin=b"G21\nG1 X1 Y1 F600\nM2\n")
+    assert res.code == 0, res.explain()
+    rows = res.out.decode().split("\n")
+    fields = rows[50].split(",")
+    fields[col] = value
+    rows[50] = ",".join(fields)
+    path = tmp_path / "doctored.csv"
+    path.write_text("\n".join(rows))
+    got = run_inproc("verify", path, "-m", "generic-mill")
+    assert got.code == code, got.out.decode() + got.err
+    assert "Traceback" not in got.err
+    if code == 2:
+        _check_one_error_line(got, str(path), line, None, "")

@@ -350,17 +350,33 @@ def _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, mode, hint, 
             target = s0
         else:
             target = s0 + d1 + jd - np.sqrt(jd * (2.0 * d1 + jd))
+        if target > b:
+            target = b
+        hint = _eval(S, C, QEND, target, hint, q, qs)
+        if _feasible(qh, k, q, vl, al, jl):
+            return True, target, hint
+        # which side of the allowed interval is the target on? (linearised at the target)
+        L, H = _lin_interval(q, qs, qh[k - 1], lo, hi, target, s0, b)
+        if target < L or L > H:
+            okl, xl, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, target, False,
+                                    hint, q, qs, tol)
+            if okl and xl >= target:
+                return True, xl, hint
+            if not okl:
+                return False, s0, hint
+        oku, xu, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, target, True,
+                                hint, q, qs, tol)
+        if not oku:
+            return False, s0, hint
+        if xu <= target:
+            return True, xu, hint
+        # the linear model misled: the target lies inside; fall back to the lower end
         okl, xl, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, False,
                                 hint, q, qs, tol)
         if not okl:
             return False, s0, hint
-        if target <= xl:
+        if xl >= target:
             return True, xl, hint
-        hint = _eval(S, C, QEND, target, hint, q, qs)
-        if target <= b and _feasible(qh, k, q, vl, al, jl):
-            return True, target, hint
-        oku, xu, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, True, hint,
-                                q, qs, tol)
         return True, xu, hint
     # aim: the largest step whose continuous stop distance still fits before L
     okl, xl, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, False,
