@@ -54,6 +54,9 @@ CASES = [
     _case("five-axis-xyzac", os.path.join(SAMPLES, "five-axis-xyzac.ngc"), "mikron-ucp710",
           marks=pytest.mark.xfail(strict=True, reason=_FIVE_AXIS_BUG)),
     _case("square", os.path.join(CORPUS, "quick-tests", "square.ngc"), XYZ_INI),
+    # every machine axis gets a column, moved or not
+    _case("square-9axis", os.path.join(CORPUS, "quick-tests", "square.ngc"),
+          os.path.join(CORPUS, "configs", "9axis.ini")),
     _case("simple_arc3", os.path.join(CORPUS, "arc-feed", "simple_arc3.ngc"), XYZ_INI),
     _case("tangent_helix", os.path.join(CORPUS, "quick-tests", "tangent_helix.ngc"), XYZ_INI),
     _case("g0_corners", os.path.join(CORPUS, "quick-tests", "g0_corners.ngc"), XYZ_INI),
