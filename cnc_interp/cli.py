@@ -239,8 +239,9 @@ def run() -> None:
     except click.exceptions.Exit as exc:
         sys.exit(exc.exit_code)
     except click.ClickException as exc:
-        exc.show()
-        sys.exit(2)
+        # One line, like every other error; `--help` shows the usage.
+        _stderr(f"cnc-interp: error: {exc.format_message()}")
+        sys.exit(exc.exit_code if isinstance(exc, click.UsageError) else 2)
     except click.exceptions.Abort:
         sys.exit(130)
     except CncInterpError as exc:

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 class SourceLocation:
     """Where in an input file something happened (1-based line and column)."""
 
-    file: str = "<input>"
+    file: str = "cnc-interp"  # no file: errors read "cnc-interp: error: ..."
     line: int = 0
     col: int = 0
     text: str = ""  # the offending source text, quoted in the message when present

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import UsageError
+from .errors import SourceLocation, UsageError
 
 
 def read_part(part: str) -> tuple[str, bytes]:
@@ -227,7 +227,7 @@ def plan_part(part: str, machine_spec: str | None = None, planner: str = "vpop",
     try:
         traj = plan_program(fitted, machine, settings, progress=progress)
     except PlanError as exc:
-        if exc.location.file == "<input>":  # name the part program
+        if exc.location.line == 0 and exc.location.file == SourceLocation().file:  # name the part program
             raise PlanError(exc.message, _loc(program.source)) from None
         raise
     t3 = time.perf_counter()

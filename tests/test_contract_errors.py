@@ -201,11 +201,7 @@ def test_bad_option_exit_2_without_traceback(good_part, tmp_path, opts):
     assert res.out == b"" and not (tmp_path / "out.csv").exists()
 
 
-@pytest.mark.xfail(strict=True, reason="bug: click usage errors (`plan PART --dt -1`, bad "
-                   "--tol/--planner, unknown option) print 4 lines (Usage:/Try/blank/Error:) "
-                   "instead of one `...: error: ...` line; cli.run's ClickException branch "
-                   "calls exc.show()")
-@pytest.mark.parametrize("opts", CLICK_OPTION_CASES[:1])
+@pytest.mark.parametrize("opts", CLICK_OPTION_CASES)
 def test_bad_option_is_one_error_line(good_part, opts):
     res = run_inproc("plan", good_part, *opts)
     assert res.code == 2
