@@ -107,6 +107,23 @@ FIT_SOFT_STALE_ROUNDS = 3
 FIT_MIN_SPAN_REL = 1e-6
 #: share of the tolerance the fit aims for (the rest absorbs rounding)
 FIT_TOL_SAFETY = 0.98
+#: path deviation: samples of the programmed path per typical fitted knot span
+PATH_DEV_SAMPLES_PER_SPAN = 8
+#: path deviation: fewest / most samples of one programmed move (or per node of a curve)
+PATH_DEV_MIN_SAMPLES = 4
+PATH_DEV_MAX_SAMPLES = 64
+#: path deviation: samples per fitted segment for the nearest-point search
+PATH_DEV_FIT_SAMPLES = 8
+#: path deviation: Newton steps of the projection onto the fitted path
+PATH_DEV_NEWTON_ITERS = 6
+#: path deviation: nearest path samples whose segments are searched for the foot point
+PATH_DEV_CANDIDATES = 3
+#: path deviation: relative slack over the tolerance (float rounding of the projection)
+PATH_DEV_SLACK = 1e-6
+#: N-axis fitter: check points per knot span between the nodes (on the programmed moves)
+FIT_SPAN_CHECKS = 4
+#: N-axis / planar fitter: check points per chord are at most this many
+FIT_MAX_CHORD_CHECKS = 16
 #: planar fit: inclinations are kept within ±this (rad/π) of the frame, as Eq. (1) guarantees
 PLANAR_MAX_INCLINATION_PI = 0.49
 #: planar fit: weight of the ∫p'''² smoothing term relative to the node residuals

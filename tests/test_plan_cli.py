@@ -1,7 +1,6 @@
 """``cnc-interp plan`` end to end: files, pipes, summaries, errors, determinism."""
 
 import json
-import os
 import subprocess
 import sys
 

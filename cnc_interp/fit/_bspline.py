@@ -223,10 +223,11 @@ def check(t, m, c, xc, ref, tol_lin, tol_rot, lin, metric, exp_speed, exp_lin_sp
           n_hard, hard_ratio):
     """Mark spans whose check points deviate or slow down too much.
 
-    Returns (max linear error, max rotary error, hard failures, soft failures): the
-    deviation of the first ``n_hard`` check points (the nodes) and a speed below
-    ``hard_ratio`` of the expected one are hard; chord-point deviations and speeds
-    between ``hard_ratio`` and ``min_ratio`` of the expected one are soft.
+    Returns (max linear error, max rotary error, hard failures, soft failures): any
+    deviation beyond the tolerance (nodes: the first ``n_hard`` points, per axis kind;
+    points on the programmed moves between them: Euclidean in the scaled metric) and a
+    speed below ``hard_ratio`` of the expected one are hard; speeds between
+    ``hard_ratio`` and ``min_ratio`` of the expected one are soft.
 
     xc (P,) check parameters, ref (P, d) reference positions, tol_lin (P,) allowed linear
     deviation, tol_rot scalar allowed rotary deviation (scaled units), exp_speed (P,) and
@@ -272,7 +273,8 @@ def check(t, m, c, xc, ref, tol_lin, tol_rot, lin, metric, exp_speed, exp_lin_sp
             np.sqrt(sp_lin) < hard_ratio * exp_lin_speed[j]
         if not (dev_ok and speed_ok):
             bad_span[find_span(t, m, xc[j])] = True
-            if stop or (j < n_hard and not dev_ok):
+            # every check point lies on the programmed path: a deviation is a failure
+            if stop or not dev_ok:
                 hard += 1
             else:
                 soft += 1

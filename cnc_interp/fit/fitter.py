@@ -19,7 +19,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..constants import PATH_DEV_SLACK
 from ..gcode.program import Dwell, Program, Run, Stop
+from .deviation import path_deviation
 from .corners import PreparedRun, SubRun, fit_tolerance, prepare_run, split_run
 from .nodes import EndState, fit_polyline, straight_piece
 from .path import Path, PlanarSegments
@@ -63,7 +65,8 @@ def fit_program(program: Program, settings: FitSettings | None = None) -> FitRes
     runs_info = []
     prev_end = None
     totals = dict(nodes_in=0, segments_out=0, feed_paths=0, rapid_moves=0,
-                  max_node_dev_mm=0.0, max_node_dev_deg=0.0, within_tolerance=True)
+                  max_node_dev_mm=0.0, max_node_dev_deg=0.0, max_path_dev_mm=0.0,
+                  max_path_dev_ratio=0.0, within_tolerance=True)
     for idx, it in enumerate(program.items):
         if isinstance(it, Run):
             raws, info = _fit_run_raw(it, settings)
@@ -81,6 +84,8 @@ def fit_program(program: Program, settings: FitSettings | None = None) -> FitRes
                 totals["feed_paths"] += len(raws)
                 totals["max_node_dev_mm"] = max(totals["max_node_dev_mm"], info["max_node_dev_mm"])
                 totals["max_node_dev_deg"] = max(totals["max_node_dev_deg"], info["max_node_dev_deg"])
+                totals["max_path_dev_mm"] = max(totals["max_path_dev_mm"], info["max_path_dev_mm"])
+                totals["max_path_dev_ratio"] = max(totals["max_path_dev_ratio"], info["max_path_dev_ratio"])
                 totals["within_tolerance"] &= info["within_tolerance"]
         elif isinstance(it, (Dwell, Stop)):
             items.append(it)
@@ -120,7 +125,7 @@ def _fit_run_raw(run: Run, settings: FitSettings):
     info = dict(kind=run.kind, first_line=int(run.line[0]) if run.n_nodes else 0,
                 last_line=int(run.line[-1]) if run.n_nodes else 0, nodes_in=0, segments_out=0,
                 paths=0, methods=[], max_node_dev_mm=0.0, max_node_dev_deg=0.0,
-                within_tolerance=True)
+                max_path_dev_mm=0.0, max_path_dev_ratio=0.0, within_tolerance=True)
     if run.kind == "rapid":
         return _rapid_raws(run, lin), info
     pr = prepare_run(run, settings)
@@ -132,7 +137,14 @@ def _fit_run_raw(run: Run, settings: FitSettings):
         info["methods"].append(meth)
         info["max_node_dev_mm"] = max(info["max_node_dev_mm"], dmm)
         info["max_node_dev_deg"] = max(info["max_node_dev_deg"], ddeg)
-        info["within_tolerance"] &= bool(ok)
+        # the programmed path (moves and exact curves) against the fit, everywhere
+        pdev, pratio = path_deviation(raw.breaks, raw.coef, pr.nodes[sub.i0:sub.i1 + 1],
+                                      fit_tolerance(pr.tol_mm[sub.i0:sub.i1 + 1]),
+                                      pr.lin if not sub.rotary else np.zeros_like(pr.lin),
+                                      sub.curves, sub.i0)
+        info["max_path_dev_mm"] = max(info["max_path_dev_mm"], pdev)
+        info["max_path_dev_ratio"] = max(info["max_path_dev_ratio"], pratio)
+        info["within_tolerance"] &= bool(ok) and pratio <= 1.0 + PATH_DEV_SLACK
         info["segments_out"] += int(raw.coef.shape[0])
     info["paths"] = len(raws)
     info["methods"] = sorted(set(info["methods"]))

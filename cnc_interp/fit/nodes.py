@@ -38,9 +38,9 @@ from ..constants import (
     FIT_MAX_ROUNDS,
     FIT_MIN_SPAN_REL,
     FIT_MIN_SPEED_RATIO,
-    FIT_SAGITTA_ALLOWANCE,
     FIT_SMOOTHING,
     FIT_SOFT_STALE_ROUNDS,
+    FIT_SPAN_CHECKS,
     FIT_STOP_SPEED_RATIO,
     FIT_TOL_SAFETY,
 )
@@ -142,46 +142,35 @@ def fit_polyline(nodes: np.ndarray, tol_mm: np.ndarray, tol_deg: float, lin: np.
     # check points: nodes and fractions of each chord
     metric_len = np.sqrt((chords[:, metric] ** 2).sum(axis=1))
     lin_ratio = metric_len / clen
-    dirs = chords / clen[:, None]
-    delta = np.zeros(n)
-    if n > 2:
-        delta[1:-1] = turn_angles(dirs[:-1], dirs[1:])
-    if start is not None:
-        delta[0] = turn_angles(start.d1[None, :], dirs[:1])[0]
-    if end is not None:
-        delta[-1] = turn_angles(dirs[-1:], end.d1[None, :])[0]
-    # sagitta of a chord on a circle of the smaller Menger curvature of its two end nodes
-    # (0 next to a corner or a section end: the path must stay near a straight chord)
-    kap = np.zeros(n)
-    if n > 2:
-        kap[1:-1] = 2.0 * np.sin(delta[1:-1]) / np.maximum(np.linalg.norm(y[2:] - y[:-2], axis=1), 1e-300)
-    if start is not None:
-        kap[0] = np.linalg.norm(start.d2)
-    if end is not None:
-        kap[-1] = np.linalg.norm(end.d2)
-    sag = sagitta_allowance(clen, kap)
+    # check points on the programmed moves: fractions of every chord (more on long chords
+    # than their neighbours' scale would need is left to the per-span points below); the
+    # tolerance is a bound on the distance to the programmed path everywhere, so no
+    # allowance beyond the tolerance (a smooth curve may not bulge off a chord)
     f = _FRACS
     xc_ch = (u[:-1, None] + clen[:, None] * f[None, :]).ravel()
     ref_ch = (y[:-1, None, :] + chords[:, None, :] * f[None, :, None]).reshape(-1, d)
-    tol_ch = (tol[1:, None] + FIT_SAGITTA_ALLOWANCE * sag[:, None] * (4 * f * (1 - f))[None, :]).ravel()
+    tol_ch = np.repeat(tol[1:], f.size)
     node_ratio = np.empty(n)
     node_ratio[0] = lin_ratio[0]
     node_ratio[-1] = lin_ratio[-1]
     node_ratio[1:-1] = np.minimum(lin_ratio[:-1], lin_ratio[1:])
-    xc = np.concatenate((u, xc_ch))
-    ref = np.concatenate((y, ref_ch))
-    tol_c = np.concatenate((tol, tol_ch))
-    exp_lin = np.concatenate((node_ratio, np.repeat(lin_ratio, f.size)))
-    exp_all = np.ones(xc.size)
-    # no minimum speed at the two ends of an unconstrained section is needed beyond the rest
+    xc0 = np.concatenate((u, xc_ch))
+    ref0 = np.concatenate((y, ref_ch))
+    tol_c0 = np.concatenate((tol, tol_ch))
+    exp_lin0 = np.concatenate((node_ratio, np.repeat(lin_ratio, f.size)))
     w = tol_ref_mm / np.maximum(tol, 1e-12)
-    # chord points are data too (else a span without nodes follows only the smoothing),
-    # weighted by their own (sagitta-widened) tolerance
+    # chord points are data too (else a span without nodes follows only the smoothing)
     w_ch = 0.5 * tol_ref_mm / (tol_ch + 1e-12)
-    order = np.argsort(np.concatenate((u, xc_ch)), kind="stable")
-    u_data = np.concatenate((u, xc_ch))[order]
-    y_data = np.concatenate((y, ref_ch))[order]
-    w_data = np.concatenate((w, w_ch))[order]
+    u_data0 = np.concatenate((u, xc_ch))
+    y_data0 = np.concatenate((y, ref_ch))
+    w_data0 = np.concatenate((w, w_ch))
+    span_f = (np.arange(1, FIT_SPAN_CHECKS + 1) / (FIT_SPAN_CHECKS + 1))
+
+    def on_moves(x):
+        """Programmed point (K, d), tolerance and metric speed ratio at parameters x (K,)."""
+        j = np.clip(np.searchsorted(u, x, side="right") - 1, 0, n - 2)
+        fr = (x - u[j]) / clen[j]
+        return y[j] + chords[j] * fr[:, None], tol[j + 1], lin_ratio[j]
 
     step = FIT_INITIAL_NODES_PER_SPAN
     interior = u[step:n - 1:step].copy()
@@ -209,6 +198,19 @@ def fit_polyline(nodes: np.ndarray, tol_mm: np.ndarray, tol_deg: float, lin: np.
             fixed[-3:] = True
         greville = np.convolve(t[1:-1], np.full(5, 0.2), mode="valid")
         prior = np.stack([np.interp(greville, u, y[:, a]) for a in range(d)], axis=1)
+        # points inside every knot span, on the programmed moves: checked and fitted, so
+        # that a long move stays straight between sparse nodes
+        kn = np.concatenate(([0.0], interior, [total]))
+        xs = (kn[:-1, None] + np.diff(kn)[:, None] * span_f[None, :]).ravel()
+        ref_s, tol_s, lr_s = on_moves(xs)
+        xc = np.concatenate((xc0, xs))
+        ref = np.concatenate((ref0, ref_s))
+        tol_c = np.concatenate((tol_c0, tol_s))
+        exp_lin = np.concatenate((exp_lin0, lr_s))
+        exp_all = np.ones(xc.size)
+        u_data = np.concatenate((u_data0, xs))
+        y_data = np.concatenate((y_data0, ref_s))
+        w_data = np.concatenate((w_data0, 0.5 * tol_ref_mm / (tol_s + 1e-12)))
         bs.solve_lsq(t, m, u_data, y_data, w_data, prior, fixed, c, FIT_SMOOTHING, _RIDGE)
         bad = np.zeros(m + 1, dtype=np.bool_)
         worst_lin, worst_rot, hard, soft = bs.check(t, m, c, xc, ref, tol_c, tol_rot, lin, metric,

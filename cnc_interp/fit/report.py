@@ -102,6 +102,8 @@ def format_statistics(stats: dict) -> str:
         f"  paths              {stats['paths']}  ({stats['feed_paths']} feed, {stats['rapid_moves']} rapid)",
         f"  max node deviation {stats['max_node_dev_mm']:.3e} mm, {stats['max_node_dev_deg']:.3e} deg"
         f"  (tolerance {stats['tol_mm']:g} mm, {stats['tol_deg']:g} deg)",
+        f"  max path deviation {stats.get('max_path_dev_mm', 0.0):.3e} mm"
+        f"  ({stats.get('max_path_dev_ratio', 0.0):.3f} of the tolerance; programmed moves and curves)",
         f"  within tolerance   {'yes' if stats['within_tolerance'] else 'NO'}",
         f"  continuity         position {c['position_mm']:.1e} mm, tangent {c['tangent']:.1e},"
         f" curvature {c['curvature_1_mm']:.1e} 1/mm ({c['curvature_rel']:.1e} relative)",
