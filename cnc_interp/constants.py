@@ -117,7 +117,9 @@ PATH_DEV_FIT_SAMPLES = 8
 #: path deviation: Newton steps of the projection onto the fitted path
 PATH_DEV_NEWTON_ITERS = 6
 #: path deviation: nearest path samples whose segments are searched for the foot point
-PATH_DEV_CANDIDATES = 3
+PATH_DEV_CANDIDATES = 4
+#: path deviation: weight of the travelled-length coordinate in the nearest-sample search
+PATH_DEV_PARAM_WEIGHT = 0.02
 #: path deviation: relative slack over the tolerance (float rounding of the projection)
 PATH_DEV_SLACK = 1e-6
 #: N-axis fitter: check points per knot span between the nodes (on the programmed moves)

@@ -19,7 +19,7 @@ def _eval(coef_k: np.ndarray, t: np.ndarray, d: int) -> np.ndarray:
 
 
 def distance_to_path(path: Path, points: np.ndarray, axes_mask: np.ndarray | None = None,
-                     samples_per_seg: int = 48) -> np.ndarray:
+                     samples_per_seg: int = 48, candidates: int = 1) -> np.ndarray:
     """Distance (K,) from points (K, n) to the path, over the axes in ``axes_mask``.
 
     Dense sampling + KD-tree for the nearest sample, then Newton on the squared
@@ -35,30 +35,34 @@ def distance_to_path(path: Path, points: np.ndarray, axes_mask: np.ndarray | Non
     t = frac * h[seg]
     q = _eval(path.coef[seg], t, 0)[:, mask]
     tree = cKDTree(q)
-    _, idx = tree.query(points[:, mask])
-    k0 = seg[idx]
-    best = np.linalg.norm(q[idx] - points[:, mask], axis=1)
-    # Newton on the nearest sample's segment and on both neighbours (the nearest point
-    # may lie just across a break)
-    for dk, t_start in ((0, None), (-1, "end"), (1, "start")):
-        k = np.clip(k0 + dk, 0, path.n_seg - 1)
-        if t_start is None:
-            tt = t[idx].copy()
-        elif t_start == "end":
-            tt = h[k].copy()
-        else:
-            tt = np.zeros(k.size)
-        c = path.coef[k][:, :, mask]
-        for _ in range(16):
-            p0 = _eval(c, tt, 0)
-            p1 = _eval(c, tt, 1)
-            p2 = _eval(c, tt, 2)
-            r = p0 - points[:, mask]
-            g = (r * p1).sum(axis=1)
-            hh = (p1 * p1).sum(axis=1) + (r * p2).sum(axis=1)
-            hh = np.where(hh > 0, hh, (p1 * p1).sum(axis=1) + 1e-300)
-            tt = np.clip(tt - g / hh, 0.0, h[k])
-        best = np.minimum(best, np.linalg.norm(_eval(c, tt, 0) - points[:, mask], axis=1))
+    k_nn = min(candidates, q.shape[0])
+    _, idx_all = tree.query(points[:, mask], k=k_nn)
+    idx_all = np.asarray(idx_all).reshape(points.shape[0], k_nn)
+    best = np.linalg.norm(q[idx_all[:, 0]] - points[:, mask], axis=1)
+    # Newton in the segments of the nearest samples (several: another part of the path
+    # may pass close by) and in their neighbours (the foot may lie just across a break)
+    for col in range(k_nn):
+        idx = idx_all[:, col]
+        k0 = seg[idx]
+        for dk, t_start in ((0, None), (-1, "end"), (1, "start")):
+            k = np.clip(k0 + dk, 0, path.n_seg - 1)
+            if t_start is None:
+                tt = t[idx].copy()
+            elif t_start == "end":
+                tt = h[k].copy()
+            else:
+                tt = np.zeros(k.size)
+            c = path.coef[k][:, :, mask]
+            for _ in range(16):
+                p0 = _eval(c, tt, 0)
+                p1 = _eval(c, tt, 1)
+                p2 = _eval(c, tt, 2)
+                r = p0 - points[:, mask]
+                g = (r * p1).sum(axis=1)
+                hh = (p1 * p1).sum(axis=1) + (r * p2).sum(axis=1)
+                hh = np.where(hh > 0, hh, (p1 * p1).sum(axis=1) + 1e-300)
+                tt = np.clip(tt - g / hh, 0.0, h[k])
+            best = np.minimum(best, np.linalg.norm(_eval(c, tt, 0) - points[:, mask], axis=1))
     return best
 
 

@@ -33,12 +33,6 @@ from ._contract_helpers import (
 XYZ_INI = os.path.join(CORPUS, "configs", "XYZ.ini")
 XZ_INI = os.path.join(CORPUS, "configs", "XZ.ini")
 
-_FIVE_AXIS_BUG = ("bug: `plan samples/gcode/five-axis-xyzac.ngc -m mikron-ucp710` exits 1: 'bug: "
-                  "path at line 21 starts at [0, 25, 0, -20, 360], the machine is at "
-                  "[0, 23.49, -8.55, -20, 360]': under xyzac-trt the rapid G0 path is planned "
-                  "in program coordinates, not joints (plan/timeline.py plan_one: "
-                  "plan_path_vpop(item, None, ...) for rapids)")
-
 
 def _case(name, part, machine, marks=()):
     return pytest.param(part, machine, id=name, marks=marks)
@@ -51,8 +45,7 @@ CASES = [
     _case("lathe-profile", os.path.join(SAMPLES, "lathe-profile.ngc"), "xz-lathe"),
     _case("lathe-profile-ini", os.path.join(SAMPLES, "lathe-profile.ngc"), XZ_INI),
     _case("nurbs-trident", os.path.join(SAMPLES, "nurbs-trident.ngc"), "generic-mill"),
-    _case("five-axis-xyzac", os.path.join(SAMPLES, "five-axis-xyzac.ngc"), "mikron-ucp710",
-          marks=pytest.mark.xfail(strict=True, reason=_FIVE_AXIS_BUG)),
+    _case("five-axis-xyzac", os.path.join(SAMPLES, "five-axis-xyzac.ngc"), "mikron-ucp710"),
     _case("square", os.path.join(CORPUS, "quick-tests", "square.ngc"), XYZ_INI),
     # every machine axis gets a column, moved or not
     _case("square-9axis", os.path.join(CORPUS, "quick-tests", "square.ngc"),
@@ -284,11 +277,6 @@ def test_start_position_from_machine_file_and_option(tmp_path):
     assert np.array_equal(parse_plan_csv(res.out).q[0], [1, 2, 3])
 
 
-@pytest.mark.xfail(strict=True, reason="bug: a program that ends without M2/M30 ends its CSV "
-                   "in motion: `printf 'G21\\nG1 X1 Y1 F600\\n' | cnc-interp plan -` last rows "
-                   "0.165,...,0.9999518 / 0.166,...,1.0 (feed 0.068, q[-1] != q[-2]); with M2 "
-                   "two rest rows follow. plan/timeline.py adds the rest hold only before a "
-                   "stop/next motion, vpop.py strips trailing repeats")
 def test_program_without_m2_still_ends_at_rest():
     res = run_inproc("plan", "-", "-q", stdin=b"G21\nG1 X1 Y1 F600\n")
     assert res.code == 0, res.explain()

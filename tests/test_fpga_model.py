@@ -154,3 +154,27 @@ def test_straight_moves_in_a_plane_become_segments():
     assert planar_form(_line_path([[0, 0, 0], [1, 2, 3]])) is None
     rapid = _line_path([[0, 0, 0], [4, 0, 3]], rapid=True)
     assert planar_form(rapid).plane == (0, 2)
+
+
+def test_straight_path_with_a_nonlinear_parametrisation():
+    from cnc_interp.fit.path import Path
+    from cnc_interp.fpga.program import planar_form
+
+    # X moves along a quintic in u (as the N-axis fit makes collinear nodes), Y and Z hold
+    coef = np.zeros((2, 6, 3))
+    coef[0, :, 0] = [0.0, 2.0, 0.5, -0.1, 0.01, 0.0]
+    coef[1, :, 0] = [2.41, 1.0, 0.0, 0.2, 0.0, -0.05]
+    coef[:, 0, 1] = 4.0
+    path = Path(axes="XYZ", breaks=np.array([0.0, 1.0, 2.0]), coef=coef, line=[3, 4],
+                feed_mm_s=np.full(2, 20.0))
+    pl = planar_form(path)
+    assert pl is not None and not np.any(pl.p)
+    traj = quintic_plan(path, feed_mm_s=20.0)
+    prog = build_program(traj, [path])
+    assert prog.stats["segments"] == 2
+    assert prog.stats["max_dev_mm"] < FPGA_ROUNDTRIP_TARGET_MM
+    # a bent path is not straight
+    bent = coef.copy()
+    bent[0, 2, 1] = 1e-3
+    assert planar_form(Path(axes="XYZ", breaks=np.array([0.0, 1.0, 2.0]), coef=bent, line=[3, 4],
+                            feed_mm_s=np.full(2, 20.0))) is None

@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..constants import (
+    PATH_DEV_PARAM_WEIGHT,
     PATH_DEV_CANDIDATES,
     PATH_DEV_FIT_SAMPLES,
     PATH_DEV_MAX_SAMPLES,
@@ -38,14 +39,17 @@ def _eval(coef_k: np.ndarray, t: np.ndarray, d: int) -> np.ndarray:
 
 
 def distance_to_pieces(breaks: np.ndarray, coef: np.ndarray, points: np.ndarray,
-                       mask: np.ndarray, spacing: float | None = None) -> np.ndarray:
+                       mask: np.ndarray, spacing: float | None = None,
+                       along: np.ndarray | None = None) -> np.ndarray:
     """Distance (K,) over the axes ``mask`` (n,) from points (K, n) to the piecewise
     quintic (breaks (S+1,), coef (S, 6, n), local parameter t = u - breaks[k]).
 
     Each result is the distance to an actual point of the path, so it never
     underestimates; the search (nearest ``PATH_DEV_CANDIDATES`` path samples, Newton in
     their segments and neighbours) makes it the true distance in practice.
-    ``spacing`` (u units) bounds the sample spacing on long segments.
+    ``spacing`` (u units) bounds the sample spacing on long segments; ``along`` (K,)
+    optionally gives the travelled length of each point along its own (programmed)
+    path, in path order, to guide the search.
     """
     from scipy.spatial import cKDTree
 
@@ -63,7 +67,17 @@ def distance_to_pieces(breaks: np.ndarray, coef: np.ndarray, points: np.ndarray,
     t = (np.arange(seg.size) - starts[seg]) / m[seg] * h[seg]
     q = _eval(c_all[seg], t, 0)
     k_nn = min(PATH_DEV_CANDIDATES, q.shape[0])
-    _, idx = cKDTree(q).query(pts, k=k_nn)
+    # search in (position, PATH_DEV_PARAM_WEIGHT x travelled length): the foot point lies
+    # near the same share of the path's length, which keeps the search off other
+    # parts of the path that pass close by (helix turns, a contour's second pass)
+    sig = np.concatenate(([0.0], np.cumsum(np.linalg.norm(np.diff(q, axis=0), axis=1))))
+    lam = PATH_DEV_PARAM_WEIGHT
+    if along is None:
+        along = np.zeros(pts.shape[0])
+        lam = 0.0
+    else:
+        along = along * (sig[-1] / along[-1] if along[-1] > 0 else 1.0)
+    _, idx = cKDTree(np.column_stack((q, lam * sig))).query(np.column_stack((pts, lam * along)), k=k_nn)
     idx = idx.reshape(pts.shape[0], k_nn)
     best = np.linalg.norm(q[idx[:, 0]] - pts, axis=1)
     for col in range(k_nn):
@@ -86,17 +100,18 @@ def distance_to_pieces(breaks: np.ndarray, coef: np.ndarray, points: np.ndarray,
 
 
 def programmed_samples(nodes: np.ndarray, tol_mm: np.ndarray, curves, i0: int, spacing: float):
-    """Dense samples of the programmed path through ``nodes`` (n, d) (sub-run nodes i0..).
+    """Dense samples of the programmed path through ``nodes`` (n, d) (sub-run nodes i0..),
+    in path order.
 
     Moves inside a curve (``curves``: CurvePiece with run indices) are replaced by the
     exact curve. ``tol_mm`` (n,) is the tolerance of the move ending at each node.
-    Returns (points (K, d), tolerance (K,)).
+    Returns (points (K, d), tolerance (K,), travelled length (K,) over all axes).
     """
     from .curves import CurveEval
 
     n, d = nodes.shape
     in_curve = np.zeros(max(n - 1, 0), dtype=bool)
-    pts, tols = [], []
+    pts, tols, keys = [], [], []
     for cp in curves:
         a, b = cp.first - i0, cp.last - i0
         in_curve[a:b] = True
@@ -107,6 +122,7 @@ def programmed_samples(nodes: np.ndarray, tol_mm: np.ndarray, curves, i0: int, s
         w = np.linspace(ev.w0, ev.w1, k + 1)
         pts.append(ev.points(w))
         tols.append(np.full(k + 1, float(tol_mm[b])))
+        keys.append(a + np.linspace(0.0, 0.5, k + 1))
     lines = np.nonzero(~in_curve)[0]
     if lines.size:
         p0, p1 = nodes[lines], nodes[lines + 1]
@@ -117,9 +133,13 @@ def programmed_samples(nodes: np.ndarray, tol_mm: np.ndarray, curves, i0: int, s
         f = (np.arange(which.size) - starts[which]) / cnt[which]
         pts.append(p0[which] + (p1 - p0)[which] * f[:, None])
         tols.append(tol_mm[lines + 1][which])
+        keys.append(lines[which] + 0.5 * f)
     if not pts:
-        return np.zeros((0, d)), np.zeros(0)
-    return np.concatenate(pts), np.concatenate(tols)
+        return np.zeros((0, d)), np.zeros(0), np.zeros(0)
+    order = np.argsort(np.concatenate(keys), kind="stable")
+    p = np.concatenate(pts)[order]
+    along = np.concatenate(([0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))))
+    return p, np.concatenate(tols)[order], along
 
 
 def path_deviation(breaks: np.ndarray, coef: np.ndarray, nodes: np.ndarray, tol_mm: np.ndarray,
@@ -131,8 +151,8 @@ def path_deviation(breaks: np.ndarray, coef: np.ndarray, nodes: np.ndarray, tol_
     h = np.diff(breaks)
     # |dq/du| ≈ 1: a typical knot span in mm, sampled PATH_DEV_SAMPLES_PER_SPAN times
     spacing = max(float(np.median(h)), 1e-9) / PATH_DEV_SAMPLES_PER_SPAN
-    pts, tol = programmed_samples(nodes, tol_mm, curves, i0, spacing)
-    dist = distance_to_pieces(breaks, coef, pts, lin, spacing * PATH_DEV_SAMPLES_PER_SPAN / 4)
+    pts, tol, along = programmed_samples(nodes, tol_mm, curves, i0, spacing)
+    dist = distance_to_pieces(breaks, coef, pts, lin, spacing, along)
     if dist.size == 0:
         return 0.0, 0.0
     ratio = dist / np.maximum(tol, 1e-300)

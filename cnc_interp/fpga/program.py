@@ -70,9 +70,10 @@ def _poly(p: np.ndarray, x: np.ndarray) -> np.ndarray:
 def planar_form(path):
     """The path's paper-000 planar form: the fit's own, or exact for straight moves.
 
-    A path whose segments are all straight (no t² .. t⁵ terms) and that moves at
-    most two axes (rapids included) is a planar path with p ≡ 0 and θ the
-    direction of each line. Returns ``None`` when neither applies.
+    A path that moves at most two axes (rapids included) and whose segments are
+    all straight (every point within ``FPGA_PLANAR_MATCH_MM`` of the chord, however
+    the fit parametrised it) is a planar path with p ≡ 0 and θ the direction of each
+    chord: the profile carries the parametrisation. Returns ``None`` otherwise.
     """
     if path.planar is not None and not path.rapid:
         return path.planar
@@ -80,19 +81,22 @@ def planar_form(path):
     n_axes = coef.shape[2]
     if n_axes < 2:
         return None
-    scale = max(1.0, float(np.abs(coef[:, 0, :]).max()))
-    if np.any(np.abs(coef[:, 2:, :]) > 1e-12 * scale):
-        return None
-    moving = np.nonzero(np.any(np.abs(coef[:, 1, :]) > 0, axis=0))[0].tolist()
+    moving = np.nonzero(np.any(coef[:, 1:, :] != 0, axis=(0, 1)))[0].tolist()
     if len(moving) > 2:
         return None
     others = [i for i in range(n_axes) if i not in moving]
     plane = tuple(sorted((moving + others)[:2]))
     h, v = plane
     du = np.diff(path.breaks)
-    d = coef[:, 1, :][:, [h, v]] * du[:, None]
+    terms = coef[:, 1:, :][:, :, [h, v]] * (du[:, None] ** np.arange(1, 6))[:, :, None]  # (n, 5, 2)
+    d = terms.sum(axis=1)
     length = np.hypot(d[:, 0], d[:, 1])
     if np.any(length <= 0):
+        return None
+    unit = d / length[:, None]
+    # distance of any point from the chord is at most the sum of the terms' normal parts
+    normal = np.abs(terms[:, :, 1] * unit[:, None, 0] - terms[:, :, 0] * unit[:, None, 1]).sum(axis=1)
+    if np.any(normal > FPGA_PLANAR_MATCH_MM):
         return None
     from ..fit.path import PlanarSegments
 

@@ -57,6 +57,20 @@ def _item_kind(item) -> str:
     raise PlanError(f"bug: unknown timeline item {type(item).__name__}")
 
 
+def _joint_rapid(path, kin):
+    """The straight joint-space line between a rapid path's end points (one segment)."""
+    from ..fit.path import Path
+
+    ends = kin.to_joints(np.stack([path.start, path.end]))
+    coef = np.zeros((1, 6, ends.shape[1]))
+    coef[0, 0] = ends[0]
+    coef[0, 1] = ends[1] - ends[0]
+    if not np.any(coef[0, 1]):
+        return path  # no joint moves: VPOp plans the (zero-length) item as it is
+    return Path(path.axes, np.array([0.0, 1.0]), coef, line=path.line[-1:],
+                feed_mm_s=np.array([np.inf]), rapid=True)
+
+
 def plan_program(fit_result, machine, settings, progress=None) -> Trajectory:
     """Plan every item of ``fit_result`` on one timeline (see module docstring).
 
@@ -104,7 +118,12 @@ def plan_program(fit_result, machine, settings, progress=None) -> Trajectory:
             return plan_path_vpop(item, None, machine, dt, settings)
         return planner(item, joint_map, machine, dt, settings)
 
-    paths = [it for it in fit_result.items if _item_kind(it) == "path"]
+    # Rapids are straight in joint space: under non-trivial kinematics the fitted
+    # (program-space) rapid is replaced by the joint-space line between its ends.
+    items = tuple(_joint_rapid(it, kin) if (joint_map is not None and _item_kind(it) == "path"
+                                            and it.rapid) else it
+                  for it in fit_result.items)
+    paths = [it for it in items if _item_kind(it) == "path"]
     for it in paths:
         if it.axes != machine.axes:
             raise PlanError(f"bug: path axes {it.axes} differ from machine axes {machine.axes}")
@@ -120,7 +139,7 @@ def plan_program(fit_result, machine, settings, progress=None) -> Trajectory:
         pool = None
         futures = None
 
-    for item in fit_result.items:
+    for item in items:
         kind = _item_kind(item)
         if kind == "path":
             try:
@@ -166,6 +185,8 @@ def plan_program(fit_result, machine, settings, progress=None) -> Trajectory:
             rest = max(rest, _REST_RUN)
             stats["stops"] += 1
 
+    # the program ends at rest even without M2/M30: the held samples make it explicit
+    hold(_REST_RUN - rest, last_line)
     if pool is not None:
         pool.shutdown()
     q = np.concatenate(qs, axis=0)

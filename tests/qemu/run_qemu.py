@@ -111,7 +111,8 @@ def main() -> int:
     vmlinuz, mods = k
     frames = os.path.abspath(a.frames)
     initrd = _initramfs(a.work, mods, f"{REPO}/tests/qemu/guest.sh {frames} {REPO}")
-    cmd = ["qemu-system-x86_64", "-accel", "tcg", "-m", "1024", "-smp", "2", "-kernel", vmlinuz,
+    # -cpu max: numpy needs x86-64-v2 (SSE4.2, POPCNT), which the default qemu64 model lacks
+    cmd = ["qemu-system-x86_64", "-accel", "tcg", "-cpu", "max", "-m", "1024", "-smp", "2", "-kernel", vmlinuz,
            "-initrd", initrd, "-append", "console=ttyS0 panic=-1 quiet", "-nographic", "-no-reboot",
            "-device", "virtio-rng-pci",
            "-virtfs", "local,path=/,mount_tag=hostroot,security_model=none,readonly=on,multidevs=remap"]
