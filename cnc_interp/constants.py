@@ -227,6 +227,9 @@ P000_MERGE_BAND = 0.1
 #: VPOp plans against limits shrunk by this relative amount, so float rounding in
 #: verify's finite differences can never push a ratio past 1 + VERIFY_RATIO_SLACK
 VPOP_LIMIT_SHRINK = 1e-10
+#: and by this many ulps of the largest position (absolute), for one-ulp differences
+#: between the values the step loop checked and those verify sees (path joins)
+VPOP_ROUNDING_ULPS = 16.0
 #: largest deviation of VPOp's arc-length joint table from the true path (mm or deg)
 VPOP_TABLE_TOL = 1e-9
 #: longest piece of that table before refinement (mm or deg of arc length)

@@ -116,3 +116,21 @@ def test_paper000_planners_share_the_timeline(planner):
     assert rep.ok, rep.format()
     assert traj.planner == planner
     assert_array_equal(traj.q[-1], [0.0, 0.0, 10.0])
+
+
+@pytest.mark.parametrize("planner", ["vpop", "constant", "variable"])
+def test_low_jerk_limit_holds_across_path_joins(planner):
+    """A jerk limit of 2000 mm/s^3 at dt = 1 ms is 2e-6 mm of third difference: a
+    one-ulp mismatch where an arc's end meets the next line (~1e-14 mm) used to
+    show as a ratio of 1.0000000028. Every planner must keep rounding margin."""
+    from cnc_interp.fit import FitSettings, fit_program
+    from cnc_interp.gcode import read_program
+
+    text = "G21 G90 G17\nG0 X20 Y10\nG1 X20 Y10 F2400\nG2 X30 Y0 I5 J-5\nG4 P0.05\nG1 X40 Y5\nM2\n"
+    machine = Machine(name="low jerk", axes="XYZ", vmax=[100.0] * 3, amax=[2000.0] * 3,
+                      jmax=[2000.0] * 3, dt_s=0.001)
+    fitted = fit_program(read_program(text, "arc.ngc", axes="XYZ"), FitSettings.from_options())
+    traj = plan_program(fitted, machine, PlanSettings.from_options(planner=planner, dt_s=0.001))
+    report = verify(traj, machine)
+    assert report.ok, report.format()
+    assert_allclose(traj.q[-1], [40.0, 5.0, 0.0], rtol=0, atol=1e-12)

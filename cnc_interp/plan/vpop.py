@@ -24,6 +24,7 @@ from ..constants import (
     VPOP_EASY_FRACTION,
     VPOP_BRAKE_JERK_FRACTION,
     VPOP_LIMIT_SHRINK,
+    VPOP_ROUNDING_ULPS,
     VPOP_TABLE_MAX_PIECE,
     VPOP_TABLE_MAX_ROUNDS,
     VPOP_TABLE_TOL,
@@ -218,6 +219,18 @@ def plan_path_vpop(path, joint_map, machine, dt_s: float, settings=None) -> Path
         q0 = _positions(path, path.breaks[:1], joint_map)
         return PathPlan(s=np.zeros(1), q=q0, stats={"samples": 1})
     table = JointTable(path, joint_map)
+    # Absolute margin for float rounding: a few ulps of the positions, times the 8 of
+    # the jerk stencil (1, 3, 3, 1), so that one-ulp differences between what the loop
+    # checked and what reaches verify (joins between paths, re-evaluated end points)
+    # cannot push a low limit (jmax * dt**3 ~ 1e-6 mm) past its ratio slack.
+    q_scale = 1.0 + float(np.max(np.abs(table.C[:, 0, :])))
+    margin = VPOP_ROUNDING_ULPS * np.finfo(float).eps * q_scale
+    vl = np.ascontiguousarray(vl - 2.0 * margin)
+    al = np.ascontiguousarray(al - 4.0 * margin)
+    jl = np.ascontiguousarray(jl - 8.0 * margin)
+    if np.any(jl <= 0.5 * machine.jmax * dt**3):
+        raise PlanError(f"the jerk limits are too small for dt = {dt:g} s at positions of "
+                        f"{q_scale:g} mm/deg: float64 cannot resolve them")
     L = table.length
     FB = np.ascontiguousarray(path.s_breaks, dtype=float).copy()
     FB[-1] = L

@@ -322,11 +322,58 @@ def _stop_distance(v, a, J, A):
 
 
 @njit(cache=True)
+def _brake_value(S, C, QEND, qh, k, vl, al, jl, js_lim, lo, hi, s0, d1, b, guess, hint, q, qs,
+                 tol):
+    """The brake policy's sample k (see ``_step``), given the bounds ``lo``/``hi`` of
+    ``_bounds``. Returns (ok, s', hint); q holds q(s')."""
+    hint = _eval(S, C, QEND, s0, hint, q, qs)
+    jd, ad = _path_limits(qs, js_lim, al)
+    # the least step after which a jerk ramp back to zero path acceleration still
+    # leaves a non-negative speed (or a full stop once the speed is one jerk step)
+    if d1 <= jd:
+        target = s0
+    else:
+        target = s0 + d1 + jd - np.sqrt(jd * (2.0 * d1 + jd))
+    if target > b:
+        target = b
+    hint = _eval(S, C, QEND, target, hint, q, qs)
+    if _feasible(qh, k, q, vl, al, jl):
+        return True, target, hint
+    # which side of the allowed interval is the target on? (linearised at the target)
+    L, H = _lin_interval(q, qs, qh[k - 1], lo, hi, target, s0, b)
+    if target < L or L > H:
+        okl, xl, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, target, False,
+                                hint, q, qs, tol)
+        if okl and xl >= target:
+            return True, xl, hint
+        if not okl:
+            return False, s0, hint
+    oku, xu, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, target, True,
+                            hint, q, qs, tol)
+    if not oku:
+        return False, s0, hint
+    if xu <= target:
+        return True, xu, hint
+    # the linear model misled: the target lies inside; fall back to the lower end
+    okl, xl, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, False,
+                            hint, q, qs, tol)
+    if not okl:
+        return False, s0, hint
+    if xl >= target:
+        return True, xl, hint
+    # (q must hold q(xu) again)
+    hint = _eval(S, C, QEND, xu, hint, q, qs)
+    return True, xu, hint
+
+
+@njit(cache=True)
 def _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, mode, hint, q, qs,
           lo, hi, tol, aim_jerk=1.0):
     """Choose sample k. mode 0: max; 1: brake; 2: aim at rest exactly at L.
 
-    Returns (ok, s', hint); q holds q(s')."""
+    Returns (ok, s', hint); q holds q(s'). Mode 0 fails only when the brake policy
+    finds no sample k either, so "max failed at k" always means "braking from k fails"
+    (what the dichotomy in ``plan_core`` relies on)."""
     if not _bounds(qh, k, vl, al, jl, lo, hi):
         return False, sh[k - 1], hint
     s0 = sh[k - 1]
@@ -337,47 +384,22 @@ def _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, mode, hint, 
     b = _cap(s0, dt, L, FB, FV)
     guess = s0 + d1 + d2
     if mode == 0:
-        return _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, True, hint, q, qs, tol)
+        ok, x, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, True, hint,
+                              q, qs, tol)
+        if ok:
+            return ok, x, hint
+        # the linearised search can miss a narrow allowed set (near a sharp turn the
+        # joint positions are far from linear in s); the brake value is a feasible seed
+        okb, xb, hint = _brake_value(S, C, QEND, qh, k, vl, al, jl, js_lim, lo, hi, s0, d1, b,
+                                     guess, hint, q, qs, tol)
+        if not okb:
+            return False, s0, hint
+        return _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, xb, True, hint, q, qs, tol)
+    if mode == 1:
+        return _brake_value(S, C, QEND, qh, k, vl, al, jl, js_lim, lo, hi, s0, d1, b, guess,
+                            hint, q, qs, tol)
     hint = _eval(S, C, QEND, s0, hint, q, qs)
-    if mode == 1:
-        jd, ad = _path_limits(qs, js_lim, al)
-    else:
-        jd, ad = _path_limits(qs, jl, al)
-    if mode == 1:
-        # brake: the least step after which a jerk ramp back to zero path acceleration
-        # still leaves a non-negative speed (or a full stop once the speed is one jerk step)
-        if d1 <= jd:
-            target = s0
-        else:
-            target = s0 + d1 + jd - np.sqrt(jd * (2.0 * d1 + jd))
-        if target > b:
-            target = b
-        hint = _eval(S, C, QEND, target, hint, q, qs)
-        if _feasible(qh, k, q, vl, al, jl):
-            return True, target, hint
-        # which side of the allowed interval is the target on? (linearised at the target)
-        L, H = _lin_interval(q, qs, qh[k - 1], lo, hi, target, s0, b)
-        if target < L or L > H:
-            okl, xl, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, target, False,
-                                    hint, q, qs, tol)
-            if okl and xl >= target:
-                return True, xl, hint
-            if not okl:
-                return False, s0, hint
-        oku, xu, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, target, True,
-                                hint, q, qs, tol)
-        if not oku:
-            return False, s0, hint
-        if xu <= target:
-            return True, xu, hint
-        # the linear model misled: the target lies inside; fall back to the lower end
-        okl, xl, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, False,
-                                hint, q, qs, tol)
-        if not okl:
-            return False, s0, hint
-        if xl >= target:
-            return True, xl, hint
-        return True, xu, hint
+    jd, ad = _path_limits(qs, jl, al)
     # aim: the largest step whose continuous stop distance still fits before L
     okl, xl, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, False,
                             hint, q, qs, tol)
