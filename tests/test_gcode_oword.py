@@ -13,7 +13,7 @@ from cnc_interp.gcode import oword
 from cnc_interp.gcode.blocks import iter_blocks
 from cnc_interp.gcode.params import ParamStore
 
-CORPUS = Path(os.environ.get("CNC_CORPUS", "/work/shared/corpus/linuxcnc"))
+CORPUS = Path(os.environ.get("CNC_CORPUS", Path(__file__).resolve().parents[2] / "shared" / "corpus" / "linuxcnc"))
 
 
 def run(src: str, params: ParamStore | None = None):
