@@ -133,6 +133,14 @@ PLANAR_SMOOTHING = 1e-6
 #: planar fit: weight of the soft end conditions (slope, curvature from the neighbouring
 #: nodes) that keep the forward propagation of p', p'' stable; 0 = the paper's bare method
 PLANAR_END_WEIGHT = 1.0
+#: planar fit: check points along a chord per whole segment length (3 more on every chord)
+PLANAR_CHECKS_PER_SEGMENT = 32
+#: planar fit: a chord longer than this many times its shorter neighbour gets extra nodes at
+#: geometrically growing distances from its ends (room for a short curvature transition)
+PLANAR_LONG_CHORD_RATIO = 4.0
+#: planar fit: retries with extra nodes around a chord that cannot be fitted before falling
+#: back to the N-axis fitter
+PLANAR_MAX_RETRIES = 8
 #: curves: exact-geometry check points per quintic piece when converting arcs / NURBS
 CURVE_CHECK_POINTS = 16
 #: curves: deepest halving of a curve piece before giving up (2**depth pieces)

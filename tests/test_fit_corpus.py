@@ -71,6 +71,9 @@ def test_corpus_program_fits_within_tolerance(name):
     assert st["within_tolerance"]
     assert st["max_node_dev_mm"] <= settings.tol_mm
     assert st["max_node_dev_deg"] <= settings.tol_deg
+    # the tolerance bounds the distance to the programmed moves and curves everywhere
+    assert st["max_path_dev_mm"] <= settings.tol_mm * (1 + 1e-6)
+    assert st["max_path_dev_ratio"] <= 1 + 1e-6
     c = st["continuity"]
     assert c["position_mm"] < 1e-9
     assert c["tangent"] < 1e-9

@@ -13,22 +13,24 @@ import sys
 
 import pytest
 
-from cnc_interp.fpga.frames import program_frames
 from cnc_interp.fpga.model import run_program
-from cnc_interp.fpga.program import build_program
-
-from .fpga_cases import gentle_curve, quintic_plan
 
 pytestmark = pytest.mark.skipif(os.environ.get("CNC_INTERP_QEMU") != "1",
                                 reason="QEMU USB integration test is opt-in (CNC_INTERP_QEMU=1)")
 
 
+CORPUS = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "corpus", "linuxcnc")
+
+
 def test_stream_through_qemu_usb_stack(tmp_path):
     import hashlib
 
-    path = gentle_curve(6)
-    prog = build_program(quintic_plan(path, feed_mm_s=30.0), [path])
-    frames, _ = program_frames(prog)
+    from cnc_interp.fpga.commands import StreamOptions, build_stream
+
+    # a whole corpus program (arcs as setpoint blocks, lines as segments), about 70 KB of frames
+    opts = StreamOptions(part=os.path.join(CORPUS, "quick-tests", "arc-arc-test.ngc"),
+                         machine_spec=os.path.join(CORPUS, "configs", "XYZ.ini"))
+    prog, frames, _ = build_stream(opts)
     f = tmp_path / "frames.bin"
     f.write_bytes(b"".join(frames))
     script = os.path.join(os.path.dirname(__file__), "qemu", "run_qemu.py")

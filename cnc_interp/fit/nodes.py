@@ -45,7 +45,7 @@ from ..constants import (
     FIT_TOL_SAFETY,
 )
 
-_FRACS = np.array([0.25, 0.5, 0.75])
+_FRACS = np.arange(1, 8) / 8.0
 _RIDGE = 1e-10
 _FACT = np.array([1.0, 1.0, 2.0, 6.0, 24.0, 120.0])
 

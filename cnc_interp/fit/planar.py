@@ -34,13 +34,16 @@ import numpy as np
 from numba import njit
 
 from ..constants import (
-    FIT_SAGITTA_ALLOWANCE,
+    FIT_MAX_CHORD_CHECKS,
     FIT_TOL_SAFETY,
+    PLANAR_CHECKS_PER_SEGMENT,
     PLANAR_END_WEIGHT,
+    PLANAR_LONG_CHORD_RATIO,
+    PLANAR_MAX_RETRIES,
     PLANAR_MAX_INCLINATION_PI,
     PLANAR_SMOOTHING,
 )
-from .nodes import sagitta_allowance, segment_sources
+from .nodes import segment_sources
 from .path import Path, PlanarSegments
 
 _PI = math.pi
@@ -200,19 +203,19 @@ def _ddpoly(b, xi):
 
 
 @njit(cache=True)
-def _node_error(b, X, xs, zs, j):
-    """An upper bound of the distance from node j to the curve (see module docstring)."""
-    xi = xs[j] / X
-    vert = abs(_poly(b, xi) - zs[j])
-    # Newton on d/dx |(x, p(x)) - node|^2 from the node's abscissa
-    x = xs[j]
+def _point_error(b, X, px, pz):
+    """An upper bound of the distance from the point (px, pz) (rotated frame, 0 <= px <= X)
+    to the curve: the smaller of the vertical residual and the distance to a
+    Newton-projected point of the curve."""
+    vert = abs(_poly(b, px / X) - pz)
+    x = px
     for _ in range(3):
         t = x / X
         p = _poly(b, t)
         dp = _dpoly(b, t) / X
         ddp = _ddpoly(b, t) / (X * X)
-        g = (x - xs[j]) + (p - zs[j]) * dp
-        h = 1.0 + dp * dp + (p - zs[j]) * ddp
+        g = (x - px) + (p - pz) * dp
+        h = 1.0 + dp * dp + (p - pz) * ddp
         if h <= 0.0:
             break
         x = x - g / h
@@ -221,8 +224,14 @@ def _node_error(b, X, xs, zs, j):
         if x > X:
             x = X
     p = _poly(b, x / X)
-    d = math.sqrt((x - xs[j]) ** 2 + (p - zs[j]) ** 2)
+    d = math.sqrt((x - px) ** 2 + (p - pz) ** 2)
     return min(vert, d)
+
+
+@njit(cache=True)
+def _node_error(b, X, xs, zs, j):
+    """An upper bound of the distance from node j to the curve (see module docstring)."""
+    return _point_error(b, X, xs[j], zs[j])
 
 
 @njit(cache=True)
@@ -240,28 +249,36 @@ def _end_est(e, th, tau, kap, max_incl):
 
 
 @njit(cache=True)
-def _try(xs, zs, tol, constrained, rho1, rho2, mu, b, e, th, tau, kap, max_incl, w_end, sag_allow, sag_mid):
-    """Fit and return the largest node error minus its tolerance (<= 0 means accepted)."""
+def _try(xs, zs, tol, constrained, rho1, rho2, mu, b, e, th, tau, kap, max_incl, w_end, per_x, max_checks):
+    """Fit and return the largest deviation minus its tolerance (<= 0 means accepted):
+    at the nodes and at points along every chord (the programmed moves), the tolerance
+    being a bound on the distance to the programmed path everywhere."""
     has, d1, d2 = _end_est(e, th, tau, kap, max_incl)
     _fit_segment(xs, zs, constrained, rho1, rho2, mu, b, has and w_end > 0.0, d1, d2, w_end)
     r = xs.shape[0]
     X = xs[r - 1]
-    s0 = e - (r - 1)
     worst = -np.inf
     for j in range(1, r - 1):
         err = _node_error(b, X, xs, zs, j) - tol[j]
         if err > worst:
             worst = err
-    # between the nodes: the chord midpoints, within the tolerance plus the sagitta a
-    # curve of the smaller neighbouring node curvature would have (0 next to a corner)
+    # along the chords: more points on a chord that is a larger share of the segment
     for j in range(1, r):
-        xm = 0.5 * (xs[j - 1] + xs[j])
-        zm = 0.5 * (zs[j - 1] + zs[j])
-        sag = sag_mid[s0 + j - 1]
-        slope = _dpoly(b, xm / X) / X
-        err = abs(_poly(b, xm / X) - zm) / math.sqrt(1.0 + slope * slope) - (tol[j] + sag_allow * sag)
-        if err > worst:
-            worst = err
+        dx = xs[j] - xs[j - 1]
+        dz = zs[j] - zs[j - 1]
+        m = 3 + int(math.ceil(per_x * dx / X))
+        if m > max_checks:
+            m = max_checks
+        for i in range(1, m + 1):
+            f = i / (m + 1.0)
+            px = xs[j - 1] + f * dx
+            pz = zs[j - 1] + f * dz
+            vert = abs(_poly(b, px / X) - pz)
+            if vert - tol[j] <= worst:
+                continue  # the vertical residual already bounds the distance
+            err = _point_error(b, X, px, pz) - tol[j]
+            if err > worst:
+                worst = err
     return worst
 
 
@@ -272,10 +289,12 @@ def _wrap(a):
 
 @njit(cache=True)
 def planar_fit_kernel(H, V, tol, alpha, theta_chord, tau, kap, w_end, max_incl, mu,
-                      out_theta, out_start, out_end, out_b, sag_allow, sag_mid):
+                      out_theta, out_start, out_end, out_b, per_x, max_checks):
     """Segment and fit nodes (H, V) (n,); returns (n_seg, status, max_dev).
 
-    status 0 = ok; 1 = an inherited tangent cannot be represented in the next frame.
+    status 0 = ok; 1 = an inherited tangent cannot be represented in the next frame;
+    2 = a single chord cannot be fitted within the tolerance (an inherited curvature
+    too strong for it): the caller falls back to the N-axis fitter.
     out_* are preallocated with n-1 rows; segment k covers nodes out_start[k]..out_end[k].
     """
     n = H.shape[0]
@@ -333,7 +352,7 @@ def planar_fit_kernel(H, V, tol, alpha, theta_chord, tau, kap, w_end, max_incl, 
                 break
             r = e - s + 1
             if _try(xs_all[:r], zs_all[:r], tl[:r], constrained, rho1, rho2, mu, bt,
-                    e, th, tau, kap, max_incl, w_end, sag_allow, sag_mid) <= 0.0:
+                    e, th, tau, kap, max_incl, w_end, per_x, max_checks) <= 0.0:
                 lo = e
                 if e == g_end:
                     break
@@ -346,12 +365,15 @@ def planar_fit_kernel(H, V, tol, alpha, theta_chord, tau, kap, w_end, max_incl, 
             mid = (lo + hi) // 2
             r = mid - s + 1
             if _try(xs_all[:r], zs_all[:r], tl[:r], constrained, rho1, rho2, mu, bt,
-                    mid, th, tau, kap, max_incl, w_end, sag_allow, sag_mid) <= 0.0:
+                    mid, th, tau, kap, max_incl, w_end, per_x, max_checks) <= 0.0:
                 lo = mid
             else:
                 hi = mid
         e = lo
         r = e - s + 1
+        if e == s + 1 and _try(xs_all[:r], zs_all[:r], tl[:r], constrained, rho1, rho2, mu, bt,
+                               e, th, tau, kap, max_incl, w_end, per_x, max_checks) > 0.0:
+            return k, 2, max_dev
         has, d1, d2 = _end_est(e, th, tau, kap, max_incl)
         _fit_segment(xs_all[:r], zs_all[:r], constrained, rho1, rho2, mu, b,
                      has and w_end > 0.0, d1, d2, w_end)
@@ -410,24 +432,36 @@ def fit_planar(nodes: np.ndarray, plane: tuple[int, int], tol_mm: np.ndarray, ax
     Returns ``(planar, coef, line, feed_mm_s, max_dev_mm)`` (build the ``Path`` with
     ``planar_to_path`` or from ``coef`` and ``breaks_of(planar)``), or ``None`` when
     the method cannot continue (an inherited tangent outside the next frame's
-    ±0.49π); the caller then uses the N-axis fitter.
+    ±0.49π, or a chord that cannot be followed within the tolerance even after
+    ``PLANAR_MAX_RETRIES`` rounds of extra nodes there); the caller then uses the
+    N-axis fitter. Extra nodes on the programmed moves (``densify_chords``) give the
+    segments room for short transitions; the tolerance holds along every move.
     """
     h, v = plane
-    H = np.ascontiguousarray(nodes[:, h], dtype=float)
-    V = np.ascontiguousarray(nodes[:, v], dtype=float)
-    n = H.size
-    alpha = np.arctan2(np.diff(V), np.diff(H))
-    theta_chord = rotation_angles(alpha)
-    tol = np.asarray(tol_mm, dtype=float) * FIT_TOL_SAFETY
-    out_theta = np.empty(n - 1)
-    out_start = np.empty(n - 1, dtype=np.int64)
-    out_end = np.empty(n - 1, dtype=np.int64)
-    out_b = np.empty((n - 1, 6))
-    tau, kap = node_tangents(H, V)
-    k, status, max_dev = planar_fit_kernel(H, V, tol, alpha, theta_chord, tau, kap, PLANAR_END_WEIGHT,
-                                           PLANAR_MAX_INCLINATION_PI * np.pi, PLANAR_SMOOTHING,
-                                           out_theta, out_start, out_end, out_b, FIT_SAGITTA_ALLOWANCE,
-                                           sagitta_allowance(np.hypot(np.diff(H), np.diff(V)), np.abs(kap)))
+    nodes, line, feed, tol_mm = densify_chords(nodes, plane, line, feed, np.asarray(tol_mm, dtype=float) * FIT_TOL_SAFETY)
+    tol_mm = tol_mm / FIT_TOL_SAFETY
+    for attempt in range(PLANAR_MAX_RETRIES + 1):
+        H = np.ascontiguousarray(nodes[:, h], dtype=float)
+        V = np.ascontiguousarray(nodes[:, v], dtype=float)
+        n = H.size
+        alpha = np.arctan2(np.diff(V), np.diff(H))
+        theta_chord = rotation_angles(alpha)
+        tol = np.asarray(tol_mm, dtype=float) * FIT_TOL_SAFETY
+        out_theta = np.empty(n - 1)
+        out_start = np.empty(n - 1, dtype=np.int64)
+        out_end = np.empty(n - 1, dtype=np.int64)
+        out_b = np.empty((n - 1, 6))
+        tau, kap = node_tangents(H, V)
+        k, status, max_dev = planar_fit_kernel(H, V, tol, alpha, theta_chord, tau, kap, PLANAR_END_WEIGHT,
+                                               PLANAR_MAX_INCLINATION_PI * np.pi, PLANAR_SMOOTHING,
+                                               out_theta, out_start, out_end, out_b,
+                                               PLANAR_CHECKS_PER_SEGMENT, FIT_MAX_CHORD_CHECKS)
+        if status != 2 or attempt == PLANAR_MAX_RETRIES:
+            break
+        # a chord right after node j could not follow its inherited curvature: more
+        # nodes close to j on both sides give the segments room to turn there
+        j = int(out_end[k - 1]) if k > 0 else 0
+        nodes, line, feed, tol_mm = _insert_near(nodes, line, feed, tol_mm, j)
     if status != 0:
         return None
     theta = out_theta[:k].copy()
@@ -449,6 +483,89 @@ def fit_planar(nodes: np.ndarray, plane: tuple[int, int], tol_mm: np.ndarray, ax
     u = np.maximum.accumulate(u)
     seg_line, seg_feed = segment_sources(breaks, u, line, feed)
     return planar, planar_coef(planar, nodes[0], len(axes)), seg_line, seg_feed, float(max_dev)
+
+
+def densify_chords(nodes: np.ndarray, plane: tuple[int, int], line: np.ndarray, feed: np.ndarray,
+                   tol_mm: np.ndarray):
+    """Extra nodes on the programmed moves where the fit needs room for a short transition.
+
+    At each end of a chord a first distance l is chosen: the neighbouring chord's length
+    when the chord is more than ``PLANAR_LONG_CHORD_RATIO`` times longer (a line after a
+    finely sampled curve), and sqrt(tol / (2 κ)) when the curvature κ estimated at that
+    node would bend a curve off the chord by more than the tolerance (a coarse polygon);
+    nodes go at l, 2l, 4l... from that end up to the chord's middle. They lie on the
+    move, so the fit can keep it straight, and a segment can end shortly after the
+    junction: an inherited curvature then fades within the tolerance instead of
+    bending the whole move. Inserted nodes take the move's line, feed and tolerance.
+    Returns (nodes, line, feed, tol_mm) with M >= n rows."""
+    n = nodes.shape[0]
+    if n < 2:
+        return nodes, line, feed, tol_mm
+    hv = np.ascontiguousarray(nodes[:, list(plane)], dtype=float)
+    clen = np.hypot(*np.diff(hv, axis=0).T)
+    tol = np.asarray(tol_mm, dtype=float)[1:]
+    left = np.full(n - 1, np.inf)
+    right = np.full(n - 1, np.inf)
+    left[1:] = clen[:-1]
+    right[:-1] = clen[1:]
+    _, kap = node_tangents(np.ascontiguousarray(hv[:, 0]), np.ascontiguousarray(hv[:, 1]))
+    kap = np.abs(kap)
+    firsts = []
+    for nb, k_end in ((left, kap[:-1]), (right, kap[1:])):
+        ell = np.where(clen > PLANAR_LONG_CHORD_RATIO * nb, nb, np.inf)
+        # a circle of curvature κ leaves its tangent by κ d² / 2 after a distance d
+        bend = k_end * clen**2 / 8.0 > 0.25 * tol
+        ell = np.where(bend, np.minimum(ell, np.sqrt(0.5 * tol / np.maximum(k_end, 1e-300))), ell)
+        firsts.append(np.minimum(ell, 0.5 * clen))
+    need = np.nonzero((firsts[0] < 0.5 * clen) | (firsts[1] < 0.5 * clen))[0]
+    if need.size == 0:
+        return nodes, line, feed, tol_mm
+    js, fs = [], []
+    for j in need.tolist():
+        L = clen[j]
+        fr = [np.array([0.5])]
+        for side in (0, 1):
+            ell = firsts[side][j]
+            if ell < 0.5 * L:
+                d = ell * 2.0 ** np.arange(int(np.ceil(np.log2(0.5 * L / ell))))
+                d = d[d < 0.5 * L]
+                fr.append(d / L if side == 0 else 1.0 - d / L)
+        f = np.unique(np.concatenate(fr))
+        js.append(np.full(f.size, j))
+        fs.append(f)
+    js = np.concatenate(js)
+    fs = np.concatenate(fs)
+    new_nodes = nodes[js] + (nodes[js + 1] - nodes[js]) * fs[:, None]
+    key = np.concatenate((np.arange(n, dtype=float), js + fs))
+    order = np.argsort(key, kind="stable")
+    line = np.asarray(line)
+    feed = np.asarray(feed, dtype=float)
+    tol_all = np.asarray(tol_mm, dtype=float)
+    return (np.concatenate((nodes, new_nodes))[order], np.concatenate((line, line[js + 1]))[order],
+            np.concatenate((feed, feed[js + 1]))[order], np.concatenate((tol_all, tol_all[js + 1]))[order])
+
+
+def _insert_near(nodes, line, feed, tol_mm, j):
+    """Nodes on the moves into and out of node j at 1/4, 1/8 ... 1/64 of their length from j."""
+    n = nodes.shape[0]
+    f = 2.0 ** -np.arange(2, 7)
+    js, fs = [], []
+    if j > 0:
+        js.append(np.full(f.size, j - 1))
+        fs.append(1.0 - f)
+    if j < n - 1:
+        js.append(np.full(f.size, j))
+        fs.append(f)
+    js = np.concatenate(js)
+    fs = np.concatenate(fs)
+    key = np.concatenate((np.arange(n, dtype=float), js + fs))
+    order = np.argsort(key, kind="stable")
+    line = np.asarray(line)
+    feed = np.asarray(feed, dtype=float)
+    tol_mm = np.asarray(tol_mm, dtype=float)
+    new = nodes[js] + (nodes[js + 1] - nodes[js]) * fs[:, None]
+    return (np.concatenate((nodes, new))[order], np.concatenate((line, line[js + 1]))[order],
+            np.concatenate((feed, feed[js + 1]))[order], np.concatenate((tol_mm, tol_mm[js + 1]))[order])
 
 
 def planar_to_path(planar: PlanarSegments, fixed: np.ndarray, axes: str, line: np.ndarray,

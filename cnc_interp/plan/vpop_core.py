@@ -228,14 +228,20 @@ def _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, a, b, guess, want_max, hint, 
     for _ in range(40):
         L, H = _lin_interval(q, qs, qprev, lo, hi, x, a, b)
         xn = H if want_max else L
+        # From the infeasible end a violation at rounding level gives a Newton step of an
+        # ulp or so, which would creep for ever: step at least tol into the bracket.
         if want_max:
             if x == f and xn <= f + tol:
                 break
+            if xn > u - tol:
+                xn = u - tol
             if not (xn > f and xn < u):
                 xn = 0.5 * (f + u)
         else:
             if x == f and xn >= f - tol:
                 break
+            if xn < u + tol:
+                xn = u + tol
             if not (xn < f and xn > u):
                 xn = 0.5 * (f + u)
         x = xn
