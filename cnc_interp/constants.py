@@ -138,9 +138,9 @@ PLANAR_CHECKS_PER_SEGMENT = 32
 #: planar fit: a chord longer than this many times its shorter neighbour gets extra nodes at
 #: geometrically growing distances from its ends (room for a short curvature transition)
 PLANAR_LONG_CHORD_RATIO = 4.0
-#: planar fit: retries with extra nodes around a chord that cannot be fitted before falling
-#: back to the N-axis fitter
-PLANAR_MAX_RETRIES = 8
+#: planar fit: most resumptions with extra nodes on a chord that could not be fitted before
+#: falling back to the N-axis fitter
+PLANAR_MAX_RETRIES = 256
 #: curves: exact-geometry check points per quintic piece when converting arcs / NURBS
 CURVE_CHECK_POINTS = 16
 #: curves: deepest halving of a curve piece before giving up (2**depth pieces)

@@ -289,8 +289,12 @@ def _wrap(a):
 
 @njit(cache=True)
 def planar_fit_kernel(H, V, tol, alpha, theta_chord, tau, kap, w_end, max_incl, mu,
-                      out_theta, out_start, out_end, out_b, per_x, max_checks):
-    """Segment and fit nodes (H, V) (n,); returns (n_seg, status, max_dev).
+                      out_theta, out_start, out_end, out_b, per_x, max_checks,
+                      s0=0, k0=0, constrained0=False, phi0=0.0, kappa0=0.0, max_dev0=0.0):
+    """Segment and fit nodes (H, V) (n,); returns (n_seg, status, max_dev, s,
+    constrained, phi_abs, kappa): on status 2, the failing segment's first node s and the
+    state it inherits, from which a call with s0..kappa0 (and out_* rows < n_seg kept)
+    resumes after nodes were inserted behind s.
 
     status 0 = ok; 1 = an inherited tangent cannot be represented in the next frame;
     2 = a single chord cannot be fitted within the tolerance (an inherited curvature
@@ -298,18 +302,18 @@ def planar_fit_kernel(H, V, tol, alpha, theta_chord, tau, kap, w_end, max_incl, 
     out_* are preallocated with n-1 rows; segment k covers nodes out_start[k]..out_end[k].
     """
     n = H.shape[0]
-    s = 0
-    k = 0
-    constrained = False
+    s = s0
+    k = k0
+    constrained = constrained0
     rho1 = 0.0
     rho2 = 0.0
-    max_dev = 0.0
+    max_dev = max_dev0
     b = np.zeros(6)
     bt = np.zeros(6)
     xs_all = np.empty(n)
     zs_all = np.empty(n)
-    phi_abs = 0.0
-    kappa = 0.0
+    phi_abs = phi0
+    kappa = kappa0
     while s < n - 1:
         th = theta_chord[s]
         alt = False
@@ -324,7 +328,7 @@ def planar_fit_kernel(H, V, tol, alpha, theta_chord, tau, kap, w_end, max_incl, 
                 phi = _wrap(phi_abs - th)
                 alt = True
                 if abs(phi) > max_incl or abs(_wrap(alpha[s] - th)) >= max_incl:
-                    return k, 1, max_dev
+                    return k, 1, max_dev, s, constrained, phi_abs, kappa
             rho1 = math.tan(phi)
             rho2 = kappa * (1.0 + rho1 * rho1) ** 1.5
         g_end = s + 1
@@ -373,7 +377,7 @@ def planar_fit_kernel(H, V, tol, alpha, theta_chord, tau, kap, w_end, max_incl, 
         r = e - s + 1
         if e == s + 1 and _try(xs_all[:r], zs_all[:r], tl[:r], constrained, rho1, rho2, mu, bt,
                                e, th, tau, kap, max_incl, w_end, per_x, max_checks) > 0.0:
-            return k, 2, max_dev
+            return k, 2, max_dev, s, constrained, phi_abs, kappa
         has, d1, d2 = _end_est(e, th, tau, kap, max_incl)
         _fit_segment(xs_all[:r], zs_all[:r], constrained, rho1, rho2, mu, b,
                      has and w_end > 0.0, d1, d2, w_end)
@@ -397,7 +401,7 @@ def planar_fit_kernel(H, V, tol, alpha, theta_chord, tau, kap, w_end, max_incl, 
         phi_abs = math.atan(p1) + th
         constrained = True
         s = e
-    return k, 0, max_dev
+    return k, 0, max_dev, s, constrained, phi_abs, kappa
 
 
 @njit(cache=True)
@@ -440,6 +444,9 @@ def fit_planar(nodes: np.ndarray, plane: tuple[int, int], tol_mm: np.ndarray, ax
     h, v = plane
     nodes, line, feed, tol_mm = densify_chords(nodes, plane, line, feed, np.asarray(tol_mm, dtype=float) * FIT_TOL_SAFETY)
     tol_mm = tol_mm / FIT_TOL_SAFETY
+    state = (0, 0, False, 0.0, 0.0, 0.0)
+    kept = None
+    last_fail = -1
     for attempt in range(PLANAR_MAX_RETRIES + 1):
         H = np.ascontiguousarray(nodes[:, h], dtype=float)
         V = np.ascontiguousarray(nodes[:, v], dtype=float)
@@ -451,17 +458,23 @@ def fit_planar(nodes: np.ndarray, plane: tuple[int, int], tol_mm: np.ndarray, ax
         out_start = np.empty(n - 1, dtype=np.int64)
         out_end = np.empty(n - 1, dtype=np.int64)
         out_b = np.empty((n - 1, 6))
+        if kept is not None:  # segments accepted before the insertion stay as they are
+            k0 = kept[0].size
+            out_theta[:k0], out_start[:k0], out_end[:k0], out_b[:k0] = kept
         tau, kap = node_tangents(H, V)
-        k, status, max_dev = planar_fit_kernel(H, V, tol, alpha, theta_chord, tau, kap, PLANAR_END_WEIGHT,
-                                               PLANAR_MAX_INCLINATION_PI * np.pi, PLANAR_SMOOTHING,
-                                               out_theta, out_start, out_end, out_b,
-                                               PLANAR_CHECKS_PER_SEGMENT, FIT_MAX_CHORD_CHECKS)
-        if status != 2 or attempt == PLANAR_MAX_RETRIES:
+        k, status, max_dev, s_fail, cons, phi_abs, kappa = planar_fit_kernel(
+            H, V, tol, alpha, theta_chord, tau, kap, PLANAR_END_WEIGHT, PLANAR_MAX_INCLINATION_PI * np.pi,
+            PLANAR_SMOOTHING, out_theta, out_start, out_end, out_b, PLANAR_CHECKS_PER_SEGMENT,
+            FIT_MAX_CHORD_CHECKS, *state)
+        if status != 2 or attempt == PLANAR_MAX_RETRIES or s_fail == last_fail:
             break
-        # a chord right after node j could not follow its inherited curvature: more
-        # nodes close to j on both sides give the segments room to turn there
-        j = int(out_end[k - 1]) if k > 0 else 0
-        nodes, line, feed, tol_mm = _insert_near(nodes, line, feed, tol_mm, j)
+        # the chord after node s_fail cannot follow the curvature it inherits: nodes on it
+        # close to s_fail (only behind it: the accepted segments keep their nodes) let a
+        # segment end soon after s_fail; then resume from there
+        last_fail = s_fail
+        kept = (out_theta[:k].copy(), out_start[:k].copy(), out_end[:k].copy(), out_b[:k].copy())
+        state = (s_fail, k, cons, phi_abs, kappa, max_dev)
+        nodes, line, feed, tol_mm = _insert_after(nodes, line, feed, tol_mm, s_fail)
     if status != 0:
         return None
     theta = out_theta[:k].copy()
@@ -545,27 +558,20 @@ def densify_chords(nodes: np.ndarray, plane: tuple[int, int], line: np.ndarray, 
             np.concatenate((feed, feed[js + 1]))[order], np.concatenate((tol_all, tol_all[js + 1]))[order])
 
 
-def _insert_near(nodes, line, feed, tol_mm, j):
-    """Nodes on the moves into and out of node j at 1/4, 1/8 ... 1/64 of their length from j."""
-    n = nodes.shape[0]
-    f = 2.0 ** -np.arange(2, 7)
-    js, fs = [], []
-    if j > 0:
-        js.append(np.full(f.size, j - 1))
-        fs.append(1.0 - f)
-    if j < n - 1:
-        js.append(np.full(f.size, j))
-        fs.append(f)
-    js = np.concatenate(js)
-    fs = np.concatenate(fs)
-    key = np.concatenate((np.arange(n, dtype=float), js + fs))
-    order = np.argsort(key, kind="stable")
+def _insert_after(nodes, line, feed, tol_mm, j):
+    """Nodes on the move out of node j at 1/4, 1/8 ... 1/1024 of its length from j."""
+    f = 2.0 ** -np.arange(2, 11)[::-1]
+    new = nodes[j] + (nodes[j + 1] - nodes[j]) * f[:, None]
+    m = f.size
+
+    def ins(a, b):
+        return np.concatenate((a[:j + 1], b, a[j + 1:]))
+
     line = np.asarray(line)
     feed = np.asarray(feed, dtype=float)
     tol_mm = np.asarray(tol_mm, dtype=float)
-    new = nodes[js] + (nodes[js + 1] - nodes[js]) * fs[:, None]
-    return (np.concatenate((nodes, new))[order], np.concatenate((line, line[js + 1]))[order],
-            np.concatenate((feed, feed[js + 1]))[order], np.concatenate((tol_mm, tol_mm[js + 1]))[order])
+    return (ins(nodes, new), ins(line, np.full(m, line[j + 1])), ins(feed, np.full(m, feed[j + 1])),
+            ins(tol_mm, np.full(m, tol_mm[j + 1])))
 
 
 def planar_to_path(planar: PlanarSegments, fixed: np.ndarray, axes: str, line: np.ndarray,

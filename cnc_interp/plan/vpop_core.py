@@ -541,6 +541,71 @@ def _brake_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq,
 
 
 @njit(cache=True)
+def _stays_at_rest(sh, j, x, L):
+    """True when sample j = x would leave the machine at rest where it stood (three
+    equal samples before j, x equal to them) short of the end: fixing that brake value
+    again and again would loop for ever."""
+    s0 = sh[j - 1]
+    s1 = sh[j - 2] if j >= 2 else sh[0]
+    s2 = sh[j - 3] if j >= 3 else sh[0]
+    return x == s0 and s1 == s0 and s2 == s0 and s0 < L
+
+
+@njit(cache=True)
+def _rest_value(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq, max_steps,
+                q, qs, lo, hi, tol, stats, K2, K3, K23, KV, easy_frac, hint):
+    """Sample j when the machine is at rest before it, the brake policy would stay put
+    and the max step's continuation cannot stop (e.g. a path shorter than what one
+    step from rest and the stop after it allow): the largest value in (s0, max] found
+    by bisection after which the brake run from j + 1 reaches rest.
+
+    Staying put is always safe and a small enough step from rest always stops again,
+    so a value > s0 exists; returns (ok, s', certified up to, hint) with q = q(s') and
+    sh[j]/qh[j] set, or ok False when float resolution leaves none."""
+    n = qh.shape[1]
+    s0 = sh[j - 1]
+    ok, xm, hint = _step(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, 0,
+                         hint, q, qs, lo, hi, tol)
+    if not ok or not xm > s0:
+        return False, s0, 0, hint
+    good = s0
+    good_cert = 0
+    bad = xm
+    x = xm
+    for _ in range(80):
+        hint = _eval(S, C, QEND, x, hint, q, qs)
+        if _feasible(qh, j, q, vl, al, jl):
+            sh[j] = x
+            for i in range(n):
+                qh[j, i] = q[i]
+            r = _brake_run(S, C, QEND, sh, qh, j + 1, vl, al, jl, js_lim, dt, L, FB, FV,
+                           bs, bq, max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23, KV,
+                           easy_frac, 0)
+            stats[1] += 1
+            passed = r[0]
+        else:
+            passed = False
+        if passed:
+            good = x
+            good_cert = r[2]
+        else:
+            bad = x
+        # a few per cent of the step is close enough to the largest value
+        if good > s0 and bad - good <= 0.02 * (good - s0):
+            break
+        if bad - good <= tol:
+            break
+        x = 0.5 * (good + bad)
+    if not good > s0:
+        return False, s0, 0, hint
+    hint = _eval(S, C, QEND, good, hint, q, qs)
+    sh[j] = good
+    for i in range(n):
+        qh[j, i] = q[i]
+    return True, good, good_cert, hint
+
+
+@njit(cache=True)
 def _horizon(k, j, fast):
     """Fast mode: a brake run from j that outlives the failed max run (index k) by as many
     steps again (+8) and then meets ``_easy`` at a 60% share is taken as safe; 0 (exact
@@ -613,6 +678,13 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol
                                 hint, q, qs, lo, hi, tol)
             if not ok:
                 return INFEASIBLE, k, b
+            if _stays_at_rest(sh, k, x, L):
+                ok, x, c, hint = _rest_value(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L,
+                                             FB, FV, bs, bq, max_steps, q, qs, lo, hi, tol,
+                                             stats, K2, K3, K23, KV, easy_frac, hint)
+                if not ok:
+                    return STUCK, k, b
+                cert = c
             sh[k] = x
             for i in range(n):
                 qh[k, i] = q[i]
@@ -695,6 +767,13 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol
                             hint, q, qs, lo, hi, tol)
         if not ok:
             return INFEASIBLE, j, b
+        if _stays_at_rest(sh, j, x, L):
+            ok, x, c, hint = _rest_value(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L,
+                                         FB, FV, bs, bq, max_steps, q, qs, lo, hi, tol,
+                                         stats, K2, K3, K23, KV, easy_frac, hint)
+            if not ok:
+                return STUCK, j, b
+            cert = c
         sh[j] = x
         for i in range(n):
             qh[j, i] = q[i]
