@@ -123,7 +123,10 @@ PATH_DEV_PARAM_WEIGHT = 0.02
 #: path deviation: relative slack over the tolerance (float rounding of the projection)
 PATH_DEV_SLACK = 1e-6
 #: N-axis fitter: check points per knot span between the nodes (on the programmed moves)
-FIT_SPAN_CHECKS = 4
+FIT_SPAN_CHECKS = 6
+#: N-axis fitter: share of the tolerance allowed at check points between the nodes (the
+#: deviation between two check points may exceed theirs slightly)
+FIT_BETWEEN_NODES_SAFETY = 0.95
 #: N-axis / planar fitter: check points per chord are at most this many
 FIT_MAX_CHORD_CHECKS = 16
 #: planar fit: inclinations are kept within ±this (rad/π) of the frame, as Eq. (1) guarantees

@@ -286,16 +286,15 @@ def test_program_without_m2_still_ends_at_rest():
 
 
 #: two 0.3 mm G1 moves in XZ at F25000 (cut down from stellabee1.ngc line 2197)
-VPOP_INFEASIBLE = b"G21 G90 G94 G64 G18\nF25000\nG1 X-0.2032 Z-0.0254\nX-0.3556 Z0.0254\nM2\n"
+TINY_ZIGZAG = b"G21 G90 G94 G64 G18\nF25000\nG1 X-0.2032 Z-0.0254\nX-0.3556 Z0.0254\nM2\n"
+#: a plan that cannot be made: at dt = 10 us the generic mill's jerk step (5e-11 mm) is
+#: below what float64 resolves at 2000 mm
+PLAN_INFEASIBLE = (b"G21 G90\nG1 X2000 F600\nM2\n", ("--dt", "0.00001"))
 
 
-@pytest.mark.xfail(strict=True, reason="bug: VPOp fails on a tiny zig-zag: `cnc-interp plan "
-                   "PART -m generic-mill` exits 1 with 'VPOp found no feasible step on the path "
-                   "ending at line 4 (s = 0.355506 of 0.608848)' (plan/vpop.py, vpop_core."
-                   "plan_core); same for stellabee1.ngc at line 2197. The stop must always be "
-                   "recoverable; --planner constant and other machines plan it")
 def test_tiny_zigzag_plans():
-    res = run_inproc("plan", "-", "-m", "generic-mill", stdin=VPOP_INFEASIBLE)
+    # VPOp once failed here: "found no feasible step on the path ending at line 4"
+    res = run_inproc("plan", "-", "-m", "generic-mill", stdin=TINY_ZIGZAG)
     assert res.code == 0, res.explain()
     csv = parse_plan_csv(res.out)
     np.testing.assert_allclose(csv.q[-1], [-0.3556, 0, 0.0254], rtol=0, atol=1e-9)
@@ -303,9 +302,10 @@ def test_tiny_zigzag_plans():
 
 def test_failed_plan_is_exit_1_one_line():
     """A plan that fails (whatever the cause) is exit 1 with one error line, no output."""
-    res = run_inproc("plan", "-", "-m", "generic-mill", stdin=VPOP_INFEASIBLE)
+    program, options = PLAN_INFEASIBLE
+    res = run_inproc("plan", "-", "-m", "generic-mill", *options, stdin=program)
     if res.code == 0:
-        pytest.xfail("the VPOp bug this test uses to fail a plan is fixed: find another")
+        pytest.xfail("the plan this test uses to fail can be made now: find another")
     assert res.code == 1, res.explain()
     assert res.out == b"" and "Traceback" not in res.err
     assert res.err.count("\n") == 1 and res.err.startswith("<stdin>: error: ")

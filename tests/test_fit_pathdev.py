@@ -41,7 +41,7 @@ M30
 """
 
 
-def _programmed_samples(run: Run, per_move: int = 400, per_curve: int = 4000) -> np.ndarray:
+def _programmed_samples(run: Run, per_move: int = 100, per_curve: int = 1000) -> np.ndarray:
     """Dense points of the programmed moves and exact curves of a run."""
     pts = []
     in_curve = np.zeros(run.n_nodes - 1, dtype=bool)
@@ -56,8 +56,9 @@ def _programmed_samples(run: Run, per_move: int = 400, per_curve: int = 4000) ->
     return np.vstack(pts)
 
 
-def _worst_distance(paths, points, mask=None) -> float:
-    return float(np.min([distance_to_path(p, points, mask, 64, candidates=16) for p in paths], axis=0).max())
+def _worst_distance(paths, points, mask=None, samples=32, candidates=6) -> float:
+    return float(np.min([distance_to_path(p, points, mask, samples, candidates=candidates) for p in paths],
+                        axis=0).max())
 
 
 @pytest.mark.parametrize("method", ["auto", "nodes"])
@@ -129,7 +130,7 @@ def _mixed_polyline(rng, n_groups=12):
     return xy[keep]
 
 
-def _dense(nodes, per_move=64):
+def _dense(nodes, per_move=24):
     f = np.linspace(0.0, 1.0, per_move)[None, :, None]
     return (nodes[:-1, None, :] + (nodes[1:] - nodes[:-1])[:, None, :] * f).reshape(-1, nodes.shape[1])
 

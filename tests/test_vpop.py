@@ -171,3 +171,126 @@ def test_other_periods():
     for dt in (0.004, 0.0005):
         plan = plan_path_vpop(p, None, MILL, dt)
         check(plan, MILL, p.start, p.end, dt=dt)
+
+
+# -- tiny zig-zags and short segments at high feed ------------------------------------
+#: the generic mill preset's limits (1 kHz) and a low-jerk machine at 6 ms (paper 001's
+#: Mikron UCP 710, linear axes), where one jerk step is 0.001-0.01 mm
+GENERIC = Machine(name="generic", axes="XYZ", vmax=[200, 200, 200], amax=[2000, 2000, 2000],
+                  jmax=[50000, 50000, 50000], dt_s=0.001)
+SLOW_JERK = Machine(name="ucp710", axes="XYZ", vmax=[500, 500, 500], amax=[2500, 3000, 2100],
+                    jmax=[5000, 5000, 50000], dt_s=0.006)
+
+#: the fitted path of `G18 G64 F25000 G1 X-0.2032 Z-0.0254` then `X-0.3556 Z0.0254` (cut
+#: down from the corpus's stellabee1.ngc line 2197) as an earlier fit produced it: X turns
+#: back twice within 0.4 mm. VPOp once failed on it with "no feasible step at s = 0.3555":
+#: its max-step search missed the narrow allowed set after a brake fix.
+ZIGZAG_COEF = [
+    [[0.0, 0.0, 0.0], [-1.0, 0.0, -0.33625847766848127],
+     [1.247576414947627e-16, 0.0, 1.018723452195554],
+     [7.089782303080595e-23, 0.0, 5.789246587682895e-07],
+     [3.262932010012549e-22, 0.0, 2.6643861824358903e-06],
+     [3.055594719845423e-16, 0.0, 2.4950824368077775]],
+    [[-0.2032, 0.0, -0.0254], [-10.098967451927443, 0.0, 1.0000000000000007],
+     [1264.889911020428, 0.0, -7.745216904024738e-14],
+     [-36914.25025723641, 0.0, 2.2603459210224465e-12],
+     [363329.15305678046, 0.0, -2.2247494216395248e-11],
+     [-1430429.283421124, 0.0, 8.758853216741609e-11]]]
+
+
+def check_path(plan, machine, p):
+    """``check`` plus: the plan covers the whole path, from s = 0 to s = L."""
+    check(plan, machine, p.start, p.end, dt=machine.dt_s)
+    assert plan.s[0] == 0.0 and plan.s[-1] == p.length
+
+
+@pytest.mark.parametrize("exact", [False, True])
+def test_near_cusp_zigzag_is_planned(exact):
+    p = Path(axes="XYZ", breaks=np.array([0.0, 0.2032, 0.254]), coef=np.array(ZIGZAG_COEF),
+             line=[3, 4], feed_mm_s=[25000 / 60, 25000 / 60])
+    plan = plan_path_vpop(p, None, GENERIC, GENERIC.dt_s,
+                          PlanSettings(options={"vpop_exact": exact}))
+    check_path(plan, GENERIC, p)
+    assert plan.stats["exact"] == exact
+    # it must slow down to a crawl at the turns, yet take well under a second
+    assert plan.s.shape[0] < 400
+
+
+@pytest.mark.parametrize("jerk_steps", [0.2, 0.5, 0.9, 1.0, 1.3, 2.0, 3.5, 10.0])
+def test_line_of_a_few_jerk_steps(jerk_steps):
+    # One step from rest straight to the end is within the jerk limit when the line is
+    # shorter than jmax dt^3, but stopping after it takes twice that: the max step alone
+    # overshoots what a stop allows and the brake step from rest stays put, so VPOp
+    # must find a step in between (it used to alternate the two for ever).
+    d = np.array([0.0, -0.0979, -0.995])
+    d /= np.linalg.norm(d)
+    m = SLOW_JERK
+    moving = d != 0
+    # path length over which the tightest moving axis travels one jerk step jmax dt^3
+    jstep = float(np.min(m.jmax[moving] / np.abs(d[moving]))) * m.dt_s**3
+    a = np.array([-0.0208, -0.0004, -0.0165])
+    p = line_path(a, a + jerk_steps * jstep * d, 1000.0)
+    for exact in (False, True):
+        plan = plan_path_vpop(p, None, m, m.dt_s, PlanSettings(options={"vpop_exact": exact}))
+        check_path(plan, m, p)
+
+
+def _zigzag_program(rng) -> bytes:
+    """2-6 random G1 moves of 0.003-3 mm (some along a plane), blended or exact stop,
+    at a feed far above what such short moves can reach."""
+    scale = 10 ** rng.uniform(-2.5, 0.5)
+    mode = rng.choice(["G64", "G64 P0.001", "G64 P0.01", "G61"])
+    lines = [f"G21 G90 G94 {mode} {rng.choice(['G17', 'G18', 'G19'])}",
+             f"F{rng.choice([3000, 10000, 25000, 60000])}"]
+    p = np.zeros(3)
+    for _ in range(int(rng.integers(2, 7))):
+        step = rng.normal(0, scale, 3)
+        if rng.random() < 0.5:
+            step[rng.integers(0, 3)] = 0.0
+        p = p + step
+        lines.append("G1 " + " ".join(f"{a}{v:.4f}" for a, v in zip("XYZ", p)))
+    return ("\n".join(lines + ["M2", ""])).encode()
+
+
+@pytest.mark.parametrize("machine", [GENERIC, SLOW_JERK], ids=["generic", "slow-jerk"])
+def test_random_tiny_zigzags_through_the_fit(machine):
+    from cnc_interp.fit import fit_program
+    from cnc_interp.fit.settings import FitSettings
+    from cnc_interp.gcode import read_program
+
+    settings = FitSettings.from_options(machine=machine)
+    planned = 0
+    for seed in range(60):
+        src = _zigzag_program(np.random.default_rng(seed))
+        fitted = fit_program(read_program(src, source="zigzag", axes="XYZ"), settings)
+        for item in fitted.items:
+            if not isinstance(item, Path):
+                continue
+            try:
+                plan = plan_path_vpop(item, None, machine, machine.dt_s)
+                check_path(plan, machine, item)
+            except Exception as exc:  # name the program that failed
+                raise AssertionError(f"seed {seed}: {src!r}") from exc
+            planned += 1
+    assert planned >= 60
+
+
+@pytest.mark.parametrize("machine", [GENERIC, SLOW_JERK], ids=["generic", "slow-jerk"])
+def test_random_short_curves_and_lines_at_high_feed(machine):
+    rng = np.random.default_rng(20261122)
+    for trial in range(40):
+        scale = 10 ** rng.uniform(-3.0, 0.0)
+        feed = float(rng.choice([50.0, 400.0, 1000.0, 1e4]))
+        if trial % 2:
+            a = rng.normal(0, 1, 3)
+            p = line_path(a, a + rng.normal(0, scale, 3), feed)
+        else:
+            p = hermite_path(random_curve(rng, scale=scale), int(rng.integers(1, 5)), feed,
+                             u1=float(rng.uniform(0.5, 4.0)))
+        for exact in (False, True):
+            try:
+                plan = plan_path_vpop(p, None, machine, machine.dt_s,
+                                      PlanSettings(options={"vpop_exact": exact}))
+                check_path(plan, machine, p)
+            except Exception as exc:
+                raise AssertionError(f"trial {trial}, exact {exact}") from exc

@@ -311,3 +311,65 @@ def segment_sources_kernel(x, u, line, feed):
         seg_line[k] = line[jj]
         seg_feed[k] = f
     return seg_line, seg_feed
+
+
+@njit(cache=True)
+def project_points(coef, h, pts, cand_seg, cand_t, iters):
+    """Distance (K,) from points pts (K, d) to a piecewise quintic (coef (S, 6, d) in the
+    local parameter t in [0, h_k]): Newton on the squared distance from every candidate
+    (segment cand_seg[i, c], start t cand_t[i, c]) and in the two neighbouring segments
+    (from their near ends); the least distance found (always that of a point of the path)."""
+    K, d = pts.shape
+    S = coef.shape[0]
+    C = cand_seg.shape[1]
+    out = np.empty(K)
+    p0 = np.empty(d)
+    p1 = np.empty(d)
+    p2 = np.empty(d)
+    for i in range(K):
+        best = np.inf
+        for c in range(C):
+            for dk in range(-1, 2):
+                k = cand_seg[i, c] + dk
+                if k < 0 or k >= S:
+                    continue
+                hk = h[k]
+                if dk == 0:
+                    t = cand_t[i, c]
+                elif dk < 0:
+                    t = hk
+                else:
+                    t = 0.0
+                for it in range(iters + 1):
+                    g = 0.0
+                    hh = 0.0
+                    r2 = 0.0
+                    q1sq = 0.0
+                    for a in range(d):
+                        v0 = coef[k, 5, a]
+                        v1 = 5.0 * coef[k, 5, a]
+                        v2 = 20.0 * coef[k, 5, a]
+                        for j in range(4, -1, -1):
+                            v0 = v0 * t + coef[k, j, a]
+                            if j >= 1:
+                                v1 = v1 * t + j * coef[k, j, a]
+                            if j >= 2:
+                                v2 = v2 * t + j * (j - 1) * coef[k, j, a]
+                        r = v0 - pts[i, a]
+                        r2 += r * r
+                        g += r * v1
+                        q1sq += v1 * v1
+                        hh += v1 * v1 + r * v2
+                    if r2 < best:
+                        best = r2
+                    if it == iters:
+                        break
+                    if hh <= 0.0:
+                        hh = q1sq + 1e-300
+                    t = t - g / hh
+                    if t < 0.0:
+                        t = 0.0
+                    elif t > hk:
+                        t = hk
+        out[i] = np.sqrt(best)
+    return out

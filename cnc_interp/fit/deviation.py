@@ -79,24 +79,11 @@ def distance_to_pieces(breaks: np.ndarray, coef: np.ndarray, points: np.ndarray,
         along = along * (sig[-1] / along[-1] if along[-1] > 0 else 1.0)
     _, idx = cKDTree(np.column_stack((q, lam * sig))).query(np.column_stack((pts, lam * along)), k=k_nn)
     idx = idx.reshape(pts.shape[0], k_nn)
-    best = np.linalg.norm(q[idx[:, 0]] - pts, axis=1)
-    for col in range(k_nn):
-        ic = idx[:, col]
-        k0 = seg[ic]
-        for dk in (0, -1, 1):
-            k = np.clip(k0 + dk, 0, n_seg - 1)
-            tt = t[ic].copy() if dk == 0 else (h[k].copy() if dk < 0 else np.zeros(k.size))
-            c = c_all[k]
-            for _ in range(PATH_DEV_NEWTON_ITERS):
-                r = _eval(c, tt, 0) - pts
-                p1 = _eval(c, tt, 1)
-                p2 = _eval(c, tt, 2)
-                g = (r * p1).sum(axis=1)
-                hh = (p1 * p1).sum(axis=1) + (r * p2).sum(axis=1)
-                hh = np.where(hh > 0, hh, (p1 * p1).sum(axis=1) + 1e-300)
-                tt = np.clip(tt - g / hh, 0.0, h[k])
-            best = np.minimum(best, np.linalg.norm(_eval(c, tt, 0) - pts, axis=1))
-    return best
+    from ._bspline import project_points
+
+    return project_points(np.ascontiguousarray(c_all), np.ascontiguousarray(h, dtype=float),
+                          np.ascontiguousarray(pts, dtype=float), np.ascontiguousarray(seg[idx]),
+                          np.ascontiguousarray(t[idx]), PATH_DEV_NEWTON_ITERS)
 
 
 def programmed_samples(nodes: np.ndarray, tol_mm: np.ndarray, curves, i0: int, spacing: float):

@@ -41,6 +41,7 @@ from ..constants import (
     FIT_SMOOTHING,
     FIT_SOFT_STALE_ROUNDS,
     FIT_SPAN_CHECKS,
+    FIT_BETWEEN_NODES_SAFETY,
     FIT_STOP_SPEED_RATIO,
     FIT_TOL_SAFETY,
 )
@@ -149,7 +150,8 @@ def fit_polyline(nodes: np.ndarray, tol_mm: np.ndarray, tol_deg: float, lin: np.
     f = _FRACS
     xc_ch = (u[:-1, None] + clen[:, None] * f[None, :]).ravel()
     ref_ch = (y[:-1, None, :] + chords[:, None, :] * f[None, :, None]).reshape(-1, d)
-    tol_ch = np.repeat(tol[1:], f.size)
+    # between the nodes the deviation is only sampled: keep a margin there
+    tol_ch = np.repeat(tol[1:], f.size) * FIT_BETWEEN_NODES_SAFETY
     node_ratio = np.empty(n)
     node_ratio[0] = lin_ratio[0]
     node_ratio[-1] = lin_ratio[-1]
@@ -170,7 +172,7 @@ def fit_polyline(nodes: np.ndarray, tol_mm: np.ndarray, tol_deg: float, lin: np.
         """Programmed point (K, d), tolerance and metric speed ratio at parameters x (K,)."""
         j = np.clip(np.searchsorted(u, x, side="right") - 1, 0, n - 2)
         fr = (x - u[j]) / clen[j]
-        return y[j] + chords[j] * fr[:, None], tol[j + 1], lin_ratio[j]
+        return y[j] + chords[j] * fr[:, None], tol[j + 1] * FIT_BETWEEN_NODES_SAFETY, lin_ratio[j]
 
     step = FIT_INITIAL_NODES_PER_SPAN
     interior = u[step:n - 1:step].copy()

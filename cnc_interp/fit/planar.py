@@ -34,6 +34,7 @@ import numpy as np
 from numba import njit
 
 from ..constants import (
+    FIT_BETWEEN_NODES_SAFETY,
     FIT_MAX_CHORD_CHECKS,
     FIT_TOL_SAFETY,
     PLANAR_CHECKS_PER_SEGMENT,
@@ -273,10 +274,11 @@ def _try(xs, zs, tol, constrained, rho1, rho2, mu, b, e, th, tau, kap, max_incl,
             f = i / (m + 1.0)
             px = xs[j - 1] + f * dx
             pz = zs[j - 1] + f * dz
+            tj = tol[j] * FIT_BETWEEN_NODES_SAFETY  # sampled only: keep a margin
             vert = abs(_poly(b, px / X) - pz)
-            if vert - tol[j] <= worst:
+            if vert - tj <= worst:
                 continue  # the vertical residual already bounds the distance
-            err = _point_error(b, X, px, pz) - tol[j]
+            err = _point_error(b, X, px, pz) - tj
             if err > worst:
                 worst = err
     return worst
@@ -533,19 +535,19 @@ def densify_chords(nodes: np.ndarray, plane: tuple[int, int], line: np.ndarray, 
     need = np.nonzero((firsts[0] < 0.5 * clen) | (firsts[1] < 0.5 * clen))[0]
     if need.size == 0:
         return nodes, line, feed, tol_mm
-    js, fs = [], []
-    for j in need.tolist():
-        L = clen[j]
-        fr = [np.array([0.5])]
-        for side in (0, 1):
-            ell = firsts[side][j]
-            if ell < 0.5 * L:
-                d = ell * 2.0 ** np.arange(int(np.ceil(np.log2(0.5 * L / ell))))
-                d = d[d < 0.5 * L]
-                fr.append(d / L if side == 0 else 1.0 - d / L)
-        f = np.unique(np.concatenate(fr))
-        js.append(np.full(f.size, j))
-        fs.append(f)
+    L = clen[need]
+    js, fs = [need], [np.full(need.size, 0.5)]
+    for side in (0, 1):
+        ell = firsts[side][need]
+        x = 0.5 * L / ell
+        # nodes at ell * 2^i, i < m, with ell * 2^(m-1) < L / 2 (none when ell >= L / 2)
+        m = np.where(x > 1.0, np.ceil(np.log2(np.maximum(x, 1.0))), 0).astype(np.int64)
+        rep = np.repeat(np.arange(need.size), m)
+        i = np.arange(rep.size) - np.repeat(np.cumsum(m) - m, m)
+        d = ell[rep] * 2.0 ** i / L[rep]
+        ok = d < 0.5
+        js.append(need[rep][ok])
+        fs.append(d[ok] if side == 0 else 1.0 - d[ok])
     js = np.concatenate(js)
     fs = np.concatenate(fs)
     new_nodes = nodes[js] + (nodes[js + 1] - nodes[js]) * fs[:, None]
