@@ -98,9 +98,6 @@ FIT_INITIAL_NODES_PER_SPAN = 24
 FIT_MIN_SPEED_RATIO = 0.25
 #: N-axis fitter: a fitted speed below this share of the chord's is a stop and never accepted
 FIT_STOP_SPEED_RATIO = 0.01
-#: N-axis fitter: chord points may deviate by the tolerance plus this many times the
-#: sagitta a circle through the neighbouring nodes would have there
-FIT_SAGITTA_ALLOWANCE = 2.0
 #: N-axis fitter: rounds without fewer chord-point failures before refinement stops
 FIT_SOFT_STALE_ROUNDS = 3
 #: N-axis fitter: smallest knot span relative to the run's parameter length
@@ -108,16 +105,16 @@ FIT_MIN_SPAN_REL = 1e-6
 #: share of the tolerance the fit aims for (the rest absorbs rounding)
 FIT_TOL_SAFETY = 0.98
 #: path deviation: samples of the programmed path per typical fitted knot span
-PATH_DEV_SAMPLES_PER_SPAN = 8
+PATH_DEV_SAMPLES_PER_SPAN = 4
 #: path deviation: fewest / most samples of one programmed move (or per node of a curve)
-PATH_DEV_MIN_SAMPLES = 4
+PATH_DEV_MIN_SAMPLES = 3
 PATH_DEV_MAX_SAMPLES = 64
 #: path deviation: samples per fitted segment for the nearest-point search
 PATH_DEV_FIT_SAMPLES = 8
 #: path deviation: Newton steps of the projection onto the fitted path
-PATH_DEV_NEWTON_ITERS = 6
+PATH_DEV_NEWTON_ITERS = 4
 #: path deviation: nearest path samples whose segments are searched for the foot point
-PATH_DEV_CANDIDATES = 4
+PATH_DEV_CANDIDATES = 2
 #: path deviation: weight of the travelled-length coordinate in the nearest-sample search
 PATH_DEV_PARAM_WEIGHT = 0.02
 #: path deviation: relative slack over the tolerance (float rounding of the projection)

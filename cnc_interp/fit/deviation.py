@@ -118,6 +118,9 @@ def programmed_samples(nodes: np.ndarray, tol_mm: np.ndarray, curves, i0: int, s
         which = np.repeat(np.arange(lines.size), cnt + 1)
         starts = np.cumsum(cnt + 1) - (cnt + 1)
         f = (np.arange(which.size) - starts[which]) / cnt[which]
+        # a move's start is the previous move's end: sample it once
+        first = (f == 0.0) & (lines[which] > 0) & ~in_curve[np.maximum(lines[which] - 1, 0)]
+        which, f = which[~first], f[~first]
         pts.append(p0[which] + (p1 - p0)[which] * f[:, None])
         tols.append(tol_mm[lines + 1][which])
         keys.append(lines[which] + 0.5 * f)

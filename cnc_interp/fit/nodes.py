@@ -6,18 +6,19 @@ Method (robust, vectorised with numba kernels in ``_bspline.py``, O(n) per round
   rotary axes scaled to mm by tol_mm / tol_deg), so |dq/du| ≈ 1;
 * a clamped quintic B-spline with interior knots at every
   ``FIT_INITIAL_NODES_PER_SPAN``-th node is fitted by weighted least squares to the
-  nodes (weight tol_ref / tol_node) and to three points on every chord (weight from
-  their wider tolerance), with a small third-divided-difference smoothing term and a
+  nodes (weight tol_ref / tol_node) and to points on every chord (half that weight), with a small third-divided-difference smoothing term and a
   vanishing ridge (both keep knot spans without data well posed); its end positions
   are the end nodes exactly, and optionally its end derivatives in u are imposed (a
   G2 junction with an exact curve);
 * checks: every node within its tolerance (Euclidean over linear axes in mm, each
-  rotary axis in deg) — hard; every chord point within the tolerance plus
-  ``FIT_SAGITTA_ALLOWANCE`` times the sagitta a circle of the smaller neighbouring
-  Menger curvature would have over at most the neighbouring chords' length (0 next
-  to a corner or on straight stretches: no bulges) — soft; the speed |dq/du| (all
-  axes and the arc-length axes) at least ``FIT_MIN_SPEED_RATIO`` of the chord's —
-  soft, and below ``FIT_STOP_SPEED_RATIO`` (a stop, a cusp) — hard;
+  rotary axis in deg) and every check point on the programmed moves — seven
+  fractions of every chord plus ``FIT_SPAN_CHECKS`` points inside every knot span,
+  which are data of the least squares too — within ``FIT_BETWEEN_NODES_SAFETY`` of
+  the tolerance (the tolerance bounds the distance to the programmed path
+  everywhere, so no sagitta allowance: a smooth curve may not bulge off a move) —
+  hard; the speed |dq/du| (all axes and the arc-length axes) at least
+  ``FIT_MIN_SPEED_RATIO`` of the chord's — soft, and below ``FIT_STOP_SPEED_RATIO``
+  (a stop, a cusp) — hard;
 * every knot span with a failing point gets a knot at its middle node (or its
   middle if it holds no node); repeat until everything passes, or until only soft
   checks fail and ``FIT_SOFT_STALE_ROUNDS`` rounds did not reduce them.
@@ -86,22 +87,6 @@ def turn_angles(v_in: np.ndarray, v_out: np.ndarray) -> np.ndarray:
     cross = np.sqrt(np.maximum((n1 * n2) ** 2 - dot**2, 0.0))
     ang = np.arctan2(cross, dot)
     return np.where((n1 > 0) & (n2 > 0), ang, 0.0)
-
-
-def sagitta_allowance(clen: np.ndarray, kap: np.ndarray) -> np.ndarray:
-    """Expected bulge (K-1,) of a smooth curve through the nodes off each chord.
-
-    A circle of the smaller Menger curvature ``kap`` (K,) of the chord's two end nodes,
-    over at most the longer neighbouring chord's length: a chord much longer than its
-    neighbours is taken as a straight line (CAM output samples curves finely and
-    writes lines as long moves), so the curve may not swing away from it.
-    """
-    nb = np.zeros_like(clen)
-    if clen.size > 1:
-        nb[1:] = clen[:-1]
-        nb[:-1] = np.maximum(nb[:-1], clen[1:])
-    L = np.minimum(clen, nb)
-    return L**2 * np.minimum(kap[:-1], kap[1:]) / 8.0
 
 
 def straight_piece(p0: np.ndarray, p1: np.ndarray, length: float, line: int, feed: float) -> PieceFit:

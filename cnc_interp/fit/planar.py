@@ -13,10 +13,17 @@ For a run that moves exactly two axes (h, v) — XZ on a lathe, or any plane:
    p'(0) = ρ1, p''(0) = ρ2 taken from the previous segment's end transformed
    between the frames (tangent angle φ → φ + θ_prev - θ, curvature invariant:
    ρ2 = κ (1 + ρ1²)^{3/2}), which makes the path G2;
-6. if a node is farther than the maximum permissible error the last node is
+6. if a node, or a point along a chord (the programmed move: the tolerance bounds
+   the distance to it everywhere), is farther than the maximum permissible error the last node is
    dropped and the fit repeated (we gallop then bisect over the number of nodes
    rather than dropping one at a time: the same answer when the error grows with
    the segment, in O(r log r)); the dropped nodes start the next segment.
+
+Before fitting, ``densify_chords`` puts extra nodes on moves that need room for a
+short transition (a long line after a finely sampled curve, a coarse polygon whose
+curvature would bulge off its chords); a chord that still cannot follow the
+curvature it inherits gets more nodes close to its start and the kernel resumes
+there (``PLANAR_MAX_RETRIES``), else the caller falls back to the N-axis fitter.
 
 A tiny ∫p'''² term (``PLANAR_SMOOTHING``) keeps a segment with no interior node
 well posed. Node deviation is the smaller of the vertical residual and the

@@ -23,6 +23,14 @@ The policies:
   still fits before L (used to land exactly on the end point at rest).
 When the max step's set is empty, a dichotomy finds the latest step j from which
 the brake run succeeds; step j is fixed at its brake value and max resumes at j+1.
+Two details keep "a stop is always recoverable" true in floating point:
+* the max step reports an empty set only when the brake policy finds no sample either
+  (its linearised search can miss a narrow set near a sharp turn; the brake value then
+  seeds it), so the dichotomy's "braking from k fails" is never a search artefact;
+* at rest, the brake value is "stay"; when the max step's continuation cannot stop
+  either (a path shorter than a step from rest and the stop after it), fixing the
+  brake value would repeat the same state for ever, so ``_rest_value`` bisects for
+  the largest step in between whose brake run reaches rest.
 
 Speed-ups (none changes what a committed sample must satisfy; every sample is
 checked exactly):
@@ -439,11 +447,9 @@ def _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, mode, hint, 
 
 
 @njit(cache=True)
-def _window_max(S, T, s, D, hint):
-    """Largest value over the table pieces meeting [s, s + D]; ``T`` is the sparse table
-    (levels, m) of ``range_max_table`` (O(1) per query)."""
-    p0 = _piece(S, s, hint)
-    p1 = _piece(S, s + D, p0)
+def _window_max(T, p0, p1):
+    """Largest value over the table pieces p0..p1; ``T`` is the sparse table (levels, m)
+    of ``range_max_table`` (O(1) per query)."""
     span = p1 - p0 + 1
     lvl = 0
     while (2 << lvl) <= span:
@@ -468,7 +474,7 @@ def range_max_table(K: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def _easy(S, C, QEND, K2, K3, K23, KV, bs, kk, al, js_lim, L, easy_frac, q, qs):
+def _easy(S, C, QEND, K2, K3, K23, KV, bs, kk, al, js_lim, L, easy_frac, q, qs, hint):
     """Early end of a brake run: braking, slow enough that the path's curvature uses at most
     ``easy_frac`` of any axis's acceleration and jerk over the whole remaining stop, and
     the stop ends before L. (A heuristic; a plan it misleads is re-planned exactly.)"""
@@ -477,7 +483,7 @@ def _easy(S, C, QEND, K2, K3, K23, KV, bs, kk, al, js_lim, L, easy_frac, q, qs):
     d2 = d1 - (bs[kk - 2] - bs[kk - 3])
     if d2 > 0.0 or d1 <= 0.0:
         return False
-    _eval(S, C, QEND, s0, 0, q, qs)
+    p0 = _eval(S, C, QEND, s0, hint, q, qs)
     jd, ad = _path_limits(qs, js_lim, al)
     # the ramp back to zero deceleration must not need a negative speed
     if d1 < 2.0 * d2 * d2 / jd:
@@ -486,15 +492,17 @@ def _easy(S, C, QEND, K2, K3, K23, KV, bs, kk, al, js_lim, L, easy_frac, q, qs):
     D = d1 * (d1 / ad + 2.0 * ab / jd) + d1
     if s0 + 2.0 * D >= L:
         return False
+    # the table pieces met by [s0, s0 + D] (found from the run's piece hint)
+    p1 = _piece(S, s0 + D, p0)
     # speed limits ahead (axis velocities, segment feeds) must already be met: the
     # brake only slows down from here
-    if _window_max(S, KV, s0, D, 0) * d1 > 1.0:
+    if _window_max(KV, p0, p1) * d1 > 1.0:
         return False
-    k2 = _window_max(S, K2, s0, D, 0)
+    k2 = _window_max(K2, p0, p1)
     if k2 * d1 * d1 > easy_frac:
         return False
-    k3 = _window_max(S, K3, s0, D, 0)
-    k23 = _window_max(S, K23, s0, D, 0)
+    k3 = _window_max(K3, p0, p1)
+    k23 = _window_max(K23, p0, p1)
     return k3 * d1 ** 3 + k23 * d1 * ab <= easy_frac
 
 
@@ -531,10 +539,10 @@ def _brake_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq,
         if bs[kk - 1] == bs[kk - 2] and bs[kk - 2] == bs[kk - 3]:
             return True, kk, _BIG
         if easy_frac > 0.0 and mode == 1 and _easy(S, C, QEND, K2, K3, K23, KV, bs, kk, al, js_lim,
-                                                   L, easy_frac, q, qs):
+                                                   L, easy_frac, q, qs, hint):
             return True, kk, _BIG
         if horizon > 0 and j + kk - 3 >= horizon and \
-                _easy(S, C, QEND, K2, K3, K23, KV, bs, kk, al, js_lim, L, 0.6, q, qs):
+                _easy(S, C, QEND, K2, K3, K23, KV, bs, kk, al, js_lim, L, 0.6, q, qs, hint):
             return True, kk, j + kk - 3
         if kk >= cap or kk >= max_steps:
             return False, kk, 0
