@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from cnc_interp.fit.path import Path
+from cnc_interp.plan.vpop import _hermite
 
 
 def line_path(a, b, feed_mm_s: float, axes: str = "XYZ", line: int = 1, rapid: bool = False) -> Path:
@@ -27,15 +28,7 @@ def hermite_path(fun, n_seg: int, feed_mm_s: float, axes: str = "XYZ", u1: float
     """
     u = np.linspace(0.0, u1, n_seg + 1)
     p, d1, d2 = (np.asarray(x, dtype=float) for x in fun(u))
-    h = np.diff(u)[:, None]
-    c0, c1, c2 = p[:-1], d1[:-1], 0.5 * d2[:-1]
-    e0 = p[1:] - (c0 + h * (c1 + h * c2))
-    e1 = d1[1:] - (c1 + 2 * h * c2)
-    e2 = d2[1:] - 2 * c2
-    c3 = (20 * e0 - 8 * e1 * h + e2 * h * h) / (2 * h**3)
-    c4 = (-30 * e0 + 14 * e1 * h - 2 * e2 * h * h) / (2 * h**4)
-    c5 = (12 * e0 - 6 * e1 * h + e2 * h * h) / (2 * h**5)
-    coef = np.stack([c0, c1, c2, c3, c4, c5], axis=1)
+    coef = _hermite(u, p, d1, d2)  # the planner's own quintic Hermite construction
     return Path(axes=axes, breaks=u, coef=coef, line=np.arange(line0, line0 + n_seg),
                 feed_mm_s=np.full(n_seg, feed_mm_s))
 
