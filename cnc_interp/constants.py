@@ -109,14 +109,17 @@ PATH_DEV_SAMPLES_PER_SPAN = 4
 #: path deviation: fewest / most samples of one programmed move (or per node of a curve)
 PATH_DEV_MIN_SAMPLES = 3
 PATH_DEV_MAX_SAMPLES = 64
-#: path deviation: samples per fitted segment for the nearest-point search
+#: path deviation: coarse samples per fitted segment before Newton (a segment entered afresh)
 PATH_DEV_FIT_SAMPLES = 8
 #: path deviation: Newton steps of the projection onto the fitted path
-PATH_DEV_NEWTON_ITERS = 4
-#: path deviation: nearest path samples whose segments are searched for the foot point
-PATH_DEV_CANDIDATES = 2
-#: path deviation: weight of the travelled-length coordinate in the nearest-sample search
-PATH_DEV_PARAM_WEIGHT = 0.02
+PATH_DEV_NEWTON_ITERS = 8
+#: path deviation: a marched distance above this share of the tolerance is searched
+#: again among the segments nearby along the path (beyond the tolerance: farther)
+PATH_DEV_LOCAL_FRAC = 0.5
+#: path deviation: reach of that second search along the path, in sample spacings each side
+PATH_DEV_WINDOW = 8
+#: path deviation: reach of the search for a point beyond its tolerance, in sample spacings
+PATH_DEV_FAR_WINDOW = 256
 #: path deviation: relative slack over the tolerance (float rounding of the projection)
 PATH_DEV_SLACK = 1e-6
 #: N-axis fitter: check points per knot span between the nodes (on the programmed moves)
@@ -244,6 +247,11 @@ VPOP_TABLE_TOL = 1e-9
 VPOP_TABLE_MAX_PIECE = 20.0
 #: refinement rounds of the table (each halves the pieces that miss VPOP_TABLE_TOL)
 VPOP_TABLE_MAX_ROUNDS = 12
+#: Gauss–Legendre points per quarter piece for the table's arc lengths
+VPOP_TABLE_GL_ORDER = 10
+#: refinement passes of the table: when scaling it to the path's length pushes a piece
+#: that passed its check over VPOP_TABLE_TOL, it is refined again against that scale
+VPOP_TABLE_MAX_TRIES = 3
 #: share of each axis's jerk step the brake policy assumes it can use to end a stop
 VPOP_BRAKE_JERK_FRACTION = 0.9
 #: a brake run may end early once curvature uses at most this share of any axis's
@@ -252,6 +260,11 @@ VPOP_EASY_FRACTION = 0.25
 #: an end-of-path "aim" run is committed when it stops within this many jerk steps
 #: (jmax dt³ of the tightest axis) short of the end; the rest is crept from rest
 VPOP_AIM_GAP_JERK_STEPS = 4.0
+#: after a brake fix, how many of the following steps are tested in order for "max step,
+#: then brake to rest" before the remaining ones (along the fix's own brake run) are
+#: bisected: the tests mostly pass from some step on, and bisection needs log2 of the
+#: brake runs, but where they do not it can pick a later switch (a slightly longer cycle)
+VPOP_CHAIN_SEQUENTIAL = 8
 #: a paper-000 plan longer than this many samples is refused (a degenerate path, e.g.
 #: a cusp with unbounded curvature, would otherwise crawl for days and exhaust memory)
 P000_MAX_SAMPLES = 20_000_000

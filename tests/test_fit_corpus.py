@@ -2,8 +2,8 @@
 
 The default run sweeps a representative subset (planar XY/XZ/YZ, 3-axis, arcs, helices,
 NURBS, G61/G64 corners, rapids) to keep CI fast; set ``CNC_FIT_FULL_CORPUS=1`` to sweep
-every ``.ngc`` file of the corpus (about a minute without stellabee1.ngc, which alone
-takes ~1 min more: 258k nodes split into 124k paths at sharp corners).
+every ``.ngc`` file of the corpus (under a minute on 2 cores; stellabee1.ngc alone takes
+~30 s: 258k nodes split into 124k paths at sharp corners).
 """
 
 from __future__ import annotations

@@ -314,62 +314,141 @@ def segment_sources_kernel(x, u, line, feed):
 
 
 @njit(cache=True)
-def project_points(coef, h, pts, cand_seg, cand_t, iters):
-    """Distance (K,) from points pts (K, d) to a piecewise quintic (coef (S, 6, d) in the
-    local parameter t in [0, h_k]): Newton on the squared distance from every candidate
-    (segment cand_seg[i, c], start t cand_t[i, c]) and in the two neighbouring segments
-    (from their near ends); the least distance found (always that of a point of the path)."""
-    K, d = pts.shape
-    S = coef.shape[0]
-    C = cand_seg.shape[1]
-    out = np.empty(K)
-    p0 = np.empty(d)
-    p1 = np.empty(d)
-    p2 = np.empty(d)
-    for i in range(K):
-        best = np.inf
-        for c in range(C):
-            for dk in range(-1, 2):
-                k = cand_seg[i, c] + dk
-                if k < 0 or k >= S:
-                    continue
-                hk = h[k]
-                if dk == 0:
-                    t = cand_t[i, c]
-                elif dk < 0:
-                    t = hk
-                else:
-                    t = 0.0
-                for it in range(iters + 1):
-                    g = 0.0
-                    hh = 0.0
-                    r2 = 0.0
-                    q1sq = 0.0
-                    for a in range(d):
-                        v0 = coef[k, 5, a]
-                        v1 = 5.0 * coef[k, 5, a]
-                        v2 = 20.0 * coef[k, 5, a]
-                        for j in range(4, -1, -1):
-                            v0 = v0 * t + coef[k, j, a]
-                            if j >= 1:
-                                v1 = v1 * t + j * coef[k, j, a]
-                            if j >= 2:
-                                v2 = v2 * t + j * (j - 1) * coef[k, j, a]
-                        r = v0 - pts[i, a]
-                        r2 += r * r
-                        g += r * v1
-                        q1sq += v1 * v1
-                        hh += v1 * v1 + r * v2
-                    if r2 < best:
-                        best = r2
-                    if it == iters:
-                        break
-                    if hh <= 0.0:
-                        hh = q1sq + 1e-300
-                    t = t - g / hh
-                    if t < 0.0:
-                        t = 0.0
-                    elif t > hk:
-                        t = hk
-        out[i] = np.sqrt(best)
-    return out
+def refine(u, y, tol, chords, clen, lin_ratio, interior, total, d1s, d2s, d1e, d2e, start_mode,
+           end_mode, xc0, ref0, tol_c0, exp_lin0, u_data0, y_data0, w_data0, span_f, tol_ref,
+           tol_rot, lin, metric, between_safety, smoothing, ridge, min_ratio, stop_ratio,
+           max_rounds, stale_rounds, min_span):
+    """The knot-insertion rounds of ``nodes.fit_polyline`` (see its module docstring),
+    compiled: one call instead of a Python loop with dozens of array operations per
+    round. Returns (t, m, c, ok): the knot vector, coefficient count, coefficients
+    (m, d) in the scaled space, and whether the last round passed (or only soft checks
+    failed).
+
+    Round-invariant inputs: node parameters u (n,), scaled nodes y (n, d), node
+    tolerances tol (n,), chords (n-1, d), clen (n-1,), lin_ratio (n-1,); the initial
+    interior knots; the end states (mode 1 imposes d1/d2); the node and chord check
+    points (xc0, ref0, tol_c0, exp_lin0) and data (u_data0, y_data0, w_data0); span_f
+    the fractions of a knot span that get points on the programmed moves.
+    """
+    n, d = y.shape
+    ns = span_f.shape[0]
+    stale = 0
+    last_soft = np.inf
+    hard = 0
+    ok = False
+    P0 = xc0.shape[0]
+    D0 = u_data0.shape[0]
+    t = np.empty(0)
+    m = 0
+    c = np.zeros((0, d))
+    for _ in range(max_rounds + 1):
+        ni = interior.shape[0]
+        m = ni + 6
+        t = np.empty(ni + 12)
+        t[:6] = 0.0
+        t[6:6 + ni] = interior
+        t[6 + ni:] = total
+        c = np.zeros((m, d))
+        end_coefs(t, m, c, y[0], y[n - 1], d1s, d2s, d1e, d2e, start_mode, end_mode)
+        fixed = np.zeros(m, dtype=np.bool_)
+        fixed[0] = True
+        fixed[m - 1] = True
+        if start_mode == 1:
+            fixed[:3] = True
+        if end_mode == 1:
+            fixed[m - 3:] = True
+        # Greville abscissae and the chordal prior of the ridge term
+        prior = np.empty((m, d))
+        g = np.empty(m)
+        for i in range(m):
+            acc = 0.0
+            for r in range(5):
+                acc += 0.2 * t[i + 1 + r]
+            g[i] = acc
+        for a in range(d):
+            prior[:, a] = np.interp(g, u, y[:, a])
+        # points inside every knot span, on the programmed moves
+        nsp = ni + 1
+        K = nsp * ns
+        P = P0 + K
+        xc = np.empty(P)
+        ref = np.empty((P, d))
+        tol_c = np.empty(P)
+        exp_lin = np.empty(P)
+        exp_all = np.ones(P)
+        xc[:P0] = xc0
+        ref[:P0] = ref0
+        tol_c[:P0] = tol_c0
+        exp_lin[:P0] = exp_lin0
+        u_data = np.empty(D0 + K)
+        y_data = np.empty((D0 + K, d))
+        w_data = np.empty(D0 + K)
+        u_data[:D0] = u_data0
+        y_data[:D0] = y_data0
+        w_data[:D0] = w_data0
+        q = 0
+        for sp in range(nsp):
+            k0 = 0.0 if sp == 0 else interior[sp - 1]
+            k1 = total if sp == ni else interior[sp]
+            for f in range(ns):
+                x = k0 + (k1 - k0) * span_f[f]
+                j = np.searchsorted(u, x, side="right") - 1
+                if j < 0:
+                    j = 0
+                elif j > n - 2:
+                    j = n - 2
+                fr = (x - u[j]) / clen[j]
+                ts = tol[j + 1] * between_safety
+                xc[P0 + q] = x
+                u_data[D0 + q] = x
+                for a in range(d):
+                    v = y[j, a] + chords[j, a] * fr
+                    ref[P0 + q, a] = v
+                    y_data[D0 + q, a] = v
+                tol_c[P0 + q] = ts
+                exp_lin[P0 + q] = lin_ratio[j]
+                w_data[D0 + q] = 0.5 * tol_ref / (ts + 1e-12)
+                q += 1
+        solve_lsq(t, m, u_data, y_data, w_data, prior, fixed, c, smoothing, ridge)
+        bad = np.zeros(m + 1, dtype=np.bool_)
+        worst_lin, worst_rot, hard, soft = check(t, m, c, xc, ref, tol_c, tol_rot, lin, metric,
+                                                 exp_all, exp_lin, min_ratio, bad, n, stop_ratio)
+        if hard == 0:
+            # chord points are a heuristic against bulges: stop refining for them once
+            # a few rounds no longer help (the nodes are within tolerance)
+            if soft >= last_soft:
+                stale += 1
+            else:
+                stale = 0
+            last_soft = soft
+            if soft == 0 or stale >= stale_rounds:
+                ok = True
+                break
+        else:
+            stale = 0
+            last_soft = np.inf
+        # a knot at the middle node of every failing span (its middle if it has none)
+        new = np.empty(m + 1)
+        nn = 0
+        for sp in range(m + 1):
+            if not bad[sp]:
+                continue
+            lo_t = t[sp]
+            hi_t = t[sp + 1]
+            if not (hi_t - lo_t > 2.0 * min_span):
+                continue
+            i_lo = np.searchsorted(u, lo_t, side="right")
+            i_hi = np.searchsorted(u, hi_t, side="left") - 1
+            if i_hi >= i_lo:
+                mid = (i_lo + i_hi) // 2
+                mid = min(max(mid, 0), n - 1)
+                new[nn] = u[mid]
+            else:
+                new[nn] = 0.5 * (lo_t + hi_t)
+            nn += 1
+        if nn == 0:
+            break
+        interior = np.unique(np.concatenate((interior, new[:nn])))
+    # out of rounds or of refinable spans: fine if only soft checks still fail
+    ok = ok or hard == 0
+    return t, m, c, ok

@@ -1,6 +1,6 @@
 """General N-axis fitter: a clamped quintic B-spline fitted to the nodes.
 
-Method (robust, vectorised with numba kernels in ``_bspline.py``, O(n) per round):
+Method (robust, O(n) per round; the rounds run in one numba kernel, ``_bspline.refine``):
 
 * parameter u = cumulative chord length in the fitter's metric (linear axes in mm,
   rotary axes scaled to mm by tol_mm / tol_deg), so |dq/du| ≈ 1;
@@ -153,78 +153,25 @@ def fit_polyline(nodes: np.ndarray, tol_mm: np.ndarray, tol_deg: float, lin: np.
     w_data0 = np.concatenate((w, w_ch))
     span_f = (np.arange(1, FIT_SPAN_CHECKS + 1) / (FIT_SPAN_CHECKS + 1))
 
-    def on_moves(x):
-        """Programmed point (K, d), tolerance and metric speed ratio at parameters x (K,)."""
-        j = np.clip(np.searchsorted(u, x, side="right") - 1, 0, n - 2)
-        fr = (x - u[j]) / clen[j]
-        return y[j] + chords[j] * fr[:, None], tol[j + 1] * FIT_BETWEEN_NODES_SAFETY, lin_ratio[j]
-
     step = FIT_INITIAL_NODES_PER_SPAN
     interior = u[step:n - 1:step].copy()
     if interior.size and total - interior[-1] < 0.5 * (interior[-1] - (interior[-2] if interior.size > 1 else 0.0)):
         interior = interior[:-1]
-    min_span = FIT_MIN_SPAN_REL * total
-    ok = False
     zero = np.zeros(d)
     d1s = start.d1 if start is not None else zero
     d2s = start.d2 if start is not None else zero
     d1e = end.d1 if end is not None else zero
     d2e = end.d2 if end is not None else zero
-    stale, last_soft = 0, np.inf
-    for _ in range(FIT_MAX_ROUNDS + 1):
-        t = np.concatenate((np.zeros(6), interior, np.full(6, total)))
-        m = interior.size + 6
-        c = np.zeros((m, d))
-        bs.end_coefs(t, m, c, y[0], y[-1], d1s, d2s, d1e, d2e,
-                     0 if start is None else 1, 0 if end is None else 1)
-        fixed = np.zeros(m, dtype=np.bool_)
-        fixed[0] = fixed[-1] = True
-        if start is not None:
-            fixed[:3] = True
-        if end is not None:
-            fixed[-3:] = True
-        greville = np.convolve(t[1:-1], np.full(5, 0.2), mode="valid")
-        prior = np.stack([np.interp(greville, u, y[:, a]) for a in range(d)], axis=1)
-        # points inside every knot span, on the programmed moves: checked and fitted, so
-        # that a long move stays straight between sparse nodes
-        kn = np.concatenate(([0.0], interior, [total]))
-        xs = (kn[:-1, None] + np.diff(kn)[:, None] * span_f[None, :]).ravel()
-        ref_s, tol_s, lr_s = on_moves(xs)
-        xc = np.concatenate((xc0, xs))
-        ref = np.concatenate((ref0, ref_s))
-        tol_c = np.concatenate((tol_c0, tol_s))
-        exp_lin = np.concatenate((exp_lin0, lr_s))
-        exp_all = np.ones(xc.size)
-        u_data = np.concatenate((u_data0, xs))
-        y_data = np.concatenate((y_data0, ref_s))
-        w_data = np.concatenate((w_data0, 0.5 * tol_ref_mm / (tol_s + 1e-12)))
-        bs.solve_lsq(t, m, u_data, y_data, w_data, prior, fixed, c, FIT_SMOOTHING, _RIDGE)
-        bad = np.zeros(m + 1, dtype=np.bool_)
-        worst_lin, worst_rot, hard, soft = bs.check(t, m, c, xc, ref, tol_c, tol_rot, lin, metric,
-                                                    exp_all, exp_lin, FIT_MIN_SPEED_RATIO, bad, n,
-                                                    FIT_STOP_SPEED_RATIO)
-        if hard == 0:
-            # chord points are a heuristic against bulges: stop refining for them once
-            # a few rounds no longer help (the nodes are within tolerance)
-            stale = stale + 1 if soft >= last_soft else 0
-            last_soft = soft
-            if soft == 0 or stale >= FIT_SOFT_STALE_ROUNDS:
-                ok = True
-                break
-        else:
-            stale, last_soft = 0, np.inf
-        spans = np.nonzero(bad)[0]
-        lo_t, hi_t = t[spans], t[spans + 1]
-        i_lo = np.searchsorted(u, lo_t, side="right")
-        i_hi = np.searchsorted(u, hi_t, side="left") - 1
-        has = i_hi >= i_lo
-        new = np.where(has, u[np.clip((i_lo + i_hi) // 2, 0, n - 1)], 0.5 * (lo_t + hi_t))
-        keep = (hi_t - lo_t) > 2 * min_span
-        if not keep.any():
-            break
-        interior = np.unique(np.concatenate((interior, new[keep])))
-    # out of rounds or of refinable spans: fine if only soft checks still fail
-    ok = ok or hard == 0
+    f64 = np.ascontiguousarray
+    # the knot-insertion rounds (compiled; see bs.refine)
+    t, m, c, ok = bs.refine(
+        f64(u), f64(y), f64(tol), f64(chords), f64(clen), f64(lin_ratio), f64(interior), float(total),
+        f64(d1s, dtype=float), f64(d2s, dtype=float), f64(d1e, dtype=float), f64(d2e, dtype=float),
+        0 if start is None else 1, 0 if end is None else 1, f64(xc0), f64(ref0), f64(tol_c0),
+        f64(exp_lin0), f64(u_data0), f64(y_data0), f64(w_data0), f64(span_f), float(tol_ref_mm),
+        float(tol_rot), f64(lin, dtype=np.bool_), f64(metric, dtype=np.bool_), FIT_BETWEEN_NODES_SAFETY,
+        FIT_SMOOTHING, _RIDGE, FIT_MIN_SPEED_RATIO, FIT_STOP_SPEED_RATIO, FIT_MAX_ROUNDS,
+        FIT_SOFT_STALE_ROUNDS, FIT_MIN_SPAN_REL * total)
     val = np.empty((n, d))
     der = np.empty((n, d))
     bs.evaluate(t, m, c, u, val, der)

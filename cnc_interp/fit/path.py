@@ -259,7 +259,14 @@ class Path:
 
     @property
     def end(self) -> np.ndarray:
-        return self.derivatives_u(self.breaks[-1:], 0)[0, 0]
+        # Horner on the last segment at its end: the same arithmetic as derivatives_u
+        # (called for every path built, so without its general machinery)
+        c = self.coef[-1]
+        t = self.breaks[-1] - self.breaks[-2]
+        acc = c[5] * _FALLING[0][5]
+        for i in range(4, -1, -1):
+            acc = acc * t + c[i] * _FALLING[0][i]
+        return acc
 
 
 def _ragged_arange(counts: np.ndarray) -> np.ndarray:

@@ -92,16 +92,51 @@ _GLW = np.array([0.3478548451374538, 0.6521451548625461, 0.6521451548625461, 0.3
 
 
 @njit(cache=True)
-def _fit_segment(xs, zs, constrained, rho1, rho2, mu, b, has_end, d1_est, d2_est, w_end):
+def _solve_spd(A, rhs, F):
+    """Solve A x = rhs in place (x in rhs) for the leading F x F block of a symmetric
+    positive definite A (Cholesky; A is overwritten)."""
+    for i in range(F):
+        s = A[i, i]
+        for k in range(i):
+            s -= A[i, k] * A[i, k]
+        if s <= 0.0:
+            s = 1e-300
+        A[i, i] = math.sqrt(s)
+        for j in range(i + 1, F):
+            s = A[j, i]
+            for k in range(i):
+                s -= A[j, k] * A[i, k]
+            A[j, i] = s / A[i, i]
+    for i in range(F):
+        s = rhs[i]
+        for k in range(i):
+            s -= A[i, k] * rhs[k]
+        rhs[i] = s / A[i, i]
+    for i in range(F - 1, -1, -1):
+        s = rhs[i]
+        for k in range(i + 1, F):
+            s -= A[k, i] * rhs[k]
+        rhs[i] = s / A[i, i]
+
+
+@njit(cache=True)
+def _fit_segment(xs, zs, constrained, rho1, rho2, mu, b, has_end, d1_est, d2_est, w_end, work):
     """Fit normalised coefficients b (6,) (q(ξ) = Σ b_i ξ^i, ξ = x*/X) to nodes xs, zs (r,)
-    (xs[0] = zs[0] = 0, xs[-1] = X > 0). Returns nothing; fills b."""
+    (xs[0] = zs[0] = 0, xs[-1] = X > 0). Returns nothing; fills b. ``work`` (8, 4) is
+    scratch space (no allocation per fit: this runs tens of thousands of times)."""
     r = xs.shape[0]
     X = xs[r - 1]
     Z = zs[r - 1]
     F = 2 if constrained else 4
-    A = np.zeros((F, F))
-    rhs = np.zeros(F)
-    phi = np.empty(F)
+    A = work[:4]
+    rhs = work[4]
+    phi = work[5]
+    g1 = work[6]
+    g2 = work[7]
+    for a in range(F):
+        rhs[a] = 0.0
+        for c in range(F):
+            A[a, c] = 0.0
     # basis of the affine family q = base(ξ) + Σ β_f φ_f(ξ)
     for j in range(1, r - 1):
         xi = xs[j] / X
@@ -146,8 +181,6 @@ def _fit_segment(xs, zs, constrained, rho1, rho2, mu, b, has_end, d1_est, d2_est
                 A[a, c] += wq * phi[a] * phi[c]
     if has_end:
         # soft end conditions: dq/dξ(1) and d²q/dξ²(1) towards the local estimates
-        g1 = np.empty(F)
-        g2 = np.empty(F)
         if constrained:
             b1 = rho1 * X
             b2 = 0.5 * rho2 * X * X
@@ -179,7 +212,8 @@ def _fit_segment(xs, zs, constrained, rho1, rho2, mu, b, has_end, d1_est, d2_est
                 A[a, c] += w1 * g1[a] * g1[c] + w2 * g2[a] * g2[c]
     for a in range(F):
         A[a, a] += 1e-12 * (1.0 + A[a, a])
-    beta = np.linalg.solve(A, rhs)
+    _solve_spd(A, rhs, F)
+    beta = rhs
     b[0] = 0.0
     if constrained:
         b[1] = rho1 * X
@@ -257,38 +291,51 @@ def _end_est(e, th, tau, kap, max_incl):
 
 
 @njit(cache=True)
-def _try(xs, zs, tol, constrained, rho1, rho2, mu, b, e, th, tau, kap, max_incl, w_end, per_x, max_checks):
-    """Fit and return the largest deviation minus its tolerance (<= 0 means accepted):
-    at the nodes and at points along every chord (the programmed moves), the tolerance
-    being a bound on the distance to the programmed path everywhere."""
+def _try(xs, zs, tol, constrained, rho1, rho2, mu, b, e, th, tau, kap, max_incl, w_end, per_x, max_checks,
+         work):
+    """Fit and test: True when every node and every point along every chord (the
+    programmed moves; the tolerance bounds the distance to the programmed path
+    everywhere) is within its tolerance. Stops at the first failure, checking from the
+    segment's end (where a too long segment fails first); the vertical residual
+    bounds the distance, so the Newton projection runs only where it exceeds the
+    tolerance."""
     has, d1, d2 = _end_est(e, th, tau, kap, max_incl)
-    _fit_segment(xs, zs, constrained, rho1, rho2, mu, b, has and w_end > 0.0, d1, d2, w_end)
+    _fit_segment(xs, zs, constrained, rho1, rho2, mu, b, has and w_end > 0.0, d1, d2, w_end, work)
     r = xs.shape[0]
     X = xs[r - 1]
-    worst = -np.inf
-    for j in range(1, r - 1):
-        err = _node_error(b, X, xs, zs, j) - tol[j]
-        if err > worst:
-            worst = err
-    # along the chords: more points on a chord that is a larger share of the segment
-    for j in range(1, r):
+    for j in range(r - 1, 0, -1):
+        if j < r - 1:
+            # node j
+            if not abs(_poly(b, xs[j] / X) - zs[j]) <= tol[j] and not _node_error(b, X, xs, zs, j) <= tol[j]:
+                return False  # (a NaN fails too)
+        # along chord j-1 -> j: more points on a chord that is a larger share of the segment
         dx = xs[j] - xs[j - 1]
         dz = zs[j] - zs[j - 1]
         m = 3 + int(math.ceil(per_x * dx / X))
         if m > max_checks:
             m = max_checks
+        tj = tol[j] * FIT_BETWEEN_NODES_SAFETY  # sampled only: keep a margin
         for i in range(1, m + 1):
             f = i / (m + 1.0)
             px = xs[j - 1] + f * dx
             pz = zs[j - 1] + f * dz
-            tj = tol[j] * FIT_BETWEEN_NODES_SAFETY  # sampled only: keep a margin
-            vert = abs(_poly(b, px / X) - pz)
-            if vert - tj <= worst:
+            if abs(_poly(b, px / X) - pz) <= tj:
                 continue  # the vertical residual already bounds the distance
-            err = _point_error(b, X, px, pz) - tj
-            if err > worst:
-                worst = err
-    return worst
+            if not _point_error(b, X, px, pz) <= tj:
+                return False
+    return True
+
+
+@njit(cache=True)
+def _rotate(H, V, s, r, n_rot, c, sn, xs_all, zs_all):
+    """Eq. (2) for nodes s + n_rot .. s + r - 1 (translate to node s, rotate by -θ);
+    returns the new count of rotated nodes."""
+    for j in range(s + n_rot, s + r):
+        dx = H[j] - H[s]
+        dz = V[j] - V[s]
+        xs_all[j - s] = dx * c + dz * sn
+        zs_all[j - s] = -dx * sn + dz * c
+    return max(n_rot, r)
 
 
 @njit(cache=True)
@@ -319,10 +366,21 @@ def planar_fit_kernel(H, V, tol, alpha, theta_chord, tau, kap, w_end, max_incl, 
     max_dev = max_dev0
     b = np.zeros(6)
     bt = np.zeros(6)
+    work = np.zeros((8, 4))
     xs_all = np.empty(n)
     zs_all = np.empty(n)
     phi_abs = phi0
     kappa = kappa0
+    # run_end[j]: the first chord after j with another θ (or node n-1): the end of the
+    # group of chords that share chord j's frame
+    run_end = np.empty(max(n - 1, 1), dtype=np.int64)
+    for j in range(n - 2, -1, -1):
+        if j + 1 >= n - 1:
+            run_end[j] = n - 1
+        elif theta_chord[j + 1] != theta_chord[j]:
+            run_end[j] = j + 1
+        else:
+            run_end[j] = run_end[j + 1]
     while s < n - 1:
         th = theta_chord[s]
         alt = False
@@ -345,18 +403,17 @@ def planar_fit_kernel(H, V, tol, alpha, theta_chord, tau, kap, w_end, max_incl, 
             while g_end < n - 1 and abs(_wrap(alpha[g_end] - th)) < max_incl:
                 g_end += 1
         else:
-            while g_end < n - 1 and theta_chord[g_end] == th:
-                g_end += 1
+            g_end = run_end[s]
         c = math.cos(th)
         sn = math.sin(th)
-        for j in range(s, g_end + 1):
-            dx = H[j] - H[s]
-            dz = V[j] - V[s]
-            xs_all[j - s] = dx * c + dz * sn
-            zs_all[j - s] = -dx * sn + dz * c
+        # Eq. (2) for the nodes s..s+n_rot-1 (rotated on demand: a group can hold many
+        # more nodes than the segment that starts it)
+        n_rot = 0
         tl = tol[s:g_end + 1]
-        # gallop: largest e with a passing fit, e in [s+1, g_end]
+        # gallop: largest e with a passing fit, e in [s+1, g_end]; b keeps the fit of
+        # the largest passing e tried (the same fit the accepted segment gets)
         lo = s + 1
+        lo_fit = False
         hi = g_end + 1  # first known failing end (exclusive bound)
         step = 2
         e = min(s + step, g_end)
@@ -364,9 +421,12 @@ def planar_fit_kernel(H, V, tol, alpha, theta_chord, tau, kap, w_end, max_incl, 
             if e <= lo:
                 break
             r = e - s + 1
+            n_rot = _rotate(H, V, s, r, n_rot, c, sn, xs_all, zs_all)
             if _try(xs_all[:r], zs_all[:r], tl[:r], constrained, rho1, rho2, mu, bt,
-                    e, th, tau, kap, max_incl, w_end, per_x, max_checks) <= 0.0:
+                    e, th, tau, kap, max_incl, w_end, per_x, max_checks, work):
                 lo = e
+                lo_fit = True
+                b[:] = bt
                 if e == g_end:
                     break
                 step *= 2
@@ -377,19 +437,23 @@ def planar_fit_kernel(H, V, tol, alpha, theta_chord, tau, kap, w_end, max_incl, 
         while hi - lo > 1:
             mid = (lo + hi) // 2
             r = mid - s + 1
+            n_rot = _rotate(H, V, s, r, n_rot, c, sn, xs_all, zs_all)
             if _try(xs_all[:r], zs_all[:r], tl[:r], constrained, rho1, rho2, mu, bt,
-                    mid, th, tau, kap, max_incl, w_end, per_x, max_checks) <= 0.0:
+                    mid, th, tau, kap, max_incl, w_end, per_x, max_checks, work):
                 lo = mid
+                lo_fit = True
+                b[:] = bt
             else:
                 hi = mid
         e = lo
         r = e - s + 1
-        if e == s + 1 and _try(xs_all[:r], zs_all[:r], tl[:r], constrained, rho1, rho2, mu, bt,
-                               e, th, tau, kap, max_incl, w_end, per_x, max_checks) > 0.0:
-            return k, 2, max_dev, s, constrained, phi_abs, kappa
-        has, d1, d2 = _end_est(e, th, tau, kap, max_incl)
-        _fit_segment(xs_all[:r], zs_all[:r], constrained, rho1, rho2, mu, b,
-                     has and w_end > 0.0, d1, d2, w_end)
+        n_rot = _rotate(H, V, s, r, n_rot, c, sn, xs_all, zs_all)
+        if not lo_fit:
+            # a single chord (never tried yet)
+            if not _try(xs_all[:r], zs_all[:r], tl[:r], constrained, rho1, rho2, mu, bt,
+                        e, th, tau, kap, max_incl, w_end, per_x, max_checks, work):
+                return k, 2, max_dev, s, constrained, phi_abs, kappa
+            b[:] = bt
         X = xs_all[r - 1]
         for j in range(1, r - 1):
             d = _node_error(b, X, xs_all[:r], zs_all[:r], j)
@@ -460,8 +524,7 @@ def fit_planar(nodes: np.ndarray, plane: tuple[int, int], tol_mm: np.ndarray, ax
         H = np.ascontiguousarray(nodes[:, h], dtype=float)
         V = np.ascontiguousarray(nodes[:, v], dtype=float)
         n = H.size
-        alpha = np.arctan2(np.diff(V), np.diff(H))
-        theta_chord = rotation_angles(alpha)
+        alpha, theta_chord, tau, kap = _chord_frames(H, V)
         tol = np.asarray(tol_mm, dtype=float) * FIT_TOL_SAFETY
         out_theta = np.empty(n - 1)
         out_start = np.empty(n - 1, dtype=np.int64)
@@ -470,7 +533,6 @@ def fit_planar(nodes: np.ndarray, plane: tuple[int, int], tol_mm: np.ndarray, ax
         if kept is not None:  # segments accepted before the insertion stay as they are
             k0 = kept[0].size
             out_theta[:k0], out_start[:k0], out_end[:k0], out_b[:k0] = kept
-        tau, kap = node_tangents(H, V)
         k, status, max_dev, s_fail, cons, phi_abs, kappa = planar_fit_kernel(
             H, V, tol, alpha, theta_chord, tau, kap, PLANAR_END_WEIGHT, PLANAR_MAX_INCLINATION_PI * np.pi,
             PLANAR_SMOOTHING, out_theta, out_start, out_end, out_b, PLANAR_CHECKS_PER_SEGMENT,
@@ -494,17 +556,43 @@ def fit_planar(nodes: np.ndarray, plane: tuple[int, int], tol_mm: np.ndarray, ax
     planar = PlanarSegments(plane=(h, v), theta=theta, origin=origin, x_end=x_end,
                             p=out_b[:k].copy())
 
-    # node parameter along the path: x* of each node inside its segment, offset by the breaks
     breaks = np.concatenate(([0.0], np.cumsum(x_end)))
-    u = np.empty(n)
-    seg_of = np.repeat(np.arange(k), en - st)
-    idx = np.arange(1, n)
-    u[0] = 0.0
-    u[1:] = breaks[seg_of] + (H[idx] - H[st[seg_of]]) * c[seg_of] + (V[idx] - V[st[seg_of]]) * s_[seg_of]
-    u[en] = breaks[1:]
-    u = np.maximum.accumulate(u)
+    u = _node_params(H, V, st, en, c, s_, breaks)
     seg_line, seg_feed = segment_sources(breaks, u, line, feed)
     return planar, planar_coef(planar, nodes[0], len(axes)), seg_line, seg_feed, float(max_dev)
+
+
+@njit(cache=True)
+def _chord_frames(H, V):
+    """Per chord the tangential angle α and Eq. (1)'s θ, per node the estimated tangent
+    angle and curvature (``node_tangents``): one compiled pass instead of several."""
+    n = H.shape[0]
+    alpha = np.empty(n - 1)
+    theta = np.empty(n - 1)
+    for j in range(n - 1):
+        a = math.atan2(V[j + 1] - V[j], H[j + 1] - H[j])
+        alpha[j] = a
+        theta[j] = rotation_angle(a)
+    tau, kap = node_tangents(H, V)
+    return alpha, theta, tau, kap
+
+
+@njit(cache=True)
+def _node_params(H, V, st, en, c, s, breaks):
+    """Path parameter (n,) of every node: x* of the node inside its segment (start st,
+    end en, frame cos c / sin s) offset by the segment's break, the segment ends
+    exactly on the breaks, made non-decreasing."""
+    n = H.shape[0]
+    u = np.empty(n)
+    u[0] = 0.0
+    for k in range(st.shape[0]):
+        for i in range(st[k] + 1, en[k] + 1):
+            u[i] = breaks[k] + (H[i] - H[st[k]]) * c[k] + (V[i] - V[st[k]]) * s[k]
+        u[en[k]] = breaks[k + 1]
+    for i in range(1, n):
+        if u[i] < u[i - 1]:
+            u[i] = u[i - 1]
+    return u
 
 
 def densify_chords(nodes: np.ndarray, plane: tuple[int, int], line: np.ndarray, feed: np.ndarray,
@@ -523,48 +611,104 @@ def densify_chords(nodes: np.ndarray, plane: tuple[int, int], line: np.ndarray, 
     n = nodes.shape[0]
     if n < 2:
         return nodes, line, feed, tol_mm
-    hv = np.ascontiguousarray(nodes[:, list(plane)], dtype=float)
-    clen = np.hypot(*np.diff(hv, axis=0).T)
-    tol = np.asarray(tol_mm, dtype=float)[1:]
-    left = np.full(n - 1, np.inf)
-    right = np.full(n - 1, np.inf)
-    left[1:] = clen[:-1]
-    right[:-1] = clen[1:]
-    _, kap = node_tangents(np.ascontiguousarray(hv[:, 0]), np.ascontiguousarray(hv[:, 1]))
-    kap = np.abs(kap)
-    firsts = []
-    for nb, k_end in ((left, kap[:-1]), (right, kap[1:])):
-        ell = np.where(clen > PLANAR_LONG_CHORD_RATIO * nb, nb, np.inf)
-        # a circle of curvature κ leaves its tangent by κ d² / 2 after a distance d
-        bend = k_end * clen**2 / 8.0 > 0.25 * tol
-        ell = np.where(bend, np.minimum(ell, np.sqrt(0.5 * tol / np.maximum(k_end, 1e-300))), ell)
-        firsts.append(np.minimum(ell, 0.5 * clen))
-    need = np.nonzero((firsts[0] < 0.5 * clen) | (firsts[1] < 0.5 * clen))[0]
-    if need.size == 0:
+    src, frac = _densify_plan(np.ascontiguousarray(nodes[:, plane[0]], dtype=float),
+                              np.ascontiguousarray(nodes[:, plane[1]], dtype=float),
+                              np.ascontiguousarray(tol_mm, dtype=float), PLANAR_LONG_CHORD_RATIO)
+    if src.size == n:
         return nodes, line, feed, tol_mm
-    L = clen[need]
-    js, fs = [need], [np.full(need.size, 0.5)]
-    for side in (0, 1):
-        ell = firsts[side][need]
-        x = 0.5 * L / ell
-        # nodes at ell * 2^i, i < m, with ell * 2^(m-1) < L / 2 (none when ell >= L / 2)
-        m = np.where(x > 1.0, np.ceil(np.log2(np.maximum(x, 1.0))), 0).astype(np.int64)
-        rep = np.repeat(np.arange(need.size), m)
-        i = np.arange(rep.size) - np.repeat(np.cumsum(m) - m, m)
-        d = ell[rep] * 2.0 ** i / L[rep]
-        ok = d < 0.5
-        js.append(need[rep][ok])
-        fs.append(d[ok] if side == 0 else 1.0 - d[ok])
-    js = np.concatenate(js)
-    fs = np.concatenate(fs)
-    new_nodes = nodes[js] + (nodes[js + 1] - nodes[js]) * fs[:, None]
-    key = np.concatenate((np.arange(n, dtype=float), js + fs))
-    order = np.argsort(key, kind="stable")
-    line = np.asarray(line)
-    feed = np.asarray(feed, dtype=float)
-    tol_all = np.asarray(tol_mm, dtype=float)
-    return (np.concatenate((nodes, new_nodes))[order], np.concatenate((line, line[js + 1]))[order],
-            np.concatenate((feed, feed[js + 1]))[order], np.concatenate((tol_all, tol_all[js + 1]))[order])
+    out, take = _densify_nodes(np.ascontiguousarray(nodes, dtype=float), src, frac)
+    return (out, np.asarray(line)[take], np.asarray(feed, dtype=float)[take],
+            np.asarray(tol_mm, dtype=float)[take])
+
+
+@njit(cache=True)
+def _densify_nodes(nodes, src, frac):
+    """Rows of ``densify_chords``: an inserted node (frac > 0) lies on the move
+    src -> src + 1 and takes that move's data (row ``take`` of line, feed, tol)."""
+    M = src.shape[0]
+    d = nodes.shape[1]
+    out = np.empty((M, d))
+    take = np.empty(M, dtype=np.int64)
+    for i in range(M):
+        j = src[i]
+        f = frac[i]
+        if f > 0.0:
+            for a in range(d):
+                out[i, a] = nodes[j, a] + (nodes[j + 1, a] - nodes[j, a]) * f
+            take[i] = j + 1
+        else:
+            for a in range(d):
+                out[i, a] = nodes[j, a]
+            take[i] = j
+    return out, take
+
+
+@njit(cache=True)
+def _densify_plan(H, V, tol_mm, long_ratio):
+    """Where ``densify_chords`` puts its nodes: for every output row the source node j
+    and the fraction f along the move j -> j+1 (0 for an original node), in path order."""
+    n = H.shape[0]
+    clen = np.empty(n - 1)
+    for j in range(n - 1):
+        clen[j] = math.hypot(H[j + 1] - H[j], V[j + 1] - V[j])
+    _, kap = node_tangents(H, V)
+    # first distance from each end of each chord (inf: no extra nodes from that end)
+    first = np.empty((n - 1, 2))
+    total = n
+    for j in range(n - 1):
+        L = clen[j]
+        tol = tol_mm[j + 1]
+        for side in range(2):
+            nb = np.inf
+            if side == 0 and j > 0:
+                nb = clen[j - 1]
+            elif side == 1 and j < n - 2:
+                nb = clen[j + 1]
+            k_end = abs(kap[j + side])
+            ell = nb if L > long_ratio * nb else np.inf
+            # a circle of curvature κ leaves its tangent by κ d² / 2 after a distance d
+            if k_end * L * L / 8.0 > 0.25 * tol:
+                ell = min(ell, math.sqrt(0.5 * tol / max(k_end, 1e-300)))
+            first[j, side] = min(ell, 0.5 * L)
+        if first[j, 0] < 0.5 * L or first[j, 1] < 0.5 * L:
+            total += 1 + _n_geometric(first[j, 0], L) + _n_geometric(first[j, 1], L)
+    src = np.empty(total, dtype=np.int64)
+    frac = np.zeros(total)
+    m = 0
+    for j in range(n - 1):
+        src[m] = j
+        m += 1
+        L = clen[j]
+        if not (first[j, 0] < 0.5 * L or first[j, 1] < 0.5 * L):
+            continue
+        ell = first[j, 0]
+        for i in range(_n_geometric(ell, L)):
+            src[m] = j
+            frac[m] = ell * 2.0 ** i / L
+            m += 1
+        src[m] = j
+        frac[m] = 0.5
+        m += 1
+        ell = first[j, 1]
+        for i in range(_n_geometric(ell, L) - 1, -1, -1):
+            src[m] = j
+            frac[m] = 1.0 - ell * 2.0 ** i / L
+            m += 1
+    src[m] = n - 1
+    return src, frac
+
+
+@njit(cache=True)
+def _n_geometric(ell, L):
+    """Number of distances ell * 2^i (i = 0, 1, ...) below L / 2."""
+    c = 0
+    if not ell < 0.5 * L:
+        return 0
+    x = ell
+    while x / L < 0.5:
+        c += 1
+        x = ell * 2.0 ** c
+    return c
 
 
 def _insert_after(nodes, line, feed, tol_mm, j):

@@ -22,11 +22,14 @@ from ..constants import (
     VPOP_MIN_LENGTH,
     VPOP_AIM_GAP_JERK_STEPS,
     VPOP_EASY_FRACTION,
+    VPOP_CHAIN_SEQUENTIAL,
     VPOP_BRAKE_JERK_FRACTION,
     VPOP_LIMIT_SHRINK,
     VPOP_ROUNDING_ULPS,
+    VPOP_TABLE_GL_ORDER,
     VPOP_TABLE_MAX_PIECE,
     VPOP_TABLE_MAX_ROUNDS,
+    VPOP_TABLE_MAX_TRIES,
     VPOP_TABLE_TOL,
 )
 from ..errors import PlanError
@@ -56,25 +59,13 @@ def _joint_derivs(path, u: np.ndarray, joint_map) -> tuple[np.ndarray, np.ndarra
     return q, qs, qss
 
 
-_GL_X, _GL_W = np.polynomial.legendre.leggauss(10)
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(VPOP_TABLE_GL_ORDER)
 
 
-def _arc(path, ua: np.ndarray, ub: np.ndarray, seg: np.ndarray) -> np.ndarray:
-    """Arc length from ua to ub (each row inside segment ``seg``), 10-point Gauss–Legendre.
+def _kernels():
+    from . import _table_kernels
 
-    (Path.s_of_u integrates from its own sub-interval table; for many short pieces
-    this direct rule is an order of magnitude cheaper and as accurate.)
-    """
-    c = path.coef[seg]  # (K, 6, n)
-    base = path.breaks[seg]
-    half = 0.5 * (ub - ua)
-    t = (0.5 * (ua + ub) - base)[:, None] + half[:, None] * _GL_X[None, :]  # (K, 10)
-    tt = t[..., None]
-    acc = 5.0 * c[:, None, 5, :]
-    for i in range(4, 0, -1):
-        acc = acc * tt + i * c[:, None, i, :]
-    sp = np.sqrt((acc * acc * path.weights).sum(axis=-1))
-    return half * (sp @ _GL_W)
+    return _table_kernels
 
 
 def _hermite(S, Q, Q1, Q2) -> np.ndarray:
@@ -91,6 +82,7 @@ def _hermite(S, Q, Q1, Q2) -> np.ndarray:
 
 
 def _eval_table(S, C, s):
+    """Table positions (K, n) at arc lengths s (K,)."""
     p = np.clip(np.searchsorted(S, s, side="right") - 1, 0, C.shape[0] - 1)
     t = (s - S[p])[:, None]
     c = C[p]
@@ -100,83 +92,136 @@ def _eval_table(S, C, s):
     return acc
 
 
+def _refine_mapped(path, joint_map, tol: float, scale: float, max_depth: int):
+    """Bisection of the initial pieces through the kinematics, one round per depth.
+
+    Same pieces and checks as ``_table_kernels._refine`` (which serves the identity
+    case in one compiled pass); only the pieces split in a round are recomputed in
+    the next. Returns the accepted pieces in path order: ua, ub, seg, depth, ds
+    (unscaled arc length), off (m, 3) arc length to the quarter points, qc (m, 3, n)
+    joint positions there, and the local deviation found.
+    """
+    K = _kernels()
+    coef, breaks, w = path.coef, path.breaks, path.weights
+    n = path.n_axes
+    ua, ub, seg = K.initial_pieces(breaks, path.s_breaks, VPOP_TABLE_MAX_PIECE)
+    dep = np.zeros(ua.shape[0], dtype=np.int64)
+    done = []
+    while ua.shape[0]:
+        uc, sub = K.quarter_arcs(coef, breaks, w, seg, ua, ub, _GL_X, _GL_W)
+        ds = ((sub[:, 0] + sub[:, 1]) + sub[:, 2]) + sub[:, 3]
+        keep = ds > 0  # pieces of zero length are dropped (the path stands still there)
+        if not keep.all():
+            ua, ub, seg, dep, uc, sub, ds = (x[keep] for x in (ua, ub, seg, dep, uc, sub, ds))
+        off = np.cumsum(sub[:, :3], axis=1)
+        qa = np.stack(_joint_derivs(path, ua, joint_map), axis=1)  # (K, 3, n)
+        qb = np.stack(_joint_derivs(path, ub, joint_map), axis=1)
+        qc = np.ascontiguousarray(_positions(path, uc.reshape(-1), joint_map).reshape(-1, 3, n))
+        err = K.piece_errors(ds * scale, qa, qb, off * scale, qc)
+        mid = 0.5 * (ua + ub)
+        split = ~(err <= tol) & (dep < max_depth) & (ua < mid) & (mid < ub)
+        ok = ~split
+        done.append((ua[ok], ub[ok], seg[ok], dep[ok], ds[ok], off[ok], qc[ok], err[ok]))
+        mid = mid[split]
+        ua = np.concatenate((ua[split], mid))
+        ub = np.concatenate((mid, ub[split]))
+        seg = np.concatenate((seg[split], seg[split]))
+        dep = np.concatenate((dep[split], dep[split])) + 1
+    parts = [np.concatenate(x) for x in zip(*done)]
+    order = np.argsort(parts[0], kind="stable")  # pieces do not overlap: u order is path order
+    return [np.ascontiguousarray(x[order]) for x in parts]
+
+
+def _build_mapped(path, joint_map, tol: float, max_depth: int):
+    """(u, S, C, err) of the table through non-identity kinematics (see ``JointTable``)."""
+    K = _kernels()
+    tol_in, sc_in = tol, 1.0
+    for _ in range(VPOP_TABLE_MAX_TRIES):
+        ua, ub, seg, dep, ds, off, qc, e_loc = _refine_mapped(path, joint_map, tol_in, sc_in,
+                                                              max_depth)
+        if ds.size == 0 or not ds.sum() > 0:
+            _no_length(path)
+        scale = path.length / ds.sum()
+        S = np.concatenate(([0.0], np.cumsum(ds * scale)))
+        S[-1] = path.length
+        u = np.concatenate((ua, ub[-1:]))
+        Q = np.stack(_joint_derivs(path, u, joint_map), axis=1)  # (m+1, 3, n)
+        C, err = K.hermite_check(S, Q, np.ascontiguousarray(off * scale), qc)
+        over = (e_loc <= tol_in) & (dep < max_depth) & ~(err <= tol)
+        if not over.any():
+            break
+        if scale != sc_in:  # check again against the scale the table gets
+            sc_in = scale
+        else:  # rounding (S is summed along the path): fail those pieces locally next time
+            excess = float(np.max(err[over] - tol))
+            low = float(np.min(e_loc[over])) * (1.0 - 1e-9)
+            tol_in = max(min(tol_in - 2.0 * excess, low), 0.5 * tol_in)
+    return u, S, C, err
+
+
+def _no_length(path):
+    raise PlanError(f"bug: the path ending at line {int(path.line[-1])} has length "
+                    f"{path.length:g} but no measurable arc length")
+
+
 class JointTable:
     """q(s) of one path as quintic pieces: knots ``S`` (m+1,), coefficients ``C`` (m, 6, n),
     exact end point ``qend`` (n,), and the largest deviation found at the check points
-    ``max_err`` (mm / deg)."""
+    ``max_err`` (mm / deg).
+
+    Construction: the path's segments are cut into pieces of at most
+    ``VPOP_TABLE_MAX_PIECE`` of arc length, and each piece is bisected in u until its
+    quintic Hermite interpolant (ends: exact q, q_s, q_ss at path points) is within
+    ``tol`` of the true path at its three quarter points, at most
+    ``VPOP_TABLE_MAX_ROUNDS - 1`` times. Arc lengths come from a Gauss–Legendre rule
+    (``VPOP_TABLE_GL_ORDER`` points) on each quarter of each piece, computed once per
+    piece, and are scaled by one factor so that the last knot is ``path.length``
+    exactly; the checks are repeated on that final table, and ``max_err`` is their
+    largest result. Identity kinematics runs in one compiled pass
+    (``_table_kernels.build_identity``), other kinematics round by round.
+    """
 
     def __init__(self, path, joint_map, tol: float = VPOP_TABLE_TOL):
-        # initial knots: every segment break, then at most VPOP_TABLE_MAX_PIECE of s apart
-        seg_len = np.diff(path.s_breaks)
-        n_sub = np.maximum(1, np.ceil(seg_len / VPOP_TABLE_MAX_PIECE)).astype(np.int64)
-        u = [np.linspace(path.breaks[i], path.breaks[i + 1], n_sub[i] + 1)[:-1]
-             for i in range(path.n_seg)]
-        u = np.concatenate(u + [path.breaks[-1:]])
-        err = np.inf
-        for _ in range(VPOP_TABLE_MAX_ROUNDS):
-            seg = np.clip(np.searchsorted(path.breaks, u[:-1], side="right") - 1, 0, path.n_seg - 1)
-            ds = _arc(path, u[:-1], u[1:], seg)
-            keep = ds > 0
-            if not keep.all():  # drop pieces of zero length (the path stands still there)
-                u = np.concatenate((u[:-1][keep], u[-1:]))
-                seg, ds = seg[keep], ds[keep]
-            if ds.size == 0 or not ds.sum() > 0:
-                raise PlanError(f"bug: the path ending at line {int(path.line[-1])} has length "
-                                f"{path.length:g} but no measurable arc length")
-            scale = path.length / ds.sum()  # agree with the path's own length to rounding
-            S = np.concatenate(([0.0], np.cumsum(ds * scale)))
-            S[-1] = path.length
-            Q, Q1, Q2 = _joint_derivs(path, u, joint_map)
-            C = _hermite(S, Q, Q1, Q2)
-            # check at the quarter points of each piece against the true path
-            fr = np.array([0.25, 0.5, 0.75])
-            uc = (u[:-1, None] + np.diff(u)[:, None] * fr[None, :]).reshape(-1)
-            pc = np.repeat(np.arange(u.shape[0] - 1), 3)
-            sc = S[pc] + _arc(path, u[pc], uc, seg[pc]) * scale
-            qc = _positions(path, uc, joint_map)
-            e = np.abs(_eval_table(S, C, sc) - qc).max(axis=1).reshape(-1, 3).max(axis=1)
-            err = float(e.max()) if e.size else 0.0
-            bad = e > tol
-            if not bad.any():
-                break
-            mids = 0.5 * (u[:-1][bad] + u[1:][bad])
-            u = np.sort(np.concatenate((u, mids)))
+        max_depth = VPOP_TABLE_MAX_ROUNDS - 1
+        identity = joint_map is None or getattr(joint_map, "is_identity", False)
+        if identity:  # one compiled call (per-path overhead matters: CAM has 1e5 paths)
+            K = _kernels()
+            status, u, S, C, max_err, qend = K.build_identity(
+                path.coef, path.breaks, path.s_breaks, path.weights, float(path.length),
+                float(tol), max_depth, float(VPOP_TABLE_MAX_PIECE), _GL_X, _GL_W,
+                VPOP_TABLE_MAX_TRIES)
+            if status == K.NO_LENGTH:
+                _no_length(path)
+            finite = status != K.NOT_FINITE
+        else:
+            u, S, C, err = _build_mapped(path, joint_map, float(tol), max_depth)
+            qend = np.ascontiguousarray(_positions(path, path.breaks[-1:], joint_map)[0])
+            max_err = float(err.max()) if err.size else 0.0
+            finite = bool(np.all(np.isfinite(C)))
+        if not finite:
+            raise PlanError(f"bug: the arc-length table of the path ending at line "
+                            f"{int(path.line[-1])} is not finite (a point of zero speed?)")
         self.u = u
-        self.S = np.ascontiguousarray(S)
+        self.S = S
         self.C = C
-        self.qend = np.ascontiguousarray(_positions(path, path.breaks[-1:], joint_map)[0])
+        self.qend = qend
         self.qstart = C[0, 0].copy()
-        self.max_err = err
+        self.max_err = float(max_err)
         self.length = float(path.length)
 
 
     def curvature_bounds(self, al: np.ndarray, jl: np.ndarray):
         """Per piece: max_i |q_ss,i|/al_i, max_i |q_sss,i|/jl_i and max_i 3|q_ss,i|/jl_i,
         sampled at five points of the piece with a 25% margin (step units)."""
-        C = self.C
-        h = np.diff(self.S)
-        t = h[:, None] * np.linspace(0.0, 1.0, 5)[None, :]  # (m, 5)
-        tt = t[..., None]
-        c = C[:, None, :, :]  # (m, 1, 6, n)
-        q2 = 2 * c[:, :, 2] + tt * (6 * c[:, :, 3] + tt * (12 * c[:, :, 4] + tt * 20 * c[:, :, 5]))
-        q3 = 6 * c[:, :, 3] + tt * (24 * c[:, :, 4] + tt * 60 * c[:, :, 5])
-        m2 = 1.25 * np.abs(q2).max(axis=1)  # (m, n)
-        m3 = 1.25 * np.abs(q3).max(axis=1)
-        k2 = np.ascontiguousarray((m2 / al).max(axis=1))
-        k3 = np.ascontiguousarray((m3 / jl).max(axis=1))
-        k23 = np.ascontiguousarray((3.0 * m2 / jl).max(axis=1))
-        return k2, k3, k23
+        al = np.ascontiguousarray(al, dtype=float)
+        jl = np.ascontiguousarray(jl, dtype=float)
+        return _kernels().curvature_bounds(self.S, self.C, al, jl)
 
 
     def speed_bounds(self, vl: np.ndarray, path, feed_step: np.ndarray) -> np.ndarray:
         """Per piece: the largest of max_i |q_s,i|/vl_i (sampled, 2% margin) and
         1/(feed step) of its path segment; d1 times it must stay <= 1 (step units)."""
-        C = self.C
-        h = np.diff(self.S)
-        t = (h[:, None] * np.linspace(0.0, 1.0, 5)[None, :])[..., None]
-        c = C[:, None, :, :]
-        q1 = c[:, :, 1] + t * (2 * c[:, :, 2] + t * (3 * c[:, :, 3] + t * (4 * c[:, :, 4] + t * 5 * c[:, :, 5])))
-        kv = (1.02 * np.abs(q1).max(axis=1) / vl).max(axis=1)
+        kv = _kernels().speed_bound(self.S, self.C, np.ascontiguousarray(vl, dtype=float))
         seg = path.segment_of_s(0.5 * (self.S[:-1] + self.S[1:]))
         kf = 1.0 / feed_step[seg]
         return np.ascontiguousarray(np.maximum(kv, kf))
@@ -264,7 +309,7 @@ def plan_path_vpop(path, joint_map, machine, dt_s: float, settings=None) -> Path
     while True:
         status, k, b = core.plan_core(table.S, table.C, table.qend, vl, al, jl, js, dt, L, FB, FV,
                                       sh, qh, k, b, tol, max_steps, bs, bq, stats, K2, K3, K23, KV,
-                                      easy, gap_tol, fast)
+                                      easy, gap_tol, fast, VPOP_CHAIN_SEQUENTIAL)
         if status == core.NEED_SPACE:
             grow = sh.shape[0] * 2
             sh = np.concatenate((sh, np.zeros(grow - sh.shape[0])))

@@ -191,13 +191,17 @@ def _lin_interval(q, qs, qprev, lo, hi, x, a, b):
 
 
 @njit(cache=True)
-def _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, a, b, guess, want_max, hint, q, qs, tol):
+def _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, a, b, guess, want_max, hint, q, qs, tol, wk,
+            guess_bad=False, L0=0.0, H0=0.0):
     """Largest (want_max) or smallest feasible s' in [a, b] of the allowed set's component
     found by linearisation. Returns (found, s', hint); ``q`` holds q(s') when found.
 
     Newton on the linearised per-axis intervals (q and dq/ds come with every evaluation,
     so each iteration costs one table evaluation), kept inside a bracket [f, u] of a
     feasible f and an infeasible u; stops when the bracket or the Newton step is below tol.
+    ``guess_bad``: the caller has just found ``guess`` (inside [a, b]) infeasible and passes
+    its linearised interval (L0, H0), which saves evaluating it again. On success q, qs
+    hold q(s') and dq/ds(s'). ``wk`` (>= 2, n) is scratch.
     """
     n = q.shape[0]
     qprev = qh[k - 1]
@@ -213,13 +217,16 @@ def _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, a, b, guess, want_max, hint, 
         x = b
     f = 0.0
     have_f = False
-    for _ in range(10):
-        hint = _eval(S, C, QEND, x, hint, q, qs)
-        if _feasible(qh, k, q, vl, al, jl):
-            f = x
-            have_f = True
-            break
-        L, H = _lin_interval(q, qs, qprev, lo, hi, x, a, b)
+    for it in range(10):
+        if it == 0 and guess_bad:
+            L, H = L0, H0
+        else:
+            hint = _eval(S, C, QEND, x, hint, q, qs)
+            if _feasible(qh, k, q, vl, al, jl):
+                f = x
+                have_f = True
+                break
+            L, H = _lin_interval(q, qs, qprev, lo, hi, x, a, b)
         xn = 0.5 * (L + H)
         if xn < a:
             xn = a
@@ -230,7 +237,11 @@ def _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, a, b, guess, want_max, hint, 
         x = xn
     if not have_f:
         return False, a, hint
-    qf = q.copy()
+    qf = wk[0]
+    qsf = wk[1]
+    for i in range(n):
+        qf[i] = q[i]
+        qsf[i] = qs[i]
     u = ends  # known infeasible
     # 2. Newton towards the wanted end of the interval
     for _ in range(40):
@@ -258,12 +269,14 @@ def _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, a, b, guess, want_max, hint, 
             f = x
             for i in range(n):
                 qf[i] = q[i]
+                qsf[i] = qs[i]
         else:
             u = x
         if abs(u - f) <= tol:
             break
     for i in range(n):
         q[i] = qf[i]
+        qs[i] = qsf[i]
     return True, f, hint
 
 
@@ -337,11 +350,15 @@ def _stop_distance(v, a, J, A):
 
 @njit(cache=True)
 def _brake_value(S, C, QEND, qh, k, vl, al, jl, js_lim, lo, hi, s0, d1, b, guess, hint, q, qs,
-                 tol):
+                 tol, wk, qs0_known):
     """The brake policy's sample k (see ``_step``), given the bounds ``lo``/``hi`` of
-    ``_bounds``. Returns (ok, s', hint); q holds q(s')."""
-    hint = _eval(S, C, QEND, s0, hint, q, qs)
-    jd, ad = _path_limits(qs, js_lim, al)
+    ``_bounds``. Returns (ok, s', hint); q, qs hold q(s'), dq/ds(s'). With ``qs0_known``
+    wk[2] already holds dq/ds(s0) (a brake run carries it from the step before)."""
+    if qs0_known:
+        jd, ad = _path_limits(wk[2], js_lim, al)
+    else:
+        hint = _eval(S, C, QEND, s0, hint, q, qs)
+        jd, ad = _path_limits(qs, js_lim, al)
     # the least step after which a jerk ramp back to zero path acceleration still
     # leaves a non-negative speed (or a full stop once the speed is one jerk step)
     if d1 <= jd:
@@ -357,20 +374,20 @@ def _brake_value(S, C, QEND, qh, k, vl, al, jl, js_lim, lo, hi, s0, d1, b, guess
     L, H = _lin_interval(q, qs, qh[k - 1], lo, hi, target, s0, b)
     if target < L or L > H:
         okl, xl, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, target, False,
-                                hint, q, qs, tol)
+                                hint, q, qs, tol, wk, True, L, H)
         if okl and xl >= target:
             return True, xl, hint
         if not okl:
             return False, s0, hint
     oku, xu, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, target, True,
-                            hint, q, qs, tol)
+                            hint, q, qs, tol, wk, True, L, H)
     if not oku:
         return False, s0, hint
     if xu <= target:
         return True, xu, hint
     # the linear model misled: the target lies inside; fall back to the lower end
     okl, xl, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, False,
-                            hint, q, qs, tol)
+                            hint, q, qs, tol, wk)
     if not okl:
         return False, s0, hint
     if xl >= target:
@@ -382,10 +399,11 @@ def _brake_value(S, C, QEND, qh, k, vl, al, jl, js_lim, lo, hi, s0, d1, b, guess
 
 @njit(cache=True)
 def _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, mode, hint, q, qs,
-          lo, hi, tol, aim_jerk=1.0):
+          lo, hi, tol, wk, qs0_known, aim_jerk=1.0):
     """Choose sample k. mode 0: max; 1: brake; 2: aim at rest exactly at L.
 
-    Returns (ok, s', hint); q holds q(s'). Mode 0 fails only when the brake policy
+    Returns (ok, s', hint); on success q, qs hold q(s'), dq/ds(s'). ``wk`` (3, n) is
+    scratch; with ``qs0_known`` wk[2] holds dq/ds at sample k-1. Mode 0 fails only when the brake policy
     finds no sample k either, so "max failed at k" always means "braking from k fails"
     (what the dichotomy in ``plan_core`` relies on)."""
     if not _bounds(qh, k, vl, al, jl, lo, hi):
@@ -399,28 +417,29 @@ def _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, mode, hint, 
     guess = s0 + d1 + d2
     if mode == 0:
         ok, x, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, True, hint,
-                              q, qs, tol)
+                              q, qs, tol, wk)
         if ok:
             return ok, x, hint
         # the linearised search can miss a narrow allowed set (near a sharp turn the
         # joint positions are far from linear in s); the brake value is a feasible seed
         okb, xb, hint = _brake_value(S, C, QEND, qh, k, vl, al, jl, js_lim, lo, hi, s0, d1, b,
-                                     guess, hint, q, qs, tol)
+                                     guess, hint, q, qs, tol, wk, qs0_known)
         if not okb:
             return False, s0, hint
-        return _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, xb, True, hint, q, qs, tol)
+        return _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, xb, True, hint, q, qs, tol,
+                       wk)
     if mode == 1:
         return _brake_value(S, C, QEND, qh, k, vl, al, jl, js_lim, lo, hi, s0, d1, b, guess,
-                            hint, q, qs, tol)
+                            hint, q, qs, tol, wk, qs0_known)
     hint = _eval(S, C, QEND, s0, hint, q, qs)
     jd, ad = _path_limits(qs, jl, al)
     # aim: the largest step whose continuous stop distance still fits before L
     okl, xl, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, False,
-                            hint, q, qs, tol)
+                            hint, q, qs, tol, wk)
     if not okl:
         return False, s0, hint
     oku, xu, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, True, hint,
-                            q, qs, tol)
+                            q, qs, tol, wk)
     jd = jd * aim_jerk
     x = xl
     if xu >= L and L - s0 <= jd:
@@ -474,7 +493,7 @@ def range_max_table(K: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def _easy(S, C, QEND, K2, K3, K23, KV, bs, kk, al, js_lim, L, easy_frac, q, qs, hint):
+def _easy(S, K2, K3, K23, KV, bs, kk, al, js_lim, L, easy_frac, qs0, hint):
     """Early end of a brake run: braking, slow enough that the path's curvature uses at most
     ``easy_frac`` of any axis's acceleration and jerk over the whole remaining stop, and
     the stop ends before L. (A heuristic; a plan it misleads is re-planned exactly.)"""
@@ -483,8 +502,8 @@ def _easy(S, C, QEND, K2, K3, K23, KV, bs, kk, al, js_lim, L, easy_frac, q, qs, 
     d2 = d1 - (bs[kk - 2] - bs[kk - 3])
     if d2 > 0.0 or d1 <= 0.0:
         return False
-    p0 = _eval(S, C, QEND, s0, hint, q, qs)
-    jd, ad = _path_limits(qs, js_lim, al)
+    p0 = _piece(S, s0, hint)
+    jd, ad = _path_limits(qs0, js_lim, al)
     # the ramp back to zero deceleration must not need a negative speed
     if d1 < 2.0 * d2 * d2 / jd:
         return False
@@ -508,7 +527,7 @@ def _easy(S, C, QEND, K2, K3, K23, KV, bs, kk, al, js_lim, L, easy_frac, q, qs, 
 
 @njit(cache=True)
 def _brake_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq, max_steps,
-               q, qs, lo, hi, tol, stats, mode, K2, K3, K23, KV, easy_frac, horizon):
+               q, qs, lo, hi, tol, stats, mode, K2, K3, K23, KV, easy_frac, horizon, wk):
     """Does the brake (mode 1) or aim (mode 2) policy from step j (samples < j fixed) reach
     rest? Uses scratch bs/bq, which start with copies of samples j-3..j-1 at 0..2.
 
@@ -528,21 +547,22 @@ def _brake_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq,
     cap = bs.shape[0]
     while True:
         ok, x, hint = _step(S, C, QEND, bs, bq, kk, vl, al, jl, js_lim, dt, L, FB, FV, mode,
-                            hint, q, qs, lo, hi, tol)
+                            hint, q, qs, lo, hi, tol, wk, kk > 3)
         if not ok:
             return False, kk, 0
         bs[kk] = x
         stats[2] += 1
         for i in range(n):
             bq[kk, i] = q[i]
+            wk[2, i] = qs[i]  # dq/ds at the new sample, for the next step and _easy
         kk += 1
         if bs[kk - 1] == bs[kk - 2] and bs[kk - 2] == bs[kk - 3]:
             return True, kk, _BIG
-        if easy_frac > 0.0 and mode == 1 and _easy(S, C, QEND, K2, K3, K23, KV, bs, kk, al, js_lim,
-                                                   L, easy_frac, q, qs, hint):
+        if easy_frac > 0.0 and mode == 1 and _easy(S, K2, K3, K23, KV, bs, kk, al, js_lim,
+                                                   L, easy_frac, wk[2], hint):
             return True, kk, _BIG
         if horizon > 0 and j + kk - 3 >= horizon and \
-                _easy(S, C, QEND, K2, K3, K23, KV, bs, kk, al, js_lim, L, 0.6, q, qs, hint):
+                _easy(S, K2, K3, K23, KV, bs, kk, al, js_lim, L, 0.6, wk[2], hint):
             return True, kk, j + kk - 3
         if kk >= cap or kk >= max_steps:
             return False, kk, 0
@@ -561,7 +581,7 @@ def _stays_at_rest(sh, j, x, L):
 
 @njit(cache=True)
 def _rest_value(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq, max_steps,
-                q, qs, lo, hi, tol, stats, K2, K3, K23, KV, easy_frac, hint):
+                q, qs, lo, hi, tol, stats, K2, K3, K23, KV, easy_frac, hint, wk):
     """Sample j when the machine is at rest before it, the brake policy would stay put
     and the max step's continuation cannot stop (e.g. a path shorter than what one
     step from rest and the stop after it allow): the largest value in (s0, max] found
@@ -573,7 +593,7 @@ def _rest_value(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq
     n = qh.shape[1]
     s0 = sh[j - 1]
     ok, xm, hint = _step(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, 0,
-                         hint, q, qs, lo, hi, tol)
+                         hint, q, qs, lo, hi, tol, wk, False)
     if not ok or not xm > s0:
         return False, s0, 0, hint
     good = s0
@@ -588,7 +608,7 @@ def _rest_value(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq
                 qh[j, i] = q[i]
             r = _brake_run(S, C, QEND, sh, qh, j + 1, vl, al, jl, js_lim, dt, L, FB, FV,
                            bs, bq, max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23, KV,
-                           easy_frac, 0)
+                           easy_frac, 0, wk)
             stats[1] += 1
             passed = r[0]
         else:
@@ -623,22 +643,109 @@ def _horizon(k, j, fast):
     return k + (k - j) + 8
 
 
+@njit(cache=True)
+def _save_run(bs, bq, kk, cs, cq):
+    """Keep the brake run just made (scratch bs/bq up to kk) as the chain's certificate."""
+    n = bq.shape[1]
+    for t in range(kk):
+        cs[t] = bs[t]
+        for i in range(n):
+            cq[t, i] = bq[t, i]
+    return kk - 3
+
+
+@njit(cache=True)
+def _put_cert(sh, qh, cs, cq, j, t0, t1):
+    """Write certificate samples t0..t1-1 (main indices; the certificate starts at j)."""
+    n = qh.shape[1]
+    for t in range(t0, t1):
+        sh[t] = cs[3 + t - j]
+        for i in range(n):
+            qh[t, i] = cq[3 + t - j, i]
+
+
+@njit(cache=True)
+def _chain_search(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, j, m, cs, cq, bs, bq,
+                  max_steps, q, qs, lo, hi, tol, stats, K2, K3, K23, KV, easy_frac, fast,
+                  last_k, last_j, wk, hint, chain_seq):
+    """After a brake fix at j with its brake run kept in cs/cq (samples j..j+m-1): the first
+    t in (j, j+m) where the max step followed by braking reaches rest, the samples between
+    following the certificate. Sequentially that is one brake run per step of the chain;
+    here the first ``chain_seq`` t are tested in order, the rest by bisection (the same
+    tests; they mostly pass from some t on, and where they do not, the t found can be a
+    later one: a slightly longer cycle, never an unsafe sample).
+
+    Returns (P, certified-up-to of P's run, hint); P = -1 when no t passes, with the
+    samples up to j+m-1 then set to the certificate. On success sh/qh hold j..P."""
+    n = qh.shape[1]
+    lo_t = j          # known: fails (or is the fix itself)
+    hi_t = j + m      # no test there yet: a virtual pass
+    best = -1
+    best_cert = 0
+    # the next step is the most frequent answer: test it first, then bisect
+    t = j + 1
+    while hi_t - lo_t > 1:
+        _put_cert(sh, qh, cs, cq, j, j + 1, t)
+        ok, x, hint = _step(S, C, QEND, sh, qh, t, vl, al, jl, js_lim, dt, L, FB, FV, 0,
+                            hint, q, qs, lo, hi, tol, wk, False)
+        stats[3] += 1
+        passed = False
+        cert = 0
+        if ok:
+            sh[t] = x
+            for i in range(n):
+                qh[t, i] = q[i]
+            hz = (t + 1 + 2 * (last_k - last_j) + 8) if fast else 0
+            r = _brake_run(S, C, QEND, sh, qh, t + 1, vl, al, jl, js_lim, dt, L, FB, FV,
+                           bs, bq, max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23, KV,
+                           easy_frac, hz, wk)
+            stats[1] += 1
+            passed = r[0]
+            cert = r[2]
+        if passed:
+            hi_t = t
+            best = t
+            best_cert = cert
+        else:
+            lo_t = t
+        if best < 0 and t - j < chain_seq and t + 1 < hi_t:
+            t = t + 1  # the first few in order (the tests do not always pass from some t on)
+        else:
+            t = (lo_t + hi_t) // 2
+    if best < 0:
+        _put_cert(sh, qh, cs, cq, j, j + 1, j + m)
+        return -1, 0, hint
+    _put_cert(sh, qh, cs, cq, j, j + 1, best)
+    ok, x, hint = _step(S, C, QEND, sh, qh, best, vl, al, jl, js_lim, dt, L, FB, FV, 0,
+                        hint, q, qs, lo, hi, tol, wk, False)
+    sh[best] = x
+    for i in range(n):
+        qh[best, i] = q[i]
+    return best, best_cert, hint
+
+
 @njit(cache=True, nogil=True)
 def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol, max_steps,
-              bs, bq, stats, K2, K3, K23, KV, easy_frac, gap_tol, fast):
+              bs, bq, stats, K2, K3, K23, KV, easy_frac, gap_tol, fast, chain_seq):
     """Run VPOp from sample k0 (samples < k0 fixed, b0 the last brake-fixed sample).
 
     Fills ``sh`` (K,), ``qh`` (K, n). Returns (status, k, b). Status NEED_SPACE asks the
     caller to grow ``sh``/``qh`` and call again with (k, b).
     stats: [backtracks, brake runs, brake-run steps, max steps, aim runs committed].
     ``easy_frac`` > 0 lets brake runs end early (see ``_easy``); ``gap_tol`` is how far
-    short of L a committed aim run may stop; ``fast`` bounds brake runs by ``_horizon``.
+    short of L a committed aim run may stop; ``fast`` bounds brake runs by ``_horizon``;
+    ``chain_seq`` is how many chain tests run in order before bisection (``_chain_search``).
     """
     n = qh.shape[1]
     q = np.empty(n)
     qs = np.empty(n)
     lo = np.empty(n)
     hi = np.empty(n)
+    wk = np.empty((3, n))
+    cs = np.empty(bs.shape[0])  # the brake run that certified the last fix
+    cq = np.empty((bs.shape[0], n))
+    c_at = -1  # main index of its first sample (cs[3]); -1: none
+    c_len = 0
     k = k0
     b = b0
     hint = 0
@@ -655,8 +762,25 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol
             return NEED_SPACE, k, b
         if k >= max_steps:
             return STUCK, k, b
+        if chain and c_at == k - 1 and c_len >= 3 and k + c_len + 1 < cap:
+            # the chain after a fix, along the fix's own brake run, by bisection
+            P, pc, hint = _chain_search(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh,
+                                        k - 1, c_len, cs, cq, bs, bq, max_steps, q, qs, lo, hi,
+                                        tol, stats, K2, K3, K23, KV, easy_frac, fast, last_k,
+                                        last_j, wk, hint, chain_seq)
+            c_at = -1
+            if P >= 0:
+                cert = pc
+                chain = False
+                if P - 1 > b:
+                    b = P - 1
+                k = P + 1
+            else:
+                b = k + c_len - 2
+                k = k + c_len - 1
+            continue
         ok, x, hint = _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, 0,
-                            hint, q, qs, lo, hi, tol)
+                            hint, q, qs, lo, hi, tol, wk, False)
         stats[3] += 1
         if ok and chain and k + 1 < cap:
             # right after a brake fix the next failure is usually imminent: test the max
@@ -665,9 +789,10 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol
             sh[k] = x
             for i in range(n):
                 qh[k, i] = q[i]
+            hz = (k + 1 + 2 * (last_k - last_j) + 8) if fast else 0
             r = _brake_run(S, C, QEND, sh, qh, k + 1, vl, al, jl, js_lim, dt, L, FB, FV,
                            bs, bq, max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23, KV,
-                           easy_frac, (k + 1 + 2 * (last_k - last_j) + 8) if fast else 0)
+                           easy_frac, hz, wk)
             stats[1] += 1
             if r[0]:
                 cert = r[2]
@@ -675,24 +800,28 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol
                 k += 1
                 continue
             if k + 1 >= cert:
+                hz = (k + 2 * (last_k - last_j) + 8) if fast else 0
                 r = _brake_run(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV,
                                bs, bq, max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23, KV,
-                               easy_frac, (k + 2 * (last_k - last_j) + 8) if fast else 0)
+                               easy_frac, hz, wk)
                 stats[1] += 1
                 if not r[0]:
                     return INFEASIBLE, k, b
                 cert = r[2]
+                c_len = _save_run(bs, bq, r[1], cs, cq)
+                c_at = k
             ok, x, hint = _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, 1,
-                                hint, q, qs, lo, hi, tol)
+                                hint, q, qs, lo, hi, tol, wk, False)
             if not ok:
                 return INFEASIBLE, k, b
             if _stays_at_rest(sh, k, x, L):
                 ok, x, c, hint = _rest_value(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L,
                                              FB, FV, bs, bq, max_steps, q, qs, lo, hi, tol,
-                                             stats, K2, K3, K23, KV, easy_frac, hint)
+                                             stats, K2, K3, K23, KV, easy_frac, hint, wk)
                 if not ok:
                     return STUCK, k, b
                 cert = c
+                c_at = -1
             sh[k] = x
             for i in range(n):
                 qh[k, i] = q[i]
@@ -718,21 +847,25 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol
         if lo_j + 1 < hi_j:
             r = _brake_run(S, C, QEND, sh, qh, lo_j + 1, vl, al, jl, js_lim, dt, L, FB,
                            FV, bs, bq, max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23, KV,
-                           easy_frac, _horizon(k, lo_j + 1, fast))
+                           easy_frac, _horizon(k, lo_j + 1, fast), wk)
             stats[1] += 1
             if r[0]:
                 lo_j = lo_j + 1
                 tested = True
                 cert = r[2]
+                c_len = _save_run(bs, bq, r[1], cs, cq)
+                c_at = lo_j
                 while hi_j - lo_j > 1:
                     mid = (lo_j + hi_j) // 2
                     r = _brake_run(S, C, QEND, sh, qh, mid, vl, al, jl, js_lim, dt, L, FB, FV,
                                    bs, bq, max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23, KV,
-                                   easy_frac, _horizon(k, mid, fast))
+                                   easy_frac, _horizon(k, mid, fast), wk)
                     stats[1] += 1
                     if r[0]:
                         lo_j = mid
                         cert = r[2]
+                        c_len = _save_run(bs, bq, r[1], cs, cq)
+                        c_at = mid
                     else:
                         hi_j = mid
         j = lo_j
@@ -740,11 +873,13 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol
             # fast mode: the brake chain has run past what its last run certified
             r = _brake_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV,
                            bs, bq, max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23, KV,
-                           easy_frac, _horizon(k, j, fast))
+                           easy_frac, _horizon(k, j, fast), wk)
             stats[1] += 1
             if not r[0]:
                 return INFEASIBLE, k, b
             cert = r[2]
+            c_len = _save_run(bs, bq, r[1], cs, cq)
+            c_at = j
         # the end is what stops us: try to land on it with the aim policy in one run
         if gap_tol > 0.0 and k >= 2 and sh[k - 1] >= L - 2.0 * (sh[k - 1] - sh[k - 2]) - tol:
             done = False
@@ -754,7 +889,7 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol
                     break
                 r = _brake_run(S, C, QEND, sh, qh, jj, vl, al, jl, js_lim, dt, L, FB, FV,
                                bs, bq, max_steps, q, qs, lo, hi, tol, stats, 2, K2, K3, K23, KV,
-                               0.0, 0)
+                               0.0, 0, wk)
                 kk = r[1]
                 if r[0] and L - bs[kk - 1] <= gap_tol:
                     need = jj + kk - 3
@@ -772,16 +907,17 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol
             if done:
                 continue
         ok, x, hint = _step(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, 1,
-                            hint, q, qs, lo, hi, tol)
+                            hint, q, qs, lo, hi, tol, wk, False)
         if not ok:
             return INFEASIBLE, j, b
         if _stays_at_rest(sh, j, x, L):
             ok, x, c, hint = _rest_value(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L,
                                          FB, FV, bs, bq, max_steps, q, qs, lo, hi, tol,
-                                         stats, K2, K3, K23, KV, easy_frac, hint)
+                                         stats, K2, K3, K23, KV, easy_frac, hint, wk)
             if not ok:
                 return STUCK, j, b
             cert = c
+            c_at = -1
         sh[j] = x
         for i in range(n):
             qh[j, i] = q[i]
