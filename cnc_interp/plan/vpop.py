@@ -305,9 +305,10 @@ def plan_path_vpop(path, joint_map, machine, dt_s: float, settings=None) -> Path
     fast = bool(getattr(settings, "get", lambda *_: None)("vpop_exact") is not True)
     if not fast:
         easy = 0.0
+    coef_axis_major = np.ascontiguousarray(table.C.transpose(0, 2, 1))  # (m, n, 6)
     k, b = 1, 0
     while True:
-        status, k, b = core.plan_core(table.S, table.C, table.qend, vl, al, jl, js, dt, L, FB, FV,
+        status, k, b = core.plan_core(table.S, coef_axis_major, table.qend, vl, al, jl, js, dt, L, FB, FV,
                                       sh, qh, k, b, tol, max_steps, bs, bq, stats, K2, K3, K23, KV,
                                       easy, gap_tol, fast, VPOP_CHAIN_SEQUENTIAL)
         if status == core.NEED_SPACE:
