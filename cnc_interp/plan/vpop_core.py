@@ -59,6 +59,8 @@ STUCK = 2
 INFEASIBLE = 3
 
 _HUGE = 1e300
+# "clearly outside the bounds" for a zero step: far above the rounding of _bounds
+_STAY_MARGIN = 1e-6
 _BIG = 1 << 62
 
 
@@ -199,7 +201,7 @@ def _lin_interval(q, qs, qprev, lo, hi, x, a, b):
 
 @njit(cache=True)
 def _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, a, b, guess, want_max, hint, q, qs, tol, wk,
-            guess_bad=False, L0=0.0, H0=0.0):
+            guess_bad=False, L0=0.0, H0=0.0, a_is_prev=False):
     """Largest (want_max) or smallest feasible s' in [a, b] of the allowed set's component
     found by linearisation. Returns (found, s', hint); ``q`` holds q(s') when found.
 
@@ -208,14 +210,23 @@ def _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, a, b, guess, want_max, hint, 
     feasible f and an infeasible u; stops when the bracket or the Newton step is below tol.
     ``guess_bad``: the caller has just found ``guess`` (inside [a, b]) infeasible and passes
     its linearised interval (L0, H0), which saves evaluating it again. On success q, qs
-    hold q(s') and dq/ds(s'). ``wk`` (>= 2, n) is scratch.
+    hold q(s') and dq/ds(s'). ``wk`` (>= 2, n) is scratch. ``a_is_prev``: a is sample
+    k-1's own s, where every axis's step e is exactly 0, so the bounds alone can rule
+    it out (only when clearly outside them; at the margin it is evaluated).
     """
     n = q.shape[0]
     qprev = qh[k - 1]
     ends = b if want_max else a
-    hint = _eval(S, C, QEND, ends, hint, q, qs)
-    if _feasible(qh, k, q, vl, al, jl):
-        return True, ends, hint
+    check_end = True
+    if a_is_prev and not want_max:
+        for i in range(n):
+            if lo[i] > _STAY_MARGIN * jl[i] or hi[i] < -_STAY_MARGIN * jl[i]:
+                check_end = False  # standing still is outside the allowed set
+                break
+    if check_end:
+        hint = _eval(S, C, QEND, ends, hint, q, qs)
+        if _feasible(qh, k, q, vl, al, jl):
+            return True, ends, hint
     # 1. a feasible point: the guess, then the middle of the linearised allowed interval
     x = guess
     if x < a:
@@ -383,7 +394,7 @@ def _brake_value(S, C, QEND, qh, k, vl, al, jl, js_lim, lo, hi, s0, d1, b, guess
     L, H = _lin_interval(q, qs, qh[k - 1], lo, hi, target, s0, b)
     if target < L or L > H:
         okl, xl, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, target, False,
-                                hint, q, qs, tol, wk, True, L, H)
+                                hint, q, qs, tol, wk, True, L, H, True)
         if okl and xl >= target:
             return True, xl, hint
         if not okl:
@@ -396,7 +407,7 @@ def _brake_value(S, C, QEND, qh, k, vl, al, jl, js_lim, lo, hi, s0, d1, b, guess
         return True, xu, hint
     # the linear model misled: the target lies inside; fall back to the lower end
     okl, xl, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, False,
-                            hint, q, qs, tol, wk)
+                            hint, q, qs, tol, wk, False, 0.0, 0.0, True)
     if not okl:
         return False, s0, hint
     if xl >= target:
