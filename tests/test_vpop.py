@@ -294,3 +294,38 @@ def test_random_short_curves_and_lines_at_high_feed(machine):
                 check_path(plan, machine, p)
             except Exception as exc:
                 raise AssertionError(f"trial {trial}, exact {exact}") from exc
+
+
+@pytest.mark.parametrize("seed", [3, 11])
+def test_bisected_chain_matches_sequential_chain(seed, monkeypatch):
+    """The chain after a brake fix is searched by bisection (plus probes below); testing
+    every step in order is the reference. Both must hold the limits and end exactly, and
+    the bisection may cost at most a little cycle time (it picks a later switch only
+    where the tests do not pass from some step on)."""
+    import cnc_interp.plan.vpop as vpop_mod
+
+    rng = np.random.default_rng(seed)
+    p = hermite_path(random_curve(rng), 40, 180.0)
+    fast = plan_path_vpop(p, None, MILL, DT)
+    monkeypatch.setattr(vpop_mod, "VPOP_CHAIN_SEQUENTIAL", 10**9)
+    ref = plan_path_vpop(p, None, MILL, DT)
+    check(fast, MILL, p.start, p.end)
+    check(ref, MILL, p.start, p.end)
+    assert fast.stats["backtracks"] > 0  # the chain is exercised
+    assert fast.s.shape[0] <= 1.03 * ref.s.shape[0], (fast.s.shape[0], ref.s.shape[0])
+    assert fast.stats["brake_steps"] < ref.stats["brake_steps"]
+
+
+def test_helix_at_the_acceleration_limit_chain(monkeypatch):
+    """A helix cruising at the centripetal limit switches between speeding up and braking
+    all the time: the bisected chain holds every limit and stays within 3% of the
+    sequential chain's cycle."""
+    import cnc_interp.plan.vpop as vpop_mod
+
+    p = hermite_path(circle_fun(12.0, turns=2.0, z_per_turn=8.0), 64, 1000.0)
+    fast = plan_path_vpop(p, None, MILL, DT)
+    check(fast, MILL, p.start, p.end)
+    monkeypatch.setattr(vpop_mod, "VPOP_CHAIN_SEQUENTIAL", 10**9)
+    ref = plan_path_vpop(p, None, MILL, DT)
+    check(ref, MILL, p.start, p.end)
+    assert fast.s.shape[0] <= 1.03 * ref.s.shape[0], (fast.s.shape[0], ref.s.shape[0])

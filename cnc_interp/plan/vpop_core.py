@@ -685,15 +685,40 @@ def _put_cert(sh, qh, cs, cq, j, t0, t1):
 
 
 @njit(cache=True)
+def _chain_test(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, j, t, cs, cq, bs, bq,
+                max_steps, q, qs, lo, hi, tol, stats, K2, K3, K23, KV, easy_frac, fast,
+                last_k, last_j, wk, hint):
+    """Samples j+1..t-1 from the certificate, the max step at t, then a brake run from
+    t+1: (passed, certified-up-to, hint)."""
+    n = qh.shape[1]
+    _put_cert(sh, qh, cs, cq, j, j + 1, t)
+    ok, x, hint = _step(S, C, QEND, sh, qh, t, vl, al, jl, js_lim, dt, L, FB, FV, 0,
+                        hint, q, qs, lo, hi, tol, wk, False)
+    stats[3] += 1
+    if not ok:
+        return False, 0, hint
+    sh[t] = x
+    for i in range(n):
+        qh[t, i] = q[i]
+    hz = (t + 1 + 2 * (last_k - last_j) + 8) if fast else 0
+    r = _brake_run(S, C, QEND, sh, qh, t + 1, vl, al, jl, js_lim, dt, L, FB, FV,
+                   bs, bq, max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23, KV,
+                   easy_frac, hz, wk)
+    stats[1] += 1
+    return r[0], r[2], hint
+
+
+@njit(cache=True)
 def _chain_search(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, j, m, cs, cq, bs, bq,
                   max_steps, q, qs, lo, hi, tol, stats, K2, K3, K23, KV, easy_frac, fast,
                   last_k, last_j, wk, hint, chain_seq):
     """After a brake fix at j with its brake run kept in cs/cq (samples j..j+m-1): the first
     t in (j, j+m) where the max step followed by braking reaches rest, the samples between
     following the certificate. Sequentially that is one brake run per step of the chain;
-    here the first ``chain_seq`` t are tested in order, the rest by bisection (the same
-    tests; they mostly pass from some t on, and where they do not, the t found can be a
-    later one: a slightly longer cycle, never an unsafe sample).
+    here the first ``chain_seq`` t are tested in order, the rest by bisection and then
+    probes below the bisection's answer at doubling distances (the tests mostly pass from
+    some t on; where they do not, an earlier pass is worth finding: the switch to
+    speeding up comes sooner). Any t chosen has passed its own test: never unsafe.
 
     Returns (P, certified-up-to of P's run, hint); P = -1 when no t passes, with the
     samples up to j+m-1 then set to the certificate. On success sh/qh hold j..P."""
@@ -702,26 +727,12 @@ def _chain_search(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, j, m, c
     hi_t = j + m      # no test there yet: a virtual pass
     best = -1
     best_cert = 0
-    # the next step is the most frequent answer: test it first, then bisect
     t = j + 1
     while hi_t - lo_t > 1:
-        _put_cert(sh, qh, cs, cq, j, j + 1, t)
-        ok, x, hint = _step(S, C, QEND, sh, qh, t, vl, al, jl, js_lim, dt, L, FB, FV, 0,
-                            hint, q, qs, lo, hi, tol, wk, False)
-        stats[3] += 1
-        passed = False
-        cert = 0
-        if ok:
-            sh[t] = x
-            for i in range(n):
-                qh[t, i] = q[i]
-            hz = (t + 1 + 2 * (last_k - last_j) + 8) if fast else 0
-            r = _brake_run(S, C, QEND, sh, qh, t + 1, vl, al, jl, js_lim, dt, L, FB, FV,
-                           bs, bq, max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23, KV,
-                           easy_frac, hz, wk)
-            stats[1] += 1
-            passed = r[0]
-            cert = r[2]
+        passed, cert, hint = _chain_test(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh,
+                                         j, t, cs, cq, bs, bq, max_steps, q, qs, lo, hi, tol,
+                                         stats, K2, K3, K23, KV, easy_frac, fast, last_k,
+                                         last_j, wk, hint)
         if passed:
             hi_t = t
             best = t
@@ -729,9 +740,23 @@ def _chain_search(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, j, m, c
         else:
             lo_t = t
         if best < 0 and t - j < chain_seq and t + 1 < hi_t:
-            t = t + 1  # the first few in order (the tests do not always pass from some t on)
+            t = t + 1  # the first few in order
         else:
             t = (lo_t + hi_t) // 2
+    if best > j + chain_seq + 1:
+        d = 2
+        while best - d > j + chain_seq:
+            t = best - d
+            passed, cert, hint = _chain_test(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh,
+                                             qh, j, t, cs, cq, bs, bq, max_steps, q, qs, lo,
+                                             hi, tol, stats, K2, K3, K23, KV, easy_frac, fast,
+                                             last_k, last_j, wk, hint)
+            if passed:
+                best = t
+                best_cert = cert
+                d = 2
+            else:
+                d *= 2
     if best < 0:
         _put_cert(sh, qh, cs, cq, j, j + 1, j + m)
         return -1, 0, hint
