@@ -105,9 +105,11 @@ def prepare_run(run: Run, settings) -> PreparedRun:
                        lin, scale, rot_only)
 
 
-def split_run(pr: PreparedRun, settings) -> list[SubRun]:
-    """Cut a prepared run into sub-runs at corners, G61 nodes and metric changes."""
-    from .curves import CurveEval, end_states
+def split_run(pr: PreparedRun, settings, evals: dict | None = None) -> list[SubRun]:
+    """Cut a prepared run into sub-runs at corners, G61 nodes and metric changes.
+
+    ``evals`` optionally shares each curve's ``CurveEval`` with the fitter."""
+    from .curves import curve_eval, end_states
 
     n = pr.nodes.shape[0]
     if n < 2:
@@ -119,7 +121,7 @@ def split_run(pr: PreparedRun, settings) -> list[SubRun]:
     d_out[:-1] = chords
     inside = np.zeros(n, dtype=bool)
     for cp in pr.curves:
-        (t0, _), (t1, _) = end_states(CurveEval(cp.curve), pr.scale)
+        (t0, _), (t1, _) = end_states(curve_eval(cp.curve, evals), pr.scale)
         d_out[cp.first] = t0
         d_in[cp.last] = t1
         inside[cp.first + 1:cp.last] = True

@@ -35,6 +35,14 @@ class CurveEval:
             self.w0, self.w1 = 0.0, 1.0
             n_q = max(1, int(np.ceil(abs(curve.sweep_rad) / (0.5 * np.pi))))
             self.breaks = np.linspace(0.0, 1.0, n_q + 1)
+            # the arc's constants, once (the same expressions as Arc.points, so that
+            # positions come out bit-identical to it)
+            c = curve
+            i, j, _ = c.plane
+            self._a0 = np.arctan2(c.start[j] - c.center[1], c.start[i] - c.center[0])
+            self._r0 = float(np.hypot(c.start[i] - c.center[0], c.start[j] - c.center[1]))
+            self._r1 = float(np.hypot(c.end[i] - c.center[0], c.end[j] - c.center[1]))
+            self._d = c.end - c.start
         elif isinstance(curve, Nurbs):
             from scipy.interpolate import BSpline
 
@@ -55,18 +63,18 @@ class CurveEval:
         c = self.curve
         if isinstance(c, Arc):
             i, j, _ = c.plane
-            P = c.points(w)
-            d = (c.end - c.start)[None, :]
-            P1 = np.repeat(d, w.size, axis=0)
-            P2 = np.zeros_like(P)
-            a0 = np.arctan2(c.start[j] - c.center[1], c.start[i] - c.center[0])
             sw = c.sweep_rad
-            ang = a0 + sw * w
-            r0 = np.hypot(c.start[i] - c.center[0], c.start[j] - c.center[1])
-            r1 = np.hypot(c.end[i] - c.center[0], c.end[j] - c.center[1])
+            ang = self._a0 + sw * w
+            r0, r1 = self._r0, self._r1
             r = r0 + (r1 - r0) * w
             dr = r1 - r0
             co, si = np.cos(ang), np.sin(ang)
+            # P as Arc.points(w) computes it (same expressions), sharing cos/sin
+            P = c.start[None, :] + self._d[None, :] * w[:, None]
+            P[:, i] = c.center[0] + r * co
+            P[:, j] = c.center[1] + r * si
+            P1 = np.repeat(self._d[None, :], w.size, axis=0)
+            P2 = np.zeros_like(P)
             P1[:, i] = dr * co - r * sw * si
             P1[:, j] = dr * si + r * sw * co
             P2[:, i] = -2 * dr * sw * si - r * sw * sw * co
@@ -84,7 +92,30 @@ class CurveEval:
         return P, P1, P2
 
     def points(self, w: np.ndarray) -> np.ndarray:
+        c = self.curve
+        if isinstance(c, Arc):
+            # Arc.points with the arc's constants computed once (bit-identical)
+            w = np.asarray(w, dtype=float)
+            i, j, _ = c.plane
+            ang = self._a0 + c.sweep_rad * w
+            out = c.start[None, :] + self._d[None, :] * w[:, None]
+            r = self._r0 + (self._r1 - self._r0) * w
+            out[:, i] = c.center[0] + r * np.cos(ang)
+            out[:, j] = c.center[1] + r * np.sin(ang)
+            return out
         return self.eval(w)[0]
+
+
+def curve_eval(curve, cache: dict | None = None) -> CurveEval:
+    """``CurveEval(curve)``, shared through ``cache`` (keyed by the curve object's id;
+    the caller keeps the curves alive) so that its cached scale and end states are
+    computed once per curve."""
+    if cache is None:
+        return CurveEval(curve)
+    ev = cache.get(id(curve))
+    if ev is None or ev.curve is not curve:
+        ev = cache[id(curve)] = CurveEval(curve)
+    return ev
 
 
 def _direction(ev: CurveEval, w: np.ndarray, scale: np.ndarray) -> np.ndarray:
@@ -128,6 +159,10 @@ def param_scale(ev: CurveEval, scale: np.ndarray) -> float:
 def end_states(ev: CurveEval, scale: np.ndarray):
     """Unit tangent and curvature vector (scaled space) at the curve's start and end,
     exactly as the quintic pieces see them (same stop-of-parameter treatment)."""
+    key = tuple(np.asarray(scale, dtype=float).tolist())
+    cache = ev.__dict__.setdefault("_ends", {})
+    if key in cache:
+        return cache[key]
     g = param_scale(ev, scale)
     _, V, A = _derivs(ev, np.array([ev.w0, ev.w1]), scale, g)
     out = []
@@ -135,7 +170,10 @@ def end_states(ev: CurveEval, scale: np.ndarray):
         sp = np.linalg.norm(V[k])
         T = V[k] / sp
         K = (A[k] - (A[k] @ T) * T) / sp**2
+        T.flags.writeable = False  # shared through the cache
+        K.flags.writeable = False
         out.append((T, K))
+    cache[key] = out
     return out
 
 
@@ -187,7 +225,7 @@ def _piece_lengths(ev: CurveEval, wa: np.ndarray, wz: np.ndarray, scale: np.ndar
     Hermite's third to fifth coefficients divide it by h³..h⁵). Large pieces take the
     difference of the exact end points, where quadrature would be the less accurate.
     """
-    x, wts = np.polynomial.legendre.leggauss(8)
+    x, wts = _PIECE_GL_X, _PIECE_GL_W
     mid, half = 0.5 * (wa + wz), 0.5 * (wz - wa)
     w = (mid[:, None] + half[:, None] * x[None, :]).ravel()
     d1 = (ev.eval(w)[1] * scale).reshape(wa.size, x.size, -1)
@@ -202,6 +240,8 @@ def _piece_lengths(ev: CurveEval, wa: np.ndarray, wz: np.ndarray, scale: np.ndar
 
 
 _SMALL_PIECE = 1e-2  # relative size below which a piece's displacement comes from quadrature
+# the 8-point rule of _piece_lengths, computed once (leggauss costs more than the arc itself)
+_PIECE_GL_X, _PIECE_GL_W = np.polynomial.legendre.leggauss(8)
 
 
 def _retarget(v, a, T, K):

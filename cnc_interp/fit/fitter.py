@@ -131,24 +131,54 @@ def _fit_run_raw(run: Run, settings: FitSettings):
     pr = prepare_run(run, settings)
     info["nodes_in"] = int(run.n_nodes)
     raws = []
-    for sub in split_run(pr, settings):
-        raw, meth, dmm, ddeg, ok = _fit_sub(pr, sub, settings)
+    methods = set()
+    dmm_max = ddeg_max = pdev_max = pratio_max = 0.0
+    ok_all = True
+    n_seg = 0
+    evals: dict = {}  # CurveEval per curve, shared by the corner split and the fit
+    lin_all, rot_all = _weights(pr.lin, False), _weights(pr.lin, True)
+    no_lin = np.zeros_like(pr.lin)
+    for sub in split_run(pr, settings, evals):
+        a, b = sub.i0, sub.i1
+        if b - a == 1 and not sub.curves:
+            # a single move: the exact line through its two nodes. Node and path deviation
+            # are 0 by construction (the programmed path IS the fitted segment), so neither
+            # the generic fitter nor the sampled path-deviation check is run for it.
+            raws.append(_single_move_raw(pr, a, b, rot_all if sub.rotary else lin_all))
+            methods.add("line")
+            n_seg += 1
+            continue
+        raw, meth, dmm, ddeg, ok = _fit_sub(pr, sub, settings, evals)
         raws.append(raw)
-        info["methods"].append(meth)
-        info["max_node_dev_mm"] = max(info["max_node_dev_mm"], dmm)
-        info["max_node_dev_deg"] = max(info["max_node_dev_deg"], ddeg)
+        methods.add(meth)
+        dmm_max = max(dmm_max, dmm)
+        ddeg_max = max(ddeg_max, ddeg)
         # the programmed path (moves and exact curves) against the fit, everywhere
-        pdev, pratio = path_deviation(raw.breaks, raw.coef, pr.nodes[sub.i0:sub.i1 + 1],
-                                      fit_tolerance(pr.tol_mm[sub.i0:sub.i1 + 1]),
-                                      pr.lin if not sub.rotary else np.zeros_like(pr.lin),
-                                      sub.curves, sub.i0)
-        info["max_path_dev_mm"] = max(info["max_path_dev_mm"], pdev)
-        info["max_path_dev_ratio"] = max(info["max_path_dev_ratio"], pratio)
-        info["within_tolerance"] &= bool(ok) and pratio <= 1.0 + PATH_DEV_SLACK
-        info["segments_out"] += int(raw.coef.shape[0])
-    info["paths"] = len(raws)
-    info["methods"] = sorted(set(info["methods"]))
+        pdev, pratio = path_deviation(raw.breaks, raw.coef, pr.nodes[a:b + 1],
+                                      fit_tolerance(pr.tol_mm[a:b + 1]),
+                                      pr.lin if not sub.rotary else no_lin,
+                                      sub.curves, a)
+        pdev_max = max(pdev_max, pdev)
+        pratio_max = max(pratio_max, pratio)
+        ok_all &= bool(ok) and pratio <= 1.0 + PATH_DEV_SLACK
+        n_seg += int(raw.coef.shape[0])
+    info.update(max_node_dev_mm=dmm_max, max_node_dev_deg=ddeg_max, max_path_dev_mm=pdev_max,
+                max_path_dev_ratio=pratio_max, within_tolerance=ok_all, segments_out=n_seg,
+                paths=len(raws), methods=sorted(methods))
     return raws, info
+
+
+def _single_move_raw(pr: PreparedRun, a: int, b: int, weights: np.ndarray) -> _Raw:
+    """The exact straight path of the move from node a to node b = a + 1 (the same
+    arithmetic as ``straight_piece`` on the sub-run, without its generic machinery)."""
+    p0, p1 = pr.nodes[a], pr.nodes[b]
+    d = p1 - p0
+    length = float(np.linalg.norm(d * pr.scale))
+    coef = np.zeros((1, 6, p0.shape[0]))
+    coef[0, 0] = p0
+    coef[0, 1] = d / length
+    return _Raw(pr.axes, np.array([0.0, length]), coef, pr.line[b:b + 1].copy(),
+                pr.feed_mm_s[b:b + 1].copy(), weights.copy())
 
 
 def _rapid_raws(run: Run, lin: np.ndarray) -> list[_Raw]:
@@ -167,7 +197,7 @@ def _rapid_raws(run: Run, lin: np.ndarray) -> list[_Raw]:
     return out
 
 
-def _fit_sub(pr: PreparedRun, sub: SubRun, settings: FitSettings):
+def _fit_sub(pr: PreparedRun, sub: SubRun, settings: FitSettings, evals: dict | None = None):
     """Fit one sub-run: (raw path, method name, max dev mm, max dev deg, ok)."""
     a, b = sub.i0, sub.i1
     nodes = pr.nodes[a:b + 1]
@@ -195,7 +225,7 @@ def _fit_sub(pr: PreparedRun, sub: SubRun, settings: FitSettings):
             planar, coef, seg_line, seg_feed, dev = got
             raw = _Raw(pr.axes, breaks_of(planar), coef, seg_line, seg_feed, weights, planar=planar)
             return raw, "planar-" + pr.axes[plane[0]] + pr.axes[plane[1]], dev, 0.0, True
-    pieces, dmm, ddeg, ok = _fit_sections(pr, sub, tol, metric, settings)
+    pieces, dmm, ddeg, ok = _fit_sections(pr, sub, tol, metric, settings, evals)
     breaks = [np.zeros(1)]
     off = 0.0
     for pf in pieces:
@@ -221,9 +251,9 @@ def _line_dev(nodes: np.ndarray, lin: np.ndarray) -> float:
 
 
 def _fit_sections(pr: PreparedRun, sub: SubRun, tol: np.ndarray, metric: np.ndarray,
-                  settings: FitSettings):
+                  settings: FitSettings, evals: dict | None = None):
     """Curves and the polylines between them, joined G2 (see module docstring)."""
-    from .curves import CurveEval, end_states, fit_curve
+    from .curves import curve_eval, end_states, fit_curve
 
     a, b = sub.i0, sub.i1
     secs = []  # ("poly", i, j) or ("curve", CurvePiece)
@@ -236,7 +266,7 @@ def _fit_sections(pr: PreparedRun, sub: SubRun, tol: np.ndarray, metric: np.ndar
     if pos < b:
         secs.append(("poly", pos, b))
     # exact end states of the curves, then the states imposed at each junction
-    evs = [CurveEval(s[1].curve) if s[0] == "curve" else None for s in secs]
+    evs = [curve_eval(s[1].curve, evals) if s[0] == "curve" else None for s in secs]
     states = [end_states(ev, pr.scale) if ev is not None else None for ev in evs]
     start_of = [None] * len(secs)
     end_of = [None] * len(secs)

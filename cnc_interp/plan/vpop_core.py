@@ -685,18 +685,12 @@ def _put_cert(sh, qh, cs, cq, j, t0, t1):
 
 
 @njit(cache=True)
-def _chain_test(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, j, t, cs, cq, bs, bq,
-                max_steps, q, qs, lo, hi, tol, stats, K2, K3, K23, KV, easy_frac, fast,
-                last_k, last_j, wk, hint):
-    """Samples j+1..t-1 from the certificate, the max step at t, then a brake run from
-    t+1: (passed, certified-up-to, hint)."""
+def _max_then_brake(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, t, x, bs, bq,
+                    max_steps, q, qs, lo, hi, tol, stats, K2, K3, K23, KV, easy_frac, fast,
+                    last_k, last_j, wk):
+    """Sample t = x (q holds q(x)), then a brake run from t+1 with the chain's horizon:
+    the run's (ok, scratch end, certified-up-to)."""
     n = qh.shape[1]
-    _put_cert(sh, qh, cs, cq, j, j + 1, t)
-    ok, x, hint = _step(S, C, QEND, sh, qh, t, vl, al, jl, js_lim, dt, L, FB, FV, 0,
-                        hint, q, qs, lo, hi, tol, wk, False)
-    stats[3] += 1
-    if not ok:
-        return False, 0, hint
     sh[t] = x
     for i in range(n):
         qh[t, i] = q[i]
@@ -705,6 +699,24 @@ def _chain_test(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, j, t, cs,
                    bs, bq, max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23, KV,
                    easy_frac, hz, wk)
     stats[1] += 1
+    return r
+
+
+@njit(cache=True)
+def _chain_test(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, j, t, cs, cq, bs, bq,
+                max_steps, q, qs, lo, hi, tol, stats, K2, K3, K23, KV, easy_frac, fast,
+                last_k, last_j, wk, hint):
+    """Samples j+1..t-1 from the certificate, the max step at t, then a brake run from
+    t+1: (passed, certified-up-to, hint)."""
+    _put_cert(sh, qh, cs, cq, j, j + 1, t)
+    ok, x, hint = _step(S, C, QEND, sh, qh, t, vl, al, jl, js_lim, dt, L, FB, FV, 0,
+                        hint, q, qs, lo, hi, tol, wk, False)
+    stats[3] += 1
+    if not ok:
+        return False, 0, hint
+    r = _max_then_brake(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, t, x, bs, bq,
+                        max_steps, q, qs, lo, hi, tol, stats, K2, K3, K23, KV, easy_frac, fast,
+                        last_k, last_j, wk)
     return r[0], r[2], hint
 
 
@@ -831,14 +843,9 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol
             # right after a brake fix the next failure is usually imminent: test the max
             # step at once (the same test the dichotomy would run first) instead of
             # re-running max steps up to the failure
-            sh[k] = x
-            for i in range(n):
-                qh[k, i] = q[i]
-            hz = (k + 1 + 2 * (last_k - last_j) + 8) if fast else 0
-            r = _brake_run(S, C, QEND, sh, qh, k + 1, vl, al, jl, js_lim, dt, L, FB, FV,
-                           bs, bq, max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23, KV,
-                           easy_frac, hz, wk)
-            stats[1] += 1
+            r = _max_then_brake(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k, x,
+                                bs, bq, max_steps, q, qs, lo, hi, tol, stats, K2, K3, K23, KV,
+                                easy_frac, fast, last_k, last_j, wk)
             if r[0]:
                 cert = r[2]
                 chain = False
