@@ -75,3 +75,71 @@ def arc_length_table(coef, breaks, w, glx, glw, rel_tol, max_sub):
     starts[n_seg] = total
     sub_u[total] = breaks[n_seg]
     return sub_u, sub_s, sub_seg, starts
+
+
+@njit(cache=True)
+def arc_length_tables(coef, breaks, seg_off, w, glx, glw, rel_tol, max_sub):
+    """``arc_length_table`` of many paths at once (one compiled call for a whole run).
+
+    Path p has segments seg_off[p]..seg_off[p+1]-1 of ``coef`` (S, 6, n), breakpoints
+    breaks[seg_off[p] + p .. seg_off[p+1] + p] and metric w[p] (P, n). Each path's
+    table is computed by ``arc_length_table`` itself (identical values). Returns the
+    concatenated sub_u/sub_s (sum of (n_sub + 1) per path), sub_seg (sum of n_sub),
+    s_breaks (S + P) and the offsets sub_off (P+1,) into sub_seg (sub_u/sub_s of path p
+    start at sub_off[p] + p).
+    """
+    n_p = seg_off.shape[0] - 1
+    us = []
+    ss = []
+    segs = []
+    sbs = []
+    sub_off = np.zeros(n_p + 1, dtype=np.int64)
+    for p in range(n_p):
+        a, b = seg_off[p], seg_off[p + 1]
+        sub_u, sub_s, seg, starts = arc_length_table(coef[a:b], breaks[a + p:b + p + 1], w[p],
+                                                     glx, glw, rel_tol, max_sub)
+        us.append(sub_u)
+        ss.append(sub_s)
+        segs.append(seg)
+        sbs.append(sub_s[starts])
+        sub_off[p + 1] = sub_off[p] + seg.shape[0]
+    n_sub = sub_off[n_p]
+    all_u = np.empty(n_sub + n_p)
+    all_s = np.empty(n_sub + n_p)
+    all_seg = np.empty(n_sub, dtype=np.int64)
+    all_sb = np.empty(seg_off[n_p] + n_p)
+    for p in range(n_p):
+        o = sub_off[p] + p
+        m = us[p].shape[0]
+        all_u[o:o + m] = us[p]
+        all_s[o:o + m] = ss[p]
+        all_seg[sub_off[p]:sub_off[p + 1]] = segs[p]
+        all_sb[seg_off[p] + p:seg_off[p + 1] + p + 1] = sbs[p]
+    return all_u, all_s, all_seg, all_sb, sub_off
+
+
+@njit(cache=True)
+def chain_ends(coef, breaks, seg_off, start, has_start):
+    """Chain paths end to start: coef[first segment of p, 0] = end of path p-1 (of
+    ``start`` (n,) for p = 0 when ``has_start``), in place. Returns the ends (P, n) and
+    the shift (P, n) applied to each path's first point (0 where none). The end is the
+    same Horner arithmetic as ``Path.end``."""
+    n_p = seg_off.shape[0] - 1
+    n = coef.shape[2]
+    ends = np.empty((n_p, n))
+    delta = np.zeros((n_p, n))
+    prev = start.copy()
+    for p in range(n_p):
+        a, b = seg_off[p], seg_off[p + 1]
+        if p > 0 or has_start:
+            for ax in range(n):
+                delta[p, ax] = prev[ax] - coef[a, 0, ax]
+                coef[a, 0, ax] = prev[ax]
+        t = breaks[b + p] - breaks[b + p - 1]
+        for ax in range(n):
+            acc = coef[b - 1, 5, ax] * 1.0
+            for i in range(4, -1, -1):
+                acc = acc * t + coef[b - 1, i, ax] * 1.0
+            ends[p, ax] = acc
+            prev[ax] = acc
+    return ends, delta

@@ -19,7 +19,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..constants import PATH_DEV_SLACK
+from ..constants import ARC_LENGTH_MAX_SUB, ARC_LENGTH_REL_TOL, PATH_DEV_SLACK
 from ..gcode.program import Dwell, Program, Run, Stop
 from .deviation import path_deviation
 from .corners import PreparedRun, SubRun, fit_tolerance, prepare_run, split_run
@@ -72,10 +72,8 @@ def fit_program(program: Program, settings: FitSettings | None = None) -> FitRes
             raws, info = _fit_run_raw(it, settings)
             info["item"] = idx
             runs_info.append(info)
-            for raw in raws:
-                path = raw.build(prev_end)
-                items.append(path)
-                prev_end = path.end
+            paths, prev_end = _build_paths(raws, prev_end)
+            items.extend(paths)
             if it.kind == "rapid":
                 totals["rapid_moves"] += len(raws)
             else:
@@ -106,13 +104,67 @@ def fit_program(program: Program, settings: FitSettings | None = None) -> FitRes
 def fit_run(run: Run, settings: FitSettings | None = None) -> list[Path]:
     """Fit one run: a list of paths, planned rest to rest, each starting where the last ended."""
     raws, _ = _fit_run_raw(run, settings or FitSettings())
+    return _build_paths(raws, None)[0]
+
+
+def _build_paths(raws: list[_Raw], start: np.ndarray | None):
+    """Build the paths of one run, chained (each starts where the previous ended, the
+    first at ``start`` if given): (paths, end of the last path, or ``start`` if none).
+
+    The same values as ``raw.build(prev_end)`` one by one, with the chaining and every
+    arc-length table computed by two compiled calls for the whole run (small paths
+    are otherwise dominated by per-path overhead)."""
+    from ._arclen import arc_length_tables, chain_ends
+    from .path import _GL_W, _GL_X
+
+    if not raws:
+        return [], start
+    n_p = len(raws)
+    axes = raws[0].axes
+    n_ax = len(axes)
+    nseg = np.array([r.coef.shape[0] for r in raws], dtype=np.int64)
+    seg_off = np.zeros(n_p + 1, dtype=np.int64)
+    np.cumsum(nseg, out=seg_off[1:])
+    valid = all(r.axes == axes and r.coef.ndim == 3 and r.coef.shape[1:] == (6, n_ax)
+                and r.breaks.shape == (r.coef.shape[0] + 1,) for r in raws) and bool(nseg.min() >= 1)
+    if valid:
+        breaks = np.concatenate([r.breaks for r in raws]).astype(float, copy=False)
+        steps = np.diff(breaks) > 0
+        steps[seg_off[1:-1] + np.arange(n_p - 1)] = True  # junctions between paths
+        valid = bool(steps.all())
+    if not valid:  # Path's own checks raise the error
+        out = []
+        for raw in raws:
+            out.append(raw.build(start))
+            start = out[-1].end
+        return out, start
+    coef = np.concatenate([r.coef for r in raws]).astype(float, copy=False)
+    if len(raws) == 1 and coef is raws[0].coef:
+        coef = coef.copy()
+    line = np.concatenate([np.asarray(r.line, dtype=np.int64).reshape(-1) for r in raws])
+    feed = np.concatenate([np.asarray(r.feed, dtype=float).reshape(-1) for r in raws])
+    weights = np.array([r.weights for r in raws], dtype=float).reshape(n_p, n_ax)
+    has_start = start is not None
+    ends, delta = chain_ends(coef, breaks, seg_off,
+                             np.asarray(start, dtype=float) if has_start else np.zeros(n_ax), has_start)
+    sub_u, sub_s, sub_seg, s_breaks, sub_off = arc_length_tables(
+        coef, breaks, seg_off, weights, _GL_X, _GL_W, ARC_LENGTH_REL_TOL, ARC_LENGTH_MAX_SUB)
     out = []
-    prev = None
-    for raw in raws:
-        p = raw.build(prev)
-        out.append(p)
-        prev = p.end
-    return out
+    so = seg_off.tolist()
+    uo = sub_off.tolist()
+    for p, r in enumerate(raws):
+        a, b = so[p], so[p + 1]
+        ua, ub = uo[p], uo[p + 1]
+        planar = r.planar
+        if planar is not None and (p > 0 or has_start):
+            h, v = planar.plane
+            origin = planar.origin.copy()
+            origin[0] += delta[p, [h, v]]
+            planar = replace(planar, origin=origin)
+        out.append(Path._from_parts(axes, breaks[a + p:b + p + 1], coef[a:b], line[a:b], feed[a:b],
+                                    weights[p], r.rapid, planar, sub_u[ua + p:ub + p + 1],
+                                    sub_s[ua + p:ub + p + 1], sub_seg[ua:ub], s_breaks[a + p:b + p + 1]))
+    return out, ends[-1]
 
 
 def _weights(lin: np.ndarray, rotary: bool) -> np.ndarray:

@@ -160,6 +160,32 @@ class Path:
         sp = self._speed_local(np.broadcast_to(seg[:, None], t.shape), t)
         return half * (sp @ _GL_W)
 
+    @classmethod
+    def _from_parts(cls, axes: str, breaks: np.ndarray, coef: np.ndarray, line: np.ndarray,
+                    feed_mm_s: np.ndarray, weights: np.ndarray, rapid: bool,
+                    planar: PlanarSegments | None, sub_u: np.ndarray, sub_s: np.ndarray,
+                    sub_seg: np.ndarray, s_breaks: np.ndarray) -> "Path":
+        """A Path whose arrays are already validated and converted (float breaks/coef/
+        feed/weights, int64 line, shapes as ``__post_init__`` makes them) and whose
+        arc-length table was computed by ``_arclen.arc_length_table`` — the fit stage
+        builds the tables of a whole run in one compiled call (``arc_length_tables``)."""
+        p = object.__new__(cls)
+        put = object.__setattr__
+        put(p, "axes", axes)
+        put(p, "breaks", breaks)
+        put(p, "coef", coef)
+        put(p, "line", line)
+        put(p, "feed_mm_s", feed_mm_s)
+        put(p, "weights", weights)
+        put(p, "rapid", rapid)
+        put(p, "planar", planar)
+        put(p, "_sub_u", sub_u)
+        put(p, "_sub_s", sub_s)
+        put(p, "_sub_seg", sub_seg)
+        put(p, "s_breaks", s_breaks)
+        put(p, "length", float(sub_s[-1]))
+        return p
+
     def _build_arc_length(self) -> None:
         from ._arclen import arc_length_table
 

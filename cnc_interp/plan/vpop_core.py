@@ -366,8 +366,8 @@ def _stop_distance(v, a, J, A):
     return d
 
 
-# inlined into _step (its only caller, twice): measured 15-20% off the whole brake run;
-# inlining more (_search, _step) adds minutes of compile time for a few per cent
+# inlined into its two callers (_brake_step and _step's fallback): 15-20% off a brake
+# run; inlining _search or _step too adds minutes of compile time for a few per cent
 @njit(cache=True, inline='always')
 def _brake_value(S, C, QEND, qh, k, vl, al, jl, js_lim, lo, hi, s0, d1, b, guess, hint, q, qs,
                  tol, wk, qs0_known):
@@ -418,6 +418,29 @@ def _brake_value(S, C, QEND, qh, k, vl, al, jl, js_lim, lo, hi, s0, d1, b, guess
 
 
 @njit(cache=True)
+def _path_state(sh, k):
+    """Position, step and step difference (s units) at sample k-1; rest before sample 0."""
+    s0 = sh[k - 1]
+    s1 = sh[k - 2] if k >= 2 else sh[0]
+    s2 = sh[k - 3] if k >= 3 else sh[0]
+    d1 = s0 - s1
+    return s0, d1, d1 - (s1 - s2)
+
+
+# inlined into the brake run's loop (its hot call) and into _step: 3-4% of a brake run
+@njit(cache=True, inline='always')
+def _brake_step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, hint, q, qs,
+                lo, hi, tol, wk, qs0_known):
+    """``_step`` in mode 1 (brake)."""
+    if not _bounds(qh, k, vl, al, jl, lo, hi):
+        return False, sh[k - 1], hint
+    s0, d1, d2 = _path_state(sh, k)
+    b = _cap(s0, dt, L, FB, FV)
+    return _brake_value(S, C, QEND, qh, k, vl, al, jl, js_lim, lo, hi, s0, d1, b, s0 + d1 + d2,
+                        hint, q, qs, tol, wk, qs0_known)
+
+
+@njit(cache=True)
 def _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, mode, hint, q, qs,
           lo, hi, tol, wk, qs0_known, aim_jerk=1.0):
     """Choose sample k. mode 0: max; 1: brake; 2: aim at rest exactly at L.
@@ -426,13 +449,12 @@ def _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, mode, hint, 
     scratch; with ``qs0_known`` wk[2] holds dq/ds at sample k-1. Mode 0 fails only when the brake policy
     finds no sample k either, so "max failed at k" always means "braking from k fails"
     (what the dichotomy in ``plan_core`` relies on)."""
+    if mode == 1:
+        return _brake_step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, hint, q, qs,
+                           lo, hi, tol, wk, qs0_known)
     if not _bounds(qh, k, vl, al, jl, lo, hi):
         return False, sh[k - 1], hint
-    s0 = sh[k - 1]
-    s1 = sh[k - 2] if k >= 2 else sh[0]
-    s2 = sh[k - 3] if k >= 3 else sh[0]
-    d1 = s0 - s1
-    d2 = d1 - (s1 - s2)
+    s0, d1, d2 = _path_state(sh, k)
     b = _cap(s0, dt, L, FB, FV)
     guess = s0 + d1 + d2
     if mode == 0:
@@ -448,9 +470,6 @@ def _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, mode, hint, 
             return False, s0, hint
         return _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, xb, True, hint, q, qs, tol,
                        wk)
-    if mode == 1:
-        return _brake_value(S, C, QEND, qh, k, vl, al, jl, js_lim, lo, hi, s0, d1, b, guess,
-                            hint, q, qs, tol, wk, qs0_known)
     hint = _eval(S, C, QEND, s0, hint, q, qs)
     jd, ad = _path_limits(qs, jl, al)
     # aim: the largest step whose continuous stop distance still fits before L
@@ -566,8 +585,12 @@ def _brake_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq,
     kk = 3
     cap = bs.shape[0]
     while True:
-        ok, x, hint = _step(S, C, QEND, bs, bq, kk, vl, al, jl, js_lim, dt, L, FB, FV, mode,
-                            hint, q, qs, lo, hi, tol, wk, kk > 3)
+        if mode == 1:
+            ok, x, hint = _brake_step(S, C, QEND, bs, bq, kk, vl, al, jl, js_lim, dt, L, FB, FV,
+                                      hint, q, qs, lo, hi, tol, wk, kk > 3)
+        else:
+            ok, x, hint = _step(S, C, QEND, bs, bq, kk, vl, al, jl, js_lim, dt, L, FB, FV, mode,
+                                hint, q, qs, lo, hi, tol, wk, kk > 3)
         if not ok:
             return False, kk, 0
         bs[kk] = x
