@@ -184,7 +184,7 @@ _DIR_STEP = 1e-7   # relative parameter step for the direction of travel there
 
 def _polyval(coef: np.ndarray, t: np.ndarray) -> np.ndarray:
     """coef (K, 6, d), t (K, M) -> (K, M, d)."""
-    acc = np.broadcast_to(coef[:, None, 5, :], t.shape + coef.shape[2:]).copy()
+    acc = coef[:, None, 5, :]  # (K, 1, d): the first Horner step broadcasts it over t
     for i in range(4, -1, -1):
         acc = acc * t[..., None] + coef[:, None, i, :]
     return acc
@@ -232,9 +232,10 @@ def _piece_lengths(ev: CurveEval, wa: np.ndarray, wz: np.ndarray, scale: np.ndar
     sp = np.linalg.norm(d1, axis=2)
     L = half * (sp @ wts)
     dp_quad = half[:, None] * np.einsum("kgd,g->kd", d1, wts)
-    dp_diff = (ev.points(wz) - ev.points(wa)) * scale
+    pa = ev.points(wa)
+    dp_diff = (ev.points(wz) - pa) * scale
     chord = np.linalg.norm(dp_diff, axis=1)
-    small = chord < _SMALL_PIECE * np.maximum(1.0, np.abs(ev.points(wa) * scale).max(axis=1))
+    small = chord < _SMALL_PIECE * np.maximum(1.0, np.abs(pa * scale).max(axis=1))
     dp = np.where(small[:, None], dp_quad, dp_diff)
     return np.maximum(L, chord), dp
 

@@ -170,20 +170,10 @@ class Path:
         arc-length table was computed by ``_arclen.arc_length_table`` — the fit stage
         builds the tables of a whole run in one compiled call (``arc_length_tables``)."""
         p = object.__new__(cls)
-        put = object.__setattr__
-        put(p, "axes", axes)
-        put(p, "breaks", breaks)
-        put(p, "coef", coef)
-        put(p, "line", line)
-        put(p, "feed_mm_s", feed_mm_s)
-        put(p, "weights", weights)
-        put(p, "rapid", rapid)
-        put(p, "planar", planar)
-        put(p, "_sub_u", sub_u)
-        put(p, "_sub_s", sub_s)
-        put(p, "_sub_seg", sub_seg)
-        put(p, "s_breaks", s_breaks)
-        put(p, "length", float(sub_s[-1]))
+        # plain instance attributes, as __init__ stores them (one update, not 13 setattrs)
+        p.__dict__.update(axes=axes, breaks=breaks, coef=coef, line=line, feed_mm_s=feed_mm_s,
+                          weights=weights, rapid=rapid, planar=planar, _sub_u=sub_u, _sub_s=sub_s,
+                          _sub_seg=sub_seg, s_breaks=s_breaks, length=float(sub_s[-1]))
         return p
 
     def _build_arc_length(self) -> None:

@@ -550,7 +550,9 @@ def fit_planar(nodes: np.ndarray, plane: tuple[int, int], tol_mm: np.ndarray, ax
         return None
     theta = out_theta[:k].copy()
     st, en = out_start[:k], out_end[:k]
-    origin = np.stack([H[st], V[st]], axis=1)
+    origin = np.empty((st.size, 2))  # np.stack([H[st], V[st]], axis=1) without its overhead
+    origin[:, 0] = H[st]
+    origin[:, 1] = V[st]
     c, s_ = np.cos(theta), np.sin(theta)
     x_end = (H[en] - H[st]) * c + (V[en] - V[st]) * s_
     planar = PlanarSegments(plane=(h, v), theta=theta, origin=origin, x_end=x_end,
