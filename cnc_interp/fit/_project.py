@@ -31,6 +31,8 @@ import math
 import numpy as np
 from numba import njit
 
+from ._quintic import quintic_d012
+
 _END_REL = 1e-9  # a foot point this close (relative) to a piece's end lies on its end
 _SAFE_ITERS = 60  # safeguarded Newton: enough bisections to reach rounding
 
@@ -76,15 +78,7 @@ def _newton(coef, k, hk, p, t, iters, best_r2, best_t):
         r2 = 0.0
         q1sq = 0.0
         for a in range(d):
-            v0 = coef[k, 5, a]
-            v1 = 5.0 * coef[k, 5, a]
-            v2 = 20.0 * coef[k, 5, a]
-            for j in range(4, -1, -1):
-                v0 = v0 * t + coef[k, j, a]
-                if j >= 1:
-                    v1 = v1 * t + j * coef[k, j, a]
-                if j >= 2:
-                    v2 = v2 * t + j * (j - 1) * coef[k, j, a]
+            v0, v1, v2 = quintic_d012(coef, k, a, t)
             r = v0 - p[a]
             r2 += r * r
             g += r * v1
@@ -137,15 +131,7 @@ def _piece_min(coef, k, hk, p, n_coarse, iters):
         hh = 0.0
         r2 = 0.0
         for c in range(d):
-            v0 = coef[k, 5, c]
-            v1 = 5.0 * coef[k, 5, c]
-            v2 = 20.0 * coef[k, 5, c]
-            for i in range(4, -1, -1):
-                v0 = v0 * t + coef[k, i, c]
-                if i >= 1:
-                    v1 = v1 * t + i * coef[k, i, c]
-                if i >= 2:
-                    v2 = v2 * t + i * (i - 1) * coef[k, i, c]
+            v0, v1, v2 = quintic_d012(coef, k, c, t)
             r = v0 - p[c]
             r2 += r * r
             g += r * v1

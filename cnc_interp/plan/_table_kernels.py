@@ -24,6 +24,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ..fit._quintic import quintic_d012
+
 # build_identity status codes
 OK = 0
 NO_LENGTH = 1
@@ -131,15 +133,7 @@ def _knot(coef, breaks, w, u, Q, i):
     s2 = 0.0
     dot1 = 0.0
     for ax in range(n):
-        a0 = coef[k, 5, ax]
-        a1 = 5.0 * coef[k, 5, ax]
-        a2 = 20.0 * coef[k, 5, ax]
-        for r in range(4, -1, -1):
-            a0 = a0 * t + coef[k, r, ax]
-            if r >= 1:
-                a1 = a1 * t + r * coef[k, r, ax]
-            if r >= 2:
-                a2 = a2 * t + (r * (r - 1)) * coef[k, r, ax]
+        a0, a1, a2 = quintic_d012(coef, k, ax, t)
         Q[i, 0, ax] = a0
         Q[i, 1, ax] = a1
         Q[i, 2, ax] = a2
