@@ -677,6 +677,29 @@ def _rest_value(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq
 
 
 @njit(cache=True)
+def _brake_fix(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq, max_steps,
+               q, qs, lo, hi, tol, stats, K2, K3, K23, KV, easy_frac, hint, wk):
+    """Fix sample j at the brake value (at rest where that would stay put: ``_rest_value``).
+    Returns (status OK / INFEASIBLE / STUCK, the certificate of a rest value or -1, hint)."""
+    n = qh.shape[1]
+    ok, x, hint = _step(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, 1,
+                        hint, q, qs, lo, hi, tol, wk, False)
+    if not ok:
+        return INFEASIBLE, -1, hint
+    c = -1
+    if _stays_at_rest(sh, j, x, L):
+        ok, x, c, hint = _rest_value(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L,
+                                     FB, FV, bs, bq, max_steps, q, qs, lo, hi, tol,
+                                     stats, K2, K3, K23, KV, easy_frac, hint, wk)
+        if not ok:
+            return STUCK, -1, hint
+    sh[j] = x
+    for i in range(n):
+        qh[j, i] = q[i]
+    return OK, c, hint
+
+
+@njit(cache=True)
 def _horizon(k, j, fast):
     """Fast mode: a brake run from j that outlives the failed max run (index k) by as many
     steps again (+8) and then meets ``_easy`` at a 60% share is taken as safe; 0 (exact
@@ -885,21 +908,14 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol
                 cert = r[2]
                 c_len = _save_run(bs, bq, r[1], cs, cq)
                 c_at = k
-            ok, x, hint = _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, 1,
-                                hint, q, qs, lo, hi, tol, wk, False)
-            if not ok:
-                return INFEASIBLE, k, b
-            if _stays_at_rest(sh, k, x, L):
-                ok, x, c, hint = _rest_value(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L,
-                                             FB, FV, bs, bq, max_steps, q, qs, lo, hi, tol,
-                                             stats, K2, K3, K23, KV, easy_frac, hint, wk)
-                if not ok:
-                    return STUCK, k, b
+            st, c, hint = _brake_fix(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, bs,
+                                     bq, max_steps, q, qs, lo, hi, tol, stats, K2, K3, K23, KV,
+                                     easy_frac, hint, wk)
+            if st != OK:
+                return st, k, b
+            if c >= 0:
                 cert = c
                 c_at = -1
-            sh[k] = x
-            for i in range(n):
-                qh[k, i] = q[i]
             b = k
             k += 1
             continue
@@ -988,21 +1004,14 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol
                     break
             if done:
                 continue
-        ok, x, hint = _step(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, 1,
-                            hint, q, qs, lo, hi, tol, wk, False)
-        if not ok:
-            return INFEASIBLE, j, b
-        if _stays_at_rest(sh, j, x, L):
-            ok, x, c, hint = _rest_value(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L,
-                                         FB, FV, bs, bq, max_steps, q, qs, lo, hi, tol,
-                                         stats, K2, K3, K23, KV, easy_frac, hint, wk)
-            if not ok:
-                return STUCK, j, b
+        st, c, hint = _brake_fix(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq,
+                                 max_steps, q, qs, lo, hi, tol, stats, K2, K3, K23, KV, easy_frac,
+                                 hint, wk)
+        if st != OK:
+            return st, j, b
+        if c >= 0:
             cert = c
             c_at = -1
-        sh[j] = x
-        for i in range(n):
-            qh[j, i] = q[i]
         k = j + 1
         b = j
         last_j = j
