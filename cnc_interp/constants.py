@@ -263,7 +263,7 @@ VPOP_AIM_GAP_JERK_STEPS = 4.0
 #: after a brake fix, how many of the following steps are tested in order for "max step,
 #: then brake to rest" before the remaining ones (along the fix's own brake run) are
 #: bisected and then probed below the answer (``vpop_core._chain_search``). Against testing
-#: every step in order, measured on 9 programs: 1.2-3x less planning time on CAM programs,
+#: every step in order, measured on 10 programs: 1.1-3.2x less planning time,
 #: cycle times -0.03..+1.4% (the worst on a helix at the acceleration limit)
 VPOP_CHAIN_SEQUENTIAL = 2
 #: a paper-000 plan longer than this many samples is refused (a degenerate path, e.g.
