@@ -266,13 +266,15 @@ def run_plan(opts: PlanOptions) -> None:
     import json
     import sys
 
+    from .export.atomic import check_writable
     from .export.progress import progress as progress_bar
 
+    out = opts.out or "-"
+    check_writable(out)
     with progress_bar(None, "plan", enabled=not opts.quiet) as tick:
         outcome = plan_part(opts.part, opts.machine_spec, opts.planner, opts.dt_s, opts.tol_mm,
                             opts.start, progress=tick)
     traj = outcome.trajectory
-    out = opts.out or "-"
     if out.lower().endswith(".mcap"):
         from .export.mcap_io import write_mcap
 

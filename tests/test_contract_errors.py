@@ -229,6 +229,21 @@ def test_unwritable_output(good_part, tmp_path):
     _check_one_error_line(res, str(out), None, None, "cannot write output")
 
 
+@pytest.mark.parametrize("where", ["missing-dir", "is-dir"])
+def test_unwritable_output_fails_before_planning(good_part, tmp_path, monkeypatch, where):
+    """The output is checked before the (possibly long) planning starts."""
+    import cnc_interp.pipeline as pipeline
+
+    def no_planning(*args, **kwargs):
+        raise AssertionError("planned although the output cannot be written")
+
+    monkeypatch.setattr(pipeline, "plan_part", no_planning)
+    out = tmp_path / "no" / "out.csv" if where == "missing-dir" else tmp_path
+    res = run_inproc("plan", good_part, "-o", out)
+    assert res.code == 2, res.explain()
+    _check_one_error_line(res, str(out), None, None, "cannot write output")
+
+
 # -- exit 1: the plan failed ----------------------------------------------------------------
 def _limit_memory():  # pragma: no cover - runs in the child
     resource.setrlimit(resource.RLIMIT_AS, (3 << 30, 3 << 30))

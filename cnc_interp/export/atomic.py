@@ -21,6 +21,21 @@ def _umask() -> int:
     return mask
 
 
+def check_writable(path: str) -> None:
+    """Fail now, with the error ``atomic_write`` would give later, when ``path`` cannot be
+    written: its folder is missing or not writable, or it is a folder. (Planning a long
+    program first and failing at the end would waste the run.)"""
+    if path == "-":
+        return
+    directory = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(directory):
+        raise UsageError("cannot write output: No such file or directory", SourceLocation(file=path))
+    if os.path.isdir(path):
+        raise UsageError("cannot write output: Is a directory", SourceLocation(file=path))
+    if not os.access(directory, os.W_OK | os.X_OK):
+        raise UsageError("cannot write output: Permission denied", SourceLocation(file=path))
+
+
 @contextlib.contextmanager
 def atomic_write(path: str) -> Iterator[BinaryIO]:
     """Yield a binary file object whose content replaces ``path`` only on success.
