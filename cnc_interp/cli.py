@@ -258,12 +258,28 @@ def run() -> None:
         _stderr("cnc-interp: error: out of memory")
         sys.exit(1)
     except Exception as exc:  # a bug: one line, and the traceback only on request
+        if _caused_by_interrupt(exc):
+            # Ctrl-C while compiled code returned: numba reports the pending
+            # KeyboardInterrupt as a SystemError whose cause it is
+            _stderr("cnc-interp: interrupted")
+            sys.exit(130)
         if os.environ.get("CNC_INTERP_DEBUG"):
             raise
         _stderr(f"cnc-interp: internal error: {type(exc).__name__}: {exc} "
                 "(please report it; set CNC_INTERP_DEBUG=1 for the traceback)")
         sys.exit(1)
     _flush_stdout()
+
+
+def _caused_by_interrupt(exc: BaseException) -> bool:
+    """True when a KeyboardInterrupt is in the exception's cause/context chain."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
 
 
 def _stderr(msg: str) -> None:

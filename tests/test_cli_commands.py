@@ -188,3 +188,26 @@ def test_error_is_cnc_interp_error_under_clirunner(files):
     res = CliRunner().invoke(cli.main, ["verify", str(files / "plan.csv"), "-m",
                                         str(files / "bad.toml")])
     assert isinstance(res.exception, CncInterpError) and res.exception.exit_code == 2
+
+
+@pytest.mark.parametrize("wrapped", [True, False])
+def test_interrupt_inside_compiled_code_is_ctrl_c(monkeypatch, capsys, wrapped):
+    """Ctrl-C that lands while a numba function returns surfaces as a SystemError caused by
+    the KeyboardInterrupt: still exit 130 and one 'interrupted' line, not an internal error.
+    A SystemError without that cause stays an internal error."""
+
+    def fake_main(*args, **kwargs):
+        if wrapped:
+            raise SystemError("CPUDispatcher(<function refine>) returned a result with an "
+                              "exception set") from KeyboardInterrupt()
+        raise SystemError("something else")
+
+    monkeypatch.setattr(cli.main, "main", fake_main)
+    monkeypatch.delenv("CNC_INTERP_DEBUG", raising=False)
+    with pytest.raises(SystemExit) as ei:
+        cli.run()
+    err = capsys.readouterr().err
+    if wrapped:
+        assert ei.value.code == 130 and err == "cnc-interp: interrupted\n", err
+    else:
+        assert ei.value.code == 1 and "internal error: SystemError" in err, err
