@@ -102,6 +102,20 @@ def programmed_samples(nodes: np.ndarray, tol_mm: np.ndarray, curves, i0: int, s
     return np.concatenate(pts)[order], np.concatenate(tols)[order]
 
 
+def polyline_deviation(breaks: np.ndarray, coef: np.ndarray, nodes: np.ndarray,
+                       tol_mm: np.ndarray, lin: np.ndarray):
+    """``path_deviation`` for a sub-run of G1 moves only (no curves), in one compiled call
+    (``_linedev``): the same samples, search and result, without the Python glue that
+    dominates on programs of many short paths."""
+    from ._linedev import polyline_path_deviation
+
+    return polyline_path_deviation(
+        np.ascontiguousarray(breaks, dtype=float), np.ascontiguousarray(coef, dtype=float),
+        nodes, tol_mm, lin, PATH_DEV_SAMPLES_PER_SPAN, PATH_DEV_MIN_SAMPLES,
+        PATH_DEV_MAX_SAMPLES, PATH_DEV_LOCAL_FRAC, PATH_DEV_WINDOW, PATH_DEV_FAR_WINDOW,
+        PATH_DEV_FIT_SAMPLES, PATH_DEV_NEWTON_ITERS)
+
+
 def path_deviation(breaks: np.ndarray, coef: np.ndarray, nodes: np.ndarray, tol_mm: np.ndarray,
                    lin: np.ndarray, curves=(), i0: int = 0):
     """Worst distance of the programmed path (nodes (n, d) with ``curves``) to the fitted

@@ -22,18 +22,10 @@ import numpy as np
 from ..constants import (
     ARC_LENGTH_MAX_SUB,
     ARC_LENGTH_REL_TOL,
-    PATH_DEV_FAR_WINDOW,
-    PATH_DEV_FIT_SAMPLES,
-    PATH_DEV_LOCAL_FRAC,
-    PATH_DEV_MAX_SAMPLES,
-    PATH_DEV_MIN_SAMPLES,
-    PATH_DEV_NEWTON_ITERS,
-    PATH_DEV_SAMPLES_PER_SPAN,
     PATH_DEV_SLACK,
-    PATH_DEV_WINDOW,
 )
 from ..gcode.program import Dwell, Program, Run, Stop
-from .deviation import path_deviation
+from .deviation import path_deviation, polyline_deviation
 from .corners import PreparedRun, SubRun, fit_tolerance, prepare_run, split_run
 from .nodes import EndState, fit_polyline, straight_piece
 from .path import Path, PlanarSegments
@@ -192,8 +184,6 @@ def _fit_run_raw(run: Run, settings: FitSettings):
                 max_path_dev_mm=0.0, max_path_dev_ratio=0.0, within_tolerance=True)
     if run.kind == "rapid":
         return _rapid_raws(run, lin), info
-    from ._linedev import polyline_path_deviation
-
     pr = prepare_run(run, settings)
     info["nodes_in"] = int(run.n_nodes)
     raws = []
@@ -220,18 +210,14 @@ def _fit_run_raw(run: Run, settings: FitSettings):
         dmm_max = max(dmm_max, dmm)
         ddeg_max = max(ddeg_max, ddeg)
         # the programmed path (moves and exact curves) against the fit, everywhere
+        measured = pr.lin if not sub.rotary else no_lin  # rotary-only: no linear axis
+        tol_sub = fit_tolerance(pr.tol_mm[a:b + 1])
         if sub.curves:
-            pdev, pratio = path_deviation(raw.breaks, raw.coef, pr.nodes[a:b + 1],
-                                          fit_tolerance(pr.tol_mm[a:b + 1]),
-                                          pr.lin if not sub.rotary else no_lin, sub.curves, a)
-        elif sub.rotary:
-            pdev = pratio = 0.0  # no linear axis measured (as path_deviation)
-        else:  # the same measurement in one compiled call
-            pdev, pratio = polyline_path_deviation(
-                np.ascontiguousarray(raw.breaks, dtype=float), np.ascontiguousarray(raw.coef, dtype=float),
-                pr.nodes[a:b + 1], fit_tolerance(pr.tol_mm[a:b + 1]), pr.lin, PATH_DEV_SAMPLES_PER_SPAN,
-                PATH_DEV_MIN_SAMPLES, PATH_DEV_MAX_SAMPLES, PATH_DEV_LOCAL_FRAC, PATH_DEV_WINDOW,
-                PATH_DEV_FAR_WINDOW, PATH_DEV_FIT_SAMPLES, PATH_DEV_NEWTON_ITERS)
+            pdev, pratio = path_deviation(raw.breaks, raw.coef, pr.nodes[a:b + 1], tol_sub,
+                                          measured, sub.curves, a)
+        else:
+            pdev, pratio = polyline_deviation(raw.breaks, raw.coef, pr.nodes[a:b + 1], tol_sub,
+                                              measured)
         pdev_max = max(pdev_max, pdev)
         pratio_max = max(pratio_max, pratio)
         ok_all &= bool(ok) and pratio <= 1.0 + PATH_DEV_SLACK

@@ -710,14 +710,23 @@ def _horizon(k, j, fast):
 
 
 @njit(cache=True)
-def _save_run(bs, bq, kk, cs, cq):
-    """Keep the brake run just made (scratch bs/bq up to kk) as the chain's certificate."""
+def _certified_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq,
+                   max_steps, q, qs, lo, hi, tol, stats, K2, K3, K23, KV, easy_frac, horizon,
+                   wk, cs, cq):
+    """A brake run from j; when it succeeds it is kept in cs/cq as the certificate the
+    chain after a fix at j bisects along. Returns (ok, certified-up-to, its length)."""
+    r = _brake_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq,
+                   max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23, KV, easy_frac,
+                   horizon, wk)
+    stats[1] += 1
+    if not r[0]:
+        return False, 0, 0
     n = bq.shape[1]
-    for t in range(kk):
+    for t in range(r[1]):
         cs[t] = bs[t]
         for i in range(n):
             cq[t, i] = bq[t, i]
-    return kk - 3
+    return True, r[2], r[1] - 3
 
 
 @njit(cache=True)
@@ -899,14 +908,12 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol
                 continue
             if k + 1 >= cert:
                 hz = (k + 2 * (last_k - last_j) + 8) if fast else 0
-                r = _brake_run(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV,
-                               bs, bq, max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23, KV,
-                               easy_frac, hz, wk)
-                stats[1] += 1
-                if not r[0]:
+                ok, cert, c_len = _certified_run(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt,
+                                                 L, FB, FV, bs, bq, max_steps, q, qs, lo, hi,
+                                                 tol, stats, K2, K3, K23, KV, easy_frac, hz, wk,
+                                                 cs, cq)
+                if not ok:
                     return INFEASIBLE, k, b
-                cert = r[2]
-                c_len = _save_run(bs, bq, r[1], cs, cq)
                 c_at = k
             st, c, hint = _brake_fix(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, bs,
                                      bq, max_steps, q, qs, lo, hi, tol, stats, K2, K3, K23, KV,
@@ -942,41 +949,39 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol
             lo_j = base
             while hi_j - lo_j > 1:
                 mid = (lo_j + hi_j) // 2
-                r = _brake_run(S, C, QEND, sh, qh, mid, vl, al, jl, js_lim, dt, L, FB, FV,
-                               bs, bq, max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23, KV,
-                               easy_frac, _horizon(k, mid, fast), wk)
-                stats[1] += 1
-                if r[0]:
+                ok, cc, cl = _certified_run(S, C, QEND, sh, qh, mid, vl, al, jl, js_lim, dt, L,
+                                            FB, FV, bs, bq, max_steps, q, qs, lo, hi, tol, stats,
+                                            K2, K3, K23, KV, easy_frac, _horizon(k, mid, fast),
+                                            wk, cs, cq)
+                if ok:
                     lo_j = mid
                     tested = True
-                    cert = r[2]
-                    c_len = _save_run(bs, bq, r[1], cs, cq)
+                    cert = cc
+                    c_len = cl
                     c_at = mid
                 else:
                     hi_j = mid
             if not tested:
-                r = _brake_run(S, C, QEND, sh, qh, base, vl, al, jl, js_lim, dt, L, FB,
-                               FV, bs, bq, max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23,
-                               KV, easy_frac, _horizon(k, base, fast), wk)
-                stats[1] += 1
-                if r[0]:
+                ok, cc, cl = _certified_run(S, C, QEND, sh, qh, base, vl, al, jl, js_lim, dt, L,
+                                            FB, FV, bs, bq, max_steps, q, qs, lo, hi, tol, stats,
+                                            K2, K3, K23, KV, easy_frac, _horizon(k, base, fast),
+                                            wk, cs, cq)
+                if ok:
                     tested = True
-                    cert = r[2]
-                    c_len = _save_run(bs, bq, r[1], cs, cq)
+                    cert = cc
+                    c_len = cl
                     c_at = base
                 else:
                     lo_j = base - 1
         j = lo_j
         if not tested and j + 1 >= cert:
             # fast mode: the brake chain has run past what its last run certified
-            r = _brake_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV,
-                           bs, bq, max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23, KV,
-                           easy_frac, _horizon(k, j, fast), wk)
-            stats[1] += 1
-            if not r[0]:
+            ok, cert, c_len = _certified_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB,
+                                             FV, bs, bq, max_steps, q, qs, lo, hi, tol, stats, K2,
+                                             K3, K23, KV, easy_frac, _horizon(k, j, fast), wk,
+                                             cs, cq)
+            if not ok:
                 return INFEASIBLE, k, b
-            cert = r[2]
-            c_len = _save_run(bs, bq, r[1], cs, cq)
             c_at = j
         # the end is what stops us: try to land on it with the aim policy in one run
         if gap_tol > 0.0 and k >= 2 and sh[k - 1] >= L - 2.0 * (sh[k - 1] - sh[k - 2]) - tol:
