@@ -8,6 +8,7 @@ from numpy.testing import assert_allclose
 
 from cnc_interp.fit.planar import (
     fit_planar,
+    frame_angle,
     planar_to_path,
     rotation_angle,
     rotation_angles,
@@ -41,6 +42,21 @@ def test_eq1_keeps_rotated_inclination_within_049pi():
     incl = wrap_angle(alpha - rotation_angles(alpha))
     assert incl.min() >= -0.04 * PI - 1e-12
     assert incl.max() <= 0.49 * PI + 1e-12
+
+
+@pytest.mark.parametrize("alpha, theta", [
+    (-PI, PI), (-0.76 * PI, PI), (-0.74 * PI, -PI / 2), (-0.5 * PI, -PI / 2), (-0.26 * PI, -PI / 2),
+    (-0.24 * PI, 0.0), (-0.02 * PI, 0.0), (0.0, 0.0), (0.24 * PI, 0.0), (0.26 * PI, PI / 2),
+    (0.74 * PI, PI / 2), (0.76 * PI, PI), (PI, PI),
+])
+def test_frame_angle_is_the_nearest_quarter(alpha, theta):
+    assert frame_angle(alpha) == pytest.approx(theta)
+
+
+def test_frame_angle_keeps_inclination_within_quarter_pi():
+    alpha = np.linspace(-PI, PI, 20_001)
+    incl = wrap_angle(alpha - np.array([frame_angle(a) for a in alpha]))
+    assert np.abs(incl).max() <= 0.25 * PI + 1e-12
 
 
 def _circle(R=10.0, n=2000, sweep=1.9 * PI, a0=0.0):
@@ -133,3 +149,47 @@ def test_random_planar_polylines(seed):
     assert curv < 1e-9 * max(1.0, np.abs(path.coef).max())
     assert min_speed(path) > 0
     assert_allclose(path.coef[:, 0, 2], 5.0)
+
+
+def _curvature(path, n=20_000):
+    s = np.linspace(0.0, path.length, n)
+    d1, d2 = path(s, 1), path(s, 2)
+    return (d1[:, 0] * d2[:, 2] - d1[:, 2] * d2[:, 0]) / np.linalg.norm(d1, axis=1) ** 3
+
+
+@pytest.mark.parametrize("tol", [1e-2, 5e-3])
+@pytest.mark.parametrize("a0", [0.0, 0.3, 0.5 * PI, PI, -0.5 * PI])
+def test_quantized_circle_keeps_curvature_near_one_over_r(tol, a0):
+    # circle_small_segments_ncd.ngc in small: a 1-inch circle of 15 µm chords whose
+    # coordinates are rounded to 0.0001 in. Chord angles then scatter by ±0.05π around
+    # Eq. (1)'s interval ends, and three-point curvature estimates by ±10 /mm. The fit
+    # used to switch frames from chord to chord and inherit those estimates: curvature
+    # spikes up to 900 /mm inside the tolerance, and a 20x slower feed plan.
+    R, q = 25.4, 0.00254
+    n = int(0.5 * PI * R / 0.015)
+    nodes = np.round(_circle(R, n=n, sweep=0.5 * PI, a0=a0) / q) * q
+    path, dev = _fit(nodes, tol=tol)
+    assert dev <= tol
+    assert distance_to_path(path, nodes).max() <= tol * (1 + 1e-6)
+    pos, tan, curv = continuity(path)
+    assert pos < 1e-9 and tan < 1e-9 and curv < 1e-9
+    k = _curvature(path)
+    assert np.all(np.isfinite(k))
+    assert np.abs(k - 1.0 / R).max() <= 1.0 / R
+    assert path.n_seg <= 10
+
+
+def test_noisy_line_on_an_eq1_interval_end_keeps_one_frame():
+    # a line at -0.02π (where Eq. (1) switches between θ = 0 and θ = -π/2) with
+    # ±1 µm noise: every segment stays in the frame θ = 0 and the line stays straight
+    rng = np.random.default_rng(7)
+    n = 600
+    t = np.linspace(0.0, 30.0, n)
+    a = -0.02 * PI
+    nodes = np.zeros((n, 3))
+    nodes[:, 0] = t * np.cos(a)
+    nodes[:, 2] = t * np.sin(a) + rng.uniform(-1e-3, 1e-3, n)
+    path, dev = _fit(nodes, tol=5e-3)
+    assert dev <= 5e-3
+    assert np.all(path.planar.theta == 0.0)
+    assert np.abs(_curvature(path)).max() <= 0.05

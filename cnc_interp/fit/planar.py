@@ -3,16 +3,26 @@
 For a run that moves exactly two axes (h, v) — XZ on a lathe, or any plane:
 
 1. tangential angle α_i of every chord (atan2, in [-π, π]);
-2. rotation angle θ_i of every chord by Eq. (1) with the -π/2 correction, so that
-   every rotated inclination α - θ lies in [-0.04π, 0.49π];
-3. segmentation: maximal groups of consecutive chords with the same θ;
+2. a rotated frame θ (a multiple of π/2) per segment. Eq. (1) (with the -π/2
+   correction, ``rotation_angle``) assigns each chord the frame that puts its
+   inclination α - θ in [-0.04π, 0.49π]. Used as is, a noisy polyline near one of its
+   interval ends switches frames from chord to chord, with one-chord segments that
+   start on a steep inherited tangent and curvature spikes (measured on quantized
+   circles). So the frames are centred (``frame_angle``: |α - θ| <= π/4) and a segment
+   keeps its predecessor's frame while the inherited tangent and its first chord stay
+   within ±``PLANAR_KEEP_INCLINATION_PI``·π of it (hysteresis);
+3. segmentation: maximal groups of consecutive chords within ±``PLANAR_GROUP_INCLINATION_PI``·π
+   of the frame (wider than the keep band: a segment that keeps its frame has room);
 4. Eq. (2): the group's nodes, translated to the segment's first node and rotated
    by -θ, become (x*, z*) with x* strictly increasing;
 5. a quintic p(x*) = Σ a_i x*^i is fitted by least squares to the interior nodes
    with p(0) = 0, p(x_end) = z_end and, after the first segment of a path,
    p'(0) = ρ1, p''(0) = ρ2 taken from the previous segment's end transformed
    between the frames (tangent angle φ → φ + θ_prev - θ, curvature invariant:
-   ρ2 = κ (1 + ρ1²)^{3/2}), which makes the path G2;
+   ρ2 = κ (1 + ρ1²)^{3/2}), which makes the path G2. The free end is pulled softly
+   (``PLANAR_END_WEIGHT``) towards the slope and curvature of a least-squares
+   quadratic through the nodes around it (``PLANAR_END_WINDOW``), which keeps the
+   forward propagation of p', p'' from following the coordinate noise;
 6. if a node, or a point along a chord (the programmed move: the tolerance bounds
    the distance to it everywhere), is farther than the maximum permissible error the last node is
    dropped and the fit repeated (we gallop then bisect over the number of nodes
@@ -46,8 +56,11 @@ from ..constants import (
     FIT_TOL_SAFETY,
     PLANAR_CHECKS_PER_SEGMENT,
     PLANAR_END_WEIGHT,
+    PLANAR_END_WINDOW,
     PLANAR_LONG_CHORD_RATIO,
     PLANAR_MAX_RETRIES,
+    PLANAR_GROUP_INCLINATION_PI,
+    PLANAR_KEEP_INCLINATION_PI,
     PLANAR_MAX_INCLINATION_PI,
     PLANAR_SMOOTHING,
 )
@@ -59,7 +72,8 @@ _PI = math.pi
 
 @njit(cache=True)
 def rotation_angle(alpha):
-    """Eq. (1) as corrected in DESIGN.md: θ for a tangential angle α in [-π, π]."""
+    """Eq. (1) as corrected in DESIGN.md: θ for a tangential angle α in [-π, π] (the
+    paper's frame choice; the fit uses the centred ``frame_angle`` with hysteresis)."""
     if alpha <= -0.51 * _PI:
         return _PI
     if alpha <= -0.02 * _PI:
@@ -69,6 +83,23 @@ def rotation_angle(alpha):
     if alpha <= 0.96 * _PI:
         return 0.5 * _PI
     return _PI
+
+
+@njit(cache=True)
+def _wrap(a):
+    return _PI - ((_PI - a) % (2.0 * _PI))
+
+
+@njit(cache=True)
+def frame_angle(alpha):
+    """The frame the fit uses for a tangent angle α (any real): the multiple of π/2 nearest to α
+    (so |α - θ| <= π/4; π rather than -π). Eq. (1)'s intervals are shifted by up to
+    0.23π from these: they put inclinations up to 0.47π in a frame (slope 10), where
+    an inherited curvature is scaled by (1 + p'²)^{3/2} ~ 1000."""
+    q = math.floor(_wrap(alpha) / (0.5 * _PI) + 0.5)
+    if q <= -2.0 or q >= 2.0:
+        return _PI
+    return 0.5 * _PI * q
 
 
 def rotation_angles(alpha: np.ndarray) -> np.ndarray:
@@ -120,11 +151,10 @@ def _solve_spd(A, rhs, F):
 
 
 @njit(cache=True)
-def _fit_segment(xs, zs, constrained, rho1, rho2, mu, b, has_end, d1_est, d2_est, w_end, work):
-    """Fit normalised coefficients b (6,) (q(ξ) = Σ b_i ξ^i, ξ = x*/X) to nodes xs, zs (r,)
-    (xs[0] = zs[0] = 0, xs[-1] = X > 0). Returns nothing; fills b. ``work`` (8, 4) is
-    scratch space (no allocation per fit: this runs tens of thousands of times)."""
-    r = xs.shape[0]
+def _fit_segment(xs, zs, r, constrained, rho1, rho2, mu, b, has_end, d1_est, d2_est, w_end, work):
+    """Fit normalised coefficients b (6,) (q(ξ) = Σ b_i ξ^i, ξ = x*/X) to nodes xs, zs
+    [:r] (xs[0] = zs[0] = 0, X = xs[r-1] > 0). Returns nothing; fills b. ``work`` (8, 4)
+    is scratch space (no allocation per fit: this runs tens of thousands of times)."""
     X = xs[r - 1]
     Z = zs[r - 1]
     F = 2 if constrained else 4
@@ -277,31 +307,112 @@ def _node_error(b, X, xs, zs, j):
 
 
 @njit(cache=True)
-def _end_est(e, th, tau, kap, max_incl):
-    """Local tangent slope and p'' at node e in the frame θ (estimates from the nodes)."""
-    n = tau.shape[0]
+def _local_frame(H, V, S, e, h):
+    """Tangent angle and signed curvature at node e from a least-squares quadratic
+    (H(s), V(s) against chord length s) over the nodes within s_e ± h (at least its two
+    neighbours). On a noisy or quantized polyline three-point estimates are off by
+    about δ/ℓ and 2δ/ℓ² (δ the coordinate noise, ℓ the chord), which the next segment
+    would inherit as a curvature spike; a window that grows with the segment averages
+    the noise out where the segment is long. Returns (ok, angle, kappa)."""
+    n = H.shape[0]
+    lo = e
+    while lo > 0 and S[e] - S[lo - 1] <= h:
+        lo -= 1
+    hi = e
+    while hi < n - 1 and S[hi + 1] - S[e] <= h:
+        hi += 1
+    if lo == e and e > 0:
+        lo = e - 1
+    if hi == e and e < n - 1:
+        hi = e + 1
+    if hi - lo < 2:
+        return False, 0.0, 0.0
+    scale = max(S[e] - S[lo], S[hi] - S[e])
+    if not scale > 0.0:
+        return False, 0.0, 0.0
+    # normal equations of (1, t, t^2), t = (s - s_e) / scale in [-1, 1]
+    m0 = 0.0
+    m1 = 0.0
+    m2 = 0.0
+    m3 = 0.0
+    m4 = 0.0
+    h0 = 0.0
+    h1 = 0.0
+    h2 = 0.0
+    v0 = 0.0
+    v1 = 0.0
+    v2 = 0.0
+    for j in range(lo, hi + 1):
+        t = (S[j] - S[e]) / scale
+        t2 = t * t
+        dh = H[j] - H[e]
+        dv = V[j] - V[e]
+        m0 += 1.0
+        m1 += t
+        m2 += t2
+        m3 += t2 * t
+        m4 += t2 * t2
+        h0 += dh
+        h1 += dh * t
+        h2 += dh * t2
+        v0 += dv
+        v1 += dv * t
+        v2 += dv * t2
+    # Cramer's rule for the symmetric 3 x 3 system [[m0 m1 m2] [m1 m2 m3] [m2 m3 m4]]
+    c00 = m2 * m4 - m3 * m3
+    c01 = m2 * m3 - m1 * m4
+    c02 = m1 * m3 - m2 * m2
+    c11 = m0 * m4 - m2 * m2
+    c12 = m1 * m2 - m0 * m3
+    c22 = m0 * m2 - m1 * m1
+    det = m0 * c00 + m1 * c01 + m2 * c02
+    if not abs(det) > 1e-12 * m0 * m2 * m4:
+        return False, 0.0, 0.0
+    a1 = (c01 * h0 + c11 * h1 + c12 * h2) / det
+    a2 = (c02 * h0 + c12 * h1 + c22 * h2) / det
+    b1 = (c01 * v0 + c11 * v1 + c12 * v2) / det
+    b2 = (c02 * v0 + c12 * v1 + c22 * v2) / det
+    speed2 = a1 * a1 + b1 * b1
+    if not speed2 > 0.0:
+        return False, 0.0, 0.0
+    # curvature of (H, V)(t): (H' V'' - V' H'') / |(H', V')|^3 (any parameter)
+    kappa = (a1 * 2.0 * b2 - b1 * 2.0 * a2) / speed2 ** 1.5
+    return True, math.atan2(b1, a1), kappa
+
+
+@njit(cache=True)
+def _end_est(e, th, H, V, S, h, max_incl):
+    """Local tangent slope and p'' at node e in the frame θ (estimates from the nodes
+    within arc length ±h, ``_local_frame``)."""
+    n = H.shape[0]
     if e <= 0 or e >= n - 1:
         return False, 0.0, 0.0
-    ang = tau[e] - th
+    ok, tang, kap = _local_frame(H, V, S, e, h)
+    if not ok:
+        return False, 0.0, 0.0
+    ang = tang - th
     ang = _PI - ((_PI - ang) % (2.0 * _PI))
     if abs(ang) >= max_incl:
         return False, 0.0, 0.0
     d1 = math.tan(ang)
-    return True, d1, kap[e] * (1.0 + d1 * d1) ** 1.5
+    return True, d1, kap * (1.0 + d1 * d1) ** 1.5
 
 
 @njit(cache=True)
-def _try(xs, zs, tol, constrained, rho1, rho2, mu, b, e, th, tau, kap, max_incl, w_end, per_x, max_checks,
-         work):
-    """Fit and test: True when every node and every point along every chord (the
+def _try(xs_all, zs_all, r, tol, constrained, rho1, rho2, mu, b, e, th, H, V, S, max_incl,
+         w_end, w_win, per_x, max_checks, work):
+    """Fit and test the segment over nodes s..e (r = e - s + 1 rotated nodes in
+    xs_all, zs_all): True when every node and every point along every chord (the
     programmed moves; the tolerance bounds the distance to the programmed path
     everywhere) is within its tolerance. Stops at the first failure, checking from the
     segment's end (where a too long segment fails first); the vertical residual
     bounds the distance, so the Newton projection runs only where it exceeds the
-    tolerance."""
-    has, d1, d2 = _end_est(e, th, tau, kap, max_incl)
-    _fit_segment(xs, zs, constrained, rho1, rho2, mu, b, has and w_end > 0.0, d1, d2, w_end, work)
-    r = xs.shape[0]
+    tolerance. The end is pulled towards the slope and curvature of the nodes within
+    ``w_win`` times the segment's length around node e (``_end_est``)."""
+    has, d1, d2 = _end_est(e, th, H, V, S, w_win * xs_all[r - 1], max_incl)
+    _fit_segment(xs_all, zs_all, r, constrained, rho1, rho2, mu, b, has and w_end > 0.0, d1, d2, w_end, work)
+    xs = xs_all[:r]
+    zs = zs_all[:r]
     X = xs[r - 1]
     for j in range(r - 1, 0, -1):
         if j < r - 1:
@@ -339,12 +450,7 @@ def _rotate(H, V, s, r, n_rot, c, sn, xs_all, zs_all):
 
 
 @njit(cache=True)
-def _wrap(a):
-    return _PI - ((_PI - a) % (2.0 * _PI))
-
-
-@njit(cache=True)
-def planar_fit_kernel(H, V, tol, alpha, theta_chord, tau, kap, w_end, max_incl, mu,
+def planar_fit_kernel(H, V, tol, alpha, S, w_end, w_win, max_incl, keep, band, mu,
                       out_theta, out_start, out_end, out_b, per_x, max_checks,
                       s0=0, k0=0, constrained0=False, phi0=0.0, kappa0=0.0, max_dev0=0.0):
     """Segment and fit nodes (H, V) (n,); returns (n_seg, status, max_dev, s,
@@ -371,39 +477,39 @@ def planar_fit_kernel(H, V, tol, alpha, theta_chord, tau, kap, w_end, max_incl, 
     zs_all = np.empty(n)
     phi_abs = phi0
     kappa = kappa0
-    # run_end[j]: the first chord after j with another θ (or node n-1): the end of the
-    # group of chords that share chord j's frame
-    run_end = np.empty(max(n - 1, 1), dtype=np.int64)
-    for j in range(n - 2, -1, -1):
-        if j + 1 >= n - 1:
-            run_end[j] = n - 1
-        elif theta_chord[j + 1] != theta_chord[j]:
-            run_end[j] = j + 1
-        else:
-            run_end[j] = run_end[j + 1]
+    th = out_theta[k0 - 1] if k0 > 0 else 0.0
+    g_th = np.nan  # the frame and group end of the last scan (valid for any s before it)
+    g_cached = -1
     while s < n - 1:
-        th = theta_chord[s]
-        alt = False
         if constrained:
+            # keep the previous frame while the inherited tangent and the next chord stay
+            # within ±keep of it. Eq. (1) has no hysteresis: on a noisy polyline near one
+            # of its interval ends the frame flips from chord to chord, every segment is
+            # one or two chords long and starts with a steep inherited tangent, and the
+            # curvature spikes
+            if not (abs(_wrap(phi_abs - th)) <= keep and abs(_wrap(alpha[s] - th)) <= keep):
+                th = frame_angle(phi_abs)
+                if abs(_wrap(alpha[s] - th)) >= max_incl:
+                    th = frame_angle(alpha[s])
+                    if abs(_wrap(phi_abs - th)) > max_incl:
+                        return k, 1, max_dev, s, constrained, phi_abs, kappa
             # the inherited tangent in this frame (DESIGN.md: the tangent angle rotates,
             # the curvature is invariant)
             phi = _wrap(phi_abs - th)
-            if abs(phi) > max_incl:
-                # Eq. (1) applied to the inherited tangent instead of the chord: the
-                # segment then takes the following chords that this frame can represent
-                th = rotation_angle(_wrap(phi_abs))
-                phi = _wrap(phi_abs - th)
-                alt = True
-                if abs(phi) > max_incl or abs(_wrap(alpha[s] - th)) >= max_incl:
-                    return k, 1, max_dev, s, constrained, phi_abs, kappa
             rho1 = math.tan(phi)
             rho2 = kappa * (1.0 + rho1 * rho1) ** 1.5
-        g_end = s + 1
-        if alt:
-            while g_end < n - 1 and abs(_wrap(alpha[g_end] - th)) < max_incl:
-                g_end += 1
         else:
-            g_end = run_end[s]
+            th = frame_angle(alpha[s])
+        # the group: chord s and the following chords within ±band of the frame (wider
+        # than ±keep, so that a segment that keeps its frame has room to grow)
+        if th == g_th and s < g_cached:
+            g_end = g_cached
+        else:
+            g_end = s + 1
+            while g_end < n - 1 and abs(_wrap(alpha[g_end] - th)) <= band:
+                g_end += 1
+            g_th = th
+            g_cached = g_end
         c = math.cos(th)
         sn = math.sin(th)
         # Eq. (2) for the nodes s..s+n_rot-1 (rotated on demand: a group can hold many
@@ -422,8 +528,8 @@ def planar_fit_kernel(H, V, tol, alpha, theta_chord, tau, kap, w_end, max_incl, 
                 break
             r = e - s + 1
             n_rot = _rotate(H, V, s, r, n_rot, c, sn, xs_all, zs_all)
-            if _try(xs_all[:r], zs_all[:r], tl[:r], constrained, rho1, rho2, mu, bt,
-                    e, th, tau, kap, max_incl, w_end, per_x, max_checks, work):
+            if _try(xs_all, zs_all, r, tl[:r], constrained, rho1, rho2, mu, bt,
+                    e, th, H, V, S, max_incl, w_end, w_win, per_x, max_checks, work):
                 lo = e
                 lo_fit = True
                 b[:] = bt
@@ -438,8 +544,8 @@ def planar_fit_kernel(H, V, tol, alpha, theta_chord, tau, kap, w_end, max_incl, 
             mid = (lo + hi) // 2
             r = mid - s + 1
             n_rot = _rotate(H, V, s, r, n_rot, c, sn, xs_all, zs_all)
-            if _try(xs_all[:r], zs_all[:r], tl[:r], constrained, rho1, rho2, mu, bt,
-                    mid, th, tau, kap, max_incl, w_end, per_x, max_checks, work):
+            if _try(xs_all, zs_all, r, tl[:r], constrained, rho1, rho2, mu, bt,
+                    mid, th, H, V, S, max_incl, w_end, w_win, per_x, max_checks, work):
                 lo = mid
                 lo_fit = True
                 b[:] = bt
@@ -450,8 +556,8 @@ def planar_fit_kernel(H, V, tol, alpha, theta_chord, tau, kap, w_end, max_incl, 
         n_rot = _rotate(H, V, s, r, n_rot, c, sn, xs_all, zs_all)
         if not lo_fit:
             # a single chord (never tried yet)
-            if not _try(xs_all[:r], zs_all[:r], tl[:r], constrained, rho1, rho2, mu, bt,
-                        e, th, tau, kap, max_incl, w_end, per_x, max_checks, work):
+            if not _try(xs_all, zs_all, r, tl[:r], constrained, rho1, rho2, mu, bt,
+                        e, th, H, V, S, max_incl, w_end, w_win, per_x, max_checks, work):
                 return k, 2, max_dev, s, constrained, phi_abs, kappa
             b[:] = bt
         X = xs_all[r - 1]
@@ -524,7 +630,7 @@ def fit_planar(nodes: np.ndarray, plane: tuple[int, int], tol_mm: np.ndarray, ax
         H = np.ascontiguousarray(nodes[:, h], dtype=float)
         V = np.ascontiguousarray(nodes[:, v], dtype=float)
         n = H.size
-        alpha, theta_chord, tau, kap = _chord_frames(H, V)
+        alpha, S = _chord_frames(H, V)
         tol = np.asarray(tol_mm, dtype=float) * FIT_TOL_SAFETY
         out_theta = np.empty(n - 1)
         out_start = np.empty(n - 1, dtype=np.int64)
@@ -534,7 +640,8 @@ def fit_planar(nodes: np.ndarray, plane: tuple[int, int], tol_mm: np.ndarray, ax
             k0 = kept[0].size
             out_theta[:k0], out_start[:k0], out_end[:k0], out_b[:k0] = kept
         k, status, max_dev, s_fail, cons, phi_abs, kappa = planar_fit_kernel(
-            H, V, tol, alpha, theta_chord, tau, kap, PLANAR_END_WEIGHT, PLANAR_MAX_INCLINATION_PI * np.pi,
+            H, V, tol, alpha, S, PLANAR_END_WEIGHT, PLANAR_END_WINDOW, PLANAR_MAX_INCLINATION_PI * np.pi,
+            PLANAR_KEEP_INCLINATION_PI * np.pi, PLANAR_GROUP_INCLINATION_PI * np.pi,
             PLANAR_SMOOTHING, out_theta, out_start, out_end, out_b, PLANAR_CHECKS_PER_SEGMENT,
             FIT_MAX_CHORD_CHECKS, *state)
         if status != 2 or attempt == PLANAR_MAX_RETRIES or s_fail == last_fail:
@@ -566,17 +673,15 @@ def fit_planar(nodes: np.ndarray, plane: tuple[int, int], tol_mm: np.ndarray, ax
 
 @njit(cache=True)
 def _chord_frames(H, V):
-    """Per chord the tangential angle α and Eq. (1)'s θ, per node the estimated tangent
-    angle and curvature (``node_tangents``): one compiled pass instead of several."""
+    """Per chord the tangential angle α (n-1,), per node the cumulated chord length (n,)."""
     n = H.shape[0]
     alpha = np.empty(n - 1)
-    theta = np.empty(n - 1)
+    S = np.empty(n)
+    S[0] = 0.0
     for j in range(n - 1):
-        a = math.atan2(V[j + 1] - V[j], H[j + 1] - H[j])
-        alpha[j] = a
-        theta[j] = rotation_angle(a)
-    tau, kap = node_tangents(H, V)
-    return alpha, theta, tau, kap
+        alpha[j] = math.atan2(V[j + 1] - V[j], H[j + 1] - H[j])
+        S[j + 1] = S[j] + math.hypot(H[j + 1] - H[j], V[j + 1] - V[j])
+    return alpha, S
 
 
 @njit(cache=True)
