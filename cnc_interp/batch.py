@@ -58,6 +58,7 @@ class BatchOptions:
     planner: str = "vpop"
     dt_s: float | None = None
     tol_mm: float | None = None
+    fit_method: str | None = None
     jobs: int | None = None
     report: str | None = None
     baseline: str | None = None
@@ -139,7 +140,7 @@ def _make_jobs(programs, machine, opts: BatchOptions, embed: bool) -> list[dict]
     jobs = []
     for key, path in programs:
         job = {"key": key, "path": path, "machine": machine, "planner": opts.planner,
-               "dt_s": opts.dt_s, "tol_mm": opts.tol_mm, "data": None}
+               "dt_s": opts.dt_s, "tol_mm": opts.tol_mm, "fit_method": opts.fit_method, "data": None}
         if embed:  # Dask workers may not share our file system: ship the program text
             with open(path, "rb") as fh:
                 job["data"] = fh.read()
@@ -369,6 +370,7 @@ def build_report(opts: BatchOptions) -> dict:
         "planner": opts.planner,
         "dt_s": machine.with_dt(opts.dt_s).dt_s,
         "tol_mm": opts.tol_mm,
+        "fit_method": opts.fit_method or "auto",
         "max_slowdown": slowdown,
         "executor": "dask" if opts.dask_address else "local",
         "programs": records,

@@ -60,7 +60,8 @@ def _run_job(job: dict) -> dict:
             with open(job["path"], "rb") as fh:
                 data = fh.read()
         return process_program(job["path"], data, job["machine"], planner=job["planner"],
-                               dt_s=job.get("dt_s"), tol_mm=job.get("tol_mm"))
+                               dt_s=job.get("dt_s"), tol_mm=job.get("tol_mm"),
+                               fit_method=job.get("fit_method"))
     except CncInterpError as exc:
         return {"status": "error", "message": exc.format(), "error_line": exc.location.line}
     except MemoryError:

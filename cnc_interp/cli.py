@@ -35,6 +35,12 @@ def _tol_option(f):
                         help="Maximum permissible fit error in mm (default 0.001, or the machine's).")(f)
 
 
+def _fit_method_option(f):
+    return click.option("--fit-method", "fit_method", type=click.Choice(("auto", "nodes")), default=None,
+                        help="auto (default): paper 000's planar fit for runs that move exactly two "
+                             "axes, the N-axis fit elsewhere; nodes: the N-axis fit everywhere.")(f)
+
+
 def _machine_option(required: bool = False):
     def deco(f):
         return click.option("-m", "--machine", "machine_spec", required=required, default=None,
@@ -80,17 +86,19 @@ def parse(part: str, machine_spec: str | None, as_json: bool) -> None:
 @_tol_option
 @click.option("--corner-deg", type=click.FloatRange(min=0, max=180), default=None,
               help="Turns sharper than this split the path (default 30).")
+@_fit_method_option
 @click.option("-o", "--output", "out", default=None, metavar="SEGMENTS.json",
               help="Write the fitted segments as JSON.")
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable statistics on stdout.")
-def fit(part, machine_spec, tol_mm, corner_deg, out, as_json) -> None:
+def fit(part, machine_spec, tol_mm, corner_deg, fit_method, out, as_json) -> None:
     """Fit PART's tool path with G2-continuous quintic segments."""
     from .fit.report import fit_statistics, format_statistics, write_segments_json
     from .fit.settings import FitSettings
     from .pipeline import fit_loaded, load_program_for
 
     program, machine = load_program_for(part, machine_spec, require_machine=False)
-    settings = FitSettings.from_options(tol_mm=tol_mm, corner_deg=corner_deg, machine=machine)
+    settings = FitSettings.from_options(tol_mm=tol_mm, corner_deg=corner_deg, machine=machine,
+                                        method=fit_method)
     result = fit_loaded(program, settings)
     if out:
         write_segments_json(result, out)
@@ -108,18 +116,20 @@ def fit(part, machine_spec, tol_mm, corner_deg, out, as_json) -> None:
 @click.option("--planner", type=click.Choice(PLANNERS), default="vpop", show_default=True)
 @_dt_option
 @_tol_option
+@_fit_method_option
 @click.option("--start", "start", default=None, metavar="X=..,Y=..",
               help="Machine position before the program (default: the machine's, else all 0).")
 @click.option("-o", "--output", "out", default="-", metavar="OUT",
               help="OUT.csv or OUT.mcap; - (default) writes CSV to stdout.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar and no summary on stderr.")
 @click.option("--json", "as_json", is_flag=True, help="Summary as JSON on stderr.")
-def plan(part, machine_spec, planner, dt_s, tol_mm, start, out, quiet, as_json) -> None:
+def plan(part, machine_spec, planner, dt_s, tol_mm, fit_method, start, out, quiet, as_json) -> None:
     """Plan PART into setpoints every dt for MACHINE's axes."""
     from .pipeline import PlanOptions, run_plan
 
     opts = PlanOptions(part=part, machine_spec=machine_spec, planner=planner, dt_s=dt_s,
-                       tol_mm=tol_mm, start=start, out=out, quiet=quiet, summary_json=as_json)
+                       tol_mm=tol_mm, fit_method=fit_method, start=start, out=out, quiet=quiet,
+                       summary_json=as_json)
     run_plan(opts)
 
 
@@ -187,18 +197,20 @@ def emulate(frames, out) -> None:
 @click.option("--planner", type=click.Choice(PLANNERS), default="variable", show_default=True)
 @_dt_option
 @_tol_option
+@_fit_method_option
 @click.option("--device", default=None, metavar="VID:PID", help="USB device (hex VID:PID).")
 @click.option("--dry-run", "dry_run", default=None, metavar="FRAMES.bin",
               help="Write the frames to a file instead of a device.")
 @click.option("--resume-from", "resume_from", type=int, default=None, metavar="SEQ",
               help="Resume a broken stream after the last acknowledged sequence number.")
 @click.option("--quiet", "-q", is_flag=True)
-def stream(part, machine_spec, planner, dt_s, tol_mm, device, dry_run, resume_from, quiet) -> None:
+def stream(part, machine_spec, planner, dt_s, tol_mm, fit_method, device, dry_run, resume_from,
+           quiet) -> None:
     """Quantize PART's plan to fixed point and stream it to the FPGA over USB."""
     from .fpga.commands import StreamOptions, run_stream
 
     run_stream(StreamOptions(part=part, machine_spec=machine_spec, planner=planner, dt_s=dt_s,
-                             tol_mm=tol_mm, device=device, dry_run=dry_run,
+                             tol_mm=tol_mm, fit_method=fit_method, device=device, dry_run=dry_run,
                              resume_from=resume_from, quiet=quiet))
 
 
@@ -209,6 +221,7 @@ def stream(part, machine_spec, planner, dt_s, tol_mm, device, dry_run, resume_fr
 @click.option("--planner", type=click.Choice(PLANNERS), default="vpop", show_default=True)
 @_dt_option
 @_tol_option
+@_fit_method_option
 @click.option("--jobs", "-j", type=click.IntRange(min=1), default=None, help="Worker processes.")
 @click.option("--report", "report", default=None, metavar="FILE.json|FILE.csv")
 @click.option("--baseline", default=None, metavar="FILE.json")
@@ -219,13 +232,14 @@ def stream(part, machine_spec, planner, dt_s, tol_mm, device, dry_run, resume_fr
               help="Run on an existing Dask distributed scheduler.")
 @click.option("--quiet", "-q", is_flag=True)
 @click.option("--json", "as_json", is_flag=True)
-def batch(paths, machine_spec, planner, dt_s, tol_mm, jobs, report, baseline, max_slowdown,
+def batch(paths, machine_spec, planner, dt_s, tol_mm, fit_method, jobs, report, baseline, max_slowdown,
           timeout_s, dask_address, quiet, as_json) -> None:
     """Run every program under PATHS through parse, fit, plan and verify."""
     from .batch import BatchOptions, run_batch
 
     code = run_batch(BatchOptions(paths=paths, machine_spec=machine_spec, planner=planner,
-                                  dt_s=dt_s, tol_mm=tol_mm, jobs=jobs, report=report,
+                                  dt_s=dt_s, tol_mm=tol_mm, fit_method=fit_method, jobs=jobs,
+                                  report=report,
                                   baseline=baseline, max_slowdown=max_slowdown,
                                   timeout_s=timeout_s, dask_address=dask_address, quiet=quiet,
                                   as_json=as_json))

@@ -70,7 +70,8 @@ def fit_loaded(program, settings):
 
 # --- batch: one program from bytes to a result record (H3a, issue 7) ----------
 def process_program(name: str, data: bytes, machine, planner: str = "vpop",
-                    dt_s: float | None = None, tol_mm: float | None = None) -> dict:
+                    dt_s: float | None = None, tol_mm: float | None = None,
+                    fit_method: str | None = None) -> dict:
     """Parse, fit, plan and verify one program; the batch's per-program record.
 
     Raises ``CncInterpError`` for bad input (the batch records it as an error).
@@ -85,7 +86,7 @@ def process_program(name: str, data: bytes, machine, planner: str = "vpop",
     from .plan.verify import verify
 
     program = read_program(data, source=name, axes=machine.axes, start=machine.start)
-    fit_settings = FitSettings.from_options(tol_mm=tol_mm, machine=machine)
+    fit_settings = FitSettings.from_options(tol_mm=tol_mm, machine=machine, method=fit_method)
     result = fit_loaded(program, fit_settings)
     settings = PlanSettings.from_options(planner=planner, dt_s=dt_s, tol_mm=tol_mm, machine=machine)
     traj = plan_program(result, machine.with_dt(settings.dt_s), settings)
@@ -132,6 +133,7 @@ class PlanOptions:
     planner: str = "vpop"
     dt_s: float | None = None
     tol_mm: float | None = None
+    fit_method: str | None = None
     start: str | None = None
     out: str = "-"
     quiet: bool = False
@@ -163,6 +165,7 @@ class PlanOutcome:
             "path_length_mm": float(traj.s[-1]) if traj.n_samples else 0.0,
             "worst_ratio": rep.worst_ratio, "worst": {"axis": axis, "limit": kind, "sample": idx},
             "status": traj.status, "timings_s": self.timings,
+            "fit_method": self.fit_stats.get("method"),
             "x_real_time": (traj.duration_s / plan_s) if plan_s > 0 else None,
         }
 
@@ -191,7 +194,8 @@ def parse_start(spec: str | None, axes: str) -> np.ndarray | None:
 
 def plan_part(part: str, machine_spec: str | None = None, planner: str = "vpop",
               dt_s: float | None = None, tol_mm: float | None = None,
-              start: str | np.ndarray | None = None, progress=None) -> PlanOutcome:
+              start: str | np.ndarray | None = None, progress=None,
+              fit_method: str | None = None) -> PlanOutcome:
     """Parse, fit, plan and verify one part program (no output written).
 
     Raises ``PlanError`` (exit 1) when the plan violates a limit: that is a bug.
@@ -220,7 +224,7 @@ def plan_part(part: str, machine_spec: str | None = None, planner: str = "vpop",
     input_meta = _input_meta(name, data)
     t1 = time.perf_counter()
     timings["parse"] = t1 - t0
-    fit_settings = FitSettings.from_options(tol_mm=tol_mm, machine=machine)
+    fit_settings = FitSettings.from_options(tol_mm=tol_mm, machine=machine, method=fit_method)
     fitted = fit_loaded(program, fit_settings)
     t2 = time.perf_counter()
     timings["fit"] = t2 - t1
@@ -273,7 +277,7 @@ def run_plan(opts: PlanOptions) -> None:
     check_writable(out)
     with progress_bar(None, "plan", enabled=not opts.quiet) as tick:
         outcome = plan_part(opts.part, opts.machine_spec, opts.planner, opts.dt_s, opts.tol_mm,
-                            opts.start, progress=tick)
+                            opts.start, progress=tick, fit_method=opts.fit_method)
     traj = outcome.trajectory
     if out.lower().endswith(".mcap"):
         from .export.mcap_io import write_mcap

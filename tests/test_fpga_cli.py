@@ -84,6 +84,27 @@ def test_stream_dry_run_round_trip_matches_plan(tmp_path):
     assert np.max(np.abs(a.q - b.q)) < FPGA_ROUNDTRIP_TARGET_MM
 
 
+def test_stream_fit_method_nodes_round_trips(tmp_path):
+    # a lathe profile of G1 moves in XZ: planar segments by default, N-axis ones on request
+    part = tmp_path / "polyline.ngc"
+    th = np.linspace(0.0, 0.5 * np.pi, 41)
+    part.write_text("G21 G18 G90 G94\nG0 X10 Z0\nF600\n"
+                    + "".join(f"G1 X{10 + 5 * np.sin(t):.4f} Z{-5 + 5 * np.cos(t):.4f}\n" for t in th[1:])
+                    + "G0 X30 Z5\nM2\n")
+    frames = {m: tmp_path / f"{m}.bin" for m in ("auto", "nodes")}
+    for m, f in frames.items():
+        r = cli("stream", str(part), "-m", XZ_INI, "--fit-method", m, "--dry-run", str(f))
+        assert r.returncode == 0, r.stderr
+        emu, plan = tmp_path / f"{m}-emu.csv", tmp_path / f"{m}-plan.csv"
+        assert cli("emulate", str(f), "-o", str(emu)).returncode == 0
+        r = cli("plan", str(part), "-m", XZ_INI, "--planner", "variable", "--fit-method", m, "-o", str(plan), "-q")
+        assert r.returncode == 0, r.stderr
+        a, b = read_csv(str(emu)), read_csv(str(plan))
+        assert a.q.shape == b.q.shape
+        assert np.max(np.abs(a.q - b.q)) < FPGA_ROUNDTRIP_TARGET_MM
+    assert frames["auto"].read_bytes() != frames["nodes"].read_bytes()
+
+
 @pytest.mark.parametrize("planner", ["constant", "vpop"])
 def test_stream_other_planners_round_trip(tmp_path, planner):
     from cnc_interp.fpga.commands import StreamOptions, build_stream, emulate_frames, plan_for_stream

@@ -114,3 +114,33 @@ def test_parse_start():
     for bad in ("X1", "X=abc", "A=1", "X=inf"):
         with pytest.raises(UsageError):
             parse_start(bad, "XYZ")
+
+
+def _polygon_arc_program(n=120):
+    """A quarter circle as n G1 moves in XY (a two-axis run of lines)."""
+    th = np.linspace(0.0, 0.5 * np.pi, n + 1)
+    lines = ["G21 G90 G94", "G0 X20 Y0", "G1 F3000"]
+    lines += [f"G1 X{20 * np.cos(t):.4f} Y{20 * np.sin(t):.4f}" for t in th[1:]]
+    return "\n".join(lines + ["M2", ""])
+
+
+def test_fit_method_option_selects_the_fitter(tmp_path):
+    part = tmp_path / "arc.ngc"
+    part.write_text(_polygon_arc_program())
+    auto = plan_part(str(part), "generic-mill")
+    nodes = plan_part(str(part), "generic-mill", fit_method="nodes")
+    assert auto.report.ok and nodes.report.ok
+    methods = lambda o: {m for r in o.fit_stats["runs"] for m in r.get("methods", [])}  # noqa: E731
+    assert methods(auto) == {"planar-XY"} and methods(nodes) == {"nodes"}
+    assert auto.summary()["fit_method"] == "auto" and nodes.summary()["fit_method"] == "nodes"
+    r = run([str(part), "--fit-method", "nodes", "--json", "-o", str(tmp_path / "n.csv")])
+    assert r.returncode == 0, r.stderr.decode()
+    assert json.loads(r.stderr.decode())["fit_method"] == "nodes"
+    r = subprocess.run([sys.executable, "-m", "cnc_interp.cli", "fit", str(part), "--fit-method", "nodes",
+                        "--json"], capture_output=True, timeout=600)
+    assert r.returncode == 0, r.stderr.decode()
+    stats = json.loads(r.stdout.decode())
+    assert stats["method"] == "nodes" and stats["within_tolerance"]
+    r = run([str(part), "--fit-method", "spline", "-o", str(tmp_path / "x.csv")])
+    assert r.returncode == 2 and b"--fit-method" in r.stderr
+    assert not (tmp_path / "x.csv").exists()

@@ -50,8 +50,9 @@ class FitSettings:
 
     @classmethod
     def from_options(cls, tol_mm: float | None = None, corner_deg: float | None = None,
-                     machine=None, **extra) -> "FitSettings":
-        """Settings from CLI options; the machine's ``tol_mm`` is used when ``--tol`` is absent.
+                     machine=None, method: str | None = None, **extra) -> "FitSettings":
+        """Settings from CLI options; the machine's ``tol_mm`` is used when ``--tol`` is absent,
+        ``"auto"`` when ``--fit-method`` is.
 
         ``--tol 0`` asks for the exact path: it is kept as the smallest tolerance the
         fitter accepts for curves (``FIT_EXACT_CURVE_TOL_MM``); straight moves stop
@@ -68,6 +69,8 @@ class FitSettings:
                 kw["corner_deg"] = 0.0
         if corner_deg is not None and "corner_deg" not in kw:
             kw["corner_deg"] = float(corner_deg)
+        if method is not None:
+            kw["method"] = method
         return cls(**kw)
 
     def node_tolerance(self, tol_block_mm):

@@ -20,6 +20,7 @@ class StreamOptions:
     planner: str = "variable"
     dt_s: float | None = None
     tol_mm: float | None = None
+    fit_method: str | None = None
     device: str | None = None
     dry_run: str | None = None
     resume_from: int | None = None
@@ -102,7 +103,8 @@ def plan_for_stream(opts: StreamOptions):
     machine = machine.with_dt(settings.dt_s)
     name, data = read_part(opts.part)
     program = read_program(data, source=name, axes=machine.axes, start=machine.start)
-    fitted = fit_loaded(program, FitSettings.from_options(tol_mm=opts.tol_mm, machine=machine))
+    fitted = fit_loaded(program, FitSettings.from_options(tol_mm=opts.tol_mm, machine=machine,
+                                                          method=opts.fit_method))
     traj = plan_program(fitted, machine, settings)
     report = verify(traj, machine)
     if not report.ok:
