@@ -173,3 +173,53 @@ def test_random_mixed_polylines_nodes_3d(seed):
         assert pos < 1e-9 and tan < 1e-9 and curv < 1e-9 * max(1.0, np.abs(p.coef).max())
         assert min_speed(p) > 0
     assert _worst_distance(paths, _dense(nodes)) <= tol * (1 + EPS)
+
+
+# --- rotary axes ---------------------------------------------------------------
+def _line_pieces(p0, p1, bulge=None):
+    """One quintic piece from p0 to p1 (d,) on u in [0, 1], plus ``bulge`` (d,) * 16 u²(1-u)²."""
+    coef = np.zeros((1, 6, p0.size))
+    coef[0, 0], coef[0, 1] = p0, p1 - p0
+    if bulge is not None:  # 16 (u² - 2u³ + u⁴): 0 at both ends, 1 at u = 1/2
+        coef[0, 2], coef[0, 3], coef[0, 4] = 16 * bulge, -32 * bulge, 16 * bulge
+    return np.array([0.0, 1.0]), coef
+
+
+@pytest.mark.parametrize("extra_deg, expected", [(0.0, 0.0), (0.5e-3, 0.5), (2e-3, 2.0)])
+def test_rotary_deviation_closed_form(extra_deg, expected):
+    from cnc_interp.fit.deviation import rotary_path_deviation
+
+    # X 0 -> 10 mm with A 0 -> 20 deg; the fit's A bulges by extra_deg in the middle
+    nodes = np.array([[0.0, 0.0], [10.0, 20.0]])
+    lin = np.array([True, False])
+    breaks, coef = _line_pieces(nodes[0], nodes[1], np.array([0.0, extra_deg]))
+    r = rotary_path_deviation(breaks, coef, nodes, np.full(2, 1e-3), 1e-3, lin, np.array([True, True]))
+    # the foot point in the scaled (X, A) plane is off the programmed pose by δ cos φ
+    # across the line (tan φ = 20 deg / 10 mm): ΔX = δ cos φ sin φ = 0.4 δ, ΔA = δ cos² φ = 0.2 δ;
+    # the ratio is the larger over its tolerance
+    cos_phi, sin_phi = np.array([10.0, 20.0]) / np.hypot(10.0, 20.0)
+    assert r == pytest.approx(expected * cos_phi * sin_phi, rel=0.01, abs=1e-9)
+    # rotary-only (X still): A 0 -> 20 deg, the fit's C bulges by extra_deg across it; the
+    # distance in degrees against tol_deg
+    nodes_r = np.array([[5.0, 0.0, 3.0], [5.0, 20.0, 3.0]])
+    lin_r = np.array([True, False, False])
+    breaks, coef = _line_pieces(nodes_r[0], nodes_r[1], np.array([0.0, 0.0, extra_deg]))
+    r = rotary_path_deviation(breaks, coef, nodes_r, np.full(2, 1e-3), 1e-3, lin_r,
+                              np.array([False, True, False]))
+    assert r == pytest.approx(expected, rel=1e-6, abs=1e-9)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_random_five_axis_polylines_hold_the_rotary_tolerance(seed):
+    rng = np.random.default_rng(100 + seed)
+    n = 60
+    steps = rng.normal(size=(n, 5)) * np.array([1.0, 1.0, 0.3, 2.0, 5.0])
+    pts = np.cumsum(steps, axis=0)
+    body = "".join(f"G1 X{p[0]:.4f} Y{p[1]:.4f} Z{p[2]:.4f} A{p[3]:.4f} C{p[4]:.4f}\n" for p in pts)
+    prog = read_program(("G21 G90 G94\nG0 X0 Y0 Z0 A0 C0\nF1200\n" + body + "M2\n").encode(),
+                        source="five.ngc", axes="XYZAC")
+    res = fit_program(prog, FitSettings(tol_mm=1e-3, tol_deg=1e-3, corner_deg=60.0))
+    st = res.stats
+    assert st["within_tolerance"]
+    assert 0.0 < st["max_path_dev_rot_ratio"] <= 1.0 + 1e-6
+    assert st["max_node_dev_deg"] <= 1e-3

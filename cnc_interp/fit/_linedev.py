@@ -4,6 +4,9 @@ Stellabee-like programs have tens of thousands of short fitted sub-runs; the Pyt
 glue around the measurement's kernels (sampling, masking, projection) then costs more
 than the kernels. This is the same measurement — the same kernels (``_project``) with
 the same arguments and arithmetic, so the same numbers — without that glue.
+
+Numba's cache of this module does not notice changes in ``_project``; a change of a kernel
+there that this module calls needs an edit here too (its cache is keyed on this file).
 """
 
 from __future__ import annotations

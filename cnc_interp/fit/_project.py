@@ -209,12 +209,20 @@ def march_distances(coef, h, pts, tol, local_frac, window_u, far_window_u, n_coa
     tolerances, window_u / far_window_u the reach (path parameter units, each side
     of the marched foot point) of tiers 2 and 3 of the module docstring (inf: all
     pieces). Conservative: each distance is that of a point of the path."""
+    return march_feet(coef, h, pts, tol, local_frac, window_u, far_window_u, n_coarse, iters)[0]
+
+
+@njit(cache=True)
+def march_feet(coef, h, pts, tol, local_frac, window_u, far_window_u, n_coarse, iters):
+    """``march_distances`` with the foot points: (distance (K,), piece (K,), local t (K,))."""
     K = pts.shape[0]
     S = coef.shape[0]
     out = np.empty(K)
+    foot_k = np.zeros(K, dtype=np.int64)
+    foot_t = np.zeros(K)
     if K == 0 or S == 0:
         out[:] = np.inf
-        return out
+        return out, foot_k, foot_t
     lo, hi = piece_boxes(coef, h)
     u0 = np.empty(S + 1)  # piece starts along the path parameter
     u0[0] = 0.0
@@ -280,7 +288,9 @@ def march_distances(coef, h, pts, tol, local_frac, window_u, far_window_u, n_coa
             k = k_best
             t = t_best
         out[i] = math.sqrt(best)
-    return out
+        foot_k[i] = k
+        foot_t[i] = t
+    return out, foot_k, foot_t
 
 
 @njit(cache=True)

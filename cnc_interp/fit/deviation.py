@@ -14,7 +14,8 @@ their tolerance. Every distance is that of an actual point of the fitted path, s
 a missed foot point can only over-estimate a deviation (conservative).
 
 This is an independent measurement: it uses neither the fitter's node parameters
-nor its check points. Distances are Euclidean over the linear axes (mm).
+nor its check points. Distances are Euclidean over the linear axes (mm);
+``rotary_path_deviation`` measures the runs whose rotary axes move.
 """
 
 from __future__ import annotations
@@ -117,9 +118,11 @@ def polyline_deviation(breaks: np.ndarray, coef: np.ndarray, nodes: np.ndarray,
 
 
 def path_deviation(breaks: np.ndarray, coef: np.ndarray, nodes: np.ndarray, tol_mm: np.ndarray,
-                   lin: np.ndarray, curves=(), i0: int = 0):
+                   lin: np.ndarray, curves=(), i0: int = 0, axis_scale: np.ndarray | None = None):
     """Worst distance of the programmed path (nodes (n, d) with ``curves``) to the fitted
-    pieces, over the linear axes ``lin``: (max distance mm, max distance / tolerance)."""
+    pieces, over the linear axes ``lin``: (max distance mm, max distance / tolerance).
+    With ``axis_scale`` (d,) the programmed samples are scaled by it before the
+    measurement (``coef`` must already be scaled the same way)."""
     if not lin.any() or nodes.shape[0] < 2:
         return 0.0, 0.0
     from ._project import median
@@ -127,8 +130,57 @@ def path_deviation(breaks: np.ndarray, coef: np.ndarray, nodes: np.ndarray, tol_
     # |dq/du| ≈ 1: a typical knot span in mm, sampled PATH_DEV_SAMPLES_PER_SPAN times
     spacing = max(median(np.diff(breaks)), 1e-9) / PATH_DEV_SAMPLES_PER_SPAN
     pts, tol = programmed_samples(nodes, tol_mm, curves, i0, spacing)
+    if axis_scale is not None:
+        pts = pts * axis_scale
     dist = distance_to_pieces(breaks, coef, pts, lin, tol, spacing)
     if dist.size == 0:
         return 0.0, 0.0
     ratio = dist / np.maximum(tol, 1e-300)
     return float(dist.max()), float(ratio.max())
+
+
+def rotary_path_deviation(breaks: np.ndarray, coef: np.ndarray, nodes: np.ndarray,
+                          tol_mm: np.ndarray, tol_deg: float, lin: np.ndarray, moving: np.ndarray,
+                          curves=(), i0: int = 0) -> float:
+    """Worst deviation of the programmed path from the fit where rotary axes move, over
+    the tolerance (<= 1 is within); ``moving`` (d,) marks the axes that move.
+
+    Without linear motion: the distance over the rotary axes (deg) against ``tol_deg``.
+    Otherwise each programmed sample is projected onto the fit in a space where every
+    rotary axis is scaled by tol_mm / tol_deg, and at that foot point (a real point of
+    the fit) the position and every rotary axis are compared with their own
+    tolerances: the ratio is max(|Δ position| / tol_mm, |Δ rotary| / tol_deg). A ratio
+    r <= 1 thus means one point of the fit lies within r·tol_mm in position and r·tol_deg
+    in each rotary axis: the tool's position and orientation there are both within
+    their tolerances. A missed foot point can only over-estimate the ratio.
+    """
+    if not (moving & ~lin).any() or nodes.shape[0] < 2:
+        return 0.0
+    rot = ~lin
+    if not (moving & lin).any():
+        tol = np.full(nodes.shape[0], float(tol_deg))
+        if curves:
+            return path_deviation(breaks, coef, nodes, tol, rot, curves, i0)[1]
+        return polyline_deviation(breaks, coef, nodes, tol, rot)[1]
+    from ._project import march_feet, median
+
+    spacing = max(median(np.diff(breaks)), 1e-9) / PATH_DEV_SAMPLES_PER_SPAN
+    pts, tol = programmed_samples(nodes, tol_mm, curves, i0, spacing)
+    if pts.shape[0] == 0:
+        return 0.0
+    # the projection's metric: rotary axes scaled by the largest linear tolerance over tol_deg
+    s_path = np.where(rot, float(np.max(tol)) / float(tol_deg), 1.0)
+    _, kf, tf = march_feet(np.ascontiguousarray(coef * s_path, dtype=float),
+                           np.ascontiguousarray(np.diff(breaks), dtype=float),
+                           np.ascontiguousarray(pts * s_path, dtype=float),
+                           np.ascontiguousarray(tol, dtype=float), PATH_DEV_LOCAL_FRAC,
+                           PATH_DEV_WINDOW * spacing, PATH_DEV_FAR_WINDOW * spacing,
+                           PATH_DEV_FIT_SAMPLES, PATH_DEV_NEWTON_ITERS)
+    c = coef[kf]  # (K, 6, d)
+    q = c[:, 5]
+    for i in range(4, -1, -1):
+        q = q * tf[:, None] + c[:, i]
+    diff = q - pts
+    r_lin = np.sqrt((diff[:, lin] ** 2).sum(axis=1)) / np.maximum(tol, 1e-300)
+    r_rot = np.abs(diff[:, rot]).max(axis=1) / float(tol_deg)
+    return float(np.maximum(r_lin, r_rot).max())

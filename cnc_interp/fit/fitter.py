@@ -25,7 +25,7 @@ from ..constants import (
     PATH_DEV_SLACK,
 )
 from ..gcode.program import Dwell, Program, Run, Stop
-from .deviation import path_deviation, polyline_deviation
+from .deviation import path_deviation, polyline_deviation, rotary_path_deviation
 from .corners import PreparedRun, SubRun, fit_tolerance, prepare_run, split_run
 from .nodes import EndState, fit_polyline, straight_piece
 from .path import Path, PlanarSegments
@@ -70,7 +70,7 @@ def fit_program(program: Program, settings: FitSettings | None = None) -> FitRes
     prev_end = None
     totals = dict(nodes_in=0, segments_out=0, feed_paths=0, rapid_moves=0,
                   max_node_dev_mm=0.0, max_node_dev_deg=0.0, max_path_dev_mm=0.0,
-                  max_path_dev_ratio=0.0, within_tolerance=True)
+                  max_path_dev_ratio=0.0, max_path_dev_rot_ratio=0.0, within_tolerance=True)
     for idx, it in enumerate(program.items):
         if isinstance(it, Run):
             raws, info = _fit_run_raw(it, settings)
@@ -88,6 +88,8 @@ def fit_program(program: Program, settings: FitSettings | None = None) -> FitRes
                 totals["max_node_dev_deg"] = max(totals["max_node_dev_deg"], info["max_node_dev_deg"])
                 totals["max_path_dev_mm"] = max(totals["max_path_dev_mm"], info["max_path_dev_mm"])
                 totals["max_path_dev_ratio"] = max(totals["max_path_dev_ratio"], info["max_path_dev_ratio"])
+                totals["max_path_dev_rot_ratio"] = max(totals["max_path_dev_rot_ratio"],
+                                                       info["max_path_dev_rot_ratio"])
                 totals["within_tolerance"] &= info["within_tolerance"]
         elif isinstance(it, (Dwell, Stop)):
             items.append(it)
@@ -181,14 +183,15 @@ def _fit_run_raw(run: Run, settings: FitSettings):
     info = dict(kind=run.kind, first_line=int(run.line[0]) if run.n_nodes else 0,
                 last_line=int(run.line[-1]) if run.n_nodes else 0, nodes_in=0, segments_out=0,
                 paths=0, methods=[], max_node_dev_mm=0.0, max_node_dev_deg=0.0,
-                max_path_dev_mm=0.0, max_path_dev_ratio=0.0, within_tolerance=True)
+                max_path_dev_mm=0.0, max_path_dev_ratio=0.0, max_path_dev_rot_ratio=0.0,
+                within_tolerance=True)
     if run.kind == "rapid":
         return _rapid_raws(run, lin), info
     pr = prepare_run(run, settings)
     info["nodes_in"] = int(run.n_nodes)
     raws = []
     methods = set()
-    dmm_max = ddeg_max = pdev_max = pratio_max = 0.0
+    dmm_max = ddeg_max = pdev_max = pratio_max = rratio_max = 0.0
     ok_all = True
     n_seg = 0
     evals: dict = {}  # CurveEval per curve, shared by the corner split and the fit
@@ -220,10 +223,18 @@ def _fit_run_raw(run: Run, settings: FitSettings):
                                               measured)
         pdev_max = max(pdev_max, pdev)
         pratio_max = max(pratio_max, pratio)
-        ok_all &= bool(ok) and pratio <= 1.0 + PATH_DEV_SLACK
+        # where rotary axes move: position and orientation at one point of the fit
+        moving = np.ptp(pr.nodes[a:b + 1], axis=0) > 0
+        rratio = 0.0
+        if (moving & ~pr.lin).any():
+            rratio = rotary_path_deviation(raw.breaks, raw.coef, pr.nodes[a:b + 1], tol_sub,
+                                           settings.tol_deg, pr.lin, moving, sub.curves, a)
+        rratio_max = max(rratio_max, rratio)
+        ok_all &= bool(ok) and max(pratio, rratio) <= 1.0 + PATH_DEV_SLACK
         n_seg += int(raw.coef.shape[0])
     info.update(max_node_dev_mm=dmm_max, max_node_dev_deg=ddeg_max, max_path_dev_mm=pdev_max,
-                max_path_dev_ratio=pratio_max, within_tolerance=ok_all, segments_out=n_seg,
+                max_path_dev_ratio=pratio_max, max_path_dev_rot_ratio=rratio_max,
+                within_tolerance=ok_all, segments_out=n_seg,
                 paths=len(raws), methods=sorted(methods))
     return raws, info
 

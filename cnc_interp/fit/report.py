@@ -104,6 +104,8 @@ def format_statistics(stats: dict) -> str:
         f"  (tolerance {stats['tol_mm']:g} mm, {stats['tol_deg']:g} deg)",
         f"  max path deviation {stats.get('max_path_dev_mm', 0.0):.3e} mm"
         f"  ({stats.get('max_path_dev_ratio', 0.0):.3f} of the tolerance; programmed moves and curves)",
+        f"  with rotary axes   {stats.get('max_path_dev_rot_ratio', 0.0):.3f} of the tolerances"
+        f" (position and orientation at one point of the fit; 0 when no rotary axis moves)",
         f"  within tolerance   {'yes' if stats['within_tolerance'] else 'NO'}",
         f"  continuity         position {c['position_mm']:.1e} mm, tangent {c['tangent']:.1e},"
         f" curvature {c['curvature_1_mm']:.1e} 1/mm ({c['curvature_rel']:.1e} relative)",
