@@ -118,7 +118,8 @@ def fit(part, machine_spec, tol_mm, corner_deg, fit_method, out, as_json) -> Non
 @_tol_option
 @_fit_method_option
 @click.option("--start", "start", default=None, metavar="X=..,Y=..",
-              help="Machine position before the program (default: the machine's, else all 0).")
+              help="Machine position before the program (default: the machine's, else all 0); "
+                   "axes not named keep the machine's.")
 @click.option("-o", "--output", "out", default="-", metavar="OUT",
               help="OUT.csv or OUT.mcap; - (default) writes CSV to stdout.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar and no summary on stderr.")

@@ -170,11 +170,12 @@ class PlanOutcome:
         }
 
 
-def parse_start(spec: str | None, axes: str) -> np.ndarray | None:
-    """``--start "X=1,Y=2"`` -> (n,) position on ``axes`` (unnamed axes 0); ``None`` passes."""
+def parse_start(spec: str | None, axes: str, base: np.ndarray | None = None) -> np.ndarray | None:
+    """``--start "X=1,Y=2"`` -> (n,) position on ``axes``; the axes it does not name keep
+    ``base`` (the machine's start position; 0 without one). ``None`` passes."""
     if spec is None:
         return None
-    out = np.zeros(len(axes))
+    out = np.zeros(len(axes)) if base is None else np.array(base, dtype=float).reshape(len(axes))
     for part in spec.replace(" ", "").split(","):
         if not part:
             continue
@@ -213,7 +214,7 @@ def plan_part(part: str, machine_spec: str | None = None, planner: str = "vpop",
     t0 = time.perf_counter()
     machine = load_machine(machine_spec if machine_spec is not None else DEFAULT_PRESET)
     if isinstance(start, str):
-        start = parse_start(start, machine.axes)
+        start = parse_start(start, machine.axes, machine.start)
     machine = machine.with_start(start)
     settings = PlanSettings.from_options(planner=planner, dt_s=dt_s, tol_mm=tol_mm, machine=machine)
     machine = machine.with_dt(settings.dt_s)

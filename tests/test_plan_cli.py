@@ -108,6 +108,8 @@ def test_plan_part_api(part):
 
 def test_parse_start():
     assert np.array_equal(parse_start("x=1, Z=-2.5", "XYZ"), [1, 0, -2.5])
+    # the axes not named keep the machine's start position
+    assert np.array_equal(parse_start("Y=3", "XYZ", np.array([1.0, 2.0, 50.0])), [1, 3, 50])
     assert parse_start(None, "XYZ") is None
     from cnc_interp.errors import UsageError
 
@@ -144,3 +146,13 @@ def test_fit_method_option_selects_the_fitter(tmp_path):
     r = run([str(part), "--fit-method", "spline", "-o", str(tmp_path / "x.csv")])
     assert r.returncode == 2 and b"--fit-method" in r.stderr
     assert not (tmp_path / "x.csv").exists()
+
+
+def test_start_keeps_the_machines_position_on_unnamed_axes(tmp_path):
+    m = tmp_path / "m.toml"
+    m.write_text('name = "m"\ndt = 0.001\nstart = { X = 0.0, Y = 0.0, Z = 50.0 }\n'
+                 + "".join(f"[axes.{a}]\nvmax = 200.0\namax = 2000.0\njmax = 50000.0\n" for a in "XYZ"))
+    r = run(["-", "-m", str(m), "--start", "Y=3"], stdin=PROGRAM.encode())
+    assert r.returncode == 0, r.stderr.decode()
+    _, rows = read_csv(r.stdout)
+    assert np.array_equal(rows[0, 3:], [0, 3, 50])
