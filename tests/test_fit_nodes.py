@@ -149,3 +149,22 @@ def test_segment_sources_and_range_min():
     seg_line, seg_feed = segment_sources(np.array([0.0, 1.5, 3.0]), u, line, feed)
     assert list(seg_line) == [12, 13]
     assert_allclose(seg_feed, [2.0, 2.0])
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_evaluate012_matches_scipy_bspline(seed):
+    from scipy.interpolate import BSpline
+
+    from cnc_interp.fit import _bspline as bs
+
+    rng = np.random.default_rng(seed)
+    inner = np.sort(rng.uniform(0.0, 10.0, 9))
+    t = np.concatenate((np.zeros(6), inner, np.full(6, 10.0)))
+    c = rng.normal(size=(t.size - 6, 3))
+    x = np.concatenate((np.unique(t), rng.uniform(0.0, 10.0, 50)))
+    d = [np.empty((x.size, 3)) for _ in range(3)]
+    bs.evaluate012(t, t.size - 6, c, x, *d)
+    spl = BSpline(t, c, 5, extrapolate=False)
+    for nu in range(3):
+        ref = spl(x, nu)
+        np.testing.assert_allclose(d[nu], ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())

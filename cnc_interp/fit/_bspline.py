@@ -219,6 +219,49 @@ def evaluate(t, m, c, x, val, der):
 
 
 @njit(cache=True)
+def evaluate012(t, m, c, x, d0, d1, d2):
+    """Values d0, first d1 and second derivatives d2 (K, d) of the quintic spline at x (K,)
+    (each point in its span t[i] <= x < t[i+1], the last knot from the left): the
+    derivative splines of degree 4 on t[1:] and 3 on t[2:] (de Boor)."""
+    d = c.shape[1]
+    nb = np.empty(6)
+    wl = np.empty(6)
+    wr = np.empty(6)
+    t1 = t[1:]
+    t2 = t[2:]
+    for j in range(x.shape[0]):
+        sp = find_span(t, m, x[j])
+        basis(t, sp, x[j], K, nb, wl, wr)
+        for a in range(d):
+            acc = 0.0
+            for r in range(6):
+                acc += nb[r] * c[sp - K + r, a]
+            d0[j, a] = acc
+        basis(t1, sp - 1, x[j], K - 1, nb, wl, wr)
+        for a in range(d):
+            acc = 0.0
+            for r in range(5):
+                acc += nb[r] * _d1_coef(t, c, sp - K + r, a)
+            d1[j, a] = acc
+        basis(t2, sp - 2, x[j], K - 2, nb, wl, wr)
+        for a in range(d):
+            acc = 0.0
+            for r in range(4):
+                i = sp - K + r
+                den = t[i + 6] - t[i + 2]
+                if den > 0.0:
+                    acc += nb[r] * (K - 1) * (_d1_coef(t, c, i + 1, a) - _d1_coef(t, c, i, a)) / den
+            d2[j, a] = acc
+
+
+@njit(cache=True, inline="always")
+def _d1_coef(t, c, i, a):
+    """Coefficient i of the first-derivative spline (degree 4 on t[1:])."""
+    den = t[i + 6] - t[i + 1]
+    return K * (c[i + 1, a] - c[i, a]) / den if den > 0.0 else 0.0
+
+
+@njit(cache=True)
 def check(t, m, c, xc, ref, tol_lin, tol_rot, lin, metric, exp_speed, exp_lin_speed, min_ratio, bad_span,
           n_hard, hard_ratio):
     """Mark spans whose check points deviate or slow down too much.

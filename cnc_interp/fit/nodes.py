@@ -189,12 +189,13 @@ def _to_pieces(t, c, u, line, feed, p0, p_end, max_mm, max_deg, ok, ends=(None, 
     q, q', q'' at its two knots (exact for a quintic), so neighbouring pieces share the
     very same end values and the joins are C2 up to the rounding of one Hermite solve
     (converting via 5th derivatives would lose digits next to tiny spans)."""
-    from scipy.interpolate import BSpline
+    from . import _bspline as bs
 
-    spl = BSpline(t, c, 5, extrapolate=False)
     x = np.unique(t)
-    d0, d1, d2 = spl(x, nu=0), spl(x, nu=1), spl(x, nu=2)
-    # (scipy evaluates the last knot from the left.) Exact end values: the end nodes and any imposed end derivatives
+    c = np.ascontiguousarray(c, dtype=float)
+    d0, d1, d2 = (np.empty((x.size, c.shape[1])) for _ in range(3))
+    bs.evaluate012(np.ascontiguousarray(t, dtype=float), t.size - 6, c, x, d0, d1, d2)
+    # (the last knot is evaluated from the left.) Exact end values: the end nodes and any imposed end derivatives
     d0 += p0
     d0[0] = p0
     d0[-1] = p_end
