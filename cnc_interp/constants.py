@@ -141,7 +141,9 @@ PLANAR_GROUP_INCLINATION_PI = 0.4
 PLANAR_SMOOTHING = 1e-6
 #: planar fit: weight of the soft end conditions (slope, curvature from the neighbouring
 #: nodes) that keep the forward propagation of p', p'' stable; 0 = the paper's bare method
-PLANAR_END_WEIGHT = 1.0
+#: (unstable: the fit then falls back to the N-axis fitter). Of 0.06-4, 0.25 gave the
+#: shortest cycles over the corpus's two-axis programs at 1 and 2 µm (none better at 10 µm)
+PLANAR_END_WEIGHT = 0.25
 #: planar fit: the end conditions' tangent and curvature come from a least-squares quadratic
 #: over the nodes within ± this fraction of the segment's length around its end node (a
 #: three-point estimate on quantized coordinates is off by ~2δ/ℓ² and becomes a spike)
