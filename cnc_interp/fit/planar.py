@@ -584,11 +584,11 @@ def planar_fit_kernel(H, V, tol, alpha, S, w_end, w_win, max_incl, keep, band, m
 
 
 @njit(cache=True)
-def node_tangents(H, V):
-    """Tangent angle (rad) and signed curvature (1/mm) estimated at every node from its
-    neighbours (bisector of the two chords; Menger curvature); zeros at the ends."""
+def node_curvatures(H, V):
+    """Signed curvature (1/mm) at every node from its two neighbours (Menger curvature);
+    zeros at the ends. (``densify_chords`` only needs its order of magnitude; the fit's
+    end conditions use ``_local_frame``.)"""
     n = H.shape[0]
-    tau = np.zeros(n)
     kap = np.zeros(n)
     for j in range(1, n - 1):
         ax = H[j] - H[j - 1]
@@ -601,11 +601,10 @@ def node_tangents(H, V):
         az /= la
         bx /= lb
         bz /= lb
-        tau[j] = math.atan2(az + bz, ax + bx)
         span = math.hypot(H[j + 1] - H[j - 1], V[j + 1] - V[j - 1])
         if span > 0.0:
             kap[j] = 2.0 * (ax * bz - az * bx) / span
-    return tau, kap
+    return kap
 
 
 def fit_planar(nodes: np.ndarray, plane: tuple[int, int], tol_mm: np.ndarray, axes: str,
@@ -758,7 +757,7 @@ def _densify_plan(H, V, tol_mm, long_ratio):
     clen = np.empty(n - 1)
     for j in range(n - 1):
         clen[j] = math.hypot(H[j + 1] - H[j], V[j + 1] - V[j])
-    _, kap = node_tangents(H, V)
+    kap = node_curvatures(H, V)
     # first distance from each end of each chord (inf: no extra nodes from that end)
     first = np.empty((n - 1, 2))
     total = n
