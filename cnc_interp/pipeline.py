@@ -81,6 +81,7 @@ def process_program(name: str, data: bytes, machine, planner: str = "vpop",
     """
     from .fit.settings import FitSettings
     from .gcode import read_program
+    from .plan.budget import check_sample_budget
     from .plan.settings import PlanSettings
     from .plan.timeline import plan_program
     from .plan.verify import verify
@@ -89,6 +90,7 @@ def process_program(name: str, data: bytes, machine, planner: str = "vpop",
     fit_settings = FitSettings.from_options(tol_mm=tol_mm, machine=machine, method=fit_method)
     result = fit_loaded(program, fit_settings)
     settings = PlanSettings.from_options(planner=planner, dt_s=dt_s, tol_mm=tol_mm, machine=machine)
+    check_sample_budget(result.paths, machine, settings.dt_s, program.source)
     traj = plan_program(result, machine.with_dt(settings.dt_s), settings)
     report = verify(traj, machine)
     axis, kind, ratio, sample = report.worst()
@@ -205,6 +207,7 @@ def plan_part(part: str, machine_spec: str | None = None, planner: str = "vpop",
 
     from .errors import PlanError
     from .fit.settings import FitSettings
+    from .plan.budget import check_sample_budget
     from .plan.machine_io import DEFAULT_PRESET, load_machine
     from .plan.settings import PlanSettings
     from .plan.timeline import plan_program
@@ -229,6 +232,7 @@ def plan_part(part: str, machine_spec: str | None = None, planner: str = "vpop",
     fitted = fit_loaded(program, fit_settings)
     t2 = time.perf_counter()
     timings["fit"] = t2 - t1
+    check_sample_budget(fitted.paths, machine, settings.dt_s, program.source)
     try:
         traj = plan_program(fitted, machine, settings, progress=progress)
     except PlanError as exc:

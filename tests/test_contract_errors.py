@@ -251,7 +251,9 @@ def _limit_memory():  # pragma: no cover - runs in the child
 
 def test_plan_too_big_for_memory_is_exit_1(tmp_path):
     """F0.001 mm/min over 10 mm: ~6e8 samples at 1 ms, more than 3 GB allows. The plan
-    fails (exit 1, one line), without a traceback or a partial output file."""
+    fails (exit 1, one line), without a traceback or a partial output file: refused before
+    planning where the system's free memory is known to be too small, else by the
+    MemoryError of the 3 GB limit."""
     import subprocess
 
     from ._contract_helpers import console_script

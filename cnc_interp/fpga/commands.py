@@ -92,6 +92,7 @@ def plan_for_stream(opts: StreamOptions):
     from ..fit.settings import FitSettings
     from ..gcode import read_program
     from ..pipeline import fit_loaded, read_part
+    from ..plan.budget import check_sample_budget
     from ..plan.machine_io import DEFAULT_PRESET, load_machine
     from ..plan.settings import PlanSettings
     from ..plan.timeline import plan_program
@@ -105,6 +106,7 @@ def plan_for_stream(opts: StreamOptions):
     program = read_program(data, source=name, axes=machine.axes, start=machine.start)
     fitted = fit_loaded(program, FitSettings.from_options(tol_mm=opts.tol_mm, machine=machine,
                                                           method=opts.fit_method))
+    check_sample_budget(fitted.paths, machine, settings.dt_s, program.source)
     traj = plan_program(fitted, machine, settings)
     report = verify(traj, machine)
     if not report.ok:
