@@ -221,28 +221,16 @@ def evaluate(t, m, c, x, val, der):
 @njit(cache=True)
 def evaluate012(t, m, c, x, d0, d1, d2):
     """Values d0, first d1 and second derivatives d2 (K, d) of the quintic spline at x (K,)
-    (each point in its span t[i] <= x < t[i+1], the last knot from the left): the
-    derivative splines of degree 4 on t[1:] and 3 on t[2:] (de Boor)."""
+    (each point in its span t[i] <= x < t[i+1], the last knot from the left): ``evaluate``,
+    then the second-derivative spline of degree 3 on t[2:] (de Boor)."""
+    evaluate(t, m, c, x, d0, d1)
     d = c.shape[1]
     nb = np.empty(6)
     wl = np.empty(6)
     wr = np.empty(6)
-    t1 = t[1:]
     t2 = t[2:]
     for j in range(x.shape[0]):
         sp = find_span(t, m, x[j])
-        basis(t, sp, x[j], K, nb, wl, wr)
-        for a in range(d):
-            acc = 0.0
-            for r in range(6):
-                acc += nb[r] * c[sp - K + r, a]
-            d0[j, a] = acc
-        basis(t1, sp - 1, x[j], K - 1, nb, wl, wr)
-        for a in range(d):
-            acc = 0.0
-            for r in range(5):
-                acc += nb[r] * _d1_coef(t, c, sp - K + r, a)
-            d1[j, a] = acc
         basis(t2, sp - 2, x[j], K - 2, nb, wl, wr)
         for a in range(d):
             acc = 0.0
