@@ -38,9 +38,18 @@ def distance_to_pieces(breaks: np.ndarray, coef: np.ndarray, points: np.ndarray,
                        mask: np.ndarray, tol: np.ndarray | None = None,
                        spacing: float | None = None) -> np.ndarray:
     """Distance (K,) over the axes ``mask`` (n,) from points (K, n), in path order, to the
-    piecewise quintic (breaks (S+1,), coef (S, 6, n), local parameter t = u - breaks[k]).
+    piecewise quintic (breaks (S+1,), coef (S, 6, n), local parameter t = u - breaks[k]);
+    see ``project_onto_pieces``."""
+    return project_onto_pieces(breaks, coef, points, mask, tol, spacing)[0]
 
-    A marching projection (``_project.march_distances``): the foot point of each point
+
+def project_onto_pieces(breaks: np.ndarray, coef: np.ndarray, points: np.ndarray,
+                        mask: np.ndarray, tol: np.ndarray | None = None,
+                        spacing: float | None = None):
+    """Distance (K,) over the axes ``mask`` from points (K, n), in path order, to the pieces,
+    and the foot points: their piece (K,) and local parameter (K,).
+
+    A marching projection (``_project.march_feet``): the foot point of each point
     is searched from the previous one's; points farther than ``PATH_DEV_LOCAL_FRAC`` x
     their tolerance ``tol`` (K,) are searched again among the pieces within
     ``PATH_DEV_WINDOW`` x ``spacing`` (u units, the samples' spacing) along the path,
@@ -50,20 +59,20 @@ def distance_to_pieces(breaks: np.ndarray, coef: np.ndarray, points: np.ndarray,
     Without ``tol`` every point gets the wider searches; without ``spacing`` they
     reach every piece (the distance to the whole path as a set).
     """
-    from ._project import march_distances
+    from ._project import march_feet
 
     if points.shape[0] == 0:
-        return np.zeros(0)
+        return np.zeros(0), np.zeros(0, dtype=np.int64), np.zeros(0)
     if tol is None:
         tol = np.zeros(points.shape[0])
     near = far = np.inf
     if spacing is not None:
         near, far = PATH_DEV_WINDOW * spacing, PATH_DEV_FAR_WINDOW * spacing
-    return march_distances(np.ascontiguousarray(coef[:, :, mask], dtype=float),
-                           np.ascontiguousarray(np.diff(breaks), dtype=float),
-                           np.ascontiguousarray(points[:, mask], dtype=float),
-                           np.ascontiguousarray(tol, dtype=float), PATH_DEV_LOCAL_FRAC,
-                           float(near), float(far), PATH_DEV_FIT_SAMPLES, PATH_DEV_NEWTON_ITERS)
+    return march_feet(np.ascontiguousarray(coef[:, :, mask], dtype=float),
+                      np.ascontiguousarray(np.diff(breaks), dtype=float),
+                      np.ascontiguousarray(points[:, mask], dtype=float),
+                      np.ascontiguousarray(tol, dtype=float), PATH_DEV_LOCAL_FRAC,
+                      float(near), float(far), PATH_DEV_FIT_SAMPLES, PATH_DEV_NEWTON_ITERS)
 
 
 def programmed_samples(nodes: np.ndarray, tol_mm: np.ndarray, curves, i0: int, spacing: float):
@@ -117,21 +126,22 @@ def polyline_deviation(breaks: np.ndarray, coef: np.ndarray, nodes: np.ndarray,
         PATH_DEV_FIT_SAMPLES, PATH_DEV_NEWTON_ITERS)
 
 
-def path_deviation(breaks: np.ndarray, coef: np.ndarray, nodes: np.ndarray, tol_mm: np.ndarray,
-                   lin: np.ndarray, curves=(), i0: int = 0, axis_scale: np.ndarray | None = None):
-    """Worst distance of the programmed path (nodes (n, d) with ``curves``) to the fitted
-    pieces, over the linear axes ``lin``: (max distance mm, max distance / tolerance).
-    With ``axis_scale`` (d,) the programmed samples are scaled by it before the
-    measurement (``coef`` must already be scaled the same way)."""
-    if not lin.any() or nodes.shape[0] < 2:
-        return 0.0, 0.0
+def _sample_spacing(breaks: np.ndarray) -> float:
+    """Spacing of the programmed samples: |dq/du| ≈ 1, so a typical knot span in mm,
+    sampled ``PATH_DEV_SAMPLES_PER_SPAN`` times."""
     from ._project import median
 
-    # |dq/du| ≈ 1: a typical knot span in mm, sampled PATH_DEV_SAMPLES_PER_SPAN times
-    spacing = max(median(np.diff(breaks)), 1e-9) / PATH_DEV_SAMPLES_PER_SPAN
+    return max(median(np.diff(breaks)), 1e-9) / PATH_DEV_SAMPLES_PER_SPAN
+
+
+def path_deviation(breaks: np.ndarray, coef: np.ndarray, nodes: np.ndarray, tol_mm: np.ndarray,
+                   lin: np.ndarray, curves=(), i0: int = 0):
+    """Worst distance of the programmed path (nodes (n, d) with ``curves``) to the fitted
+    pieces, over the linear axes ``lin``: (max distance mm, max distance / tolerance)."""
+    if not lin.any() or nodes.shape[0] < 2:
+        return 0.0, 0.0
+    spacing = _sample_spacing(breaks)
     pts, tol = programmed_samples(nodes, tol_mm, curves, i0, spacing)
-    if axis_scale is not None:
-        pts = pts * axis_scale
     dist = distance_to_pieces(breaks, coef, pts, lin, tol, spacing)
     if dist.size == 0:
         return 0.0, 0.0
@@ -162,20 +172,14 @@ def rotary_path_deviation(breaks: np.ndarray, coef: np.ndarray, nodes: np.ndarra
         if curves:
             return path_deviation(breaks, coef, nodes, tol, rot, curves, i0)[1]
         return polyline_deviation(breaks, coef, nodes, tol, rot)[1]
-    from ._project import march_feet, median
-
-    spacing = max(median(np.diff(breaks)), 1e-9) / PATH_DEV_SAMPLES_PER_SPAN
+    spacing = _sample_spacing(breaks)
     pts, tol = programmed_samples(nodes, tol_mm, curves, i0, spacing)
     if pts.shape[0] == 0:
         return 0.0
     # the projection's metric: rotary axes scaled by the largest linear tolerance over tol_deg
     s_path = np.where(rot, float(np.max(tol)) / float(tol_deg), 1.0)
-    _, kf, tf = march_feet(np.ascontiguousarray(coef * s_path, dtype=float),
-                           np.ascontiguousarray(np.diff(breaks), dtype=float),
-                           np.ascontiguousarray(pts * s_path, dtype=float),
-                           np.ascontiguousarray(tol, dtype=float), PATH_DEV_LOCAL_FRAC,
-                           PATH_DEV_WINDOW * spacing, PATH_DEV_FAR_WINDOW * spacing,
-                           PATH_DEV_FIT_SAMPLES, PATH_DEV_NEWTON_ITERS)
+    _, kf, tf = project_onto_pieces(breaks, coef * s_path, pts * s_path, np.ones_like(lin), tol,
+                                    spacing)
     c = coef[kf]  # (K, 6, d)
     q = c[:, 5]
     for i in range(4, -1, -1):

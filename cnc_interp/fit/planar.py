@@ -151,10 +151,11 @@ def _solve_spd(A, rhs, F):
 
 
 @njit(cache=True)
-def _fit_segment(xs, zs, r, constrained, rho1, rho2, mu, b, has_end, d1_est, d2_est, w_end, work):
-    """Fit normalised coefficients b (6,) (q(ξ) = Σ b_i ξ^i, ξ = x*/X) to nodes xs, zs
-    [:r] (xs[0] = zs[0] = 0, X = xs[r-1] > 0). Returns nothing; fills b. ``work`` (8, 4)
-    is scratch space (no allocation per fit: this runs tens of thousands of times)."""
+def _fit_segment(xs, zs, constrained, rho1, rho2, mu, b, has_end, d1_est, d2_est, w_end, work):
+    """Fit normalised coefficients b (6,) (q(ξ) = Σ b_i ξ^i, ξ = x*/X) to nodes xs, zs (r,)
+    (xs[0] = zs[0] = 0, xs[-1] = X > 0). Returns nothing; fills b. ``work`` (8, 4) is
+    scratch space (no allocation per fit: this runs tens of thousands of times)."""
+    r = xs.shape[0]
     X = xs[r - 1]
     Z = zs[r - 1]
     F = 2 if constrained else 4
@@ -390,8 +391,7 @@ def _end_est(e, th, H, V, S, h, max_incl):
     ok, tang, kap = _local_frame(H, V, S, e, h)
     if not ok:
         return False, 0.0, 0.0
-    ang = tang - th
-    ang = _PI - ((_PI - ang) % (2.0 * _PI))
+    ang = _wrap(tang - th)
     if abs(ang) >= max_incl:
         return False, 0.0, 0.0
     d1 = math.tan(ang)
@@ -399,21 +399,19 @@ def _end_est(e, th, H, V, S, h, max_incl):
 
 
 @njit(cache=True)
-def _try(xs_all, zs_all, r, tol, constrained, rho1, rho2, mu, b, e, th, H, V, S, max_incl,
-         w_end, w_win, per_x, max_checks, work):
-    """Fit and test the segment over nodes s..e (r = e - s + 1 rotated nodes in
-    xs_all, zs_all): True when every node and every point along every chord (the
-    programmed moves; the tolerance bounds the distance to the programmed path
-    everywhere) is within its tolerance. Stops at the first failure, checking from the
+def _try(xs, zs, tol, constrained, rho1, rho2, mu, b, e, th, H, V, S, max_incl, w_end, w_win,
+         per_x, max_checks, work):
+    """Fit and test the segment ending at node e (its rotated nodes xs, zs): True when
+    every node and every point along every chord (the programmed moves; the tolerance
+    bounds the distance to the programmed path everywhere) is within its tolerance. Stops at the first failure, checking from the
     segment's end (where a too long segment fails first); the vertical residual
     bounds the distance, so the Newton projection runs only where it exceeds the
     tolerance. The end is pulled towards the slope and curvature of the nodes within
     ``w_win`` times the segment's length around node e (``_end_est``)."""
-    has, d1, d2 = _end_est(e, th, H, V, S, w_win * xs_all[r - 1], max_incl)
-    _fit_segment(xs_all, zs_all, r, constrained, rho1, rho2, mu, b, has and w_end > 0.0, d1, d2, w_end, work)
-    xs = xs_all[:r]
-    zs = zs_all[:r]
+    r = xs.shape[0]
     X = xs[r - 1]
+    has, d1, d2 = _end_est(e, th, H, V, S, w_win * X, max_incl)
+    _fit_segment(xs, zs, constrained, rho1, rho2, mu, b, has and w_end > 0.0, d1, d2, w_end, work)
     for j in range(r - 1, 0, -1):
         if j < r - 1:
             # node j
@@ -528,7 +526,7 @@ def planar_fit_kernel(H, V, tol, alpha, S, w_end, w_win, max_incl, keep, band, m
                 break
             r = e - s + 1
             n_rot = _rotate(H, V, s, r, n_rot, c, sn, xs_all, zs_all)
-            if _try(xs_all, zs_all, r, tl[:r], constrained, rho1, rho2, mu, bt,
+            if _try(xs_all[:r], zs_all[:r], tl[:r], constrained, rho1, rho2, mu, bt,
                     e, th, H, V, S, max_incl, w_end, w_win, per_x, max_checks, work):
                 lo = e
                 lo_fit = True
@@ -544,7 +542,7 @@ def planar_fit_kernel(H, V, tol, alpha, S, w_end, w_win, max_incl, keep, band, m
             mid = (lo + hi) // 2
             r = mid - s + 1
             n_rot = _rotate(H, V, s, r, n_rot, c, sn, xs_all, zs_all)
-            if _try(xs_all, zs_all, r, tl[:r], constrained, rho1, rho2, mu, bt,
+            if _try(xs_all[:r], zs_all[:r], tl[:r], constrained, rho1, rho2, mu, bt,
                     mid, th, H, V, S, max_incl, w_end, w_win, per_x, max_checks, work):
                 lo = mid
                 lo_fit = True
@@ -556,7 +554,7 @@ def planar_fit_kernel(H, V, tol, alpha, S, w_end, w_win, max_incl, keep, band, m
         n_rot = _rotate(H, V, s, r, n_rot, c, sn, xs_all, zs_all)
         if not lo_fit:
             # a single chord (never tried yet)
-            if not _try(xs_all, zs_all, r, tl[:r], constrained, rho1, rho2, mu, bt,
+            if not _try(xs_all[:r], zs_all[:r], tl[:r], constrained, rho1, rho2, mu, bt,
                         e, th, H, V, S, max_incl, w_end, w_win, per_x, max_checks, work):
                 return k, 2, max_dev, s, constrained, phi_abs, kappa
             b[:] = bt
