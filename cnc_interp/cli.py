@@ -25,14 +25,26 @@ def _emit_json(obj) -> None:
     click.echo(json.dumps(obj, indent=2, sort_keys=True, allow_nan=False))
 
 
+class _Finite(click.FloatRange):
+    """A float option within [lo, hi]; NaN, which every comparison lets through, is refused."""
+
+    def convert(self, value, param, ctx):
+        v = super().convert(value, param, ctx)
+        if v != v:
+            self.fail(f"{value!r} is not a number.", param, ctx)
+        return v
+
+
 def _dt_option(f):
-    return click.option("--dt", "dt_s", type=click.FloatRange(min=0, min_open=True), default=None,
-                        help="Sample period in seconds (default: the machine's).")(f)
+    # the same range a machine file accepts (plan/machine.py)
+    return click.option("--dt", "dt_s", type=_Finite(min=1e-6, max=1.0), default=None,
+                        help="Sample period in seconds, 1e-6 to 1 (default: the machine's).")(f)
 
 
 def _tol_option(f):
-    return click.option("--tol", "tol_mm", type=click.FloatRange(min=0), default=None,
-                        help="Maximum permissible fit error in mm (default 0.001, or the machine's).")(f)
+    return click.option("--tol", "tol_mm", type=_Finite(min=0, max=10.0), default=None,
+                        help="Maximum permissible fit error in mm, 0 to 10 (default 0.001, or "
+                             "the machine's).")(f)
 
 
 def _fit_method_option(f):
@@ -96,6 +108,10 @@ def fit(part, machine_spec, tol_mm, corner_deg, fit_method, out, as_json) -> Non
     from .fit.settings import FitSettings
     from .pipeline import fit_loaded, load_program_for
 
+    if out:
+        from .outfile import check_writable
+
+        check_writable(out, inputs=(part, machine_spec))
     program, machine = load_program_for(part, machine_spec, require_machine=False)
     settings = FitSettings.from_options(tol_mm=tol_mm, corner_deg=corner_deg, machine=machine,
                                         method=fit_method)

@@ -28,6 +28,9 @@ ARC_RADIUS_TOL_MAX_INCH = 0.05
 ARC_RADIUS_TOL_REL = 0.001
 #: upper bound on iterations of one while/do/repeat loop
 LOOP_ITERATION_LIMIT = 1_000_000
+#: upper bound on loop iterations of a whole program, all loops and nestings together (as
+#: many as a ten-million-line program has blocks)
+LOOP_TOTAL_ITERATION_LIMIT = 10_000_000
 #: deepest O-word call / nesting the interpreter accepts before a clear error
 MAX_CALL_DEPTH = 200
 #: longest source line accepted (characters); longer is an error, not a hang

@@ -45,10 +45,19 @@ class CncInterpError(Exception):
             if len(text) > 60:
                 text = text[:57] + "..."
             msg = f"{msg}: '{text}'"
-        return f"{self.location.prefix()}: error: {msg}"
+        return _printable(f"{self.location.prefix()}: error: {msg}")
 
     def __str__(self) -> str:  # pragma: no cover - convenience
         return self.format()
+
+
+_CONTROL = {c: f"\\x{c:02x}" for c in (*range(0x20), 0x7F)}
+
+
+def _printable(text: str) -> str:
+    """``text`` with control characters (ESC, BEL, CR, ...) escaped as ``\\xNN``: a file
+    name or source text must not drive the user's terminal."""
+    return text.translate(_CONTROL)
 
 
 class GCodeError(CncInterpError):
@@ -69,6 +78,13 @@ class UsageError(CncInterpError):
 
 class PlanError(CncInterpError):
     """A plan that could not be produced or that failed verification (exit 1)."""
+
+    exit_code = 1
+
+
+class OutputError(CncInterpError):
+    """An output that could not be written for a reason the input did not cause (a full
+    disk); the previous file is kept (exit 1)."""
 
     exit_code = 1
 

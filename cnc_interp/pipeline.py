@@ -81,7 +81,7 @@ def process_program(name: str, data: bytes, machine, planner: str = "vpop",
     """
     from .fit.settings import FitSettings
     from .gcode import read_program
-    from .plan.budget import check_sample_budget
+    from .plan.budget import check_sample_budget, held_time_s
     from .plan.settings import PlanSettings
     from .plan.timeline import plan_program
     from .plan.verify import verify
@@ -90,7 +90,8 @@ def process_program(name: str, data: bytes, machine, planner: str = "vpop",
     fit_settings = FitSettings.from_options(tol_mm=tol_mm, machine=machine, method=fit_method)
     result = fit_loaded(program, fit_settings)
     settings = PlanSettings.from_options(planner=planner, dt_s=dt_s, tol_mm=tol_mm, machine=machine)
-    check_sample_budget(result.paths, machine, settings.dt_s, program.source)
+    check_sample_budget(result.paths, machine, settings.dt_s, program.source,
+                        held_s=held_time_s(result.items))
     traj = plan_program(result, machine.with_dt(settings.dt_s), settings)
     report = verify(traj, machine)
     axis, kind, ratio, sample = report.worst()
@@ -175,6 +176,8 @@ class PlanOutcome:
 def parse_start(spec: str | None, axes: str, base: np.ndarray | None = None) -> np.ndarray | None:
     """``--start "X=1,Y=2"`` -> (n,) position on ``axes``; the axes it does not name keep
     ``base`` (the machine's start position; 0 without one). ``None`` passes."""
+    from .plan.machine import START_MAX
+
     if spec is None:
         return None
     out = np.zeros(len(axes)) if base is None else np.array(base, dtype=float).reshape(len(axes))
@@ -189,8 +192,9 @@ def parse_start(spec: str | None, axes: str, base: np.ndarray | None = None) -> 
             v = float(value)
         except ValueError:
             raise UsageError(f"bad --start value in '{part}': not a number") from None
-        if not np.isfinite(v):
-            raise UsageError(f"bad --start value in '{part}': not finite")
+        if not np.isfinite(v) or abs(v) > START_MAX:
+            raise UsageError(f"bad --start value in '{part}': not a finite coordinate "
+                             f"within ±{START_MAX:g}")
         out[axes.index(name)] = v
     return out
 
@@ -207,7 +211,7 @@ def plan_part(part: str, machine_spec: str | None = None, planner: str = "vpop",
 
     from .errors import PlanError
     from .fit.settings import FitSettings
-    from .plan.budget import check_sample_budget
+    from .plan.budget import check_sample_budget, held_time_s
     from .plan.machine_io import DEFAULT_PRESET, load_machine
     from .plan.settings import PlanSettings
     from .plan.timeline import plan_program
@@ -232,7 +236,8 @@ def plan_part(part: str, machine_spec: str | None = None, planner: str = "vpop",
     fitted = fit_loaded(program, fit_settings)
     t2 = time.perf_counter()
     timings["fit"] = t2 - t1
-    check_sample_budget(fitted.paths, machine, settings.dt_s, program.source)
+    check_sample_budget(fitted.paths, machine, settings.dt_s, program.source,
+                        held_s=held_time_s(fitted.items))
     try:
         traj = plan_program(fitted, machine, settings, progress=progress)
     except PlanError as exc:
@@ -279,7 +284,7 @@ def run_plan(opts: PlanOptions) -> None:
     from .export.progress import progress as progress_bar
 
     out = opts.out or "-"
-    check_writable(out)
+    check_writable(out, inputs=(opts.part, opts.machine_spec))
     with progress_bar(None, "plan", enabled=not opts.quiet) as tick:
         outcome = plan_part(opts.part, opts.machine_spec, opts.planner, opts.dt_s, opts.tol_mm,
                             opts.start, progress=tick, fit_method=opts.fit_method)

@@ -78,16 +78,14 @@ def prepare_run(run: Run, settings) -> PreparedRun:
     feed = np.asarray(run.feed_mm_s, dtype=float).copy()
     line = np.asarray(run.line, dtype=np.int64)
     n = nodes.shape[0]
-    if n >= 2:
-        step = np.linalg.norm(np.diff(nodes * scale, axis=0), axis=1)
-        keep = np.concatenate(([True], step > FIT_DUPLICATE_NODE_MM))
-    else:
-        keep = np.ones(n, dtype=bool)
+    keep = _distinct_nodes(nodes * scale, FIT_DUPLICATE_NODE_MM)
     # a merged node keeps the last block's line/feed/tolerance (the move that ends there)
     new_index = np.cumsum(keep) - 1
     last_of = np.zeros(int(keep.sum()), dtype=np.int64)
     last_of[new_index] = np.arange(n)
     nodes_k = nodes[keep]
+    if n >= 2 and not keep[-1]:
+        nodes_k[-1] = nodes[-1]  # the run ends exactly on its programmed end point
     line_k, feed_k, tol_k = line[last_of], feed[last_of], tol[last_of]
     # the first node's line is the block that started the run
     line_k[0] = line[0]
@@ -103,6 +101,26 @@ def prepare_run(run: Run, settings) -> PreparedRun:
         rot_only = np.zeros(len(d), dtype=bool)
     return PreparedRun(run.axes, nodes_k, line_k, feed_k, tol_k, tuple(sorted(curves, key=lambda c: c.first)),
                        lin, scale, rot_only)
+
+
+def _distinct_nodes(scaled: np.ndarray, threshold: float) -> np.ndarray:
+    """``keep`` mask of the nodes ``(n, n_axes)`` farther than ``threshold`` from the last
+    KEPT node (the first is always kept). Comparing with the previous raw node instead
+    would drop a whole chain of sub-threshold steps and lose their sum."""
+    n = scaled.shape[0]
+    if n < 2:
+        return np.ones(n, dtype=bool)
+    step = np.linalg.norm(np.diff(scaled, axis=0), axis=1)
+    keep = np.concatenate(([True], step > threshold))
+    if keep.all():
+        return keep
+    return _distinct_nodes_seq(np.ascontiguousarray(scaled, dtype=np.float64), threshold)
+
+
+def _distinct_nodes_seq(scaled: np.ndarray, threshold: float) -> np.ndarray:
+    from ._dedup import distinct_nodes
+
+    return distinct_nodes(scaled, threshold)
 
 
 def split_run(pr: PreparedRun, settings, evals: dict | None = None) -> list[SubRun]:

@@ -30,12 +30,10 @@ the same bytes.
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 
 import numpy as np
 
-from ..errors import SourceLocation, UsageError
+from ..outfile import atomic_write
 from ..gcode.program import Dwell, Stop
 from .path import Path
 from .result import FitResult
@@ -147,28 +145,10 @@ def segments_document(result: FitResult) -> dict:
 
 
 def write_segments_json(result: FitResult, path: str) -> None:
-    """Write ``segments_document`` atomically (temp file beside ``path``, then rename); ``-`` = stdout."""
+    """Write ``segments_document`` atomically (``cnc_interp.outfile``); ``-`` = stdout."""
     text = json.dumps(segments_document(result), indent=1, sort_keys=True, allow_nan=False) + "\n"
-    if path == "-":
-        import sys
-
-        sys.stdout.write(text)
-        return
-    directory = os.path.dirname(os.path.abspath(path))
-    try:
-        fd, tmp = tempfile.mkstemp(prefix="." + os.path.basename(path) + ".", suffix=".tmp", dir=directory)
-    except OSError as exc:
-        raise UsageError(f"cannot write segments file: {exc.strerror}", SourceLocation(file=path)) from None
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
+    with atomic_write(path) as fh:
+        fh.write(text.encode("utf-8"))
 
 
 def _num(x: float):

@@ -74,8 +74,10 @@ def trajectory_from_device(core, planner: str = "fpga-emulate"):
 def emulate_file(frames_path: str, out: str) -> None:
     """Replay a frame file through the bit-exact model and write its setpoints as plan CSV."""
     from ..export.csv_io import write_csv
+    from ..outfile import check_writable
     from .frames import read_frame_file
 
+    check_writable(out, inputs=(frames_path,))
     frames = read_frame_file(frames_path)
     core = emulate_frames(frames, frames_path)
     write_csv(trajectory_from_device(core), out)
@@ -92,7 +94,7 @@ def plan_for_stream(opts: StreamOptions):
     from ..fit.settings import FitSettings
     from ..gcode import read_program
     from ..pipeline import fit_loaded, read_part
-    from ..plan.budget import check_sample_budget
+    from ..plan.budget import check_sample_budget, held_time_s
     from ..plan.machine_io import DEFAULT_PRESET, load_machine
     from ..plan.settings import PlanSettings
     from ..plan.timeline import plan_program
@@ -106,7 +108,8 @@ def plan_for_stream(opts: StreamOptions):
     program = read_program(data, source=name, axes=machine.axes, start=machine.start)
     fitted = fit_loaded(program, FitSettings.from_options(tol_mm=opts.tol_mm, machine=machine,
                                                           method=opts.fit_method))
-    check_sample_budget(fitted.paths, machine, settings.dt_s, program.source)
+    check_sample_budget(fitted.paths, machine, settings.dt_s, program.source,
+                        held_s=held_time_s(fitted.items))
     traj = plan_program(fitted, machine, settings)
     report = verify(traj, machine)
     if not report.ok:
@@ -138,10 +141,12 @@ def summary_line(prog, frames) -> str:
 
 def run_stream(opts: StreamOptions, backend=None) -> None:
     """``cnc-interp stream``: plan, quantize, then write frames (``--dry-run``) or send them over USB."""
-    from ..export.atomic import atomic_write
+    from ..outfile import atomic_write, check_writable
 
     if opts.dry_run and opts.resume_from is not None:
         raise UsageError("--resume-from applies to a device, not to --dry-run")
+    if opts.dry_run:
+        check_writable(opts.dry_run, inputs=(opts.part, opts.machine_spec))
     prog, frames, infos = build_stream(opts)
     _say(opts.quiet, summary_line(prog, frames))
     for why in prog.stats.get("fallback_paths", []):

@@ -64,7 +64,44 @@ def read_program(data: bytes | str, source: str, axes: str | None = None,
     finally:
         if gc_was_enabled:
             gc.enable()
-    return interp.program(_count_lines(data))
+    program = interp.program(_count_lines(data))
+    _check_ranges(program)
+    return program
+
+
+#: largest machine coordinate accepted, mm or deg (1000 km: far beyond any machine, far
+#: below where lengths and sample counts overflow float64 or int64)
+MAX_COORDINATE = 1e9
+#: longest dwell accepted, s (31 years; a longer one is refused by the memory check anyway,
+#: but must not overflow a sample count first)
+MAX_DWELL_S = 1e9
+
+
+def _check_ranges(program: Program) -> None:
+    """Every node coordinate finite and within ``MAX_COORDINATE``, every feed positive (a
+    rapid's is infinite), every dwell finite and within ``MAX_DWELL_S``: a ``GCodeError``
+    at the first block that breaks this (the geometry downstream would overflow)."""
+    from ..errors import GCodeError, SourceLocation
+
+    def fail(msg: str, line: int):
+        raise GCodeError(msg, SourceLocation(file=program.source, line=int(line), col=1))
+
+    for item in program.items:
+        if isinstance(item, Run):
+            bad = ~(np.abs(item.nodes) <= MAX_COORDINATE).all(axis=1)
+            if bad.any():
+                i = int(np.argmax(bad))
+                fail(f"position out of range (|coordinate| > {MAX_COORDINATE:g} mm or deg)",
+                     item.line[i])
+            f = item.feed_mm_s
+            badf = ~((f > 0) & ((f <= MAX_COORDINATE) | (np.isinf(f) & (item.kind == "rapid"))))
+            if badf[1:].any():
+                i = int(np.argmax(badf[1:])) + 1
+                fail(f"feed rate out of range (0 < F, at most {MAX_COORDINATE * 60:g} per minute)",
+                     item.line[i])
+        elif isinstance(item, Dwell):
+            if not (0 <= item.seconds <= MAX_DWELL_S):
+                fail(f"dwell time out of range (0 to {MAX_DWELL_S:g} s)", item.line)
 
 
 def _live_params_class():
@@ -102,8 +139,9 @@ _LIVE = None
 
 
 def _count_lines(data: bytes | str) -> int:
+    """Lines as the language layer splits them: LF, CRLF or CR alone ends a line."""
     if not data:
         return 0
-    nl = b"\n" if isinstance(data, bytes) else "\n"
-    n = data.count(nl)
-    return n if data.endswith(nl) else n + 1
+    nl, cr = (b"\n", b"\r") if isinstance(data, bytes) else ("\n", "\r")
+    n = data.count(nl) + data.count(cr) - data.count(cr + nl)
+    return n if data.endswith(nl) or data.endswith(cr) else n + 1

@@ -85,12 +85,13 @@ class _Source:
         else:
             b = bytes(data)
             text = b.decode("latin-1")
+        if b.startswith(b"\xef\xbb\xbf"):  # a UTF-8 byte order mark (Windows editors)
+            b = b[3:]
+            text = text[3:] if text.startswith("\xef\xbb\xbf") else text.lstrip("\ufeff")
         if "\r" in text:
-            text = text.replace("\r\n", "\n")
-            b = b.replace(b"\r\n", b"\n")
-            if text.endswith("\r"):  # a last line ended by CR alone
-                text = text[:-1]
-                b = b[:-1]
+            # CRLF (DOS) and CR alone (classic Mac) both end a line
+            text = text.replace("\r\n", "\n").replace("\r", "\n")
+            b = b.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
         if not text.endswith("\n"):
             text += "\n"
             b += b"\n"

@@ -262,6 +262,9 @@ class Interpreter:
         for n in nums:
             if self.params.exists(n):
                 self._pset(n, self._pget(n) * ratio)
+        # the feed in effect keeps its physical value (LinuxCNC re-reads it from the canon
+        # level in the new units): 600 mm/min after G20 is 23.62 in/min, not 600 in/min
+        self.f_word *= ratio
         self._set_units(len_unit)
 
     # -- runs -----------------------------------------------------------------------

@@ -13,7 +13,7 @@ Line indices are 0-based; ``src`` is the block layer's source (``line(i)``,
 
 from __future__ import annotations
 
-from ..constants import LOOP_ITERATION_LIMIT, MAX_CALL_DEPTH
+from ..constants import LOOP_ITERATION_LIMIT, LOOP_TOTAL_ITERATION_LIMIT, MAX_CALL_DEPTH
 from ..errors import GCodeError, SourceLocation
 from .expr import evaluate, to_int
 from .lexer import EMPTY, OWORD, PERCENT, LineCode, snippet
@@ -155,6 +155,7 @@ class Executor:
         self.code_at = code_at
         self.frames: list[tuple[int, dict]] = []  # (return line index, caller's loops)
         self.loops: dict[int, int] = {}  # loop head -> iterations so far / repeats left
+        self.iterations = 0  # loop iterations of the whole program, every loop and nesting
 
     def where_at(self, i: int):
         """Error-location builder for line index ``i`` (reads the line only on error)."""
@@ -173,7 +174,19 @@ class Executor:
     def _cond(self, i: int, lc: LineCode) -> bool:
         return evaluate(lc.oargs[0], self.params, self.where_at(i)) != 0.0
 
+    def _total(self, i: int, lc: LineCode) -> None:
+        """Count one more loop iteration of the whole program: nested loops are each
+        within ``LOOP_ITERATION_LIMIT`` but their product must be bounded too."""
+        self.iterations += 1
+        if self.iterations > LOOP_TOTAL_ITERATION_LIMIT:
+            raise GCodeError(
+                f"the program's loops ran more than {LOOP_TOTAL_ITERATION_LIMIT} iterations in "
+                "all (LOOP_TOTAL_ITERATION_LIMIT; nested loops multiply)",
+                self.where_at(i)(lc.ocol),
+            )
+
     def _count(self, head: int, i: int, lc: LineCode) -> None:
+        self._total(i, lc)
         n = self.loops.get(head, 0) + 1
         if n > LOOP_ITERATION_LIMIT:
             where = self.where_at(i)
@@ -271,6 +284,7 @@ class Executor:
             head = st.loop_head[i]
             left = self.loops.get(head, 0)
             if left > 0:
+                self._total(i, lc)
                 self.loops[head] = left - 1
                 return head + 1
             self.loops.pop(head, None)

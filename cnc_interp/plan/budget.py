@@ -77,12 +77,22 @@ def available_memory_bytes() -> int | None:
     return avail
 
 
+def held_time_s(items) -> float:
+    """Time (s) the timeline ``items`` holds the machine still on purpose: its dwells.
+    Held samples take memory like moving ones."""
+    from ..gcode.program import Dwell
+
+    return float(sum(it.seconds for it in items if isinstance(it, Dwell)))
+
+
 def check_sample_budget(paths, machine, dt_s: float, source: str,
-                        available: int | None = None) -> None:
+                        available: int | None = None, held_s: float = 0.0) -> None:
     """Raise ``PlanError`` (exit 1: the plan cannot be made) when even the shortest
-    possible plan of ``paths`` on ``machine`` at ``dt_s`` needs more memory than is
-    available (``available`` bytes; default: ``available_memory_bytes``)."""
-    n_min = PLAN_BUDGET_MARGIN * min_cycle_time_s(paths, machine) / dt_s
+    possible plan of ``paths`` on ``machine`` at ``dt_s``, plus ``held_s`` seconds of
+    dwells (``held_time_s``), needs more memory than is available (``available`` bytes;
+    default: ``available_memory_bytes``)."""
+    # the margin is for the paths' lower bound; a dwell's time is exact
+    n_min = (PLAN_BUDGET_MARGIN * min_cycle_time_s(paths, machine) + held_s) / dt_s
     need = n_min * PLAN_PEAK_BYTES_PER_SAMPLE_COLUMN * (5 + machine.n_axes)
     if available is None:
         available = available_memory_bytes()

@@ -11,6 +11,18 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..constants import ROTARY_AXES
+from ..errors import MachineError, SourceLocation
+
+#: accepted limit ranges (exclusive of 0), mm or deg per s, s², s³: far beyond any machine,
+#: far below where the planner's products (v·dt, j·dt³ and their squares) lose precision
+#: or overflow float64
+LIMIT_MAX = {"vmax": 1e6, "amax": 1e9, "jmax": 1e13}
+#: accepted sample periods, s: a 1 MHz servo rate to 1 s
+DT_MIN_S, DT_MAX_S = 1e-6, 1.0
+#: largest default fit tolerance, mm (a tolerance is a deviation from the part, not a size)
+TOL_MAX_MM = 10.0
+#: largest start coordinate, mm or deg (the G-code front end's coordinate bound)
+START_MAX = 1e9
 
 
 @dataclass(frozen=True, eq=False)
@@ -50,6 +62,28 @@ class Machine:
             object.__setattr__(self, name, arr)
         start = np.zeros(n) if self.start is None else np.asarray(self.start, dtype=float).reshape(n)
         object.__setattr__(self, "start", start)
+        self._check_ranges()
+
+    def _check_ranges(self) -> None:
+        """Every number finite and within its sane range, else a ``MachineError`` naming it
+        (a machine file is checked with line numbers before it gets here; this also covers
+        ``--dt``, ``--start`` and machines built in Python)."""
+        loc = SourceLocation(file=self.source or "machine")
+        for name, hi in LIMIT_MAX.items():
+            arr = getattr(self, name)
+            bad = ~((arr > 0) & (arr <= hi))
+            if bad.any():
+                k = int(np.argmax(bad))
+                raise MachineError(f"axis {self.axes[k]} {name} = {arr[k]:g} is out of range "
+                                   f"(0, {hi:g}]", loc)
+        if not DT_MIN_S <= self.dt_s <= DT_MAX_S:
+            raise MachineError(f"sample period dt = {self.dt_s:g} s is out of range "
+                               f"[{DT_MIN_S:g}, {DT_MAX_S:g}] s", loc)
+        if self.tol_mm is not None and not 0 <= self.tol_mm <= TOL_MAX_MM:
+            raise MachineError(f"tol = {self.tol_mm:g} mm is out of range [0, {TOL_MAX_MM:g}] mm",
+                               loc)
+        if not (np.abs(self.start) <= START_MAX).all():
+            raise MachineError(f"start position out of range (|coordinate| > {START_MAX:g})", loc)
 
     @property
     def n_axes(self) -> int:

@@ -35,6 +35,7 @@ from __future__ import annotations
 import math
 import os
 import re
+import stat
 
 import numpy as np
 
@@ -47,7 +48,7 @@ from ..constants import (
 )
 from ..errors import MachineError, SourceLocation
 from .kinematics import KINEMATICS, normalise_params
-from .machine import Machine
+from .machine import DT_MAX_S, DT_MIN_S, LIMIT_MAX, START_MAX, TOL_MAX_MM, Machine
 from .presets import DEFAULT_PRESET, PRESETS
 
 __all__ = ["load_machine", "machine_from_data", "preset_table", "format_presets",
@@ -57,7 +58,9 @@ _TOP_KEYS = ("name", "dt", "kinematics", "tol", "start", "axes", "description")
 _AXIS_KEYS = ("vmax", "amax", "jmax")
 _LIMIT_NAMES = {"vmax": "velocity", "amax": "acceleration", "jmax": "jerk"}
 #: longest sample period accepted (s); anything longer is certainly a unit mistake
-_MAX_DT_S = 1.0
+_MAX_DT_S = DT_MAX_S
+#: largest machine file read, bytes (real TOML/INI machine files are a few kB)
+MACHINE_FILE_MAX_BYTES = 1 << 20
 
 
 # --- entry point -------------------------------------------------------------
@@ -70,12 +73,7 @@ def load_machine(spec: str) -> Machine:
             raise MachineError("machine file not found", SourceLocation(file=spec))
         raise MachineError(f"no machine file or preset named '{spec}' "
                            f"(presets: {', '.join(sorted(PRESETS))})", SourceLocation(file=spec))
-    try:
-        with open(spec, "rb") as fh:
-            raw = fh.read()
-    except OSError as exc:
-        raise MachineError(f"cannot read machine file: {exc.strerror}",
-                           SourceLocation(file=spec)) from None
+    raw = _read_machine_file(spec)
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
@@ -85,6 +83,29 @@ def load_machine(spec: str) -> Machine:
     if ext == ".ini" or (ext != ".toml" and _looks_like_ini(text)):
         return _load_ini(text, spec)
     return _load_toml(text, spec)
+
+
+def _read_machine_file(path: str) -> bytes:
+    """The bytes of a machine file: a regular file of at most ``MACHINE_FILE_MAX_BYTES``
+    (a device such as /dev/zero would be read until memory runs out, a FIFO would block)."""
+    loc = SourceLocation(file=path)
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)  # a FIFO must not block the open
+    except OSError as exc:
+        raise MachineError(f"cannot read machine file: {exc.strerror}", loc) from None
+    with os.fdopen(fd, "rb") as fh:
+        st = os.fstat(fh.fileno())
+        if not stat.S_ISREG(st.st_mode):
+            raise MachineError("machine file is not a regular file", loc)
+        if st.st_size > MACHINE_FILE_MAX_BYTES:
+            raise MachineError(f"machine file is larger than {MACHINE_FILE_MAX_BYTES} bytes", loc)
+        try:
+            raw = fh.read(MACHINE_FILE_MAX_BYTES + 1)
+        except OSError as exc:
+            raise MachineError(f"cannot read machine file: {exc.strerror}", loc) from None
+    if len(raw) > MACHINE_FILE_MAX_BYTES:
+        raise MachineError(f"machine file is larger than {MACHINE_FILE_MAX_BYTES} bytes", loc)
+    return raw
 
 
 def _looks_like_ini(text: str) -> bool:
@@ -102,6 +123,8 @@ def _load_toml(text: str, path: str) -> Machine:
 
     try:
         data = tomllib.loads(text)
+    except RecursionError:  # arrays or tables nested thousands deep
+        raise MachineError("invalid TOML: nested too deeply", SourceLocation(path, 1, 1)) from None
     except tomllib.TOMLDecodeError as exc:
         line = getattr(exc, "lineno", None)
         col = getattr(exc, "colno", None)
@@ -182,14 +205,20 @@ def _stem(path: str) -> str:
 
 
 # --- validation shared by TOML files and presets ----------------------------
-def _number(value, what: str, loc: SourceLocation, positive: bool = True) -> float:
+def _number(value, what: str, loc: SourceLocation, positive: bool = True,
+            most: float | None = None) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise MachineError(f"{what} must be a number, not {type(value).__name__}", loc)
-    v = float(value)
+    try:
+        v = float(value)
+    except OverflowError:  # a TOML integer beyond float64
+        raise MachineError(f"{what} is out of range", loc) from None
     if not math.isfinite(v):
         raise MachineError(f"{what} must be finite, not {value}", loc)
     if positive and v <= 0:
         raise MachineError(f"{what} must be positive, not {value}", loc)
+    if most is not None and abs(v) > most:
+        raise MachineError(f"{what} = {value} is out of range (at most {most:g})", loc)
     return v
 
 
@@ -209,6 +238,8 @@ def machine_from_data(data: dict, source: str, locate, default_name: str = "mach
     dt_s = DEFAULT_DT_S
     if "dt" in data:
         dt_s = _number(data["dt"], "dt (sample period, s)", locate((), "dt"))
+        if dt_s < DT_MIN_S:
+            raise MachineError(f"dt = {dt_s} s is shorter than {DT_MIN_S:g} s", locate((), "dt"))
         if dt_s > _MAX_DT_S:
             raise MachineError(f"dt = {dt_s} s is longer than {_MAX_DT_S} s (dt is in seconds)",
                                locate((), "dt"))
@@ -264,7 +295,7 @@ def machine_from_data(data: dict, source: str, locate, default_name: str = "mach
                                    locate(where, None))
             power = "/s" if key == "vmax" else "/s^2" if key == "amax" else "/s^3"
             limits[key].append(_number(table[key], f"axis {letter} {key} ({unit}{power})",
-                                       locate(where, key)))
+                                       locate(where, key), most=LIMIT_MAX[key]))
         letters.append(letter)
     axes = "".join(letters)
     if kind == "xyzac-trt":
@@ -284,11 +315,11 @@ def machine_from_data(data: dict, source: str, locate, default_name: str = "mach
                 raise MachineError(f"start position for '{key}', which is not an axis of this machine "
                                    f"({axes})", locate(("start",), key))
             start[axes.index(key.upper())] = _number(value, f"start {key}", locate(("start",), key),
-                                                     positive=False)
+                                                     positive=False, most=START_MAX)
 
     tol_mm = None
     if "tol" in data:
-        tol_mm = _number(data["tol"], "tol (mm)", locate((), "tol"))
+        tol_mm = _number(data["tol"], "tol (mm)", locate((), "tol"), most=TOL_MAX_MM)
     if "description" in data and not isinstance(data["description"], str):
         raise MachineError("description must be a string", locate((), "description"))
 

@@ -1,0 +1,215 @@
+"""Output files that never destroy anything: atomic replacement of regular files only.
+
+Every stage writes through ``atomic_write`` (it lives on the bottom floor, beside
+``errors``, so that ``fit``, ``export``, ``fpga`` and ``batch`` can all use it):
+
+- a regular file or a new path is written to an unnamed temporary file in its folder
+  (``O_TMPFILE``), which is linked under a temporary name and renamed into place only on
+  success, so a reader never sees a half-written file and an interrupted run (an error,
+  Ctrl-C, SIGTERM, SIGHUP, even SIGKILL, a full disk) leaves the previous file, or none,
+  and no temporary file. Where the file system has no ``O_TMPFILE`` a named temporary file
+  is used, removed on errors, Ctrl-C, SIGTERM and SIGHUP. A symbolic link keeps pointing
+  where it did (its target is replaced);
+- a character device, FIFO or socket (``/dev/null``, ``/dev/stdout`` on a terminal or pipe,
+  a named pipe) is written straight through: renaming onto it would replace the device
+  node itself;
+- an output that is one of the command's inputs (same inode), or an existing directory,
+  is refused before any work is done (``check_writable``);
+- a file that is replaced keeps its permission bits; a new one gets what ``open()`` would
+  give it (0666 less the umask).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import os
+import stat
+import sys
+import tempfile
+from typing import BinaryIO, Iterable, Iterator
+
+from .errors import OutputError, SourceLocation, UsageError
+
+#: ``errno`` values that mean the disk (or quota) is full: a plan failure, not bad input
+_FULL = {28, 122}  # ENOSPC, EDQUOT
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def _stat(path: str) -> os.stat_result | None:
+    try:
+        return os.stat(path)
+    except OSError:
+        return None
+
+
+def _is_stream(st: os.stat_result | None) -> bool:
+    """A target written straight through: anything that exists and is not a regular file
+    or directory (character/block device, FIFO, socket)."""
+    return st is not None and not stat.S_ISREG(st.st_mode) and not stat.S_ISDIR(st.st_mode)
+
+
+def check_writable(path: str, inputs: Iterable[str] = ()) -> None:
+    """Fail now, with the error ``atomic_write`` would give later, when ``path`` cannot be
+    written: its folder is missing or not writable, it is a folder, or it is one of the
+    command's ``inputs`` (the same file, by inode). Planning a long program first and
+    failing at the end would waste the run; writing over the input would destroy it."""
+    if path == "-":
+        return
+    loc = SourceLocation(file=path)
+    st = _stat(path)
+    for name in inputs:
+        if name in ("-", None):
+            continue
+        src = _stat(name)
+        if st is not None and src is not None and (st.st_dev, st.st_ino) == (src.st_dev, src.st_ino):
+            raise UsageError(f"the output is the input file {name!r}; refusing to overwrite it", loc)
+    if _is_stream(st):
+        if not os.access(path, os.W_OK):
+            raise UsageError("cannot write output: Permission denied", loc)
+        return
+    if st is not None and stat.S_ISDIR(st.st_mode):
+        raise UsageError("cannot write output: Is a directory", loc)
+    directory = os.path.dirname(os.path.realpath(path))
+    if not os.path.isdir(directory):
+        raise UsageError("cannot write output: No such file or directory", loc)
+    if not os.access(directory, os.W_OK | os.X_OK):
+        raise UsageError("cannot write output: Permission denied", loc)
+
+
+def _write_error(exc: OSError, path: str) -> Exception:
+    loc = SourceLocation(file=path)
+    reason = exc.strerror or str(exc)
+    if exc.errno in _FULL:
+        return OutputError(f"cannot write output: {reason} (the previous file is kept)", loc)
+    return UsageError(f"cannot write output: {reason}", loc)
+
+
+@contextlib.contextmanager
+def atomic_write(path: str) -> Iterator[BinaryIO]:
+    """Yield a binary file object whose content replaces ``path`` only on success.
+
+    ``path == "-"`` writes to standard output, and a device/FIFO path is written straight
+    through (no atomicity is possible there). A ``BrokenPipeError`` from either is left to
+    propagate: the CLI turns it into a quiet exit. A write that fails for a full disk is an
+    ``OutputError`` (exit 1), any other ``OSError`` a ``UsageError``; the target is unchanged.
+    """
+    if path == "-":
+        out = sys.stdout.buffer
+        yield out
+        out.flush()
+        return
+    st = _stat(path)
+    if _is_stream(st):
+        try:
+            fh = open(path, "wb", buffering=1 << 20)
+        except OSError as exc:
+            raise _write_error(exc, path) from None
+        with fh:
+            yield fh
+        return
+    if st is not None and stat.S_ISDIR(st.st_mode):
+        raise UsageError("cannot write output: Is a directory", SourceLocation(file=path))
+    target = os.path.realpath(path)  # a symlink keeps pointing where it did
+    directory = os.path.dirname(target)
+    mode = stat.S_IMODE(st.st_mode) if st is not None else 0o666 & ~_umask()
+    fd, tmp = _open_temp(directory, os.path.basename(target), path)
+    linked = None
+    try:
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                yield fh
+                fh.flush()
+                os.fsync(fh.fileno())
+                os.fchmod(fh.fileno(), mode)
+                if tmp is None:  # an unnamed file: give it a name only now, then rename
+                    linked = _temp_name(directory, os.path.basename(target))
+                    _link_fd(fh.fileno(), linked)
+            os.replace(linked or tmp, target)
+        except OSError as exc:
+            if isinstance(exc, BrokenPipeError):
+                raise
+            raise _write_error(exc, path) from None
+    except BaseException:  # includes KeyboardInterrupt: never leave the temporary file
+        for name in (tmp, linked):
+            if name is not None:
+                with contextlib.suppress(OSError):
+                    os.unlink(name)
+        raise
+    finally:
+        if tmp is not None:
+            _TEMPS.discard(tmp)
+
+
+#: named temporary files being written (the fallback where ``O_TMPFILE`` is not available);
+#: the CLI's SIGTERM/SIGHUP handler removes them
+_TEMPS: set[str] = set()
+
+
+def _link_fd(fd: int, name: str) -> None:
+    """Give the unnamed file ``fd`` the name ``name``: linkat(2) with AT_SYMLINK_FOLLOW on
+    its /proc/self/fd entry (os.link uses plain link(2), which would link the /proc entry
+    itself, unless a dir_fd is given)."""
+    dfd = os.open("/", os.O_RDONLY)
+    try:
+        os.link(f"/proc/self/fd/{fd}", name, src_dir_fd=dfd, follow_symlinks=True)
+    finally:
+        os.close(dfd)
+
+
+def _temp_name(directory: str, base: str) -> str:
+    return os.path.join(directory, f".{base}.{os.getpid()}.{os.urandom(4).hex()}.tmp")
+
+
+def _open_temp(directory: str, base: str, path: str) -> tuple[int, str | None]:
+    """A file descriptor to write the new content to: an unnamed file in ``directory``
+    (``O_TMPFILE``: nothing is left behind whatever ends the process, SIGKILL included),
+    else a named temporary file (then ``(fd, name)``, registered in ``_TEMPS``)."""
+    flag = getattr(os, "O_TMPFILE", 0)
+    if flag:
+        try:
+            return os.open(directory, flag | os.O_WRONLY | os.O_CLOEXEC, 0o600), None
+        except OSError as exc:
+            if exc.errno not in (errno.EOPNOTSUPP, errno.EISDIR, errno.EINVAL, errno.ENOENT):
+                raise _write_error(exc, path) from None
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{base}.", suffix=".tmp", dir=directory)
+    except OSError as exc:
+        raise _write_error(exc, path) from None
+    _TEMPS.add(tmp)
+    _remove_on_termination()
+    return fd, tmp
+
+
+def _remove_on_termination() -> None:
+    """SIGTERM/SIGHUP: remove the named temporary files, then die of the signal as before.
+    Installed only when a named temporary file exists, since a Python-level handler runs
+    only between bytecodes (it would delay termination during a compiled kernel)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return
+
+    def handler(signum, frame):
+        remove_temporaries()
+        signal.signal(signum, signal.SIG_DFL)
+        os.kill(os.getpid(), signum)
+
+    for sig in (signal.SIGTERM, signal.SIGHUP):
+        if signal.getsignal(sig) in (signal.SIG_DFL, None):
+            signal.signal(sig, handler)
+
+
+def remove_temporaries() -> None:
+    """Delete the named temporary files still being written (for a signal handler that
+    is about to end the process)."""
+    for name in list(_TEMPS):
+        with contextlib.suppress(OSError):
+            os.unlink(name)
+    _TEMPS.clear()
