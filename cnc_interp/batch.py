@@ -45,6 +45,9 @@ FIELDS = ("key", "status", "message", "error_line", "lines", "nodes", "segments"
 VOLATILE_FIELDS = ("wall_s", "peak_mem_mb")
 #: how long to try to reach a Dask scheduler before giving up (s)
 DASK_CONNECT_TIMEOUT_S = 20
+#: per-program time limit by default, s: a hung program must not hold a regression run
+#: forever (stellabee1, 169k lines and a 2 h 24 min cycle, takes about 100 s)
+DEFAULT_TIMEOUT_S = 1800.0
 #: statuses that count as a regression by themselves
 _BAD_STATUS = ("violation",)
 
@@ -63,7 +66,7 @@ class BatchOptions:
     report: str | None = None
     baseline: str | None = None
     max_slowdown: str = "1%"
-    timeout_s: float | None = None
+    timeout_s: float | None = DEFAULT_TIMEOUT_S
     dask_address: str | None = None
     quiet: bool = False
     as_json: bool = False
@@ -94,12 +97,16 @@ def collect_programs(paths) -> list[tuple[str, str]]:
             for dirpath, dirnames, filenames in os.walk(root):
                 dirnames[:] = sorted(d for d in dirnames if not d.startswith("."))
                 for name in filenames:
-                    if name.lower().endswith(GCODE_SUFFIXES) and not name.startswith("."):
-                        path = os.path.join(dirpath, name)
+                    path = os.path.join(dirpath, name)
+                    # regular files only: a FIFO would block, a link to /dev/zero never ends
+                    if (name.lower().endswith(GCODE_SUFFIXES) and not name.startswith(".")
+                            and os.path.isfile(path)):
                         rel = os.path.relpath(path, root).replace(os.sep, "/")
                         found.setdefault(f"{base}/{rel}", path)
         elif os.path.isfile(arg):
             found.setdefault(os.path.basename(arg), arg)
+        elif os.path.exists(arg):
+            raise UsageError("not a regular file or a directory", SourceLocation(file=arg))
         else:
             raise UsageError("no such file or directory", SourceLocation(file=arg))
     if not found:
@@ -122,7 +129,8 @@ def load_baseline(path: str) -> dict:
         raise UsageError(f"baseline is not JSON: {exc.msg}",
                          SourceLocation(path, exc.lineno, exc.colno)) from None
     programs = data.get("programs") if isinstance(data, dict) else None
-    if not isinstance(programs, list) or not all(isinstance(p, dict) and "key" in p for p in programs):
+    if not isinstance(programs, list) or not all(isinstance(p, dict) and isinstance(p.get("key"), str)
+                                                 for p in programs):
         raise UsageError("baseline is not a cnc-interp batch JSON report (no 'programs' list)",
                          SourceLocation(file=path))
     return {p["key"]: p for p in programs}
@@ -270,7 +278,12 @@ def compare(records: list[dict], baseline: dict | None, max_slowdown: float) -> 
                     out["slower"].append(item)
                 elif change < -max_slowdown:
                     out["faster"].append(item)
-    out["regressions"] = len(out["violations"]) + len(out["status_changed"]) + len(out["slower"])
+    # a crash or a timeout is never an expected outcome, baseline or not
+    out["crashes"] = [{"key": r["key"], "status": r["status"], "message": r["message"]}
+                      for r in records if r["status"] in ("crash", "timeout")
+                      and not (baseline and baseline.get(r["key"], {}).get("status") == r["status"])]
+    out["regressions"] = (len(out["violations"]) + len(out["status_changed"]) + len(out["slower"])
+                          + len(out["crashes"]))
     return out
 
 

@@ -158,6 +158,7 @@ def run_pool(jobs: list[dict], workers: int, timeout_s: float | None,
     pending = list(range(len(jobs)))[::-1]
     running: dict[int, _Running] = {}
     workers = max(1, int(workers))
+    previous = _catch_termination()
     try:
         while pending or running:
             while pending and len(running) < workers:
@@ -165,6 +166,8 @@ def run_pool(jobs: list[dict], workers: int, timeout_s: float | None,
                 rfd, wfd = os.pipe()
                 pid = os.fork()
                 if pid == 0:  # pragma: no cover - runs in the child
+                    for sig in _TERMINATING:
+                        signal.signal(sig, signal.SIG_DFL)
                     os.close(rfd)
                     _child(func, jobs[i], wfd)
                 os.close(wfd)
@@ -191,7 +194,7 @@ def run_pool(jobs: list[dict], workers: int, timeout_s: float | None,
                     results[run.index] = _finish(run, timed_out=True)
                     if on_done:
                         on_done(run.index, results[run.index])
-    except BaseException:
+    except BaseException as exc:
         for run in running.values():
             try:
                 os.kill(run.pid, signal.SIGKILL)
@@ -199,8 +202,41 @@ def run_pool(jobs: list[dict], workers: int, timeout_s: float | None,
                 os.close(run.fd)
             except OSError:
                 pass
+        _restore(previous)
+        if isinstance(exc, _Signalled):  # die of the signal, as without the handler
+            signal.signal(exc.signum, signal.SIG_DFL)
+            os.kill(os.getpid(), exc.signum)
         raise
+    _restore(previous)
     return results  # type: ignore[return-value]
+
+
+#: signals that end a batch: its workers are killed first, not orphaned
+_TERMINATING = (signal.SIGTERM, signal.SIGHUP)
+
+
+class _Signalled(BaseException):
+    def __init__(self, signum: int):
+        super().__init__(signum)
+        self.signum = signum
+
+
+def _catch_termination() -> dict | None:
+    """Turn SIGTERM/SIGHUP into ``_Signalled`` while the pool runs (main thread only)."""
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return None
+
+    def handler(signum, frame):
+        raise _Signalled(signum)
+
+    return {sig: signal.signal(sig, handler) for sig in _TERMINATING}
+
+
+def _restore(previous: dict | None) -> None:
+    for sig, old in (previous or {}).items():
+        signal.signal(sig, old)
 
 
 def run_isolated(job: dict, timeout_s: float | None = None,

@@ -62,7 +62,20 @@ def _machine_option(required: bool = False):
     return deco
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+class _ReaderClosed(Exception):
+    """Standard output's reader closed early (``| head``)."""
+
+
+class _Group(click.Group):
+    def invoke(self, ctx):
+        # click turns EPIPE into exit status 1 itself; hand it to ``run`` instead
+        try:
+            return super().invoke(ctx)
+        except BrokenPipeError:
+            raise _ReaderClosed() from None
+
+
+@click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="cnc-interp")
 def main() -> None:
     """G-code in, jerk-limited axis setpoints out.
@@ -243,8 +256,8 @@ def stream(part, machine_spec, planner, dt_s, tol_mm, fit_method, device, dry_ru
 @click.option("--report", "report", default=None, metavar="FILE.json|FILE.csv")
 @click.option("--baseline", default=None, metavar="FILE.json")
 @click.option("--max-slowdown", default="1%", show_default=True)
-@click.option("--timeout", "timeout_s", type=click.FloatRange(min=0, min_open=True), default=None,
-              help="Per-program time limit, s.")
+@click.option("--timeout", "timeout_s", type=_Finite(min=0, min_open=True), default=1800.0,
+              show_default=True, help="Per-program time limit, s.")
 @click.option("--dask", "dask_address", default=None, metavar="ADDRESS",
               help="Run on an existing Dask distributed scheduler.")
 @click.option("--quiet", "-q", is_flag=True)
@@ -278,7 +291,7 @@ def run() -> None:
     except CncInterpError as exc:
         _stderr(exc.format())
         sys.exit(exc.exit_code)
-    except BrokenPipeError:
+    except (BrokenPipeError, _ReaderClosed):
         # The reader closed early (`| head`): stop quietly.
         _silence_stdout()
         sys.exit(0)

@@ -158,6 +158,9 @@ class DeviceCore:
             seg, n_pieces = decode_segment(f.payload)
             if seg.start_sample != self.datapath.next_sample:
                 raise FrameError("segment does not start at the next sample")
+            n_axes = len(self.datapath.axes)
+            if not (seg.plane[0] < n_axes and seg.plane[1] < n_axes and seg.plane[0] != seg.plane[1]):
+                raise FrameError(f"segment plane {seg.plane} is not two of the {n_axes} axes")
             self._pending = (seg, n_pieces, [])
         elif t == FrameType.PROFILE:
             if self._pending is None:
@@ -167,6 +170,9 @@ class DeviceCore:
             if index != seg.index or first != len(have) or len(have) + len(pieces) > n_pieces:
                 raise FrameError("PROFILE out of order")
             have = have + pieces
+            # every length is checked against the program before anything is allocated
+            if seg.start_sample + sum(p.n_samples for p in have) > self.n_samples:
+                raise FrameError("PROFILE runs past the program's sample count")
             if len(have) == n_pieces:
                 from dataclasses import replace
 
@@ -178,6 +184,8 @@ class DeviceCore:
             if self._pending is not None:
                 raise FrameError("SETPOINTS inside a segment")
             blk = decode_setpoints(f.payload)
+            if blk.start_sample + blk.q.shape[0] > self.n_samples:
+                raise FrameError("SETPOINTS run past the program's sample count")
             if blk.q.shape[1] != len(self.datapath.axes):
                 raise FrameError("SETPOINTS axis count differs from CONFIG")
             self.datapath.apply(blk)

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..constants import FPGA_MAX_PAYLOAD
+from ..constants import ALL_AXES, FPGA_MAX_PAYLOAD
 from .fixed import FpgaFormats
 from .model import FixedSegment, FpgaProgram, ProfilePiece, SetpointBlock
 
@@ -60,6 +60,11 @@ class ErrorFlag(enum.IntFlag):
 
 
 # -- payload layouts ------------------------------------------------------------------------
+#: sample periods a CONFIG frame may carry, s (the machine files' range)
+CONFIG_DT_MIN_S, CONFIG_DT_MAX_S = 1e-6, 1.0
+#: most samples a program may declare: 2^28 is 74 h at 1 kHz, and keeps an emulation of
+#: the whole program (a few tens of bytes per sample and axis) within a workstation
+MAX_PROGRAM_SAMPLES = 1 << 28
 CONFIG = struct.Struct("<B16sdQQI8B")  # n_axes, axes, dt_s, dt_ns, n_samples, n_items, formats
 SEGMENT = struct.Struct("<IIQBBqqqqqb6qI")  # index, line, start, plane h, v, cos, sin, oh, ov,
 #                                             x_end, p_exp, p_mant[6], n_pieces
@@ -259,7 +264,20 @@ def decode_config(payload: bytes) -> Config:
         n_axes, axes, dt_s, _dt_ns, n_samples, n_items, *fm = CONFIG.unpack_from(payload)
         *start, program_id = struct.unpack_from(f"<{n_axes}qI", payload, CONFIG.size)
         src = payload[CONFIG.size + 8 * n_axes + 4:].decode("utf-8", "replace")
-        return Config(axes.rstrip(b"\0").decode("ascii"), dt_s, n_samples, n_items,
+        letters = axes.rstrip(b"\0").decode("ascii")
+    except (struct.error, UnicodeDecodeError, ValueError) as exc:
+        raise FrameError(f"bad CONFIG payload: {exc}") from None
+    # valid CRCs do not make the values sane: a device must refuse them like bad bytes
+    if (not letters or len(letters) != n_axes or len(set(letters)) != n_axes
+            or any(a not in ALL_AXES for a in letters)):
+        raise FrameError(f"bad CONFIG payload: axes {letters!r} (letters from {ALL_AXES}, each once)")
+    if not (CONFIG_DT_MIN_S <= dt_s <= CONFIG_DT_MAX_S):  # also refuses NaN
+        raise FrameError(f"bad CONFIG payload: dt {dt_s!r} s outside "
+                         f"[{CONFIG_DT_MIN_S:g}, {CONFIG_DT_MAX_S:g}]")
+    if n_samples > MAX_PROGRAM_SAMPLES:
+        raise FrameError(f"bad CONFIG payload: {n_samples} samples (at most {MAX_PROGRAM_SAMPLES})")
+    try:
+        return Config(letters, dt_s, n_samples, n_items,
                       FpgaFormats.from_tuple(fm), tuple(start), src, program_id)
     except (struct.error, UnicodeDecodeError, ValueError) as exc:
         raise FrameError(f"bad CONFIG payload: {exc}") from None
