@@ -180,10 +180,12 @@ def machines(as_json: bool) -> None:
 # -- verify -------------------------------------------------------------------
 @main.command()
 @click.argument("plan_file", metavar="OUT", type=click.Path(exists=True, dir_okay=False))
-@_machine_option(required=True)
+@_machine_option()
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable report.")
 def verify(plan_file, machine_spec, as_json) -> None:
-    """Check a CSV or MCAP plan against MACHINE's limits (exit 1 on a violation)."""
+    """Check a CSV or MCAP plan against MACHINE's limits (exit 1 on a violation).
+
+    An MCAP plan records its machine, so -m is optional there."""
     from .export.verify_file import verify_file
 
     report = verify_file(plan_file, machine_spec)

@@ -152,6 +152,7 @@ def read_mcap_machine(path: str):
     """The ``Machine`` recorded in an MCAP plan's ``machine`` metadata, or ``None``."""
     from mcap.reader import make_reader
 
+    from ..errors import MachineError
     from ..plan.machine import Machine
 
     try:
@@ -169,7 +170,7 @@ def read_mcap_machine(path: str):
                        amax=limits[1], jmax=limits[2], dt_s=float(rec.get("dt_s", "nan")),
                        kinematics=rec.get("kinematics", "trivial"),
                        source=f"{path} (recorded machine)")
-    except (KeyError, ValueError):
+    except (KeyError, ValueError, MachineError):  # incomplete or insane: not a usable machine
         return None
 
 

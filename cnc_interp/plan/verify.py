@@ -108,8 +108,9 @@ class VerifyReport:
         else:
             axis, kind, ratio, idx = self.worst()
             verdict = "ok" if self.ok else "FAIL: limit exceeded"
-            lines.append(f"{verdict}: worst {ratio:.9f} ({axis} {kind}, sample {idx}); "
-                         f"{self.n_samples} samples at dt = {self.dt_s:g} s")
+            lines.append(f"{verdict}: worst {ratio:.12f} ({axis} {kind}, sample {idx}); "
+                         f"{self.n_samples} samples at dt = {self.dt_s:g} s; a ratio passes up "
+                         f"to 1 + {VERIFY_RATIO_SLACK:g} (float rounding)")
         return "\n".join(lines)
 
 
