@@ -110,8 +110,13 @@ def atomic_write(path: str) -> Iterator[BinaryIO]:
             fh = open(path, "wb", buffering=1 << 20)
         except OSError as exc:
             raise _write_error(exc, path) from None
-        with fh:
-            yield fh
+        try:
+            with fh:
+                yield fh
+        except OSError as exc:
+            if isinstance(exc, BrokenPipeError):
+                raise
+            raise _write_error(exc, path) from None
         return
     if st is not None and stat.S_ISDIR(st.st_mode):
         raise UsageError("cannot write output: Is a directory", SourceLocation(file=path))

@@ -414,6 +414,22 @@ STELLABEE = os.path.join(CORPUS, "performance", "stellabee1.ngc")
 SLOW_LINE = b"G21\nG1 X100 F6\nM2\n"
 
 
+def _writes_into(pid: int, folder) -> bool:
+    """True when process ``pid`` has a file open in ``folder`` (named or unnamed)."""
+    try:
+        fds = os.listdir(f"/proc/{pid}/fd")
+    except OSError:
+        return False
+    prefix = os.path.realpath(folder) + os.sep
+    for fd in fds:
+        try:
+            if os.readlink(f"/proc/{pid}/fd/{fd}").startswith(prefix):
+                return True
+        except OSError:
+            pass
+    return False
+
+
 @pytest.mark.parametrize("phase", ["plan", "write"])
 def test_ctrl_c_leaves_no_output_and_no_temp_file(tmp_path, phase):
     """SIGINT to a running ``plan -o out.csv``: no output and no temporary file left.
@@ -440,9 +456,12 @@ def test_ctrl_c_leaves_no_output_and_no_temp_file(tmp_path, phase):
                 time.sleep(0.05)
             assert not os.listdir(work), "stellabee1 reached its output within 4 s"
         else:
-            while proc.poll() is None and time.monotonic() - t0 < 240 and not os.listdir(work):
+            # the output is written to an unnamed file in ``work`` (O_TMPFILE): wait until
+            # the process holds one open there
+            while (proc.poll() is None and time.monotonic() - t0 < 240
+                   and not _writes_into(proc.pid, work)):
                 time.sleep(0.005)
-            assert os.listdir(work), "no temporary output file appeared"
+            assert _writes_into(proc.pid, work), "no temporary output file appeared"
             assert "out.csv" not in os.listdir(work), "the output appeared before the signal"
         assert proc.poll() is None, "the plan finished before it could be interrupted"
         proc.send_signal(signal.SIGINT)

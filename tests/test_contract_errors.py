@@ -211,8 +211,10 @@ def test_bad_option_is_one_error_line(good_part, opts):
 @pytest.mark.parametrize("opts,what", [
     (["--start", "Q=1"], "--start"),
     (["--start", "X=abc"], "--start"),
-    (["--dt", "nan"], "sample period"),
-    (["--dt", "inf"], "sample period"),
+    (["--dt", "nan"], "'--dt'"),
+    (["--dt", "inf"], "'--dt'"),
+    (["--dt", "100"], "'--dt'"),
+    (["--tol", "nan"], "'--tol'"),
 ])
 def test_bad_option_value_one_line(good_part, opts, what):
     res = run_inproc("plan", good_part, *opts)
