@@ -53,6 +53,14 @@ def _fit_method_option(f):
                              "axes, the N-axis fit elsewhere; nodes: the N-axis fit everywhere.")(f)
 
 
+def _tool_table_option(f):
+    return click.option("--tool-table", "tool_table", default=None, metavar="FILE",
+                        type=click.Path(exists=True, dir_okay=False),
+                        help="LinuxCNC tool table (T1 P1 Z+12.5 ...) for G43 Hn tool lengths "
+                             "(default: the INI machine's [EMCIO] TOOL_TABLE; without one, "
+                             "G43 Hn applies length 0 with a warning).")(f)
+
+
 def _machine_option(required: bool = False):
     def deco(f):
         return click.option("-m", "--machine", "machine_spec", required=required, default=None,
@@ -90,13 +98,15 @@ def main() -> None:
 @main.command()
 @click.argument("part", type=click.Path(allow_dash=True, dir_okay=False))
 @_machine_option()
+@_tool_table_option
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable summary on stdout.")
-def parse(part: str, machine_spec: str | None, as_json: bool) -> None:
+def parse(part: str, machine_spec: str | None, tool_table: str | None, as_json: bool) -> None:
     """Read PART (a file or - for stdin) and summarise its runs and nodes."""
     from .gcode.summary import format_summary, program_summary
     from .pipeline import load_program_for
 
-    program, _ = load_program_for(part, machine_spec, require_machine=False)
+    program, _ = load_program_for(part, machine_spec, require_machine=False,
+                                  tool_table=tool_table)
     summary = program_summary(program)
     if as_json:
         _emit_json(summary)
@@ -108,6 +118,7 @@ def parse(part: str, machine_spec: str | None, as_json: bool) -> None:
 @main.command()
 @click.argument("part", type=click.Path(allow_dash=True, dir_okay=False))
 @_machine_option()
+@_tool_table_option
 @_tol_option
 @click.option("--corner-deg", type=click.FloatRange(min=0, max=180), default=None,
               help="Turns sharper than this split the path (default 30).")
@@ -115,7 +126,7 @@ def parse(part: str, machine_spec: str | None, as_json: bool) -> None:
 @click.option("-o", "--output", "out", default=None, metavar="SEGMENTS.json",
               help="Write the fitted segments as JSON.")
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable statistics on stdout.")
-def fit(part, machine_spec, tol_mm, corner_deg, fit_method, out, as_json) -> None:
+def fit(part, machine_spec, tool_table, tol_mm, corner_deg, fit_method, out, as_json) -> None:
     """Fit PART's tool path with G2-continuous quintic segments."""
     from .fit.report import fit_statistics, format_statistics, write_segments_json
     from .fit.settings import FitSettings
@@ -125,7 +136,8 @@ def fit(part, machine_spec, tol_mm, corner_deg, fit_method, out, as_json) -> Non
         from .outfile import check_writable
 
         check_writable(out, inputs=(part, machine_spec))
-    program, machine = load_program_for(part, machine_spec, require_machine=False)
+    program, machine = load_program_for(part, machine_spec, require_machine=False,
+                                        tool_table=tool_table)
     settings = FitSettings.from_options(tol_mm=tol_mm, corner_deg=corner_deg, machine=machine,
                                         method=fit_method)
     result = fit_loaded(program, settings)
@@ -142,6 +154,7 @@ def fit(part, machine_spec, tol_mm, corner_deg, fit_method, out, as_json) -> Non
 @main.command()
 @click.argument("part", type=click.Path(allow_dash=True, dir_okay=False))
 @_machine_option()
+@_tool_table_option
 @click.option("--planner", type=click.Choice(PLANNERS), default="vpop", show_default=True)
 @_dt_option
 @_tol_option
@@ -153,13 +166,14 @@ def fit(part, machine_spec, tol_mm, corner_deg, fit_method, out, as_json) -> Non
               help="OUT.csv or OUT.mcap; - (default) writes CSV to stdout.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar and no summary on stderr.")
 @click.option("--json", "as_json", is_flag=True, help="Summary as JSON on stderr.")
-def plan(part, machine_spec, planner, dt_s, tol_mm, fit_method, start, out, quiet, as_json) -> None:
+def plan(part, machine_spec, tool_table, planner, dt_s, tol_mm, fit_method, start, out, quiet,
+         as_json) -> None:
     """Plan PART into setpoints every dt for MACHINE's axes."""
     from .pipeline import PlanOptions, run_plan
 
     opts = PlanOptions(part=part, machine_spec=machine_spec, planner=planner, dt_s=dt_s,
-                       tol_mm=tol_mm, fit_method=fit_method, start=start, out=out, quiet=quiet,
-                       summary_json=as_json)
+                       tol_mm=tol_mm, fit_method=fit_method, start=start, tool_table=tool_table,
+                       out=out, quiet=quiet, summary_json=as_json)
     run_plan(opts)
 
 
@@ -280,6 +294,7 @@ def batch(paths, machine_spec, planner, dt_s, tol_mm, fit_method, jobs, report, 
 
 def run() -> None:
     """Console-script entry point: map errors to exit codes, never a traceback for bad input."""
+    _warnings_as_lines()
     try:
         main.main(standalone_mode=False)
     except click.exceptions.Exit as exc:
@@ -315,6 +330,23 @@ def run() -> None:
                 "(please report it; set CNC_INTERP_DEBUG=1 for the traceback)")
         sys.exit(1)
     _flush_stdout()
+
+
+def _warnings_as_lines() -> None:
+    """Print our warnings as their one line (no Python file/line prefix), each once."""
+    import warnings
+
+    from .errors import CncInterpWarning
+
+    shown = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, CncInterpWarning):
+            _stderr(str(message))
+        else:
+            shown(message, category, filename, lineno, file, line)
+
+    warnings.showwarning = show
 
 
 def _caused_by_interrupt(exc: BaseException) -> bool:

@@ -60,6 +60,11 @@ def _printable(text: str) -> str:
     return text.translate(_CONTROL)
 
 
+class CncInterpWarning(UserWarning):
+    """Something the user should know that does not stop the run; its text is one
+    ``FILE:LINE:COL: warning: ...`` line (the CLI prints just that)."""
+
+
 class GCodeError(CncInterpError):
     """Malformed or unsupported G-code (location = file, line, column, text)."""
 

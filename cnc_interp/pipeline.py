@@ -41,10 +41,11 @@ def load_machine_spec(spec: str | None):
 
 
 def load_program_for(part: str, machine_spec: str | None, require_machine: bool = False,
-                     start: np.ndarray | None = None):
+                     start: np.ndarray | None = None, tool_table: str | None = None):
     """Parse ``part`` for the machine named by ``machine_spec``: (Program, Machine | None).
 
-    Without a machine the program's own axes are used (at least XYZ).
+    Without a machine the program's own axes are used (at least XYZ). ``tool_table``
+    (a LinuxCNC tool table file) overrides the machine's (``[EMCIO] TOOL_TABLE``).
     """
     from .gcode import read_program
 
@@ -57,7 +58,9 @@ def load_program_for(part: str, machine_spec: str | None, require_machine: bool 
     axes = machine.axes if machine is not None else None
     if start is None and machine is not None:
         start = machine.start
-    program = read_program(data, source=name, axes=axes, start=start)
+    if tool_table is None and machine is not None:
+        tool_table = machine.tool_table
+    program = read_program(data, source=name, axes=axes, start=start, tool_table=tool_table)
     return program, machine
 
 
@@ -86,7 +89,8 @@ def process_program(name: str, data: bytes, machine, planner: str = "vpop",
     from .plan.timeline import plan_program
     from .plan.verify import verify
 
-    program = read_program(data, source=name, axes=machine.axes, start=machine.start)
+    program = read_program(data, source=name, axes=machine.axes, start=machine.start,
+                           tool_table=machine.tool_table)
     fit_settings = FitSettings.from_options(tol_mm=tol_mm, machine=machine, method=fit_method)
     result = fit_loaded(program, fit_settings)
     settings = PlanSettings.from_options(planner=planner, dt_s=dt_s, tol_mm=tol_mm, machine=machine)
@@ -138,6 +142,7 @@ class PlanOptions:
     tol_mm: float | None = None
     fit_method: str | None = None
     start: str | None = None
+    tool_table: str | None = None
     out: str = "-"
     quiet: bool = False
     summary_json: bool = False
@@ -202,7 +207,7 @@ def parse_start(spec: str | None, axes: str, base: np.ndarray | None = None) -> 
 def plan_part(part: str, machine_spec: str | None = None, planner: str = "vpop",
               dt_s: float | None = None, tol_mm: float | None = None,
               start: str | np.ndarray | None = None, progress=None,
-              fit_method: str | None = None) -> PlanOutcome:
+              fit_method: str | None = None, tool_table: str | None = None) -> PlanOutcome:
     """Parse, fit, plan and verify one part program (no output written).
 
     Raises ``PlanError`` (exit 1) when the plan violates a limit: that is a bug.
@@ -228,7 +233,8 @@ def plan_part(part: str, machine_spec: str | None = None, planner: str = "vpop",
     from .gcode import read_program
 
     name, data = read_part(part)
-    program = read_program(data, source=name, axes=machine.axes, start=machine.start)
+    program = read_program(data, source=name, axes=machine.axes, start=machine.start,
+                           tool_table=tool_table if tool_table is not None else machine.tool_table)
     input_meta = _input_meta(name, data)
     t1 = time.perf_counter()
     timings["parse"] = t1 - t0
@@ -272,7 +278,8 @@ def _load_with(part: str, machine):
     from .gcode import read_program
 
     name, data = read_part(part)
-    return read_program(data, source=name, axes=machine.axes, start=machine.start), machine
+    return read_program(data, source=name, axes=machine.axes, start=machine.start,
+                        tool_table=machine.tool_table), machine
 
 
 def run_plan(opts: PlanOptions) -> None:
@@ -287,7 +294,8 @@ def run_plan(opts: PlanOptions) -> None:
     check_writable(out, inputs=(opts.part, opts.machine_spec))
     with progress_bar(None, "plan", enabled=not opts.quiet) as tick:
         outcome = plan_part(opts.part, opts.machine_spec, opts.planner, opts.dt_s, opts.tol_mm,
-                            opts.start, progress=tick, fit_method=opts.fit_method)
+                            opts.start, progress=tick, fit_method=opts.fit_method,
+                            tool_table=opts.tool_table)
     traj = outcome.trajectory
     if out.lower().endswith(".mcap"):
         from .export.mcap_io import write_mcap

@@ -119,7 +119,7 @@ def test_g80_with_a_motion_code_is_accepted():
 
 @pytest.mark.parametrize("code,name", [
     ("G41 D1", "G41"), ("G42", "G42"), ("G38.2 Z-1 F10", "G38.2"), ("G33 Z-1 K1", "G33"),
-    ("G76 P1 Z-1", "G76"), ("G43 H1", "G43"), ("M98 P100", "M98"), ("M99", "M99"),
+    ("G76 P1 Z-1", "G76"), ("M98 P100", "M98"), ("M99", "M99"),
     ("G95", "G95"), ("M66 P0 L0", "M66"),
 ])
 def test_unsupported_constructs_are_named(code, name):

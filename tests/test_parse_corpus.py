@@ -23,15 +23,9 @@ FILES = sorted(glob.glob(os.path.join(CORPUS, "**", "*.ngc"), recursive=True))
 EXPECTED_ERRORS = {
     "linuxcnc/arc-feed/full_xz.ngc": "arcs outside the XY plane with a rotated coordinate",
     "linuxcnc/arc-feed/full_yz.ngc": "arcs outside the XY plane with a rotated coordinate",
-    "linuxcnc/examples/cone.ngc": "G43.1",
     "linuxcnc/examples/hole-circle.ngc": "polar coordinates",
     "linuxcnc/quick-tests/sam-circle_lines.ngc": "polar coordinates",
     "linuxcnc/nurbs-g5/Curva_Stella #1=1_G5.ngc": "unknown G-code G2.2",
-    "linuxcnc/performance/Cereal.ngc": "G43 tool length offset",
-    "linuxcnc/performance/Pasta.ngc": "G43 tool length offset",
-    "linuxcnc/violation_checks/sam_violation2_verbatim.ngc": "G43 tool length offset",
-    "linuxcnc/violation_checks/sam_zero_length_move.ngc": "G43 tool length offset",
-    "linuxcnc/violation_checks/z_jump_tangent_improvement.ngc": "G43 tool length offset",
     "linuxcnc/violation_checks/tap-discrimant-error-orig.ngc": "G7 lathe diameter mode",
     "linuxcnc/violation_checks/spreadsheeterrors.ngc": "not on the circle",
 }

@@ -108,7 +108,8 @@ def plan_for_stream(opts: StreamOptions):
                                          machine=machine)
     machine = machine.with_dt(settings.dt_s)
     name, data = read_part(opts.part)
-    program = read_program(data, source=name, axes=machine.axes, start=machine.start)
+    program = read_program(data, source=name, axes=machine.axes, start=machine.start,
+                           tool_table=machine.tool_table)
     fitted = fit_loaded(program, FitSettings.from_options(tol_mm=opts.tol_mm, machine=machine,
                                                           method=opts.fit_method))
     check_sample_budget(fitted.paths, machine, settings.dt_s, program.source,

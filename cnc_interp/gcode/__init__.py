@@ -7,18 +7,20 @@ parameters, expressions, O-words) feeds ``interp`` (modal interpreter).
 from __future__ import annotations
 
 import gc
+import os
+import warnings
 
 import numpy as np
 
 from ..constants import ALL_AXES
-from ..errors import UsageError
+from ..errors import CncInterpWarning, UsageError
 from .program import Arc, CurvePiece, Dwell, Nurbs, Program, Run, Stop
 
 __all__ = ["read_program", "Program", "Run", "Arc", "Nurbs", "CurvePiece", "Dwell", "Stop"]
 
 
 def read_program(data: bytes | str, source: str, axes: str | None = None,
-                 start: np.ndarray | None = None, params=None) -> Program:
+                 start: np.ndarray | None = None, params=None, tool_table=None) -> Program:
     """Interpret a whole part program.
 
     Args:
@@ -30,6 +32,8 @@ def read_program(data: bytes | str, source: str, axes: str | None = None,
         start: machine position before the program, (len(axes),) mm/deg; with
             ``axes=None`` it may have 3 (XYZ) or 9 (XYZABCUVW) values. Default 0.
         params: an optional ``ParamStore`` (e.g. with preset work offsets).
+        tool_table: a tool table file's path or a ``ToolTable`` (tool length offsets for
+            ``G43 Hn``); ``None``: ``G43 Hn`` applies zero length with one warning.
 
     Returns:
         The ``Program`` in machine coordinates, mm / deg / s.
@@ -53,6 +57,12 @@ def read_program(data: bytes | str, source: str, axes: str | None = None,
     if live:
         params = _LiveParams()
     interp = Interpreter(source, params, axes, start9)
+    if tool_table is not None:
+        from .tooltable import ToolTable, read_tool_table
+
+        table = read_tool_table(tool_table) if isinstance(tool_table, (str, os.PathLike)) else tool_table
+        interp.tool_table = ToolTable(table)  # a copy: G10 L1 may edit it
+        interp.tool_table.source = getattr(table, "source", "")
     if live:
         params.interp = interp
     # The parse allocates millions of short-lived tuples and no reference cycles;
@@ -66,6 +76,8 @@ def read_program(data: bytes | str, source: str, axes: str | None = None,
             gc.enable()
     program = interp.program(_count_lines(data))
     _check_ranges(program)
+    for text in program.metadata.get("warnings", ()):
+        warnings.warn(CncInterpWarning(text), stacklevel=2)
     return program
 
 

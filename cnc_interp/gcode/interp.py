@@ -48,7 +48,7 @@ G_GROUP = {
     830: 1, 850: 1, 890: 1,
     170: 2, 180: 2, 190: 2,
     900: 3, 910: 3, 901: 4, 911: 4, 930: 5, 940: 5, 200: 6, 210: 6, 400: 7,
-    430: 8, 490: 8, 980: 10, 990: 10,
+    430: 8, 431: 8, 432: 8, 490: 8, 980: 10, 990: 10,
     540: 12, 550: 12, 560: 12, 570: 12, 580: 12, 590: 12, 591: 12, 592: 12, 593: 12,
     610: 13, 611: 13, 640: 13, 960: 14, 970: 14, 80: 15,
     40: 0, 100: 0, 280: 0, 281: 0, 300: 0, 301: 0, 530: 0, 920: 0, 921: 0, 922: 0, 923: 0,
@@ -61,7 +61,6 @@ G_UNSUPPORTED = {
     410: "G41 cutter radius compensation", 420: "G42 cutter radius compensation",
     411: "G41.1 dynamic cutter radius compensation",
     421: "G42.1 dynamic cutter radius compensation",
-    431: "G43.1 dynamic tool length offset", 432: "G43.2 additional tool length offset",
     520: "G52 local coordinate offset",
     700: "G70 lathe finishing cycle", 710: "G71 lathe roughing cycle",
     711: "G71.1 lathe roughing cycle",
@@ -131,6 +130,11 @@ class Interpreter:
         self.coord_off = [0.0] * 9
         self.g92 = [0.0] * 9
         self.off = [0.0] * 9
+        # tool length offset (G43/G43.1/G43.2, mm/deg, machine frame): added to every target
+        self.tlo = [0.0] * 9
+        self.tool_table = None  # ToolTable or None (then G43 Hn applies zero, with a warning)
+        self.tools_touched: set[int] = set()  # changed by G10 L10/L11 (not modelled)
+        self.warnings: list[str] = []
         # XY rotation of the current coordinate system (G10 L2 R), LinuxCNC order:
         # machine_xy = offset_xy + Rot(rot) (program_xy + g92_xy)
         self.rot_deg = 0.0
@@ -205,7 +209,7 @@ class Interpreter:
         self.params.set(n, float(v))
 
     def _update_off(self) -> None:
-        self.off = [c + g for c, g in zip(self.coord_off, self.g92)]
+        self.off = [c + g + t for c, g, t in zip(self.coord_off, self.g92, self.tlo)]
 
     def program_position(self) -> list[float]:
         """Current position in program coordinates and units (for #5420-#5428)."""
@@ -216,7 +220,8 @@ class Interpreter:
         q = [m - o for m, o in zip(m9, self.off)]
         if self.rot_deg:
             c, s = self.rot_cs
-            dx, dy = m9[0] - self.coord_off[0], m9[1] - self.coord_off[1]
+            dx = m9[0] - self.coord_off[0] - self.tlo[0]
+            dy = m9[1] - self.coord_off[1] - self.tlo[1]
             q[0] = c * dx + s * dy - self.g92[0]
             q[1] = -s * dx + c * dy - self.g92[1]
         return q
@@ -227,8 +232,8 @@ class Interpreter:
         if self.rot_deg:
             c, s = self.rot_cs
             vx, vy = q9[0] + self.g92[0], q9[1] + self.g92[1]
-            m[0] = self.coord_off[0] + c * vx - s * vy
-            m[1] = self.coord_off[1] + s * vx + c * vy
+            m[0] = self.coord_off[0] + self.tlo[0] + c * vx - s * vy
+            m[1] = self.coord_off[1] + self.tlo[1] + s * vx + c * vy
         return m
 
     def _set_rotation(self, deg: float) -> None:
@@ -564,11 +569,6 @@ class Interpreter:
             grp = G_GROUP.get(code)
             if grp is None:
                 raise self.error(f"unknown G-code {_gcode_name(code)}", w[2])
-            if code == 430:
-                hw = d.get("H")
-                if hw is None or hw[1] != 0:
-                    raise self.error("G43 tool length offset is not supported (only G43 H0)",
-                                     w[2], unsupported=True)
             if code == 800:
                 g80 = True
                 if 1 in groups:
@@ -606,7 +606,8 @@ class Interpreter:
         g0 = groups.get(0)
         g0code = g0[0] if g0 else None
         axis_words = [(L, w) for L, w in d.items() if L in AXIS_INDEX]
-        covets = g0code in (100, 280, 300, 920)
+        # G43.1/G43.2 take their offsets from the axis words, like G10 and G92
+        covets = g0code in (100, 280, 300, 920) or groups.get(8, (0,))[0] in (431, 432)
         mcode = groups[1][0] if 1 in groups else None
 
         self._check_unused_words(d, groups, mgroups, mcode, g0code, covets, axis_words)
@@ -650,7 +651,10 @@ class Interpreter:
             if self.nurbs_cp is not None and newp != self.plane:
                 raise self.error("plane change inside a G5.2 NURBS block", groups[2][1])
             self.plane = newp
-        # 7. cutter comp G40 / tool length G49, G43 H0: nothing moves
+        # 7. cutter comp G40 (nothing moves); tool length G43/G43.1/G43.2/G49: the offset
+        # changes the program-to-machine map, so it applies from the next move on
+        if 8 in groups:
+            self._tool_length(groups[8][0], groups[8][1], d, axis_words)
         # 8. coordinate system
         if 12 in groups:
             code = groups[12][0]
@@ -816,13 +820,88 @@ class Interpreter:
                 self._pset(base + k, self.pos[k] / u[k])
         return False
 
+    def _g10_tool(self, lv: float, d: dict, axis_words: list, col: int) -> None:
+        """G10 L1 P<tool> <axes>: set the tool's offsets in the table; L10/L11 (offsets from
+        the current position) are recorded, and a later G43 of that tool is refused."""
+        pw = d.get("P")
+        if pw is None or pw[1] < 0 or pw[1] != int(pw[1]):
+            raise self.error(f"G10 L{lv:g} needs P (a tool number)", col)
+        tool = int(pw[1])
+        if lv != 1.0:
+            self.tools_touched.add(tool)
+            return
+        from .tooltable import ToolTable
+
+        if self.tool_table is None:
+            self.tool_table = ToolTable()
+            self.tool_table.source = "(G10 L1)"
+        offs = list(self.tool_table.get(tool, (0.0,) * 9))
+        for L, w in axis_words:
+            i = AXIS_INDEX[L]
+            offs[i] = w[1] * self.units9[i]
+        self.tool_table[tool] = tuple(offs)
+        self.tools_touched.discard(tool)
+
+    def _tool_length(self, code: int, col: int, d: dict, axis_words: list) -> None:
+        """G43 [H], G43.1 axes, G43.2 H|axes, G49 (LinuxCNC semantics)."""
+        if code == 490:
+            tlo = [0.0] * 9
+        elif code == 431:
+            if not axis_words:
+                raise self.error("G43.1 without axis words (the offsets)", col)
+            tlo = [0.0] * 9
+            for L, w in axis_words:
+                i = AXIS_INDEX[L]
+                tlo[i] = w[1] * self.units9[i]
+        else:
+            hw = d.get("H")
+            if code == 432 and hw is None and not axis_words:
+                raise self.error("G43.2 without H or axis words", col)
+            if code == 432 and hw is not None and axis_words:
+                raise self.error("G43.2 takes H or axis words, not both", col)
+            tlo = [0.0] * 9 if code == 430 else list(self.tlo)
+            if hw is not None or code == 430:
+                tool = self.tool if hw is None else hw[1]  # G43 alone: the tool in the spindle
+                hcol = hw[2] if hw is not None else col
+                if tool < 0 or tool != int(tool):
+                    raise self.error("H must be a non-negative integer (a tool number)", hcol)
+                add = self._tool_offsets(int(tool), hcol)
+                tlo = [a + b for a, b in zip(tlo, add)]
+            for L, w in axis_words:
+                i = AXIS_INDEX[L]
+                tlo[i] += w[1] * self.units9[i]
+        self.tlo = tlo
+        self._update_off()
+        for k in range(9):  # #5401-#5409: the offset in effect, program units
+            self._pset(5401 + k, tlo[k] / self.units9[k])
+
+    def _tool_offsets(self, tool: int, col: int) -> list[float]:
+        """Offsets (mm/deg) of ``tool`` from the tool table; tool 0 has none."""
+        if tool == 0:
+            return [0.0] * 9
+        if tool in self.tools_touched:
+            raise self.error(f"tool {tool} was changed by G10 L10/L11; such tool table edits "
+                             "are not supported", col, unsupported=True)
+        if self.tool_table is None:
+            if not self.warnings:
+                self.warnings.append(
+                    f"{self.source}:{self.blk.line}:{max(col, 1)}: warning: G43 H{tool} with no "
+                    "tool table (--tool-table FILE): tool lengths are taken as 0, so the "
+                    "program's geometry and timing are as written")
+            return [0.0] * 9
+        offs = self.tool_table.get(tool)
+        if offs is None:
+            raise self.error(f"tool {tool} is not in the tool table {self.tool_table.source}", col)
+        return list(offs)
+
     def _g10(self, col: int, d: dict, axis_words: list) -> None:
         lw, pw = d.get("L"), d.get("P")
         if lw is None:
             raise self.error("G10 without L", col)
         lv = lw[1]
         if lv in (1.0, 10.0, 11.0):
-            return  # tool table entries: tool offsets are not applied (no G43), nothing moves
+            self._g10_tool(lv, d, axis_words, col)  # a tool table entry: nothing moves
+            return
         if lv not in (2.0, 20.0):
             raise self.error(f"G10 L{lv:g} is not supported", lw[2], unsupported=True)
         if pw is None:
@@ -1175,6 +1254,7 @@ class Interpreter:
                 items.append(Stop(line=obj.line, code=obj.code,
                                   position=np.array(extra, dtype=float)[sel]))
         meta = {"zero_length_moves": self.zero_length_moves,
+                "warnings": list(self.warnings),
                 "zero_length_lines": list(self.zero_length_lines),
                 "final_position": [float(v) for v in np.array(self.pos)[sel]]}
         return Program(source=self.source, axes=axes, items=tuple(items),

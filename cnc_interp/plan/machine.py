@@ -41,6 +41,7 @@ class Machine:
         start: (n,) machine position before the program, mm / deg.
         tol_mm: default path tolerance for the fit, mm.
         source: where it was loaded from (file name or ``preset:NAME``).
+        tool_table: path of the LinuxCNC tool table (an INI's ``[EMCIO] TOOL_TABLE``), or None.
     """
 
     name: str
@@ -54,6 +55,7 @@ class Machine:
     start: np.ndarray | None = None
     tol_mm: float | None = None
     source: str = ""
+    tool_table: str | None = None
 
     def __post_init__(self) -> None:
         n = len(self.axes)

@@ -467,8 +467,13 @@ def _load_ini(text: str, path: str) -> Machine:
     name_item = ini.get("EMC", "MACHINE")
     name = name_item[0] if name_item else _stem(path)
     kind = _ini_kinematics(ini, axes)
+    table = ini.get("EMCIO", "TOOL_TABLE")
+    tool_table = None
+    if table is not None and table[0].strip():  # relative to the INI file, as LinuxCNC reads it
+        tool_table = os.path.join(os.path.dirname(os.path.abspath(path)), table[0].strip())
     return Machine(name=name, axes=axes, vmax=vmax, amax=amax, jmax=jmax, dt_s=dt_s,
-                   kinematics=kind, kinematics_params=normalise_params(kind, {}), source=path)
+                   kinematics=kind, kinematics_params=normalise_params(kind, {}), source=path,
+                   tool_table=tool_table)
 
 
 #: LinuxCNC kinematics module -> ours (pivot offsets are HAL pins, not INI keys: 0 here)
