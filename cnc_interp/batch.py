@@ -278,12 +278,14 @@ def compare(records: list[dict], baseline: dict | None, max_slowdown: float) -> 
                     out["slower"].append(item)
                 elif change < -max_slowdown:
                     out["faster"].append(item)
-    # a crash or a timeout is never an expected outcome, baseline or not
-    out["crashes"] = [{"key": r["key"], "status": r["status"], "message": r["message"]}
-                      for r in records if r["status"] in ("crash", "timeout")
-                      and not (baseline and baseline.get(r["key"], {}).get("status") == r["status"])]
+    # a program that did not plan is a failure unless the baseline expects it: a crash or a
+    # timeout always, an input error when there is no baseline to say it is known
+    failing = ("crash", "timeout") if baseline is not None else ("crash", "timeout", "error")
+    out["failed"] = [{"key": r["key"], "status": r["status"], "message": r["message"]}
+                     for r in records if r["status"] in failing
+                     and (baseline is None or r["key"] not in baseline)]  # else: status_changed
     out["regressions"] = (len(out["violations"]) + len(out["status_changed"]) + len(out["slower"])
-                          + len(out["crashes"]))
+                          + len(out["failed"]))
     return out
 
 

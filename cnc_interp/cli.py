@@ -155,7 +155,8 @@ def fit(part, machine_spec, tool_table, tol_mm, corner_deg, fit_method, out, as_
 @click.argument("part", type=click.Path(allow_dash=True, dir_okay=False))
 @_machine_option()
 @_tool_table_option
-@click.option("--planner", type=click.Choice(PLANNERS), default="vpop", show_default=True)
+@click.option("--planner", type=click.Choice(PLANNERS), default="vpop", show_default=True,
+              help="VPOp (paper 001) or paper 000's constant / variable feedrate planner.")
 @_dt_option
 @_tol_option
 @_fit_method_option
@@ -164,8 +165,10 @@ def fit(part, machine_spec, tool_table, tol_mm, corner_deg, fit_method, out, as_
                    "axes not named keep the machine's.")
 @click.option("-o", "--output", "out", default="-", metavar="OUT",
               help="OUT.csv or OUT.mcap; - (default) writes CSV to stdout.")
-@click.option("--quiet", "-q", is_flag=True, help="No progress bar and no summary on stderr.")
-@click.option("--json", "as_json", is_flag=True, help="Summary as JSON on stderr.")
+@click.option("--quiet", "-q", is_flag=True, help="No progress bar and no summary line on stderr "
+              "(--json is still written).")
+@click.option("--json", "as_json", is_flag=True, help="Summary as JSON on stdout (on stderr when "
+              "stdout carries the plan, -o -).")
 def plan(part, machine_spec, tool_table, planner, dt_s, tol_mm, fit_method, start, out, quiet,
          as_json) -> None:
     """Plan PART into setpoints every dt for MACHINE's axes."""
@@ -240,7 +243,9 @@ def emulate(frames, out) -> None:
 @main.command()
 @click.argument("part", type=click.Path(allow_dash=True, dir_okay=False))
 @_machine_option(required=True)
-@click.option("--planner", type=click.Choice(PLANNERS), default="variable", show_default=True)
+@click.option("--planner", type=click.Choice(PLANNERS), default="variable", show_default=True,
+              help="The planner whose plan is quantized (variable: paper 000's, whose "
+                   "segments the device evaluates).")
 @_dt_option
 @_tol_option
 @_fit_method_option
@@ -249,7 +254,7 @@ def emulate(frames, out) -> None:
               help="Write the frames to a file instead of a device.")
 @click.option("--resume-from", "resume_from", type=int, default=None, metavar="SEQ",
               help="Resume a broken stream after the last acknowledged sequence number.")
-@click.option("--quiet", "-q", is_flag=True)
+@click.option("--quiet", "-q", is_flag=True, help="No summary lines on stderr.")
 def stream(part, machine_spec, planner, dt_s, tol_mm, fit_method, device, dry_run, resume_from,
            quiet) -> None:
     """Quantize PART's plan to fixed point and stream it to the FPGA over USB."""
@@ -264,20 +269,25 @@ def stream(part, machine_spec, planner, dt_s, tol_mm, fit_method, device, dry_ru
 @main.command()
 @click.argument("paths", nargs=-1, required=True, type=click.Path(exists=True))
 @_machine_option(required=True)
-@click.option("--planner", type=click.Choice(PLANNERS), default="vpop", show_default=True)
+@click.option("--planner", type=click.Choice(PLANNERS), default="vpop", show_default=True,
+              help="VPOp (paper 001) or paper 000's constant / variable feedrate planner.")
 @_dt_option
 @_tol_option
 @_fit_method_option
 @click.option("--jobs", "-j", type=click.IntRange(min=1), default=None, help="Worker processes.")
-@click.option("--report", "report", default=None, metavar="FILE.json|FILE.csv")
-@click.option("--baseline", default=None, metavar="FILE.json")
-@click.option("--max-slowdown", default="1%", show_default=True)
+@click.option("--report", "report", default=None, metavar="FILE.json|FILE.csv",
+              help="Write the per-program report (JSON, or CSV by extension).")
+@click.option("--baseline", default=None, metavar="FILE.json",
+              help="A previous --report JSON: status changes and slowdowns are regressions.")
+@click.option("--max-slowdown", default="1%", show_default=True,
+              help="Cycle-time growth against --baseline that counts as a regression.")
 @click.option("--timeout", "timeout_s", type=_Finite(min=0, min_open=True), default=1800.0,
               show_default=True, help="Per-program time limit, s.")
 @click.option("--dask", "dask_address", default=None, metavar="ADDRESS",
               help="Run on an existing Dask distributed scheduler.")
-@click.option("--quiet", "-q", is_flag=True)
-@click.option("--json", "as_json", is_flag=True)
+@click.option("--quiet", "-q", is_flag=True, help="No progress bar.")
+@click.option("--json", "as_json", is_flag=True, help="The report as JSON on stdout instead of "
+              "the table.")
 def batch(paths, machine_spec, planner, dt_s, tol_mm, fit_method, jobs, report, baseline, max_slowdown,
           timeout_s, dask_address, quiet, as_json) -> None:
     """Run every program under PATHS through parse, fit, plan and verify."""

@@ -308,11 +308,15 @@ def run_plan(opts: PlanOptions) -> None:
         from .export.csv_io import write_csv
 
         write_csv(traj, out)
-    if opts.quiet:
-        return
     summary = outcome.summary()
     if opts.summary_json:
-        sys.stderr.write(json.dumps(summary, indent=2, sort_keys=True, allow_nan=False) + "\n")
+        # JSON goes to stdout unless stdout carries the plan itself; --quiet never hides it
+        stream = sys.stderr if out == "-" else sys.stdout
+        stream.write(json.dumps(summary, indent=2, sort_keys=True, allow_nan=False) + "\n")
+        stream.flush()
+        return
+    if opts.quiet:
+        return
     else:
         sys.stderr.write(
             f"{summary['part']}: {traj.planner} on {summary['machine']}: "

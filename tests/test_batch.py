@@ -61,8 +61,8 @@ def test_compare_rules():
     assert out["regressions"] == 3
     # an already-broken program that stays broken is no regression
     assert compare([rec("c", status="error")], {"c": rec("c", status="error")}, 0.01)["regressions"] == 0
-    # without a baseline only violations count
-    assert compare(cur, None, 0.01)["regressions"] == 1
+    # without a baseline violations and programs that did not plan count (issue 16)
+    assert compare(cur, None, 0.01)["regressions"] == 2
     faster = compare([rec("b", cycle=1.0)], {"b": rec("b", cycle=2.0)}, 0.01)
     assert faster["regressions"] == 0 and faster["faster"][0]["key"] == "b"
 
@@ -80,7 +80,7 @@ def test_reports_round_trip(tmp_path):
     assert [r["key"] for r in rows] == ["x.ngc", "y.ngc"] and rows[1]["cycle_time_s"] == ""
     assert tuple(rows[0]) == FIELDS
     text = format_table(report)
-    assert "bad word" in text and "2 programs: 1 error, 1 ok" in text and "0 regression(s)" in text
+    assert "bad word" in text and "2 programs: 1 error, 1 ok" in text and "1 regression(s)" in text
     assert set(VOLATILE_FIELDS) <= set(FIELDS)
 
 
@@ -157,7 +157,7 @@ def test_batch_with_broken_program_and_baseline_rules(tmp_path, folder):
     m = machine_file(tmp_path, 20000.0)
     rep = str(tmp_path / "r.json")
     res = run_cli(["batch", str(folder), "-m", m, "--jobs", "2", "--report", rep, "-q"])
-    assert res.exit_code == 0, res.output           # a broken program alone is no regression
+    assert res.exit_code == 1, res.output           # without a baseline, a failure fails the run
     report = json.load(open(rep))
     by = {r["key"]: r for r in report["programs"]}
     assert sorted(by) == ["progs/arc.ngc", "progs/square.ngc", "progs/sub/broken.ngc"]

@@ -189,8 +189,12 @@ class Interpreter:
         if i in self.active:
             return
         if self.fixed_axes:
-            raise self.error(f"axis {ALL_AXES[i]} is not on this machine (axes "
-                             f"{''.join(ALL_AXES[k] for k in self.out_order)})", col)
+            a = ALL_AXES[i]
+            raise self.error(f"axis {a} is not on this machine (axes "
+                             f"{''.join(ALL_AXES[k] for k in self.out_order)}); use a machine "
+                             f"with an {a} axis: -m with a preset that has one (cnc-interp "
+                             f"machines), or a machine file with an [axes.{a}] table (vmax, "
+                             "amax, jmax)", col)
         self.active = tuple(sorted(self.active + (i,)))
         if self.rb is not None:
             self.rb.widen(self.active, self.pos)
