@@ -292,6 +292,10 @@ def run_plan(opts: PlanOptions) -> None:
 
     out = opts.out or "-"
     check_writable(out, inputs=(opts.part, opts.machine_spec))
+    if not opts.quiet:
+        from ._kernel_cache import announce_first_compile
+
+        announce_first_compile()
     with progress_bar(None, "plan", enabled=not opts.quiet) as tick:
         outcome = plan_part(opts.part, opts.machine_spec, opts.planner, opts.dt_s, opts.tol_mm,
                             opts.start, progress=tick, fit_method=opts.fit_method,

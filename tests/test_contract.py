@@ -330,8 +330,15 @@ def test_quiet_and_json_summary(plans, tmp_path):
     res = run_inproc("plan", MAIN_PART, "-m", MAIN_MACHINE, "-o", tmp_path / "q.csv", "--quiet")
     assert res.code == 0 and res.err == "" and res.out == b""
     res = run_inproc("plan", MAIN_PART, "-m", MAIN_MACHINE, "-o", tmp_path / "j.csv", "--json")
-    assert res.code == 0, res.explain()
-    summary = json.loads(res.err)
+    assert res.code == 0 and res.err == "", res.explain()
+    summary = json.loads(res.out)  # stdout: it does not carry the plan here
+    # --quiet never hides the JSON; with -o - the JSON moves to stderr
+    quiet = run_inproc("plan", MAIN_PART, "-m", MAIN_MACHINE, "-o", tmp_path / "k.csv", "--json",
+                       "-q")
+    assert json.loads(quiet.out)["samples"] == summary["samples"] and quiet.err == ""
+    piped = run_inproc("plan", MAIN_PART, "-m", MAIN_MACHINE, "--json", "-q")
+    assert piped.out.startswith(b"t,s,feed,")
+    assert json.loads(piped.err)["cycle_time_s"] == summary["cycle_time_s"]
     assert summary["samples"] == csv.data.shape[0]
     assert summary["cycle_time_s"] == csv.data[-1, 0]
     assert summary["worst_ratio"] <= 1 + 1e-9

@@ -70,3 +70,28 @@ def test_unwritable_cache_folder_is_left_alone(tmp_path, monkeypatch):
     monkeypatch.setattr(os, "access", lambda *a, **k: False)
     assert refresh(str(root)) == []
     assert len(_left(root)) == 6
+
+
+def test_first_compile_notice_only_on_a_terminal_and_only_when_kernels_are_missing(tmp_path):
+    import io
+
+    from cnc_interp._kernel_cache import PLAN_KERNEL_MODULES, announce_first_compile, missing_kernels
+
+    class Tty(io.StringIO):
+        def isatty(self):
+            return True
+
+    root = tmp_path / "pkg"
+    assert missing_kernels(str(root)) == list(PLAN_KERNEL_MODULES)
+    pipe, tty = io.StringIO(), Tty()
+    assert not announce_first_compile(pipe, root=str(root)) and pipe.getvalue() == ""
+    assert announce_first_compile(tty, root=str(root))
+    assert tty.getvalue().startswith("cnc-interp: first run: compiling") and tty.getvalue().count("\n") == 1
+    for mod in PLAN_KERNEL_MODULES:  # every module cached: silent
+        *pkg, name = mod.split(".")
+        d = root.joinpath(*pkg, "__pycache__")
+        d.mkdir(parents=True, exist_ok=True)
+        (d / f"{name}.kernel-1.py311.nbi").write_bytes(b"")
+    tty2 = Tty()
+    assert missing_kernels(str(root)) == [] and not announce_first_compile(tty2, root=str(root))
+    assert tty2.getvalue() == ""

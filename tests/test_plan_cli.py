@@ -137,7 +137,7 @@ def test_fit_method_option_selects_the_fitter(tmp_path):
     assert auto.summary()["fit_method"] == "auto" and nodes.summary()["fit_method"] == "nodes"
     r = run([str(part), "--fit-method", "nodes", "--json", "-o", str(tmp_path / "n.csv")])
     assert r.returncode == 0, r.stderr.decode()
-    assert json.loads(r.stderr.decode())["fit_method"] == "nodes"
+    assert json.loads(r.stdout.decode())["fit_method"] == "nodes"
     r = subprocess.run([sys.executable, "-m", "cnc_interp.cli", "fit", str(part), "--fit-method", "nodes",
                         "--json"], capture_output=True, timeout=600)
     assert r.returncode == 0, r.stderr.decode()

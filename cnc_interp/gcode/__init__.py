@@ -57,12 +57,13 @@ def read_program(data: bytes | str, source: str, axes: str | None = None,
     if live:
         params = _LiveParams()
     interp = Interpreter(source, params, axes, start9)
-    if tool_table is not None:
-        from .tooltable import ToolTable, read_tool_table
+    if isinstance(tool_table, (str, os.PathLike)):
+        interp.tool_table_path = os.fspath(tool_table)  # read when a G43 first needs it
+    elif tool_table is not None:
+        from .tooltable import ToolTable
 
-        table = read_tool_table(tool_table) if isinstance(tool_table, (str, os.PathLike)) else tool_table
-        interp.tool_table = ToolTable(table)  # a copy: G10 L1 may edit it
-        interp.tool_table.source = getattr(table, "source", "")
+        interp.tool_table = ToolTable(tool_table)  # a copy: G10 L1 may edit it
+        interp.tool_table.source = getattr(tool_table, "source", "")
     if live:
         params.interp = interp
     # The parse allocates millions of short-lived tuples and no reference cycles;

@@ -133,6 +133,7 @@ class Interpreter:
         # tool length offset (G43/G43.1/G43.2, mm/deg, machine frame): added to every target
         self.tlo = [0.0] * 9
         self.tool_table = None  # ToolTable or None (then G43 Hn applies zero, with a warning)
+        self.tool_table_path: str | None = None  # a table file, read at its first use
         self.tools_touched: set[int] = set()  # changed by G10 L10/L11 (not modelled)
         self.warnings: list[str] = []
         # XY rotation of the current coordinate system (G10 L2 R), LinuxCNC order:
@@ -836,6 +837,7 @@ class Interpreter:
             return
         from .tooltable import ToolTable
 
+        self._load_tool_table()
         if self.tool_table is None:
             self.tool_table = ToolTable()
             self.tool_table.source = "(G10 L1)"
@@ -845,6 +847,15 @@ class Interpreter:
             offs[i] = w[1] * self.units9[i]
         self.tool_table[tool] = tuple(offs)
         self.tools_touched.discard(tool)
+
+    def _load_tool_table(self) -> None:
+        """Read the tool table file on first use (a program without G43 Hn never needs it,
+        so a machine whose INI names a missing table still plans such programs)."""
+        if self.tool_table is None and self.tool_table_path is not None:
+            from .tooltable import read_tool_table
+
+            path, self.tool_table_path = self.tool_table_path, None
+            self.tool_table = read_tool_table(path)
 
     def _tool_length(self, code: int, col: int, d: dict, axis_words: list) -> None:
         """G43 [H], G43.1 axes, G43.2 H|axes, G49 (LinuxCNC semantics)."""
@@ -886,6 +897,7 @@ class Interpreter:
         if tool in self.tools_touched:
             raise self.error(f"tool {tool} was changed by G10 L10/L11; such tool table edits "
                              "are not supported", col, unsupported=True)
+        self._load_tool_table()
         if self.tool_table is None:
             if not self.warnings:
                 self.warnings.append(
