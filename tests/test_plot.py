@@ -113,3 +113,50 @@ def test_matplotlib_not_imported_by_cli():
     code = "import cnc_interp.cli, sys; print('matplotlib' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def _mill_trajectory(cut_mm_s=3.0, rapid_mm_s=200.0):
+    """A mill plan: a slow XY cut at Z -1, then a fast rapid up in Z."""
+    from cnc_interp.plan.trajectory import Trajectory
+
+    dt = 1e-3
+    x = np.cumsum(np.full(2000, cut_mm_s * dt))
+    z_up = -1.0 + np.cumsum(np.full(200, rapid_mm_s * dt))
+    q = np.zeros((2200, 3))
+    q[:2000, 0] = x
+    q[:2000, 1] = np.sin(x)  # an XY contour: the path view is the top view
+    q[2000:, 1] = q[1999, 1]
+    q[:2000, 2] = -1.0
+    q[2000:, 0] = x[-1]
+    q[2000:, 2] = z_up
+    feed = np.concatenate([[0.0], np.linalg.norm(np.diff(q, axis=0), axis=1) / dt])
+    return Trajectory(axes="XYZ", dt_s=dt, t=np.arange(2200) * dt,
+                      s=np.concatenate([[0.0], np.cumsum(feed[1:] * dt)]), feed=feed, q=q,
+                      line=np.zeros(2200, dtype=np.int64), planner="test")
+
+
+def test_mill_plot_has_a_z_view_and_a_feed_scale_for_cutting_feeds():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from cnc_interp.export.plot import _figure, _z_view_axis
+
+    traj = _mill_trajectory()
+    assert _z_view_axis(traj) == 2
+    fig = _figure(plt, traj, None, "mill")
+    try:
+        labels = [ax.get_ylabel() for ax in fig.axes]
+        assert "Z (mm)" in labels
+        scales = {ax.get_yscale() for ax in fig.axes if ax.get_ylabel() == "feed (mm/s)"}
+        assert "symlog" in scales  # 3 mm/s cutting next to 200 mm/s rapids
+    finally:
+        plt.close(fig)
+    slow = _mill_trajectory(rapid_mm_s=6.0)  # no rapid far above the cutting feed
+    fig = _figure(plt, slow, None, "mill")
+    try:
+        scales = {ax.get_yscale() for ax in fig.axes if ax.get_ylabel() == "feed (mm/s)"}
+        assert "linear" in scales and "symlog" not in scales
+    finally:
+        plt.close(fig)

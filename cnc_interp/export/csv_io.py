@@ -9,6 +9,7 @@ lines; ``\\n`` line ends. The same trajectory always gives the same bytes.
 from __future__ import annotations
 
 import io
+import warnings
 from typing import BinaryIO
 
 import numpy as np
@@ -68,10 +69,9 @@ def read_csv(path: str, dt_s: float | None = None):
 
     try:
         with open(path, "rb") as fh:
-            raw = fh.read()
+            first = fh.readline().rstrip(b"\n")
     except OSError as exc:
         raise PlanFileError(f"cannot read plan: {exc.strerror}", SourceLocation(file=path)) from None
-    first, _, body = raw.partition(b"\n")
     header = first.decode("ascii", "replace").strip().split(",")
     names = [h.strip() for h in header]
     hloc = SourceLocation(path, 1, 1, first.decode("ascii", "replace").strip())
@@ -82,7 +82,15 @@ def read_csv(path: str, dt_s: float | None = None):
         raise PlanFileError("plan CSV header: the columns after t,s,feed must be distinct "
                             "axis letters", hloc)
     ncol = len(names)
-    data = _parse_numbers(body, ncol, path)
+    data = _parse_arrow(path, names)
+    if data is None:
+        try:
+            with open(path, "rb") as fh:
+                body = fh.read().partition(b"\n")[2]
+        except OSError as exc:
+            raise PlanFileError(f"cannot read plan: {exc.strerror}",
+                                SourceLocation(file=path)) from None
+        data = _parse_numbers(body, ncol, path)
     k = data.shape[0]
     if k == 0:
         raise PlanFileError("plan CSV has no samples", hloc)
@@ -103,11 +111,75 @@ def read_csv(path: str, dt_s: float | None = None):
                       planner="csv", settings={"source": path})
 
 
+def _parse_arrow(path: str, names: list[str]) -> np.ndarray | None:
+    """The rows as a (K, ncol) array read by Arrow's multithreaded CSV reader (correctly
+    rounded, about 5x numpy's text parsers on 2 cores); ``None`` when pyarrow is missing or
+    the file has anything it would not read as exactly ``ncol`` numbers per row (the numpy
+    path then reads it or names the bad row)."""
+    try:
+        import pyarrow as pa
+        import pyarrow.csv as pacsv
+    except ImportError:
+        return None
+    try:
+        table = pacsv.read_csv(
+            path, read_options=pacsv.ReadOptions(column_names=names, skip_rows=1),
+            parse_options=pacsv.ParseOptions(newlines_in_values=False),
+            convert_options=pacsv.ConvertOptions(column_types={n: pa.float64() for n in names},
+                                                 strings_can_be_null=False,
+                                                 null_values=[], quoted_strings_can_be_null=False))
+    except (pa.ArrowInvalid, pa.ArrowTypeError, OSError, ValueError):
+        return None
+    if table.num_columns != len(names) or any(c.null_count for c in table.columns):
+        return None
+    out = np.empty((table.num_rows, len(names)))
+    for j, col in enumerate(table.columns):
+        out[:, j] = col.to_numpy()
+    return out
+
+
+def _parse_fast(body: bytes, ncol: int) -> np.ndarray | None:
+    """The rows as a (K, ncol) array, parsed in C (numpy's text ``fromstring``) after a
+    vectorised check that every line has ``ncol`` fields; ``None`` when anything is off
+    (the slow path then names the bad row). Several times faster than ``np.loadtxt``."""
+    raw = np.frombuffer(body, dtype=np.uint8)
+    if raw.size and raw[-1] != 0x0A:
+        raw = np.concatenate([raw, np.array([0x0A], dtype=np.uint8)])
+    ends = np.flatnonzero(raw == 0x0A)
+    starts = np.concatenate(([0], ends[:-1] + 1))
+    rows = ends > starts
+    if not rows.all():  # blank lines: numpy's reader skips them
+        return None
+    # every line has ncol - 1 commas: as many in all, and the j-th group of them inside line j
+    commas = np.flatnonzero(raw == 0x2C)
+    k = ends.size
+    if commas.size != k * (ncol - 1):
+        return None
+    if ncol > 1:
+        groups = commas.reshape(k, ncol - 1)
+        if not ((groups[:, 0] > starts).all() and (groups[:, -1] < ends).all()):
+            return None
+    del commas
+    text = raw.tobytes().replace(b"\n", b",")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a field fromstring cannot read must not be dropped
+        try:
+            flat = np.fromstring(text, dtype=float, sep=",")
+        except (ValueError, DeprecationWarning):
+            return None
+    if flat.size != k * ncol:
+        return None
+    return flat.reshape(k, ncol)
+
+
 def _parse_numbers(body: bytes, ncol: int, path: str) -> np.ndarray:
     """Rows of ``ncol`` comma-separated floats; errors name the file line."""
     if not body.strip():
         return np.empty((0, ncol))
-    try:
+    data = _parse_fast(body, ncol)
+    if data is not None:
+        return data
+    try:  # blank lines and other oddities the fast path leaves to numpy's reader
         data = np.loadtxt(io.BytesIO(body), delimiter=",", dtype=float, ndmin=2)
     except ValueError:
         data = None

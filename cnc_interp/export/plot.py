@@ -17,6 +17,12 @@ import numpy as np
 
 from ..constants import LINEAR_AXES, PLOT_ENVELOPE_BINS, PLOT_MAX_PATH_POINTS
 
+#: the feed panel turns logarithmic when the fastest move is this many times the median
+#: moving feed (a mill's rapids against its cutting feeds)...
+PLOT_RAPID_FACTOR = 10.0
+#: ...linear below this feed, mm/s (so rest, 0, stays on the axis)
+PLOT_FEED_LINEAR_BELOW = 1.0
+
 _KIND_LABELS = (("velocity", "v / vmax"), ("acceleration", "a / amax"), ("jerk", "j / jmax"))
 
 
@@ -91,19 +97,28 @@ def _metadata(fmt: str) -> dict | None:
 def _figure(plt, traj, machine, title):
     from matplotlib.gridspec import GridSpec
 
-    n_right = 4 if machine is not None else 1
+    n_right = 4 if machine is not None else 2
     fig = plt.figure(figsize=(14, 7.5) if machine is not None else (13, 5.5))
     gs = GridSpec(n_right, 2, figure=fig, width_ratios=(1.0, 1.15), wspace=0.3, hspace=0.12,
                   left=0.06, right=0.98, top=0.9, bottom=0.08)
-    ax_path = fig.add_subplot(gs[:, 0])
+    z_axis = _z_view_axis(traj)
+    ax_path = fig.add_subplot(gs[:-1, 0] if z_axis is not None else gs[:, 0])
     _draw_path(fig, ax_path, traj)
 
-    ax_feed = fig.add_subplot(gs[0, 1])
+    ax_feed = fig.add_subplot(gs[0, 1] if machine is not None else gs[:, 1])
     t_f, f_lo, f_hi = _envelope(traj.t, traj.feed[:, None])
     ax_feed.fill_between(t_f, f_lo[:, 0], f_hi[:, 0], color="tab:blue", lw=0.6, alpha=0.9)
     ax_feed.plot(t_f, f_hi[:, 0], color="tab:blue", lw=0.6)
     ax_feed.set_ylabel("feed (mm/s)")
     ax_feed.set_xlim(traj.t[0] if traj.t.size else 0, traj.t[-1] if traj.t.size else 1)
+    _scale_to_cutting_feeds(ax_feed, traj.feed)
+    if z_axis is not None:
+        ax_z = fig.add_subplot(gs[-1, 0])
+        t_z, z_lo, z_hi = _envelope(traj.t, traj.q[:, z_axis:z_axis + 1])
+        ax_z.fill_between(t_z, z_lo[:, 0], z_hi[:, 0], color="tab:green", lw=0.6)
+        ax_z.set_xlim(ax_feed.get_xlim())
+        ax_z.set_ylabel(f"{traj.axes[z_axis]} (mm)")
+        ax_z.set_xlabel("time (s)")
     axes_right = [ax_feed]
     if machine is not None:
         axes_right += _draw_ratios(fig, gs, traj, machine, ax_feed)
@@ -120,6 +135,31 @@ def _figure(plt, traj, machine, title):
         sub += f" [{traj.status}]"
     fig.suptitle(f"{title}\n{sub}" if title else sub, fontsize=10)
     return fig
+
+
+def _scale_to_cutting_feeds(ax, feed: np.ndarray) -> None:
+    """A symmetric-log feed axis when the fastest moves (rapids) are far above the typical
+    moving feed: on a linear scale a 200 mm/s rapid flattens cutting at 1-15 mm/s into a
+    line; on the log part every feed keeps its own height, and rest (0) is still drawn."""
+    f = feed[np.isfinite(feed) & (feed > 0)]
+    if f.size < 10:
+        return
+    typical = float(np.median(f))
+    if typical > 0 and float(f.max()) > PLOT_RAPID_FACTOR * typical:
+        ax.set_yscale("symlog", linthresh=PLOT_FEED_LINEAR_BELOW, linscale=0.5)
+        ax.set_ylim(0.0, float(f.max()) * 1.5)
+        ax.text(0.995, 0.94, "log scale above 1 mm/s", transform=ax.transAxes, ha="right",
+                va="top", fontsize=8, bbox={"facecolor": "white", "alpha": 0.75, "lw": 0})
+
+
+def _z_view_axis(traj) -> int | None:
+    """The Z column when Z moves but the path view does not show it (a mill's top view)."""
+    if "Z" not in traj.axes or traj.n_samples == 0:
+        return None
+    iz = traj.axes.index("Z")
+    if iz in _plane_axes(traj) or not np.ptp(traj.q[:, iz]) > 0:
+        return None
+    return iz
 
 
 def _plane_axes(traj) -> tuple[int, int]:

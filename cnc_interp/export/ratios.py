@@ -23,12 +23,17 @@ def limit_ratios(q: np.ndarray, dt_s: float, limits: np.ndarray) -> np.ndarray:
     out = np.zeros((3, K, n))
     if K == 0:
         return out
-    x = np.concatenate([np.repeat(q[:1], 3, axis=0), q])
     lim = np.asarray(limits, dtype=float).reshape(3, n)
-    for m in range(3):
-        x = np.diff(x, axis=0)              # m+1-th difference; its last K rows end at 0..K-1
-        d = x[-K:] / dt_s ** (m + 1)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            r = d / lim[m]
-        out[m] = np.where(d == 0.0, 0.0, r)
+    for i in range(n):  # one contiguous column at a time: a few times faster on long plans
+        x = np.empty(K + 3)
+        x[:3] = q[0, i]
+        x[3:] = q[:, i]
+        for m in range(3):
+            x = np.diff(x)                  # m+1-th difference; its last K values end at 0..K-1
+            d = x[-K:] / dt_s ** (m + 1)
+            if lim[m, i] > 0:
+                out[m, :, i] = d / lim[m, i]
+            else:
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    out[m, :, i] = np.where(d == 0.0, 0.0, d / lim[m, i])
     return out
