@@ -208,10 +208,6 @@ def _fit_run_raw(run: Run, settings: FitSettings):
             n_seg += 1
             continue
         raw, meth, dmm, ddeg, ok = _fit_sub(pr, sub, settings, evals)
-        raws.append(raw)
-        methods.add(meth)
-        dmm_max = max(dmm_max, dmm)
-        ddeg_max = max(ddeg_max, ddeg)
         # the programmed path (moves and exact curves) against the fit, everywhere
         measured = pr.lin if not sub.rotary else no_lin  # rotary-only: no linear axis
         tol_sub = fit_tolerance(pr.tol_mm[a:b + 1])
@@ -221,16 +217,33 @@ def _fit_run_raw(run: Run, settings: FitSettings):
         else:
             pdev, pratio = polyline_deviation(raw.breaks, raw.coef, pr.nodes[a:b + 1], tol_sub,
                                               measured)
-        pdev_max = max(pdev_max, pdev)
-        pratio_max = max(pratio_max, pratio)
         # where rotary axes move: position and orientation at one point of the fit
         moving = np.ptp(pr.nodes[a:b + 1], axis=0) > 0
         rratio = 0.0
         if (moving & ~pr.lin).any():
             rratio = rotary_path_deviation(raw.breaks, raw.coef, pr.nodes[a:b + 1], tol_sub,
                                            settings.tol_deg, pr.lin, moving, sub.curves, a)
+        sub_ok = bool(ok) and max(pratio, rratio) <= 1.0 + PATH_DEV_SLACK
+        if not sub_ok and not sub.curves:
+            # repair, never report: the moves themselves, exact lines with a stop at each
+            # node, are within any tolerance (slower, but never outside the part)
+            w = rot_all if sub.rotary else lin_all
+            raws.extend(_single_move_raw(pr, j, j + 1, w) for j in range(a, b))
+            methods.add("line-fallback")
+            info["fallback_lines"] = info.get("fallback_lines", []) + [int(pr.line[a + 1]),
+                                                                       int(pr.line[b])]
+            n_seg += b - a
+            continue
+        raws.append(raw)
+        methods.add(meth)
+        dmm_max = max(dmm_max, dmm)
+        ddeg_max = max(ddeg_max, ddeg)
+        pdev_max = max(pdev_max, pdev)
+        pratio_max = max(pratio_max, pratio)
         rratio_max = max(rratio_max, rratio)
-        ok_all &= bool(ok) and max(pratio, rratio) <= 1.0 + PATH_DEV_SLACK
+        if not sub_ok and "outside_lines" not in info:
+            info["outside_lines"] = [int(pr.line[a + 1]), int(pr.line[b])]
+        ok_all &= sub_ok
         n_seg += int(raw.coef.shape[0])
     info.update(max_node_dev_mm=dmm_max, max_node_dev_deg=ddeg_max, max_path_dev_mm=pdev_max,
                 max_path_dev_ratio=pratio_max, max_path_dev_rot_ratio=rratio_max,
