@@ -1,0 +1,470 @@
+"""The feed profile: a near-time-optimal w(s) = ṡ² along one path, as linear programs.
+
+``FeedProfileBuilder(table, path, machine, dt_s).windows()`` yields the profile piece by
+piece (``FeedPiece``: a cubic B-spline of w on [s0, s1]). Each piece comes from a
+linear program over the B-spline's coefficients (rows built by ``_feed_kernels``):
+maximise the path speed — the first-order change of the traversal time ∫ ds/√w,
+weights ŵ^-3/2 — under every axis's velocity, acceleration and jerk limit at
+collocation points, the segments' feeds, and w = 0 at the ends. The jerk bound is
+not convex; the convex-concave procedure of ``_feed_kernels`` makes it a few LPs,
+solved by the banded interior-point method of ``_ipm``.
+
+Knots: a spacing of ``FEED_KNOT_TIME_S`` of motion at an estimated speed (static
+limits of velocity, curvature and jerk, and the sampled start and stop near the ends)
+and at most ``FEED_KNOT_GEO`` of the geometry's length scale, placed by counting
+∫ ds / spacing from the path's start, block by block of the joint table: a knot
+depends only on the path up to it (and the end region on the end).
+
+Windows: at least ``FEED_WINDOW_S`` of motion and four braking times; each fixes the
+coefficients the committed part uses, ends at rest (w = 0: a brake-safe end, the
+window's solution can always stop) and commits its first half. The profile on
+[0, s] therefore depends only on the path up to s plus one window: the streaming
+contract of ``optimal.iter_path_plan``.
+
+Collocation: ``FEED_COLLOCATION`` points per knot interval, plus the path's segment
+joins, where q_sss jumps (paths are G2): there both one-sided values are imposed.
+
+Sampled start and stop: a sampled plan may start with an acceleration of up to J dt
+(its first third difference is the jerk limit), so w'(0) <= 2 J_t dt and
+w'(L) >= -2 J_t dt with J_t the tangent's path jerk limit.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import _feed_kernels as K
+from ._ipm import OK as LP_OK, _ax, lp_solve
+
+#: knot spacing in time of motion at the estimated speed, s (the profile's resolution)
+FEED_KNOT_TIME_S = 0.006
+#: knot spacing at most this share of the geometry's length scale (radius of curvature,
+#: and that of its change): a rounded corner gets several knots
+FEED_KNOT_GEO = 0.5
+#: collocation points per knot interval (constraints are imposed there)
+FEED_COLLOCATION = 4
+#: a window spans at least this much motion and four braking times, s
+FEED_WINDOW_S = 0.6
+#: iterations of the convex-concave procedure, and the relative change of the traversal
+#: time below which it stops
+FEED_CCP_MAX = 6
+FEED_CCP_TOL = 1e-3
+#: the estimated speed of the knot placement may exceed the static limits by these
+#: factors (the dynamic terms can cancel the static ones: measured up to ~1.6 at the
+#: tips of the paper-001 trident)
+FEED_EST_ACC_FACTOR = 1.5
+FEED_EST_JERK_FACTOR = 2.0
+#: the time weights ŵ^-3/2 of the objective use ŵ >= this share of the estimate at the
+#: point: where the profile must reach zero (a window's terminal rest) or an iterate
+#: dipped, the weights would otherwise dwarf the rest of the objective below the
+#: solver's tolerance
+FEED_WEIGHT_FLOOR = 0.01
+#: interior-point iterations per LP and its tolerance (scaled problem)
+FEED_LP_MAX_ITER = 150
+FEED_LP_TOL = 1e-8
+#: limits used by the LP, relative (the sampler checks the exact ones; the LP's
+#: collocation leaves small excursions between its points)
+FEED_LIMIT_SHARE = 0.998
+#: after the first LP of a window, only rows whose value at the current solution is
+#: above this share of their bound take part; rows left out are checked after each
+#: solve and added back if violated (the answer is the same, the solve smaller)
+FEED_ROW_SCREEN = 0.3
+#: table pieces per block of the knot placement
+FEED_KNOT_BLOCK = 256
+
+
+class ProfileError(Exception):
+    """The profile LP could not be solved (the planner then falls back to VPOp)."""
+
+
+@dataclass(frozen=True, eq=False)
+class FeedPiece:
+    """A committed part of the profile: w(s) on [s0, s1] as cubic B-spline data.
+
+    Attributes:
+        knots: (nc + 4,) the knot vector of the basis functions of ``coef``.
+        coef: (nc,) coefficients of w (mm²/s² or deg²/s²).
+        s0, s1: the arc-length range this piece is final on, mm.
+        lp_iters: interior-point iterations spent (statistics).
+    """
+
+    knots: np.ndarray
+    coef: np.ndarray
+    s0: float
+    s1: float
+    lp_iters: int
+
+
+def spline_values(knots, coef, x, nu: int = 0):
+    """The nu-th derivative (nu <= 2) of the cubic B-spline (knots, coef) at sorted x."""
+    x = np.ascontiguousarray(x, dtype=float)
+    first = np.empty(x.shape[0], dtype=np.int64)
+    B = np.empty((x.shape[0], 3, 4))
+    K.cubic_basis(knots, coef.shape[0], x, first, B)
+    return np.einsum("kj,kj->k", B[:, nu], coef[first[:, None] + np.arange(4)[None, :]])
+
+
+def _discrete_start_curve(x, jp, dt):
+    """w of the sampled max-jerk start along a line, at distance x: s_k = c k(k+1)(k+2)/6,
+    v_k = c k(k+1)/(2 dt), c = jp dt³ (k from s by Newton, interpolated)."""
+    c = jp * dt ** 3
+    k = np.maximum(np.cbrt(6.0 * np.maximum(x, 0.0) / c) - 1.0, 0.0)
+    for _ in range(3):
+        f = c * k * (k + 1) * (k + 2) / 6.0 - x
+        df = c * (3 * k * k + 6 * k + 2) / 6.0
+        k = np.maximum(k - f / np.maximum(df, 1e-300), 0.0)
+    v = c * k * (k + 1) / (2.0 * dt)
+    return v * v
+
+
+class FeedProfileBuilder:
+    """Builds the profile of one path window by window (see module docstring)."""
+
+    def __init__(self, table, path, machine, dt_s: float, limit_share: float = FEED_LIMIT_SHARE):
+        self.L = float(table.length)
+        self.dt = float(dt_s)
+        self.n = table.C.shape[2]
+        share = float(limit_share)
+        self.vmax = np.asarray(machine.vmax, dtype=float) * share
+        self.amax = np.ascontiguousarray(np.asarray(machine.amax, dtype=float) * share)
+        self.jmax = np.ascontiguousarray(np.asarray(machine.jmax, dtype=float) * share)
+        self.S = np.ascontiguousarray(table.S)
+        self.C = np.ascontiguousarray(table.C)
+        self.moving = np.ascontiguousarray(np.any(np.abs(table.C[:, 1:, :]) > 0, axis=(0, 1)))
+        # segment joins of the path, as table knots (the table keeps every path break)
+        sb = np.asarray(path.s_breaks, dtype=float)[1:-1] * (self.L / float(path.length))
+        if sb.size:
+            ti = np.clip(np.searchsorted(self.S, sb), 1, self.S.shape[0] - 1)
+            near = np.where(np.abs(self.S[ti - 1] - sb) < np.abs(self.S[ti] - sb), ti - 1, ti)
+            self.joins = np.unique(self.S[np.clip(near, 1, self.S.shape[0] - 2)])
+        else:
+            self.joins = np.zeros(0)
+        # segment feeds (path s) as a step function
+        fb = np.asarray(path.s_breaks, dtype=float).copy()
+        fb[-1] = self.L
+        fv = np.where(np.isfinite(path.feed_mm_s) & (path.feed_mm_s > 0), path.feed_mm_s, np.inf)
+        self.feed_breaks = fb
+        self.feed_values = fv.astype(float) * share
+        q1e, _, _ = self.derivs(np.array([0.0, self.L]))
+        self.jt0 = self._tangent_jerk(q1e[0])
+        self.jt1 = self._tangent_jerk(q1e[1])
+        # no knot interval shorter than the first sampled step from rest (J_t dt³)
+        self.hmin = max(min(self.jt0, self.jt1) * self.dt ** 3, 1e-9 * max(self.L, 1.0))
+        # window length in intervals: FEED_WINDOW_S of motion, four braking times
+        t_brake = float(np.max(np.minimum(self.vmax, np.max(self.feed_values))
+                               / self.amax + self.amax / self.jmax))
+        self.window = max(16, int(np.ceil(max(FEED_WINDOW_S, 4.0 * t_brake) / FEED_KNOT_TIME_S)))
+        # incremental knot placement state
+        self._br = [0.0]
+        self._cum = 0.0
+        self._piece = 0  # next table piece to probe
+        self._last_probe = (0.0, None)  # (s, density) of the last probe point
+        self.knots_done = False
+
+    # -- geometry -----------------------------------------------------------------
+    def derivs(self, x):
+        x = np.ascontiguousarray(x, dtype=float)
+        q1 = np.empty((x.shape[0], self.n))
+        q2 = np.empty_like(q1)
+        q3 = np.empty_like(q1)
+        K.table_derivs(self.S, self.C, x, q1, q2, q3)
+        return q1, q2, q3
+
+    def feed_at(self, x):
+        i = np.clip(np.searchsorted(self.feed_breaks, x, side="right") - 1, 0,
+                    self.feed_values.shape[0] - 1)
+        return self.feed_values[i]
+
+    def _tangent_jerk(self, q1row):
+        g = np.abs(q1row)
+        ok = g > 1e-12
+        return float(np.min(self.jmax[ok] / g[ok])) if ok.any() else float(np.min(self.jmax))
+
+    def wmax_at(self, x, q1):
+        with np.errstate(divide="ignore"):
+            wv = np.min(np.where(np.abs(q1) > 0, (self.vmax / np.abs(q1)) ** 2, np.inf), axis=1)
+        f = self.feed_at(x)
+        return np.minimum(wv, f * f)
+
+    def estimate(self, x):
+        """Estimated speed² at x (K,): static limits inflated, sampled start and stop."""
+        q1, q2, q3 = self.derivs(x)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            wa = np.min(np.where(np.abs(q2) > 0, self.amax / np.abs(q2), np.inf), axis=1)
+            wj = np.min(np.where(np.abs(q3) > 0, (self.jmax / np.abs(q3)) ** (2.0 / 3.0), np.inf),
+                        axis=1)
+        w = np.minimum.reduce([self.wmax_at(x, q1), FEED_EST_ACC_FACTOR ** 2 * wa,
+                               FEED_EST_JERK_FACTOR ** 2 * wj])
+        ws = _discrete_start_curve(x, self.jt0, self.dt)
+        we = _discrete_start_curve(self.L - x, self.jt1, self.dt)
+        return np.minimum(w, np.minimum(ws, we))
+
+    def _spacing(self, x):
+        """Knot spacing wanted at x: time of motion at the estimated speed, geometry."""
+        _, q2, q3 = self.derivs(x)
+        k2 = np.max(np.abs(q2), axis=1)
+        k3 = np.max(np.abs(q3), axis=1)
+        geo = np.minimum(1.0 / np.maximum(k2, 1e-300), 1.0 / np.sqrt(np.maximum(k3, 1e-300)))
+        v = np.sqrt(np.maximum(self.estimate(x), 0.0))
+        return np.maximum(np.minimum(FEED_KNOT_TIME_S * v, FEED_KNOT_GEO * geo), self.hmin)
+
+    # -- knots, block by block ----------------------------------------------------
+    def _extend_knots(self):
+        """Place the knots over the next block of table pieces."""
+        S, L = self.S, self.L
+        m = S.shape[0] - 1
+        p0 = self._piece
+        p1 = min(p0 + FEED_KNOT_BLOCK, m)
+        a, b = float(S[p0]), float(S[p1])
+        pts = [S[p0:p1 + 1], 0.5 * (S[p0:p1] + S[p0 + 1:p1 + 1]), np.linspace(a, b, 9)]
+        end = min(L / 2, 1.0)
+        geo = end * 2.0 ** -np.arange(1, 40)
+        pts.append(geo[(geo > a) & (geo < b)])
+        pts.append((L - geo)[((L - geo) > a) & ((L - geo) < b)])
+        probe = np.unique(np.concatenate(pts))
+        h = self._spacing(probe)
+        gap = np.diff(probe)
+        need = np.ceil(gap / (0.25 * np.minimum(h[:-1], h[1:]))).astype(np.int64)
+        if np.any(need > 1):
+            extra = [probe[i] + gap[i] * np.arange(1, need[i]) / need[i]
+                     for i in np.flatnonzero(need > 1)]
+            probe = np.unique(np.concatenate([probe] + extra))
+            h = self._spacing(probe)
+        dens = 1.0 / h
+        cum = self._cum + np.concatenate(
+            ([0.0], np.cumsum(0.5 * (dens[1:] + dens[:-1]) * np.diff(probe))))
+        lo = np.floor(self._cum) + 1.0
+        marks = np.arange(lo, np.floor(cum[-1]) + 1.0)
+        if marks.size:
+            br = np.interp(marks, cum, probe)
+            self._br.extend(float(v) for v in br if 0.0 < v < L)
+        self._cum = float(cum[-1])
+        self._piece = p1
+        if p1 == m:
+            br = self._br
+            if br[-1] >= L:
+                br.pop()
+            br.append(L)
+            if len(br) < 5:  # at least four intervals (end conditions use two coefficients)
+                self._br = list(np.linspace(0.0, L, 5))
+            self.knots_done = True
+
+    def _breaks_upto(self, i: int) -> int:
+        """Make breakpoints 0..i known (or all of them); returns the number known."""
+        while not self.knots_done and len(self._br) <= i:
+            self._extend_knots()
+        return len(self._br)
+
+    def _knot_slice(self, j0: int, j1: int):
+        """Global clamped knots t[j0 : j1] (t_{i+3} = breakpoint i, three-fold ends)."""
+        nb = len(self._br) - 1
+        idx = np.arange(j0, j1) - 3
+        t = np.asarray(self._br)[np.clip(idx, 0, nb)]
+        return t
+
+    # -- the LP of one window -------------------------------------------------------
+    def windows(self):
+        """Yield ``FeedPiece``s in path order (see module docstring)."""
+        b0 = 0
+        fixed = np.zeros(0)  # coefficients b0 .. b0+2 (committed), global indices
+        prev = None  # (knots, coef) of the previous window's whole solution
+        while True:
+            self._breaks_upto(b0 + self.window + 4)
+            nb = len(self._br) - 1
+            if self.knots_done and nb - b0 <= self.window + 3:
+                b1, at_end = nb, True
+            else:
+                b1, at_end = b0 + self.window, False  # three breakpoints of look-ahead remain
+            coef, tk, it = self._solve(b0, b1, at_end, fixed, prev)
+            # coef / tk: coefficients b0 .. b1+2 and their knots t[b0 : b1+7]
+            if at_end:
+                yield FeedPiece(tk, coef, self._br[b0], self.L, it)
+                return
+            commit = max((b1 - b0) // 2, 1)
+            bc = b0 + commit
+            n_keep = bc - b0 + 3
+            yield FeedPiece(tk[: n_keep + 4].copy(), coef[:n_keep].copy(), self._br[b0],
+                            self._br[bc], it)
+            fixed = coef[commit: commit + 3].copy()
+            prev = (tk, coef)
+            b0 = bc
+
+    def _collocation(self, b0, b1):
+        br = np.asarray(self._br[b0:b1 + 1])
+        u = np.arange(FEED_COLLOCATION) / FEED_COLLOCATION
+        x = (br[:-1, None] + np.diff(br)[:, None] * u[None, :]).ravel()
+        x = np.concatenate((x, br[-1:]))
+        # segment joins: both one-sided third derivatives (duplicated points)
+        J = self.joins
+        i0 = int(np.searchsorted(J, x[0], side="right"))
+        i1 = int(np.searchsorted(J, x[-1], side="left"))
+        q1, q2, q3 = self.derivs(x)
+        if i1 > i0:
+            xj = J[i0:i1]
+            nk = xj.shape[0]
+            k1 = np.empty((nk, self.n))
+            k2 = np.empty_like(k1)
+            k3l = np.empty_like(k1)
+            k3r = np.empty_like(k1)
+            K.join_derivs(self.S, self.C, xj, k1, k2, k3l, k3r)
+            x = np.concatenate((x, xj, xj))
+            q1 = np.concatenate((q1, k1, k1))
+            q2 = np.concatenate((q2, k2, k2))
+            q3 = np.concatenate((q3, k3l, k3r))
+            order = np.argsort(x, kind="stable")
+            x, q1, q2, q3 = x[order], q1[order], q2[order], q3[order]
+        return x, np.ascontiguousarray(q1), np.ascontiguousarray(q2), np.ascontiguousarray(q3)
+
+    def _solve(self, b0, b1, at_end, fixed, prev):
+        """The LPs of the window [b0, b1]: coefficients b0 .. b1+2, their knots, iterations."""
+        tk = self._knot_slice(b0, b1 + 7)
+        nc = b1 - b0 + 3
+        x, q1, q2, q3 = self._collocation(b0, b1)
+        npt = x.shape[0]
+        first = np.empty(npt, dtype=np.int64)
+        B = np.empty((npt, 3, 4))
+        K.cubic_basis(tk, nc, x, first, B)
+        wmax = np.maximum(self.wmax_at(x, q1), 1e-300)
+        finite = np.isfinite(wmax)
+        W0 = float(np.max(wmax[finite])) if finite.any() else 1.0
+        wmax = np.minimum(wmax, 1e3 * W0)
+        w_est = np.minimum(np.maximum(self.estimate(x), 1e-12 * W0), wmax)
+        w_hat = np.maximum(w_est, 1e-9 * W0)
+        if prev is not None:
+            # where fixed coefficients act, linearise at the previous window's solution:
+            # its rows are then exactly those it met (a tangent elsewhere cuts it off)
+            near = x <= self._br[min(b0 + 3, len(self._br) - 1)]
+            wc = spline_values(prev[0], prev[1], np.clip(x[near], prev[0][3], prev[0][-4]))
+            w_hat[near] = np.maximum(wc, 1e-9 * W0)
+        # fixed coefficients: the committed three (b0 > 0), w(0) = 0, w(L) = 0
+        free = np.ones(nc, dtype=bool)
+        cfix = np.zeros(nc)
+        if b0 > 0:
+            free[:3] = False
+            cfix[:3] = fixed
+        else:
+            free[0] = False
+        if at_end:
+            free[-1] = False
+        # variables scaled by the estimate at each basis function's Greville abscissa
+        grev = (tk[1:nc + 1] + tk[2:nc + 2] + tk[3:nc + 3]) / 3.0
+        scale = np.minimum(self.estimate(grev), self.wmax_at(grev, self.derivs(grev)[0]))
+        scale = np.ascontiguousarray(np.maximum(scale, 1e-9 * W0))
+        inner = (x > 0.0) & (x < self.L)
+        if not at_end:
+            inner[-1] = False  # the window's terminal rest
+        rows_max = npt * (2 + 4 * int(self.moving.sum())) + 8
+        row_first = np.empty(rows_max, dtype=np.int64)
+        row_coef = np.empty((rows_max, 4))
+        row_b = np.empty(rows_max)
+        cell = np.zeros(npt)
+        dx = np.diff(x)
+        cell[:-1] += 0.5 * dx
+        cell[1:] += 0.5 * dx
+        cols = first[:, None] + np.arange(4)[None, :]
+        xv = np.where(free, 0.0, cfix / scale)
+        prev_T = np.inf
+        best = None
+        iters = 0
+        for ccp in range(FEED_CCP_MAX):
+            r = K.lp_rows(first, B, q1, q2, q3, self.moving, wmax, w_hat, inner, self.amax,
+                          self.jmax, scale, row_first, row_coef, row_b)
+            rf, rc, rb = self._end_rows(r, row_first, row_coef, row_b, tk, nc, scale, b0, b1,
+                                        at_end)
+            wts = cell * np.maximum(w_hat, FEED_WEIGHT_FLOOR * w_est) ** -1.5
+            c = np.bincount(cols.ravel(), weights=-(wts[:, None] * B[:, 0, :]
+                                                    * scale[cols]).ravel(), minlength=nc)
+            c[~free] = 0.0
+            c /= max(np.max(np.abs(c)), 1e-300)
+            status, it, xv_new = self._lp(rf, rc, rb, c, xv, free, cfix, scale, screen=ccp > 0)
+            iters += it
+            if status != LP_OK or not np.all(np.isfinite(xv_new)):
+                if best is None:
+                    raise ProfileError(f"feed-profile LP failed (status {status})")
+                break  # keep the last solved iterate (feasible for the true limits)
+            xv = xv_new
+            coef = xv * scale
+            coef[~free] = cfix[~free]
+            best = coef
+            w = np.maximum(np.einsum("kj,kj->k", B[:, 0, :], coef[cols]), 0.0)
+            v = np.sqrt(w)
+            T = float(np.sum(2.0 * dx / np.maximum(v[1:] + v[:-1], 1e-300)))
+            w_hat = np.maximum(w, 1e-9 * W0)
+            if abs(prev_T - T) <= FEED_CCP_TOL * T:
+                break
+            prev_T = T
+        return best, tk, iters
+
+    def _lp(self, rf, rc, rb, c, xv, free, cfix, scale, screen: bool):
+        """Solve the LP in the free variables (fixed ones moved to the right-hand side),
+        with row screening after the first; returns (status, iterations, x)."""
+        nc = free.shape[0]
+        # fixed variables: their terms go to the right-hand side
+        fixed_vals = np.where(free, 0.0, cfix / scale)
+        idx = rf[:, None] + np.arange(4)[None, :]
+        rb = rb - np.sum(rc * fixed_vals[idx], axis=1)
+        rc = np.where(free[idx], rc, 0.0)
+        keep = np.any(rc != 0.0, axis=1)
+        rf, rc, rb = rf[keep], rc[keep], rb[keep]
+        if screen:
+            val = np.empty(rb.shape[0])
+            _ax(rf, np.ascontiguousarray(rc), np.where(free, xv, 0.0), val)
+            active = val >= FEED_ROW_SCREEN * np.abs(rb) - 1e-12
+        else:
+            active = np.ones(rb.shape[0], dtype=bool)
+        iters = 0
+        x = np.where(free, xv, 0.0)
+        for _ in range(4):
+            fr = np.ascontiguousarray(rf[active])
+            fc = np.ascontiguousarray(rc[active])
+            fb = np.ascontiguousarray(rb[active])
+            x_try = x.copy()
+            status, it, _, _ = lp_solve(nc, fr, fc, fb, np.ascontiguousarray(c), x_try,
+                                        FEED_LP_MAX_ITER, FEED_LP_TOL)
+            iters += it
+            if status != LP_OK:
+                return status, iters, x_try
+            val = np.empty(rb.shape[0])
+            _ax(rf, np.ascontiguousarray(rc), x_try, val)
+            viol = (val > rb + 1e-9 * np.maximum(np.abs(rb), 1.0)) & ~active
+            if not viol.any():
+                return status, iters, x_try
+            active |= viol | (val >= FEED_ROW_SCREEN * np.abs(rb))
+        return status, iters, x_try
+
+    def _end_rows(self, r, row_first, row_coef, row_b, tk, nc, scale, b0, b1, at_end):
+        """The collocation rows plus the end conditions of the window (in local indices)."""
+        ef, ec, eb = [], [], []
+        if b0 == 0:  # w'(0) = 3 c1 / t[4] <= 2 J_t dt
+            ef.append(0)
+            ec.append([0.0, 3.0 * scale[1] / tk[4] / (2.0 * self.jt0 * self.dt), 0.0, 0.0])
+            eb.append(1.0)
+        if at_end:  # w'(L) = -3 c_{n-2} / (L - t[n-1]) >= -2 J_t dt
+            ef.append(nc - 4)
+            ec.append([0.0, 0.0, 3.0 * scale[nc - 2] / (self.L - tk[nc - 1])
+                       / (2.0 * self.jt1 * self.dt), 0.0])
+            eb.append(1.0)
+        else:  # the window ends at rest at its last breakpoint: w = 0, w' >= -2 J_t dt
+            xe = np.array([self._br[b1]])
+            fe = np.empty(1, dtype=np.int64)
+            Be = np.empty((1, 3, 4))
+            K.cubic_basis(tk, nc, xe, fe, Be)
+            jt = self._tangent_jerk(self.derivs(xe)[0][0])
+            sc = scale[fe[0]: fe[0] + 4]
+            ef += [int(fe[0])] * 3
+            ec += [list(Be[0, 0] * sc), list(-Be[0, 0] * sc),
+                   list(-Be[0, 1] * sc / (2.0 * jt * self.dt))]
+            eb += [0.0, 0.0, 1.0]
+        rf = np.concatenate((row_first[:r], np.asarray(ef, dtype=np.int64)))
+        rc = np.concatenate((row_coef[:r], np.asarray(ec, dtype=float).reshape(-1, 4)))
+        rb = np.concatenate((row_b[:r], np.asarray(eb, dtype=float)))
+        # a band must fit in [0, nc): shift rows that start too late (zero-padded)
+        over = rf + 4 - nc
+        for i in np.flatnonzero(over > 0):
+            sft = over[i]
+            rc[i, sft:] = rc[i, : 4 - sft].copy()
+            rc[i, :sft] = 0.0
+            rf[i] -= sft
+        return rf, rc, rb

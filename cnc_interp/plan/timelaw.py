@@ -1,0 +1,75 @@
+"""The reference time law s(t) of a feed profile w(s) = ṡ².
+
+Nodes (s_i, t_i, v_i, a_i) with v = √w, a = w'/2 and t_i = ∫ ds/√w, integrated piece by
+piece with Gauss–Legendre (``TIMELAW_GL`` points; an interval that starts or ends at
+rest, w = 0 with w' ≠ 0, is integrated in u with s = s_a + u² or s = s_b - u², where the
+integrand is smooth). Between nodes s(t) is the quintic Hermite interpolant of
+(s, v, a) at both ends: C² in time, so the sampled reference has bounded third
+differences. ``_track_kernels`` evaluates it in compiled code.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import _feed_kernels as K
+
+#: Gauss–Legendre points per node interval of the time integral
+TIMELAW_GL = 6
+#: nodes per knot interval of the profile
+TIMELAW_NODES = 4
+
+_GX, _GW = np.polynomial.legendre.leggauss(TIMELAW_GL)
+
+
+def _spline_w(knots, coef, x):
+    """w, w' at sorted x of the cubic B-spline (knots, coef)."""
+    x = np.ascontiguousarray(x, dtype=float)
+    first = np.empty(x.shape[0], dtype=np.int64)
+    B = np.empty((x.shape[0], 3, 4))
+    K.cubic_basis(knots, coef.shape[0], x, first, B)
+    cols = first[:, None] + np.arange(4)[None, :]
+    c = coef[cols]
+    return np.einsum("kj,kj->k", B[:, 0], c), np.einsum("kj,kj->k", B[:, 1], c)
+
+
+def nodes_for(knots, coef, s0: float, s1: float, t0: float):
+    """Time-law nodes on [s0, s1] (s, t, v, a arrays), starting at time t0, of the
+    profile piece (knots, coef) (``feedprofile.FeedPiece``); None when w reaches zero
+    inside the interval (the profile would stop there)."""
+    br = np.unique(knots)
+    br = br[(br > s0) & (br < s1)]
+    br = np.concatenate(([s0], br, [s1]))
+    u = np.arange(TIMELAW_NODES) / TIMELAW_NODES
+    x = (br[:-1, None] + np.diff(br)[:, None] * u[None, :]).ravel()
+    x = np.concatenate((x, [s1]))
+    w, w1 = _spline_w(knots, coef, x)
+    w = np.maximum(w, 0.0)
+    rest_a = w <= 0.0
+    # plain intervals: Gauss–Legendre on 1/√w
+    a_, b_ = x[:-1], x[1:]
+    h = 0.5 * (b_ - a_)
+    m = 0.5 * (b_ + a_)
+    pts = (m[:, None] + h[:, None] * _GX[None, :]).ravel()
+    wp, _ = _spline_w(knots, coef, np.sort(pts))
+    wp = wp[np.argsort(np.argsort(pts))].reshape(-1, TIMELAW_GL)
+    if np.any(wp[~(rest_a[:-1] | rest_a[1:])] <= 0.0):
+        return None  # the profile touches zero between its collocation points
+    with np.errstate(divide="ignore"):
+        dt = h * (np.maximum(wp, 1e-300) ** -0.5 @ _GW)
+    # intervals touching rest: s = a + u² (rest at a) or s = b - u² (rest at b)
+    for i in np.flatnonzero(rest_a[:-1] | rest_a[1:]):
+        at_start = rest_a[i]
+        span = b_[i] - a_[i]
+        ub = np.sqrt(span)
+        uu = 0.5 * ub * (_GX + 1.0)
+        ss = a_[i] + uu * uu if at_start else b_[i] - uu * uu
+        order = np.argsort(ss)
+        wv, _ = _spline_w(knots, coef, ss[order])
+        wv = wv[np.argsort(order)]
+        f = 2.0 * uu / np.sqrt(np.maximum(wv, 1e-300))
+        dt[i] = 0.5 * ub * (f @ _GW)
+    t = t0 + np.concatenate(([0.0], np.cumsum(dt)))
+    v = np.sqrt(w)
+    a = 0.5 * w1
+    return x, t, v, a
