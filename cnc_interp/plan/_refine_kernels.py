@@ -1,0 +1,356 @@
+"""Shorten a window of a sampled plan by whole periods (numba): the discrete problem itself.
+
+A plan's samples s_k (arc length at t = k dt) must keep every axis's backward
+differences within the limits (Beudaert et al. 2012, Eq. 6, exactly as ``verify``
+computes them). Given a feasible plan, the samples ``a .. a+M-1`` can be replaced by
+M' < M others when some positions x_0 .. x_{M'-1} between the fixed samples before
+(``pre``: the three samples before a) and after (``post``: the three samples that
+followed the window) meet every row of the stencils they enter:
+
+    | Σ_i c_{d,i} q(P_{e-d+i}) | <= lim_{d, axis}            (d = 1, 2, 3)
+    P_e - P_{e-1} <= F dt,   P_e >= P_{e-1}
+
+``solve_window`` minimises the largest relative violation z of these rows (z <= 0:
+feasible) by a primal log-barrier method: damped Newton steps on
+z - μ Σ log(u_r), u_r = bound - row > 0, with μ decreased tenfold when a step's
+Newton decrement is small. A row depends on at most four consecutive samples and its
+Hessian in x is diagonal (it is a sum of functions of one sample each), so the Newton
+matrix is a band of half-width 3 bordered by the z row: two band solves per step. The
+negative part of the rows' curvature is dropped (a Gauss–Newton-like matrix, always
+positive definite), and every iterate stays strictly inside (u > 0): the method
+never leaves the region where the barrier is defined.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ._ipm import _band_cholesky, _band_solve
+from .vpop_core import _eval, _feasible
+
+FEASIBLE = 0
+INFEASIBLE = 1
+FAILED = 2
+
+#: z below which a window counts as feasible (the exact check follows)
+_Z_TARGET = -1e-6
+_MU0 = 1e-2
+_MU_MIN = 1e-10
+
+
+@njit(cache=True)
+def _q_d012(S, C, QEND, x, hint, q0, q1, q2):
+    """q, q_s, q_ss of every axis at x (C axis-major (m, n, 6)); returns the piece."""
+    m = S.shape[0] - 1
+    n = q0.shape[0]
+    p = hint
+    if p < 0:
+        p = 0
+    if p > m - 1:
+        p = m - 1
+    while p > 0 and x < S[p]:
+        p -= 1
+    while p < m - 1 and x >= S[p + 1]:
+        p += 1
+    t = x - S[p]
+    for i in range(n):
+        c = C[p, i]
+        q0[i] = ((((c[5] * t + c[4]) * t + c[3]) * t + c[2]) * t + c[1]) * t + c[0]
+        q1[i] = (((5.0 * c[5] * t + 4.0 * c[4]) * t + 3.0 * c[3]) * t + 2.0 * c[2]) * t + c[1]
+        q2[i] = ((20.0 * c[5] * t + 12.0 * c[4]) * t + 6.0 * c[3]) * t + 2.0 * c[2]
+    if x >= S[m]:
+        for i in range(n):
+            q0[i] = QEND[i]
+    return p
+
+
+@njit(cache=True)
+def _stencil(d, i):
+    """Coefficient i (0..d) of the d-th backward difference, oldest sample first."""
+    if d == 1:
+        return -1.0 if i == 0 else 1.0
+    if d == 2:
+        return 1.0 if i != 1 else -2.0
+    if i == 0:
+        return -1.0
+    if i == 1:
+        return 3.0
+    if i == 2:
+        return -3.0
+    return 1.0
+
+
+@njit(cache=True)
+def _evaluate(S, C, QEND, P, nfree, moving, lim, fdt, Q0, Q1, Q2):
+    """Axis positions and derivatives at every sample of the sequence P (K,)."""
+    K = P.shape[0]
+    n = Q0.shape[1]
+    hint = 0
+    q0 = np.empty(n)
+    q1 = np.empty(n)
+    q2 = np.empty(n)
+    for k in range(K):
+        hint = _q_d012(S, C, QEND, P[k], hint, q0, q1, q2)
+        for i in range(n):
+            Q0[k, i] = q0[i]
+            Q1[k, i] = q1[i]
+            Q2[k, i] = q2[i]
+
+
+@njit(cache=True)
+def _rows(P, nfree, moving, lim, fdt, Q0, z, u_out):
+    """u_r = bound - row (the barrier's arguments) for every row; returns the count and
+    the largest relative violation (max over rows of row/bound - 1)."""
+    n = Q0.shape[1]
+    r = 0
+    worst = -1e300
+    # difference rows: order d ends at e = 3 .. 3 + nfree + d - 1 (sequence index)
+    for d in range(1, 4):
+        for e in range(3, 3 + nfree + d):
+            for i in range(n):
+                if not moving[i]:
+                    continue
+                val = 0.0
+                for j in range(d + 1):
+                    val += _stencil(d, j) * Q0[e - d + j, i]
+                rel = val / lim[d - 1, i]
+                if rel - 1.0 > worst:
+                    worst = rel - 1.0
+                if -rel - 1.0 > worst:
+                    worst = -rel - 1.0
+                u_out[r] = 1.0 + z - rel
+                u_out[r + 1] = 1.0 + z + rel
+                r += 2
+    # feed and monotonicity per step into/through the window
+    for e in range(3, 3 + nfree + 1):
+        step = P[e] - P[e - 1]
+        rel = step / fdt
+        if rel - 1.0 > worst:
+            worst = rel - 1.0
+        u_out[r] = 1.0 + z - rel
+        u_out[r + 1] = rel + 1e-12
+        r += 2
+    return r, worst
+
+
+@njit(cache=True)
+def _assemble(P, nfree, moving, lim, fdt, Q1, Q2, u, mu, g, H, hz, grad_z):
+    """Gradient g (nfree), band Hessian H (nfree, 4) and the z column hz, of
+    mu Σ -log(u_r) (z's own gradient 1 added by the caller in grad_z[0])."""
+    n = Q1.shape[1]
+    for k in range(nfree):
+        g[k] = 0.0
+        hz[k] = 0.0
+        for b in range(4):
+            H[k, b] = 0.0
+    hzz = 0.0
+    gz = 0.0
+    r = 0
+    # scratch for one row's gradient over (up to 4) samples
+    idx = np.empty(4, dtype=np.int64)
+    gr = np.empty(4)
+    cr = np.empty(4)
+    for d in range(1, 4):
+        for e in range(3, 3 + nfree + d):
+            for i in range(n):
+                if not moving[i]:
+                    continue
+                cnt = 0
+                for j in range(d + 1):
+                    k = e - d + j - 3  # free index
+                    if 0 <= k < nfree:
+                        c = _stencil(d, j) / lim[d - 1, i]
+                        idx[cnt] = k
+                        gr[cnt] = c * Q1[e - d + j, i]
+                        cr[cnt] = c * Q2[e - d + j, i]
+                        cnt += 1
+                for sgn in (1.0, -1.0):
+                    ur = u[r]
+                    w = mu / ur
+                    w2 = mu / (ur * ur)
+                    # u = 1 + z - sgn*row: du/dx = -sgn*gr, du/dz = 1
+                    for a in range(cnt):
+                        ka = idx[a]
+                        ga = -sgn * gr[a]
+                        g[ka] -= w * ga
+                        hz[ka] += w2 * ga
+                        # curvature of -log u: -d2u/u = sgn*cr/u (keep the convex part)
+                        cv = sgn * cr[a] * w
+                        if cv > 0.0:
+                            H[ka, 0] += cv
+                        for b in range(a + 1):
+                            kb = idx[b]
+                            gb = -sgn * gr[b]
+                            H[ka, ka - kb] += w2 * ga * gb
+                    gz -= w
+                    hzz += w2
+                    r += 1
+    for e in range(3, 3 + nfree + 1):
+        k1 = e - 3  # the sample at e (free when < nfree)
+        k0 = e - 4  # the sample before
+        for row in range(2):
+            ur = u[r]
+            w = mu / ur
+            w2 = mu / (ur * ur)
+            if row == 0:  # u = 1 + z - (P_e - P_{e-1})/fdt
+                c1 = -1.0 / fdt
+                c0 = 1.0 / fdt
+                gz -= w
+                hzz += w2
+            else:  # u = (P_e - P_{e-1})/fdt + 1e-12
+                c1 = 1.0 / fdt
+                c0 = -1.0 / fdt
+            if 0 <= k1 < nfree:
+                g[k1] -= w * c1
+                H[k1, 0] += w2 * c1 * c1
+                if row == 0:
+                    hz[k1] += w2 * c1
+            if 0 <= k0 < nfree:
+                g[k0] -= w * c0
+                H[k0, 0] += w2 * c0 * c0
+                if row == 0:
+                    hz[k0] += w2 * c0
+            if 0 <= k1 < nfree and 0 <= k0 < nfree:
+                H[k1, 1] += w2 * c1 * c0
+            r += 1
+    grad_z[0] = gz
+    grad_z[1] = hzz
+
+
+@njit(cache=True)
+def solve_window(S, C, QEND, pre, post, x0, moving, lim, fdt, max_newton):
+    """Positions x (nfree,) between ``pre`` (3,) and ``post`` (3,) minimising the largest
+    relative violation z; stops as soon as z < _Z_TARGET. Returns (status, x, z)."""
+    nfree = x0.shape[0]
+    n = C.shape[1]
+    K = nfree + 6
+    P = np.empty(K)
+    for i in range(3):
+        P[i] = pre[i]
+        P[nfree + 3 + i] = post[i]
+    x = x0.copy()
+    for k in range(nfree):
+        P[3 + k] = x[k]
+    Q0 = np.empty((K, n))
+    Q1 = np.empty((K, n))
+    Q2 = np.empty((K, n))
+    nrows = 2 * 3 * n * (nfree + 2) + 2 * (nfree + 1) + 16
+    u = np.empty(nrows)
+    ut = np.empty(nrows)
+    _evaluate(S, C, QEND, P, nfree, moving, lim, fdt, Q0, Q1, Q2)
+    r, worst = _rows(P, nfree, moving, lim, fdt, Q0, 0.0, u)
+    z = worst + 0.1 * (1.0 + abs(worst))
+    # monotonicity must hold strictly from the start
+    for e in range(3, 3 + nfree + 1):
+        if not P[e] - P[e - 1] > -1e-12 * fdt:
+            return FAILED, x, worst
+    r, worst = _rows(P, nfree, moving, lim, fdt, Q0, z, u)
+    g = np.empty(nfree)
+    H = np.empty((nfree, 4))
+    hz = np.empty(nfree)
+    gzz = np.empty(2)
+    y1 = np.empty(nfree)
+    y2 = np.empty(nfree)
+    dx = np.empty(nfree)
+    Pt = np.empty(K)
+    mu = _MU0
+    best_z = worst
+    best_x = x.copy()
+    for it in range(max_newton):
+        _assemble(P, nfree, moving, lim, fdt, Q1, Q2, u, mu, g, H, hz, gzz)
+        gz = 1.0 + gzz[0]
+        hzz = gzz[1]
+        for k in range(nfree):
+            H[k, 0] += 1e-12 * H[k, 0] + 1e-300
+        _band_cholesky(H, nfree, 4)
+        for k in range(nfree):
+            y1[k] = -g[k]
+            y2[k] = hz[k]
+        _band_solve(H, nfree, 4, y1)
+        _band_solve(H, nfree, 4, y2)
+        # [H hz; hz^T hzz] [dx; dz] = -[g; gz]
+        den = hzz
+        num = -gz
+        for k in range(nfree):
+            den -= hz[k] * y2[k]
+            num -= hz[k] * y1[k]
+        dz = num / den if den > 0.0 else -gz
+        for k in range(nfree):
+            dx[k] = y1[k] - y2[k] * dz
+        dec = -gz * dz
+        for k in range(nfree):
+            dec -= g[k] * dx[k]
+        # backtracking: stay strictly inside, decrease the barrier function
+        phi0 = z
+        for i in range(r):
+            phi0 -= mu * np.log(u[i])
+        alpha = 1.0
+        accepted = False
+        for _ in range(40):
+            for k in range(nfree):
+                Pt[3 + k] = x[k] + alpha * dx[k]
+            for i in range(3):
+                Pt[i] = P[i]
+                Pt[nfree + 3 + i] = P[nfree + 3 + i]
+            zt = z + alpha * dz
+            _evaluate(S, C, QEND, Pt, nfree, moving, lim, fdt, Q0, Q1, Q2)
+            rt, wt = _rows(Pt, nfree, moving, lim, fdt, Q0, zt, ut)
+            ok = True
+            phi = zt
+            for i in range(rt):
+                if not ut[i] > 0.0:
+                    ok = False
+                    break
+                phi -= mu * np.log(ut[i])
+            if ok and phi <= phi0 - 1e-4 * alpha * dec:
+                accepted = True
+                break
+            alpha *= 0.5
+        if not accepted:
+            # no progress at this μ: restore the derivatives at the current point
+            _evaluate(S, C, QEND, P, nfree, moving, lim, fdt, Q0, Q1, Q2)
+            if mu <= _MU_MIN:
+                break
+            mu *= 0.1
+            continue
+        for k in range(nfree):
+            x[k] = Pt[3 + k]
+            P[3 + k] = x[k]
+        z = zt
+        for i in range(rt):
+            u[i] = ut[i]
+        if wt < best_z:
+            best_z = wt
+            for k in range(nfree):
+                best_x[k] = x[k]
+        if best_z < _Z_TARGET:
+            return FEASIBLE, best_x, best_z
+        if dec < 1e-3 * mu * r or alpha < 1e-3:
+            # near the central point of this μ: z exceeds the optimum by at most about
+            # μ per row; when even that leaves it positive, the window is infeasible
+            if z - mu * r > 1e-9:
+                return INFEASIBLE, best_x, best_z
+            if mu <= _MU_MIN:
+                break
+            mu *= 0.1
+    if best_z < _Z_TARGET:
+        return FEASIBLE, best_x, best_z
+    return INFEASIBLE, best_x, best_z
+
+
+@njit(cache=True)
+def exact_ok(S, C, QEND, sh, lo, hi, vl, al, jl, qbuf):
+    """Samples lo..hi-1 of sh (with the samples before lo) pass verify's exact checks;
+    q positions go to qbuf (rows lo..hi-1)."""
+    n = qbuf.shape[1]
+    q = np.empty(n)
+    qs = np.empty(n)
+    hint = 0
+    for k in range(lo, hi):
+        hint = _eval(S, C, QEND, sh[k], hint, q, qs)
+        if not _feasible(qbuf, k, q, vl, al, jl):
+            return False
+        for i in range(n):
+            qbuf[k, i] = q[i]
+    return True

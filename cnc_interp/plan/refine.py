@@ -1,0 +1,85 @@
+"""Shorten a feasible sampled plan window by window (the discrete problem, locally).
+
+``Refiner.window`` takes one window of ``REFINE_WINDOW`` samples of a plan (the
+optimal planner slides them along it every ``REFINE_STRIDE`` samples) and asks
+``_refine_kernels.solve_window`` for positions with one sample fewer between the same
+three samples before and after, keeps them if every sample they touch passes
+``verify``'s exact checks (``_refine_kernels.exact_ok``), and tries one fewer again.
+Each accepted window is a whole period saved and the plan stays exact throughout.
+
+The continuous profile of ``feedprofile`` is the solution of a different problem: a
+sampled plan may exploit that a backward difference is an average over a few
+periods (a geometric feature shorter than a few samples, a jump of q_sss where two
+path segments join, the start and stop from rest); these windows recover that, and
+VPOp's greedy losses where a plan comes from it. A window's result depends on the
+plan up to three samples past it, so the pass can stream.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import _refine_kernels as RK
+
+#: samples per window, the stride between windows, Newton steps per solve
+REFINE_WINDOW = 60
+REFINE_STRIDE = 20
+REFINE_NEWTON = 200
+#: a window is shortened by at most this share of its samples per visit
+REFINE_MAX_CUT = 0.5
+
+
+
+class Refiner:
+    """The exact-check and window-solve machinery for one path's table."""
+
+    def __init__(self, table, path, vl, al, jl, dt: float):
+        self.S = table.S
+        self.C = np.ascontiguousarray(table.C.transpose(0, 2, 1))
+        self.QE = table.qend
+        self.q0 = table.qstart
+        self.L = table.length
+        self.vl, self.al, self.jl = vl, al, jl
+        self.lim = np.ascontiguousarray(np.stack([vl, al, jl]))
+        self.moving = np.ascontiguousarray(np.any(np.abs(table.C[:, 1:, :]) > 0, axis=(0, 1)))
+        feeds = np.asarray(path.feed_mm_s, dtype=float)
+        feeds = feeds[np.isfinite(feeds) & (feeds > 0)]
+        # one feed per path here: windows use the lowest (segments never straddle a feed
+        # change, so a path whose segments differ in feed is rare; it is only slower)
+        self.fdt = (float(np.min(feeds)) if feeds.size else 1e300) * dt * (1.0 - 1e-10)
+        self.n = table.C.shape[2]
+
+    def window(self, sh, qh, a: int, b: int, max_cut: int):
+        """Try to drop samples from the window a..b-1 of (sh, qh) (both ending at the
+        end point, rest implied after). Returns the new (sh, qh, dropped)."""
+        N = sh.shape[0]
+        pre = np.array([sh[max(a - 3 + i, 0)] for i in range(3)])
+        post = np.array([sh[min(b + i, N - 1)] for i in range(3)])
+        M = b - a
+        dropped = 0
+        cur = sh[a - 1: b + 1].copy()
+        while dropped < max_cut and M - 1 >= 2:
+            Mn = M - 1
+            tn = np.linspace(0.0, 1.0, Mn + 2)
+            tt = np.linspace(0.0, 1.0, cur.shape[0])
+            x0 = np.interp(tn, tt, cur)[1:-1]
+            st, x, z = RK.solve_window(self.S, self.C, self.QE, pre, post, x0, self.moving,
+                                       self.lim, self.fdt, REFINE_NEWTON)
+            if st != RK.FEASIBLE:
+                break
+            cand = np.concatenate((sh[:a], x, sh[b:]))
+            tail = np.full(3, self.L)
+            full = np.concatenate((cand, tail))
+            qb = np.empty((full.shape[0], self.n))
+            qb[:a] = qh[:a]
+            hi = min(a + Mn + 3, full.shape[0])
+            if not RK.exact_ok(self.S, self.C, self.QE, full, a, hi, self.vl, self.al, self.jl,
+                               qb):
+                break
+            qn = np.concatenate((qh[:a], qb[a: a + Mn], qh[b:]))
+            sh, qh = cand, qn
+            cur = np.concatenate(([sh[a - 1]], x, [sh[a + Mn]]))
+            M = Mn
+            b = a + Mn
+            dropped += 1
+        return sh, qh, dropped
