@@ -241,6 +241,97 @@ def _core():
     return vpop_core
 
 
+class VpopRun:
+    """VPOp's step loop on one path, set up once: limits in step units with the rounding
+    margins, the feed step function, the table's bound tables and scratch space.
+
+    ``run(sh, qh, k0, b0)`` plans from sample k0 on, with samples < k0 fixed and b0 the
+    last sample it may not move (0 from rest); the optimal planner hands its tail over
+    this way. Returns (status, k, sh, qh) with sh/qh possibly grown.
+    """
+
+    def __init__(self, table, path, machine, dt: float, settings=None):
+        core = _core()
+        self.core = core
+        self.table = table
+        n = path.n_axes
+        self.n = n
+        dt = float(dt)
+        self.dt = dt
+        shrink = 1.0 - VPOP_LIMIT_SHRINK
+        vl = np.ascontiguousarray(machine.vmax * dt * shrink, dtype=float)
+        al = np.ascontiguousarray(machine.amax * dt * dt * shrink, dtype=float)
+        jl = np.ascontiguousarray(machine.jmax * dt**3 * shrink, dtype=float)
+        # Absolute margin for float rounding: a few ulps of the positions, times the 8 of
+        # the jerk stencil (1, 3, 3, 1), so that one-ulp differences between what the loop
+        # checked and what reaches verify (joins between paths, re-evaluated end points)
+        # cannot push a low limit (jmax * dt**3 ~ 1e-6 mm) past its ratio slack.
+        q_scale = 1.0 + float(np.max(np.abs(table.C[:, 0, :])))
+        margin = VPOP_ROUNDING_ULPS * np.finfo(float).eps * q_scale
+        self.vl = vl = np.ascontiguousarray(vl - 2.0 * margin)
+        self.al = al = np.ascontiguousarray(al - 4.0 * margin)
+        self.jl = jl = np.ascontiguousarray(jl - 8.0 * margin)
+        if np.any(jl <= 0.5 * machine.jmax * dt**3):
+            raise PlanError(f"the jerk limits are too small for dt = {dt:g} s at positions of "
+                            f"{q_scale:g} mm/deg: float64 cannot resolve them")
+        self.L = L = table.length
+        FB = np.ascontiguousarray(path.s_breaks, dtype=float).copy()
+        FB[-1] = L
+        self.FB = FB
+        FV = np.where(np.isfinite(path.feed_mm_s) & (path.feed_mm_s > 0),
+                      path.feed_mm_s * shrink, 1e300)
+        self.FV = FV = np.ascontiguousarray(FV, dtype=float)
+        # rough duration: travel at the slowest of feed and axis speeds, plus ramps
+        dq = np.abs(table.qend - table.qstart)
+        tv = float(np.max(dq / machine.vmax)) + L / float(np.min(FV))
+        ramp = float(np.max(machine.vmax / machine.amax + machine.amax / machine.jmax))
+        est = int((tv + 2 * ramp) / dt) + 16
+        self.cap = max(64, 2 * est)
+        brake_cap = 8 * int(ramp / dt) + 4096
+        self.max_steps = 200 * est + 100_000
+        self.tol = max(4.0 * np.spacing(max(L, 1.0)), 1e-7 * float(np.min(jl)))
+        self.bs = np.zeros(brake_cap)
+        self.bq = np.zeros((brake_cap, n))
+        self.stats = np.zeros(5, dtype=np.int64)
+        self.js = np.ascontiguousarray(jl * VPOP_BRAKE_JERK_FRACTION)
+        self.K2, self.K3, self.K23 = (core.range_max_table(x)
+                                      for x in table.curvature_bounds(al, jl))
+        self.KV = core.range_max_table(table.speed_bounds(vl, path, FV * dt))
+        self.gap_tol = VPOP_AIM_GAP_JERK_STEPS * float(np.min(jl))
+        self.fast = bool(getattr(settings, "get", lambda *_: None)("vpop_exact") is not True)
+        self.coef_axis_major = np.ascontiguousarray(table.C.transpose(0, 2, 1))  # (m, n, 6)
+
+    def run(self, sh, qh, k0: int, b0: int):
+        core = self.core
+        table = self.table
+        n = self.n
+        easy = VPOP_EASY_FRACTION if self.fast else 0.0
+        fast = self.fast
+        k, b = k0, b0
+        while True:
+            status, k, b = core.plan_core(table.S, self.coef_axis_major, table.qend, self.vl,
+                                          self.al, self.jl, self.js, self.dt, self.L, self.FB,
+                                          self.FV, sh, qh, k, b, self.tol, self.max_steps,
+                                          self.bs, self.bq, self.stats, self.K2, self.K3,
+                                          self.K23, self.KV, easy, self.gap_tol, fast,
+                                          VPOP_CHAIN_SEQUENTIAL)
+            if status == core.NEED_SPACE:
+                grow = sh.shape[0] * 2
+                sh = np.concatenate((sh, np.zeros(grow - sh.shape[0])))
+                qh = np.concatenate((qh, np.zeros((grow - qh.shape[0], n))))
+                continue
+            if status != core.OK and fast:
+                # a shortened brake run misjudged a state: plan again exactly
+                easy = 0.0
+                fast = False
+                self.stats[:] = 0
+                k, b = k0, b0
+                continue
+            break
+        self.fast = fast
+        return status, k, sh, qh
+
+
 def plan_path_vpop(path, joint_map, machine, dt_s: float, settings=None) -> PathPlan:
     """Plan one path from rest to rest with VPOp (see module docstring).
 
@@ -249,85 +340,30 @@ def plan_path_vpop(path, joint_map, machine, dt_s: float, settings=None) -> Path
     q[-1] are the path's exact joint start and end; the machine is at rest before and
     after, and every backward-difference limit holds.
     """
-    core = _core()
     if path.rapid:
         joint_map = None
     n = path.n_axes
     dt = float(dt_s)
-    shrink = 1.0 - VPOP_LIMIT_SHRINK
-    vl = np.ascontiguousarray(machine.vmax * dt * shrink, dtype=float)
-    al = np.ascontiguousarray(machine.amax * dt * dt * shrink, dtype=float)
-    jl = np.ascontiguousarray(machine.jmax * dt**3 * shrink, dtype=float)
     if not (np.isfinite(path.length) and np.all(np.isfinite(path.coef))):
         raise PlanError(f"bug: the fitted path ending at line {int(path.line[-1])} is not finite")
     if path.length <= VPOP_MIN_LENGTH:
         q0 = _positions(path, path.breaks[:1], joint_map)
         return PathPlan(s=np.zeros(1), q=q0, stats={"samples": 1})
     table = JointTable(path, joint_map)
-    # Absolute margin for float rounding: a few ulps of the positions, times the 8 of
-    # the jerk stencil (1, 3, 3, 1), so that one-ulp differences between what the loop
-    # checked and what reaches verify (joins between paths, re-evaluated end points)
-    # cannot push a low limit (jmax * dt**3 ~ 1e-6 mm) past its ratio slack.
-    q_scale = 1.0 + float(np.max(np.abs(table.C[:, 0, :])))
-    margin = VPOP_ROUNDING_ULPS * np.finfo(float).eps * q_scale
-    vl = np.ascontiguousarray(vl - 2.0 * margin)
-    al = np.ascontiguousarray(al - 4.0 * margin)
-    jl = np.ascontiguousarray(jl - 8.0 * margin)
-    if np.any(jl <= 0.5 * machine.jmax * dt**3):
-        raise PlanError(f"the jerk limits are too small for dt = {dt:g} s at positions of "
-                        f"{q_scale:g} mm/deg: float64 cannot resolve them")
-    L = table.length
-    FB = np.ascontiguousarray(path.s_breaks, dtype=float).copy()
-    FB[-1] = L
-    FV = np.where(np.isfinite(path.feed_mm_s) & (path.feed_mm_s > 0), path.feed_mm_s * shrink, 1e300)
-    FV = np.ascontiguousarray(FV, dtype=float)
-    # rough duration: travel at the slowest of feed and axis speeds, plus ramps
-    dq = np.abs(table.qend - table.qstart)
-    tv = float(np.max(dq / machine.vmax)) + L / float(np.min(FV))
-    ramp = float(np.max(machine.vmax / machine.amax + machine.amax / machine.jmax))
-    est = int((tv + 2 * ramp) / dt) + 16
-    cap = max(64, 2 * est)
-    brake_cap = 8 * int(ramp / dt) + 4096
-    max_steps = 200 * est + 100_000
-    tol = max(4.0 * np.spacing(max(L, 1.0)), 1e-7 * float(np.min(jl)))
-    sh = np.zeros(cap)
-    qh = np.zeros((cap, n))
+    run = VpopRun(table, path, machine, dt, settings)
+    sh = np.zeros(run.cap)
+    qh = np.zeros((run.cap, n))
     sh[0] = 0.0
     qh[0] = table.qstart
-    bs = np.zeros(brake_cap)
-    bq = np.zeros((brake_cap, n))
-    stats = np.zeros(5, dtype=np.int64)
-    js = np.ascontiguousarray(jl * VPOP_BRAKE_JERK_FRACTION)
-    K2, K3, K23 = (core.range_max_table(x) for x in table.curvature_bounds(al, jl))
-    KV = core.range_max_table(table.speed_bounds(vl, path, FV * dt))
-    gap_tol = VPOP_AIM_GAP_JERK_STEPS * float(np.min(jl))
-    easy = VPOP_EASY_FRACTION
-    fast = bool(getattr(settings, "get", lambda *_: None)("vpop_exact") is not True)
-    if not fast:
-        easy = 0.0
-    coef_axis_major = np.ascontiguousarray(table.C.transpose(0, 2, 1))  # (m, n, 6)
-    k, b = 1, 0
-    while True:
-        status, k, b = core.plan_core(table.S, coef_axis_major, table.qend, vl, al, jl, js, dt, L, FB, FV,
-                                      sh, qh, k, b, tol, max_steps, bs, bq, stats, K2, K3, K23, KV,
-                                      easy, gap_tol, fast, VPOP_CHAIN_SEQUENTIAL)
-        if status == core.NEED_SPACE:
-            grow = sh.shape[0] * 2
-            sh = np.concatenate((sh, np.zeros(grow - sh.shape[0])))
-            qh = np.concatenate((qh, np.zeros((grow - qh.shape[0], n))))
-            continue
-        if status != core.OK and fast:
-            # a shortened brake run misjudged a state: plan this path again exactly
-            easy = 0.0
-            fast = False
-            stats[:] = 0
-            k, b = 1, 0
-            continue
-        break
-    if status != core.OK:
-        what = {core.STUCK: "made no progress", core.INFEASIBLE: "found no feasible step"}[status]
+    status, k, sh, qh = run.run(sh, qh, 1, 0)
+    if status != run.core.OK:
+        what = {run.core.STUCK: "made no progress",
+                run.core.INFEASIBLE: "found no feasible step"}[status]
         raise PlanError(f"VPOp {what} on the path ending at line {int(path.line[-1])} "
-                        f"(s = {sh[max(k - 1, 0)]:.6g} of {L:.6g})")
+                        f"(s = {sh[max(k - 1, 0)]:.6g} of {run.L:.6g})")
+    stats = run.stats
+    fast = run.fast
+    L = run.L
     # trailing repeats of the end point are the rest the contract already implies
     last = k - 1
     while last > 0 and sh[last - 1] == L:
