@@ -1,0 +1,415 @@
+"""The near-time-optimal planner: a feed-profile LP, an exact sampler, window refinement.
+
+``plan_path_optimal(path, joint_map, machine, dt_s, settings)`` plans one path from
+rest to rest; ``iter_path_plan`` is the same plan as a generator of (s, q) chunks
+(their concatenation is byte for byte the one-shot plan). Stages, each a generator
+that only ever looks a bounded distance ahead:
+
+1. profile (``feedprofile``): w(s) = ṡ², near-time-optimal under every axis's
+   velocity, acceleration and jerk limit and the feed, as a linear program over a
+   cubic B-spline, window by window (each window ends at rest and commits its first
+   half);
+2. sampling (``timelaw`` + ``_track_kernels.track``): the profile's time law, one
+   sample per period, each checked with exactly the float operations of ``verify``
+   and moved to the nearest allowed position where the reference would exceed a
+   limit. Where no position is allowed (the LP holds its limits at collocation
+   points), the reference is lowered by a smooth dip around that place and the
+   stretch is sampled again; near the end, or after ``OPT_RETRY_DEPTHS`` dips, VPOp's
+   step loop (``vpop.VpopRun``) takes over from a few samples back;
+3. refinement (``refine``): windows of samples shortened by whole periods where the
+   discrete problem allows it (averaging over a few periods: short geometric features,
+   jumps of q_sss at segment joins, the start and the stop).
+
+Every sample is exact at every stage. Memory: the samples held back are those a
+later stage may still change (``OPT_HOLD_S`` of motion plus a window).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..constants import VPOP_LIMIT_SHRINK, VPOP_MIN_LENGTH, VPOP_ROUNDING_ULPS
+from ..errors import PlanError
+from .base import PathPlan
+
+#: depths of the successive dips of w around a place where the sampler got stuck
+OPT_RETRY_DEPTHS = (0.04, 0.1, 0.2, 0.4)
+#: a dip spans this much motion at the reference speed before the stuck place (half as
+#: much after it), s: wide enough that the lowered reference stays smooth
+OPT_RETRY_SPAN_S = 0.1
+#: when the sampler gets stuck within this much reference time of the end (or after the
+#: last dip), VPOp finishes the path from so many samples back (the first that works)
+OPT_TAIL_S = 0.5
+OPT_HANDOVER_BACK = (2, 6, 16, 40, 100, 250)
+#: samples held back by the sampler for dips and hand-overs: this much motion plus the
+#: longest hand-over
+OPT_HOLD_S = 0.25
+#: passes of the window refinement over the sampled plan
+OPT_REFINE_PASSES = 2
+#: samples per chunk of ``iter_path_plan`` (the plan does not depend on it)
+OPT_CHUNK = 4096
+
+
+def _step_limits(machine, dt, table):
+    """vl, al, jl in step units with VPOp's margins (rounding, shrink)."""
+    shrink = 1.0 - VPOP_LIMIT_SHRINK
+    q_scale = 1.0 + float(np.max(np.abs(table.C[:, 0, :])))
+    margin = VPOP_ROUNDING_ULPS * np.finfo(float).eps * q_scale
+    vl = np.ascontiguousarray(machine.vmax * dt * shrink - 2.0 * margin, dtype=float)
+    al = np.ascontiguousarray(machine.amax * dt * dt * shrink - 4.0 * margin, dtype=float)
+    jl = np.ascontiguousarray(machine.jmax * dt ** 3 * shrink - 8.0 * margin, dtype=float)
+    if np.any(jl <= 0.5 * machine.jmax * dt ** 3):
+        raise PlanError(f"the jerk limits are too small for dt = {dt:g} s at positions of "
+                        f"{q_scale:g} mm/deg: float64 cannot resolve them")
+    return vl, al, jl
+
+
+def _option(settings, key, default):
+    get = getattr(settings, "get", None)
+    return get(key, default) if get is not None else default
+
+
+class _Path:
+    """What every stage needs about one path."""
+
+    def __init__(self, path, joint_map, machine, dt, settings):
+        from .vpop import JointTable
+
+        self.path = path
+        self.joint_map = joint_map
+        self.machine = machine
+        self.dt = dt
+        self.settings = settings
+        self.table = table = JointTable(path, joint_map)
+        self.vl, self.al, self.jl = _step_limits(machine, dt, table)
+        self.L = table.length
+        self.n = path.n_axes
+        self.Cm = np.ascontiguousarray(table.C.transpose(0, 2, 1))
+        self.tol = max(4.0 * np.spacing(max(self.L, 1.0)), 1e-7 * float(np.min(self.jl)))
+        fb = np.ascontiguousarray(path.s_breaks, dtype=float).copy()
+        fb[-1] = self.L
+        self.FB = fb
+        self.FV = np.ascontiguousarray(np.where(np.isfinite(path.feed_mm_s) & (path.feed_mm_s > 0),
+                                                path.feed_mm_s * (1.0 - VPOP_LIMIT_SHRINK), 1e300))
+        self.stats = {"lp_iterations": 0, "knots": 0, "clamped": 0, "retries": 0,
+                      "handover": -1, "refined_periods": 0, "table_pieces": int(table.C.shape[0])}
+        self._vrun = None
+
+    def vrun(self):
+        from .vpop import VpopRun
+
+        if self._vrun is None:
+            self._vrun = VpopRun(self.table, self.path, self.machine, self.dt, self.settings)
+        return self._vrun
+
+
+class _Nodes:
+    """The time-law nodes of the committed profile, appended piece by piece."""
+
+    def __init__(self):
+        self.parts = []  # (knots, coef, s0, s1)
+        self.s = np.zeros(0)
+        self.t = np.zeros(0)
+        self.v = np.zeros(0)
+        self.a = np.zeros(0)
+
+    def append(self, knots, coef, s0, s1) -> bool:
+        from .timelaw import nodes_for
+
+        t0 = float(self.t[-1]) if self.t.size else 0.0
+        nodes = nodes_for(knots, coef, s0, s1, t0)
+        if nodes is None:
+            return False
+        ns, nt, nv, na = nodes
+        if not (np.all(np.isfinite(nt)) and np.all(np.isfinite(nv)) and np.all(np.isfinite(na))):
+            return False
+        self.parts.append([knots, coef.copy(), s0, s1])
+        if self.s.size:
+            ns, nt, nv, na = ns[1:], nt[1:], nv[1:], na[1:]
+        self.s = np.concatenate((self.s, ns))
+        self.t = np.concatenate((self.t, nt))
+        self.v = np.concatenate((self.v, nv))
+        self.a = np.concatenate((self.a, na))
+        return True
+
+    def drop_before(self, s_keep: float):
+        """Forget parts (and nodes) that end before s_keep."""
+        while len(self.parts) > 1 and self.parts[0][3] < s_keep:
+            s1 = self.parts[0][3]
+            self.parts.pop(0)
+            i = int(np.searchsorted(self.s, s1, side="left"))
+            self.s, self.t, self.v, self.a = self.s[i:], self.t[i:], self.v[i:], self.a[i:]
+
+    def dip(self, s_bad: float, depth: float, reach: float, s_floor: float) -> bool:
+        """Lower w by a smooth dip of the given depth on [s_bad - reach, s_bad + reach/2]
+        (not before s_floor) and recompute the nodes from there. False if impossible."""
+        lo = max(s_bad - reach, s_floor)
+        hi = min(s_bad + 0.5 * reach, self.parts[-1][3] if self.parts else s_bad)
+        if not lo < s_bad < hi:
+            return False
+        changed = False
+        for part in self.parts:
+            knots, coef, s0, s1 = part
+            nc = coef.shape[0]
+            g = (knots[1:nc + 1] + knots[2:nc + 2] + knots[3:nc + 3]) / 3.0
+            u = np.where(g < s_bad, (g - s_bad) / (s_bad - lo), (g - s_bad) / (hi - s_bad))
+            phi = np.where(np.abs(u) < 1.0, 0.5 * (1.0 + np.cos(np.pi * u)), 0.0)
+            if np.any(phi > 0):
+                part[1] = coef * (1.0 - depth * phi)
+                changed = True
+        if not changed:
+            return False
+        # rebuild every node from the first part (their times change from there on)
+        parts = self.parts
+        self.parts = []
+        self.s = self.t = self.v = self.a = np.zeros(0)
+        for knots, coef, s0, s1 in parts:
+            if not self.append(knots, coef, s0, s1):
+                return False
+        return True
+
+
+def _sampled(ctx):
+    """Stage 2: yields (s, q) blocks of final samples (see module docstring)."""
+    from . import _track_kernels as TK
+    from .feedprofile import FeedProfileBuilder, ProfileError
+
+    dt, n, L = ctx.dt, ctx.n, ctx.L
+    builder = FeedProfileBuilder(ctx.table, ctx.path, ctx.machine, dt)
+    pieces = builder.windows()
+    nodes = _Nodes()
+    final = False
+    hold = int(OPT_HOLD_S / dt) + OPT_HANDOVER_BACK[-1] + 8
+    cap = 4 * hold + 64
+    sh = np.zeros(cap)
+    qh = np.zeros((cap, n))
+    qh[0] = ctx.table.qstart
+    k = 1  # next sample, index into the buffer
+    base = 0  # global index of buffer[0]
+    emitted = 0  # global index of the first sample not yet emitted
+    stats = np.zeros(2, dtype=np.int64)
+    retries_here = 0
+    while True:
+        status, k = (TK.NEED_REF, k) if nodes.s.size < 2 else TK.track(
+            nodes.s, nodes.t, nodes.v, nodes.a, nodes.s.shape[0], final, ctx.table.S, ctx.Cm,
+            ctx.table.qend, ctx.vl, ctx.al, ctx.jl, dt, L, ctx.FB, ctx.FV, sh, qh, k, ctx.tol,
+            stats)
+        if status == TK.NEED_REF:
+            try:
+                piece = next(pieces)
+            except ProfileError as exc:
+                if nodes.s.size == 0:
+                    raise _Fallback("profile") from exc
+                piece = None
+            if piece is None:  # VPOp finishes from here
+                status = TK.STUCK
+                final = True
+                retries_here = len(OPT_RETRY_DEPTHS)
+            elif not _append_piece(ctx, nodes, piece):
+                if nodes.s.size == 0:
+                    raise _Fallback("reference")
+                status = TK.STUCK  # the profile stops inside a piece: VPOp finishes
+                final = True
+                retries_here = len(OPT_RETRY_DEPTHS)
+            else:
+                final = piece.s1 >= L
+                continue
+        if status == TK.OK:
+            last = k - 1
+            while last > 0 and sh[last - 1] == L:
+                last -= 1
+            out_s = sh[emitted - base: last + 1].copy()
+            out_q = qh[emitted - base: last + 1].copy()
+            out_q[-1] = ctx.table.qend
+            ctx.stats["clamped"] = int(stats[0])
+            yield out_s, out_q
+            return
+        if status == TK.NEED_SPACE:
+            # emit what no retry can change, then compact the buffer
+            upto = base + k - hold
+            if upto > emitted:
+                yield sh[emitted - base: upto - base].copy(), qh[emitted - base: upto - base].copy()
+                emitted = upto
+            keep_from = emitted - 3 - base
+            if keep_from > 0:
+                sh[: k - keep_from] = sh[keep_from: k]
+                qh[: k - keep_from] = qh[keep_from: k]
+                base += keep_from
+                k -= keep_from
+                nodes.drop_before(float(sh[0]))
+            if k + 16 >= sh.shape[0]:
+                sh = np.concatenate((sh, np.zeros(sh.shape[0])))
+                qh = np.concatenate((qh, np.zeros((qh.shape[0], n))))
+            continue
+        # STUCK at buffer index k
+        t_here, _ = TK.ref_t_of_s(nodes.s, nodes.t, nodes.v, nodes.a, nodes.s.shape[0],
+                                  sh[k - 1], 0)
+        near_end = final and nodes.t[-1] - t_here <= OPT_TAIL_S
+        if not near_end and retries_here < len(OPT_RETRY_DEPTHS):
+            s_bad = float(sh[k - 1])
+            i = min(int(np.searchsorted(nodes.s, s_bad)), nodes.v.shape[0] - 1)
+            v_here = max(float(np.max(nodes.v[max(i - 8, 0): i + 8])), 1e-9)
+            reach = max(OPT_RETRY_SPAN_S * v_here, 20.0 * dt * v_here, 1e-6)
+            s_floor = float(sh[emitted - base]) if emitted > base else float(sh[0])
+            if nodes.dip(s_bad, OPT_RETRY_DEPTHS[retries_here], reach, s_floor):
+                retries_here += 1
+                ctx.stats["retries"] += 1
+                # restart before the dip (every sample there is unchanged)
+                lo = max(s_bad - reach, s_floor)
+                kr = int(np.searchsorted(sh[:k], lo, side="left"))
+                k = max(kr, emitted - base + 1, 1)
+                continue
+        # VPOp finishes the path from a few samples back (within what is held)
+        done = False
+        for back in OPT_HANDOVER_BACK:
+            k0 = max(k - back, emitted - base + 1, 1)
+            st, kk, sh2, qh2 = ctx.vrun().run(sh.copy(), qh.copy(), k0, k0 - 1)
+            if st == ctx.vrun().core.OK:
+                sh, qh, k, done = sh2, qh2, kk, True
+                ctx.stats["handover"] = int(base + k0)
+                break
+            if k0 <= emitted - base + 1:
+                break
+        if not done:
+            raise _Fallback("stuck")
+        status = TK.OK
+        last = k - 1
+        while last > 0 and sh[last - 1] == L:
+            last -= 1
+        out_s = sh[emitted - base: last + 1].copy()
+        out_q = qh[emitted - base: last + 1].copy()
+        out_q[-1] = ctx.table.qend
+        ctx.stats["clamped"] = int(stats[0])
+        yield out_s, out_q
+        return
+
+
+def _append_piece(ctx, nodes, piece) -> bool:
+    ctx.stats["lp_iterations"] += piece.lp_iters
+    return nodes.append(piece.knots, piece.coef, piece.s0, piece.s1)
+
+
+class _Fallback(Exception):
+    """This path cannot be planned by the profile (VPOp plans it)."""
+
+
+def _refined(ctx, blocks):
+    """Stage 3: one pass of window refinement over a stream of (s, q) blocks: windows of
+    ``REFINE_WINDOW`` samples every ``REFINE_STRIDE`` samples; a window changes only
+    samples from its start on, so everything before the next start is final."""
+    from .refine import REFINE_STRIDE, REFINE_WINDOW, Refiner
+
+    ref = Refiner(ctx.table, ctx.path, ctx.vl, ctx.al, ctx.jl, ctx.dt)
+    W = REFINE_WINDOW
+    sh = np.zeros(0)
+    qh = np.zeros((0, ctx.n))
+    base = 0  # global index of sh[0]
+    a = 1  # next window start, global index
+    emitted = 0
+    done = False
+    it = iter(blocks)
+    while True:
+        while not done and base + sh.shape[0] < a + W + 4:
+            try:
+                bs, bq = next(it)
+            except StopIteration:
+                done = True
+                break
+            sh = np.concatenate((sh, bs))
+            qh = np.concatenate((qh, bq))
+        la = a - base
+        N = sh.shape[0]
+        if la >= N - 1:
+            break
+        b = min(la + W, N - 1)
+        if b - la >= 3:
+            sh, qh, d = ref.window(sh, qh, la, b, max(1, (b - la) // 2))
+            ctx.stats["refined_periods"] += d
+        a += REFINE_STRIDE
+        upto = min(a, base + sh.shape[0])
+        if upto > emitted:
+            yield sh[emitted - base: upto - base].copy(), qh[emitted - base: upto - base].copy()
+            emitted = upto
+            cut = emitted - 3 - base  # keep three samples before the next window
+            if cut > 0:
+                sh, qh, base = sh[cut:], qh[cut:], base + cut
+    if emitted < base + sh.shape[0]:
+        yield sh[emitted - base:].copy(), qh[emitted - base:].copy()
+
+
+def _rechunk(blocks, chunk: int):
+    """Re-cut a stream of (s, q) blocks into chunks of ``chunk`` samples (the last shorter)."""
+    buf_s, buf_q, held = [], [], 0
+    for bs, bq in blocks:
+        buf_s.append(bs)
+        buf_q.append(bq)
+        held += bs.shape[0]
+        while held >= chunk:
+            s = np.concatenate(buf_s)
+            q = np.concatenate(buf_q)
+            yield s[:chunk], q[:chunk]
+            buf_s, buf_q, held = [s[chunk:]], [q[chunk:]], s.shape[0] - chunk
+    if held:
+        yield np.concatenate(buf_s), np.concatenate(buf_q)
+
+
+def iter_path_plan(path, joint_map, machine, dt_s: float, settings=None):
+    """Yield the plan of one path as (s (K,), q (K, n)) chunks of ``chunk_samples``
+    (settings option, default ``OPT_CHUNK``) samples; their concatenation is the
+    one-shot plan (see module docstring). The last chunk ends with the path's exact
+    end point; the machine is at rest before the first sample and after the last."""
+    stats = {}
+    yield from _iter(path, joint_map, machine, dt_s, settings, stats)
+
+
+def _iter(path, joint_map, machine, dt_s, settings, stats):
+    from .vpop import _positions, plan_path_vpop
+
+    if path.rapid:
+        joint_map = None
+    dt = float(dt_s)
+    if not (np.isfinite(path.length) and np.all(np.isfinite(path.coef))):
+        raise PlanError(f"bug: the fitted path ending at line {int(path.line[-1])} is not finite")
+    chunk = max(1, int(_option(settings, "chunk_samples", OPT_CHUNK)))
+    if path.length <= VPOP_MIN_LENGTH:
+        stats["samples"] = 1
+        yield np.zeros(1), _positions(path, path.breaks[:1], joint_map)
+        return
+    ctx = _Path(path, joint_map, machine, dt, settings)
+    passes = int(_option(settings, "refine_passes", OPT_REFINE_PASSES))
+    stage = _sampled(ctx)
+    for _ in range(passes):
+        stage = _refined(ctx, stage)
+    produced = False
+    try:
+        for s, q in _rechunk(stage, chunk):
+            produced = True
+            yield s, q
+    except _Fallback as why:
+        if produced:
+            raise PlanError(f"bug: the optimal planner gave up on the path ending at line "
+                            f"{int(path.line[-1])} after emitting samples ({why})") from None
+        plan = plan_path_vpop(path, joint_map, machine, dt, settings)
+        ctx.stats["fallback"] = str(why)
+        s, q = plan.s, plan.q
+        for _ in range(passes):
+            s, q = _refine_arrays(ctx, s, q)
+        for i in range(0, s.shape[0], chunk):
+            yield s[i:i + chunk], q[i:i + chunk]
+    stats.update(ctx.stats)
+
+
+def _refine_arrays(ctx, s, q):
+    out = list(_refined(ctx, iter([(s, q)])))
+    return np.concatenate([b[0] for b in out]), np.concatenate([b[1] for b in out])
+
+
+def plan_path_optimal(path, joint_map, machine, dt_s: float, settings=None) -> PathPlan:
+    """Plan one path from rest to rest (see module docstring): the concatenation of
+    ``iter_path_plan``'s chunks."""
+    stats = {}
+    parts = list(_iter(path, joint_map, machine, dt_s, settings, stats))
+    s = np.concatenate([p[0] for p in parts])
+    q = np.concatenate([p[1] for p in parts])
+    stats["samples"] = int(s.shape[0])
+    return PathPlan(s=s, q=q, stats=stats)
