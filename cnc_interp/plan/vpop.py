@@ -357,10 +357,16 @@ def plan_path_vpop(path, joint_map, machine, dt_s: float, settings=None) -> Path
     qh[0] = table.qstart
     status, k, sh, qh = run.run(sh, qh, 1, 0)
     if status != run.core.OK:
+        # VPOp can get stuck (issue 13: rotary moves with almost no linear motion); the
+        # safe planner cannot: one S-curve under the path's global bounds
+        from .safe import plan_path_safe
+
         what = {run.core.STUCK: "made no progress",
                 run.core.INFEASIBLE: "found no feasible step"}[status]
-        raise PlanError(f"VPOp {what} on the path ending at line {int(path.line[-1])} "
-                        f"(s = {sh[max(k - 1, 0)]:.6g} of {run.L:.6g})")
+        plan = plan_path_safe(path, joint_map, machine, dt, settings)
+        stats = dict(plan.stats or {})
+        stats["fallback"] = f"VPOp {what} at s = {sh[max(k - 1, 0)]:.6g} of {run.L:.6g}"
+        return PathPlan(s=plan.s, q=plan.q, status=plan.status, stats=stats)
     stats = run.stats
     fast = run.fast
     L = run.L
