@@ -43,13 +43,16 @@ def corpus_programs():
     return sorted(set(files))
 
 
-def plan_one(path: str, machine: str, dt_s: float | None = 0.001, optimality: bool = False) -> dict:
+def plan_one(path: str, machine: str, dt_s: float | None = 0.001, optimality: bool = False,
+             planner: str = "vpop") -> dict:
     from cnc_interp.errors import CncInterpError
     from cnc_interp.pipeline import plan_part
 
     t0 = time.perf_counter()
     try:
-        out = plan_part(path, machine, "vpop", dt_s)
+        c0 = time.process_time()
+        out = plan_part(path, machine, planner, dt_s)
+        cpu = time.process_time() - c0
     except CncInterpError as exc:
         return {"program": os.path.relpath(path, CORPUS), "machine": machine,
                 "status": "error", "exit_code": exc.exit_code, "message": exc.format(),
@@ -57,6 +60,7 @@ def plan_one(path: str, machine: str, dt_s: float | None = 0.001, optimality: bo
     traj = out.trajectory
     plan_s = out.timings["plan"]
     rec = {"program": os.path.relpath(path, CORPUS), "machine": machine, "status": "ok",
+           "planner": planner, "cpu_s": cpu,
            "samples": traj.n_samples, "cycle_time_s": traj.duration_s,
            "plan_s": plan_s, "setpoints_per_s": traj.n_samples / plan_s if plan_s else None,
            "x_real_time": traj.duration_s / plan_s if plan_s else None,
@@ -76,6 +80,8 @@ def main() -> None:
     ap.add_argument("--sweep", action="store_true", help="every corpus program on a LinuxCNC INI")
     ap.add_argument("--ini", default=os.path.join(CORPUS, "configs", "axis_mm.ini"))
     ap.add_argument("--json", default=None)
+    ap.add_argument("--planner", default="vpop", help="the per-path planner (default vpop)")
+    ap.add_argument("--no-bound", action="store_true", help="skip the V/A lower bound")
     ap.add_argument("--exclude", action="append", default=[], metavar="TEXT",
                     help="skip sweep programs whose path contains TEXT (repeatable)")
     ap.add_argument("--repeat", type=int, default=3,
@@ -83,13 +89,13 @@ def main() -> None:
                          "a few tens of ms is dominated by first-run effects otherwise)")
     args = ap.parse_args()
     # compile once outside the timings
-    plan_one(TRIDENT, "generic-mill")
+    plan_one(TRIDENT, "generic-mill", planner=args.planner)
     rows = []
     if args.sweep:
         for f in corpus_programs():
             if any(x in f for x in args.exclude):
                 continue
-            rec = plan_one(f, args.ini)
+            rec = plan_one(f, args.ini, planner=args.planner)
             rows.append(rec)
             _print(rec)
     else:
@@ -98,11 +104,11 @@ def main() -> None:
             if os.path.isdir(targets[0]):
                 targets = sorted(glob.glob(os.path.join(targets[0], "*.ngc")))[:3]
             for f in targets:
-                rec = plan_one(f, machine, optimality=True)
+                rec = plan_one(f, machine, optimality=not args.no_bound, planner=args.planner)
                 for _ in range(max(args.repeat, 1) - 1):
-                    again = plan_one(f, machine)
+                    again = plan_one(f, machine, planner=args.planner)
                     if again["status"] == "ok" and again["plan_s"] < rec["plan_s"]:
-                        for key in ("plan_s", "setpoints_per_s", "x_real_time", "timings"):
+                        for key in ("plan_s", "setpoints_per_s", "x_real_time", "timings", "cpu_s"):
                             rec[key] = again[key]
                 rows.append(rec)
                 _print(rec)
@@ -110,10 +116,11 @@ def main() -> None:
     if ok:
         tot_cycle = sum(r["cycle_time_s"] for r in ok)
         tot_plan = sum(r["plan_s"] for r in ok)
+        tot_cpu = sum(r.get("cpu_s", 0.0) for r in ok)
         tot_samples = sum(r["samples"] for r in ok)
         print(f"TOTAL {len(ok)}/{len(rows)} ok: {tot_samples} setpoints, cycle {tot_cycle:.2f} s, "
               f"plan {tot_plan:.2f} s -> {tot_samples / tot_plan:,.0f} setpoints/s, "
-              f"{tot_cycle / tot_plan:.1f}x real time")
+              f"{tot_cycle / tot_plan:.1f}x real time (process CPU {tot_cpu:.2f} s)")
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(rows, fh, indent=1)
@@ -126,7 +133,8 @@ def _print(r: dict) -> None:
     extra = f" bound-ratio {r['ratio_to_bound']:.3f}" if r.get("ratio_to_bound") else ""
     print(f"{r['program']:48s} {os.path.basename(r['machine'])[-20:]:>20s} {r['samples']:8d} samples "
           f"cycle {r['cycle_time_s']:8.3f} s plan {r['plan_s']:7.3f} s "
-          f"{r['x_real_time']:7.1f}x RT worst {r['worst_ratio']:.9f}{extra}", flush=True)
+          f"{r['x_real_time']:7.1f}x RT cpu {r.get('cpu_s', 0):6.3f} s worst {r['worst_ratio']:.9f}{extra}",
+          flush=True)
 
 
 if __name__ == "__main__":

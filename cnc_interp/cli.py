@@ -18,7 +18,7 @@ import click
 from . import __version__
 from .errors import CncInterpError
 
-PLANNERS = ("vpop", "constant", "variable")
+PLANNERS = ("optimal", "vpop", "constant", "variable")
 
 
 def _emit_json(obj) -> None:

@@ -108,7 +108,7 @@ def lp_rows(first, B, q1, q2, q3, moving, wmax, w_hat, inner, amax, jmax, scale,
     """Fill the LP rows (in x_j = c_j / scale[j]) for the collocation points; returns
     their count.
 
-    Per point k: w <= wmax (scaled by wmax), -w <= 0, and for each moving axis i:
+    Per point k: w <= wmax (scaled by wmax) and for each moving axis i:
     ±(q_ss w + q_s w'/2) / A_i <= 1 and, where ``inner[k]`` (w > 0 is possible),
     ±E_i(w) √ŵ / (3/2 J_i) + w / (3 ŵ) <= 1 (the tangent bound of the module docstring).
     """
@@ -117,15 +117,13 @@ def lp_rows(first, B, q1, q2, q3, moving, wmax, w_hat, inner, amax, jmax, scale,
     r = 0
     for k in range(K):
         f = first[k]
-        # w <= wmax and w >= 0
+        # w <= wmax (w >= 0 holds everywhere: the coefficients are kept >= 0, and a
+        # B-spline lies in the convex hull of its coefficients)
         for j in range(4):
             row_coef[r, j] = B[k, 0, j] * scale[f + j] / wmax[k]
-            row_coef[r + 1, j] = -B[k, 0, j] * scale[f + j] / wmax[k]
         row_first[r] = f
-        row_first[r + 1] = f
         row_b[r] = 1.0
-        row_b[r + 1] = 0.0
-        r += 2
+        r += 1
         wh = w_hat[k]
         for i in range(n):
             if not moving[i]:

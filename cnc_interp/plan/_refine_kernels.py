@@ -219,9 +219,10 @@ def _assemble(P, nfree, moving, lim, fdt, Q1, Q2, u, mu, g, H, hz, grad_z):
 
 
 @njit(cache=True)
-def solve_window(S, C, QEND, pre, post, x0, moving, lim, fdt, max_newton):
+def solve_window(S, C, QEND, pre, post, x0, moving, lim, fdt, max_newton, counts):
     """Positions x (nfree,) between ``pre`` (3,) and ``post`` (3,) minimising the largest
-    relative violation z; stops as soon as z < _Z_TARGET. Returns (status, x, z)."""
+    relative violation z; stops as soon as z < _Z_TARGET. Returns (status, x, z);
+    ``counts`` (2,) int accumulates Newton steps and row evaluations."""
     nfree = x0.shape[0]
     n = C.shape[1]
     K = nfree + 6
@@ -258,6 +259,7 @@ def solve_window(S, C, QEND, pre, post, x0, moving, lim, fdt, max_newton):
     best_z = worst
     best_x = x.copy()
     for it in range(max_newton):
+        counts[0] += 1
         _assemble(P, nfree, moving, lim, fdt, Q1, Q2, u, mu, g, H, hz, gzz)
         gz = 1.0 + gzz[0]
         hzz = gzz[1]
@@ -294,6 +296,7 @@ def solve_window(S, C, QEND, pre, post, x0, moving, lim, fdt, max_newton):
                 Pt[i] = P[i]
                 Pt[nfree + 3 + i] = P[nfree + 3 + i]
             zt = z + alpha * dz
+            counts[1] += 1
             _evaluate(S, C, QEND, Pt, nfree, moving, lim, fdt, Q0, Q1, Q2)
             rt, wt = _rows(Pt, nfree, moving, lim, fdt, Q0, zt, ut)
             ok = True

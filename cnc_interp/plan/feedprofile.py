@@ -15,9 +15,9 @@ and at most ``FEED_KNOT_GEO`` of the geometry's length scale, placed by counting
 ∫ ds / spacing from the path's start, block by block of the joint table: a knot
 depends only on the path up to it (and the end region on the end).
 
-Windows: at least ``FEED_WINDOW_S`` of motion and four braking times; each fixes the
+Windows: ``FEED_COMMIT_S`` of motion plus two braking times; each fixes the
 coefficients the committed part uses, ends at rest (w = 0: a brake-safe end, the
-window's solution can always stop) and commits its first half. The profile on
+window's solution can always stop) and commits all but the braking part. The profile on
 [0, s] therefore depends only on the path up to s plus one window: the streaming
 contract of ``optimal.iter_path_plan``.
 
@@ -44,12 +44,12 @@ FEED_KNOT_TIME_S = 0.006
 #: and that of its change): a rounded corner gets several knots
 FEED_KNOT_GEO = 0.5
 #: collocation points per knot interval (constraints are imposed there)
-FEED_COLLOCATION = 4
-#: a window spans at least this much motion and four braking times, s
-FEED_WINDOW_S = 0.6
+FEED_COLLOCATION = 2
+#: a window commits this much motion (estimated) and looks two braking times further, s
+FEED_COMMIT_S = 0.5
 #: iterations of the convex-concave procedure, and the relative change of the traversal
 #: time below which it stops
-FEED_CCP_MAX = 6
+FEED_CCP_MAX = 3
 FEED_CCP_TOL = 1e-3
 #: the estimated speed of the knot placement may exceed the static limits by these
 #: factors (the dynamic terms can cancel the static ones: measured up to ~1.6 at the
@@ -63,7 +63,7 @@ FEED_EST_JERK_FACTOR = 2.0
 FEED_WEIGHT_FLOOR = 0.01
 #: interior-point iterations per LP and its tolerance (scaled problem)
 FEED_LP_MAX_ITER = 150
-FEED_LP_TOL = 1e-8
+FEED_LP_TOL = 1e-6
 #: limits used by the LP, relative (the sampler checks the exact ones; the LP's
 #: collocation leaves small excursions between its points)
 FEED_LIMIT_SHARE = 0.998
@@ -155,7 +155,11 @@ class FeedProfileBuilder:
         # window length in intervals: FEED_WINDOW_S of motion, four braking times
         t_brake = float(np.max(np.minimum(self.vmax, np.max(self.feed_values))
                                / self.amax + self.amax / self.jmax))
-        self.window = max(16, int(np.ceil(max(FEED_WINDOW_S, 4.0 * t_brake) / FEED_KNOT_TIME_S)))
+        # window: a committed part of FEED_COMMIT_S of motion, then two braking times for
+        # the terminal rest to stay out of it
+        self.commit = max(8, int(np.ceil(FEED_COMMIT_S / FEED_KNOT_TIME_S)))
+        self.brake = int(np.ceil(2.0 * t_brake / FEED_KNOT_TIME_S)) + 8
+        self.window = self.commit + self.brake
         # incremental knot placement state
         self._br = [0.0]
         self._cum = 0.0
@@ -282,13 +286,13 @@ class FeedProfileBuilder:
             if at_end:
                 yield FeedPiece(tk, coef, self._br[b0], self.L, it)
                 return
-            commit = max((b1 - b0) // 2, 1)
+            commit = min(self.commit, max(b1 - b0 - self.brake, 1))
             bc = b0 + commit
             n_keep = bc - b0 + 3
             yield FeedPiece(tk[: n_keep + 4].copy(), coef[:n_keep].copy(), self._br[b0],
                             self._br[bc], it)
             fixed = coef[commit: commit + 3].copy()
-            prev = (tk, coef)
+            prev = (tk, coef, self._br[max(b1 - self.brake, bc)])
             b0 = bc
 
     def _collocation(self, b0, b1):
@@ -333,9 +337,11 @@ class FeedProfileBuilder:
         w_est = np.minimum(np.maximum(self.estimate(x), 1e-12 * W0), wmax)
         w_hat = np.maximum(w_est, 1e-9 * W0)
         if prev is not None:
-            # where fixed coefficients act, linearise at the previous window's solution:
-            # its rows are then exactly those it met (a tangent elsewhere cuts it off)
-            near = x <= self._br[min(b0 + 3, len(self._br) - 1)]
+            # linearise at the previous window's solution where it is not braking for its
+            # terminal rest: where fixed coefficients act its rows are then exactly those
+            # it met (a tangent elsewhere would cut it off), and further on it is a
+            # better start than the estimate
+            near = x <= max(self._br[min(b0 + 3, len(self._br) - 1)], prev[2])
             wc = spline_values(prev[0], prev[1], np.clip(x[near], prev[0][3], prev[0][-4]))
             w_hat[near] = np.maximum(wc, 1e-9 * W0)
         # fixed coefficients: the committed three (b0 > 0), w(0) = 0, w(L) = 0
@@ -355,7 +361,7 @@ class FeedProfileBuilder:
         inner = (x > 0.0) & (x < self.L)
         if not at_end:
             inner[-1] = False  # the window's terminal rest
-        rows_max = npt * (2 + 4 * int(self.moving.sum())) + 8
+        rows_max = npt * (1 + 4 * int(self.moving.sum())) + 8
         row_first = np.empty(rows_max, dtype=np.int64)
         row_coef = np.empty((rows_max, 4))
         row_b = np.empty(rows_max)
@@ -457,9 +463,15 @@ class FeedProfileBuilder:
             ec += [list(Be[0, 0] * sc), list(-Be[0, 0] * sc),
                    list(-Be[0, 1] * sc / (2.0 * jt * self.dt))]
             eb += [0.0, 0.0, 1.0]
-        rf = np.concatenate((row_first[:r], np.asarray(ef, dtype=np.int64)))
-        rc = np.concatenate((row_coef[:r], np.asarray(ec, dtype=float).reshape(-1, 4)))
-        rb = np.concatenate((row_b[:r], np.asarray(eb, dtype=float)))
+        # every coefficient >= 0: then w >= 0 everywhere (convex hull), not only at
+        # collocation points (a profile dipping below zero between them would stop)
+        jj = np.arange(nc)
+        nf = np.minimum(jj, nc - 4)
+        nn = np.zeros((nc, 4))
+        nn[jj, jj - nf] = -1.0
+        rf = np.concatenate((row_first[:r], np.asarray(ef, dtype=np.int64), nf))
+        rc = np.concatenate((row_coef[:r], np.asarray(ec, dtype=float).reshape(-1, 4), nn))
+        rb = np.concatenate((row_b[:r], np.asarray(eb, dtype=float), np.zeros(nc)))
         # a band must fit in [0, nc): shift rows that start too late (zero-padded)
         over = rf + 4 - nc
         for i in np.flatnonzero(over > 0):

@@ -46,6 +46,18 @@ OPT_HANDOVER_BACK = (2, 6, 16, 40, 100, 250)
 OPT_HOLD_S = 0.25
 #: passes of the window refinement over the sampled plan
 OPT_REFINE_PASSES = 2
+#: periods at and above which every window is refined; below, only the path's ends and
+#: dips of the speed (targeted), the rest costs more than it gains
+OPT_FULL_REFINE_DT = 0.002
+#: a step below this share of the largest within a window around it marks a dip
+OPT_DIP = 0.7
+#: a path goes through the profile when its static speed limit (curvature, jerk) is
+#: below OPT_ROUTE_SPEED of its feed and axis speeds on at least OPT_ROUTE_SHARE of its
+#: length and it lasts at least OPT_ROUTE_MIN_S; otherwise VPOp, which is within a
+#: fraction of a per cent of the optimum where the feed or an axis speed binds
+OPT_ROUTE_SPEED = 0.9
+OPT_ROUTE_SHARE = 0.03
+OPT_ROUTE_MIN_S = 0.03
 #: samples per chunk of ``iter_path_plan`` (the plan does not depend on it)
 OPT_CHUNK = 4096
 
@@ -91,6 +103,10 @@ class _Path:
         self.FB = fb
         self.FV = np.ascontiguousarray(np.where(np.isfinite(path.feed_mm_s) & (path.feed_mm_s > 0),
                                                 path.feed_mm_s * (1.0 - VPOP_LIMIT_SHRINK), 1e300))
+        dq = np.abs(table.qend - table.qstart)
+        ramp = float(np.max(machine.vmax / machine.amax + machine.amax / machine.jmax))
+        self.rough_s = (float(np.max(dq / machine.vmax)) + self.L / float(np.min(self.FV))
+                        + 2.0 * ramp)
         self.stats = {"lp_iterations": 0, "knots": 0, "clamped": 0, "retries": 0,
                       "handover": -1, "refined_periods": 0, "table_pieces": int(table.C.shape[0])}
         self._vrun = None
@@ -189,7 +205,13 @@ def _sampled(ctx):
     emitted = 0  # global index of the first sample not yet emitted
     stats = np.zeros(2, dtype=np.int64)
     retries_here = 0
+    # a sane bound on the samples: ten times travel at the lowest feed and axis speed
+    # plus ramps (the profile is never that slow unless something went wrong)
+    max_samples = int(10.0 * ctx.rough_s / dt) + 100_000
     while True:
+        if base + k > max_samples:
+            raise PlanError(f"bug: the optimal planner's sampler exceeded {max_samples} samples "
+                            f"on the path ending at line {int(ctx.path.line[-1])}")
         status, k = (TK.NEED_REF, k) if nodes.s.size < 2 else TK.track(
             nodes.s, nodes.t, nodes.v, nodes.a, nodes.s.shape[0], final, ctx.table.S, ctx.Cm,
             ctx.table.qend, ctx.vl, ctx.al, ctx.jl, dt, L, ctx.FB, ctx.FV, sh, qh, k, ctx.tol,
@@ -293,14 +315,18 @@ class _Fallback(Exception):
     """This path cannot be planned by the profile (VPOp plans it)."""
 
 
-def _refined(ctx, blocks):
+def _refined(ctx, blocks, targeted: bool = False):
     """Stage 3: one pass of window refinement over a stream of (s, q) blocks: windows of
     ``REFINE_WINDOW`` samples every ``REFINE_STRIDE`` samples; a window changes only
-    samples from its start on, so everything before the next start is final."""
+    samples from its start on, so everything before the next start is final.
+    ``targeted``: only windows at the ends of the path and around dips of the speed
+    (where a sampled plan gains most over the continuous profile), for fine periods
+    where a pass over everything costs too much."""
     from .refine import REFINE_STRIDE, REFINE_WINDOW, Refiner
 
     ref = Refiner(ctx.table, ctx.path, ctx.vl, ctx.al, ctx.jl, ctx.dt)
     W = REFINE_WINDOW
+    ahead = W + 4 + (W if targeted else 0)
     sh = np.zeros(0)
     qh = np.zeros((0, ctx.n))
     base = 0  # global index of sh[0]
@@ -309,7 +335,7 @@ def _refined(ctx, blocks):
     done = False
     it = iter(blocks)
     while True:
-        while not done and base + sh.shape[0] < a + W + 4:
+        while not done and base + sh.shape[0] < a + ahead:
             try:
                 bs, bq = next(it)
             except StopIteration:
@@ -322,7 +348,8 @@ def _refined(ctx, blocks):
         if la >= N - 1:
             break
         b = min(la + W, N - 1)
-        if b - la >= 3:
+        if b - la >= 3 and (not targeted or _dip_or_end(sh, la, b, W, done)) and \
+                ref.loose(sh, qh, la, b):
             sh, qh, d = ref.window(sh, qh, la, b, max(1, (b - la) // 2))
             ctx.stats["refined_periods"] += d
         a += REFINE_STRIDE
@@ -335,6 +362,19 @@ def _refined(ctx, blocks):
                 sh, qh, base = sh[cut:], qh[cut:], base + cut
     if emitted < base + sh.shape[0]:
         yield sh[emitted - base:].copy(), qh[emitted - base:].copy()
+    ctx.stats["refine_solves"] = ctx.stats.get("refine_solves", 0) + ref.solves
+    ctx.stats["refine_newton"] = ctx.stats.get("refine_newton", 0) + int(ref.counts[0])
+    ctx.stats["refine_evals"] = ctx.stats.get("refine_evals", 0) + int(ref.counts[1])
+
+
+def _dip_or_end(sh, la, b, W, done) -> bool:
+    """Does the window la..b-1 hold the path's start, its end, or a dip of the speed (a
+    step below OPT_DIP times the largest step within W samples around)?"""
+    if la <= 2 or (done and b >= sh.shape[0] - 2):
+        return True
+    steps = np.diff(sh[max(la - W, 1) - 1: min(b + W, sh.shape[0])])
+    inner = np.diff(sh[la - 1: b])
+    return bool(inner.size and np.min(inner) < OPT_DIP * np.max(steps))
 
 
 def _rechunk(blocks, chunk: int):
@@ -376,10 +416,17 @@ def _iter(path, joint_map, machine, dt_s, settings, stats):
         yield np.zeros(1), _positions(path, path.breaks[:1], joint_map)
         return
     ctx = _Path(path, joint_map, machine, dt, settings)
-    passes = int(_option(settings, "refine_passes", OPT_REFINE_PASSES))
-    stage = _sampled(ctx)
+    targeted = dt < OPT_FULL_REFINE_DT
+    route = _option(settings, "route", None) or _route(ctx)
+    ctx.stats["route"] = route
+    # refinement: every window at coarse periods; at fine ones only the profile's dips
+    # and ends, once (VPOp's plans there are within a few periods per path of the
+    # discrete optimum, and windows on every short path would cost more than planning)
+    default_passes = OPT_REFINE_PASSES if not targeted else (1 if route == "profile" else 0)
+    passes = int(_option(settings, "refine_passes", default_passes))
+    stage = _sampled(ctx) if route == "profile" else _vpop_stage(ctx)
     for _ in range(passes):
-        stage = _refined(ctx, stage)
+        stage = _refined(ctx, stage, targeted)
     produced = False
     try:
         for s, q in _rechunk(stage, chunk):
@@ -389,19 +436,74 @@ def _iter(path, joint_map, machine, dt_s, settings, stats):
         if produced:
             raise PlanError(f"bug: the optimal planner gave up on the path ending at line "
                             f"{int(path.line[-1])} after emitting samples ({why})") from None
-        plan = plan_path_vpop(path, joint_map, machine, dt, settings)
         ctx.stats["fallback"] = str(why)
-        s, q = plan.s, plan.q
+        if targeted:
+            passes = int(_option(settings, "refine_passes", 0))
+        stage = _vpop_stage(ctx)
         for _ in range(passes):
-            s, q = _refine_arrays(ctx, s, q)
-        for i in range(0, s.shape[0], chunk):
-            yield s[i:i + chunk], q[i:i + chunk]
+            stage = _refined(ctx, stage, targeted)
+        yield from _rechunk(stage, chunk)
     stats.update(ctx.stats)
 
 
-def _refine_arrays(ctx, s, q):
-    out = list(_refined(ctx, iter([(s, q)])))
-    return np.concatenate([b[0] for b in out]), np.concatenate([b[1] for b in out])
+def _route(ctx) -> str:
+    """"profile" where curvature or jerk limit the speed on a good part of a path long
+    enough to gain from it, else "vpop" (see OPT_ROUTE_*)."""
+    if ctx.rough_s < OPT_ROUTE_MIN_S:
+        return "vpop"
+    from . import _feed_kernels as K
+
+    S = ctx.table.S
+    x = np.concatenate((S, 0.5 * (S[:-1] + S[1:])))
+    x.sort()
+    n = ctx.n
+    q1 = np.empty((x.shape[0], n))
+    q2 = np.empty_like(q1)
+    q3 = np.empty_like(q1)
+    K.table_derivs(S, np.ascontiguousarray(ctx.table.C), x, q1, q2, q3)
+    m = ctx.machine
+    with np.errstate(divide="ignore", invalid="ignore"):
+        vv = np.min(np.where(np.abs(q1) > 0, m.vmax / np.abs(q1), np.inf), axis=1)
+        va = np.min(np.where(np.abs(q2) > 0, np.sqrt(m.amax / np.abs(q2)), np.inf), axis=1)
+        vj = np.min(np.where(np.abs(q3) > 0, np.cbrt(m.jmax / np.abs(q3)), np.inf), axis=1)
+    seg = np.clip(np.searchsorted(ctx.FB, x, side="right") - 1, 0, ctx.FV.shape[0] - 1)
+    cap = np.minimum(vv, ctx.FV[seg])
+    limited = np.minimum(va, vj) < OPT_ROUTE_SPEED * cap
+    w = np.diff(x)
+    share = float(np.sum(w * limited[:-1])) / max(float(np.sum(w)), 1e-300)
+    ctx.stats["limited_share"] = round(share, 4)
+    return "profile" if share >= OPT_ROUTE_SHARE else "vpop"
+
+
+def _vpop_stage(ctx):
+    """VPOp's plan of the whole path as one block (it plans a path in one call)."""
+    sh = np.zeros(ctx.vrun().cap)
+    qh = np.zeros((sh.shape[0], ctx.n))
+    qh[0] = ctx.table.qstart
+    st, k, sh, qh = ctx.vrun().run(sh, qh, 1, 0)
+    if st != ctx.vrun().core.OK:
+        # VPOp got stuck (issue 13's A+Z moves): the profile if this path did not come
+        # from it, else the safe S-curve, which cannot fail
+        ctx.stats["vpop_failed"] = True
+        if ctx.stats.get("route") == "vpop" and "fallback" not in ctx.stats:
+            ctx.stats["route"] = "profile"
+            try:
+                yield from _sampled(ctx)
+                return
+            except _Fallback:
+                pass
+        from .safe import plan_path_safe
+
+        plan = plan_path_safe(ctx.path, ctx.joint_map, ctx.machine, ctx.dt, ctx.settings)
+        ctx.stats["safe"] = True
+        yield plan.s, plan.q
+        return
+    last = k - 1
+    while last > 0 and sh[last - 1] == ctx.L:
+        last -= 1
+    q = qh[: last + 1].copy()
+    q[-1] = ctx.table.qend
+    yield sh[: last + 1].copy(), q
 
 
 def plan_path_optimal(path, joint_map, machine, dt_s: float, settings=None) -> PathPlan:

@@ -27,6 +27,8 @@ REFINE_STRIDE = 20
 REFINE_NEWTON = 200
 #: a window is shortened by at most this share of its samples per visit
 REFINE_MAX_CUT = 0.5
+#: a window none of whose samples has every limit ratio below this is skipped
+REFINE_SKIP = 0.99
 
 
 
@@ -48,6 +50,29 @@ class Refiner:
         # change, so a path whose segments differ in feed is rare; it is only slower)
         self.fdt = (float(np.min(feeds)) if feeds.size else 1e300) * dt * (1.0 - 1e-10)
         self.n = table.C.shape[2]
+        #: Newton steps, row evaluations and window solves spent (statistics)
+        self.counts = np.zeros(2, dtype=np.int64)
+        self.solves = 0
+
+    def loose(self, sh, qh, a: int, b: int) -> bool:
+        """Is some sample of the window a..b-1 clearly below every limit? (A window whose
+        samples all keep a limit within REFINE_SKIP of active cannot lose a period
+        cheaply; it is skipped.) Needs the three samples before a."""
+        lo = max(a - 3, 0)
+        q = qh[lo:b]
+        if lo == 0:
+            q = np.concatenate((np.repeat(qh[:1], 3, axis=0), q))
+        d1 = np.diff(q, axis=0)
+        d2 = np.diff(d1, axis=0)
+        d3 = np.diff(d2, axis=0)
+        mv = self.moving
+        r = np.max(np.abs(d3[:, mv]) / self.jl[mv], axis=1)
+        r = np.maximum(r, np.max(np.abs(d2[1:, mv]) / self.al[mv], axis=1))
+        r = np.maximum(r, np.max(np.abs(d1[2:, mv]) / self.vl[mv], axis=1))
+        steps = np.diff(sh[max(a - 1, 0):b])
+        m = min(r.shape[0], steps.shape[0])
+        r = np.maximum(r[-m:], steps[-m:] / self.fdt)
+        return bool(np.any(r < REFINE_SKIP))
 
     def window(self, sh, qh, a: int, b: int, max_cut: int):
         """Try to drop samples from the window a..b-1 of (sh, qh) (both ending at the
@@ -64,7 +89,8 @@ class Refiner:
             tt = np.linspace(0.0, 1.0, cur.shape[0])
             x0 = np.interp(tn, tt, cur)[1:-1]
             st, x, z = RK.solve_window(self.S, self.C, self.QE, pre, post, x0, self.moving,
-                                       self.lim, self.fdt, REFINE_NEWTON)
+                                       self.lim, self.fdt, REFINE_NEWTON, self.counts)
+            self.solves += 1
             if st != RK.FEASIBLE:
                 break
             cand = np.concatenate((sh[:a], x, sh[b:]))

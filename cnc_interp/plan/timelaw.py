@@ -18,6 +18,9 @@ from . import _feed_kernels as K
 TIMELAW_GL = 6
 #: nodes per knot interval of the profile
 TIMELAW_NODES = 4
+#: a piece whose w dips between two nodes below this share of the smaller node value is
+#: refused (the sampler would crawl there; the planner hands over to VPOp instead)
+TIMELAW_MIN_DIP = 1e-3
 
 _GX, _GW = np.polynomial.legendre.leggauss(TIMELAW_GL)
 
@@ -53,8 +56,10 @@ def nodes_for(knots, coef, s0: float, s1: float, t0: float):
     pts = (m[:, None] + h[:, None] * _GX[None, :]).ravel()
     wp, _ = _spline_w(knots, coef, np.sort(pts))
     wp = wp[np.argsort(np.argsort(pts))].reshape(-1, TIMELAW_GL)
-    if np.any(wp[~(rest_a[:-1] | rest_a[1:])] <= 0.0):
-        return None  # the profile touches zero between its collocation points
+    plain = ~(rest_a[:-1] | rest_a[1:])
+    ends = np.minimum(w[:-1], w[1:])[plain]
+    if plain.any() and np.any(np.min(wp[plain], axis=1) <= TIMELAW_MIN_DIP * ends):
+        return None  # the profile (nearly) stops between two of its nodes
     with np.errstate(divide="ignore"):
         dt = h * (np.maximum(wp, 1e-300) ** -0.5 @ _GW)
     # intervals touching rest: s = a + u² (rest at a) or s = b - u² (rest at b)
