@@ -150,8 +150,10 @@ class FeedProfileBuilder:
         q1e, _, _ = self.derivs(np.array([0.0, self.L]))
         self.jt0 = self._tangent_jerk(q1e[0])
         self.jt1 = self._tangent_jerk(q1e[1])
-        # no knot interval shorter than the first sampled step from rest (J_t dt³)
-        self.hmin = max(min(self.jt0, self.jt1) * self.dt ** 3, 1e-9 * max(self.L, 1.0))
+        # no knot interval shorter than the first sampled step from rest (J_t dt³, with
+        # the tangent's path jerk of the nearer end: a knot depends on local data only)
+        self.hmin0 = self.jt0 * self.dt ** 3
+        self.hmin1 = self.jt1 * self.dt ** 3
         # window length in intervals: FEED_WINDOW_S of motion, four braking times
         t_brake = float(np.max(np.minimum(self.vmax, np.max(self.feed_values))
                                / self.amax + self.amax / self.jmax))
@@ -212,7 +214,8 @@ class FeedProfileBuilder:
         k3 = np.max(np.abs(q3), axis=1)
         geo = np.minimum(1.0 / np.maximum(k2, 1e-300), 1.0 / np.sqrt(np.maximum(k3, 1e-300)))
         v = np.sqrt(np.maximum(self.estimate(x), 0.0))
-        return np.maximum(np.minimum(FEED_KNOT_TIME_S * v, FEED_KNOT_GEO * geo), self.hmin)
+        hmin = np.where(x < 0.5 * self.L, self.hmin0, self.hmin1)
+        return np.maximum(np.minimum(FEED_KNOT_TIME_S * v, FEED_KNOT_GEO * geo), hmin)
 
     # -- knots, block by block ----------------------------------------------------
     def _extend_knots(self):

@@ -1,0 +1,174 @@
+"""The optimal planner's parts: the banded LP solver, the B-spline basis, the feed profile,
+the time law and the window refinement, each against an independent reference."""
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from cnc_interp.plan import _feed_kernels as FK
+from cnc_interp.plan._ipm import OK, _band_cholesky, _band_solve, lp_solve
+from cnc_interp.plan.machine import Machine
+from cnc_interp.plan.safe import scurve
+from cnc_interp.plan.verify import verify_arrays
+
+from ._vpop_paths import circle_fun, hermite_path, line_path
+
+MILL = Machine(name="mill", axes="XYZ", vmax=[200, 200, 200], amax=[2000, 2000, 2000],
+               jmax=[50000, 50000, 50000], dt_s=0.001)
+UCP = Machine(name="ucp710", axes="XYZ", vmax=[500, 500, 500], amax=[2500, 3000, 2100],
+              jmax=[5000, 5000, 50000], dt_s=0.006)
+
+
+def _random_lp(rng, n=120, W=4, per=5):
+    first, coef, b = [], [], []
+    for i in range(n - W + 1):
+        for _ in range(per):
+            first.append(i)
+            coef.append(rng.normal(size=W))
+            b.append(rng.uniform(0.5, 2.0))
+    for i in range(n):  # a box keeps it bounded
+        f = min(i, n - W)
+        for sgn in (1.0, -1.0):
+            c = np.zeros(W)
+            c[i - f] = sgn
+            first.append(f)
+            coef.append(c)
+            b.append(5.0)
+    return np.array(first, dtype=np.int64), np.array(coef), np.array(b), rng.normal(size=n)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_banded_lp_matches_highs(seed):
+    from scipy.optimize import linprog
+    from scipy.sparse import csr_matrix
+
+    rng = np.random.default_rng(seed)
+    first, coef, b, c = _random_lp(rng)
+    n = c.shape[0]
+    x = np.zeros(n)
+    status, it, lam, s = lp_solve(n, first, coef, b, c, x, 100, 1e-9)
+    assert status == OK and it < 60
+    m = b.shape[0]
+    A = csr_matrix((coef.ravel(), (np.repeat(np.arange(m), 4),
+                                   (first[:, None] + np.arange(4)).ravel())), shape=(m, n))
+    ref = linprog(c, A_ub=A, b_ub=b, bounds=[(None, None)] * n, method="highs")
+    assert ref.status == 0
+    assert c @ x == pytest.approx(ref.fun, rel=1e-7, abs=1e-7)
+    assert np.max(A @ x - b) <= 1e-8
+
+
+def test_band_cholesky_solves_like_numpy():
+    rng = np.random.default_rng(5)
+    n, W = 30, 4
+    A = np.zeros((n, n))
+    for i in range(n):
+        for d in range(W):
+            if i - d >= 0:
+                A[i, i - d] = A[i - d, i] = rng.normal()
+    A = A @ A.T + n * np.eye(n)  # SPD, bandwidth 2W-2: keep the band of A itself instead
+    A = np.where(np.abs(np.subtract.outer(np.arange(n), np.arange(n))) < W, A, 0.0)
+    A += 10 * n * np.eye(n)
+    M = np.zeros((n, W))
+    for i in range(n):
+        for d in range(W):
+            if i - d >= 0:
+                M[i, d] = A[i, i - d]
+    assert _band_cholesky(M, n, W)
+    y = rng.normal(size=n)
+    x = y.copy()
+    _band_solve(M, n, W, x)
+    assert_allclose(x, np.linalg.solve(A, y), rtol=1e-10)
+
+
+def test_cubic_basis_matches_scipy():
+    from scipy.interpolate import BSpline
+
+    rng = np.random.default_rng(1)
+    br = np.sort(np.concatenate(([0.0, 10.0], rng.uniform(0, 10, 9))))
+    t = np.concatenate(([0.0] * 3, br, [10.0] * 3))
+    n = t.shape[0] - 4
+    x = np.concatenate(([0.0], np.sort(rng.uniform(0, 10, 40)), [10.0]))
+    first = np.empty(x.shape[0], dtype=np.int64)
+    B = np.empty((x.shape[0], 3, 4))
+    FK.cubic_basis(t, n, x, first, B)
+    c = rng.normal(size=n)
+    sp = BSpline(t, c, 3)
+    for d in range(3):
+        mine = np.array([B[k, d] @ c[first[k]:first[k] + 4] for k in range(x.shape[0])])
+        assert_allclose(mine, sp(x, d), atol=1e-12 * (1 + np.abs(sp(x, d)).max()))
+
+
+def _profile_time(path, machine, dt):
+    from cnc_interp.plan.feedprofile import FeedProfileBuilder, spline_values
+    from cnc_interp.plan.vpop import JointTable
+
+    b = FeedProfileBuilder(JointTable(path, None), path, machine, dt)
+    total = 0.0
+    for piece in b.windows():
+        s = np.linspace(piece.s0, piece.s1, 40001)
+        v = np.sqrt(np.maximum(spline_values(piece.knots, piece.coef, s), 0.0))
+        total += np.sum(2.0 * np.diff(s) / np.maximum(v[1:] + v[:-1], 1e-300))
+    return total
+
+
+def test_profile_of_a_line_is_the_s_curve():
+    # along a line the profile is the continuous time-optimal S-curve (the sampled start
+    # and stop may each start a period earlier: w'(0) <= 2 J dt)
+    L, F = 100.0, 83.3
+    p = line_path([0, 0, 0], [L, 0, 0], F)
+    share = 0.998  # the LP's own margin
+    ph = scurve(L, F * share, 2000.0 * share, 50000.0 * share)
+    t_cont = sum(d for d, _ in ph)
+    T = _profile_time(p, MILL, 0.001)
+    assert t_cont - 0.004 <= T <= t_cont * 1.002, (T, t_cont)
+
+
+def test_profile_holds_the_centripetal_limit_on_a_circle():
+    # r = 10 mm, no feed limit: the profile cruises near sqrt(A r) = 141 mm/s
+    p = hermite_path(circle_fun(10.0, turns=1.0), 16, 1000.0)
+    T = _profile_time(p, MILL, 0.001)
+    cruise = p.length / np.sqrt(2000.0 * 10.0)
+    assert cruise < T < 1.25 * cruise
+
+
+def test_time_law_hermite_is_consistent():
+    from cnc_interp.plan import _track_kernels as TK
+
+    ns = np.array([0.0, 1.0, 3.0, 4.0])
+    nt = np.array([0.0, 1.0, 2.0, 3.0])
+    nv = np.array([0.0, 2.0, 2.0, 0.0])
+    na = np.array([2.0, 0.0, 0.0, -2.0])
+    for t in (0.0, 0.3, 1.0, 1.7, 2.5, 3.0):
+        s, _ = TK.ref_s_of_t(ns, nt, nv, na, 4, t, 0)
+        back, _ = TK.ref_t_of_s(ns, nt, nv, na, 4, s, 0)
+        assert back == pytest.approx(t, abs=1e-12)
+    assert TK.ref_s_of_t(ns, nt, nv, na, 4, 2.0, 0)[0] == 3.0
+
+
+@pytest.mark.parametrize("machine", [MILL, UCP])
+def test_refine_keeps_plans_exact_and_never_longer(machine):
+    from cnc_interp.plan.optimal import _step_limits
+    from cnc_interp.plan.refine import Refiner
+    from cnc_interp.plan.vpop import JointTable, plan_path_vpop
+
+    dt = machine.dt_s
+    p = hermite_path(circle_fun(15.0, turns=0.6), 8, 150.0)
+    plan = plan_path_vpop(p, None, machine, dt)
+    table = JointTable(p, None)
+    ref = Refiner(table, p, *_step_limits(machine, dt, table), dt)
+    s, q = plan.s, plan.q
+    saved = 0
+    for a in range(1, s.shape[0] - 4, 20):
+        b = min(a + 60, s.shape[0] - 1)
+        s, q, d = ref.window(s, q, a, b, 30)
+        saved += d
+    rep = verify_arrays(q, dt, machine.vmax, machine.amax, machine.jmax)
+    assert rep.ok, rep.format()
+    assert np.all(np.diff(s) >= 0) and s[-1] == p.length
+    assert s.shape[0] == plan.s.shape[0] - saved
+    # the positions are the table's at the samples (nothing moved off the path)
+    from cnc_interp.plan.vpop import _eval_table
+
+    assert_allclose(q[:-1], _eval_table(table.S, table.C, s[:-1]), atol=1e-12)
+    if machine is UCP:
+        assert saved >= 1  # at 6 ms VPOp's plan always leaves a period or more
