@@ -58,7 +58,7 @@ class BatchOptions:
 
     paths: tuple[str, ...]
     machine_spec: str
-    planner: str = "vpop"
+    planner: str = "optimal"
     dt_s: float | None = None
     tol_mm: float | None = None
     fit_method: str | None = None

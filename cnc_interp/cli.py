@@ -155,8 +155,9 @@ def fit(part, machine_spec, tool_table, tol_mm, corner_deg, fit_method, out, as_
 @click.argument("part", type=click.Path(allow_dash=True, dir_okay=False))
 @_machine_option()
 @_tool_table_option
-@click.option("--planner", type=click.Choice(PLANNERS), default="vpop", show_default=True,
-              help="VPOp (paper 001) or paper 000's constant / variable feedrate planner.")
+@click.option("--planner", type=click.Choice(PLANNERS), default="optimal", show_default=True,
+              help="optimal (near-time-optimal: feed-profile LP, exact sampler), VPOp "
+                   "(paper 001), or paper 000's constant / variable feedrate planner.")
 @_dt_option
 @_tol_option
 @_fit_method_option
@@ -269,8 +270,9 @@ def stream(part, machine_spec, planner, dt_s, tol_mm, fit_method, device, dry_ru
 @main.command()
 @click.argument("paths", nargs=-1, required=True, type=click.Path(exists=True))
 @_machine_option(required=True)
-@click.option("--planner", type=click.Choice(PLANNERS), default="vpop", show_default=True,
-              help="VPOp (paper 001) or paper 000's constant / variable feedrate planner.")
+@click.option("--planner", type=click.Choice(PLANNERS), default="optimal", show_default=True,
+              help="optimal (near-time-optimal: feed-profile LP, exact sampler), VPOp "
+                   "(paper 001), or paper 000's constant / variable feedrate planner.")
 @_dt_option
 @_tol_option
 @_fit_method_option

@@ -72,7 +72,7 @@ def fit_loaded(program, settings):
 
 
 # --- batch: one program from bytes to a result record (H3a, issue 7) ----------
-def process_program(name: str, data: bytes, machine, planner: str = "vpop",
+def process_program(name: str, data: bytes, machine, planner: str = "optimal",
                     dt_s: float | None = None, tol_mm: float | None = None,
                     fit_method: str | None = None) -> dict:
     """Parse, fit, plan and verify one program; the batch's per-program record.
@@ -137,7 +137,7 @@ class PlanOptions:
 
     part: str
     machine_spec: str | None = None
-    planner: str = "vpop"
+    planner: str = "optimal"
     dt_s: float | None = None
     tol_mm: float | None = None
     fit_method: str | None = None
@@ -204,7 +204,7 @@ def parse_start(spec: str | None, axes: str, base: np.ndarray | None = None) -> 
     return out
 
 
-def plan_part(part: str, machine_spec: str | None = None, planner: str = "vpop",
+def plan_part(part: str, machine_spec: str | None = None, planner: str = "optimal",
               dt_s: float | None = None, tol_mm: float | None = None,
               start: str | np.ndarray | None = None, progress=None,
               fit_method: str | None = None, tool_table: str | None = None) -> PlanOutcome:

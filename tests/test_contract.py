@@ -240,7 +240,7 @@ def test_nothing_lost(plans, part, machine):
     assert dist[worst] <= bound, f"node {nodes[worst]} is {dist[worst]:.4g} from the plan"
 
 
-@pytest.mark.parametrize("planner", ["vpop", "constant", "variable"])
+@pytest.mark.parametrize("planner", ["optimal", "vpop", "constant", "variable"])
 def test_every_planner_keeps_the_contract(planner, tmp_path):
     part = os.path.join(SAMPLES, "nurbs-trident.ngc")
     out = tmp_path / "plan.csv"
@@ -342,7 +342,7 @@ def test_quiet_and_json_summary(plans, tmp_path):
     assert summary["samples"] == csv.data.shape[0]
     assert summary["cycle_time_s"] == csv.data[-1, 0]
     assert summary["worst_ratio"] <= 1 + 1e-9
-    assert summary["planner"] == "vpop"
+    assert summary["planner"] == "optimal"  # the default
 
 
 def test_mcap_output_matches_csv(plans, tmp_path):

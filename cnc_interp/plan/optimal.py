@@ -58,6 +58,9 @@ OPT_DIP = 0.7
 OPT_ROUTE_SPEED = 0.9
 OPT_ROUTE_SHARE = 0.03
 OPT_ROUTE_MIN_S = 0.03
+#: a profile-routed path whose rough duration is at most this (s) is also planned by
+#: VPOp and the shorter plan kept (longer paths stream the profile's plan)
+OPT_COMPARE_S = 10.0
 #: samples per chunk of ``iter_path_plan`` (the plan does not depend on it)
 OPT_CHUNK = 4096
 
@@ -427,6 +430,8 @@ def _iter(path, joint_map, machine, dt_s, settings, stats):
     stage = _sampled(ctx) if route == "profile" else _vpop_stage(ctx)
     for _ in range(passes):
         stage = _refined(ctx, stage, targeted)
+    if route == "profile" and ctx.rough_s <= OPT_COMPARE_S:
+        stage = _better_of(ctx, stage, passes if not targeted else 0, targeted)
     produced = False
     try:
         for s, q in _rechunk(stage, chunk):
@@ -444,6 +449,27 @@ def _iter(path, joint_map, machine, dt_s, settings, stats):
             stage = _refined(ctx, stage, targeted)
         yield from _rechunk(stage, chunk)
     stats.update(ctx.stats)
+
+
+def _better_of(ctx, stage, vpop_passes, targeted):
+    """The profile's plan or VPOp's, whichever is shorter (both whole: short paths)."""
+    try:
+        blocks = list(stage)
+    except _Fallback:
+        raise
+    s = np.concatenate([b[0] for b in blocks])
+    q = np.concatenate([b[1] for b in blocks])
+    alt = _vpop_stage(ctx)
+    for _ in range(vpop_passes):
+        alt = _refined(ctx, alt, targeted)
+    alt = list(alt)
+    sv = np.concatenate([b[0] for b in alt])
+    if sv.shape[0] < s.shape[0]:
+        ctx.stats["kept"] = "vpop"
+        yield sv, np.concatenate([b[1] for b in alt])
+    else:
+        ctx.stats["kept"] = "profile"
+        yield s, q
 
 
 def _route(ctx) -> str:

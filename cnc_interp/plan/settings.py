@@ -14,13 +14,14 @@ class PlanSettings:
     """How a program is planned.
 
     Attributes:
-        planner: ``"vpop"`` (paper 001), ``"constant"`` or ``"variable"`` (paper 000).
+        planner: ``"optimal"`` (near-time-optimal, ``plan.optimal``), ``"vpop"`` (paper
+            001), ``"constant"`` or ``"variable"`` (paper 000).
         dt_s: sample period, s.
         tol_mm: fit tolerance the plan was made for (informational), mm.
         options: planner-specific extras (plain JSON-able values), read with ``get``.
     """
 
-    planner: str = "vpop"
+    planner: str = "optimal"
     dt_s: float = DEFAULT_DT_S
     tol_mm: float | None = None
     options: dict = field(default_factory=dict)
@@ -34,7 +35,7 @@ class PlanSettings:
             raise UsageError(f"sample period must be a positive number of seconds, got {self.dt_s!r}")
 
     @classmethod
-    def from_options(cls, planner: str = "vpop", dt_s: float | None = None,
+    def from_options(cls, planner: str = "optimal", dt_s: float | None = None,
                      tol_mm: float | None = None, machine=None, **options) -> "PlanSettings":
         """Settings from CLI options: ``--dt`` wins over the machine's period, then the default."""
         if dt_s is None:

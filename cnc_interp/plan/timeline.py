@@ -71,6 +71,22 @@ def _joint_rapid(path, kin):
                 feed_mm_s=np.array([np.inf]), rapid=True)
 
 
+def _count_planner_stats(stats: dict, path_stats) -> None:
+    """Program-level counts of how the paths were planned (the optimal planner's route,
+    which plan it kept, fallbacks)."""
+    if not path_stats:
+        return
+    for key in ("route", "kept"):
+        value = path_stats.get(key)
+        if value is not None:
+            bucket = stats.setdefault(f"{key}s", {})
+            bucket[value] = bucket.get(value, 0) + 1
+    if "fallback" in path_stats:
+        stats["fallbacks"] = stats.get("fallbacks", 0) + 1
+    if path_stats.get("planner") == "safe" or path_stats.get("safe"):
+        stats["safe"] = stats.get("safe", 0) + 1
+
+
 def plan_program(fit_result, machine, settings, progress=None) -> Trajectory:
     """Plan every item of ``fit_result`` on one timeline (see module docstring).
 
@@ -154,6 +170,7 @@ def plan_program(fit_result, machine, settings, progress=None) -> Trajectory:
                 stats["paths"] += 1
                 if plan.profiles is not None:
                     profiles.append(plan.profiles)
+                _count_planner_stats(stats, plan.stats)
             if plan.status != "ok":
                 status = plan.status
             q0 = plan.q[0]
