@@ -149,6 +149,8 @@ CASES = [
      "X=5", None, 6000),
     ("helix-1ms", "G21 G90 G17\nG1 X5 F4000\nG2 X5 Y0 Z-3 I-5 J0 P3\nM2\n", MILL_TOML, 0.001,
      "X=5", None, 4000),
+    ("arc-accel-1ms", "G21 G90 G17\nG1 X10 F60000\nG2 X10 Y0 I-10 J0\nM2\n", MILL_TOML, 0.001,
+     "X=10", None, 60000),
     ("trident-nurbs-6ms", TRIDENT, MIKRON_TOML, 0.006, "X=10", None, 2500),
     ("trident-nurbs-1ms", TRIDENT, MIKRON_TOML, 0.001, "X=10", None, 2500),
     ("trident-g1-6ms", _trident_polyline, MIKRON_TOML, 0.006, "X=10", "nodes", 2500),

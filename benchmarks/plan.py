@@ -65,6 +65,7 @@ def plan_one(path: str, machine: str, dt_s: float | None = 0.001, optimality: bo
            "plan_s": plan_s, "setpoints_per_s": traj.n_samples / plan_s if plan_s else None,
            "x_real_time": traj.duration_s / plan_s if plan_s else None,
            "worst_ratio": out.report.worst_ratio, "timings": out.timings,
+           "stats": traj.settings.get("stats", {}),
            "wall_s": time.perf_counter() - t0}
     if optimality:
         from cnc_interp.plan.optimality import program_lower_bound

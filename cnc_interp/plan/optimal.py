@@ -57,7 +57,7 @@ OPT_DIP = 0.7
 #: fraction of a per cent of the optimum where the feed or an axis speed binds
 OPT_ROUTE_SPEED = 0.9
 OPT_ROUTE_SHARE = 0.03
-OPT_ROUTE_MIN_S = 0.03
+OPT_ROUTE_MIN_S = 0.5
 #: a profile-routed path whose rough duration is at most this (s) is also planned by
 #: VPOp and the shorter plan kept (longer paths stream the profile's plan)
 OPT_COMPARE_S = 10.0
