@@ -155,8 +155,6 @@ CASES = [
     ("trident-nurbs-1ms", TRIDENT, MIKRON_TOML, 0.001, "X=10", None, 2500),
     ("trident-g1-6ms", _trident_polyline, MIKRON_TOML, 0.006, "X=10", "nodes", 2500),
     ("five-axis-6ms", _five_axis, MIKRON_TOML, 0.006, "Y=-20", None, 50000),
-    ("leto-nurbs-6ms", lambda: _excerpt("nurbs-g5/leto-xy.ngc", 0, 1, 10 ** 6).replace(
-        "F100", "F10000"), MIKRON_TOML, 0.006, None, None, 10000),
     ("spiral-lines-1ms", lambda: _excerpt("performance/spiral_lines.ngc", 2, 5, 20),
      MILL_TOML, 0.001, "X=1.724638,Y=-1.012731", None, 999 * 25.4),
     ("trochoidal-1ms", lambda: _excerpt("performance/trochoidal.ngc", 13, 18, 110),

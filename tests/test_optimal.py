@@ -198,7 +198,7 @@ def test_a_sample_does_not_depend_on_the_path_far_ahead():
     pb = Path(axes="XYZ", breaks=np.concatenate((pa.breaks, [pa.breaks[-1] + 1.0])),
               coef=np.concatenate((pa.coef, tail)), line=np.arange(1, 50),
               feed_mm_s=np.full(49, 120.0))
-    opts = PlanSettings(options={"route": "profile"})
+    opts = PlanSettings(options={"route": "profile", "compare_s": 0})
     sa = plan_path_optimal(pa, None, MILL, DT, opts)
     sb = plan_path_optimal(pb, None, MILL, DT, opts)
     n = 400

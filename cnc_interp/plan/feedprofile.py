@@ -64,8 +64,9 @@ FEED_WEIGHT_FLOOR = 0.01
 #: interior-point iterations per LP and its tolerance (scaled problem)
 FEED_LP_MAX_ITER = 150
 FEED_LP_TOL = 1e-6
-#: limits used by the LP, relative (the sampler checks the exact ones; the LP's
-#: collocation leaves small excursions between its points)
+#: acceleration and jerk limits used by the LP, relative (the sampler checks the exact
+#: ones; the LP's collocation leaves small excursions between its points). Velocity and
+#: feed bound w directly and are used whole.
 FEED_LIMIT_SHARE = 0.998
 #: after the first LP of a window, only rows whose value at the current solution is
 #: above this share of their bound take part; rows left out are checked after each
@@ -127,7 +128,10 @@ class FeedProfileBuilder:
         self.dt = float(dt_s)
         self.n = table.C.shape[2]
         share = float(limit_share)
-        self.vmax = np.asarray(machine.vmax, dtype=float) * share
+        # velocity and feed are bounds on w itself, exact at every point: only the shrink
+        # every planner keeps; acceleration and jerk get the collocation's margin
+        keep = 1.0 - 1e-9
+        self.vmax = np.asarray(machine.vmax, dtype=float) * keep
         self.amax = np.ascontiguousarray(np.asarray(machine.amax, dtype=float) * share)
         self.jmax = np.ascontiguousarray(np.asarray(machine.jmax, dtype=float) * share)
         self.S = np.ascontiguousarray(table.S)
@@ -146,7 +150,7 @@ class FeedProfileBuilder:
         fb[-1] = self.L
         fv = np.where(np.isfinite(path.feed_mm_s) & (path.feed_mm_s > 0), path.feed_mm_s, np.inf)
         self.feed_breaks = fb
-        self.feed_values = fv.astype(float) * share
+        self.feed_values = fv.astype(float) * keep
         q1e, _, _ = self.derivs(np.array([0.0, self.L]))
         self.jt0 = self._tangent_jerk(q1e[0])
         self.jt1 = self._tangent_jerk(q1e[1])

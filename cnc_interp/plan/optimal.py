@@ -53,14 +53,22 @@ OPT_FULL_REFINE_DT = 0.002
 OPT_DIP = 0.7
 #: a path goes through the profile when its static speed limit (curvature, jerk) is
 #: below OPT_ROUTE_SPEED of its feed and axis speeds on at least OPT_ROUTE_SHARE of its
-#: length and it lasts at least OPT_ROUTE_MIN_S; otherwise VPOp, which is within a
-#: fraction of a per cent of the optimum where the feed or an axis speed binds
+#: length and it lasts at least OPT_ROUTE_MIN_S at those limits (plus ramps); otherwise
+#: VPOp, which is within a fraction of a per cent of the optimum where the feed or an
+#: axis speed binds, and on short paths (the profile's windows cost ~30 ms per path
+#: there for ~1 %: stellabee1)
 OPT_ROUTE_SPEED = 0.9
 OPT_ROUTE_SHARE = 0.03
 OPT_ROUTE_MIN_S = 0.5
+#: paths whose travel at the feed plus ramps is shorter than this take VPOp at once
+OPT_ROUTE_TINY_S = 0.1
 #: a profile-routed path whose rough duration is at most this (s) is also planned by
-#: VPOp and the shorter plan kept (longer paths stream the profile's plan)
-OPT_COMPARE_S = 10.0
+#: VPOp and the shorter plan kept; longer paths stream the profile's plan. (On fitted
+#: CAM contours whose q_sss jumps from segment to segment the continuous profile can be
+#: ~0.3 % slower than VPOp, which samples them; the comparison keeps the better.) The
+#: ``compare_s`` option overrides it: 0 makes every sample depend on the path up to one
+#: profile window ahead only, as a streaming pipeline wants.
+OPT_COMPARE_S = 600.0
 #: samples per chunk of ``iter_path_plan`` (the plan does not depend on it)
 OPT_CHUNK = 4096
 
@@ -108,8 +116,9 @@ class _Path:
                                                 path.feed_mm_s * (1.0 - VPOP_LIMIT_SHRINK), 1e300))
         dq = np.abs(table.qend - table.qstart)
         ramp = float(np.max(machine.vmax / machine.amax + machine.amax / machine.jmax))
+        self.ramp_s = 2.0 * ramp
         self.rough_s = (float(np.max(dq / machine.vmax)) + self.L / float(np.min(self.FV))
-                        + 2.0 * ramp)
+                        + self.ramp_s)
         self.stats = {"lp_iterations": 0, "knots": 0, "clamped": 0, "retries": 0,
                       "handover": -1, "refined_periods": 0, "table_pieces": int(table.C.shape[0])}
         self._vrun = None
@@ -430,7 +439,7 @@ def _iter(path, joint_map, machine, dt_s, settings, stats):
     stage = _sampled(ctx) if route == "profile" else _vpop_stage(ctx)
     for _ in range(passes):
         stage = _refined(ctx, stage, targeted)
-    if route == "profile" and ctx.rough_s <= OPT_COMPARE_S:
+    if route == "profile" and ctx.rough_s <= float(_option(settings, "compare_s", OPT_COMPARE_S)):
         stage = _better_of(ctx, stage, passes if not targeted else 0, targeted)
     produced = False
     try:
@@ -473,10 +482,10 @@ def _better_of(ctx, stage, vpop_passes, targeted):
 
 
 def _route(ctx) -> str:
-    """"profile" where curvature or jerk limit the speed on a good part of a path long
-    enough to gain from it, else "vpop" (see OPT_ROUTE_*)."""
-    if ctx.rough_s < OPT_ROUTE_MIN_S:
-        return "vpop"
+    """"profile" where curvature or jerk limit the speed on a good part of a path that
+    lasts long enough to gain from it, else "vpop" (see OPT_ROUTE_*)."""
+    if ctx.rough_s < OPT_ROUTE_TINY_S:
+        return "vpop"  # travel at the feed and ramps: far below the threshold anyway
     from . import _feed_kernels as K
 
     S = ctx.table.S
@@ -494,11 +503,16 @@ def _route(ctx) -> str:
         vj = np.min(np.where(np.abs(q3) > 0, np.cbrt(m.jmax / np.abs(q3)), np.inf), axis=1)
     seg = np.clip(np.searchsorted(ctx.FB, x, side="right") - 1, 0, ctx.FV.shape[0] - 1)
     cap = np.minimum(vv, ctx.FV[seg])
-    limited = np.minimum(va, vj) < OPT_ROUTE_SPEED * cap
+    curv = np.minimum(va, vj)
+    limited = curv < OPT_ROUTE_SPEED * cap
     w = np.diff(x)
     share = float(np.sum(w * limited[:-1])) / max(float(np.sum(w)), 1e-300)
+    # duration at the static limits (a lower bound of the motion's, ramps aside)
+    v = np.maximum(np.minimum(cap, curv), 1e-300)
+    t_static = float(np.sum(w * 2.0 / (v[:-1] + v[1:])))
     ctx.stats["limited_share"] = round(share, 4)
-    return "profile" if share >= OPT_ROUTE_SHARE else "vpop"
+    long_enough = t_static + ctx.ramp_s >= OPT_ROUTE_MIN_S
+    return "profile" if share >= OPT_ROUTE_SHARE and long_enough else "vpop"
 
 
 def _vpop_stage(ctx):
