@@ -156,7 +156,7 @@ CASES = [
     ("trident-g1-6ms", _trident_polyline, MIKRON_TOML, 0.006, "X=10", "nodes", 2500),
     ("five-axis-6ms", _five_axis, MIKRON_TOML, 0.006, "Y=-20", None, 50000),
     ("spiral-lines-1ms", lambda: _excerpt("performance/spiral_lines.ngc", 2, 5, 20),
-     MILL_TOML, 0.001, "X=1.724638,Y=-1.012731", None, 999 * 25.4),
+     MILL_TOML, 0.001, "X=43.8058052,Y=-25.7233674", None, 999 * 25.4),
     ("trochoidal-1ms", lambda: _excerpt("performance/trochoidal.ngc", 13, 18, 110),
      MILL_TOML, 0.001, None, None, 3600),
     ("3dchips-1ms", lambda: _excerpt("performance/3D_Chips.ngc", 21, 22, 160), MILL_TOML,

@@ -231,6 +231,36 @@ def test_the_issue_13_a_plus_z_moves_plan_with_both_planners(tmp_path):
     assert cycles["optimal"] <= cycles["vpop"]
 
 
+def test_a_profile_that_would_crawl_after_a_sharp_corner_plans(tmp_path, monkeypatch):
+    # corpus stellabee1.ngc lines 29179-29184 on axis_mm.ini: knots placed at the static
+    # speed estimate right after a sharp corner left one long knot interval where the
+    # profile nearly stopped (the sampler crawled until its sample budget). The reach
+    # envelope of the estimate fixes the knots; the crawl check would hand over to VPOp.
+    from cnc_interp.pipeline import plan_part
+
+    part = tmp_path / "sb1.ngc"
+    part.write_text("G20 G18 G90 G94 G64\nF999.0\nG0 X2.6260 Y3.8500 Z-0.1392\n"
+                    "G1 X2.6320 Z-0.1428\nX2.6500 Z-0.1441\nX2.6580 Z-0.1467\n"
+                    "X2.6620 Z-0.1500\nG3 X2.6660 Y3.8500 Z-0.1634 I-0.0228 K-0.0141\n"
+                    "G1 X2.6740 Z-0.2157\nX2.6760 Z-0.2128\nX2.6880 Z-0.1638\nM2\n")
+    mach = tmp_path / "axis_mm.toml"
+    mach.write_text('name = "axis_mm"\ndt = 0.001\nkinematics = "trivial"\n'
+                    + "".join(f"[axes.{a}]\nvmax = 30.48\namax = 508.0\njmax = 5080.0\n"
+                              for a in "XYZ"))
+    cycles = {}
+    for planner in ("vpop", "optimal"):
+        out = plan_part(str(part), str(mach), planner)
+        assert out.report.ok
+        cycles[planner] = out.trajectory.duration_s
+    assert cycles["optimal"] <= cycles["vpop"]
+    # without the envelope the crawl check refuses the profile (VPOp plans the path)
+    from cnc_interp.plan.feedprofile import FeedProfileBuilder
+
+    monkeypatch.setattr(FeedProfileBuilder, "_envelope", lambda self, x, w, q1, carry: w)
+    out = plan_part(str(part), str(mach), "optimal")
+    assert out.report.ok and out.trajectory.duration_s <= 1.001 * cycles["vpop"]
+
+
 @pytest.mark.parametrize("seed", range(3))
 def test_safe_planner_holds_limits(seed):
     rng = np.random.default_rng(200 + seed)

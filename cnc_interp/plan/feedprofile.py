@@ -171,6 +171,9 @@ class FeedProfileBuilder:
         self._cum = 0.0
         self._piece = 0  # next table piece to probe
         self._last_probe = (0.0, None)  # (s, density) of the last probe point
+        self._carry = None  # (x, w) of the reach envelope's last probe
+        self._ex = np.zeros(0)  # probes (x, enveloped w) from the current window on
+        self._ew = np.zeros(0)
         self.knots_done = False
 
     # -- geometry -----------------------------------------------------------------
@@ -198,8 +201,9 @@ class FeedProfileBuilder:
         f = self.feed_at(x)
         return np.minimum(wv, f * f)
 
-    def estimate(self, x):
-        """Estimated speed² at x (K,): static limits inflated, sampled start and stop."""
+    def _raw_estimate(self, x):
+        """Estimated speed² at x (K,) from the geometry there: static limits inflated,
+        sampled start and stop near the ends."""
         q1, q2, q3 = self.derivs(x)
         with np.errstate(divide="ignore", invalid="ignore"):
             wa = np.min(np.where(np.abs(q2) > 0, self.amax / np.abs(q2), np.inf), axis=1)
@@ -209,15 +213,57 @@ class FeedProfileBuilder:
                                FEED_EST_JERK_FACTOR ** 2 * wj])
         ws = _discrete_start_curve(x, self.jt0, self.dt)
         we = _discrete_start_curve(self.L - x, self.jt1, self.dt)
-        return np.minimum(w, np.minimum(ws, we))
+        return np.minimum(w, np.minimum(ws, we)), q1
 
-    def _spacing(self, x):
-        """Knot spacing wanted at x: time of motion at the estimated speed, geometry."""
+    def estimate(self, x):
+        """Estimated speed² at x (K,): ``_raw_estimate`` under the reach envelope of the
+        knot placement's probes (a speed the tangent's acceleration and jerk can reach
+        from the slow points around, see ``_envelope``)."""
+        x = np.ascontiguousarray(x, dtype=float)
+        w, _ = self._raw_estimate(x)
+        ex, ew = self._ex, self._ew
+        if ex.shape[0] >= 2:
+            inside = (x >= ex[0]) & (x <= ex[-1])
+            w = np.where(inside, np.minimum(w, np.interp(x, ex, ew)), w)
+        return w
+
+    def _envelope(self, x, w, q1, carry):
+        """The reach envelope of w at sorted probes x: speed² a path acceleration of
+        ``FEED_EST_ACC_FACTOR`` times the tangent's (w grows by 2 A ds) and a jerk-limited
+        ramp (w^3/4 grows by 2.12 √J ds, exact from rest) can reach from the other probes,
+        both ways; the slopes are the largest of the probes' tangents (generous: an
+        estimate). ``carry`` (x, w) is the envelope's last value before x[0]."""
+        g = np.abs(q1)
+        with np.errstate(divide="ignore"):
+            at = np.min(np.where(g > 1e-12, self.amax / g, np.inf), axis=1)
+            jt = np.min(np.where(g > 1e-12, self.jmax / g, np.inf), axis=1)
+        A = FEED_EST_ACC_FACTOR * float(np.max(np.where(np.isfinite(at), at, 0.0)))
+        J = FEED_EST_JERK_FACTOR ** 2 * float(np.max(np.where(np.isfinite(jt), jt, 0.0)))
+        if not (A > 0.0 and J > 0.0):
+            return w
+        if carry is not None:
+            x = np.concatenate(([carry[0]], x))
+            w = np.concatenate(([carry[1]], w))
+        w = np.minimum(w, 1e300)
+        a2 = 2.0 * A
+        w = np.minimum(w, np.minimum.accumulate(w - a2 * x) + a2 * x)
+        w = np.minimum(w, (np.minimum.accumulate((w + a2 * x)[::-1]) - a2 * x[::-1])[::-1])
+        c = 2.1213203435596424 * np.sqrt(J)
+        u = w ** 0.75
+        u = np.minimum(u, np.minimum.accumulate(u - c * x) + c * x)
+        u = np.minimum(u, (np.minimum.accumulate((u + c * x)[::-1]) - c * x[::-1])[::-1])
+        w = np.minimum(w, np.maximum(u, 0.0) ** (4.0 / 3.0))
+        return w[1:] if carry is not None else w
+
+    def _spacing(self, x, w=None):
+        """Knot spacing wanted at x: time of motion at the estimated speed (w), geometry."""
         _, q2, q3 = self.derivs(x)
         k2 = np.max(np.abs(q2), axis=1)
         k3 = np.max(np.abs(q3), axis=1)
         geo = np.minimum(1.0 / np.maximum(k2, 1e-300), 1.0 / np.sqrt(np.maximum(k3, 1e-300)))
-        v = np.sqrt(np.maximum(self.estimate(x), 0.0))
+        if w is None:
+            w, _ = self._raw_estimate(x)
+        v = np.sqrt(np.maximum(w, 0.0))
         hmin = np.where(x < 0.5 * self.L, self.hmin0, self.hmin1)
         return np.maximum(np.minimum(FEED_KNOT_TIME_S * v, FEED_KNOT_GEO * geo), hmin)
 
@@ -235,14 +281,36 @@ class FeedProfileBuilder:
         pts.append(geo[(geo > a) & (geo < b)])
         pts.append((L - geo)[((L - geo) > a) & ((L - geo) < b)])
         probe = np.unique(np.concatenate(pts))
-        h = self._spacing(probe)
-        gap = np.diff(probe)
-        need = np.ceil(gap / (0.25 * np.minimum(h[:-1], h[1:]))).astype(np.int64)
-        if np.any(need > 1):
+        # the next block's table points: the envelope looks that far ahead (slow points
+        # just after this block lower the estimate before them)
+        p2 = min(p1 + FEED_KNOT_BLOCK, m)
+        ahead = np.concatenate((S[p1 + 1:p2 + 1], 0.5 * (S[p1:p2] + S[p1 + 1:p2 + 1])))
+        ahead.sort()
+        wa_raw, qa = self._raw_estimate(ahead) if ahead.size else (np.zeros(0), None)
+        for _ in range(3):
+            w_raw, q1 = self._raw_estimate(probe)
+            xs = np.concatenate((probe, ahead))
+            ws = np.concatenate((w_raw, wa_raw))
+            qs = np.concatenate((q1, qa)) if ahead.size else q1
+            w = self._envelope(xs, ws, qs, self._carry)[: probe.shape[0]]
+            h = self._spacing(probe, w)
+            gap = np.diff(probe)
+            need = np.ceil(gap / (0.25 * np.minimum(h[:-1], h[1:]))).astype(np.int64)
+            if not np.any(need > 1):
+                break
             extra = [probe[i] + gap[i] * np.arange(1, need[i]) / need[i]
                      for i in np.flatnonzero(need > 1)]
             probe = np.unique(np.concatenate([probe] + extra))
-            h = self._spacing(probe)
+        else:
+            w_raw, q1 = self._raw_estimate(probe)
+            xs = np.concatenate((probe, ahead))
+            ws = np.concatenate((w_raw, wa_raw))
+            qs = np.concatenate((q1, qa)) if ahead.size else q1
+            w = self._envelope(xs, ws, qs, self._carry)[: probe.shape[0]]
+            h = self._spacing(probe, w)
+        self._carry = (float(probe[-1]), float(w[-1]))
+        self._ex = np.concatenate((self._ex, probe))
+        self._ew = np.concatenate((self._ew, w))
         dens = 1.0 / h
         cum = self._cum + np.concatenate(
             ([0.0], np.cumsum(0.5 * (dens[1:] + dens[:-1]) * np.diff(probe))))
@@ -301,6 +369,9 @@ class FeedProfileBuilder:
             fixed = coef[commit: commit + 3].copy()
             prev = (tk, coef, self._br[max(b1 - self.brake, bc)])
             b0 = bc
+            # forget the estimate's probes before the next window (bounded memory)
+            i = max(int(np.searchsorted(self._ex, self._br[b0], side="right")) - 2, 0)
+            self._ex, self._ew = self._ex[i:], self._ew[i:]
 
     def _collocation(self, b0, b1):
         br = np.asarray(self._br[b0:b1 + 1])

@@ -71,6 +71,10 @@ OPT_ROUTE_TINY_S = 0.1
 OPT_COMPARE_S = 600.0
 #: samples per chunk of ``iter_path_plan`` (the plan does not depend on it)
 OPT_CHUNK = 4096
+#: a profile piece whose time law spends more than this many times the estimated time
+#: on a node interval is refused (the profile nearly stops where nothing asks for it:
+#: VPOp finishes the path from there)
+OPT_CRAWL = 50.0
 
 
 def _step_limits(machine, dt, table):
@@ -141,7 +145,10 @@ class _Nodes:
         self.v = np.zeros(0)
         self.a = np.zeros(0)
 
-    def append(self, knots, coef, s0, s1) -> bool:
+    def append(self, knots, coef, s0, s1, estimate=None) -> bool:
+        """Append a profile piece's nodes; False (nothing appended) if its time law is
+        not finite or, given the profile's speed estimate, crawls somewhere (takes more
+        than OPT_CRAWL times the estimate's time over a node interval)."""
         from .timelaw import nodes_for
 
         t0 = float(self.t[-1]) if self.t.size else 0.0
@@ -151,6 +158,12 @@ class _Nodes:
         ns, nt, nv, na = nodes
         if not (np.all(np.isfinite(nt)) and np.all(np.isfinite(nv)) and np.all(np.isfinite(na))):
             return False
+        if estimate is not None and ns.shape[0] >= 2:
+            ve = np.sqrt(np.maximum(estimate(ns), 0.0))
+            with np.errstate(divide="ignore"):
+                t_est = np.diff(ns) / np.maximum(ve[:-1], ve[1:])
+            if np.any(np.diff(nt) > OPT_CRAWL * t_est):
+                return False
         self.parts.append([knots, coef.copy(), s0, s1])
         if self.s.size:
             ns, nt, nv, na = ns[1:], nt[1:], nv[1:], na[1:]
@@ -217,17 +230,21 @@ def _sampled(ctx):
     emitted = 0  # global index of the first sample not yet emitted
     stats = np.zeros(2, dtype=np.int64)
     retries_here = 0
+    final_handover = False
     # a sane bound on the samples: ten times travel at the lowest feed and axis speed
     # plus ramps (the profile is never that slow unless something went wrong)
     max_samples = int(10.0 * ctx.rough_s / dt) + 100_000
     while True:
-        if base + k > max_samples:
-            raise PlanError(f"bug: the optimal planner's sampler exceeded {max_samples} samples "
-                            f"on the path ending at line {int(ctx.path.line[-1])}")
-        status, k = (TK.NEED_REF, k) if nodes.s.size < 2 else TK.track(
+        if base + k > max_samples and not final_handover:
+            # the reference crawls (a bug, or a profile the crawl check let through):
+            # VPOp finishes the path
+            ctx.stats["sample_budget"] = True
+            status, final, retries_here, final_handover = TK.STUCK, True, len(OPT_RETRY_DEPTHS), True
+        else:
+            status, k = (TK.NEED_REF, k) if nodes.s.size < 2 else TK.track(
             nodes.s, nodes.t, nodes.v, nodes.a, nodes.s.shape[0], final, ctx.table.S, ctx.Cm,
-            ctx.table.qend, ctx.vl, ctx.al, ctx.jl, dt, L, ctx.FB, ctx.FV, sh, qh, k, ctx.tol,
-            stats)
+                ctx.table.qend, ctx.vl, ctx.al, ctx.jl, dt, L, ctx.FB, ctx.FV, sh, qh, k,
+                ctx.tol, stats)
         if status == TK.NEED_REF:
             try:
                 piece = next(pieces)
@@ -239,7 +256,7 @@ def _sampled(ctx):
                 status = TK.STUCK
                 final = True
                 retries_here = len(OPT_RETRY_DEPTHS)
-            elif not _append_piece(ctx, nodes, piece):
+            elif not _append_piece(ctx, nodes, piece, builder):
                 if nodes.s.size == 0:
                     raise _Fallback("reference")
                 status = TK.STUCK  # the profile stops inside a piece: VPOp finishes
@@ -318,9 +335,12 @@ def _sampled(ctx):
         return
 
 
-def _append_piece(ctx, nodes, piece) -> bool:
+def _append_piece(ctx, nodes, piece, builder) -> bool:
     ctx.stats["lp_iterations"] += piece.lp_iters
-    return nodes.append(piece.knots, piece.coef, piece.s0, piece.s1)
+    if nodes.append(piece.knots, piece.coef, piece.s0, piece.s1, builder.estimate):
+        return True
+    ctx.stats["crawl"] = ctx.stats.get("crawl", 0) + 1
+    return False
 
 
 class _Fallback(Exception):
