@@ -99,15 +99,14 @@ def process_program(name: str, data: bytes, machine, planner: str = "vpop",
     traj = plan_program(result, machine.with_dt(settings.dt_s), settings)
     report = verify(traj, machine)
     axis, kind, ratio, sample = report.worst()
-    nodes = sum(int(r.nodes.shape[0]) for r in program.runs)
-    paths = result.paths
     return {
         "status": "ok" if report.ok else "violation",
         "message": "" if report.ok else f"{axis} {kind} ratio {ratio:.9f} at sample {sample}",
         "error_line": 0,
         "lines": int(program.line_count),
-        "nodes": nodes,
-        "segments": sum(int(p.n_seg) for p in paths),
+        # one definition with `parse` and `fit`: nodes of feed runs, fitted feed segments
+        "nodes": int(result.stats["nodes_in"]),
+        "segments": int(result.stats["segments_out"]),
         "path_length_mm": float(traj.s[-1]) if traj.s.size else 0.0,
         "cycle_time_s": float(traj.duration_s),
         "samples": int(traj.n_samples),
