@@ -33,7 +33,7 @@ from ..constants import (
     VPOP_TABLE_TOL,
 )
 from ..errors import PlanError
-from .base import PathPlan
+from .base import PathPlan, collect_path_plan
 
 
 # -- the arc-length table -------------------------------------------------------
@@ -235,10 +235,268 @@ def _positions(path, u, joint_map):
 
 
 # -- the planner --------------------------------------------------------------------
+#: a checkpoint of the step loop is kept every this many samples; after a fast-mode failure
+#: the path is re-planned exactly from the last one (the start for shorter paths), so
+#: samples before it are final and can be handed out (1 min at 1 kHz)
+VPOP_CHECKPOINT_SAMPLES = 1 << 16
+#: the backtracking looks back at most this many brake runs (``brake_cap`` samples each)
+#: before the failing step: a bounded look-ahead, so a long path streams in bounded memory
+VPOP_LOOKBACK_BRAKE_RUNS = 4
+#: samples kept before a checkpoint's last fixed sample (the stencils read 3 back)
+_CKPT_HISTORY = 8
+
+
 def _core():
     from . import vpop_core
 
     return vpop_core
+
+
+class _Prepared:
+    """Everything the step loop of one path needs (limits in step units, the joint table
+    and its bounds, the feed per segment, buffer sizes). See ``plan_path_vpop``."""
+
+    def __init__(self, path, joint_map, machine, dt_s: float, settings):
+        core = _core()
+        if path.rapid:
+            joint_map = None
+        self.path = path
+        n = path.n_axes
+        dt = float(dt_s)
+        self.n, self.dt = n, dt
+        shrink = 1.0 - VPOP_LIMIT_SHRINK
+        vl = np.ascontiguousarray(machine.vmax * dt * shrink, dtype=float)
+        al = np.ascontiguousarray(machine.amax * dt * dt * shrink, dtype=float)
+        jl = np.ascontiguousarray(machine.jmax * dt**3 * shrink, dtype=float)
+        if not (np.isfinite(path.length) and np.all(np.isfinite(path.coef))):
+            raise PlanError(f"bug: the fitted path ending at line {int(path.line[-1])} is not finite")
+        self.trivial = path.length <= VPOP_MIN_LENGTH
+        if self.trivial:
+            self.q0 = _positions(path, path.breaks[:1], joint_map)
+            return
+        table = JointTable(path, joint_map)
+        self.table = table
+        # Absolute margin for float rounding: a few ulps of the positions, times the 8 of
+        # the jerk stencil (1, 3, 3, 1), so that one-ulp differences between what the loop
+        # checked and what reaches verify (joins between paths, re-evaluated end points)
+        # cannot push a low limit (jmax * dt**3 ~ 1e-6 mm) past its ratio slack.
+        q_scale = 1.0 + float(np.max(np.abs(table.C[:, 0, :])))
+        margin = VPOP_ROUNDING_ULPS * np.finfo(float).eps * q_scale
+        vl = np.ascontiguousarray(vl - 2.0 * margin)
+        al = np.ascontiguousarray(al - 4.0 * margin)
+        jl = np.ascontiguousarray(jl - 8.0 * margin)
+        if np.any(jl <= 0.5 * machine.jmax * dt**3):
+            raise PlanError(f"the jerk limits are too small for dt = {dt:g} s at positions of "
+                            f"{q_scale:g} mm/deg: float64 cannot resolve them")
+        self.vl, self.al, self.jl = vl, al, jl
+        L = table.length
+        self.L = L
+        FB = np.ascontiguousarray(path.s_breaks, dtype=float).copy()
+        FB[-1] = L
+        FV = np.where(np.isfinite(path.feed_mm_s) & (path.feed_mm_s > 0), path.feed_mm_s * shrink, 1e300)
+        self.FB, self.FV = FB, np.ascontiguousarray(FV, dtype=float)
+        # rough duration: travel at the slowest of feed and axis speeds, plus ramps
+        dq = np.abs(table.qend - table.qstart)
+        tv = float(np.max(dq / machine.vmax)) + L / float(np.min(self.FV))
+        ramp = float(np.max(machine.vmax / machine.amax + machine.amax / machine.jmax))
+        est = int((tv + 2 * ramp) / dt) + 16
+        self.est = est
+        self.brake_cap = 8 * int(ramp / dt) + 4096
+        self.max_steps = 200 * est + 100_000
+        self.floor_h = VPOP_LOOKBACK_BRAKE_RUNS * self.brake_cap
+        self.tol = max(4.0 * np.spacing(max(L, 1.0)), 1e-7 * float(np.min(jl)))
+        self.js = np.ascontiguousarray(jl * VPOP_BRAKE_JERK_FRACTION)
+        self.K2, self.K3, self.K23 = (core.range_max_table(x)
+                                      for x in table.curvature_bounds(al, jl))
+        self.KV = core.range_max_table(table.speed_bounds(vl, path, self.FV * dt))
+        self.gap_tol = VPOP_AIM_GAP_JERK_STEPS * float(np.min(jl))
+        get = getattr(settings, "get", lambda *_: None)
+        self.fast = bool(get("vpop_exact") is not True)
+        self.C_axis_major = np.ascontiguousarray(table.C.transpose(0, 2, 1))  # (m, n, 6)
+
+
+class _Checkpoint:
+    """The step loop's state at a sample, global indices: state ``st``, certificate
+    ``cs``/``cq``, and the samples from ``lo`` on (``sh``, ``qh``)."""
+
+    __slots__ = ("st", "cs", "cq", "lo", "sh", "qh", "first")
+
+    def __init__(self, st, cs, cq, lo, sh, qh, first):
+        self.st, self.cs, self.cq, self.lo, self.sh, self.qh = st, cs, cq, lo, sh, qh
+        self.first = first
+
+
+def _shift_state(st: np.ndarray, delta: int) -> np.ndarray:
+    """``st`` with its sample indices moved by ``delta`` (local <-> global)."""
+    core = _core()
+    out = st.copy()
+    for i in (core.ST_K, core.ST_B, core.ST_LASTK, core.ST_LASTJ):
+        out[i] += delta
+    if st[core.ST_CAT] >= 0:
+        out[core.ST_CAT] = st[core.ST_CAT] + delta
+    if st[core.ST_CERT] < core._BIG // 2:
+        out[core.ST_CERT] += delta
+    return out
+
+
+class _StepLoop:
+    """Runs ``vpop_core.plan_core`` over buffers that grow, or slide when ``window`` (samples)
+    is reached, keeping a checkpoint every ``VPOP_CHECKPOINT_SAMPLES``: a fast-mode failure
+    re-plans exactly from the last checkpoint. Samples before the checkpoint's look-back
+    are final; ``run`` returns them as they come free (or all of them at the end)."""
+
+    def __init__(self, prep: _Prepared, window: int | None):
+        core = _core()
+        self.p = prep
+        n = prep.n
+        self.room = prep.brake_cap + 8
+        cap = max(64, 2 * prep.est) + self.room + 16
+        # a sliding buffer holds a checkpoint's look-back, an epoch and a brake run
+        self.max_cap = None if window is None else max(
+            int(window), 2 * (VPOP_CHECKPOINT_SAMPLES + prep.floor_h + self.room + 64))
+        if self.max_cap is not None:
+            cap = min(cap, self.max_cap)
+        self.sh = np.zeros(cap)
+        self.qh = np.zeros((cap, n))
+        self.qh[0] = prep.table.qstart
+        self.base = 0
+        self.st = core.new_state()
+        self.cs = np.empty(prep.brake_cap)
+        self.cq = np.empty((prep.brake_cap, n))
+        self.bs = np.zeros(prep.brake_cap)
+        self.bq = np.zeros((prep.brake_cap, n))
+        self.stats = np.zeros(5, dtype=np.int64)
+        self.fast = prep.fast
+        self.easy = VPOP_EASY_FRACTION if self.fast else 0.0
+        self.next_ck = VPOP_CHECKPOINT_SAMPLES
+        self.ck = self._checkpoint(first=True)
+        self.handed = 0  # global index of the first sample not yet returned
+
+    def _checkpoint(self, first: bool = False) -> _Checkpoint:
+        core = _core()
+        st = self.st
+        lo_l = max(int(st[core.ST_B]) - _CKPT_HISTORY, 0)
+        k_l = int(st[core.ST_K])
+        return _Checkpoint(_shift_state(st, self.base), self.cs.copy(), self.cq.copy(),
+                           lo_l + self.base, self.sh[lo_l:k_l].copy(), self.qh[lo_l:k_l].copy(),
+                           first)
+
+    def _restore(self) -> None:
+        ck = self.ck
+        lo_l = ck.lo - self.base  # >= 0: nothing at or after ck.lo was ever handed out
+        m = ck.sh.shape[0]
+        self.sh[lo_l:lo_l + m] = ck.sh
+        self.qh[lo_l:lo_l + m] = ck.qh
+        self.st = _shift_state(ck.st, -self.base)
+        self.cs[:] = ck.cs
+        self.cq[:] = ck.cq
+        if ck.first:
+            self.stats[:] = 0
+
+    def _make_room(self) -> None:
+        """Slide the buffer past the samples that are final and handed out (when a window
+        is set and there are any), else grow it."""
+        core = _core()
+        k_l = int(self.st[core.ST_K])
+        cap = self.sh.shape[0]
+        shift = min(self.ck.lo, self.handed) - self.base
+        if self.max_cap is not None and shift > 0 and k_l - shift + self.room + 16 < cap:
+            keep = slice(shift, k_l)
+            self.sh[:k_l - shift] = self.sh[keep]
+            self.qh[:k_l - shift] = self.qh[keep]
+            self.st = _shift_state(self.st, -shift)
+            self.base += shift
+            return
+        grow = max(2 * cap, k_l + self.room + 16)
+        sh = np.zeros(grow)
+        qh = np.zeros((grow, self.p.n))
+        sh[:k_l] = self.sh[:k_l]
+        qh[:k_l] = self.qh[:k_l]
+        self.sh, self.qh = sh, qh
+
+    def final_until(self) -> int:
+        """Global index before which every sample is final."""
+        return self.ck.lo
+
+    def take(self, upto: int) -> tuple[np.ndarray, np.ndarray]:
+        """Copies of the samples from the last handed-out one up to global ``upto``."""
+        a, b = self.handed - self.base, upto - self.base
+        self.handed = upto
+        return self.sh[a:b].copy(), self.qh[a:b].copy()
+
+    def run(self) -> int:
+        """Step until the path is done (returns the global end index k) or samples have
+        come free while the buffer is full (returns -1: call ``take`` then ``run`` again)."""
+        core = _core()
+        p = self.p
+        while True:
+            status = core.plan_core(p.table.S, p.C_axis_major, p.table.qend, p.vl, p.al, p.jl,
+                                    p.js, p.dt, p.L, p.FB, p.FV, self.sh, self.qh, self.st,
+                                    self.cs, self.cq, p.tol, p.max_steps, self.bs, self.bq,
+                                    self.stats, p.K2, p.K3, p.K23, p.KV, self.easy, p.gap_tol,
+                                    self.fast, VPOP_CHAIN_SEQUENTIAL, p.floor_h,
+                                    self.next_ck - self.base, self.base)
+            if status == core.OK:
+                return int(self.st[core.ST_K]) + self.base
+            if status == core.YIELD:
+                self.ck = self._checkpoint()
+                self.next_ck += VPOP_CHECKPOINT_SAMPLES
+                continue
+            if status == core.NEED_SPACE:
+                if self.max_cap is not None and self.handed < self.ck.lo:
+                    return -1  # hand out the final samples before the buffer slides past them
+                self._make_room()
+                continue
+            if self.fast:
+                # a shortened brake run misjudged a state: plan exactly from the checkpoint
+                self.fast = False
+                self.easy = 0.0
+                self._restore()
+                continue
+            k = int(self.st[core.ST_K])
+            what = {core.STUCK: "made no progress", core.INFEASIBLE: "found no feasible step"}[status]
+            raise PlanError(f"VPOp {what} on the path ending at line {int(p.path.line[-1])} "
+                            f"(s = {self.sh[max(k - 1, 0)]:.6g} of {p.L:.6g})")
+
+
+def iter_path_plan_vpop(path, joint_map, machine, dt_s: float, settings=None,
+                        window: int | None = None):
+    """VPOp on one path as a stream of ``PathPlan`` chunks (see ``plan.base``).
+
+    Samples are handed out as soon as no later step can change them: the backtracking
+    looks back at most ``VPOP_LOOKBACK_BRAKE_RUNS`` brake runs, and a fast-mode failure
+    re-plans from the last checkpoint (every ``VPOP_CHECKPOINT_SAMPLES`` samples), so the
+    step loop's buffers stay bounded (``window`` samples, at least two checkpoints'
+    worth) however long the path. ``window=None`` keeps the whole path and yields one
+    chunk. The chunks' concatenation does not depend on ``window``.
+    """
+    prep = _Prepared(path, joint_map, machine, dt_s, settings)
+    if prep.trivial:
+        yield PathPlan(s=np.zeros(1), q=prep.q0, stats={"samples": 1})
+        return
+    loop = _StepLoop(prep, window)
+    while True:
+        end = loop.run()
+        if end >= 0:
+            break
+        s, q = loop.take(loop.final_until())
+        if s.size:
+            yield PathPlan(s=s, q=q, last=False)
+    # trailing repeats of the end point are the rest the contract already implies
+    L = prep.L
+    sh, base = loop.sh, loop.base
+    last = end - 1
+    while last > loop.handed and sh[last - 1 - base] == L:
+        last -= 1
+    s, q = loop.take(last + 1)
+    q[-1] = prep.table.qend
+    st = loop.stats
+    yield PathPlan(s=s, q=q, stats={
+        "samples": int(last + 1), "backtracks": int(st[0]), "brake_runs": int(st[1]),
+        "brake_steps": int(st[2]), "max_steps": int(st[3]), "aim_runs": int(st[4]),
+        "exact": not loop.fast,
+        "table_pieces": int(prep.table.C.shape[0]), "table_err": float(prep.table.max_err),
+    })
 
 
 def plan_path_vpop(path, joint_map, machine, dt_s: float, settings=None) -> PathPlan:
@@ -247,97 +505,7 @@ def plan_path_vpop(path, joint_map, machine, dt_s: float, settings=None) -> Path
     ``joint_map`` maps program coordinates to joints (``None`` or an identity map for
     rapids, which are already in joint space). Returns a ``PathPlan`` whose q[0] and
     q[-1] are the path's exact joint start and end; the machine is at rest before and
-    after, and every backward-difference limit holds.
+    after, and every backward-difference limit holds. The same samples as the chunks
+    of ``iter_path_plan_vpop``.
     """
-    core = _core()
-    if path.rapid:
-        joint_map = None
-    n = path.n_axes
-    dt = float(dt_s)
-    shrink = 1.0 - VPOP_LIMIT_SHRINK
-    vl = np.ascontiguousarray(machine.vmax * dt * shrink, dtype=float)
-    al = np.ascontiguousarray(machine.amax * dt * dt * shrink, dtype=float)
-    jl = np.ascontiguousarray(machine.jmax * dt**3 * shrink, dtype=float)
-    if not (np.isfinite(path.length) and np.all(np.isfinite(path.coef))):
-        raise PlanError(f"bug: the fitted path ending at line {int(path.line[-1])} is not finite")
-    if path.length <= VPOP_MIN_LENGTH:
-        q0 = _positions(path, path.breaks[:1], joint_map)
-        return PathPlan(s=np.zeros(1), q=q0, stats={"samples": 1})
-    table = JointTable(path, joint_map)
-    # Absolute margin for float rounding: a few ulps of the positions, times the 8 of
-    # the jerk stencil (1, 3, 3, 1), so that one-ulp differences between what the loop
-    # checked and what reaches verify (joins between paths, re-evaluated end points)
-    # cannot push a low limit (jmax * dt**3 ~ 1e-6 mm) past its ratio slack.
-    q_scale = 1.0 + float(np.max(np.abs(table.C[:, 0, :])))
-    margin = VPOP_ROUNDING_ULPS * np.finfo(float).eps * q_scale
-    vl = np.ascontiguousarray(vl - 2.0 * margin)
-    al = np.ascontiguousarray(al - 4.0 * margin)
-    jl = np.ascontiguousarray(jl - 8.0 * margin)
-    if np.any(jl <= 0.5 * machine.jmax * dt**3):
-        raise PlanError(f"the jerk limits are too small for dt = {dt:g} s at positions of "
-                        f"{q_scale:g} mm/deg: float64 cannot resolve them")
-    L = table.length
-    FB = np.ascontiguousarray(path.s_breaks, dtype=float).copy()
-    FB[-1] = L
-    FV = np.where(np.isfinite(path.feed_mm_s) & (path.feed_mm_s > 0), path.feed_mm_s * shrink, 1e300)
-    FV = np.ascontiguousarray(FV, dtype=float)
-    # rough duration: travel at the slowest of feed and axis speeds, plus ramps
-    dq = np.abs(table.qend - table.qstart)
-    tv = float(np.max(dq / machine.vmax)) + L / float(np.min(FV))
-    ramp = float(np.max(machine.vmax / machine.amax + machine.amax / machine.jmax))
-    est = int((tv + 2 * ramp) / dt) + 16
-    cap = max(64, 2 * est)
-    brake_cap = 8 * int(ramp / dt) + 4096
-    max_steps = 200 * est + 100_000
-    tol = max(4.0 * np.spacing(max(L, 1.0)), 1e-7 * float(np.min(jl)))
-    sh = np.zeros(cap)
-    qh = np.zeros((cap, n))
-    sh[0] = 0.0
-    qh[0] = table.qstart
-    bs = np.zeros(brake_cap)
-    bq = np.zeros((brake_cap, n))
-    stats = np.zeros(5, dtype=np.int64)
-    js = np.ascontiguousarray(jl * VPOP_BRAKE_JERK_FRACTION)
-    K2, K3, K23 = (core.range_max_table(x) for x in table.curvature_bounds(al, jl))
-    KV = core.range_max_table(table.speed_bounds(vl, path, FV * dt))
-    gap_tol = VPOP_AIM_GAP_JERK_STEPS * float(np.min(jl))
-    easy = VPOP_EASY_FRACTION
-    fast = bool(getattr(settings, "get", lambda *_: None)("vpop_exact") is not True)
-    if not fast:
-        easy = 0.0
-    coef_axis_major = np.ascontiguousarray(table.C.transpose(0, 2, 1))  # (m, n, 6)
-    k, b = 1, 0
-    while True:
-        status, k, b = core.plan_core(table.S, coef_axis_major, table.qend, vl, al, jl, js, dt, L, FB, FV,
-                                      sh, qh, k, b, tol, max_steps, bs, bq, stats, K2, K3, K23, KV,
-                                      easy, gap_tol, fast, VPOP_CHAIN_SEQUENTIAL)
-        if status == core.NEED_SPACE:
-            grow = sh.shape[0] * 2
-            sh = np.concatenate((sh, np.zeros(grow - sh.shape[0])))
-            qh = np.concatenate((qh, np.zeros((grow - qh.shape[0], n))))
-            continue
-        if status != core.OK and fast:
-            # a shortened brake run misjudged a state: plan this path again exactly
-            easy = 0.0
-            fast = False
-            stats[:] = 0
-            k, b = 1, 0
-            continue
-        break
-    if status != core.OK:
-        what = {core.STUCK: "made no progress", core.INFEASIBLE: "found no feasible step"}[status]
-        raise PlanError(f"VPOp {what} on the path ending at line {int(path.line[-1])} "
-                        f"(s = {sh[max(k - 1, 0)]:.6g} of {L:.6g})")
-    # trailing repeats of the end point are the rest the contract already implies
-    last = k - 1
-    while last > 0 and sh[last - 1] == L:
-        last -= 1
-    s = sh[: last + 1].copy()
-    q = qh[: last + 1].copy()
-    q[-1] = table.qend
-    return PathPlan(s=s, q=q, stats={
-        "samples": int(s.shape[0]), "backtracks": int(stats[0]), "brake_runs": int(stats[1]),
-        "brake_steps": int(stats[2]), "max_steps": int(stats[3]), "aim_runs": int(stats[4]),
-        "exact": not fast,
-        "table_pieces": int(table.C.shape[0]), "table_err": float(table.max_err),
-    })
+    return collect_path_plan(iter_path_plan_vpop(path, joint_map, machine, dt_s, settings))
