@@ -282,8 +282,149 @@ def _load_with(part: str, machine):
                         tool_table=machine.tool_table), machine
 
 
+def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | None = None) -> dict:
+    """Parse, fit, plan, verify and write ``opts.out`` as one stream (``cnc-interp plan``).
+
+    The stages overlap: the parse runs in a thread, the fit hands over each run's paths as
+    they are fitted, worker threads plan jobs of paths ahead (``plan.timeline``), and every
+    block of samples is verified (``StreamVerifier``, carrying the last samples across
+    blocks) before it is written, so peak memory is a window of the program, not its
+    cycle. The output goes through ``atomic_write``: a file appears only complete. The
+    bytes do not depend on ``window`` or ``threads``.
+
+    Returns the summary (``PlanOutcome.summary``'s keys) with ``timings_s``: ``parse``
+    (the parse thread's CPU time), ``fit`` (time in the fit, waits for the parse
+    excluded), ``plan`` (the planning threads' CPU time), ``verify``, ``write``,
+    ``first_row`` (from the start until the first samples were written) and ``total``
+    (wall time). Raises ``PlanError`` (exit 1) when a block violates a limit (a bug),
+    before that block is written.
+    """
+    import time
+
+    from .errors import PlanError
+    from .export.atomic import atomic_write
+    from .fit.fitter import iter_fit
+    from .fit.settings import FitSettings
+    from .gcode.stream import ProgramStream
+    from .plan.machine_io import DEFAULT_PRESET, load_machine
+    from .plan.settings import PlanSettings
+    from .plan.timeline import TimelineInfo, feed_of, iter_timeline
+    from .plan.verify import StreamVerifier
+
+    t_start = time.perf_counter()
+    out = opts.out or "-"
+    machine = load_machine(opts.machine_spec if opts.machine_spec is not None else DEFAULT_PRESET)
+    start = opts.start
+    if isinstance(start, str):
+        start = parse_start(start, machine.axes, machine.start)
+    machine = machine.with_start(start)
+    settings = PlanSettings.from_options(planner=opts.planner, dt_s=opts.dt_s, tol_mm=opts.tol_mm,
+                                         machine=machine)
+    machine = machine.with_dt(settings.dt_s)
+    dt = float(settings.dt_s)
+    name, data = read_part(opts.part)
+    input_meta = _input_meta(name, data)
+    tool_table = opts.tool_table if opts.tool_table is not None else machine.tool_table
+    program = ProgramStream(data, name, machine.axes, machine.start, tool_table)
+    del data
+    fit_settings = FitSettings.from_options(tol_mm=opts.tol_mm, machine=machine,
+                                            method=opts.fit_method)
+    fit_stats: dict = {}
+    clock = {"fit": 0.0, "verify": 0.0, "write": 0.0}
+
+    def timed_fit(items):
+        it = iter_fit(items, fit_settings, fit_stats)
+        while True:
+            t0 = time.perf_counter()
+            waited = program.wait_s
+            try:
+                item = next(it)
+            except StopIteration:
+                clock["fit"] += time.perf_counter() - t0 - (program.wait_s - waited)
+                return
+            clock["fit"] += time.perf_counter() - t0 - (program.wait_s - waited)
+            yield item
+
+    n = machine.n_axes
+    start_pos = np.zeros(n) if machine.start is None else np.asarray(machine.start, dtype=float)
+    info = TimelineInfo()
+    blocks = iter_timeline(timed_fit(program), machine, settings, start_pos, window=window,
+                           info=info, progress=progress, source=name, threads=threads)
+    verifier = StreamVerifier.for_machine(machine, dt)
+    first_row = None
+    last_s = 0.0
+    mcap = out.lower().endswith(".mcap")
+    try:
+        with atomic_write(out) as fh:
+            if mcap:
+                from .export.mcap_io import McapPlanWriter
+
+                writer = McapPlanWriter(fh, machine.axes, dt, machine)
+            else:
+                from .export.csv_io import CsvPlanWriter
+
+                writer = CsvPlanWriter(fh, machine.axes)
+            s_prev = None
+            for block in blocks:
+                t0 = time.perf_counter()
+                ok = verifier.add(block.q)
+                t1 = time.perf_counter()
+                clock["verify"] += t1 - t0
+                if not ok:
+                    _violation(verifier.report(), name, PlanError)
+                t = np.arange(block.k0, block.k0 + block.n) * dt
+                feed = feed_of(block.s, s_prev, dt)
+                s_prev = float(block.s[-1])
+                if mcap:
+                    writer.write(t, block.s, feed, block.q, block.line)
+                else:
+                    writer.write(t, block.s, feed, block.q)
+                    if first_row is None:
+                        fh.flush()
+                if first_row is None:
+                    first_row = time.perf_counter() - t_start
+                clock["write"] += time.perf_counter() - t1
+                last_s = s_prev
+            report = verifier.report()
+            if not report.ok:
+                _violation(report, name, PlanError)
+            if mcap:
+                from .export.mcap_io import planner_record
+
+                t1 = time.perf_counter()
+                stats_settings = settings.to_dict()
+                stats_settings["stats"] = dict(info.stats)
+                meta = {"planner": settings.to_dict(), "input": input_meta}
+                writer.finish(planner_record(settings.planner, info.status, dt, machine.axes,
+                                             info.samples, stats_settings), meta)
+                clock["write"] += time.perf_counter() - t1
+    finally:
+        blocks.close()
+    samples = info.samples
+    cycle = float((samples - 1) * dt) if samples else 0.0
+    total = time.perf_counter() - t_start
+    timings = {"parse": program.thread_cpu_s, "fit": clock["fit"], "plan": info.plan_cpu_s,
+               "verify": clock["verify"], "write": clock["write"],
+               "first_row": first_row if first_row is not None else total, "total": total}
+    axis, kind, ratio, idx = report.worst()
+    return {
+        "part": name, "machine": machine.name, "planner": settings.planner, "dt_s": dt,
+        "samples": samples, "cycle_time_s": cycle, "path_length_mm": last_s,
+        "worst_ratio": report.worst_ratio, "worst": {"axis": axis, "limit": kind, "sample": idx},
+        "status": info.status, "timings_s": timings, "fit_method": fit_stats.get("method"),
+        "x_real_time": (cycle / total) if total > 0 else None,
+    }
+
+
+def _violation(report, name: str, error) -> None:
+    axis, kind, ratio, idx = report.worst()
+    raise error(f"bug: plan violates the {axis} {kind} limit (ratio {ratio:.12g} at sample "
+                f"{idx}, t = {idx * report.dt_s:.6g} s); please report it", _loc(name))
+
+
 def run_plan(opts: PlanOptions) -> None:
-    """``cnc-interp plan``: plan, verify and write CSV or MCAP; summary on stderr."""
+    """``cnc-interp plan``: plan, verify and write CSV or MCAP as a stream; summary on
+    stderr (``stream_plan``)."""
     import json
     import sys
 
@@ -296,23 +437,8 @@ def run_plan(opts: PlanOptions) -> None:
         from ._kernel_cache import announce_first_compile
 
         announce_first_compile()
-    with progress_bar(None, "plan", enabled=not opts.quiet) as tick:
-        outcome = plan_part(opts.part, opts.machine_spec, opts.planner, opts.dt_s, opts.tol_mm,
-                            opts.start, progress=tick, fit_method=opts.fit_method,
-                            tool_table=opts.tool_table)
-    traj = outcome.trajectory
-    if out.lower().endswith(".mcap"):
-        from .export.mcap_io import write_mcap
-
-        meta = {"planner": outcome.settings.to_dict()}
-        if outcome.input_meta:
-            meta["input"] = outcome.input_meta
-        write_mcap(traj, out, metadata=meta, machine=outcome.machine)
-    else:
-        from .export.csv_io import write_csv
-
-        write_csv(traj, out)
-    summary = outcome.summary()
+    with progress_bar(None, "plan", enabled=not opts.quiet, unit="mm") as tick:
+        summary = stream_plan(opts, progress=tick)
     if opts.summary_json:
         # JSON goes to stdout unless stdout carries the plan itself; --quiet never hides it
         stream = sys.stderr if out == "-" else sys.stdout
@@ -321,11 +447,10 @@ def run_plan(opts: PlanOptions) -> None:
         return
     if opts.quiet:
         return
-    else:
-        sys.stderr.write(
-            f"{summary['part']}: {traj.planner} on {summary['machine']}: "
-            f"cycle time {summary['cycle_time_s']:.6g} s, {summary['samples']} samples at "
-            f"dt = {traj.dt_s:g} s, path {summary['path_length_mm']:.6g} mm, "
-            f"worst limit ratio {summary['worst_ratio']:.9f} "
-            f"({summary['worst']['axis']} {summary['worst']['limit']})\n")
+    sys.stderr.write(
+        f"{summary['part']}: {summary['planner']} on {summary['machine']}: "
+        f"cycle time {summary['cycle_time_s']:.6g} s, {summary['samples']} samples at "
+        f"dt = {summary['dt_s']:g} s, path {summary['path_length_mm']:.6g} mm, "
+        f"worst limit ratio {summary['worst_ratio']:.9f} "
+        f"({summary['worst']['axis']} {summary['worst']['limit']})\n")
     sys.stderr.flush()

@@ -39,18 +39,37 @@ def _chunk_text(cols: list[np.ndarray], lo: int, hi: int) -> str:
     return "\n".join(map(",".join, zip(*strs))) + "\n"
 
 
+class CsvPlanWriter:
+    """Writes a plan as CSV while it is planned: the header, then ``write`` blocks of
+    samples in order. The bytes do not depend on how the samples are split into blocks."""
+
+    def __init__(self, fh: BinaryIO, axes: str):
+        self.fh = fh
+        self.rows = 0
+        fh.write((",".join(_FIXED + tuple(axes)) + "\n").encode("ascii"))
+
+    def write(self, t, s, feed, q) -> None:
+        """Append rows (t, s, feed (K,), q (K, n))."""
+        q = np.asarray(q, dtype=float)
+        cols = [np.ascontiguousarray(t, dtype=float), np.ascontiguousarray(s, dtype=float),
+                np.ascontiguousarray(feed, dtype=float)]
+        cols += [np.ascontiguousarray(q[:, i]) for i in range(q.shape[1])]
+        k = cols[0].shape[0]
+        for lo in range(0, k, CSV_CHUNK_ROWS):
+            self.fh.write(format_rows(cols, lo, min(k, lo + CSV_CHUNK_ROWS)))
+        self.rows += k
+
+
+def format_rows(cols: list[np.ndarray], lo: int, hi: int) -> bytes:
+    """Rows lo..hi-1 of the columns as CSV text (``repr`` of each float, ``\\n`` ends)."""
+    return _chunk_text(cols, lo, hi).encode("ascii")
+
+
 def write_csv_to(traj, fh: BinaryIO) -> int:
     """Write ``traj`` as CSV to an open binary file; returns the number of rows."""
-    header = ",".join(_FIXED + tuple(traj.axes)) + "\n"
-    fh.write(header.encode("ascii"))
-    q = np.asarray(traj.q, dtype=float)
-    cols = [np.ascontiguousarray(traj.t, dtype=float), np.ascontiguousarray(traj.s, dtype=float),
-            np.ascontiguousarray(traj.feed, dtype=float)]
-    cols += [np.ascontiguousarray(q[:, i]) for i in range(q.shape[1])]
-    k = cols[0].shape[0]
-    for lo in range(0, k, CSV_CHUNK_ROWS):
-        fh.write(_chunk_text(cols, lo, min(k, lo + CSV_CHUNK_ROWS)).encode("ascii"))
-    return k
+    w = CsvPlanWriter(fh, traj.axes)
+    w.write(traj.t, traj.s, traj.feed, traj.q)
+    return w.rows
 
 
 def write_csv(traj, out: str) -> int:
