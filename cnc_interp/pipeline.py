@@ -356,16 +356,22 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
     mcap = out.lower().endswith(".mcap")
     try:
         with atomic_write(out) as fh:
-            if mcap:
-                from .export.mcap_io import McapPlanWriter
+            def open_writer():
+                # only once the first samples are planned: a plan that fails at once
+                # writes nothing, not even a header, to standard output
+                if mcap:
+                    from .export.mcap_io import McapPlanWriter
 
-                writer = McapPlanWriter(fh, machine.axes, dt, machine)
-            else:
+                    return McapPlanWriter(fh, machine.axes, dt, machine)
                 from .export.csv_io import CsvPlanWriter
 
-                writer = CsvPlanWriter(fh, machine.axes)
+                return CsvPlanWriter(fh, machine.axes)
+
+            writer = None
             s_prev = None
             for block in blocks:
+                if writer is None:
+                    writer = open_writer()
                 t0 = time.perf_counter()
                 ok = verifier.add(block.q)
                 t1 = time.perf_counter()
@@ -388,6 +394,8 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
             report = verifier.report()
             if not report.ok:
                 _violation(report, name, PlanError)
+            if writer is None:
+                writer = open_writer()
             if mcap:
                 from .export.mcap_io import planner_record
 
@@ -398,6 +406,10 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
                 writer.finish(planner_record(settings.planner, info.status, dt, machine.axes,
                                              info.samples, stats_settings), meta)
                 clock["write"] += time.perf_counter() - t1
+    except PlanError as exc:
+        if exc.location.line == 0 and exc.location.file == SourceLocation().file:
+            raise PlanError(exc.message, _loc(name)) from None  # name the part program
+        raise
     finally:
         blocks.close()
     samples = info.samples
