@@ -308,8 +308,7 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
     from .gcode.stream import ProgramStream
     from .plan.machine_io import DEFAULT_PRESET, load_machine
     from .plan.settings import PlanSettings
-    from .plan.timeline import TimelineInfo, feed_of, iter_timeline
-    from .plan.verify import StreamVerifier
+    from .plan.timeline import TimelineInfo, iter_timeline
 
     t_start = time.perf_counter()
     out = opts.out or "-"
@@ -330,7 +329,7 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
     fit_settings = FitSettings.from_options(tol_mm=opts.tol_mm, machine=machine,
                                             method=opts.fit_method)
     fit_stats: dict = {}
-    clock = {"fit": 0.0, "verify": 0.0, "write": 0.0}
+    clock = {"fit": 0.0}
 
     def timed_fit(items):
         it = iter_fit(items, fit_settings, fit_stats)
@@ -350,73 +349,47 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
     info = TimelineInfo()
     blocks = iter_timeline(timed_fit(program), machine, settings, start_pos, window=window,
                            info=info, progress=progress, source=name, threads=threads)
-    verifier = StreamVerifier.for_machine(machine, dt)
-    first_row = None
-    last_s = 0.0
     mcap = out.lower().endswith(".mcap")
+
+    def violation(report):
+        _violation(report, name, PlanError)
+
+    sink = None
     try:
         with atomic_write(out) as fh:
-            def open_writer():
-                # only once the first samples are planned: a plan that fails at once
-                # writes nothing, not even a header, to standard output
+            from .export.sink import PlanSink
+
+            sink = PlanSink(fh, machine, dt, mcap, violation)
+            try:
+                for block in blocks:
+                    sink.put(block)
+                planner = None
+                meta = None
                 if mcap:
-                    from .export.mcap_io import McapPlanWriter
+                    from .export.mcap_io import planner_record
 
-                    return McapPlanWriter(fh, machine.axes, dt, machine)
-                from .export.csv_io import CsvPlanWriter
-
-                return CsvPlanWriter(fh, machine.axes)
-
-            writer = None
-            s_prev = None
-            for block in blocks:
-                if writer is None:
-                    writer = open_writer()
-                t0 = time.perf_counter()
-                ok = verifier.add(block.q)
-                t1 = time.perf_counter()
-                clock["verify"] += t1 - t0
-                if not ok:
-                    _violation(verifier.report(), name, PlanError)
-                t = np.arange(block.k0, block.k0 + block.n) * dt
-                feed = feed_of(block.s, s_prev, dt)
-                s_prev = float(block.s[-1])
-                if mcap:
-                    writer.write(t, block.s, feed, block.q, block.line)
-                else:
-                    writer.write(t, block.s, feed, block.q)
-                    if first_row is None:
-                        fh.flush()
-                if first_row is None:
-                    first_row = time.perf_counter() - t_start
-                clock["write"] += time.perf_counter() - t1
-                last_s = s_prev
-            report = verifier.report()
-            if not report.ok:
-                _violation(report, name, PlanError)
-            if writer is None:
-                writer = open_writer()
-            if mcap:
-                from .export.mcap_io import planner_record
-
-                t1 = time.perf_counter()
-                stats_settings = settings.to_dict()
-                stats_settings["stats"] = dict(info.stats)
-                meta = {"planner": settings.to_dict(), "input": input_meta}
-                writer.finish(planner_record(settings.planner, info.status, dt, machine.axes,
-                                             info.samples, stats_settings), meta)
-                clock["write"] += time.perf_counter() - t1
+                    stats_settings = settings.to_dict()
+                    stats_settings["stats"] = dict(info.stats)
+                    planner = planner_record(settings.planner, info.status, dt, machine.axes,
+                                             info.samples, stats_settings)
+                    meta = {"planner": settings.to_dict(), "input": input_meta}
+                report = sink.finish(planner, meta)
+            except BaseException:
+                sink.abort()
+                raise
     except PlanError as exc:
         if exc.location.line == 0 and exc.location.file == SourceLocation().file:
             raise PlanError(exc.message, _loc(name)) from None  # name the part program
         raise
     finally:
         blocks.close()
+    first_row = (sink.first_row_at - t_start) if sink.first_row_at is not None else None
+    last_s = sink.last_s
     samples = info.samples
     cycle = float((samples - 1) * dt) if samples else 0.0
     total = time.perf_counter() - t_start
     timings = {"parse": program.thread_cpu_s, "fit": clock["fit"], "plan": info.plan_cpu_s,
-               "verify": clock["verify"], "write": clock["write"],
+               "verify": sink.verify_s, "write": sink.write_s,
                "first_row": first_row if first_row is not None else total, "total": total}
     axis, kind, ratio, idx = report.worst()
     return {

@@ -25,20 +25,6 @@ class PlanFileError(CncInterpError):
     """A plan file (CSV) that cannot be read back: bad header, number or row length."""
 
 
-def _chunk_text(cols: list[np.ndarray], lo: int, hi: int) -> str:
-    # float.__repr__ on tolist() values is the fastest exact shortest-repr path
-    # in CPython (~10M values/s); joining column-wise lists keeps it in C loops.
-    strs = []
-    for c in cols:
-        part = c[lo:hi]
-        bits = part.view(np.uint64)
-        if part.size and (bits == bits[0]).all():  # axis at rest: one repr (bit-equal, so -0.0 kept)
-            strs.append([repr(float(part[0]))] * part.size)
-        else:
-            strs.append(list(map(repr, part.tolist())))
-    return "\n".join(map(",".join, zip(*strs))) + "\n"
-
-
 class CsvPlanWriter:
     """Writes a plan as CSV while it is planned: the header, then ``write`` blocks of
     samples in order. The bytes do not depend on how the samples are split into blocks."""
@@ -51,18 +37,23 @@ class CsvPlanWriter:
     def write(self, t, s, feed, q) -> None:
         """Append rows (t, s, feed (K,), q (K, n))."""
         q = np.asarray(q, dtype=float)
-        cols = [np.ascontiguousarray(t, dtype=float), np.ascontiguousarray(s, dtype=float),
-                np.ascontiguousarray(feed, dtype=float)]
-        cols += [np.ascontiguousarray(q[:, i]) for i in range(q.shape[1])]
-        k = cols[0].shape[0]
+        k = q.shape[0]
+        cols = np.empty((3 + q.shape[1], k))
+        cols[0] = t
+        cols[1] = s
+        cols[2] = feed
+        cols[3:] = q.T
         for lo in range(0, k, CSV_CHUNK_ROWS):
-            self.fh.write(format_rows(cols, lo, min(k, lo + CSV_CHUNK_ROWS)))
+            self.fh.write(format_rows(cols[:, lo:min(k, lo + CSV_CHUNK_ROWS)]))
         self.rows += k
 
 
-def format_rows(cols: list[np.ndarray], lo: int, hi: int) -> bytes:
-    """Rows lo..hi-1 of the columns as CSV text (``repr`` of each float, ``\\n`` ends)."""
-    return _chunk_text(cols, lo, hi).encode("ascii")
+def format_rows(cols: np.ndarray) -> bytes:
+    """The columns ``cols`` (ncol, K) as K CSV rows: ``repr`` of each float (compiled:
+    ``export._repr``), ``,`` between columns, ``\\n`` after each row."""
+    from ._repr import format_table
+
+    return format_table(cols)
 
 
 def write_csv_to(traj, fh: BinaryIO) -> int:
