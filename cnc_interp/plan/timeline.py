@@ -153,8 +153,9 @@ class _Workers:
     a thread, so a worker blocked on a full queue of a later job cannot stall it). Daemon
     threads never keep an interrupted process alive."""
 
-    def __init__(self, count: int, plan_chunks, info: TimelineInfo):
+    def __init__(self, count: int, plan_chunks, info: TimelineInfo, plan_many=None):
         self.info = info
+        self.plan_many = plan_many
         self.lock = threading.Lock()
         self.jobs: queue.Queue = queue.Queue()
         self.stop = threading.Event()
@@ -185,10 +186,9 @@ class _Workers:
                 return
             t0 = time.thread_time()
             try:
-                for i, path in enumerate(job.paths):
-                    for chunk in self.plan_chunks(path):
-                        if not self._put(job, (i, chunk)):
-                            return
+                for item in _plan_job(job, self.plan_chunks, self.plan_many):
+                    if not self._put(job, item):
+                        return
                 self._put(job, _DONE)
             except BaseException as exc:  # handed to the consumer, raised there
                 self._put(job, exc)
@@ -205,9 +205,10 @@ class _Workers:
 class _Inline:
     """The same interface without threads: a job is planned when it is consumed."""
 
-    def __init__(self, plan_chunks, info: TimelineInfo):
+    def __init__(self, plan_chunks, info: TimelineInfo, plan_many=None):
         self.plan_chunks = plan_chunks
         self.info = info
+        self.plan_many = plan_many
 
     def submit(self, job: _Job) -> None:
         pass
@@ -215,18 +216,30 @@ class _Inline:
     def results(self, job: _Job):
         import time
 
-        for i, path in enumerate(job.paths):
-            it = iter(self.plan_chunks(path))
-            while True:
-                t0 = time.thread_time()
-                chunk = next(it, None)
-                self.info.plan_cpu_s += time.thread_time() - t0
-                if chunk is None:
-                    break
-                yield i, chunk
+        it = _plan_job(job, self.plan_chunks, self.plan_many)
+        while True:
+            t0 = time.thread_time()
+            got = next(it, None)
+            self.info.plan_cpu_s += time.thread_time() - t0
+            if got is None:
+                break
+            yield got
 
     def close(self) -> None:
         pass
+
+
+def _plan_job(job: _Job, plan_chunks, plan_many):
+    """(path index, chunk) of a job's paths in order: the paths ``plan_many`` plans in one
+    call, the others through their planner's stream."""
+    pre = plan_many(job.paths) if plan_many is not None else None
+    for i, path in enumerate(job.paths):
+        got = pre[i] if pre is not None else None
+        if got is not None:
+            yield i, got
+            continue
+        for chunk in plan_chunks(path):
+            yield i, chunk
 
 
 def _job_results(pool, job: _Job):
@@ -324,6 +337,20 @@ def iter_timeline(items, machine, settings, start, window: Window | None = None,
     budget = WindowBudget(machine, dt, source, streams, window)
     pw = window.path_window
 
+    def plan_many(paths):
+        """VPOp's compiled batch for the paths it plans in joint = program space (rapids;
+        every path without kinematics when VPOp is the planner): the same samples."""
+        from .vpop import plan_many_vpop
+
+        sel = [i for i, p in enumerate(paths)
+               if p.rapid or (settings.planner == "vpop" and joint_map is None)]
+        out = [None] * len(paths)
+        if sel:
+            got = plan_many_vpop([paths[i] for i in sel], machine, dt, settings)
+            for i, g in zip(sel, got):
+                out[i] = g
+        return out
+
     def plan_chunks(item):
         if item.rapid:
             return iter_path_plan_vpop(item, None, machine, dt, settings, window=pw)
@@ -358,7 +385,8 @@ def iter_timeline(items, machine, settings, start, window: Window | None = None,
             yield "job", job
 
     workers = threads if threads is not None else _plan_threads()
-    pool = _Workers(workers, plan_chunks, info) if workers > 1 else _Inline(plan_chunks, info)
+    pool = (_Workers(workers, plan_chunks, info, plan_many) if workers > 1
+            else _Inline(plan_chunks, info, plan_many))
     ahead: deque = deque()
     source_units = units()
     in_flight = 0

@@ -242,8 +242,10 @@ VPOP_CHECKPOINT_SAMPLES = 1 << 16
 #: the backtracking looks back at most this many brake runs (``brake_cap`` samples each)
 #: before the failing step: a bounded look-ahead, so a long path streams in bounded memory
 VPOP_LOOKBACK_BRAKE_RUNS = 4
-#: samples kept before a checkpoint's last fixed sample (the stencils read 3 back)
-_CKPT_HISTORY = 8
+#: a streamed path's own buffer (samples; at least two checkpoints' worth is kept)
+VPOP_STREAM_WINDOW = 1 << 18
+#: paths whose rough sample estimate exceeds this are streamed, not planned in a batch
+VPOP_BATCH_MAX_SAMPLES = 1 << 17
 
 
 def _core():
@@ -252,40 +254,96 @@ def _core():
     return vpop_core
 
 
+def _machine_consts(machine, dt: float) -> dict:
+    """Per-machine inputs of the preparation, computed once in Python (the same float
+    operations as before the compiled path existed)."""
+    shrink = 1.0 - VPOP_LIMIT_SHRINK
+    ramp = float(np.max(machine.vmax / machine.amax + machine.amax / machine.jmax))
+    return dict(
+        shrink=shrink,
+        vl0=np.ascontiguousarray(machine.vmax * dt * shrink, dtype=float),
+        al0=np.ascontiguousarray(machine.amax * dt * dt * shrink, dtype=float),
+        jl0=np.ascontiguousarray(machine.jmax * dt**3 * shrink, dtype=float),
+        jl_floor=np.ascontiguousarray(0.5 * machine.jmax * dt**3, dtype=float),
+        vmax=np.ascontiguousarray(machine.vmax, dtype=float),
+        ramp=ramp, brake_cap=8 * int(ramp / dt) + 4096)
+
+
+def _fast(settings) -> bool:
+    get = getattr(settings, "get", lambda *_: None)
+    return bool(get("vpop_exact") is not True)
+
+
 class _Prepared:
     """Everything the step loop of one path needs (limits in step units, the joint table
-    and its bounds, the feed per segment, buffer sizes). See ``plan_path_vpop``."""
+    and its bounds, the feed per segment, sizes). Identity kinematics: one compiled call
+    (``vpop_drive.prepare_identity``); other kinematics: the table through the joint map."""
 
     def __init__(self, path, joint_map, machine, dt_s: float, settings):
-        core = _core()
+        from . import vpop_drive as D
+
         if path.rapid:
             joint_map = None
         self.path = path
-        n = path.n_axes
-        dt = float(dt_s)
-        self.n, self.dt = n, dt
-        shrink = 1.0 - VPOP_LIMIT_SHRINK
-        vl = np.ascontiguousarray(machine.vmax * dt * shrink, dtype=float)
-        al = np.ascontiguousarray(machine.amax * dt * dt * shrink, dtype=float)
-        jl = np.ascontiguousarray(machine.jmax * dt**3 * shrink, dtype=float)
+        self.n = n = path.n_axes
+        self.dt = dt = float(dt_s)
+        mc = _machine_consts(machine, dt)
+        self.brake_cap = mc["brake_cap"]
+        self.fast = _fast(settings)
+        self.trivial = False
+        identity = joint_map is None or getattr(joint_map, "is_identity", False)
+        if identity:
+            r = D.prepare_identity(path.coef, path.breaks, path.s_breaks, path.weights,
+                                   float(path.length), path.feed_mm_s, mc["vl0"], mc["al0"],
+                                   mc["jl0"], mc["jl_floor"], mc["vmax"], mc["ramp"], dt,
+                                   mc["brake_cap"], VPOP_LOOKBACK_BRAKE_RUNS, mc["shrink"],
+                                   float(VPOP_TABLE_TOL), VPOP_TABLE_MAX_ROUNDS - 1,
+                                   float(VPOP_TABLE_MAX_PIECE), _GL_X, _GL_W, VPOP_TABLE_MAX_TRIES,
+                                   float(VPOP_ROUNDING_ULPS), float(VPOP_BRAKE_JERK_FRACTION),
+                                   float(VPOP_AIM_GAP_JERK_STEPS), float(VPOP_MIN_LENGTH))
+            status = r[0]
+            if status == D.PREP_NOT_FINITE_PATH:
+                raise PlanError(f"bug: the fitted path ending at line {int(path.line[-1])} is "
+                                "not finite")
+            if status == D.PREP_TRIVIAL:
+                self.trivial = True
+                self.q0 = _positions(path, path.breaks[:1], None)
+                return
+            if status == D.PREP_NO_LENGTH:
+                _no_length(path)
+            if status == D.PREP_TABLE_NOT_FINITE:
+                raise PlanError(f"bug: the arc-length table of the path ending at line "
+                                f"{int(path.line[-1])} is not finite (a point of zero speed?)")
+            if status == D.PREP_JERK_TOO_SMALL:
+                raise PlanError(f"the jerk limits are too small for dt = {dt:g} s at positions "
+                                f"of {r[-1]:g} mm/deg: float64 cannot resolve them")
+            (_, self.S, self.C_axis_major, self.qend, self.qstart, self.vl, self.al, self.jl,
+             self.js, self.FB, self.FV, self.K2, self.K3, self.K23, self.KV, self.tol,
+             self.gap_tol, self.est, self.max_steps, self.floor_h, self.pieces,
+             self.max_err) = r
+            self.L = float(path.length)
+            return
+        self._prepare_mapped(path, joint_map, machine, dt, mc)
+
+    def _prepare_mapped(self, path, joint_map, machine, dt, mc):
+        core = _core()
         if not (np.isfinite(path.length) and np.all(np.isfinite(path.coef))):
             raise PlanError(f"bug: the fitted path ending at line {int(path.line[-1])} is not finite")
-        self.trivial = path.length <= VPOP_MIN_LENGTH
-        if self.trivial:
+        if path.length <= VPOP_MIN_LENGTH:
+            self.trivial = True
             self.q0 = _positions(path, path.breaks[:1], joint_map)
             return
         table = JointTable(path, joint_map)
-        self.table = table
         # Absolute margin for float rounding: a few ulps of the positions, times the 8 of
         # the jerk stencil (1, 3, 3, 1), so that one-ulp differences between what the loop
         # checked and what reaches verify (joins between paths, re-evaluated end points)
         # cannot push a low limit (jmax * dt**3 ~ 1e-6 mm) past its ratio slack.
         q_scale = 1.0 + float(np.max(np.abs(table.C[:, 0, :])))
         margin = VPOP_ROUNDING_ULPS * np.finfo(float).eps * q_scale
-        vl = np.ascontiguousarray(vl - 2.0 * margin)
-        al = np.ascontiguousarray(al - 4.0 * margin)
-        jl = np.ascontiguousarray(jl - 8.0 * margin)
-        if np.any(jl <= 0.5 * machine.jmax * dt**3):
+        vl = np.ascontiguousarray(mc["vl0"] - 2.0 * margin)
+        al = np.ascontiguousarray(mc["al0"] - 4.0 * margin)
+        jl = np.ascontiguousarray(mc["jl0"] - 8.0 * margin)
+        if np.any(jl <= mc["jl_floor"]):
             raise PlanError(f"the jerk limits are too small for dt = {dt:g} s at positions of "
                             f"{q_scale:g} mm/deg: float64 cannot resolve them")
         self.vl, self.al, self.jl = vl, al, jl
@@ -293,15 +351,14 @@ class _Prepared:
         self.L = L
         FB = np.ascontiguousarray(path.s_breaks, dtype=float).copy()
         FB[-1] = L
-        FV = np.where(np.isfinite(path.feed_mm_s) & (path.feed_mm_s > 0), path.feed_mm_s * shrink, 1e300)
+        FV = np.where(np.isfinite(path.feed_mm_s) & (path.feed_mm_s > 0),
+                      path.feed_mm_s * mc["shrink"], 1e300)
         self.FB, self.FV = FB, np.ascontiguousarray(FV, dtype=float)
         # rough duration: travel at the slowest of feed and axis speeds, plus ramps
         dq = np.abs(table.qend - table.qstart)
         tv = float(np.max(dq / machine.vmax)) + L / float(np.min(self.FV))
-        ramp = float(np.max(machine.vmax / machine.amax + machine.amax / machine.jmax))
-        est = int((tv + 2 * ramp) / dt) + 16
+        est = int((tv + 2 * mc["ramp"]) / dt) + 16
         self.est = est
-        self.brake_cap = 8 * int(ramp / dt) + 4096
         self.max_steps = 200 * est + 100_000
         self.floor_h = VPOP_LOOKBACK_BRAKE_RUNS * self.brake_cap
         self.tol = max(4.0 * np.spacing(max(L, 1.0)), 1e-7 * float(np.min(jl)))
@@ -310,157 +367,67 @@ class _Prepared:
                                       for x in table.curvature_bounds(al, jl))
         self.KV = core.range_max_table(table.speed_bounds(vl, path, self.FV * dt))
         self.gap_tol = VPOP_AIM_GAP_JERK_STEPS * float(np.min(jl))
-        get = getattr(settings, "get", lambda *_: None)
-        self.fast = bool(get("vpop_exact") is not True)
+        self.S = table.S
         self.C_axis_major = np.ascontiguousarray(table.C.transpose(0, 2, 1))  # (m, n, 6)
+        self.qend = table.qend
+        self.qstart = table.qstart
+        self.pieces = int(table.C.shape[0])
+        self.max_err = float(table.max_err)
 
 
-class _Checkpoint:
-    """The step loop's state at a sample, global indices: state ``st``, certificate
-    ``cs``/``cq``, and the samples from ``lo`` on (``sh``, ``qh``)."""
-
-    __slots__ = ("st", "cs", "cq", "lo", "sh", "qh", "first")
-
-    def __init__(self, st, cs, cq, lo, sh, qh, first):
-        self.st, self.cs, self.cq, self.lo, self.sh, self.qh = st, cs, cq, lo, sh, qh
-        self.first = first
-
-
-def _shift_state(st: np.ndarray, delta: int) -> np.ndarray:
-    """``st`` with its sample indices moved by ``delta`` (local <-> global)."""
-    core = _core()
-    out = st.copy()
-    for i in (core.ST_K, core.ST_B, core.ST_LASTK, core.ST_LASTJ):
-        out[i] += delta
-    if st[core.ST_CAT] >= 0:
-        out[core.ST_CAT] = st[core.ST_CAT] + delta
-    if st[core.ST_CERT] < core._BIG // 2:
-        out[core.ST_CERT] += delta
-    return out
-
-
-class _StepLoop:
-    """Runs ``vpop_core.plan_core`` over buffers that grow, or slide when ``window`` (samples)
-    is reached, keeping a checkpoint every ``VPOP_CHECKPOINT_SAMPLES``: a fast-mode failure
-    re-plans exactly from the last checkpoint. Samples before the checkpoint's look-back
-    are final; ``run`` returns them as they come free (or all of them at the end)."""
+class _Loop:
+    """The step loop of one path (``vpop_drive.drive``): buffers that grow, or slide when
+    ``window`` (samples) is set, checkpoints every ``VPOP_CHECKPOINT_SAMPLES``."""
 
     def __init__(self, prep: _Prepared, window: int | None):
-        core = _core()
+        from . import vpop_drive as D
+
+        self.D = D
         self.p = prep
-        n = prep.n
-        self.room = prep.brake_cap + 8
-        cap = max(64, 2 * prep.est) + self.room + 16
-        # a sliding buffer holds a checkpoint's look-back, an epoch and a brake run
-        self.max_cap = None if window is None else max(
-            int(window), 2 * (VPOP_CHECKPOINT_SAMPLES + prep.floor_h + self.room + 64))
-        if self.max_cap is not None:
-            cap = min(cap, self.max_cap)
-        self.sh = np.zeros(cap)
-        self.qh = np.zeros((cap, n))
-        self.qh[0] = prep.table.qstart
-        self.base = 0
-        self.st = core.new_state()
-        self.cs = np.empty(prep.brake_cap)
-        self.cq = np.empty((prep.brake_cap, n))
-        self.bs = np.zeros(prep.brake_cap)
-        self.bq = np.zeros((prep.brake_cap, n))
-        self.stats = np.zeros(5, dtype=np.int64)
-        self.fast = prep.fast
-        self.easy = VPOP_EASY_FRACTION if self.fast else 0.0
-        self.next_ck = VPOP_CHECKPOINT_SAMPLES
-        self.ck = self._checkpoint(first=True)
-        self.handed = 0  # global index of the first sample not yet returned
-
-    def _checkpoint(self, first: bool = False) -> _Checkpoint:
-        core = _core()
-        st = self.st
-        lo_l = max(int(st[core.ST_B]) - _CKPT_HISTORY, 0)
-        k_l = int(st[core.ST_K])
-        return _Checkpoint(_shift_state(st, self.base), self.cs.copy(), self.cq.copy(),
-                           lo_l + self.base, self.sh[lo_l:k_l].copy(), self.qh[lo_l:k_l].copy(),
-                           first)
-
-    def _restore(self) -> None:
-        ck = self.ck
-        lo_l = ck.lo - self.base  # >= 0: nothing at or after ck.lo was ever handed out
-        m = ck.sh.shape[0]
-        self.sh[lo_l:lo_l + m] = ck.sh
-        self.qh[lo_l:lo_l + m] = ck.qh
-        self.st = _shift_state(ck.st, -self.base)
-        self.cs[:] = ck.cs
-        self.cq[:] = ck.cq
-        if ck.first:
-            self.stats[:] = 0
-
-    def _make_room(self) -> None:
-        """Slide the buffer past the samples that are final and handed out (when a window
-        is set and there are any), else grow it."""
-        core = _core()
-        k_l = int(self.st[core.ST_K])
-        cap = self.sh.shape[0]
-        shift = min(self.ck.lo, self.handed) - self.base
-        if self.max_cap is not None and shift > 0 and k_l - shift + self.room + 16 < cap:
-            keep = slice(shift, k_l)
-            self.sh[:k_l - shift] = self.sh[keep]
-            self.qh[:k_l - shift] = self.qh[keep]
-            self.st = _shift_state(self.st, -shift)
-            self.base += shift
-            return
-        grow = max(2 * cap, k_l + self.room + 16)
-        sh = np.zeros(grow)
-        qh = np.zeros((grow, self.p.n))
-        sh[:k_l] = self.sh[:k_l]
-        qh[:k_l] = self.qh[:k_l]
-        self.sh, self.qh = sh, qh
-
-    def final_until(self) -> int:
-        """Global index before which every sample is final."""
-        return self.ck.lo
-
-    def take(self, upto: int) -> tuple[np.ndarray, np.ndarray]:
-        """Copies of the samples from the last handed-out one up to global ``upto``."""
-        a, b = self.handed - self.base, upto - self.base
-        self.handed = upto
-        return self.sh[a:b].copy(), self.qh[a:b].copy()
+        room = prep.brake_cap + 8
+        (self.sh, self.qh, self.st, self.cs, self.cq, self.bs, self.bq, self.stats, self.ds,
+         self.ck_st, self.ck_cs, self.ck_cq, self.ck_sh, self.ck_qh, self.max_cap) = D.new_loop(
+            prep.n, prep.qstart, prep.est, prep.brake_cap, prep.floor_h, room,
+            0 if window is None else max(1, int(window)), VPOP_CHECKPOINT_SAMPLES)
+        self.ds[D.DS_NEXT_CK] = VPOP_CHECKPOINT_SAMPLES
+        self.ds[D.DS_FAST] = 1 if prep.fast else 0
+        D.checkpoint(self.sh, self.qh, self.st, self.cs, self.cq, self.ds, self.ck_st,
+                     self.ck_cs, self.ck_cq, self.ck_sh, self.ck_qh, True)
 
     def run(self) -> int:
-        """Step until the path is done (returns the global end index k) or samples have
-        come free while the buffer is full (returns -1: call ``take`` then ``run`` again)."""
-        core = _core()
-        p = self.p
-        while True:
-            status = core.plan_core(p.table.S, p.C_axis_major, p.table.qend, p.vl, p.al, p.jl,
-                                    p.js, p.dt, p.L, p.FB, p.FV, self.sh, self.qh, self.st,
-                                    self.cs, self.cq, p.tol, p.max_steps, self.bs, self.bq,
-                                    self.stats, p.K2, p.K3, p.K23, p.KV, self.easy, p.gap_tol,
-                                    self.fast, VPOP_CHAIN_SEQUENTIAL, p.floor_h,
-                                    self.next_ck - self.base, self.base)
-            if status == core.OK:
-                return int(self.st[core.ST_K]) + self.base
-            if status == core.YIELD:
-                self.ck = self._checkpoint()
-                self.next_ck += VPOP_CHECKPOINT_SAMPLES
-                continue
-            if status == core.NEED_SPACE:
-                if self.max_cap is not None and self.handed < self.ck.lo:
-                    return -1  # hand out the final samples before the buffer slides past them
-                self._make_room()
-                continue
-            if self.fast:
-                # a shortened brake run misjudged a state: plan exactly from the checkpoint
-                self.fast = False
-                self.easy = 0.0
-                self._restore()
-                continue
+        D, p = self.D, self.p
+        res, self.sh, self.qh = D.drive(
+            p.S, p.C_axis_major, p.qend, p.vl, p.al, p.jl, p.js, p.dt, p.L, p.FB, p.FV, p.tol,
+            p.max_steps, p.K2, p.K3, p.K23, p.KV, p.gap_tol, p.floor_h, VPOP_EASY_FRACTION,
+            VPOP_CHAIN_SEQUENTIAL, VPOP_CHECKPOINT_SAMPLES, self.sh, self.qh, self.st, self.cs,
+            self.cq, self.bs, self.bq, self.stats, self.ds, self.ck_st, self.ck_cs, self.ck_cq,
+            self.ck_sh, self.ck_qh, self.max_cap)
+        if res == D.FAILED:
+            core = _core()
+            status = int(self.ds[D.DS_STATUS])
             k = int(self.st[core.ST_K])
             what = {core.STUCK: "made no progress", core.INFEASIBLE: "found no feasible step"}[status]
             raise PlanError(f"VPOp {what} on the path ending at line {int(p.path.line[-1])} "
                             f"(s = {self.sh[max(k - 1, 0)]:.6g} of {p.L:.6g})")
+        return res
+
+    def take(self, upto: int) -> tuple[np.ndarray, np.ndarray]:
+        """Copies of the samples from the last handed-out one up to global ``upto``."""
+        D = self.D
+        base, handed = int(self.ds[D.DS_BASE]), int(self.ds[D.DS_HANDED])
+        a, b = handed - base, upto - base
+        self.ds[D.DS_HANDED] = upto
+        return self.sh[a:b].copy(), self.qh[a:b].copy()
+
+
+def _final_stats(samples: int, st, exact: bool, pieces: int, max_err: float) -> dict:
+    return {"samples": int(samples), "backtracks": int(st[0]), "brake_runs": int(st[1]),
+            "brake_steps": int(st[2]), "max_steps": int(st[3]), "aim_runs": int(st[4]),
+            "exact": bool(exact), "table_pieces": int(pieces), "table_err": float(max_err)}
 
 
 def iter_path_plan_vpop(path, joint_map, machine, dt_s: float, settings=None,
-                        window: int | None = None):
+                        window: int | None = VPOP_STREAM_WINDOW):
     """VPOp on one path as a stream of ``PathPlan`` chunks (see ``plan.base``).
 
     Samples are handed out as soon as no later step can change them: the backtracking
@@ -474,29 +441,64 @@ def iter_path_plan_vpop(path, joint_map, machine, dt_s: float, settings=None,
     if prep.trivial:
         yield PathPlan(s=np.zeros(1), q=prep.q0, stats={"samples": 1})
         return
-    loop = _StepLoop(prep, window)
-    while True:
-        end = loop.run()
-        if end >= 0:
-            break
-        s, q = loop.take(loop.final_until())
+    loop = _Loop(prep, window)
+    D = loop.D
+    while loop.run() == D.HAND_OUT:
+        s, q = loop.take(int(loop.ds[D.DS_CK_LO]))
         if s.size:
             yield PathPlan(s=s, q=q, last=False)
-    # trailing repeats of the end point are the rest the contract already implies
-    L = prep.L
-    sh, base = loop.sh, loop.base
-    last = end - 1
-    while last > loop.handed and sh[last - 1 - base] == L:
-        last -= 1
-    s, q = loop.take(last + 1)
-    q[-1] = prep.table.qend
-    st = loop.stats
-    yield PathPlan(s=s, q=q, stats={
-        "samples": int(last + 1), "backtracks": int(st[0]), "brake_runs": int(st[1]),
-        "brake_steps": int(st[2]), "max_steps": int(st[3]), "aim_runs": int(st[4]),
-        "exact": not loop.fast,
-        "table_pieces": int(prep.table.C.shape[0]), "table_err": float(prep.table.max_err),
-    })
+    ds = loop.ds
+    last = D.end_index(loop.sh, ds[D.DS_BASE], ds[D.DS_HANDED], ds[D.DS_END], prep.L)
+    s, q = loop.take(int(last) + 1)
+    q[-1] = prep.qend
+    yield PathPlan(s=s, q=q, stats=_final_stats(last + 1, loop.stats, ds[D.DS_FAST] == 0,
+                                                prep.pieces, prep.max_err))
+
+
+def plan_many_vpop(paths, machine, dt_s: float, settings=None,
+                   long_samples: int = VPOP_BATCH_MAX_SAMPLES):
+    """VPOp on consecutive paths whose joints are the program axes (no kinematics, or
+    rapids), in one compiled call: the same samples as ``iter_path_plan_vpop`` for each.
+    Returns one ``PathPlan`` per path, or ``None`` for a path left to
+    ``iter_path_plan_vpop`` (a long one, which should stream, or one whose preparation
+    fails, so that the right error is raised there)."""
+    from . import vpop_drive as D
+
+    if not paths:
+        return []
+    dt = float(dt_s)
+    mc = _machine_consts(machine, dt)
+    n_seg = np.array([p.n_seg for p in paths], dtype=np.int64)
+    seg_off = np.zeros(len(paths) + 1, dtype=np.int64)
+    np.cumsum(n_seg, out=seg_off[1:])
+    coef = np.concatenate([p.coef for p in paths])
+    breaks = np.concatenate([p.breaks for p in paths])
+    s_breaks = np.concatenate([p.s_breaks for p in paths])
+    weights = np.array([p.weights for p in paths], dtype=float)
+    lengths = np.array([p.length for p in paths], dtype=float)
+    feed = np.concatenate([p.feed_mm_s for p in paths])
+    done, off, s_all, q_all, pstats, perr = D.plan_identity_batch(
+        coef, breaks, s_breaks, weights, lengths, feed, seg_off, mc["vl0"], mc["al0"],
+        mc["jl0"], mc["jl_floor"], mc["vmax"], mc["ramp"], dt, mc["brake_cap"],
+        VPOP_LOOKBACK_BRAKE_RUNS, mc["shrink"], float(VPOP_TABLE_TOL), VPOP_TABLE_MAX_ROUNDS - 1,
+        float(VPOP_TABLE_MAX_PIECE), _GL_X, _GL_W, VPOP_TABLE_MAX_TRIES, float(VPOP_ROUNDING_ULPS),
+        float(VPOP_BRAKE_JERK_FRACTION), float(VPOP_AIM_GAP_JERK_STEPS), float(VPOP_MIN_LENGTH),
+        VPOP_EASY_FRACTION, VPOP_CHAIN_SEQUENTIAL, VPOP_CHECKPOINT_SAMPLES, _fast(settings),
+        int(long_samples))
+    out = []
+    offs = off.tolist()
+    for i, ok in enumerate(done.tolist()):
+        if not ok:
+            out.append(None)
+            continue
+        a, b = offs[i], offs[i + 1]
+        st = pstats[i]
+        if st[6] < 0:
+            out.append(PathPlan(s=s_all[a:b], q=q_all[a:b], stats={"samples": 1}))
+            continue
+        out.append(PathPlan(s=s_all[a:b], q=q_all[a:b],
+                            stats=_final_stats(b - a, st, bool(st[5]), int(st[6]), float(perr[i]))))
+    return out
 
 
 def plan_path_vpop(path, joint_map, machine, dt_s: float, settings=None) -> PathPlan:
@@ -508,4 +510,5 @@ def plan_path_vpop(path, joint_map, machine, dt_s: float, settings=None) -> Path
     after, and every backward-difference limit holds. The same samples as the chunks
     of ``iter_path_plan_vpop``.
     """
-    return collect_path_plan(iter_path_plan_vpop(path, joint_map, machine, dt_s, settings))
+    return collect_path_plan(iter_path_plan_vpop(path, joint_map, machine, dt_s, settings,
+                                                 window=None))
