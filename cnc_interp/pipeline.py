@@ -293,8 +293,8 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
     bytes do not depend on ``window`` or ``threads``.
 
     Returns the summary (``PlanOutcome.summary``'s keys) with ``timings_s``: ``parse``
-    (the parse thread's CPU time), ``fit`` (time in the fit, waits for the parse
-    excluded), ``plan`` (the planning threads' CPU time), ``verify``, ``write``,
+    (the parse thread's CPU time), ``fit`` (the fit
+    thread's CPU time), ``plan`` (the planning threads' CPU time), ``verify``, ``write``,
     ``first_row`` (from the start until the first samples were written) and ``total``
     (wall time). Raises ``PlanError`` (exit 1) when a block violates a limit (a bug),
     before that block is written.
@@ -308,7 +308,7 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
     from .gcode.stream import ProgramStream
     from .plan.machine_io import DEFAULT_PRESET, load_machine
     from .plan.settings import PlanSettings
-    from .plan.timeline import TimelineInfo, iter_timeline
+    from .plan.timeline import Prefetch, TimelineInfo, iter_timeline
 
     t_start = time.perf_counter()
     out = opts.out or "-"
@@ -329,25 +329,13 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
     fit_settings = FitSettings.from_options(tol_mm=opts.tol_mm, machine=machine,
                                             method=opts.fit_method)
     fit_stats: dict = {}
-    clock = {"fit": 0.0}
-
-    def timed_fit(items):
-        it = iter_fit(items, fit_settings, fit_stats)
-        while True:
-            t0 = time.perf_counter()
-            waited = program.wait_s
-            try:
-                item = next(it)
-            except StopIteration:
-                clock["fit"] += time.perf_counter() - t0 - (program.wait_s - waited)
-                return
-            clock["fit"] += time.perf_counter() - t0 - (program.wait_s - waited)
-            yield item
+    # the fit runs in a thread of its own, a bounded number of items ahead
+    fitted = Prefetch(iter_fit(program, fit_settings, fit_stats))
 
     n = machine.n_axes
     start_pos = np.zeros(n) if machine.start is None else np.asarray(machine.start, dtype=float)
     info = TimelineInfo()
-    blocks = iter_timeline(timed_fit(program), machine, settings, start_pos, window=window,
+    blocks = iter_timeline(fitted, machine, settings, start_pos, window=window,
                            info=info, progress=progress, source=name, threads=threads)
     mcap = out.lower().endswith(".mcap")
 
@@ -383,12 +371,13 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
         raise
     finally:
         blocks.close()
+        fitted.close()
     first_row = (sink.first_row_at - t_start) if sink.first_row_at is not None else None
     last_s = sink.last_s
     samples = info.samples
     cycle = float((samples - 1) * dt) if samples else 0.0
     total = time.perf_counter() - t_start
-    timings = {"parse": program.thread_cpu_s, "fit": clock["fit"], "plan": info.plan_cpu_s,
+    timings = {"parse": program.thread_cpu_s, "fit": fitted.cpu_s, "plan": info.plan_cpu_s,
                "verify": sink.verify_s, "write": sink.write_s,
                "first_row": first_row if first_row is not None else total, "total": total}
     axis, kind, ratio, idx = report.worst()

@@ -359,9 +359,12 @@ def iter_timeline(items, machine, settings, start, window: Window | None = None,
         return planner(item, joint_map, machine, dt, settings)
 
     def units():
-        """Jobs of consecutive paths, and the dwells and stops between them."""
+        """Jobs of consecutive paths, and the dwells and stops between them. The first
+        jobs are small (the first samples come out early), then each doubles up to the
+        window's size."""
         job: list = []
         est = 0.0
+        limit = [1, 1.0]  # paths, samples of the job being filled
         for item in items:
             if isinstance(item, Path):
                 if joint_map is not None and item.rapid:
@@ -371,9 +374,11 @@ def iter_timeline(items, machine, settings, start, window: Window | None = None,
                                     f"{machine.axes}")
                 job.append(item)
                 est += budget.rough_samples(item)
-                if len(job) >= window.job_paths or est >= window.job_samples:
+                if len(job) >= min(limit[0], window.job_paths) or \
+                        est >= min(limit[1], window.job_samples):
                     yield "job", job
                     job, est = [], 0.0
+                    limit = [2 * limit[0], 2.0 * max(limit[1], 64.0)]
             elif isinstance(item, (Dwell, Stop)):
                 if job:
                     yield "job", job
@@ -397,9 +402,13 @@ def iter_timeline(items, machine, settings, start, window: Window | None = None,
     s_off = 0.0
     stats = info.stats
 
+    ready = getattr(items, "ready", None)  # a prefetching source tells if a pull would wait
+
     def refill():
         nonlocal in_flight, exhausted
         while not exhausted and in_flight < max(1, window.jobs_ahead):
+            if ahead and ready is not None and not ready():
+                break  # consume what is planned rather than wait for the fit
             u = next(source_units, None)
             if u is None:
                 exhausted = True
@@ -537,3 +546,59 @@ def trajectory_of(blocks, machine, settings, info: TimelineInfo) -> Trajectory:
     return Trajectory(axes=machine.axes, dt_s=dt, t=np.arange(k) * dt, s=s,
                       feed=feed_of(s, None, dt), q=q, line=line, planner=settings.planner,
                       settings=settings_dict, status=info.status, profiles=info.profiles or None)
+
+
+class Prefetch:
+    """Iterates ``iterable`` in a thread of its own, ``ahead`` items ahead: the fit runs
+    while the timeline hands out samples, and ``ready()`` tells the timeline whether the
+    next item is there (so that it consumes planned samples instead of waiting). The
+    thread's CPU time is ``cpu_s``; an exception is raised where the consumer reaches it."""
+
+    def __init__(self, iterable, ahead: int = 4096):
+        self.q: queue.Queue = queue.Queue(maxsize=max(1, ahead))
+        self.cpu_s = 0.0
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._run, args=(iterable,), daemon=True,
+                                       name="cnc-interp-fit")
+        self.thread.start()
+
+    def _put(self, value) -> bool:
+        while not self.stop.is_set():
+            try:
+                self.q.put(value, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def _run(self, iterable) -> None:
+        import time
+
+        t0 = time.thread_time()
+        try:
+            for item in iterable:
+                if not self._put(("item", item)):
+                    return
+            self._put(("end", None))
+        except BaseException as exc:
+            self._put(("error", exc))
+        finally:
+            self.cpu_s = time.thread_time() - t0
+
+    def ready(self) -> bool:
+        return not self.q.empty()
+
+    def __iter__(self):
+        try:
+            while True:
+                kind, value = self.q.get()
+                if kind == "end":
+                    return
+                if kind == "error":
+                    raise value
+                yield value
+        finally:
+            self.close()
+
+    def close(self) -> None:
+        self.stop.set()
