@@ -312,6 +312,7 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
 
     t_start = time.perf_counter()
     out = opts.out or "-"
+    _warm_kernels()
     machine = load_machine(opts.machine_spec if opts.machine_spec is not None else DEFAULT_PRESET)
     start = opts.start
     if isinstance(start, str):
@@ -388,6 +389,32 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
         "status": info.status, "timings_s": timings, "fit_method": fit_stats.get("method"),
         "x_real_time": (cycle / total) if total > 0 else None,
     }
+
+
+def _warm_kernels() -> None:
+    """Load the planner's and the CSV formatter's compiled kernels in a thread while the
+    program is read: loading them takes about a second, and the first rows wait for it."""
+    import threading
+
+    def load():
+        try:
+            from .export._repr import format_table
+            from .plan import vpop_drive
+
+            format_table(np.zeros((1, 1)))
+            vpop_drive.plan_identity_batch  # noqa: B018 - the import loads the module
+            from .plan.machine_io import DEFAULT_PRESET, load_machine
+            from .plan.vpop import plan_many_vpop
+            from .fit import fit_run
+            from .gcode import read_program
+
+            m = load_machine(DEFAULT_PRESET)
+            prog = read_program(b"G21 G90\nG0 X1\n", "warm", axes=m.axes, start=m.start)
+            plan_many_vpop(fit_run(prog.runs[0]), m, m.dt_s)
+        except Exception:  # noqa: BLE001 - only a head start; the real call reports errors
+            pass
+
+    threading.Thread(target=load, daemon=True, name="cnc-interp-warm").start()
 
 
 def _violation(report, name: str, error) -> None:

@@ -229,6 +229,23 @@ class _Inline:
         pass
 
 
+_FLUSH = object()
+
+
+def _closing(items, ready, pending):
+    """``items``, with ``_FLUSH`` before a pull that would wait for the fit while a job is
+    being filled (jobs only group paths for the workers: where they end changes no sample)."""
+    it = iter(items)
+    while True:
+        if ready is not None and pending() and not ready():
+            yield _FLUSH
+        try:
+            item = next(it)
+        except StopIteration:
+            return
+        yield item
+
+
 def _plan_job(job: _Job, plan_chunks, plan_many):
     """(path index, chunk) of a job's paths in order: the paths ``plan_many`` plans in one
     call, the others through their planner's stream."""
@@ -358,6 +375,8 @@ def iter_timeline(items, machine, settings, start, window: Window | None = None,
             return planner(item, joint_map, machine, dt, settings, window=pw)
         return planner(item, joint_map, machine, dt, settings)
 
+    ready = getattr(items, "ready", None)  # a prefetching source tells if a pull would wait
+
     def units():
         """Jobs of consecutive paths, and the dwells and stops between them. The first
         jobs are small (the first samples come out early), then each doubles up to the
@@ -365,7 +384,11 @@ def iter_timeline(items, machine, settings, start, window: Window | None = None,
         job: list = []
         est = 0.0
         limit = [1, 1.0]  # paths, samples of the job being filled
-        for item in items:
+        for item in _closing(items, ready, lambda: bool(job)):
+            if item is _FLUSH:  # the fit has nothing yet: plan what is there
+                yield "job", job
+                job, est = [], 0.0
+                continue
             if isinstance(item, Path):
                 if joint_map is not None and item.rapid:
                     item = _joint_rapid(item, kin)
@@ -401,8 +424,6 @@ def iter_timeline(items, machine, settings, start, window: Window | None = None,
     last_line = 0
     s_off = 0.0
     stats = info.stats
-
-    ready = getattr(items, "ready", None)  # a prefetching source tells if a pull would wait
 
     def refill():
         nonlocal in_flight, exhausted

@@ -12,6 +12,16 @@
    and ``verify`` checks exactly these numbers.
 2. ``vpop_core.plan_core`` (numba) runs the step loop: max step in the allowed
    set, dichotomy back to the last step from which a brake reaches rest.
+
+Streaming (``iter_path_plan_vpop``): the loop keeps its state across calls, so where its
+buffers end never changes a sample; the backtracking looks back at most
+``VPOP_LOOKBACK_BRAKE_RUNS`` brake runs, and a fast-mode failure is re-planned exactly
+from the last checkpoint (one every ``VPOP_CHECKPOINT_SAMPLES``; the path's start on
+shorter paths, as before), so the samples before the last checkpoint are final and are
+handed out while the rest of the path is planned. ``vpop_drive`` holds the compiled
+driver and, for identity kinematics, the compiled preparation; ``plan_many_vpop`` plans
+many short paths in one call (the same samples). ``plan_path_vpop`` is the stream
+collected.
 """
 
 from __future__ import annotations
