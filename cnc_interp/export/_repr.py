@@ -242,9 +242,19 @@ def _put_repr(x, buf, p, digits, inv, pos):
         return p + 3
     out, e10 = _d2d(mant, expo, inv, pos)
     nd = 0
-    while out != _U0:
-        digits[nd] = np.int64(out % _U10)
-        out //= _U10
+    while out >= np.uint64(100):  # two digits per (constant) division
+        r = np.int64(out % np.uint64(100))
+        out //= np.uint64(100)
+        digits[nd] = r % 10
+        digits[nd + 1] = r // 10
+        nd += 2
+    r = np.int64(out)
+    if r >= 10:
+        digits[nd] = r % 10
+        digits[nd + 1] = r // 10
+        nd += 2
+    elif r > 0:
+        digits[nd] = r
         nd += 1
     # digits[nd-1] is the leading digit; value = 0.d1d2... * 10^decpt
     decpt = nd + e10

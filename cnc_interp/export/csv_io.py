@@ -19,6 +19,8 @@ from ..errors import CncInterpError, SourceLocation
 from .atomic import atomic_write
 
 _FIXED = ("t", "s", "feed")
+#: blocks of at least this many rows are formatted in two halves on two threads
+CSV_SPLIT_ROWS = 8192
 
 
 class PlanFileError(CncInterpError):
@@ -32,6 +34,7 @@ class CsvPlanWriter:
     def __init__(self, fh: BinaryIO, axes: str):
         self.fh = fh
         self.rows = 0
+        self._pool = None
         fh.write((",".join(_FIXED + tuple(axes)) + "\n").encode("ascii"))
 
     def write(self, t, s, feed, q) -> None:
@@ -44,7 +47,21 @@ class CsvPlanWriter:
         cols[2] = feed
         cols[3:] = q.T
         for lo in range(0, k, CSV_CHUNK_ROWS):
-            self.fh.write(format_rows(cols[:, lo:min(k, lo + CSV_CHUNK_ROWS)]))
+            hi = min(k, lo + CSV_CHUNK_ROWS)
+            if hi - lo >= CSV_SPLIT_ROWS:
+                # two halves formatted at once (the formatter releases the GIL); the text of
+                # a row does not depend on where the rows are cut
+                mid = (lo + hi) // 2
+                if self._pool is None:
+                    from concurrent.futures import ThreadPoolExecutor
+
+                    self._pool = ThreadPoolExecutor(max_workers=1,
+                                                    thread_name_prefix="cnc-interp-csv")
+                second = self._pool.submit(format_rows, cols[:, mid:hi])
+                self.fh.write(format_rows(cols[:, lo:mid]))
+                self.fh.write(second.result())
+            else:
+                self.fh.write(format_rows(cols[:, lo:hi]))
         self.rows += k
 
 
