@@ -312,6 +312,7 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
 
     t_start = time.perf_counter()
     out = opts.out or "-"
+    _few_malloc_arenas()
     _warm_kernels()
     machine = load_machine(opts.machine_spec if opts.machine_spec is not None else DEFAULT_PRESET)
     start = opts.start
@@ -389,6 +390,22 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
         "status": info.status, "timings_s": timings, "fit_method": fit_stats.get("method"),
         "x_real_time": (cycle / total) if total > 0 else None,
     }
+
+
+#: glibc malloc arenas for the streaming plan's threads (mallopt M_ARENA_MAX): the
+#: default (8 per core) lets each thread keep its own freed blocks, ~100 MB more RSS
+MALLOC_ARENAS = 2
+
+
+def _few_malloc_arenas() -> None:
+    """Ask glibc for few malloc arenas (no effect elsewhere)."""
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL("libc.so.6")
+        libc.mallopt(-8, MALLOC_ARENAS)  # M_ARENA_MAX
+    except (OSError, AttributeError):
+        pass
 
 
 def _warm_kernels() -> None:

@@ -22,7 +22,7 @@ from ..errors import CncInterpWarning, UsageError
 from .program import Dwell, Program, Run, Stop
 
 #: nodes read ahead of the consumer (about 100 bytes each); a single longer run still
-#: passes whole, as it must (the fit needs all of a run)
+#: passes whole, as it must (the fit needs all of a run), but only when the consumer asks
 STREAM_NODES_AHEAD = 200_000
 #: blocks interpreted between two looks for closed items
 _DRAIN_EVERY = 256
@@ -40,10 +40,15 @@ class _Channel:
         self.weight = 0
         self.cond = threading.Condition()
         self.stop = False
+        self.asking = False  # the consumer waits for the next item
 
     def put(self, item, weight: int) -> bool:
         with self.cond:
-            while self.items and self.weight + weight > self.budget and not self.stop:
+            # an item heavier than the budget (a long run) is handed over only when the
+            # consumer asks for it: the interpreter does not start on the next run while
+            # one waits and another is being fitted
+            while not self.stop and ((self.items and self.weight + weight > self.budget)
+                                     or (weight > self.budget and not self.asking)):
                 self.cond.wait(0.1)
             if self.stop:
                 return False
@@ -55,7 +60,10 @@ class _Channel:
     def get(self):
         with self.cond:
             while not self.items:
+                self.asking = True
+                self.cond.notify_all()
                 self.cond.wait()
+            self.asking = False
             item, weight = self.items.pop(0)
             self.weight -= weight
             self.cond.notify_all()
