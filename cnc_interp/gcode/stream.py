@@ -21,9 +21,9 @@ from ..constants import ALL_AXES
 from ..errors import CncInterpWarning, UsageError
 from .program import Dwell, Program, Run, Stop
 
-#: nodes read ahead of the consumer (about 100 bytes each); a single longer run still
-#: passes whole, as it must (the fit needs all of a run), but only when the consumer asks
-STREAM_NODES_AHEAD = 200_000
+#: nodes read ahead of the consumer (about 100 bytes each); a longer run is read on only
+#: while the consumer waits for it, and passes whole (the fit needs all of a run)
+STREAM_NODES_AHEAD = 50_000
 #: blocks interpreted between two looks for closed items
 _DRAIN_EVERY = 256
 
@@ -56,6 +56,15 @@ class _Channel:
             self.weight += weight
             self.cond.notify_all()
             return True
+
+    def wait_for_ask(self) -> bool:
+        """Block until the consumer asks for an item (it has finished what it holds): the
+        interpreter does not grow a second long run while one is being fitted. False when
+        the stream was closed."""
+        with self.cond:
+            while not self.asking and not self.stop:
+                self.cond.wait(0.1)
+            return not self.stop
 
     def get(self):
         with self.cond:
@@ -152,9 +161,13 @@ class ProgramStream:
         for blk in iter_blocks(self.data, self.source, self.params):
             yield blk
             count += 1
-            if count >= _DRAIN_EVERY and interp.items:
+            if count >= _DRAIN_EVERY:
                 count = 0
-                if not self._drain():
+                if interp.items and not self._drain():
+                    raise _Stopped()
+                rb = interp.rb
+                if rb is not None and rb.n > self.channel.budget and \
+                        not self.channel.wait_for_ask():
                     raise _Stopped()
 
     def _run(self) -> None:
