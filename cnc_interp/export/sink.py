@@ -17,7 +17,7 @@ import time
 import numpy as np
 
 #: blocks waiting for the writer thread
-SINK_BLOCKS_AHEAD = 4
+SINK_BLOCKS_AHEAD = 2
 
 _END = object()
 

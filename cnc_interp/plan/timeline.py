@@ -575,7 +575,7 @@ class Prefetch:
     next item is there (so that it consumes planned samples instead of waiting). The
     thread's CPU time is ``cpu_s``; an exception is raised where the consumer reaches it."""
 
-    def __init__(self, iterable, ahead: int = 4096):
+    def __init__(self, iterable, ahead: int = 512):
         self.q: queue.Queue = queue.Queue(maxsize=max(1, ahead))
         self.cpu_s = 0.0
         self.stop = threading.Event()
