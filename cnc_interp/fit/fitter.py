@@ -62,28 +62,52 @@ class _Raw:
                     feed_mm_s=self.feed, weights=self.weights, rapid=self.rapid, planar=planar)
 
 
+#: paths built per compiled call while streaming a run (any value gives the same paths)
+FIT_STREAM_BATCH = 128
+
+
 def fit_program(program: Program, settings: FitSettings | None = None) -> FitResult:
     """Fit every run of ``program``; dwells and stops pass through (see ``FitResult``)."""
+    stats: dict = {}
+    items = tuple(iter_fit(program.items, settings, stats))
+    return FitResult(program=program, items=items, stats=stats)
+
+
+def iter_fit(items, settings: FitSettings | None = None, stats: dict | None = None,
+             batch: int = FIT_STREAM_BATCH):
+    """Fit a program's items lazily, in order: each run's paths as soon as they are
+    fitted (``batch`` at a time), dwells and stops passed through. ``stats`` (a dict) is
+    filled with ``fit_program``'s statistics, complete when the iteration ends. The paths
+    are the same as ``fit_program``'s, whatever ``batch`` is."""
     settings = settings or FitSettings()
-    items = []
     runs_info = []
     prev_end = None
     totals = dict(nodes_in=0, segments_out=0, feed_paths=0, rapid_moves=0,
                   max_node_dev_mm=0.0, max_node_dev_deg=0.0, max_path_dev_mm=0.0,
                   max_path_dev_ratio=0.0, max_path_dev_rot_ratio=0.0, within_tolerance=True)
-    for idx, it in enumerate(program.items):
+    for idx, it in enumerate(items):
         if isinstance(it, Run):
-            raws, info = _fit_run_raw(it, settings)
+            info = _run_info(it)
             info["item"] = idx
             runs_info.append(info)
+            raws = []
+            n_raws = 0
+            for raw in _iter_run_raws(it, settings, info):
+                raws.append(raw)
+                if len(raws) >= batch:
+                    paths, prev_end = _build_paths(raws, prev_end)
+                    n_raws += len(raws)
+                    raws = []
+                    yield from paths
             paths, prev_end = _build_paths(raws, prev_end)
-            items.extend(paths)
+            n_raws += len(raws)
+            yield from paths
             if it.kind == "rapid":
-                totals["rapid_moves"] += len(raws)
+                totals["rapid_moves"] += n_raws
             else:
                 totals["nodes_in"] += info["nodes_in"]
                 totals["segments_out"] += info["segments_out"]
-                totals["feed_paths"] += len(raws)
+                totals["feed_paths"] += n_raws
                 totals["max_node_dev_mm"] = max(totals["max_node_dev_mm"], info["max_node_dev_mm"])
                 totals["max_node_dev_deg"] = max(totals["max_node_dev_deg"], info["max_node_dev_deg"])
                 totals["max_path_dev_mm"] = max(totals["max_path_dev_mm"], info["max_path_dev_mm"])
@@ -92,19 +116,20 @@ def fit_program(program: Program, settings: FitSettings | None = None) -> FitRes
                                                        info["max_path_dev_rot_ratio"])
                 totals["within_tolerance"] &= info["within_tolerance"]
         elif isinstance(it, (Dwell, Stop)):
-            items.append(it)
+            yield it
             prev_end = None
         else:  # pragma: no cover - the item type is closed
             raise TypeError(type(it))
-    stats = dict(totals)
-    stats["segments_per_node"] = (totals["segments_out"] / totals["nodes_in"]) if totals["nodes_in"] else 0.0
-    stats["tol_mm"] = settings.tol_mm
-    stats["tol_deg"] = settings.tol_deg
-    stats["corner_deg"] = settings.corner_deg
-    stats["tol_mode"] = settings.tol_mode
-    stats["method"] = settings.method
-    stats["runs"] = runs_info
-    return FitResult(program=program, items=tuple(items), stats=stats)
+    out = dict(totals)
+    out["segments_per_node"] = (totals["segments_out"] / totals["nodes_in"]) if totals["nodes_in"] else 0.0
+    out["tol_mm"] = settings.tol_mm
+    out["tol_deg"] = settings.tol_deg
+    out["corner_deg"] = settings.corner_deg
+    out["tol_mode"] = settings.tol_mode
+    out["method"] = settings.method
+    out["runs"] = runs_info
+    if stats is not None:
+        stats.update(out)
 
 
 def fit_run(run: Run, settings: FitSettings | None = None) -> list[Path]:
@@ -178,18 +203,30 @@ def _weights(lin: np.ndarray, rotary: bool) -> np.ndarray:
     return (1.0 - w) if rotary else w
 
 
-def _fit_run_raw(run: Run, settings: FitSettings):
-    lin = np.array([a in "XYZUVW" for a in run.axes], dtype=bool)
-    info = dict(kind=run.kind, first_line=int(run.line[0]) if run.n_nodes else 0,
+def _run_info(run: Run) -> dict:
+    return dict(kind=run.kind, first_line=int(run.line[0]) if run.n_nodes else 0,
                 last_line=int(run.line[-1]) if run.n_nodes else 0, nodes_in=0, segments_out=0,
                 paths=0, methods=[], max_node_dev_mm=0.0, max_node_dev_deg=0.0,
                 max_path_dev_mm=0.0, max_path_dev_ratio=0.0, max_path_dev_rot_ratio=0.0,
                 within_tolerance=True)
+
+
+def _fit_run_raw(run: Run, settings: FitSettings):
+    info = _run_info(run)
+    raws = list(_iter_run_raws(run, settings, info))
+    return raws, info
+
+
+def _iter_run_raws(run: Run, settings: FitSettings, info: dict):
+    """The raw paths of one run in order, each as soon as it is fitted; ``info`` is
+    complete when the iteration ends."""
+    lin = np.array([a in "XYZUVW" for a in run.axes], dtype=bool)
     if run.kind == "rapid":
-        return _rapid_raws(run, lin), info
+        yield from _rapid_raws(run, lin)
+        return
     pr = prepare_run(run, settings)
     info["nodes_in"] = int(run.n_nodes)
-    raws = []
+    n_raws = 0
     methods = set()
     dmm_max = ddeg_max = pdev_max = pratio_max = rratio_max = 0.0
     ok_all = True
@@ -203,7 +240,8 @@ def _fit_run_raw(run: Run, settings: FitSettings):
             # a single move: the exact line through its two nodes. Node and path deviation
             # are 0 by construction (the programmed path IS the fitted segment), so neither
             # the generic fitter nor the sampled path-deviation check is run for it.
-            raws.append(_single_move_raw(pr, a, b, rot_all if sub.rotary else lin_all))
+            yield _single_move_raw(pr, a, b, rot_all if sub.rotary else lin_all)
+            n_raws += 1
             methods.add("line")
             n_seg += 1
             continue
@@ -228,13 +266,16 @@ def _fit_run_raw(run: Run, settings: FitSettings):
             # repair, never report: the moves themselves, exact lines with a stop at each
             # node, are within any tolerance (slower, but never outside the part)
             w = rot_all if sub.rotary else lin_all
-            raws.extend(_single_move_raw(pr, j, j + 1, w) for j in range(a, b))
+            for j in range(a, b):
+                yield _single_move_raw(pr, j, j + 1, w)
+            n_raws += b - a
             methods.add("line-fallback")
             info["fallback_lines"] = info.get("fallback_lines", []) + [int(pr.line[a + 1]),
                                                                        int(pr.line[b])]
             n_seg += b - a
             continue
-        raws.append(raw)
+        yield raw
+        n_raws += 1
         methods.add(meth)
         dmm_max = max(dmm_max, dmm)
         ddeg_max = max(ddeg_max, ddeg)
@@ -248,8 +289,7 @@ def _fit_run_raw(run: Run, settings: FitSettings):
     info.update(max_node_dev_mm=dmm_max, max_node_dev_deg=ddeg_max, max_path_dev_mm=pdev_max,
                 max_path_dev_ratio=pratio_max, max_path_dev_rot_ratio=rratio_max,
                 within_tolerance=ok_all, segments_out=n_seg,
-                paths=len(raws), methods=sorted(methods))
-    return raws, info
+                paths=n_raws, methods=sorted(methods))
 
 
 def _single_move_raw(pr: PreparedRun, a: int, b: int, weights: np.ndarray) -> _Raw:
