@@ -30,7 +30,7 @@ def sequential_segment(seg: FixedSegment, f: FpgaFormats):
             for i in range(4, -1, -1):
                 a = _rs(a * tau, fx) + piece.mant[i]
             xi = _rs(a, piece.exp - fx)
-            x = _rs(xi * seg.x_end, fx)
+            x = _rs(xi * seg.x_mant, fx + seg.x_exp - fp)
             b = seg.p_mant[5]
             for i in range(4, -1, -1):
                 b = _rs(b * xi, fx) + seg.p_mant[i]
@@ -123,7 +123,13 @@ def test_overflow_names_segment_and_line():
     with pytest.raises(FixedPointOverflow) as ei:
         build_program(traj, [path], formats=small, source="wave.nc")
     msg = ei.value.format()
-    assert msg.startswith("wave.nc:10:1: error:") and "overflows" in msg and "segment 0" in msg
+    import re
+
+    m = re.match(r"wave\.nc:(\d+):1: error: .* overflows Q4\.20 \(24 bits\) in segment (\d+), "
+                 r"source line (\d+)$", msg)
+    assert m, msg
+    # gentle_curve numbers segment k's source line 10 + k
+    assert int(m[1]) == int(m[3]) == 10 + int(m[2])
 
 
 def _line_path(points, axes="XYZ", rapid=False):

@@ -30,7 +30,7 @@ from .fixed import FpgaFormats
 from .model import FixedSegment, FpgaProgram, ProfilePiece, SetpointBlock
 
 MAGIC = b"CNCF"
-VERSION = 1
+VERSION = 2  # 2: separate Horner/integrator widths, x_end as mantissa + exponent
 HEADER = struct.Struct("<4sBBHII")
 HEADER_SIZE = HEADER.size + 4
 TRAILER_SIZE = 4
@@ -65,9 +65,9 @@ CONFIG_DT_MIN_S, CONFIG_DT_MAX_S = 1e-6, 1.0
 #: most samples a program may declare: 2^28 is 74 h at 1 kHz, and keeps an emulation of
 #: the whole program (a few tens of bytes per sample and axis) within a workstation
 MAX_PROGRAM_SAMPLES = 1 << 28
-CONFIG = struct.Struct("<B16sdQQI8B")  # n_axes, axes, dt_s, dt_ns, n_samples, n_items, formats
-SEGMENT = struct.Struct("<IIQBBqqqqqb6qI")  # index, line, start, plane h, v, cos, sin, oh, ov,
-#                                             x_end, p_exp, p_mant[6], n_pieces
+CONFIG = struct.Struct("<B16sdQQI10B")  # n_axes, axes, dt_s, dt_ns, n_samples, n_items, formats
+SEGMENT = struct.Struct("<IIQBBqqqqbqb6qI")  # index, line, start, plane h, v, cos, sin, oh, ov,
+#                                              x_exp, x_mant, p_exp, p_mant[6], n_pieces
 PROFILE_HEAD = struct.Struct("<IIH")  # segment index, first piece, count in this frame
 PIECE = struct.Struct("<IQb6q")  # n_samples, dtau, exp, mant[6]
 SETPOINTS_HEAD = struct.Struct("<QIBI")  # start sample, n samples, n_axes, source line
@@ -221,7 +221,7 @@ def program_frames(prog: FpgaProgram) -> tuple[list[bytes], list[FrameInfo]]:
     for item in prog.items:
         if isinstance(item, FixedSegment):
             seg = SEGMENT.pack(item.index, item.line, item.start_sample, item.plane[0], item.plane[1],
-                               item.cos, item.sin, item.origin[0], item.origin[1], item.x_end,
+                               item.cos, item.sin, item.origin[0], item.origin[1], item.x_exp, item.x_mant,
                                item.p_exp, *item.p_mant, len(item.pieces))
             add(FrameType.SEGMENT, seg, "segment", item.index, item.line)
             for first in range(0, len(item.pieces), per_profile):
@@ -290,9 +290,9 @@ def decode_segment(payload: bytes) -> tuple[FixedSegment, int]:
     except struct.error as exc:
         raise FrameError(f"bad SEGMENT payload: {exc}") from None
     seg = FixedSegment(index=v[0], line=v[1], start_sample=v[2], plane=(v[3], v[4]), cos=v[5],
-                       sin=v[6], origin=(v[7], v[8]), x_end=v[9], p_exp=v[10],
-                       p_mant=tuple(v[11:17]), pieces=())
-    return seg, v[17]
+                       sin=v[6], origin=(v[7], v[8]), x_exp=v[9], x_mant=v[10], p_exp=v[11],
+                       p_mant=tuple(v[12:18]), pieces=())
+    return seg, v[18]
 
 
 def decode_profile(payload: bytes) -> tuple[int, int, list[ProfilePiece]]:

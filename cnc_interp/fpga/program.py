@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..constants import FPGA_PLANAR_MATCH_MM, FPGA_PROFILE_TOL_MM
+from ..constants import FPGA_LIMIT_MARGIN, FPGA_PLANAR_MATCH_MM, FPGA_PROFILE_TOL_MM
 from ..errors import SourceLocation
 from .fixed import FixedFormat, FixedPointOverflow, FpgaFormats, Where, quantize_block
 from .model import (
@@ -25,6 +25,7 @@ from .model import (
     FpgaProgram,
     ProfilePiece,
     SetpointBlock,
+    profile_xi,
     run_program,
     to_mm,
 )
@@ -131,8 +132,24 @@ def _planar_samples(path, pl, q: np.ndarray, s_loc: np.ndarray, held: np.ndarray
     return (seg, np.clip(x, 0.0, x_end)), ""
 
 
-def _fit_piece(xi: np.ndarray, scale: np.ndarray, fmts: FpgaFormats, tol: float, where: Where):
-    """Fit one profile piece to ξ samples; (piece, max error along the path in mm) or (None, err)."""
+def _budget_ok(e: np.ndarray, carry: np.ndarray, budget: np.ndarray | None) -> bool:
+    """Whether the error sequence (mm along the path), after the carried errors of the samples
+    before it, has |Δe|, |Δ²e|, |Δ³e| within ``budget`` (3,) mm per sample."""
+    if budget is None:
+        return True
+    x = np.concatenate((carry, e))
+    for m in range(3):
+        x = np.diff(x)
+        if x.size and float(np.abs(x).max()) > budget[m]:
+            return False
+    return True
+
+
+def _fit_piece(xi: np.ndarray, scale: np.ndarray, fmts: FpgaFormats, tol: float, where: Where,
+               budget: np.ndarray | None = None, carry: np.ndarray | None = None):
+    """Fit one profile piece to ξ samples: (piece, max error along the path in mm, errors (n,))
+    or (None, err, None) when the piece must be split (too far from the samples, or its
+    error changes too fast for the limits' budget after the ``carry`` errors before it)."""
     n = xi.shape[0]
     fx = fmts.param.frac
     if n == 1:
@@ -150,42 +167,53 @@ def _fit_piece(xi: np.ndarray, scale: np.ndarray, fmts: FpgaFormats, tol: float,
         coef = np.linalg.lstsq(vand, xi, rcond=None)[0]
     fl = np.polynomial.polynomial.polyval(tau, coef)
     err_f = float(np.max(np.abs(fl - xi) * scale))
-    if err_f > 0.5 * tol and n > _DEG + 1:
-        return None, err_f
+    short = n <= _DEG + 1
+    if err_f > 0.5 * tol and not short:
+        return None, err_f, None
     full = np.zeros(_DEG + 1)
     full[: deg + 1] = coef
-    exp, mant = quantize_block(full, fmts.coef_word, "profile coefficient", where)
-    # error with the quantized coefficients, in float: the integer Horner adds at most a
-    # few 2^-44 to ξ (far below the tolerance); the whole program is then checked bit-exactly
-    # by ``deviation_stats``
-    fq = np.polynomial.polynomial.polyval(tau, np.ldexp(np.array(mant, dtype=float), -exp))
-    err = float(np.max(np.abs(fq - xi) * scale))
-    return ProfilePiece(n, dtau, exp, tuple(mant)), err
+    exp, mant = quantize_block(full, fmts.coef_word, "profile coefficient", where, fmts.param.frac)
+    piece = ProfilePiece(n, dtau, exp, tuple(mant))
+    # the device's own ξ (integer Horner, bit-exact), as an error along the path
+    xi_dev = np.ldexp(profile_xi([piece], fmts, where).astype(float), -fx)
+    e = (xi_dev - xi) * scale
+    err = float(np.max(np.abs(e)))
+    if not short and (err > tol or not _budget_ok(e, carry if carry is not None else np.zeros(0), budget)):
+        return None, err, None
+    return piece, err, e
 
 
-def fit_profile(xi: np.ndarray, scale: np.ndarray, fmts: FpgaFormats,
-                tol_mm: float, where: Where) -> tuple[list[ProfilePiece], float]:
-    """Piecewise quintic ξ(τ) through the samples; (pieces, worst error along the path, mm).
+def fit_profile(xi: np.ndarray, scale: np.ndarray, fmts: FpgaFormats, tol_mm: float, where: Where,
+                budget: np.ndarray | None = None, carry: np.ndarray | None = None):
+    """Piecewise quintic ξ(τ) through the samples: (pieces, worst error along the path in mm,
+    the last three errors (mm) to carry into the next segment).
 
     ``scale`` (n,) converts a ξ error into mm along the path (x_end·sqrt(1+p'²)).
+    ``budget`` (3,): largest |Δe|, |Δ²e|, |Δ³e| per sample (mm) the profile's error may
+    have, checked with the device's integer ξ and across piece and segment joins (``carry``:
+    errors of the samples before the first); pieces of at most six samples are kept as
+    they come (the program-level limit check re-sends a segment as setpoints if needed).
     Pieces grow geometrically from the last accepted length and halve on failure,
     so the work stays linear in the number of samples.
     """
     pieces: list[ProfilePiece] = []
     worst = 0.0
+    carry = np.zeros(0) if carry is None else np.asarray(carry, float)[-3:]
     i, m = 0, xi.shape[0]
     length = m
     while i < m:
         length = min(m - i, max(2 * length, _DEG + 1))
         while True:
-            piece, err = _fit_piece(xi[i:i + length], scale[i:i + length], fmts, tol_mm, where)
-            if piece is not None and (err <= tol_mm or length <= _DEG + 1):
+            piece, err, e = _fit_piece(xi[i:i + length], scale[i:i + length], fmts, tol_mm, where,
+                                       budget, carry)
+            if piece is not None:
                 break
             length = max(1, length // 2)
         pieces.append(piece)
         worst = max(worst, err)
+        carry = np.concatenate((carry, e))[-3:]
         i += length
-    return pieces, worst
+    return pieces, worst, carry
 
 
 def _setpoint_block(q: np.ndarray, start: int, line: int, pos: FixedFormat, file: str) -> SetpointBlock:
@@ -199,12 +227,16 @@ def _setpoint_block(q: np.ndarray, start: int, line: int, pos: FixedFormat, file
 
 
 def build_program(traj, paths=(), formats: FpgaFormats | None = None, source: str = "<input>",
-                  start=None, profile_tol_mm: float = FPGA_PROFILE_TOL_MM) -> FpgaProgram:
+                  start=None, profile_tol_mm: float = FPGA_PROFILE_TOL_MM,
+                  limits: np.ndarray | None = None) -> FpgaProgram:
     """Quantize a planned ``Trajectory`` (and the ``Path``s it was planned from) for the FPGA.
 
     ``paths``: the program's paths in order (rapids included), as in
     ``FitResult.paths``; their planar parts become segments. ``start``: position
-    before the first sample (default ``traj.q[0]``).
+    before the first sample (default ``traj.q[0]``). ``limits`` (3, n_axes): the
+    machine's vmax, amax, jmax; with them, every segment whose reproduction takes part
+    in a verify difference above a limit is sent as exact setpoints instead
+    (``fpga/limits.py``), and ``stats["verify_ratio"]`` is the golden model's worst ratio.
     """
     fmts = formats or FpgaFormats()
     pos = fmts.pos
@@ -217,6 +249,13 @@ def build_program(traj, paths=(), formats: FpgaFormats | None = None, source: st
 
     items: list = []
     planar_mask = np.zeros(K, dtype=bool)
+    # per axis, how much the profile's error may change per sample: half the base margin of
+    # each limit (the other half and the rounding budget are the device margin's, limits.py)
+    budget = None
+    if limits is not None:
+        dt = float(traj.dt_s)
+        budget = (0.5 * FPGA_LIMIT_MARGIN * np.asarray(limits, float)
+                  * np.array([dt, dt ** 2, dt ** 3])[:, None])
     fallback: list[str] = []
     seg_counter = 0
     profile_err = 0.0
@@ -243,6 +282,8 @@ def build_program(traj, paths=(), formats: FpgaFormats | None = None, source: st
             continue
         seg, x = got
         flush_setpoints(a)
+        carry = np.zeros(3)  # the samples before a path are exact setpoints (or at rest)
+        budget_path = None if budget is None else budget[:, list(pl.plane)].min(axis=1)
         for k in range(n_seg_path):
             idx = np.nonzero(seg == k)[0]
             gid = seg_counter + k
@@ -254,11 +295,14 @@ def build_program(traj, paths=(), formats: FpgaFormats | None = None, source: st
             xk = x[idx]
             xi = xk / x_end
             scale = x_end * np.sqrt(1.0 + _poly_d1(np.repeat(pl.p[k][None, :], idx.size, 0), xk) ** 2)
-            pieces, err = fit_profile(xi, scale, fmts, profile_tol_mm, where)
+            pieces, err, carry = fit_profile(xi, scale, fmts, profile_tol_mm, where,
+                                             budget_path, carry)
             profile_err = max(profile_err, err)
             n_pieces += len(pieces)
             pn = pl.p[k] * x_end ** np.arange(6)
-            p_exp, p_mant = quantize_block(pn, fmts.coef_word, "path coefficient", where)
+            p_exp, p_mant = quantize_block(pn, fmts.coef_word, "path coefficient", where, pos.frac)
+            x_exp, x_mant = quantize_block([x_end], fmts.mult_word, "segment x_end", where,
+                                           pos.frac - fmts.param.frac)
             th = float(pl.theta[k])
             cos_i = int(fmts.trig.quantize(np.cos(th), "cos θ", where))
             sin_i = int(fmts.trig.quantize(np.sin(th), "sin θ", where))
@@ -266,7 +310,7 @@ def build_program(traj, paths=(), formats: FpgaFormats | None = None, source: st
             items.append(FixedSegment(
                 index=gid, line=line, plane=(int(pl.plane[0]), int(pl.plane[1])),
                 cos=cos_i, sin=sin_i, origin=(int(org[0]), int(org[1])),
-                x_end=int(pos.quantize(x_end, "segment x_end", where)),
+                x_exp=x_exp, x_mant=x_mant[0],
                 p_exp=p_exp, p_mant=tuple(p_mant), start_sample=a + int(idx[0]),
                 pieces=tuple(pieces)))
         planar_mask[a:b] = True
@@ -274,18 +318,52 @@ def build_program(traj, paths=(), formats: FpgaFormats | None = None, source: st
         seg_counter += n_seg_path
     flush_setpoints(K)
 
+    repaired = 0
+    if limits is not None:
+        items, repaired = _repair_limits(items, q, traj, fmts, start_i, source, np.asarray(limits, float))
+        for it in items:
+            if isinstance(it, SetpointBlock):
+                planar_mask[it.start_sample:it.start_sample + it.n_samples] = False
     prog = FpgaProgram(axes=traj.axes, dt_s=float(traj.dt_s), formats=fmts, start=start_i,
                        n_samples=K, items=tuple(items), source=source)
-    stats = deviation_stats(prog, q, planar_mask)
+    stats = deviation_stats(prog, q, planar_mask, limits)
     stats.update(segments=sum(isinstance(i, FixedSegment) for i in items),
+                 repaired_segments=repaired,
                  profile_pieces=n_pieces, profile_fit_err_mm=profile_err,
                  setpoint_samples=int(K - planar_mask.sum()), planar_samples=int(planar_mask.sum()),
                  fallback_paths=fallback)
     return FpgaProgram(**{**prog.__dict__, "stats": stats})
 
 
-def deviation_stats(prog: FpgaProgram, q_plan: np.ndarray, planar_mask: np.ndarray | None = None) -> dict:
-    """Run the golden model and compare with the float plan: worst deviations and end drift (mm)."""
+def _repair_limits(items, q, traj, fmts, start_i, source, limits):
+    """Re-send as setpoints every segment whose reproduction breaks a limit; (items, count)."""
+    from .limits import excess_samples
+
+    items = list(items)
+    repaired = 0
+    while True:
+        prog = FpgaProgram(axes=traj.axes, dt_s=float(traj.dt_s), formats=fmts, start=start_i,
+                           n_samples=q.shape[0], items=tuple(items), source=source)
+        qe = to_mm(run_program(prog).q, fmts)
+        bad = excess_samples(qe, float(traj.dt_s), limits)
+        if bad.size == 0:
+            return items, repaired
+        starts = np.array([it.start_sample for it in items], dtype=np.int64)
+        owners = np.unique(np.searchsorted(starts, bad, side="right") - 1)
+        hit = [k for k in owners.tolist() if isinstance(items[k], FixedSegment)]
+        if not hit:
+            return items, repaired  # rounding only: the margin's job; verify has the last word
+        for k in hit:
+            seg = items[k]
+            a = seg.start_sample
+            items[k] = _setpoint_block(q[a:a + seg.n_samples], a, seg.line, fmts.pos, source)
+        repaired += len(hit)
+
+
+def deviation_stats(prog: FpgaProgram, q_plan: np.ndarray, planar_mask: np.ndarray | None = None,
+                    limits: np.ndarray | None = None) -> dict:
+    """Run the golden model and compare with the float plan: worst deviations and end drift (mm);
+    with ``limits`` (3, n_axes) also verify's worst ratio of the device's setpoints."""
     out = run_program(prog)
     qe = to_mm(out.q, prog.formats)
     dev = np.abs(qe - q_plan)
@@ -295,4 +373,11 @@ def deviation_stats(prog: FpgaProgram, q_plan: np.ndarray, planar_mask: np.ndarr
         stats["max_dev_planar_mm"] = float(dev[planar_mask].max())
     gaps = np.array(out.segment_end_gap, dtype=float).reshape(-1, 2)
     stats["max_segment_end_drift_mm"] = float(np.abs(gaps).max() * prog.formats.pos.lsb) if gaps.size else 0.0
+    if limits is not None and qe.shape[0]:
+        from ..plan.verify import verify_arrays
+
+        rep = verify_arrays(qe, prog.dt_s, *np.asarray(limits, float), axes=prog.axes)
+        axis, kind, ratio, idx = rep.worst()
+        stats.update(verify_ok=bool(rep.ok), verify_ratio=float(ratio),
+                     verify_worst=f"{axis} {kind} at sample {idx}")
     return stats
