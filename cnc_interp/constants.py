@@ -247,6 +247,8 @@ FPGA_PLANAR_MATCH_MM = 1e-7
 FPGA_ROUNDTRIP_TARGET_MM = 1e-4
 #: largest frame payload (bytes); longer data is split over several frames
 FPGA_MAX_PAYLOAD = 4096
+#: motion the device buffers after START before its sample clock runs (s)
+FPGA_PREFILL_S = 0.25
 #: emulated device receive buffer (bytes)
 FPGA_DEVICE_BUFFER = 16384
 #: USB transfer timeout (ms) and retry budget per frame

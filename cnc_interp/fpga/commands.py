@@ -37,12 +37,12 @@ def _say(quiet: bool, msg: str) -> None:
 def emulate_frames(frames, source: str = "<frames>"):
     """Feed decoded frames to a device core in order; returns the core (raises UsageError on a reject)."""
     from .device import DONE, DeviceCore
-    from .frames import ErrorFlag, FrameType
+    from .frames import CONTROL_TYPES, ErrorFlag
 
     core = DeviceCore(buffer_bytes=1 << 62)
     for i, f in enumerate(frames):
-        if f.type == FrameType.POLL:  # a host request, never part of a program's stream
-            raise UsageError(f"frame {i + 1} (seq {f.seq}) is a POLL frame; a frame file holds "
+        if f.type in CONTROL_TYPES:  # a host request, never part of a program's stream
+            raise UsageError(f"frame {i + 1} (seq {f.seq}) is a {f.type.name} frame; a frame file holds "
                              "a program's frames only", SourceLocation(file=source))
         if not core.handle(f):
             flags = ErrorFlag(core.status().errors)
