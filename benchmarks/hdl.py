@@ -90,7 +90,7 @@ def main() -> int:
     from hdl.synth import synthesize
 
     t0 = time.perf_counter()
-    r = synthesize(seeds=tuple(range(1, args.seeds + 1)))
+    r = synthesize(seeds=tuple(range(1, args.seeds + 1)), log=lambda s: print("  " + s, flush=True))
     print(f"  synthesis + {args.seeds} place-and-route runs: {time.perf_counter() - t0:.0f} s; "
           f"Fmax per seed {', '.join(f'{f:.1f}' for f in r.fmax_mhz)} MHz; "
           f"schedule {SAMPLE_CYCLES + 1} cycles per sample, measured {cps:.2f}")

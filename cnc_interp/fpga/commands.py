@@ -133,6 +133,12 @@ def plan_for_stream(opts: StreamOptions, formats=None, with_machine: bool = Fals
 
 def build_stream(opts: StreamOptions):
     """Plan and quantize: (FpgaProgram, frames, frame infos)."""
+    prog, frames, infos, _traj, _machine = build_stream_full(opts)
+    return prog, frames, infos
+
+
+def build_stream_full(opts: StreamOptions):
+    """Plan and quantize: (FpgaProgram, frames, infos, planned Trajectory, real Machine)."""
     from .frames import program_frames
     from .program import build_program
 
@@ -148,7 +154,7 @@ def build_stream(opts: StreamOptions):
                         f"{prog.stats['verify_worst']} limit (ratio {prog.stats['verify_ratio']:.12g})",
                         SourceLocation(file=source))
     frames, infos = program_frames(prog)
-    return prog, frames, infos
+    return prog, frames, infos, traj, machine
 
 
 def summary_line(prog, frames) -> str:

@@ -97,13 +97,121 @@ def planar_form(path):
     unit = d / length[:, None]
     # distance of any point from the chord is at most the sum of the terms' normal parts
     normal = np.abs(terms[:, :, 1] * unit[:, None, 0] - terms[:, :, 0] * unit[:, None, 1]).sum(axis=1)
-    if np.any(normal > FPGA_PLANAR_MATCH_MM):
-        return None
     from ..fit.path import PlanarSegments
 
-    return PlanarSegments(plane=plane, theta=np.arctan2(d[:, 1], d[:, 0]),
-                          origin=coef[:, 0, :][:, [h, v]].copy(), x_end=length,
-                          p=np.zeros((coef.shape[0], 6)))
+    theta = np.arctan2(d[:, 1], d[:, 0])
+    p = np.zeros((coef.shape[0], 6))
+    if np.any(normal > FPGA_PLANAR_MATCH_MM):
+        # a planar curve (an arc, a spline, a NURBS of the plane): each segment as a graph
+        # z = p(x) over its chord, if a quintic follows it within the match tolerance
+        p = _chord_quintics(coef[:, :, [h, v]], du, theta, length)
+        if p is None:
+            return None
+    return PlanarSegments(plane=plane, theta=theta, origin=coef[:, 0, :][:, [h, v]].copy(),
+                          x_end=length, p=p)
+
+
+#: points per segment at which a curve's chord-frame quintic is fitted and checked
+_CURVE_FIT_POINTS = 97
+
+
+def _chord_quintic(c2: np.ndarray, du: float):
+    """(θ, x_end, p) of one segment as a graph z = p(x) over its chord, or None.
+
+    c2 (6, 2) power-basis coefficients of the plane's two axes in t ∈ [0, du]; p is the
+    quintic with p(0) = p(x_end) = 0 fitted by least squares at ``_CURVE_FIT_POINTS``
+    points, accepted when every point is within half ``FPGA_PLANAR_MATCH_MM`` of it (and
+    the segment never turns back over its chord)."""
+    tk = np.linspace(0.0, du, _CURVE_FIT_POINTS)
+    pts = (tk[:, None] ** np.arange(6)[None, :]) @ c2
+    d = pts[-1] - pts[0]
+    L = float(np.hypot(d[0], d[1]))
+    if L <= 0:
+        return None
+    th = float(np.arctan2(d[1], d[0]))
+    c, s = np.cos(th), np.sin(th)
+    dxy = pts - pts[0]
+    x = dxy[:, 0] * c + dxy[:, 1] * s
+    z = -dxy[:, 0] * s + dxy[:, 1] * c
+    if np.any(np.diff(x) <= 0):
+        return None
+    # p(x) = x (x - L) (a0 + a1 x + a2 x^2 + a3 x^3): p(0) = p(L) = 0 by construction
+    A = (x * (x - L))[:, None] * x[:, None] ** np.arange(4)[None, :]
+    scale = np.abs(A).max(axis=0)
+    scale[scale == 0] = 1.0
+    a = np.linalg.lstsq(A / scale, z, rcond=None)[0] / scale
+    if np.max(np.abs(A @ a - z)) > 0.5 * FPGA_PLANAR_MATCH_MM:
+        return None
+    return th, L, np.polynomial.polynomial.polymul([0.0, -L, 1.0], a)[:6]
+
+
+def _chord_quintics(coef2: np.ndarray, du: np.ndarray, theta: np.ndarray, length: np.ndarray):
+    """Per segment, the chord-frame quintic (see ``_chord_quintic``); None if one fails.
+    coef2 (n, 6, 2), du (n,)."""
+    out = np.zeros((coef2.shape[0], 6))
+    for k in range(coef2.shape[0]):
+        got = _chord_quintic(coef2[k], float(du[k]))
+        if got is None:
+            return None
+        out[k] = got[2]
+    return out
+
+
+def _shift_poly(c: np.ndarray, h: float) -> np.ndarray:
+    """Coefficients (6, n_axes) of c(t + h) (Taylor shift)."""
+    from math import comb
+
+    out = np.zeros_like(c)
+    for i in range(6):
+        for j in range(i, 6):
+            out[i] += comb(j, i) * h ** (j - i) * c[j]
+    return out
+
+
+#: a curved segment is halved at most this many times to follow it with chord quintics
+_CURVE_MAX_SPLITS = 6
+
+
+def planar_path(path):
+    """(path, PlanarSegments) to stream ``path`` as segments, or None.
+
+    A planar curve whose segments are too long for one chord-frame quintic each (a whole
+    arc fitted as one parametric quintic) is split in its parameter until every piece is
+    one (at most ``_CURVE_MAX_SPLITS`` halvings); the returned path is then that refined
+    path (same geometry, same arc length)."""
+    pl = planar_form(path)
+    if pl is not None:
+        return path, pl
+    if path.planar is not None and not path.rapid:
+        return None
+    coef = path.coef
+    moving = np.nonzero(np.any(coef[:, 1:, :] != 0, axis=(0, 1)))[0].tolist()
+    if len(moving) != 2:
+        return None
+    h, v = moving
+    du = np.diff(path.breaks)
+    pieces: list[tuple[np.ndarray, float, int, float]] = []
+
+    def split(c: np.ndarray, d: float, depth: int, k: int) -> bool:
+        if _chord_quintic(c[:, [h, v]], d) is not None:
+            pieces.append((c, d, int(path.line[k]), float(path.feed_mm_s[k])))
+            return True
+        if depth >= _CURVE_MAX_SPLITS:
+            return False
+        half = 0.5 * d
+        return split(c, half, depth + 1, k) and split(_shift_poly(c, half), half, depth + 1, k)
+
+    for k in range(path.n_seg):
+        if not split(coef[k], float(du[k]), 0, k):
+            return None
+    from ..fit.path import Path
+
+    breaks = path.breaks[0] + np.concatenate(([0.0], np.cumsum([p[1] for p in pieces])))
+    refined = Path(axes=path.axes, breaks=breaks, coef=np.stack([p[0] for p in pieces]),
+                   line=[p[2] for p in pieces], feed_mm_s=[p[3] for p in pieces],
+                   weights=path.weights, rapid=path.rapid)
+    pl = planar_form(refined)
+    return (refined, pl) if pl is not None else None
 
 
 def _planar_samples(path, pl, q: np.ndarray, s_loc: np.ndarray, held: np.ndarray, pos: FixedFormat):
@@ -270,10 +378,12 @@ def build_program(traj, paths=(), formats: FpgaFormats | None = None, source: st
 
     for path, a, b, s0 in assign_paths(traj, paths):
         n_seg_path = path.n_seg
-        pl = planar_form(path) if b > a else None
-        if pl is None:
+        got_form = planar_path(path) if b > a else None
+        if got_form is None:
             seg_counter += n_seg_path
             continue
+        path, pl = got_form
+        n_seg_path = path.n_seg
         held = q[a - 1] if a > 0 else start_f
         got, why = _planar_samples(path, pl, q[a:b], traj.s[a:b] - s0, held, pos)
         if got is None:
