@@ -72,7 +72,7 @@ def main() -> int:
                     idx = [m.axes.index(a) for a in traj.axes]
                     prog = build_program(traj, fit.paths, formats=fm, limits=m.limits()[:, idx])
                 except CncInterpError as exc:
-                    notes.append(f"{name}: {str(exc)[:60]}")
+                    notes.append(f"{name}: {exc.args[0][:70]}")
                     continue
                 from cnc_interp.fpga.limits import device_margin
 
