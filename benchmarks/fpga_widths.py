@@ -41,8 +41,6 @@ def formats(pos_frac: int, mult: int, int_bits: int = 14):
 
 
 def main() -> int:
-    import numpy as np
-
     from cnc_interp.errors import CncInterpError
     from cnc_interp.fpga.commands import StreamOptions, plan_for_stream
     from cnc_interp.fpga.program import build_program
@@ -87,7 +85,6 @@ def main() -> int:
             share = f"{100 * seg_s / max(1, tot_s):.1f} %"
             print(f"| Q{14}.{pf} ({pf + 14} bits) | {mw} | {margin:.2e} | {dev} | {rat} | {share} | "
                   f"{'; '.join(notes) or ''} ({time.perf_counter() - t0:.0f} s) |", flush=True)
-    del np
     return 0
 
 

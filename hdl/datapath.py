@@ -81,8 +81,8 @@ def width(layout) -> int:
     return sum(b for _, b in layout)
 
 
-def _fields(m: Module, data, layout, signed_names=()):
-    """Slice a FIFO word into named signals (registered copies are made by the caller)."""
+def _fields(data, layout):
+    """Slice a FIFO word into named fields (registered copies are made by the caller)."""
     out, off = {}, 0
     for name, bits in layout:
         out[name] = data[off:off + bits]
@@ -190,8 +190,8 @@ class Datapath(wiring.Component):
         m.d.comb += [sf.w_data.eq(self.seg_data), sf.w_en.eq(self.seg_valid), self.seg_ready.eq(sf.w_rdy),
                      pf.w_data.eq(self.piece_data), pf.w_en.eq(self.piece_valid),
                      self.piece_ready.eq(pf.w_rdy)]
-        sfd = _fields(m, sf.r_data, self.seg_layout)
-        pfd = _fields(m, pf.r_data, self.piece_layout)
+        sfd = _fields(sf.r_data, self.seg_layout)
+        pfd = _fields(pf.r_data, self.piece_layout)
 
         # segment registers
         cos = Signal(signed(f.trig.word))

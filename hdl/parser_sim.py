@@ -52,7 +52,7 @@ def run_hdl(data: bytes, clocked: bool = False, buffer_bits: int = 13):
 
 def run_python(data: bytes):
     from cnc_interp.fpga.device import DeviceCore
-    from cnc_interp.fpga.frames import FrameType, decode_status, decode_frame
+    from cnc_interp.fpga.frames import decode_frame, decode_status
 
     core = DeviceCore(buffer_bytes=1 << 31)
     accepted, statuses = [], []
@@ -71,5 +71,4 @@ def run_python(data: bytes):
     core.handle = handle
     for b in data:
         core.receive(bytes([b]))
-    del FrameType
     return accepted, statuses
