@@ -159,7 +159,8 @@ class Datapath(wiring.Component):
 
     Inputs: seg_data/seg_valid (ready: seg_ready), piece_data/piece_valid (piece_ready),
     tick (may a sample start). Outputs per sample (out_valid for one cycle): out_h, out_v
-    (positions of the plane axes), out_xi, out_x, out_z (ξ, x*, z*, for test benches);
+    (positions of the plane axes), out_xi, out_x, out_z (ξ, x*, z*, for test benches),
+    out_last (the segment's last sample);
     busy; overflow (sticky: a register left its width, the golden model's OVERRUN).
     """
 
@@ -174,7 +175,7 @@ class Datapath(wiring.Component):
             "tick": In(1),
             "out_valid": Out(1), "out_h": Out(signed(f.pos.word)), "out_v": Out(signed(f.pos.word)),
             "out_xi": Out(signed(f.param.word)), "out_x": Out(signed(f.pos.word)),
-            "out_z": Out(signed(f.pos.word)),
+            "out_z": Out(signed(f.pos.word)), "out_last": Out(1),
             "busy": Out(1), "overflow": Out(1),
         })
 
@@ -333,7 +334,8 @@ class Datapath(wiring.Component):
                     qh = org_h + ((i_h >> (ft - 1)) + 1 >> 1)
                     qv = org_v + ((i_v >> (ft - 1)) + 1 >> 1)
                     m.d.sync += [self.out_h.eq(qh), self.out_v.eq(qv), self.out_xi.eq(xi),
-                                 self.out_x.eq(x), self.out_z.eq(z), self.out_valid.eq(1)]
+                                 self.out_x.eq(x), self.out_z.eq(z), self.out_valid.eq(1),
+                                 self.out_last.eq((left == 1) & (pieces_left == 0))]
                     with m.If(~fits(qh, f.pos.word) | ~fits(qv, f.pos.word)):
                         m.d.sync += ovf.eq(1)
                 with m.If(cyc == SAMPLE_CYCLES - 1):

@@ -65,6 +65,9 @@ class FrameParser(wiring.Component):
             "acc_valid": Out(1), "acc_type": Out(8), "acc_seq": Out(32), "acc_len": Out(16),
             "status_valid": Out(1), "st_last_seq": Out(32), "st_errors": Out(8), "st_state": Out(3),
             "st_bytes": Out(64), "st_poll_id": Out(32), "st_program_id": Out(32),
+            # second pass over an accepted CONFIG/SEGMENT/PROFILE/SETPOINTS payload, for the decoder
+            "dec_valid": Out(1), "dec_ready": In(1), "dec_data": Out(8), "dec_pos": Out(16),
+            "dec_type": Out(8),
         })
 
     def elaborate(self, platform):
@@ -168,9 +171,10 @@ class FrameParser(wiring.Component):
                     with m.If((frame_crc != ~crc) | ~known):
                         m.d.sync += fail()
                     with m.Else():
-                        m.d.sync += [base.eq(base + total), pos.eq(0)]
                         m.next = "HANDLE"
             with m.State("HANDLE"):
+                # the frame's bytes stay in the buffer until its payload is decoded
+                m.d.sync += [base.eq(base + total), pos.eq(0)]
                 m.next = "READ"
                 control = ((ftype == FrameType.POLL) | (ftype == FrameType.HOLD)
                            | (ftype == FrameType.RESUME) | (ftype == FrameType.ABORT))
@@ -210,6 +214,10 @@ class FrameParser(wiring.Component):
                         m.d.sync += [last_seq.eq(seq), bytes_acc.eq(cur_bytes + total),
                                      self.acc_valid.eq(1), self.acc_type.eq(ftype),
                                      self.acc_seq.eq(seq), self.acc_len.eq(length)]
+                        with m.If((ftype == FrameType.CONFIG) | (ftype == FrameType.SEGMENT)
+                                  | (ftype == FrameType.PROFILE) | (ftype == FrameType.SETPOINTS)):
+                            m.d.sync += [base.eq(base), pos.eq(20)]
+                            m.next = "DEC_READ"
                         with m.Switch(ftype):
                             with m.Case(FrameType.CONFIG):
                                 m.d.sync += [configured.eq(1), state.eq(CONFIGURED), program_id.eq(pid)]
@@ -217,4 +225,16 @@ class FrameParser(wiring.Component):
                                 m.d.sync += state.eq(ARMED if self.clocked else RUNNING)
                             with m.Case(FrameType.STOP):
                                 m.d.sync += state.eq(DONE)
+            with m.State("DEC_READ"):
+                with m.If(pos < 20 + length):
+                    m.next = "DEC_BYTE"
+                with m.Else():
+                    m.d.sync += [base.eq(base + total), pos.eq(0)]
+                    m.next = "READ"
+            with m.State("DEC_BYTE"):
+                m.d.comb += [self.dec_valid.eq(1), self.dec_data.eq(byte), self.dec_pos.eq(pos - 20),
+                             self.dec_type.eq(ftype)]
+                with m.If(self.dec_ready):
+                    m.d.sync += pos.eq(pos + 1)
+                    m.next = "DEC_READ"
         return m

