@@ -157,6 +157,7 @@ class RoundShift(wiring.Component):
 class Datapath(wiring.Component):
     """Segment FIFO + piece FIFO in, one planar sample out every ``SAMPLE_CYCLES`` cycles.
 
+    The FIFOs are 512 deep so that they map to block RAM (DP16KD) rather than LUTs.
     Inputs: seg_data/seg_valid (ready: seg_ready), piece_data/piece_valid (piece_ready),
     tick (may a sample start). Outputs per sample (out_valid for one cycle): out_h, out_v
     (positions of the plane axes), out_xi, out_x, out_z (ξ, x*, z*, for test benches),
@@ -164,7 +165,7 @@ class Datapath(wiring.Component):
     busy; overflow (sticky: a register left its width, the golden model's OVERRUN).
     """
 
-    def __init__(self, fmts: FpgaFormats | None = None, seg_depth: int = 4, piece_depth: int = 16):
+    def __init__(self, fmts: FpgaFormats | None = None, seg_depth: int = 512, piece_depth: int = 512):
         self.f = f = fmts or FpgaFormats()
         self.seg_layout = segment_layout(f)
         self.piece_layout = piece_layout(f)

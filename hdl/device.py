@@ -53,8 +53,8 @@ class Device(wiring.Component):
         W = f.pos.word
         m.submodules.parser = ps = FrameParser(buffer_bits=self.buffer_bits)
         m.submodules.dp = dp = Datapath(f)
-        m.submodules.sp_fifo = spf = fifo.SyncFIFOBuffered(width=W, depth=64)
-        m.submodules.tag_fifo = tf = fifo.SyncFIFOBuffered(width=1 + 4 + 4 + 32, depth=16)
+        m.submodules.sp_fifo = spf = fifo.SyncFIFOBuffered(width=W, depth=512)  # block RAM
+        m.submodules.tag_fifo = tf = fifo.SyncFIFOBuffered(width=1 + 4 + 4 + 32, depth=512)
         m.d.comb += [ps.in_data.eq(self.in_data), ps.in_valid.eq(self.in_valid),
                      self.in_ready.eq(ps.in_ready),
                      self.status_valid.eq(ps.status_valid), self.st_last_seq.eq(ps.st_last_seq),
@@ -63,6 +63,15 @@ class Device(wiring.Component):
 
         n_axes = Signal(4)
         pos = [Signal(signed(W), name=f"pos{i}") for i in range(MAX_AXES)]
+        # one write bus into the axis registers (a register file with one write port: each
+        # register is a clock enable, not a multiplexer of every source)
+        wen = Signal()
+        widx = Signal(4)
+        wval = Signal(signed(W))
+        m.d.comb += [wen.eq(0), widx.eq(0), wval.eq(0)]
+        for i in range(MAX_AXES):
+            with m.If(wen & (widx == i)):
+                m.d.sync += pos[i].eq(wval)
 
         # -- payload decoder ----------------------------------------------------------
         byte, p = ps.dec_data, ps.dec_pos
@@ -101,10 +110,8 @@ class Device(wiring.Component):
                         m.d.sync += n_axes.eq(byte)
                     k = Signal(16)
                     m.d.comb += k.eq(p - CONFIG_START_AT)
-                    with m.If((p >= CONFIG_START_AT) & (k[:3] == 7)):
-                        for i in range(MAX_AXES):
-                            with m.If(k[3:] == i):
-                                m.d.sync += pos[i].eq(val64[:W])
+                    with m.If((p >= CONFIG_START_AT) & (k[:3] == 7) & (k[3:] < MAX_AXES)):
+                        m.d.comb += [wen.eq(1), widx.eq(k[3:]), wval.eq(val64[:W])]
                 with m.Case(FrameType.SEGMENT):
                     m.d.sync += seg_sr.eq(seg_full[8:])
                     with m.If(p == SEGMENT_BYTES - 1):
@@ -135,6 +142,7 @@ class Device(wiring.Component):
         count = Signal(32)
         axis = Signal(4)
         last = Signal()
+        held_v = Signal(signed(W))
         m.d.comb += [tf.r_en.eq(0), spf.r_en.eq(0)]
         m.d.sync += self.smp_valid.eq(0)
         with m.FSM():
@@ -151,13 +159,12 @@ class Device(wiring.Component):
                 # the datapath starts a sample only while the merger waits for it
                 m.d.comb += dp.tick.eq(self.tick)
                 with m.If(dp.out_valid):
-                    for i in range(MAX_AXES):
-                        with m.If(ph == i):
-                            m.d.sync += pos[i].eq(dp.out_h)
-                        with m.If(pv == i):
-                            m.d.sync += pos[i].eq(dp.out_v)
-                    m.d.sync += [axis.eq(0), last.eq(dp.out_last)]
-                    m.next = "EMIT"
+                    m.d.comb += [wen.eq(1), widx.eq(ph), wval.eq(dp.out_h)]
+                    m.d.sync += [axis.eq(0), last.eq(dp.out_last), held_v.eq(dp.out_v)]
+                    m.next = "SEG_V"
+            with m.State("SEG_V"):
+                m.d.comb += [wen.eq(1), widx.eq(pv), wval.eq(held_v)]
+                m.next = "EMIT"
             with m.State("SETP"):
                 with m.If(count == 0):
                     m.next = "IDLE"
@@ -169,10 +176,7 @@ class Device(wiring.Component):
                     m.d.sync += [axis.eq(0), count.eq(count - 1), last.eq(count == 1)]
                     m.next = "EMIT"
                 with m.Elif(spf.r_rdy):
-                    m.d.comb += spf.r_en.eq(1)
-                    for i in range(MAX_AXES):
-                        with m.If(axis == i):
-                            m.d.sync += pos[i].eq(spf.r_data)
+                    m.d.comb += [spf.r_en.eq(1), wen.eq(1), widx.eq(axis), wval.eq(spf.r_data)]
                     m.d.sync += axis.eq(axis + 1)
             with m.State("EMIT"):
                 m.d.sync += [self.smp_valid.eq(1), self.smp_axis.eq(axis)]

@@ -46,12 +46,6 @@ def test_device_outputs_every_axis_like_the_golden_model(three_axis):
     assert st[-1][2] == 3
 
 
-def test_setpoint_only_program():
-    path = gentle_curve(2, seed=9, axes="XYZ", plane=(0, 1))
-    prog = build_program(quintic_plan(path, feed_mm_s=600.0))
-    _check(_polled(program_frames(prog)[0]), prog)
-
-
 def test_damaged_stream_gives_the_same_setpoints(three_axis):
     prog, frames = three_axis
     rng = random.Random(3)
