@@ -290,12 +290,11 @@ def _fit_sub(pr: PreparedRun, sub: SubRun, settings: FitSettings, evals: dict | 
     weights = _weights(pr.lin, sub.rotary)
     metric = weights > 0
     if sub.kind == "straight" or (b - a == 1 and not sub.curves):
-        chord = (nodes[-1] - nodes[0]) * pr.scale
-        length = float(np.linalg.norm(chord))
-        # collinear G61 chain: the straight line from the first to the last node
-        pf = straight_piece(nodes[0], nodes[-1], length, int(line[-1]), float(feed[1:].min()))
+        # collinear G61 chain: the straight line from the first to the last node, with a
+        # segment boundary wherever the programmed feed changes (each move keeps its F)
+        breaks, coef, seg_line, seg_feed = _straight_chain(nodes, line, feed, pr.scale)
         dev = _line_dev(nodes, pr.lin)
-        raw = _Raw(pr.axes, pf.breaks, pf.coef, pf.line, pf.feed_mm_s, weights)
+        raw = _Raw(pr.axes, breaks, coef, seg_line, seg_feed, weights)
         return raw, "line", dev, 0.0, True
     tol = fit_tolerance(pr.tol_mm[a:b + 1])
     moving = np.ptp(nodes, axis=0) > 0
@@ -319,6 +318,34 @@ def _fit_sub(pr: PreparedRun, sub: SubRun, settings: FitSettings, evals: dict | 
                np.concatenate([p.line for p in pieces]), np.concatenate([p.feed_mm_s for p in pieces]),
                weights)
     return raw, ("curves+nodes" if sub.curves else "nodes"), dmm, ddeg, ok
+
+
+def _straight_chain(nodes: np.ndarray, line: np.ndarray, feed: np.ndarray, scale: np.ndarray):
+    """The straight line nodes[0] -> nodes[-1] of a collinear chain (n, d) as one segment per
+    run of equal feeds: breaks (K+1,), coef (K, 6, d), line (K,), feed (K,). A boundary
+    sits at the projection onto the line of each node where the feed changes (the
+    chain's nodes lie on it within ``FIT_COLLINEAR_DEG``)."""
+    n, d = nodes.shape
+    chord = (nodes[-1] - nodes[0]) * scale
+    length = float(np.linalg.norm(chord))
+    f = np.asarray(feed, dtype=float)
+    brk = np.nonzero(f[1:-1] != f[2:])[0] + 1 if n > 2 else np.zeros(0, dtype=np.int64)
+    direction = chord / length
+    pos = np.clip(((nodes[brk] - nodes[0]) * scale) @ direction, 0.0, length)
+    # (collinear forward moves project in order; a break that would give an empty
+    # segment is dropped and its moves merge with the next ones)
+    ok = (pos > 0) & (pos < length) & np.concatenate(([True], np.diff(pos) > 0))
+    u = np.concatenate(([0.0], pos[ok], [length]))
+    ends = np.concatenate((brk[ok], [n - 1]))
+    k = u.size - 1
+    coef = np.zeros((k, 6, d))
+    step = (nodes[-1] - nodes[0]) / length
+    coef[:, 0] = nodes[0] + u[:-1, None] * step
+    coef[0, 0] = nodes[0]
+    coef[:, 1] = step
+    starts = np.concatenate(([0], ends[:-1]))
+    seg_feed = np.array([f[a + 1:b + 1].min() for a, b in zip(starts, ends)])
+    return u, coef, np.asarray(line)[ends], seg_feed
 
 
 def _line_dev(nodes: np.ndarray, lin: np.ndarray) -> float:

@@ -157,6 +157,12 @@ def fit_polyline(nodes: np.ndarray, tol_mm: np.ndarray, tol_deg: float, lin: np.
     interior = u[step:n - 1:step].copy()
     if interior.size and total - interior[-1] < 0.5 * (interior[-1] - (interior[-2] if interior.size > 1 else 0.0)):
         interior = interior[:-1]
+    # a knot (a segment boundary) wherever the programmed feed changes: every segment
+    # then lies within one feed (``segment_sources``) and each move keeps its own F
+    f_in = np.asarray(feed, dtype=float)
+    brk = np.nonzero(f_in[1:-1] != f_in[2:])[0] + 1 if n > 2 else np.zeros(0, dtype=np.int64)
+    if brk.size:
+        interior = np.unique(np.concatenate((interior, u[brk])))
     zero = np.zeros(d)
     d1s = start.d1 if start is not None else zero
     d2s = start.d2 if start is not None else zero
