@@ -48,9 +48,11 @@ def _tol_option(f):
 
 
 def _fit_method_option(f):
-    return click.option("--fit-method", "fit_method", type=click.Choice(("auto", "nodes")), default=None,
-                        help="auto (default): paper 000's planar fit for runs that move exactly two "
-                             "axes, the N-axis fit elsewhere; nodes: the N-axis fit everywhere.")(f)
+    return click.option("--fit-method", "fit_method", type=click.Choice(("nodes", "planar", "auto")),
+                        default=None,
+                        help="nodes (default; stream: planar): the N-axis fit everywhere; planar: "
+                             "paper 000's planar fit for runs of lines that move exactly two axes, "
+                             "the N-axis fit elsewhere; auto: the same as planar.")(f)
 
 
 def _tool_table_option(f):
@@ -260,8 +262,10 @@ def stream(part, machine_spec, planner, dt_s, tol_mm, fit_method, device, dry_ru
     """Quantize PART's plan to fixed point and stream it to the FPGA over USB."""
     from .fpga.commands import StreamOptions, run_stream
 
+    # the FPGA evaluates paper 000's planar segments: stream keeps that fit by default
     run_stream(StreamOptions(part=part, machine_spec=machine_spec, planner=planner, dt_s=dt_s,
-                             tol_mm=tol_mm, fit_method=fit_method, device=device, dry_run=dry_run,
+                             tol_mm=tol_mm, fit_method=fit_method or "planar", device=device,
+                             dry_run=dry_run,
                              resume_from=resume_from, quiet=quiet))
 
 

@@ -293,7 +293,9 @@ def check(t, m, c, xc, ref, tol_lin, tol_rot, lin, metric, exp_speed, exp_lin_sp
         e_all = np.sqrt(e_all)
         e_lin = np.sqrt(e_lin)
         if j < n_hard:
-            dev_ok = e_lin <= tol_lin[j] and e_rot <= tol_rot
+            # nodes: Euclidean in the scaled metric too (linear and scaled rotary errors
+            # each within the tolerance could sum to √2 of it), and each rotary axis
+            dev_ok = e_all <= tol_lin[j] and e_rot <= tol_rot
         else:
             # chord points: one Euclidean allowance in the scaled metric (it holds the sagitta)
             dev_ok = e_all <= tol_lin[j]

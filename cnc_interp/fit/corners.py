@@ -71,7 +71,7 @@ def prepare_run(run: Run, settings) -> PreparedRun:
     """Merge duplicate nodes, resolve tolerances and re-index curve pieces."""
     nodes = np.asarray(run.nodes, dtype=float)
     lin = np.array([a in LINEAR_AXES for a in run.axes], dtype=bool)
-    scale = np.where(lin, 1.0, settings.tol_mm / settings.tol_deg)
+    scale = np.where(lin, 1.0, settings.fit_tol_mm / settings.fit_tol_deg)
     tol = settings.node_tolerance(run.tol_mm)
     if tol.size > 1:
         tol[0] = tol[1]

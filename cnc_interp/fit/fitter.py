@@ -65,12 +65,17 @@ class _Raw:
 def fit_program(program: Program, settings: FitSettings | None = None) -> FitResult:
     """Fit every run of ``program``; dwells and stops pass through (see ``FitResult``)."""
     settings = settings or FitSettings()
+    from .quantum import coordinate_quantum
+
+    quantum = coordinate_quantum(program)
+    settings = replace(settings, quantum_mm=quantum["quantum_mm"], quantum_deg=quantum["quantum_deg"])
     items = []
     runs_info = []
     prev_end = None
     totals = dict(nodes_in=0, segments_out=0, feed_paths=0, rapid_moves=0,
                   max_node_dev_mm=0.0, max_node_dev_deg=0.0, max_path_dev_mm=0.0,
-                  max_path_dev_ratio=0.0, max_path_dev_rot_ratio=0.0, within_tolerance=True)
+                  max_path_dev_ratio=0.0, max_path_dev_rot_ratio=0.0, within_tolerance=True,
+                  max_tol_mm=0.0)
     for idx, it in enumerate(program.items):
         if isinstance(it, Run):
             raws, info = _fit_run_raw(it, settings)
@@ -91,6 +96,7 @@ def fit_program(program: Program, settings: FitSettings | None = None) -> FitRes
                 totals["max_path_dev_rot_ratio"] = max(totals["max_path_dev_rot_ratio"],
                                                        info["max_path_dev_rot_ratio"])
                 totals["within_tolerance"] &= info["within_tolerance"]
+                totals["max_tol_mm"] = max(totals["max_tol_mm"], info.get("max_tol_mm", 0.0))
         elif isinstance(it, (Dwell, Stop)):
             items.append(it)
             prev_end = None
@@ -100,6 +106,10 @@ def fit_program(program: Program, settings: FitSettings | None = None) -> FitRes
     stats["segments_per_node"] = (totals["segments_out"] / totals["nodes_in"]) if totals["nodes_in"] else 0.0
     stats["tol_mm"] = settings.tol_mm
     stats["tol_deg"] = settings.tol_deg
+    stats["tol_cap_mm"] = settings.tol_cap_mm
+    stats["quantum"] = quantum
+    stats["fit_tol_mm"] = settings.fit_tol_mm
+    stats["fit_tol_deg"] = settings.fit_tol_deg
     stats["corner_deg"] = settings.corner_deg
     stats["tol_mode"] = settings.tol_mode
     stats["method"] = settings.method
@@ -189,6 +199,7 @@ def _fit_run_raw(run: Run, settings: FitSettings):
         return _rapid_raws(run, lin), info
     pr = prepare_run(run, settings)
     info["nodes_in"] = int(run.n_nodes)
+    info["max_tol_mm"] = float(pr.tol_mm.max()) if pr.tol_mm.size else 0.0
     raws = []
     methods = set()
     dmm_max = ddeg_max = pdev_max = pratio_max = rratio_max = 0.0
@@ -222,7 +233,7 @@ def _fit_run_raw(run: Run, settings: FitSettings):
         rratio = 0.0
         if (moving & ~pr.lin).any():
             rratio = rotary_path_deviation(raw.breaks, raw.coef, pr.nodes[a:b + 1], tol_sub,
-                                           settings.tol_deg, pr.lin, moving, sub.curves, a)
+                                           settings.fit_tol_deg, pr.lin, moving, sub.curves, a)
         sub_ok = bool(ok) and max(pratio, rratio) <= 1.0 + PATH_DEV_SLACK
         if not sub_ok and not sub.curves:
             # repair, never report: the moves themselves, exact lines with a stop at each
@@ -400,19 +411,22 @@ def _fit_sections(pr: PreparedRun, sub: SubRun, tol: np.ndarray, metric: np.ndar
     pieces = []
     dmm = ddeg = 0.0
     ok = True
-    tol_ref = settings.tol_mm
+    # the rotary axes' metric scale tol_ref / tol_deg: the sub-run's largest tolerance,
+    # as in the measurement (``rotary_path_deviation``), so that a fit within the scaled
+    # Euclidean tolerance is within both tolerances at the measured foot points
+    tol_ref = float(np.max(tol))
     for k, s in enumerate(secs):
         if s[0] == "curve":
             cp = s[1]
             t_c = float(tol[cp.last - a])
-            pf = fit_curve(evs[k], pr.scale, pr.lin, t_c, settings.tol_deg, cp.curve.line,
+            pf = fit_curve(evs[k], pr.scale, pr.lin, t_c, settings.fit_tol_deg, cp.curve.line,
                            float(pr.feed_mm_s[cp.last]),
                            start=start_of[k], end=end_of[k])
         else:
             i, j = s[1], s[2]
             st = EndState(*start_of[k]) if start_of[k] is not None else None
             en = EndState(*end_of[k]) if end_of[k] is not None else None
-            pf = fit_polyline(pr.nodes[i:j + 1], tol[i - a:j - a + 1], settings.tol_deg, pr.lin,
+            pf = fit_polyline(pr.nodes[i:j + 1], tol[i - a:j - a + 1], settings.fit_tol_deg, pr.lin,
                               metric, pr.line[i:j + 1], pr.feed_mm_s[i:j + 1], tol_ref, st, en)
         pieces.append(pf)
         dmm = max(dmm, pf.max_dev_mm)

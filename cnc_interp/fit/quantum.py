@@ -1,0 +1,103 @@
+"""The printed precision of a program's coordinates (issue 14).
+
+CAM output rounds every coordinate to a fixed number of decimals (0.0001 in is
+2.54 µm). A printed point is only known to ±½ of that quantum, so a fit held to a
+tolerance below it traces the rounding and the planner crawls along its curvature.
+``coordinate_quantum`` finds the quantum from the program itself: the coarsest
+decimal grid, in mm or in inches, that holds the displacement of every straight
+feed move (displacements, not positions, so work offsets and G92 shifts do not
+matter; arcs and splines are sampled, not printed, and are left out). Coordinates
+computed by expressions fall on no grid and give no quantum.
+
+Only a fine quantum counts (``FIT_QUANTUM_MAX_MM`` / ``FIT_QUANTUM_MAX_DEG``):
+coordinates printed to 0.01 mm or 0.001 in (hand-written programs, "X12.5") are
+taken as exact, not as ±5 µm samples of something else.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..constants import (
+    FIT_QUANTUM_MAX_DECIMALS,
+    FIT_QUANTUM_MAX_DEG,
+    FIT_QUANTUM_MAX_MM,
+    FIT_QUANTUM_MATCH,
+    FIT_QUANTUM_MIN_MOVES,
+    LINEAR_AXES,
+    MM_PER_INCH,
+)
+from ..gcode.program import Program, Run
+
+#: displacements tested first, before a candidate grid is checked on all of them
+_PROBE = 4096
+
+
+def _move_displacements(run: Run, lin: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Nonzero per-axis displacements of the run's straight moves: (linear mm, rotary deg)."""
+    nodes = np.asarray(run.nodes, dtype=float)
+    if nodes.shape[0] < 2:
+        return np.zeros(0), np.zeros(0)
+    d = np.diff(nodes, axis=0)
+    straight = np.ones(d.shape[0], dtype=bool)
+    for cp in run.curves:  # moves inside a curve are samples of it
+        straight[cp.first:cp.last] = False
+    d = d[straight]
+    dl, dr = d[:, lin].ravel(), d[:, ~lin].ravel()
+    return dl[dl != 0], dr[dr != 0]
+
+
+def _on_grid(delta: np.ndarray, q: float) -> bool:
+    """Every displacement an integer multiple of q (within float rounding)."""
+    if delta.size > _PROBE:
+        r = delta[:_PROBE] / q
+        if not np.all(np.abs(r - np.rint(r)) <= FIT_QUANTUM_MATCH):
+            return False
+    r = delta / q
+    return bool(np.all(np.abs(r - np.rint(r)) <= FIT_QUANTUM_MATCH))
+
+
+def _grid(delta: np.ndarray, units: tuple[tuple[float, str], ...]) -> tuple[float, str]:
+    """The coarsest grid 10^-D x unit holding every displacement: (quantum, label)."""
+    if delta.size == 0:
+        return 0.0, ""
+    best = (0.0, "")
+    for dec in range(FIT_QUANTUM_MAX_DECIMALS + 1):
+        for factor, name in units:
+            q = factor * 10.0 ** -dec
+            if q > best[0] and _on_grid(delta, q):
+                best = (q, f"{10.0 ** -dec:.{dec}f} {name}")
+        if best[0] > 0:
+            return best
+    return best
+
+
+def coordinate_quantum(program: Program) -> dict:
+    """The quantum of the program's printed coordinates.
+
+    Returns a dict: ``detected_mm`` / ``detected_deg`` (the grid found, 0 if none),
+    ``label_mm`` / ``label_deg`` (e.g. "0.0001 in"), and ``quantum_mm`` /
+    ``quantum_deg``: the quantum the fit allows for (the detected one where it is at
+    most ``FIT_QUANTUM_MAX_MM`` / ``_DEG``, else 0).
+    """
+    lin_parts, rot_parts = [], []
+    n_moves = 0
+    for run in program.runs:
+        if run.kind != "feed":
+            continue
+        lin = np.array([a in LINEAR_AXES for a in run.axes], dtype=bool)
+        dl, dr = _move_displacements(run, lin)
+        lin_parts.append(dl)
+        rot_parts.append(dr)
+        n_moves += max(run.n_nodes - 1, 0)
+    out = dict(detected_mm=0.0, detected_deg=0.0, label_mm="", label_deg="",
+               quantum_mm=0.0, quantum_deg=0.0)
+    if n_moves < FIT_QUANTUM_MIN_MOVES:
+        return out
+    dl = np.abs(np.concatenate(lin_parts)) if lin_parts else np.zeros(0)
+    dr = np.abs(np.concatenate(rot_parts)) if rot_parts else np.zeros(0)
+    q, label = _grid(dl, ((1.0, "mm"), (MM_PER_INCH, "in")))
+    out.update(detected_mm=q, label_mm=label, quantum_mm=q if q <= FIT_QUANTUM_MAX_MM else 0.0)
+    q, label = _grid(dr, ((1.0, "deg"),))
+    out.update(detected_deg=q, label_deg=label, quantum_deg=q if q <= FIT_QUANTUM_MAX_DEG else 0.0)
+    return out
