@@ -45,8 +45,10 @@ def test_timeline_rapids_dwell_stop_and_exact_chaining():
     res = fit_program(prog, FitSettings())
     assert isinstance(res, FitResult)
     kinds = [type(it).__name__ + ("-rapid" if isinstance(it, Path) and it.rapid else "") for it in res.items]
-    # two rapid moves, three feed paths (90° corners stop), dwell, one rapid, stop
-    assert kinds == ["Path-rapid", "Path-rapid", "Path", "Path", "Path", "Dwell", "Path-rapid", "Stop"]
+    # two rapid moves, one feed path (its 90° corners are blended), dwell, one rapid, stop
+    assert kinds == ["Path-rapid", "Path-rapid", "Path", "Dwell", "Path-rapid", "Stop"]
+    stops = fit_program(prog, FitSettings(blend_corners=False))
+    assert sum(isinstance(it, Path) and not it.rapid for it in stops.items) == 3  # corners stop
     paths = [it for it in res.items if isinstance(it, Path)]
     for a, b in zip(res.items[:-1], res.items[1:]):
         if isinstance(a, Path) and isinstance(b, Path):
@@ -58,15 +60,19 @@ def test_timeline_rapids_dwell_stop_and_exact_chaining():
             assert np.isinf(p.feed_mm_s).all()
     st = fit_statistics(res)
     assert st["nodes_in"] == 4 and st["rapid_moves"] == 3 and st["within_tolerance"]
-    assert "continuity" in st and st["paths"] == 6
+    assert "continuity" in st and st["paths"] == 4
     text = format_statistics(st)
     assert "segments out" in text and "max node deviation" in text
 
 
 def test_corner_threshold_splits_or_rounds():
     sq = np.array([[0, 0, 0], [10, 0, 0], [10, 10, 0], [0, 10, 0], [0, 0, 0.0]])
-    split = fit_run(_run(sq), FitSettings(corner_deg=30))
+    split = fit_run(_run(sq), FitSettings(corner_deg=30, blend_corners=False))
     assert len(split) == 4 and all(p.n_seg == 1 for p in split)
+    # blended (the default): one path, a line and a G2 blend per corner, within 1 µm
+    (blended,) = fit_run(_run(sq), FitSettings(corner_deg=30))
+    assert blended.n_seg == 7
+    assert distance_to_path(blended, sq).max() <= 1e-3
     tol = 0.01
     rounded = fit_run(_run(sq), FitSettings(tol_mm=tol, corner_deg=120, method="nodes"))
     assert len(rounded) == 1

@@ -22,12 +22,15 @@ class FitSettings:
         tol_deg: maximum permissible error for rotary axes, deg.
         tol_cap_mm: the user's cap (``--tol``): no move gets a larger tolerance, whatever
             its ``G64 P`` says; ``None``: no cap. 0 makes every move exact (``G61``).
-        corner_deg: a turn between consecutive moves sharper than this splits
-            the path there (the planner stops); below it the fit rounds the
-            corner within the tolerance.
+        corner_deg: the smooth fit rounds turns up to this within the tolerance; a
+            sharper corner gets a blend (``blend_corners``) or splits the path there
+            (the planner stops).
         tol_mode: how a block's ``G64 P`` combines with ``tol_mm``: ``"gcode"``
             (default) lets ``G64 P`` win, ``"stricter"`` takes the smaller one. The
             cap applies in both; ``G61`` (tolerance 0) always means exact path.
+        blend_corners: a corner sharper than ``corner_deg`` is rounded by a G2 blend
+            within the tolerance (``fit.blends``) rather than stopping the machine
+            (N-axis fit only; the planar method and ``G61`` stop as in paper 000).
         quantum_mm / quantum_deg: the grid the program's coordinates are printed on
             (``fit.quantum``), set by ``fit_program``; half of it is added to every
             tolerance, since a printed point is only known to ±½ of its last digit.
@@ -45,6 +48,7 @@ class FitSettings:
     tol_cap_mm: float | None = None
     quantum_mm: float = 0.0
     quantum_deg: float = 0.0
+    blend_corners: bool = True
 
     def __post_init__(self) -> None:
         for name in ("tol_mm", "tol_deg"):
