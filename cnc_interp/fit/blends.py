@@ -160,11 +160,13 @@ def choose_shapes(theta: np.ndarray, tol: np.ndarray, d_max: np.ndarray):
     return r, d, dev
 
 
-def plan_blends(nodes_s: np.ndarray, lin: np.ndarray, tol: np.ndarray, cand: np.ndarray):
+def plan_blends(nodes_s: np.ndarray, lin: np.ndarray, tol: np.ndarray, cand: np.ndarray,
+                forced: np.ndarray | None = None):
     """Shapes and sizes of the blends at candidate corners.
 
     nodes_s (n, d) in the scaled metric, lin (d,) linear axes, tol (n,) tolerance of the
-    move ending at each node, cand (n,) bool corners the caller allows to blend.
+    move ending at each node, cand (n,) bool corners the caller allows to blend;
+    ``forced`` (n,) corners a repair blends whatever the crowding (else they stop).
     Returns (ok (n,) bool: blended, d (n,) blend distance from the corner along each
     move in scaled units, r (n,) shape). Two blends on one move never overlap.
     """
@@ -197,7 +199,10 @@ def plan_blends(nodes_s: np.ndarray, lin: np.ndarray, tol: np.ndarray, cand: np.
     # a blend squeezed into far less room than the tolerance would give it is slower than
     # a stop (measured with VPOp on dense CAM corners): stop there instead
     _, d_free, _ = choose_shapes(th, tol_c, np.full(room.shape, np.inf))
-    good &= d_free <= FIT_BLEND_MAX_CROWDING * room
+    roomy = d_free <= FIT_BLEND_MAX_CROWDING * room
+    if forced is not None:
+        roomy |= forced[j]
+    good &= roomy
     ok[j[good]] = True
     dist[j[good]] = d[good]
     shape[j[good]] = r[good]

@@ -229,7 +229,7 @@ def add_blends(pr: PreparedRun, settings, evals: dict | None = None,
     if not cand.any():
         return replace(pr, stops=np.nonzero(no_blend)[0])
     scaled = pr.nodes * pr.scale
-    ok, dist, shape = plan_blends(scaled, pr.lin, pr.tol_mm, cand)
+    ok, dist, shape = plan_blends(scaled, pr.lin, pr.tol_mm, cand, force)
     no_blend &= ~ok
     corners = np.nonzero(ok)[0]
     if corners.size == 0:
