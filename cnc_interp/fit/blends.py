@@ -161,12 +161,15 @@ def choose_shapes(theta: np.ndarray, tol: np.ndarray, d_max: np.ndarray):
 
 
 def plan_blends(nodes_s: np.ndarray, lin: np.ndarray, tol: np.ndarray, cand: np.ndarray,
-                forced: np.ndarray | None = None):
+                forced: np.ndarray | None = None, tol_rot_scaled: float = np.inf):
     """Shapes and sizes of the blends at candidate corners.
 
     nodes_s (n, d) in the scaled metric, lin (d,) linear axes, tol (n,) tolerance of the
     move ending at each node, cand (n,) bool corners the caller allows to blend;
-    ``forced`` (n,) corners a repair blends whatever the crowding (else they stop).
+    ``forced`` (n,) corners a repair blends whatever the crowding (else they stop);
+    ``tol_rot_scaled``: the rotary tolerance in the scaled metric, the most a blend may
+    deviate where rotary axes move (a ``G64 P`` above the default tolerance widens the
+    position's tolerance, not the orientation's).
     Returns (ok (n,) bool: blended, d (n,) blend distance from the corner along each
     move in scaled units, r (n,) shape). Two blends on one move never overlap.
     """
@@ -191,7 +194,11 @@ def plan_blends(nodes_s: np.ndarray, lin: np.ndarray, tol: np.ndarray, cand: np.
         cos_lin = (li * lo).sum(axis=1) / np.maximum(ni * no, 1e-300)
         good &= (np.degrees(np.arccos(np.clip(cos_lin, -1.0, 1.0))) <= FIT_BLEND_MAX_TURN_DEG)
         good &= np.minimum(ni, no) >= FIT_BLEND_MIN_LIN_SPEED
-    tol_c = np.minimum(tol[j], tol[j + 1]) * FIT_BLEND_TOL_SHARE
+    tol_c = np.minimum(tol[j], tol[j + 1])
+    if (~lin).any():
+        rot_moves = (np.abs(t_in[:, ~lin]) + np.abs(t_out[:, ~lin])).max(axis=1) > 0
+        tol_c = np.where(rot_moves, np.minimum(tol_c, tol_rot_scaled), tol_c)
+    tol_c = tol_c * FIT_BLEND_TOL_SHARE
     th = np.minimum(theta, np.radians(FIT_BLEND_MAX_TURN_DEG))
     room = 0.5 * np.minimum(clen[j - 1], clen[j])
     r, d, _ = choose_shapes(th, tol_c, room)

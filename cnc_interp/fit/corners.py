@@ -83,10 +83,14 @@ def prepare_run(run: Run, settings) -> PreparedRun:
     """Merge duplicate nodes, resolve tolerances and re-index curve pieces."""
     nodes = np.asarray(run.nodes, dtype=float)
     lin = np.array([a in LINEAR_AXES for a in run.axes], dtype=bool)
-    scale = np.where(lin, 1.0, settings.fit_tol_mm / settings.fit_tol_deg)
     tol = settings.node_tolerance(run.tol_mm)
     if tol.size > 1:
         tol[0] = tol[1]
+    # rotary axes count tol_ref / tol_deg mm per degree, tol_ref the run's largest
+    # tolerance (the sub-runs' fit and measurement use theirs: the same where G64 P is
+    # constant), so corners are judged in the metric the fit works in
+    ref = float(tol.max()) if tol.size and tol.max() > 0 else settings.fit_tol_mm
+    scale = np.where(lin, 1.0, ref / settings.fit_tol_deg)
     feed = np.asarray(run.feed_mm_s, dtype=float).copy()
     line = np.asarray(run.line, dtype=np.int64)
     n = nodes.shape[0]
@@ -229,7 +233,8 @@ def add_blends(pr: PreparedRun, settings, evals: dict | None = None,
     if not cand.any():
         return replace(pr, stops=np.nonzero(no_blend)[0])
     scaled = pr.nodes * pr.scale
-    ok, dist, shape = plan_blends(scaled, pr.lin, pr.tol_mm, cand, force)
+    tol_rot = settings.fit_tol_deg * float(pr.scale[~pr.lin].max()) if (~pr.lin).any() else np.inf
+    ok, dist, shape = plan_blends(scaled, pr.lin, pr.tol_mm, cand, force, tol_rot_scaled=tol_rot)
     no_blend &= ~ok
     corners = np.nonzero(ok)[0]
     if corners.size == 0:

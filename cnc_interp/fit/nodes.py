@@ -20,8 +20,8 @@ Method (robust, O(n) per round; the rounds run in one numba kernel, ``_bspline.r
   ``FIT_MIN_SPEED_RATIO`` of the chord's — soft, and below ``FIT_STOP_SPEED_RATIO``
   (a stop, a cusp) — hard;
 * every knot span with a failing point gets a knot at its middle node (or its
-  middle if it holds no node, except where rotary axes move: knots only at nodes,
-  at most one segment per move); repeat until everything passes, or until only soft
+  middle if it holds no node; where rotary axes move, no more knots than moves: at
+  most one segment per move); repeat until everything passes, or until only soft
   checks fail and ``FIT_SOFT_STALE_ROUNDS`` rounds did not reduce them.
 
 A quintic B-spline is C4 in u at simple knots, hence C2 in arc length and G2
@@ -170,9 +170,9 @@ def fit_polyline(nodes: np.ndarray, tol_mm: np.ndarray, tol_deg: float, lin: np.
     d1e = end.d1 if end is not None else zero
     d2e = end.d2 if end is not None else zero
     f64 = np.ascontiguousarray
-    # where rotary axes move, knots only at nodes: at most one segment per move (mid-span
-    # knots chase the soft speed check of the tool's own path, whose share of the motion
-    # jumps from move to move, and multiplied the segments several times over)
+    # where rotary axes move, at most one segment per move (knots chasing the soft speed
+    # check of the tool's own path, whose share of the motion jumps from move to move,
+    # multiplied the segments several times over)
     rotary_moves = bool(np.any(np.ptp(nodes[:, ~lin], axis=0) > 0)) if (~lin).any() else False
     # the knot-insertion rounds (compiled; see bs.refine)
     t, m, c, ok = bs.refine(
@@ -182,7 +182,7 @@ def fit_polyline(nodes: np.ndarray, tol_mm: np.ndarray, tol_deg: float, lin: np.
         f64(exp_lin0), f64(u_data0), f64(y_data0), f64(w_data0), f64(span_f), float(tol_ref_mm),
         float(tol_rot), f64(lin, dtype=np.bool_), f64(metric, dtype=np.bool_), FIT_BETWEEN_NODES_SAFETY,
         FIT_SMOOTHING, _RIDGE, FIT_MIN_SPEED_RATIO, FIT_STOP_SPEED_RATIO, FIT_MAX_ROUNDS,
-        FIT_SOFT_STALE_ROUNDS, FIT_MIN_SPAN_REL * total, rotary_moves)
+        FIT_SOFT_STALE_ROUNDS, FIT_MIN_SPAN_REL * total, n - 2 if rotary_moves else -1)
     val = np.empty((n, d))
     der = np.empty((n, d))
     bs.evaluate(t, m, c, u, val, der)
