@@ -46,7 +46,8 @@ def test_blend_piece_is_g2_with_both_moves_and_within_tolerance(deg):
     (r,), (d,), (dev,) = choose_shapes(np.array([th]), np.array([tol]), np.array([np.inf]))
     assert dev <= tol * (1 + 1e-12)
     p_a, p_b = v - d * t_in, v + d * t_out
-    coef, h = blend_piece(p_a, p_b, t_in, t_out, d, r, np.ones(3))
+    (coef,), (h,) = blend_piece(p_a[None], p_b[None], t_in[None], t_out[None], np.array([d]),
+                                np.array([r]), np.ones(3))
     ends = np.array([0.0, h])
     q, q1, q2 = (_hermite_eval(coef, ends, k) for k in range(3))
     assert_allclose(q, [p_a, p_b], atol=1e-12)
@@ -72,8 +73,9 @@ def test_unit_blend_table_matches_a_direct_computation():
     # the chosen shape's deviation against 20k samples of the same blend
     th = np.radians(73.0)
     (r,), (d,), (dev_c,) = choose_shapes(np.array([th]), np.array([1.0]), np.array([np.inf]))
-    coef, h = blend_piece(np.array([-d, 0.0]), d * np.array([np.cos(th), np.sin(th)]),
-                          np.array([1.0, 0.0]), np.array([np.cos(th), np.sin(th)]), d, r, np.ones(2))
+    (coef,), (h,) = blend_piece(np.array([[-d, 0.0]]), d * np.array([[np.cos(th), np.sin(th)]]),
+                                np.array([[1.0, 0.0]]), np.array([[np.cos(th), np.sin(th)]]),
+                                np.array([d]), np.array([r]), np.ones(2))
     pts = _hermite_eval(coef, np.linspace(0, h, 20001))
     true_dev = np.linalg.norm(pts, axis=1).min()
     assert true_dev <= dev_c <= 1.05 * max(true_dev, 1e-12) + 0.03

@@ -98,14 +98,17 @@ def unit_blends(theta: float, rs: np.ndarray, samples: int = _SAMPLES):
     z = np.zeros((R, 2))
     c = hermite(np.tile(-tin, (R, 1)), np.tile(tin, (R, 1)), z, np.tile(tout, (R, 1)),
                 np.tile(tout, (R, 1)), z, rs)
-    t = rs[:, None] * np.linspace(0.0, 1.0, samples)[None, :]
+    # q^(k)(r τ) = Σ_i c_i i!/(i-k)! r^(i-k) τ^(i-k): one product with the powers of τ
+    tau = np.linspace(0.0, 1.0, samples)
+    powers = tau[:, None] ** np.arange(6)[None, :]  # (S, 6)
+    rp = rs[:, None] ** np.arange(6)[None, :]  # (R, 6)
 
     def deriv(k):
-        acc = np.zeros((R, samples, 2))
-        for i in range(5, k - 1, -1):
-            f = float(np.prod(np.arange(i - k + 1, i + 1))) if k else 1.0
-            acc = acc * t[..., None] + f * c[:, None, i, :]
-        return acc
+        fac = np.array([float(np.prod(np.arange(i - k + 1, i + 1))) if i >= k else 0.0
+                        for i in range(6)])
+        ck = np.zeros_like(c)  # (R, 6, 2): coefficients of the k-th derivative in τ^(i-k)
+        ck[:, :6 - k] = (c[:, k:] * fac[k:, None] * rp[:, :6 - k, None])
+        return np.matmul(powers, ck)  # (S, 6) @ (R, 6, 2) -> (R, S, 2)
 
     p, d1, d2, d3 = deriv(0), deriv(1), deriv(2), deriv(3)
     sp = np.linalg.norm(d1, axis=2)
@@ -216,16 +219,16 @@ def plan_blends(nodes_s: np.ndarray, lin: np.ndarray, tol: np.ndarray, cand: np.
     return ok, dist, shape
 
 
-def blend_piece(p_a: np.ndarray, p_b: np.ndarray, t_in: np.ndarray, t_out: np.ndarray, d: float,
-                r: float, scale: np.ndarray):
-    """Coefficients (6, n) in machine units and parameter length h of the blend of shape r
-    from p_a to p_b (n,) (machine units, at distance d before / after the corner along the
-    moves); t_in/t_out unit directions in the scaled metric. The piece starts exactly at
-    p_a and its end is p_b up to the rounding of one Hermite evaluation."""
-    h = r * d
-    z = np.zeros((1, p_a.size))
-    c = hermite((p_a * scale)[None], t_in[None], z, (p_b * scale)[None], t_out[None], z,
-                np.array([h]), dp=((p_b - p_a) * scale)[None])[0]
-    c = c / scale[None, :]
-    c[0] = p_a
+def blend_piece(p_a: np.ndarray, p_b: np.ndarray, t_in: np.ndarray, t_out: np.ndarray,
+                d: np.ndarray, r: np.ndarray, scale: np.ndarray):
+    """Coefficients (K, 6, n) in machine units and parameter lengths h (K,) of K blends of
+    shapes r (K,) from p_a to p_b (K, n) (machine units, at distances d (K,) before / after
+    the corners along the moves); t_in/t_out (K, n) unit directions in the scaled metric.
+    Each piece starts exactly at p_a and ends at p_b up to the rounding of one Hermite
+    evaluation."""
+    h = np.asarray(r, dtype=float) * np.asarray(d, dtype=float)
+    z = np.zeros_like(t_in)
+    c = hermite(p_a * scale, t_in, z, p_b * scale, t_out, z, h, dp=(p_b - p_a) * scale)
+    c = c / scale[None, None, :]
+    c[:, 0] = p_a
     return c, h

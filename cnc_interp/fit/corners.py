@@ -247,39 +247,42 @@ def add_blends(pr: PreparedRun, settings, evals: dict | None = None,
     f_end = np.where(ok[:-1], dist[:-1] / clen, -1.0)  # fraction along move m, or none
     f_start = np.where(ok[1:], 1.0 - dist[1:] / clen, -1.0)
     shared = (f_end >= 0) & (f_start >= 0) & (f_start - f_end <= 1e-12)
-    rows, take = [], []
+    has_end = f_end >= 0
+    has_start = (f_start >= 0) & ~shared
+    extra = np.concatenate((has_end.astype(np.int64) + has_start, [0]))
+    new_index = np.concatenate(([0], np.cumsum(1 + extra)[:-1]))
+    total = int(new_index[-1]) + 1
+    # each row: a point on move src -> src + 1 at fraction frac (0: the programmed node)
+    src = np.empty(total, dtype=np.int64)
+    frac = np.zeros(total)
+    take = np.empty(total, dtype=np.int64)  # row of line / feed / tol it takes
+    src[new_index] = np.arange(n)
+    take[new_index] = np.arange(n)
     at_end = np.full(n, -1, dtype=np.int64)    # row of the blend-at-m's end point
     at_start = np.full(n, -1, dtype=np.int64)  # row of the blend-at-m's start point
-    new_index = np.empty(n, dtype=np.int64)
-    for m in range(n):
-        new_index[m] = len(rows)
-        rows.append(pr.nodes[m])
-        take.append(m)
-        if m == n - 1:
-            break
-        d_vec = pr.nodes[m + 1] - pr.nodes[m]
-        if f_end[m] >= 0:
-            at_end[m] = len(rows)
-            rows.append(pr.nodes[m] + d_vec * (0.5 if shared[m] else f_end[m]))
-            take.append(m + 1)  # a point on move m -> m+1 takes that move's data
-        if f_start[m] >= 0:
-            if shared[m]:
-                at_start[m + 1] = at_end[m]
-            else:
-                at_start[m + 1] = len(rows)
-                rows.append(pr.nodes[m] + d_vec * f_start[m])
-                take.append(m + 1)
-    take = np.array(take, dtype=np.int64)
-    nodes = np.array(rows)
-    blends = []
-    for c in corners.tolist():
-        ia, ib = int(at_start[c]), int(at_end[c])
-        t_in = chords[c - 1] / clen[c - 1]
-        t_out = chords[c] / clen[c]
-        coef, h = blend_piece(nodes[ia], nodes[ib], t_in, t_out, float(dist[c]), float(shape[c]),
-                              pr.scale)
-        blends.append(Blend(ia, h, coef, int(pr.line[c]),
-                            float(min(pr.feed_mm_s[c], pr.feed_mm_s[c + 1])), t_in, t_out))
+    m = np.nonzero(has_end)[0]
+    at_end[m] = new_index[m] + 1
+    src[at_end[m]] = m
+    frac[at_end[m]] = np.where(shared[m], 0.5, f_end[m])
+    m = np.nonzero(has_start)[0]
+    rows = new_index[m] + 1 + has_end[m]
+    at_start[m + 1] = rows
+    src[rows] = m
+    frac[rows] = f_start[m]
+    m = np.nonzero(shared)[0]
+    at_start[m + 1] = at_end[m]
+    inserted = frac > 0
+    take[inserted] = src[inserted] + 1  # a point on move m -> m+1 takes that move's data
+    nodes = pr.nodes[src].copy()
+    k = np.nonzero(inserted)[0]
+    nodes[k] += (pr.nodes[src[k] + 1] - pr.nodes[src[k]]) * frac[k, None]
+    ia, ib = at_start[corners], at_end[corners]
+    t_in = chords[corners - 1] / clen[corners - 1, None]
+    t_out = chords[corners] / clen[corners, None]
+    coef, h = blend_piece(nodes[ia], nodes[ib], t_in, t_out, dist[corners], shape[corners], pr.scale)
+    feed = np.minimum(pr.feed_mm_s[corners], pr.feed_mm_s[corners + 1])
+    blends = [Blend(int(ia[k]), float(h[k]), coef[k], int(pr.line[c]), float(feed[k]), t_in[k], t_out[k])
+              for k, c in enumerate(corners.tolist())]
     curves = tuple(CurvePiece(int(new_index[cp.first]), int(new_index[cp.last]), cp.curve)
                    for cp in pr.curves)
     rot_only = pr.rot_only[take[1:] - 1]

@@ -3,14 +3,24 @@
 Which fitter handles what:
 
 * rapid runs: one straight ``Path(rapid=True)`` per G0 move;
-* G61 stretches: exact straight lines, a stop at every non-collinear node;
-* feed paths without exact curves that move exactly two axes: paper 000's
-  planar method (``planar.py``; ``FitSettings.method`` = "auto"/"planar"), with
-  the N-axis fitter as fallback when an inherited tangent leaves the next frame;
-* everything else: sections — exact curves (``curves.py``) and the polylines
-  between them (``nodes.py``), joined G2: a polyline next to a curve takes the
-  curve's exact tangent and curvature vector at the junction, two curves meet at
-  their averaged tangent / curvature.
+* G61 stretches: exact straight lines, a stop at every non-collinear node (one
+  segment per feed in a collinear chain: each move keeps its F);
+* with ``FitSettings.method`` = "planar"/"auto", feed paths without exact curves
+  that move exactly two axes: paper 000's planar method (``planar.py``), with the
+  N-axis fitter as fallback when an inherited tangent leaves the next frame;
+* everything else (the default "nodes" everywhere): sharp corners between straight
+  moves get G2 blends (``blends.py``, ``corners.add_blends``); then sections — exact
+  curves (``curves.py``), blends, and the polylines between them (``nodes.py``),
+  joined G2: a polyline next to a curve or blend takes its exact tangent and
+  curvature vector at the junction, two curves meet at their averaged tangent /
+  curvature.
+
+Every fitted sub-run is measured against the programmed path (``deviation.py``);
+one outside its tolerance is refitted tighter, then repaired locally over a few
+rounds (blends, or stops where a corner cannot be blended, at nodes of its failing
+sections), and as the last resort becomes its exact moves with stops. A fit still
+outside is reported in the statistics; ``result.require_within_tolerance`` turns
+that into a ``FitError`` for the commands.
 """
 
 from __future__ import annotations
@@ -239,7 +249,7 @@ def _fit_run_raw(run: Run, settings: FitSettings):
             info["outside_lines"] = [int(prb.line[m.i0 + 1]), int(prb.line[m.i1])]
         ok_all &= m.ok
         n_seg += int(m.raw.coef.shape[0])
-    if (prb.stops.size or prb is not pr) and info.get("repaired"):
+    if info.get("repaired"):
         info["repair_stops"] = int(prb.stops.size)
     info.update(max_node_dev_mm=dmm_max, max_node_dev_deg=ddeg_max, max_path_dev_mm=pdev_max,
                 max_path_dev_ratio=pratio_max, max_path_dev_rot_ratio=rratio_max,
@@ -527,14 +537,18 @@ def _fit_sections(pr: PreparedRun, sub: SubRun, tol: np.ndarray, metric: np.ndar
     # exact end states of the curves and blends, then the states imposed at each junction
     evs = [curve_eval(s_[1].curve, evals) if s_[0] == "curve" else None for s_ in secs]
     states = []
+    zero = np.zeros(scale.size)
+    same = bool(np.array_equal(scale, pr.scale))  # always without rotary axes
     for s_, ev in zip(secs, evs):
         if ev is not None:
             states.append(end_states(ev, scale))
         elif s_[0] == "blend":
             bl = s_[1]
-            zero = np.zeros(scale.size)
-            t0, t1 = (_unit(t / pr.scale * scale) for t in (bl.t_in, bl.t_out))
-            states.append(((t0, zero), (t1, zero)))
+            if same:
+                states.append(((bl.t_in, zero), (bl.t_out, zero)))
+            else:
+                t0, t1 = (_unit(t / pr.scale * scale) for t in (bl.t_in, bl.t_out))
+                states.append(((t0, zero), (t1, zero)))
         else:
             states.append(None)
     start_of = [None] * len(secs)
@@ -571,9 +585,12 @@ def _fit_sections(pr: PreparedRun, sub: SubRun, tol: np.ndarray, metric: np.ndar
                           np.array([bl.feed_mm_s]), 0.0, 0.0, True, 3)
         else:
             i, j = s_[1], s_[2]
-            if j == i + 1 and start_of[k] is not None and end_of[k] is not None \
-                    and secs[k - 1][0] == "blend" and secs[k + 1][0] == "blend":
-                # the straight middle of a move between two blends: the move itself
+            free_or_blend = (
+                (start_of[k] is None or secs[k - 1][0] == "blend")
+                and (end_of[k] is None or secs[k + 1][0] == "blend"))
+            if j == i + 1 and free_or_blend:
+                # a move between blends (or a blend and the path's end): the move itself,
+                # G2 with the blends (their ends lie on it, tangent, with zero curvature)
                 length = float(np.linalg.norm((pr.nodes[j] - pr.nodes[i]) * pr.scale))
                 pf = straight_piece(pr.nodes[i], pr.nodes[j], length, int(pr.line[j]),
                                     float(pr.feed_mm_s[j]))
