@@ -41,9 +41,9 @@ def test_polyline_plans_within_two_percent_of_the_exact_curve(tmp_path, name, ch
 
 @pytest.mark.slow
 @pytest.mark.skipif(not os.environ.get("CNC_POLYLINE_FULL"), reason="set CNC_POLYLINE_FULL=1")
-@pytest.mark.parametrize("name, chord", FULL)
-def test_polyline_vs_exact_full_set(tmp_path, name, chord):
-    _check(tmp_path, name, chord)
+def test_polyline_vs_exact_full_set(tmp_path):
+    for name, chord in FULL:
+        _check(tmp_path, name, chord)
 
 
 def test_polyline_sampling_respects_the_chord_error():
