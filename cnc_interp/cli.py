@@ -123,7 +123,8 @@ def parse(part: str, machine_spec: str | None, tool_table: str | None, as_json: 
 @_tool_table_option
 @_tol_option
 @click.option("--corner-deg", type=click.FloatRange(min=0, max=180), default=None,
-              help="Turns sharper than this split the path (default 30).")
+              help="Turns up to this are rounded by the smooth fit; sharper corners get a G2 "
+                   "blend within the tolerance, or a stop where none fits (default 30).")
 @_fit_method_option
 @click.option("-o", "--output", "out", default=None, metavar="SEGMENTS.json",
               help="Write the fitted segments as JSON.")
