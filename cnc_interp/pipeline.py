@@ -65,10 +65,12 @@ def load_program_for(part: str, machine_spec: str | None, require_machine: bool 
 
 
 def fit_loaded(program, settings):
-    """Fit every run of a parsed program (see ``cnc_interp.fit.fit_program``)."""
+    """Fit every run of a parsed program (see ``cnc_interp.fit.fit_program``); a fit outside
+    its tolerance that could not be repaired is a ``FitError`` (exit 1) naming its line."""
     from .fit import fit_program
+    from .fit.result import require_within_tolerance
 
-    return fit_program(program, settings)
+    return require_within_tolerance(fit_program(program, settings))
 
 
 # --- batch: one program from bytes to a result record (H3a, issue 7) ----------
@@ -331,7 +333,7 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
                                             method=opts.fit_method)
     fit_stats: dict = {}
     # the fit runs in a thread of its own, a bounded number of items ahead
-    fitted = Prefetch(iter_fit(program, fit_settings, fit_stats))
+    fitted = Prefetch(iter_fit(program, fit_settings, fit_stats, source=name))
 
     n = machine.n_axes
     start_pos = np.zeros(n) if machine.start is None else np.asarray(machine.start, dtype=float)
