@@ -76,18 +76,20 @@ def test_a_z_wrap_keeps_at_most_two_segments_per_move():
 def test_a_fit_outside_its_tolerance_fails_with_exit_1_naming_the_line(tmp_path, monkeypatch):
     from click.testing import CliRunner
 
-    import cnc_interp.fit as fit_pkg
+    import cnc_interp.fit.fitter as fitter
     from cnc_interp.cli import main
 
-    real = fit_pkg.fit_program
+    real = fitter._fit_run_raw
 
-    def outside(program, settings=None):
-        res = real(program, settings)
-        res.stats["within_tolerance"] = False
-        res.stats["runs"][-1]["outside_lines"] = [4, 6]
-        return res
+    def outside(run, settings):
+        # every path of the pipeline (fit_program and the streaming iter_fit) fits runs here
+        raws, info = real(run, settings)
+        if run.kind != "rapid":
+            info["within_tolerance"] = False
+            info["outside_lines"] = [4, 6]
+        return raws, info
 
-    monkeypatch.setattr(fit_pkg, "fit_program", outside)
+    monkeypatch.setattr(fitter, "_fit_run_raw", outside)
     f = tmp_path / "r.ngc"
     f.write_text(ROT9)
     for cmd in (["fit", str(f), "-m", "mikron-ucp710"],
