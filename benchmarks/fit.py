@@ -1,6 +1,6 @@
 """Fit-stage throughput: nodes fitted per second (best of several runs).
 
-Usage: .venv/bin/python benchmarks/fit.py [FILE.ngc ...] [--tol MM] [--method auto|planar|nodes] [--repeat N]
+Usage: .venv/bin/python benchmarks/fit.py [FILE.ngc ...] [--tol MM] [--method nodes|planar|auto] [--repeat N]
 
 Defaults to the two corpus files of issue 3 (circle_small_segments_ncd.ngc and
 3D_Chips.ngc). Parsing is excluded from the timing; building the Paths (their
@@ -33,7 +33,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("files", nargs="*", default=DEFAULT_FILES)
     ap.add_argument("--tol", type=float, default=None, help="fit tolerance, mm (default 0.001)")
-    ap.add_argument("--method", default="auto", choices=("auto", "planar", "nodes"))
+    ap.add_argument("--method", default="nodes", choices=("nodes", "planar", "auto"))
     ap.add_argument("--repeat", type=int, default=10)
     args = ap.parse_args(argv)
     settings = FitSettings.from_options(tol_mm=args.tol, method=args.method)

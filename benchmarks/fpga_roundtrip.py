@@ -1,11 +1,13 @@
-"""FPGA round trip over corpus programs: plan -> fixed point -> frames -> golden model.
+"""FPGA round trip: plan as ``stream`` does -> fixed point -> frames -> device model -> verify.
 
-Prints, per program: samples, planar segments, share of samples streamed as
-segments, frame bytes, worst deviation from the float plan (µm), worst
-segment-end drift before resynchronisation (µm), and the deviation the paper's
-p'-Euler integrator would have on the same samples (µm), plus wall times.
+Per program and planner: samples, planar segments, share of samples sent as segments,
+frame bytes per sample, segments re-sent as setpoints for the limits, worst deviation of
+the device's setpoints from the float plan (µm), verify's worst ratio of the device's
+setpoints against the real machine (must be <= 1 + 1e-9), wall times. The last line sums
+it up: ``fpga round trip: R runs, V verify failures, worst ratio X, worst deviation D µm``.
 
-    .venv/bin/python benchmarks/fpga_roundtrip.py [-m MACHINE] [--planner P] PART...
+    .venv/bin/python benchmarks/fpga_roundtrip.py [--planner all|vpop|...] [-m MACHINE] PART...
+    .venv/bin/python benchmarks/fpga_roundtrip.py --done-when   # samples + 20 corpus programs
 """
 
 from __future__ import annotations
@@ -17,75 +19,86 @@ import time
 
 import numpy as np
 
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
+ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
+sys.path.insert(0, ROOT)
 
 from cnc_interp.errors import CncInterpError  # noqa: E402
-from cnc_interp.fpga.commands import StreamOptions, plan_for_stream  # noqa: E402
+from cnc_interp.fpga.commands import StreamOptions, build_stream_full  # noqa: E402
 from cnc_interp.fpga.device import DeviceCore  # noqa: E402
-from cnc_interp.fpga.frames import decode_frame, program_frames  # noqa: E402
+from cnc_interp.fpga.frames import decode_frame  # noqa: E402
 from cnc_interp.fpga.model import to_mm  # noqa: E402
-from cnc_interp.fpga.program import assign_paths, build_program  # noqa: E402
+from cnc_interp.plan.verify import verify_arrays  # noqa: E402
+
+CORPUS = os.path.join(ROOT, "..", "shared", "corpus", "linuxcnc")
+XYZ_INI = os.path.join(CORPUS, "configs", "XYZ.ini")
+SAMPLES = [("drilling-cycles.ngc", "generic-mill"), ("five-axis-xyzac.ngc", "mikron-ucp710"),
+           ("lathe-profile.ngc", "xz-lathe"), ("mill-contour.ngc", "generic-mill"),
+           ("nurbs-trident.ngc", "mikron-ucp710")]
+CORPUS_20 = ["quick-tests/" + n for n in (
+    "arc-arc-concave-convex.ngc", "arc-arc-sawtooth.ngc", "arc-arc-test.ngc", "arc-terminal.ngc",
+    "corner_decel.ngc", "dodecagon_0.1in.ngc", "g0_corners.ngc", "line-arc.ngc", "linearc.ngc",
+    "long-kink.ngc", "naive_cam_corner1.ngc", "parabolic_bump.ngc", "ramp_test.ngc",
+    "rapid_3d_corners.ngc", "sawtooth.ngc", "single_circle.ngc", "square.ngc", "square_spiral.ngc",
+    "straight_segments.ngc", "tangent_helix.ngc")] + ["nurbs-g5/trident-xy.ngc"]
 
 
-def euler_deviation_mm(traj, paths) -> float:
-    """Worst |z*| error of paper 000's p'-integrator (Δz* = p'(x*)·Δx*) on the planned abscissae."""
-    worst = 0.0
-    for path, a, b, s0 in assign_paths(traj, paths):
-        pl = path.planar
-        if pl is None or path.rapid or b <= a:
-            continue
-        h, v = pl.plane
-        seg = path.segment_of_s(traj.s[a:b] - s0)
-        q = traj.q[a:b]
-        for k in np.unique(seg):
-            m = seg == k
-            c, s = np.cos(pl.theta[k]), np.sin(pl.theta[k])
-            d = q[m][:, [h, v]] - pl.origin[k]
-            x = np.concatenate(([0.0], d[:, 0] * c + d[:, 1] * s))
-            p = pl.p[k]
-            dp = np.polynomial.polynomial.polyder(p)
-            z_euler = np.cumsum(np.polynomial.polynomial.polyval(x[:-1], dp) * np.diff(x))
-            z_true = np.polynomial.polynomial.polyval(x[1:], p)
-            worst = max(worst, float(np.max(np.abs(z_euler - z_true))))
-    return worst
+def run_one(part: str, machine: str, planner: str) -> dict:
+    opts = StreamOptions(part=part, machine_spec=machine, planner=planner, quiet=True)
+    t0 = time.perf_counter()
+    prog, frames, _, traj, m = build_stream_full(opts)
+    t1 = time.perf_counter()
+    core = DeviceCore(buffer_bytes=1 << 31)
+    for f in frames:
+        assert core.handle(decode_frame(f))
+    q = to_mm(core.datapath.output().q, prog.formats)
+    idx = [m.axes.index(a) for a in traj.axes]
+    rep = verify_arrays(q, traj.dt_s, m.vmax[idx], m.amax[idx], m.jmax[idx], axes=traj.axes)
+    st = prog.stats
+    return {"samples": prog.n_samples, "segments": st["segments"],
+            "share": st["planar_samples"] / max(1, prog.n_samples),
+            "bytes_per_sample": sum(map(len, frames)) / max(1, prog.n_samples),
+            "bytes": sum(map(len, frames)), "repaired": st["repaired_segments"],
+            "dev_um": float(np.max(np.abs(q - traj.q))) * 1e3, "ratio": rep.worst_ratio,
+            "ok": rep.ok, "t": t1 - t0}
 
 
 def main() -> int:
     ap = argparse.ArgumentParser()
-    ap.add_argument("parts", nargs="+")
-    ap.add_argument("-m", "--machine", default=None)
-    ap.add_argument("--planner", default="variable")
+    ap.add_argument("parts", nargs="*")
+    ap.add_argument("-m", "--machine", default=XYZ_INI)
+    ap.add_argument("--planner", default="all", help="vpop, constant, variable or all")
+    ap.add_argument("--done-when", action="store_true",
+                    help="every sample program (own machine) and 21 corpus programs (XYZ.ini)")
     args = ap.parse_args()
-    print("| program | samples | segments | on segments | frame bytes | max dev µm | end drift µm | "
-          "p'-Euler dev µm | plan s | fpga s |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
-    for part in args.parts:
-        name = os.path.basename(part)
-        opts = StreamOptions(part=part, machine_spec=args.machine, planner=args.planner)
-        t0 = time.perf_counter()
-        try:
-            fit, traj = plan_for_stream(opts)
-        except CncInterpError as exc:
-            print(f"| {name} | error: {exc.format()[:80]} |")
-            continue
-        t1 = time.perf_counter()
-        prog = build_program(traj, fit.paths, source=part)
-        frames, _ = program_frames(prog)
-        core = DeviceCore(buffer_bytes=1 << 62)
-        for f in frames:
-            assert core.handle(decode_frame(f))
-        q = to_mm(core.datapath.output().q, prog.formats)
-        t2 = time.perf_counter()
-        dev = float(np.max(np.abs(q - traj.q)))
-        st = prog.stats
-        share = st["planar_samples"] / max(1, prog.n_samples)
-        eul = euler_deviation_mm(traj, fit.paths)
-        print(f"| {name} | {prog.n_samples} | {st['segments']} | {100 * share:.1f}% | "
-              f"{sum(map(len, frames))} | {dev * 1e3:.5f} | {st['max_segment_end_drift_mm'] * 1e3:.2e} | "
-              f"{eul * 1e3:.3g} | {t1 - t0:.2f} | {t2 - t1:.2f} |")
-        for why in st["fallback_paths"][:3]:
-            print(f"|   setpoints: {why} |")
-    return 0
+    planners = ("vpop", "constant", "variable") if args.planner == "all" else (args.planner,)
+    jobs = [(p, args.machine) for p in args.parts]
+    if args.done_when:
+        jobs = [(os.path.join(ROOT, "samples", "gcode", n), m) for n, m in SAMPLES]
+        jobs += [(os.path.join(CORPUS, n), XYZ_INI) for n in CORPUS_20]
+    print("| program | planner | samples | on segments | bytes/sample | re-sent | max dev µm | "
+          "device verify ratio | s |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    runs = fails = errors = 0
+    worst_ratio = worst_dev = 0.0
+    for part, machine in jobs:
+        for planner in planners:
+            name = os.path.basename(part)
+            try:
+                r = run_one(part, machine, planner)
+            except CncInterpError as exc:
+                errors += 1
+                print(f"| {name} | {planner} | error: {exc.format()[:100]} |", flush=True)
+                continue
+            runs += 1
+            fails += not r["ok"]
+            worst_ratio = max(worst_ratio, r["ratio"])
+            worst_dev = max(worst_dev, r["dev_um"])
+            print(f"| {name} | {planner} | {r['samples']} | {100 * r['share']:.1f} % | "
+                  f"{r['bytes_per_sample']:.2f} | {r['repaired']} | {r['dev_um']:.4f} | "
+                  f"{r['ratio']:.12f} | {r['t']:.1f} |", flush=True)
+    print(f"fpga round trip: {runs} runs, {fails} verify failures, {errors} errors, worst ratio "
+          f"{worst_ratio:.12f}, worst deviation {worst_dev:.4f} µm")
+    return 1 if fails else 0
 
 
 if __name__ == "__main__":

@@ -385,7 +385,7 @@ def build_report(opts: BatchOptions) -> dict:
         "planner": opts.planner,
         "dt_s": machine.with_dt(opts.dt_s).dt_s,
         "tol_mm": opts.tol_mm,
-        "fit_method": opts.fit_method or "auto",
+        "fit_method": opts.fit_method or "nodes",
         "max_slowdown": slowdown,
         "executor": "dask" if opts.dask_address else "local",
         "programs": records,

@@ -48,9 +48,11 @@ def _tol_option(f):
 
 
 def _fit_method_option(f):
-    return click.option("--fit-method", "fit_method", type=click.Choice(("auto", "nodes")), default=None,
-                        help="auto (default): paper 000's planar fit for runs that move exactly two "
-                             "axes, the N-axis fit elsewhere; nodes: the N-axis fit everywhere.")(f)
+    return click.option("--fit-method", "fit_method", type=click.Choice(("nodes", "planar", "auto")),
+                        default=None,
+                        help="nodes (default; stream: planar): the N-axis fit everywhere; planar: "
+                             "paper 000's planar fit for runs of lines that move exactly two axes, "
+                             "the N-axis fit elsewhere; auto: the same as planar.")(f)
 
 
 def _tool_table_option(f):
@@ -121,7 +123,8 @@ def parse(part: str, machine_spec: str | None, tool_table: str | None, as_json: 
 @_tool_table_option
 @_tol_option
 @click.option("--corner-deg", type=click.FloatRange(min=0, max=180), default=None,
-              help="Turns sharper than this split the path (default 30).")
+              help="Turns up to this are rounded by the smooth fit; sharper corners get a G2 "
+                   "blend within the tolerance, or a stop where none fits (default 30).")
 @_fit_method_option
 @click.option("-o", "--output", "out", default=None, metavar="SEGMENTS.json",
               help="Write the fitted segments as JSON.")
@@ -261,8 +264,10 @@ def stream(part, machine_spec, planner, dt_s, tol_mm, fit_method, device, dry_ru
     """Quantize PART's plan to fixed point and stream it to the FPGA over USB."""
     from .fpga.commands import StreamOptions, run_stream
 
+    # the FPGA evaluates paper 000's planar segments: stream keeps that fit by default
     run_stream(StreamOptions(part=part, machine_spec=machine_spec, planner=planner, dt_s=dt_s,
-                             tol_mm=tol_mm, fit_method=fit_method, device=device, dry_run=dry_run,
+                             tol_mm=tol_mm, fit_method=fit_method or "planar", device=device,
+                             dry_run=dry_run,
                              resume_from=resume_from, quiet=quiet))
 
 

@@ -96,7 +96,7 @@ FIT_SMOOTHING = 1e-4
 #: N-axis fitter: most knot-insertion rounds before the fit falls back to a knot per node
 FIT_MAX_ROUNDS = 40
 #: N-axis fitter: nodes per span of the initial knot vector
-FIT_INITIAL_NODES_PER_SPAN = 24
+FIT_INITIAL_NODES_PER_SPAN = 512
 #: N-axis fitter: least fitted speed |dq/du| relative to the chord's, at nodes and mid-chords
 FIT_MIN_SPEED_RATIO = 0.25
 #: N-axis fitter: a fitted speed below this share of the chord's is a stop and never accepted
@@ -159,6 +159,43 @@ PLANAR_LONG_CHORD_RATIO = 4.0
 #: planar fit: most resumptions with extra nodes on a chord that could not be fitted before
 #: falling back to the N-axis fitter
 PLANAR_MAX_RETRIES = 256
+#: quantum of printed coordinates (fit/quantum.py): decimals tried (10^-D mm and 10^-D in)
+FIT_QUANTUM_MAX_DECIMALS = 6
+#: only a quantum up to this (mm) widens the tolerance by its half: 0.0001 in (2.54 µm) and
+#: 0.001 mm count; coordinates printed to 0.01 mm or 0.001 in are taken as exact values
+FIT_QUANTUM_MAX_MM = 0.003
+#: the same for rotary axes (deg): 0.001° counts, 0.01° does not
+FIT_QUANTUM_MAX_DEG = 0.003
+#: a displacement is on a grid q when it is within this many q of a multiple of q (float
+#: rounding of inch -> mm and offsets is ~1e-11 q; a random value passes with odds 2e-6)
+FIT_QUANTUM_MATCH = 1e-6
+#: fewer straight feed moves than this in a program: no quantum is inferred
+FIT_QUANTUM_MIN_MOVES = 16
+#: corner blends (fit/blends.py): a corner turning more than this (deg) is a near-reversal
+#: and stops the path (the blend would be a near-cusp: parameter speed 0.64 at 175°)
+FIT_BLEND_MAX_TURN_DEG = 175.0
+#: share of the tolerance a blend may use (the rest absorbs the tabulated deviation's
+#: interpolation and float rounding; the deviation is measured independently after)
+FIT_BLEND_TOL_SHARE = 0.95
+#: a corner whose blend, at its tolerance, would be more than this many times longer than
+#: the room its moves leave (half the shorter move) stops instead: squeezed blends were
+#: slower than stops (a dense-corner program at G64 P0.05: 103.0 s blended, 100.3 s with
+#: stops; 101.5 s at 4, and the stellabee kink test keeps its 124.5 s)
+FIT_BLEND_MAX_CROWDING = 4.0
+#: shortest blend (mm, scaled metric): below it (moves of nanometres) the path stops instead
+FIT_BLEND_MIN_MM = 1e-5
+#: with rotary axes: least share of the linear axes in either move's direction (scaled metric)
+#: for a blend; below it the tool's own path would nearly stop inside the blend
+FIT_BLEND_MIN_LIN_SPEED = 0.05
+#: a fit the measurement finds outside its tolerance is fitted again aiming at this share
+#: of it before the sub-run is split (the fitter checks sampled points; the measurement is
+#: denser, so a miss is usually by a few per cent)
+FIT_REPAIR_TOL_SHARE = 0.7
+#: repair rounds of a run whose fit the measurement finds outside its tolerance: each puts
+#: blends (stops where a corner cannot be blended) at FIT_REPAIR_SPLITS nodes spread over
+#: every failing section and refits; the last one at every node of the sections still failing
+FIT_REPAIR_ROUNDS = 4
+FIT_REPAIR_SPLITS = 8
 #: curves: exact-geometry check points per quintic piece when converting arcs / NURBS
 CURVE_CHECK_POINTS = 16
 #: curves: deepest halving of a curve piece before giving up (2**depth pieces)
@@ -221,12 +258,24 @@ P000_BISECT_ITERS = 80
 P000_MIN_LENGTH_MM = 1e-12
 
 # --- fpga ----------------------------------------------------------------------
-#: fixed-point defaults (word bits, fraction bits); see cnc_interp/fpga/fixed.py
-FPGA_POS_FORMAT = (64, 32)  # positions, origins, x_end, increments: LSB 2.3e-10 mm
-FPGA_TRIG_FORMAT = (48, 46)  # cos θ, sin θ
-FPGA_PARAM_FORMAT = (48, 44)  # normalised abscissa ξ = x*/x_end and time τ, both in [0, 1]
-FPGA_COEF_WORD = 48  # polynomial coefficient mantissas (block exponent chosen per segment)
-FPGA_ACC_WORD = 96  # Horner accumulator width; overflow is an error naming the segment
+#: fixed-point defaults (word bits, fraction bits); see cnc_interp/fpga/fixed.py and the width
+#: sweep in benchmarks/fpga_widths.py (docs/fpga-protocol.md section 4 gives the reasoning)
+FPGA_POS_FORMAT = (42, 28)  # positions, origins, increments: ±8192 mm, LSB 3.7e-9 mm
+FPGA_TRIG_FORMAT = (35, 33)  # cos θ, sin θ: one 35×35 multiplier operand (4 MULT18X18D)
+FPGA_PARAM_FORMAT = (35, 33)  # normalised abscissa ξ = x*/x_end and time τ, both in [0, 1]
+FPGA_COEF_WORD = 32  # polynomial mantissas (block exponent per polynomial); 3 guard bits below
+FPGA_HORNER_WORD = 35  # Horner accumulator: sum of six 32-bit mantissas fits, and it is a
+#                        multiplier operand; overflow is an error naming the segment
+FPGA_INT_WORD = 76  # rotation integrators: position word + trig fraction + 1 (never rounded)
+FPGA_MULT_WORD = 35  # every multiplier operand (increments, x_end mantissa) fits this
+#: relative margin below every limit that ``stream`` plans with, on top of the position
+#: rounding budget (cnc_interp/fpga/limits.py): room for the profile fit's error, so that
+#: most planned segments reproduce within the limits instead of falling back to setpoints
+FPGA_LIMIT_MARGIN = 1e-4
+#: the rounding budget (LSB/dt, 2 LSB/dt², 4 LSB/dt³ over the limits) counts this many times
+FPGA_MARGIN_QUANTA = 2.0
+#: a margin above this (a dt too short for the position LSB) is refused
+FPGA_LIMIT_MARGIN_MAX = 1e-2
 #: largest error the fitted parametric profile ξ(τ) may add along the path (mm)
 FPGA_PROFILE_TOL_MM = 2e-5
 #: a planar path is streamed as segments only if its samples lie on its planar form within this (mm)
@@ -235,6 +284,8 @@ FPGA_PLANAR_MATCH_MM = 1e-7
 FPGA_ROUNDTRIP_TARGET_MM = 1e-4
 #: largest frame payload (bytes); longer data is split over several frames
 FPGA_MAX_PAYLOAD = 4096
+#: motion the device buffers after START before its sample clock runs (s)
+FPGA_PREFILL_S = 0.25
 #: emulated device receive buffer (bytes)
 FPGA_DEVICE_BUFFER = 16384
 #: USB transfer timeout (ms) and retry budget per frame

@@ -87,6 +87,13 @@ class PlanError(CncInterpError):
     exit_code = 1
 
 
+class FitError(CncInterpError):
+    """A fitted path that misses its tolerance where the fit could not repair it (exit 1):
+    the command fails rather than plan a path outside the part; names the source line."""
+
+    exit_code = 1
+
+
 class OutputError(CncInterpError):
     """An output that could not be written for a reason the input did not cause (a full
     disk); the previous file is kept (exit 1)."""

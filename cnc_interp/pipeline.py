@@ -65,10 +65,12 @@ def load_program_for(part: str, machine_spec: str | None, require_machine: bool 
 
 
 def fit_loaded(program, settings):
-    """Fit every run of a parsed program (see ``cnc_interp.fit.fit_program``)."""
+    """Fit every run of a parsed program (see ``cnc_interp.fit.fit_program``); a fit outside
+    its tolerance that could not be repaired is a ``FitError`` (exit 1) naming its line."""
     from .fit import fit_program
+    from .fit.result import require_within_tolerance
 
-    return fit_program(program, settings)
+    return require_within_tolerance(fit_program(program, settings))
 
 
 # --- batch: one program from bytes to a result record (H3a, issue 7) ----------
@@ -99,15 +101,14 @@ def process_program(name: str, data: bytes, machine, planner: str = "optimal",
     traj = plan_program(result, machine.with_dt(settings.dt_s), settings)
     report = verify(traj, machine)
     axis, kind, ratio, sample = report.worst()
-    nodes = sum(int(r.nodes.shape[0]) for r in program.runs)
-    paths = result.paths
     return {
         "status": "ok" if report.ok else "violation",
         "message": "" if report.ok else f"{axis} {kind} ratio {ratio:.9f} at sample {sample}",
         "error_line": 0,
         "lines": int(program.line_count),
-        "nodes": nodes,
-        "segments": sum(int(p.n_seg) for p in paths),
+        # one definition with `parse` and `fit`: nodes of feed runs, fitted feed segments
+        "nodes": int(result.stats["nodes_in"]),
+        "segments": int(result.stats["segments_out"]),
         "path_length_mm": float(traj.s[-1]) if traj.s.size else 0.0,
         "cycle_time_s": float(traj.duration_s),
         "samples": int(traj.n_samples),
@@ -282,8 +283,167 @@ def _load_with(part: str, machine):
                         tool_table=machine.tool_table), machine
 
 
+def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | None = None) -> dict:
+    """Parse, fit, plan, verify and write ``opts.out`` as one stream (``cnc-interp plan``).
+
+    The stages overlap: the parse runs in a thread, the fit hands over each run's paths as
+    they are fitted, worker threads plan jobs of paths ahead (``plan.timeline``), and every
+    block of samples is verified (``StreamVerifier``, carrying the last samples across
+    blocks) before it is written, so peak memory is a window of the program, not its
+    cycle. The output goes through ``atomic_write``: a file appears only complete. The
+    bytes do not depend on ``window`` or ``threads``.
+
+    Returns the summary (``PlanOutcome.summary``'s keys) with ``timings_s``: ``parse``
+    (the parse thread's CPU time), ``fit`` (the fit
+    thread's CPU time), ``plan`` (the planning threads' CPU time), ``verify``, ``write``,
+    ``first_row`` (from the start until the first samples were written) and ``total``
+    (wall time). Raises ``PlanError`` (exit 1) when a block violates a limit (a bug),
+    before that block is written.
+    """
+    import time
+
+    from .errors import PlanError
+    from .export.atomic import atomic_write
+    from .fit.fitter import iter_fit
+    from .fit.settings import FitSettings
+    from .gcode.stream import ProgramStream
+    from .plan.machine_io import DEFAULT_PRESET, load_machine
+    from .plan.settings import PlanSettings
+    from .plan.timeline import Prefetch, TimelineInfo, iter_timeline
+
+    t_start = time.perf_counter()
+    out = opts.out or "-"
+    _few_malloc_arenas()
+    _warm_kernels()
+    machine = load_machine(opts.machine_spec if opts.machine_spec is not None else DEFAULT_PRESET)
+    start = opts.start
+    if isinstance(start, str):
+        start = parse_start(start, machine.axes, machine.start)
+    machine = machine.with_start(start)
+    settings = PlanSettings.from_options(planner=opts.planner, dt_s=opts.dt_s, tol_mm=opts.tol_mm,
+                                         machine=machine)
+    machine = machine.with_dt(settings.dt_s)
+    dt = float(settings.dt_s)
+    name, data = read_part(opts.part)
+    input_meta = _input_meta(name, data)
+    tool_table = opts.tool_table if opts.tool_table is not None else machine.tool_table
+    program = ProgramStream(data, name, machine.axes, machine.start, tool_table)
+    del data
+    fit_settings = FitSettings.from_options(tol_mm=opts.tol_mm, machine=machine,
+                                            method=opts.fit_method)
+    fit_stats: dict = {}
+    # the fit runs in a thread of its own, a bounded number of items ahead
+    fitted = Prefetch(iter_fit(program, fit_settings, fit_stats, source=name))
+
+    n = machine.n_axes
+    start_pos = np.zeros(n) if machine.start is None else np.asarray(machine.start, dtype=float)
+    info = TimelineInfo()
+    blocks = iter_timeline(fitted, machine, settings, start_pos, window=window,
+                           info=info, progress=progress, source=name, threads=threads)
+    mcap = out.lower().endswith(".mcap")
+
+    def violation(report):
+        _violation(report, name, PlanError)
+
+    sink = None
+    try:
+        with atomic_write(out) as fh:
+            from .export.sink import PlanSink
+
+            sink = PlanSink(fh, machine, dt, mcap, violation)
+            try:
+                for block in blocks:
+                    sink.put(block)
+                planner = None
+                meta = None
+                if mcap:
+                    from .export.mcap_io import planner_record
+
+                    stats_settings = settings.to_dict()
+                    stats_settings["stats"] = dict(info.stats)
+                    planner = planner_record(settings.planner, info.status, dt, machine.axes,
+                                             info.samples, stats_settings)
+                    meta = {"planner": settings.to_dict(), "input": input_meta}
+                report = sink.finish(planner, meta)
+            except BaseException:
+                sink.abort()
+                raise
+    except PlanError as exc:
+        if exc.location.line == 0 and exc.location.file == SourceLocation().file:
+            raise PlanError(exc.message, _loc(name)) from None  # name the part program
+        raise
+    finally:
+        blocks.close()
+        fitted.close()
+    first_row = (sink.first_row_at - t_start) if sink.first_row_at is not None else None
+    last_s = sink.last_s
+    samples = info.samples
+    cycle = float((samples - 1) * dt) if samples else 0.0
+    total = time.perf_counter() - t_start
+    timings = {"parse": program.thread_cpu_s, "fit": fitted.cpu_s, "plan": info.plan_cpu_s,
+               "verify": sink.verify_s, "write": sink.write_s,
+               "first_row": first_row if first_row is not None else total, "total": total}
+    axis, kind, ratio, idx = report.worst()
+    return {
+        "part": name, "machine": machine.name, "planner": settings.planner, "dt_s": dt,
+        "samples": samples, "cycle_time_s": cycle, "path_length_mm": last_s,
+        "worst_ratio": report.worst_ratio, "worst": {"axis": axis, "limit": kind, "sample": idx},
+        "status": info.status, "timings_s": timings, "fit_method": fit_stats.get("method"),
+        "x_real_time": (cycle / total) if total > 0 else None,
+    }
+
+
+#: glibc malloc arenas for the streaming plan's threads (mallopt M_ARENA_MAX): the
+#: default (8 per core) lets each thread keep its own freed blocks, ~100 MB more RSS
+MALLOC_ARENAS = 2
+
+
+def _few_malloc_arenas() -> None:
+    """Ask glibc for few malloc arenas (no effect elsewhere)."""
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL("libc.so.6")
+        libc.mallopt(-8, MALLOC_ARENAS)  # M_ARENA_MAX
+    except (OSError, AttributeError):
+        pass
+
+
+def _warm_kernels() -> None:
+    """Load the planner's and the CSV formatter's compiled kernels in a thread while the
+    program is read: loading them takes about a second, and the first rows wait for it."""
+    import threading
+
+    def load():
+        try:
+            from .export._repr import format_table
+            from .plan import vpop_drive
+
+            format_table(np.zeros((1, 1)))
+            vpop_drive.plan_identity_batch  # noqa: B018 - the import loads the module
+            from .plan.machine_io import DEFAULT_PRESET, load_machine
+            from .plan.vpop import plan_many_vpop
+            from .fit import fit_run
+            from .gcode import read_program
+
+            m = load_machine(DEFAULT_PRESET)
+            prog = read_program(b"G21 G90\nG0 X1\n", "warm", axes=m.axes, start=m.start)
+            plan_many_vpop(fit_run(prog.runs[0]), m, m.dt_s)
+        except Exception:  # noqa: BLE001 - only a head start; the real call reports errors
+            pass
+
+    threading.Thread(target=load, daemon=True, name="cnc-interp-warm").start()
+
+
+def _violation(report, name: str, error) -> None:
+    axis, kind, ratio, idx = report.worst()
+    raise error(f"bug: plan violates the {axis} {kind} limit (ratio {ratio:.12g} at sample "
+                f"{idx}, t = {idx * report.dt_s:.6g} s); please report it", _loc(name))
+
+
 def run_plan(opts: PlanOptions) -> None:
-    """``cnc-interp plan``: plan, verify and write CSV or MCAP; summary on stderr."""
+    """``cnc-interp plan``: plan, verify and write CSV or MCAP as a stream; summary on
+    stderr (``stream_plan``)."""
     import json
     import sys
 
@@ -296,23 +456,8 @@ def run_plan(opts: PlanOptions) -> None:
         from ._kernel_cache import announce_first_compile
 
         announce_first_compile()
-    with progress_bar(None, "plan", enabled=not opts.quiet) as tick:
-        outcome = plan_part(opts.part, opts.machine_spec, opts.planner, opts.dt_s, opts.tol_mm,
-                            opts.start, progress=tick, fit_method=opts.fit_method,
-                            tool_table=opts.tool_table)
-    traj = outcome.trajectory
-    if out.lower().endswith(".mcap"):
-        from .export.mcap_io import write_mcap
-
-        meta = {"planner": outcome.settings.to_dict()}
-        if outcome.input_meta:
-            meta["input"] = outcome.input_meta
-        write_mcap(traj, out, metadata=meta, machine=outcome.machine)
-    else:
-        from .export.csv_io import write_csv
-
-        write_csv(traj, out)
-    summary = outcome.summary()
+    with progress_bar(None, "plan", enabled=not opts.quiet, unit="mm") as tick:
+        summary = stream_plan(opts, progress=tick)
     if opts.summary_json:
         # JSON goes to stdout unless stdout carries the plan itself; --quiet never hides it
         stream = sys.stderr if out == "-" else sys.stdout
@@ -321,11 +466,10 @@ def run_plan(opts: PlanOptions) -> None:
         return
     if opts.quiet:
         return
-    else:
-        sys.stderr.write(
-            f"{summary['part']}: {traj.planner} on {summary['machine']}: "
-            f"cycle time {summary['cycle_time_s']:.6g} s, {summary['samples']} samples at "
-            f"dt = {traj.dt_s:g} s, path {summary['path_length_mm']:.6g} mm, "
-            f"worst limit ratio {summary['worst_ratio']:.9f} "
-            f"({summary['worst']['axis']} {summary['worst']['limit']})\n")
+    sys.stderr.write(
+        f"{summary['part']}: {summary['planner']} on {summary['machine']}: "
+        f"cycle time {summary['cycle_time_s']:.6g} s, {summary['samples']} samples at "
+        f"dt = {summary['dt_s']:g} s, path {summary['path_length_mm']:.6g} mm, "
+        f"worst limit ratio {summary['worst_ratio']:.9f} "
+        f"({summary['worst']['axis']} {summary['worst']['limit']})\n")
     sys.stderr.flush()

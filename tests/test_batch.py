@@ -269,10 +269,10 @@ def test_fit_method_reaches_the_workers(tmp_path, folder):
     moves = "".join(f"G1 X{20 * np.cos(t):.4f} Y{20 * np.sin(t):.4f}\n" for t in th[1:])
     (folder / "polygon.ngc").write_text("G21 G90 G17\nG0 X20 Y0\nG1 F3000\n" + moves + "M2\n")
     m = machine_file(tmp_path, 20000.0)
-    auto = build_report(BatchOptions(paths=(str(folder),), machine_spec=m, jobs=1, quiet=True))
-    nodes = build_report(BatchOptions(paths=(str(folder),), machine_spec=m, jobs=1, quiet=True,
-                                      fit_method="nodes"))
-    assert auto["fit_method"] == "auto" and nodes["fit_method"] == "nodes"
+    auto = build_report(BatchOptions(paths=(str(folder),), machine_spec=m, jobs=1, quiet=True,
+                                     fit_method="planar"))
+    nodes = build_report(BatchOptions(paths=(str(folder),), machine_spec=m, jobs=1, quiet=True))
+    assert auto["fit_method"] == "planar" and nodes["fit_method"] == "nodes"
     ok = [k for k, r in enumerate(auto["programs"]) if r["status"] == "ok"]
     assert ok and all(nodes["programs"][k]["status"] == "ok" for k in ok)
     # the two fitters give different segmentations of at least one program

@@ -107,3 +107,20 @@ def test_binary_garbage_is_a_clean_error():
     err = res.stderr.decode("utf-8", "replace")
     assert err.startswith("<stdin>:") and ": error: " in err
     assert "Traceback" not in err
+
+
+def test_parse_fit_and_batch_count_nodes_and_segments_alike(tmp_path):
+    """One definition of node and segment across the commands (issue 16): rapids' end
+    points are not nodes, and every command counts the same feed nodes and fitted segments."""
+    from cnc_interp.pipeline import process_program
+    from cnc_interp.plan.machine_io import load_machine
+
+    part = tmp_path / "p.ngc"
+    part.write_text("G21 G90\nG0 X5 Y5 Z2\nG0 X5 Y5 Z2\nG1 Z0 F600\nG1 X20\nG2 X30 Y15 R10\n"
+                    "G1 Y40\nG0 Z5\nG0 X0 Y0\nG1 Z-1 F300\nG1 X3 Y4\nM2\n")
+    parsed = json.loads(CliRunner().invoke(main, ["parse", str(part), "--json"]).output)
+    fitted = json.loads(CliRunner().invoke(main, ["fit", str(part), "--json"]).output)
+    record = process_program(str(part), part.read_bytes(), load_machine("generic-mill"))
+    assert parsed["nodes"] == fitted["nodes_in"] == record["nodes"]
+    assert fitted["segments_out"] == record["segments"]
+    assert parsed["rapid_moves"] == fitted["rapid_moves"] == 3  # the repeated G0 moves nothing

@@ -252,17 +252,20 @@ def _limit_memory():  # pragma: no cover - runs in the child
 
 
 def test_plan_too_big_for_memory_is_exit_1(tmp_path):
-    """F0.001 mm/min over 10 mm: ~6e8 samples at 1 ms, more than 3 GB allows. The plan
-    fails (exit 1, one line), without a traceback or a partial output file: refused before
-    planning where the system's free memory is known to be too small, else by the
-    MemoryError of the 3 GB limit."""
+    """F0.001 mm/min over 10 mm: ~6e8 samples at 1 ms in one path, more than 3 GB allows
+    for a planner that returns a whole path at once (paper 000's constant feed; VPOp
+    streams within the path and would plan it, for hours). The plan fails (exit 1, one
+    line), without a traceback or a partial output file: refused before planning the path
+    (the window check) where the system's free memory is known to be too small, else by
+    the MemoryError of the 3 GB limit."""
     import subprocess
 
     from ._contract_helpers import console_script
 
     part = tmp_path / "slow.ngc"
     part.write_text("G21\nG1 X10 F0.001\n")
-    r = subprocess.run([console_script(), "plan", str(part), "-o", str(tmp_path / "out.csv")],
+    r = subprocess.run([console_script(), "plan", str(part), "--planner", "constant", "-o",
+                        str(tmp_path / "out.csv")],
                        capture_output=True, timeout=300, preexec_fn=_limit_memory,
                        stdin=subprocess.DEVNULL)
     err = r.stderr.decode("utf-8", "replace")

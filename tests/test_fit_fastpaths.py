@@ -4,6 +4,9 @@
   against ``_Raw.build`` + ``Path.end`` path by path;
 * ``polyline_path_deviation`` (one compiled call) against ``deviation.path_deviation``;
 * single moves (no fitter, no sampled deviation check) against the exact line.
+
+The fits here stop at sharp corners (``blend_corners=False``): the single-move machinery
+serves the corners that cannot be blended.
 """
 
 from __future__ import annotations
@@ -61,7 +64,7 @@ def _same_path(p: Path, q: Path):
 @pytest.mark.parametrize("start", [None, "shifted"])
 def test_build_paths_equals_path_by_path_build(seed, start):
     run = _run(_zigzag(seed))
-    raws, _ = _fit_run_raw(run, FitSettings())
+    raws, _ = _fit_run_raw(run, FitSettings(blend_corners=False))
     assert len(raws) > 3
     s0 = None if start is None else run.nodes[0] + 1e-7
     got, end = _build_paths(raws, s0)
@@ -73,7 +76,7 @@ def test_build_paths_equals_path_by_path_build(seed, start):
     np.testing.assert_array_equal(end, prev)
     # the rapids too, and an empty run keeps the start
     rap = _run(_zigzag(seed, 8), kind="rapid")
-    raws, _ = _fit_run_raw(rap, FitSettings())
+    raws, _ = _fit_run_raw(rap, FitSettings(blend_corners=False))
     got, _ = _build_paths(raws, None)
     prev = None
     for raw, p in zip(raws, got):
@@ -84,7 +87,7 @@ def test_build_paths_equals_path_by_path_build(seed, start):
 
 
 def test_build_paths_rejects_bad_breaks_like_path():
-    raws, _ = _fit_run_raw(_run(_zigzag(1)), FitSettings())
+    raws, _ = _fit_run_raw(_run(_zigzag(1)), FitSettings(blend_corners=False))
     raws[1].breaks = raws[1].breaks[::-1].copy()
     with pytest.raises(ValueError):
         _build_paths(raws, None)
@@ -124,7 +127,7 @@ def test_compiled_polyline_deviation_equals_path_deviation(seed):
 def test_single_moves_are_exact_lines_with_zero_deviation():
     # a square: four sharp corners, every side a single move
     sq = np.array([[0, 0, 0], [10, 0, 0], [10, 10, 0], [0, 10, 0], [0, 0, 0]], float) + 1000.0
-    res = fit_program(Program("sq", "XYZ", (_run(sq), Stop(5, "M2", sq[-1])), sq[0], 6), FitSettings())
+    res = fit_program(Program("sq", "XYZ", (_run(sq), Stop(5, "M2", sq[-1])), sq[0], 6), FitSettings(blend_corners=False))
     paths = res.paths
     assert len(paths) == 4
     for k, p in enumerate(paths):

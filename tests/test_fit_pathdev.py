@@ -65,7 +65,7 @@ def _worst_distance(paths, points, mask=None, samples=32, candidates=6) -> float
 def test_line_arc_contour_stays_on_the_programmed_path(method):
     prog = read_program(CONTOUR, source="contour.ngc")
     tol = 1e-3
-    res = fit_program(prog, FitSettings(tol_mm=tol, method=method))
+    res = fit_program(prog, FitSettings(tol_mm=tol, tol_cap_mm=tol, method=method))  # caps G64 P0.01
     feed = [p for p in res.paths if not p.rapid]
     run = [r for r in prog.runs if r.kind == "feed"][0]
     worst = _worst_distance(feed, _programmed_samples(run))

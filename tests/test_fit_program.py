@@ -45,8 +45,10 @@ def test_timeline_rapids_dwell_stop_and_exact_chaining():
     res = fit_program(prog, FitSettings())
     assert isinstance(res, FitResult)
     kinds = [type(it).__name__ + ("-rapid" if isinstance(it, Path) and it.rapid else "") for it in res.items]
-    # two rapid moves, three feed paths (90° corners stop), dwell, one rapid, stop
-    assert kinds == ["Path-rapid", "Path-rapid", "Path", "Path", "Path", "Dwell", "Path-rapid", "Stop"]
+    # two rapid moves, one feed path (its 90° corners are blended), dwell, one rapid, stop
+    assert kinds == ["Path-rapid", "Path-rapid", "Path", "Dwell", "Path-rapid", "Stop"]
+    stops = fit_program(prog, FitSettings(blend_corners=False))
+    assert sum(isinstance(it, Path) and not it.rapid for it in stops.items) == 3  # corners stop
     paths = [it for it in res.items if isinstance(it, Path)]
     for a, b in zip(res.items[:-1], res.items[1:]):
         if isinstance(a, Path) and isinstance(b, Path):
@@ -58,15 +60,19 @@ def test_timeline_rapids_dwell_stop_and_exact_chaining():
             assert np.isinf(p.feed_mm_s).all()
     st = fit_statistics(res)
     assert st["nodes_in"] == 4 and st["rapid_moves"] == 3 and st["within_tolerance"]
-    assert "continuity" in st and st["paths"] == 6
+    assert "continuity" in st and st["paths"] == 4
     text = format_statistics(st)
     assert "segments out" in text and "max node deviation" in text
 
 
 def test_corner_threshold_splits_or_rounds():
     sq = np.array([[0, 0, 0], [10, 0, 0], [10, 10, 0], [0, 10, 0], [0, 0, 0.0]])
-    split = fit_run(_run(sq), FitSettings(corner_deg=30))
+    split = fit_run(_run(sq), FitSettings(corner_deg=30, blend_corners=False))
     assert len(split) == 4 and all(p.n_seg == 1 for p in split)
+    # blended (the default): one path, a line and a G2 blend per corner, within 1 µm
+    (blended,) = fit_run(_run(sq), FitSettings(corner_deg=30))
+    assert blended.n_seg == 7
+    assert distance_to_path(blended, sq).max() <= 1e-3
     tol = 0.01
     rounded = fit_run(_run(sq), FitSettings(tol_mm=tol, corner_deg=120, method="nodes"))
     assert len(rounded) == 1
@@ -98,12 +104,17 @@ def test_g64_p_tolerance_modes():
     rng = np.random.default_rng(3)
     nodes = _polygon(400, R=20, laps=0.75) + np.concatenate([rng.normal(0, 0.01, (301, 2)), np.zeros((301, 1))], 1)
     run = _run(nodes, tol=0.05)
-    st_strict = fit_statistics(fit_program(Program("a", "XYZ", (run,), nodes[0], 1), FitSettings(tol_mm=0.01)))
-    st_gcode = fit_statistics(fit_program(Program("a", "XYZ", (run,), nodes[0], 1),
-                                          FitSettings(tol_mm=0.01, tol_mode="gcode")))
+    prog = Program("a", "XYZ", (run,), nodes[0], 1)
+    st_strict = fit_statistics(fit_program(prog, FitSettings(tol_mm=0.01, tol_mode="stricter")))
+    # the default: G64 P wins where the program gives one
+    st_gcode = fit_statistics(fit_program(prog, FitSettings(tol_mm=0.01)))
+    # --tol is the user's cap on every move's tolerance
+    st_cap = fit_statistics(fit_program(prog, FitSettings.from_options(tol_mm=0.02)))
     assert st_strict["max_node_dev_mm"] <= 0.01
     assert 0.01 < st_gcode["max_node_dev_mm"] <= 0.05
     assert st_gcode["segments_out"] < st_strict["segments_out"]
+    assert st_cap["tol_cap_mm"] == 0.02 and st_cap["max_tol_mm"] == 0.02
+    assert st_cap["max_node_dev_mm"] <= 0.02 and st_cap["max_path_dev_ratio"] <= 1 + 1e-6
     # nan (G64 without P) takes --tol
     st_nan = fit_statistics(fit_program(Program("a", "XYZ", (_run(nodes),), nodes[0], 1), FitSettings(tol_mm=0.02)))
     assert st_nan["max_node_dev_mm"] <= 0.02
@@ -137,22 +148,34 @@ def test_settings_validation_and_from_options():
         tol_mm = 0.02
 
     assert FitSettings.from_options(machine=M()).tol_mm == 0.02
+    assert FitSettings.from_options(machine=M()).tol_cap_mm is None  # a machine's tol is a default
     assert FitSettings.from_options(tol_mm=0.005, machine=M()).tol_mm == 0.005
+    assert FitSettings.from_options(tol_mm=0.005, machine=M()).tol_cap_mm == 0.005
     assert FitSettings.from_options(corner_deg=45).corner_deg == 45
     exact = FitSettings.from_options(tol_mm=0.0)
     assert exact.corner_deg == 0.0 and exact.tol_mm > 0
-    assert_allclose(FitSettings(tol_mm=0.01).node_tolerance(np.array([np.nan, 0.0, 0.005, 0.5])),
+    blocks = np.array([np.nan, 0.0, 0.005, 0.5])  # plain G64, G61, G64 P0.005, G64 P0.5
+    assert_allclose(FitSettings(tol_mm=0.01).node_tolerance(blocks), [0.01, 0.0, 0.005, 0.5])
+    assert_allclose(FitSettings(tol_mm=0.01, tol_mode="stricter").node_tolerance(blocks),
                     [0.01, 0.0, 0.005, 0.01])
+    assert_allclose(FitSettings(tol_mm=0.01, tol_cap_mm=0.02).node_tolerance(blocks),
+                    [0.01, 0.0, 0.005, 0.02])
+    assert_allclose(FitSettings(tol_mm=0.01, tol_cap_mm=0.0).node_tolerance(blocks), [0, 0, 0, 0])
+    # half the printed quantum is added wherever the path is not exact
+    assert_allclose(FitSettings(tol_mm=0.01, quantum_mm=0.002).node_tolerance(blocks),
+                    [0.011, 0.0, 0.006, 0.501])
+    with pytest.raises(UsageError):
+        FitSettings(tol_cap_mm=-1.0)
 
 
 def test_segments_json_is_documented_and_deterministic(tmp_path):
     x = np.linspace(0, 2 * np.pi, 200)
     nodes = np.stack([10 * np.cos(x), np.zeros_like(x), 10 * np.sin(x) * 0.5], axis=1)
     prog = Program("lathe.ngc", "XYZ", (_run(nodes),), nodes[0], 200)
-    res = fit_program(prog, FitSettings())
+    res = fit_program(prog, FitSettings(method="planar"))
     out1, out2 = tmp_path / "a.json", tmp_path / "b.json"
     write_segments_json(res, str(out1))
-    write_segments_json(fit_program(prog, FitSettings()), str(out2))
+    write_segments_json(fit_program(prog, FitSettings(method="planar")), str(out2))
     assert out1.read_bytes() == out2.read_bytes()
     assert not [f for f in os.listdir(tmp_path) if f.endswith(".tmp")]
     doc = json.loads(out1.read_text())
@@ -184,7 +207,9 @@ def test_cli_fit_on_samples(tmp_path):
         assert r.exit_code == 0, (f, r.output)
         st = json.loads(r.output)
         assert st["within_tolerance"], f
-        assert st["max_node_dev_mm"] <= st["tol_mm"]
+        # (a sample's G64 P may allow more than the default tolerance)
+        assert st["max_node_dev_mm"] <= max(st["tol_mm"], st["max_tol_mm"]) * (1 + 1e-9)
+        assert st["max_path_dev_ratio"] <= 1 + 1e-6
         assert json.loads(out.read_text())["format"] == "cnc-interp-segments"
     r = runner.invoke(main, ["fit", os.path.join(SAMPLES, files[0]), "--tol", "0.01"])
     assert r.exit_code == 0 and "segments out" in r.output

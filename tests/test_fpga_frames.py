@@ -41,7 +41,7 @@ def prog():
 
 def test_header_layout_and_crc():
     raw = encode_frame(FrameType.START, 7, b"\x01\x02")
-    assert raw[:4] == b"CNCF" and raw[4] == 1 and raw[5] == FrameType.START
+    assert raw[:4] == b"CNCF" and raw[4] == 2 and raw[5] == FrameType.START
     assert struct.unpack_from("<II", raw, 8) == (7, 2)
     assert struct.unpack_from("<I", raw, 16)[0] == zlib.crc32(raw[:16])
     assert struct.unpack_from("<I", raw, len(raw) - 4)[0] == zlib.crc32(raw[:-4])

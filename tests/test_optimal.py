@@ -7,7 +7,7 @@ from numpy.testing import assert_array_equal
 
 from cnc_interp.plan.kinematics import make_kinematics
 from cnc_interp.plan.machine import Machine
-from cnc_interp.plan.optimal import iter_path_plan, plan_path_optimal
+from cnc_interp.plan.optimal import iter_path_plan_optimal, plan_path_optimal
 from cnc_interp.plan.optimality import line_min_samples
 from cnc_interp.plan.safe import plan_path_safe
 from cnc_interp.plan.settings import PlanSettings
@@ -168,15 +168,18 @@ def test_zero_length_and_rotary_only():
 @pytest.mark.parametrize("route", ["profile", "vpop"])
 def test_tiny_chunks_give_the_same_bytes_as_one_chunk(route):
     p = hermite_path(circle_fun(4.0, turns=1.5, z_per_turn=-0.5), 18, 180.0)
-    one = list(iter_path_plan(p, None, MILL, DT, PlanSettings(
+    one = list(iter_path_plan_optimal(p, None, MILL, DT, PlanSettings(
         options={"route": route, "chunk_samples": 10 ** 9})))
-    tiny = list(iter_path_plan(p, None, MILL, DT, PlanSettings(
-        options={"route": route, "chunk_samples": 7})))
+    # tiny chunks, and VPOp's own stream window as small as it goes
+    tiny = list(iter_path_plan_optimal(p, None, MILL, DT, PlanSettings(
+        options={"route": route, "chunk_samples": 7}), window=1))
     assert len(one) == 1 and len(tiny) > 10
-    assert all(c[0].shape[0] == 7 for c in tiny[:-1])
-    s1, q1 = one[0]
-    s2 = np.concatenate([c[0] for c in tiny])
-    q2 = np.concatenate([c[1] for c in tiny])
+    assert all(c.s.shape[0] == 7 and not c.last for c in tiny[:-1])
+    assert one[0].last and tiny[-1].last and tiny[-1].stats["route"] == route
+    assert tiny[-1].stats["samples"] == one[0].s.shape[0]
+    s1, q1 = one[0].s, one[0].q
+    s2 = np.concatenate([c.s for c in tiny])
+    q2 = np.concatenate([c.q for c in tiny])
     assert s1.tobytes() == s2.tobytes() and q1.tobytes() == q2.tobytes()
     plan = plan_path_optimal(p, None, MILL, DT, PlanSettings(options={"route": route}))
     assert plan.s.tobytes() == s1.tobytes() and plan.q.tobytes() == q1.tobytes()

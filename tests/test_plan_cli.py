@@ -129,12 +129,12 @@ def _polygon_arc_program(n=120):
 def test_fit_method_option_selects_the_fitter(tmp_path):
     part = tmp_path / "arc.ngc"
     part.write_text(_polygon_arc_program())
-    auto = plan_part(str(part), "generic-mill")
-    nodes = plan_part(str(part), "generic-mill", fit_method="nodes")
-    assert auto.report.ok and nodes.report.ok
+    planar = plan_part(str(part), "generic-mill", fit_method="planar")
+    nodes = plan_part(str(part), "generic-mill")  # the default (issue 14)
+    assert planar.report.ok and nodes.report.ok
     methods = lambda o: {m for r in o.fit_stats["runs"] for m in r.get("methods", [])}  # noqa: E731
-    assert methods(auto) == {"planar-XY"} and methods(nodes) == {"nodes"}
-    assert auto.summary()["fit_method"] == "auto" and nodes.summary()["fit_method"] == "nodes"
+    assert methods(planar) == {"planar-XY"} and methods(nodes) == {"nodes"}
+    assert planar.summary()["fit_method"] == "planar" and nodes.summary()["fit_method"] == "nodes"
     r = run([str(part), "--fit-method", "nodes", "--json", "-o", str(tmp_path / "n.csv")])
     assert r.returncode == 0, r.stderr.decode()
     assert json.loads(r.stdout.decode())["fit_method"] == "nodes"

@@ -19,38 +19,65 @@ from ..errors import CncInterpError, SourceLocation
 from .atomic import atomic_write
 
 _FIXED = ("t", "s", "feed")
+#: blocks of at least this many rows are formatted in two halves on two threads
+CSV_SPLIT_ROWS = 8192
 
 
 class PlanFileError(CncInterpError):
     """A plan file (CSV) that cannot be read back: bad header, number or row length."""
 
 
-def _chunk_text(cols: list[np.ndarray], lo: int, hi: int) -> str:
-    # float.__repr__ on tolist() values is the fastest exact shortest-repr path
-    # in CPython (~10M values/s); joining column-wise lists keeps it in C loops.
-    strs = []
-    for c in cols:
-        part = c[lo:hi]
-        bits = part.view(np.uint64)
-        if part.size and (bits == bits[0]).all():  # axis at rest: one repr (bit-equal, so -0.0 kept)
-            strs.append([repr(float(part[0]))] * part.size)
-        else:
-            strs.append(list(map(repr, part.tolist())))
-    return "\n".join(map(",".join, zip(*strs))) + "\n"
+class CsvPlanWriter:
+    """Writes a plan as CSV while it is planned: the header, then ``write`` blocks of
+    samples in order. The bytes do not depend on how the samples are split into blocks."""
+
+    def __init__(self, fh: BinaryIO, axes: str):
+        self.fh = fh
+        self.rows = 0
+        self._pool = None
+        fh.write((",".join(_FIXED + tuple(axes)) + "\n").encode("ascii"))
+
+    def write(self, t, s, feed, q) -> None:
+        """Append rows (t, s, feed (K,), q (K, n))."""
+        q = np.asarray(q, dtype=float)
+        k = q.shape[0]
+        cols = np.empty((3 + q.shape[1], k))
+        cols[0] = t
+        cols[1] = s
+        cols[2] = feed
+        cols[3:] = q.T
+        for lo in range(0, k, CSV_CHUNK_ROWS):
+            hi = min(k, lo + CSV_CHUNK_ROWS)
+            if hi - lo >= CSV_SPLIT_ROWS:
+                # two halves formatted at once (the formatter releases the GIL); the text of
+                # a row does not depend on where the rows are cut
+                mid = (lo + hi) // 2
+                if self._pool is None:
+                    from concurrent.futures import ThreadPoolExecutor
+
+                    self._pool = ThreadPoolExecutor(max_workers=1,
+                                                    thread_name_prefix="cnc-interp-csv")
+                second = self._pool.submit(format_rows, cols[:, mid:hi])
+                self.fh.write(format_rows(cols[:, lo:mid]))
+                self.fh.write(second.result())
+            else:
+                self.fh.write(format_rows(cols[:, lo:hi]))
+        self.rows += k
+
+
+def format_rows(cols: np.ndarray) -> bytes:
+    """The columns ``cols`` (ncol, K) as K CSV rows: ``repr`` of each float (compiled:
+    ``export._repr``), ``,`` between columns, ``\\n`` after each row."""
+    from ._repr import format_table
+
+    return format_table(cols)
 
 
 def write_csv_to(traj, fh: BinaryIO) -> int:
     """Write ``traj`` as CSV to an open binary file; returns the number of rows."""
-    header = ",".join(_FIXED + tuple(traj.axes)) + "\n"
-    fh.write(header.encode("ascii"))
-    q = np.asarray(traj.q, dtype=float)
-    cols = [np.ascontiguousarray(traj.t, dtype=float), np.ascontiguousarray(traj.s, dtype=float),
-            np.ascontiguousarray(traj.feed, dtype=float)]
-    cols += [np.ascontiguousarray(q[:, i]) for i in range(q.shape[1])]
-    k = cols[0].shape[0]
-    for lo in range(0, k, CSV_CHUNK_ROWS):
-        fh.write(_chunk_text(cols, lo, min(k, lo + CSV_CHUNK_ROWS)).encode("ascii"))
-    return k
+    w = CsvPlanWriter(fh, traj.axes)
+    w.write(traj.t, traj.s, traj.feed, traj.q)
+    return w.rows
 
 
 def write_csv(traj, out: str) -> int:

@@ -37,6 +37,10 @@ from typing import Iterable, Mapping
 import numpy as np
 
 from ..constants import MCAP_CHUNK_BYTES
+
+#: a /segments message covers at most this many samples (a longer run of one source
+#: line, e.g. a long dwell, is split): the messages of an open segment wait for its end
+MCAP_SEGMENT_MAX_SAMPLES = 1 << 16
 from ..errors import SourceLocation, UsageError
 
 #: samples formatted per batch (bounds memory for very long plans)
@@ -74,7 +78,8 @@ def write_mcap(traj, out: str, metadata: Mapping | None = None, machine=None,
         machine: the ``Machine`` the plan was made for: adds ``/limits`` and the
             ``machine`` record.
         segments: optional (m, 3) array-like of ``(line, s_start_mm, s_end_mm)`` in the
-            trajectory's arc length; by default one segment per run of equal ``traj.line``.
+            trajectory's arc length; by default one segment per run of equal ``traj.line``
+            (split every ``MCAP_SEGMENT_MAX_SAMPLES``).
         progress: optional ``tick(n)`` callable, called with samples written.
 
     Returns:
@@ -82,17 +87,240 @@ def write_mcap(traj, out: str, metadata: Mapping | None = None, machine=None,
     """
     from .atomic import atomic_write
 
-    if out == "-":
-        import sys
-
-        # The MCAP writer seeks nothing but needs tell(); a pipe has none, so buffer.
-        buf = io.BytesIO()
-        count = _write(buf, traj, metadata, machine, segments, progress)
-        sys.stdout.buffer.write(buf.getvalue())
-        sys.stdout.buffer.flush()
-        return count
+    fixed = _fixed_segments(traj, segments) if segments is not None else None
     with atomic_write(out) as fh:
-        return _write(fh, traj, metadata, machine, segments, progress)
+        w = McapPlanWriter(fh, traj.axes, traj.dt_s, machine, fixed_segments=fixed)
+        K = traj.n_samples
+        for b0 in range(0, K, _BATCH):
+            b1 = min(b0 + _BATCH, K)
+            w.write(traj.t[b0:b1], traj.s[b0:b1], traj.feed[b0:b1], traj.q[b0:b1],
+                    traj.line[b0:b1])
+            if progress is not None:
+                progress(b1 - b0)
+        return w.finish(_planner_record(traj), metadata)
+
+
+def _planner_record(traj) -> dict:
+    return {"name": traj.planner, "status": traj.status, "dt_s": float(traj.dt_s),
+            "axes": traj.axes, "samples": traj.n_samples, "duration_s": traj.duration_s,
+            "settings": _dumps(traj.settings)}
+
+
+def planner_record(planner: str, status: str, dt_s: float, axes: str, samples: int,
+                   settings: dict) -> dict:
+    """The ``planner`` metadata record of a streamed plan (known at its end)."""
+    duration = float((samples - 1) * dt_s) if samples else 0.0
+    return {"name": planner, "status": status, "dt_s": float(dt_s), "axes": axes,
+            "samples": int(samples), "duration_s": duration, "settings": _dumps(settings)}
+
+
+class _Tell:
+    """A write-only stream that counts what it writes (the MCAP writer needs ``tell``;
+    a pipe has none)."""
+
+    def __init__(self, fh):
+        self.fh = fh
+        self.pos = 0
+
+    def write(self, data) -> int:
+        self.fh.write(data)
+        self.pos += len(data)
+        return len(data)
+
+    def tell(self) -> int:
+        return self.pos
+
+
+class McapPlanWriter:
+    """Writes a plan as MCAP while it is planned: ``write`` blocks of samples in order,
+    then ``finish``. The file does not depend on how the samples are split into blocks.
+
+    A ``/segments`` message is written at the sample where its segment starts, but holds
+    the segment's end (time, feed range, samples): the messages of an open segment wait
+    until it closes, at a change of source line or after ``MCAP_SEGMENT_MAX_SAMPLES``
+    samples (a long segment is split), which bounds what waits. The metadata records,
+    which hold what is known only at the end (samples, status, statistics), follow the
+    messages.
+    """
+
+    def __init__(self, fh, axes: str, dt_s: float, machine=None, fixed_segments=None):
+        from .. import __version__
+        from .mcap_bulk import BulkMcapWriter
+
+        self.axes = axes
+        self.dt_s = float(dt_s)
+        self.machine = machine
+        # Same bytes as mcap.writer.Writer(fh, chunk_size, CompressionType.ZSTD), faster.
+        self.writer = writer = BulkMcapWriter(_Tell(fh), chunk_size=MCAP_CHUNK_BYTES)
+        # A fixed library string: no timestamps, nothing host-specific in the header.
+        writer.start(profile="", library=f"cnc-interp/{__version__}")
+        sp_schema = writer.register_schema("cnc_interp.Setpoint", "jsonschema",
+                                           _schema_json(_setpoint_schema(axes)).encode())
+        self.sp_chan = writer.register_channel(SETPOINTS_TOPIC, "json", sp_schema,
+                                               {"axes": axes, "units": _units(axes)})
+        seg_schema = writer.register_schema("cnc_interp.Segment", "jsonschema",
+                                            _schema_json(_segment_schema()).encode())
+        self.seg_chan = writer.register_channel(SEGMENTS_TOPIC, "json", seg_schema, {})
+        self.lim_chan = None
+        self.lim_axes = ""
+        if machine is not None:
+            self.lim_axes = "".join(a for a in axes if a in machine.axes)
+            lim_schema = writer.register_schema("cnc_interp.LimitRatios", "jsonschema",
+                                                _schema_json(_limits_schema(self.lim_axes)).encode())
+            self.lim_chan = writer.register_channel(LIMITS_TOPIC, "json", lim_schema,
+                                                    {"axes": self.lim_axes})
+            self.lim_idx = [axes.index(a) for a in self.lim_axes]
+            self.limits = machine.limits()[:, [machine.axes.index(a) for a in self.lim_axes]]
+        self.sp_fmt = _template(("t", "s", "feed", "line", *axes))
+        self.lim_fmt = _limits_template(self.lim_axes) if self.lim_chan is not None else None
+        self.seg_fmt = _template(_SEG_FIELDS)
+        self.fixed = fixed_segments  # (starts, messages) computed from a whole trajectory
+        self.k = 0  # samples written
+        self.count = 0
+        self.hist: np.ndarray | None = None  # the last 3 samples (limit ratios' stencils)
+        # the open segment: its first sample, its samples' t/s/feed/line, waiting messages
+        self.seg0 = 0
+        self.pend_tsf = np.zeros((0, 3))
+        self.pend_line = np.zeros(0, dtype=np.int64)
+        self.pend: list[tuple[np.ndarray, np.ndarray, np.ndarray, list]] = []
+
+    # -- messages of one block -------------------------------------------------------------
+    def _messages(self, t, s, feed, q, line):
+        K = t.shape[0]
+        k = np.arange(self.k, self.k + K, dtype=np.int64)
+        ns = _time_ns(t)
+        datas = _format_rows(self.sp_fmt, [t, s, feed, np.asarray(line, dtype=np.int64), *q.T])
+        chans = [np.full(K, self.sp_chan)]
+        times = [ns]
+        keys = [3 * k + 1]
+        if self.lim_chan is not None:
+            sub = q[:, self.lim_idx]
+            h = self.hist if self.hist is not None else np.repeat(sub[:1], 3, axis=0)
+            ratios = _ratio_rows(np.concatenate([h, sub]), self.dt_s, self.limits)
+            datas += _format_rows(self.lim_fmt, list(ratios.T), RATIO_FORMAT)
+            chans.append(np.full(K, self.lim_chan))
+            times.append(ns)
+            keys.append(3 * k + 2)
+            self.hist = np.concatenate([h, sub])[-3:]
+        return np.concatenate(chans), np.concatenate(times), np.concatenate(keys), datas
+
+    def write(self, t, s, feed, q, line) -> None:
+        """Append the next samples (t, s, feed (K,), q (K, n), line (K,))."""
+        t = np.asarray(t, dtype=float)
+        K = t.shape[0]
+        if not K:
+            return
+        s = np.asarray(s, dtype=float)
+        feed = np.asarray(feed, dtype=float)
+        q = np.asarray(q, dtype=float).reshape(K, -1)
+        line = np.asarray(line, dtype=np.int64)
+        chans, times, keys, datas = self._messages(t, s, feed, q, line)
+        k0 = self.k
+        self.k += K
+        if self.fixed is not None:
+            self._release_fixed(chans, times, keys, datas, k0, K)
+            return
+        self.pend.append((chans, times, keys, datas))
+        self.pend_tsf = np.concatenate([self.pend_tsf, np.stack([t, s, feed], axis=1)])
+        self.pend_line = np.concatenate([self.pend_line, line])
+        self._close_segments(final=False)
+
+    def _close_segments(self, final: bool) -> None:
+        """Write every segment of the waiting samples that is known to have ended (at the
+        end of the plan, ``final``, the last one too)."""
+        line = self.pend_line
+        n = line.shape[0]
+        a = 0
+        while a < n:
+            # the segment starting at local sample a ends where the next begins: at the next
+            # change of line, or MCAP_SEGMENT_MAX_SAMPLES samples on
+            top = min(n, a + MCAP_SEGMENT_MAX_SAMPLES + 1)
+            change = np.flatnonzero(line[a + 1:top] != line[a])
+            if change.size:
+                c = a + 1 + int(change[0])
+            elif top - a > MCAP_SEGMENT_MAX_SAMPLES:
+                c = a + MCAP_SEGMENT_MAX_SAMPLES
+            elif final:
+                self._emit_segment(a, n - 1, n)  # the last segment ends at the last sample
+                a = n
+                break
+            else:
+                break
+            self._emit_segment(a, c, c)
+            a = c
+        if a:
+            self.pend_tsf = self.pend_tsf[a:]
+            self.pend_line = self.pend_line[a:]
+            self.seg0 += a
+
+    def _emit_segment(self, a: int, c: int, release: int) -> None:
+        """The segment of waiting samples a..c (c: where the next begins, or the last
+        sample), then the waiting messages of samples a..release-1."""
+        ln = int(self.pend_line[a])
+        tsf = self.pend_tsf
+        i0 = self.seg0 + a
+        out_c, out_t, out_k, out_d = [], [], [], []
+        if ln != 0:
+            fseg = tsf[a:c + 1, 2]
+            fin = fseg[np.isfinite(fseg)]
+            vals = (ln, _num(tsf[a, 1]), _num(tsf[c, 1]), _num(tsf[a, 0]), _num(tsf[c, 0]),
+                    _num(fin.min()) if fin.size else "null",
+                    _num(fin.max()) if fin.size else "null", int(c - a + 1))
+            out_c.append(np.array([self.seg_chan]))
+            out_t.append(_time_ns(tsf[a:a + 1, 0]))
+            out_k.append(np.array([3 * i0], dtype=np.int64))
+            out_d.append([(self.seg_fmt % vals).encode()])
+        lim_key = 3 * (self.seg0 + release)
+        keep = []
+        for chans, times, keys, datas in self.pend:
+            sel = keys < lim_key
+            if sel.all():
+                out_c.append(chans), out_t.append(times), out_k.append(keys), out_d.append(datas)
+            elif sel.any():
+                idx = np.flatnonzero(sel)
+                rest = np.flatnonzero(~sel)
+                out_c.append(chans[idx]), out_t.append(times[idx]), out_k.append(keys[idx])
+                out_d.append([datas[i] for i in idx.tolist()])
+                keep.append((chans[rest], times[rest], keys[rest], [datas[i] for i in rest.tolist()]))
+            else:
+                keep.append((chans, times, keys, datas))
+        self.pend = keep
+        self._add(out_c, out_t, out_k, out_d)
+
+    def _add(self, chans, times, keys, datas) -> None:
+        if not chans:
+            return
+        keys = np.concatenate(keys)
+        order = np.argsort(keys, kind="stable")
+        flat = [d for part in datas for d in part]
+        self.writer.add_messages(np.concatenate(chans)[order], np.concatenate(times)[order],
+                                 [flat[i] for i in order.tolist()])
+        self.count += len(flat)
+
+    def _release_fixed(self, chans, times, keys, datas, k0: int, K: int) -> None:
+        starts, msgs = self.fixed
+        sel = np.flatnonzero((starts >= k0) & (starts < k0 + K))
+        c, t, k, d = [chans], [times], [keys], [datas]
+        if sel.size:
+            c.append(np.full(sel.size, self.seg_chan))
+            t.append(times[starts[sel] - k0])
+            k.append(3 * starts[sel])
+            d.append([msgs[i] for i in sel.tolist()])
+        self._add(c, t, k, d)
+
+    # -- the end -----------------------------------------------------------------------------
+    def finish(self, planner: dict, metadata: Mapping | None = None) -> int:
+        """Close the last segment, write the metadata records and the summary. Returns
+        the number of messages written."""
+        from mcap import __version__ as mcap_version
+
+        if self.fixed is None:
+            self._close_segments(final=True)
+        self.writer._finalize_chunk()
+        for name, record in _metadata_records(planner, metadata, self.machine, mcap_version):
+            self.writer.add_metadata(name, record)
+        self.writer.finish()
+        return self.count
 
 
 def read_mcap(path: str):
@@ -175,85 +403,6 @@ def read_mcap_machine(path: str):
 
 
 # -- writing -------------------------------------------------------------------------------
-def _write(fh, traj, metadata, machine, segments, progress) -> int:
-    from mcap import __version__ as mcap_version
-
-    from .. import __version__
-    from .mcap_bulk import BulkMcapWriter
-
-    axes = traj.axes
-    # Same bytes as mcap.writer.Writer(fh, chunk_size, CompressionType.ZSTD), faster.
-    writer = BulkMcapWriter(fh, chunk_size=MCAP_CHUNK_BYTES)
-    # A fixed library string: no timestamps, nothing host-specific in the header.
-    writer.start(profile="", library=f"cnc-interp/{__version__}")
-
-    sp_schema = writer.register_schema("cnc_interp.Setpoint", "jsonschema",
-                                       _schema_json(_setpoint_schema(axes)).encode())
-    sp_chan = writer.register_channel(SETPOINTS_TOPIC, "json", sp_schema,
-                                      {"axes": axes, "units": _units(axes)})
-    seg_schema = writer.register_schema("cnc_interp.Segment", "jsonschema",
-                                        _schema_json(_segment_schema()).encode())
-    seg_chan = writer.register_channel(SEGMENTS_TOPIC, "json", seg_schema, {})
-    lim_chan = None
-    lim_axes = ""
-    if machine is not None:
-        lim_axes = "".join(a for a in axes if a in machine.axes)
-        lim_schema = writer.register_schema("cnc_interp.LimitRatios", "jsonschema",
-                                            _schema_json(_limits_schema(lim_axes)).encode())
-        lim_chan = writer.register_channel(LIMITS_TOPIC, "json", lim_schema, {"axes": lim_axes})
-
-    for name, record in _metadata_records(traj, metadata, machine, mcap_version):
-        writer.add_metadata(name, record)
-
-    count = _write_messages(writer, traj, machine, lim_axes, segments,
-                            sp_chan, seg_chan, lim_chan, progress)
-    writer.finish()
-    return count
-
-
-def _write_messages(writer, traj, machine, lim_axes, segments, sp_chan, seg_chan, lim_chan,
-                    progress) -> int:
-    """All messages in time order: at each sample its segment (if one starts there), its
-    setpoint, then its limit ratios. Returns the number of messages."""
-    K = traj.n_samples
-    axes = traj.axes
-    ns = _time_ns(traj.t)
-    seg_start, seg_msgs = _segment_messages(traj, segments)
-    seg_start = np.asarray(seg_start, dtype=np.int64)
-    sp_fmt = _template(("t", "s", "feed", "line", *axes))
-    lim_fmt = _limits_template(lim_axes) if lim_chan is not None else None
-
-    count = 0
-    for b0 in range(0, K, _BATCH):
-        b1 = min(b0 + _BATCH, K)
-        k = np.arange(b0, b1, dtype=np.int64)
-        datas = _format_rows(sp_fmt, [traj.t[b0:b1], traj.s[b0:b1], traj.feed[b0:b1],
-                                      np.asarray(traj.line[b0:b1], dtype=np.int64),
-                                      *traj.q[b0:b1].T])
-        chans = [np.full(k.size, sp_chan)]
-        times = [ns[b0:b1]]
-        keys = [3 * k + 1]
-        if lim_chan is not None:
-            ratios = _ratio_table(traj, machine, lim_axes, b0, b1)
-            datas += _format_rows(lim_fmt, list(ratios.T), RATIO_FORMAT)
-            chans.append(np.full(k.size, lim_chan))
-            times.append(ns[b0:b1])
-            keys.append(3 * k + 2)
-        sel = np.flatnonzero((seg_start >= b0) & (seg_start < b1))
-        if sel.size:
-            datas += [seg_msgs[i] for i in sel.tolist()]
-            chans.append(np.full(sel.size, seg_chan))
-            times.append(ns[seg_start[sel]])
-            keys.append(3 * seg_start[sel])
-        order = np.argsort(np.concatenate(keys), kind="stable")
-        writer.add_messages(np.concatenate(chans)[order], np.concatenate(times)[order],
-                            [datas[i] for i in order.tolist()])
-        count += len(datas)
-        if progress is not None:
-            progress(b1 - b0)
-    return count
-
-
 def _time_ns(t: np.ndarray) -> np.ndarray:
     """Sample times in integer ns (MCAP times are unsigned)."""
     ns = np.rint(np.asarray(t, dtype=float) * 1e9)
@@ -292,20 +441,15 @@ def _format_rows(fmt: str, columns: list[np.ndarray], spec: str = "%r") -> list[
     return [m.encode() for m in out]
 
 
-def _ratio_table(traj, machine, lim_axes: str, b0: int, b1: int) -> np.ndarray:
-    """(b1-b0, 3n+1): samples b0..b1-1's signed v, a, j ratios per axis (grouped by kind)
-    and the worst |ratio|. Computed a batch at a time to bound memory."""
+def _ratio_rows(qh: np.ndarray, dt_s: float, limits: np.ndarray) -> np.ndarray:
+    """(K, 3n+1) signed v, a, j ratios per axis (grouped by kind) and the worst |ratio| of
+    the samples qh[3:], qh[:3] being the three samples before them (rest before 0)."""
     from .ratios import limit_ratios
 
-    idx_t = [traj.axes.index(a) for a in lim_axes]
-    idx_m = [machine.axes.index(a) for a in lim_axes]
-    limits = machine.limits()[:, idx_m]  # (3, n)
-    # Three samples of history give the differences at b0 exactly; limit_ratios pads with
-    # rest only before sample 0.
-    h0 = max(b0 - 3, 0)
-    r = limit_ratios(traj.q[h0:b1, idx_t], traj.dt_s, limits)[:, b0 - h0:]  # (3, m, n)
-    n = len(lim_axes)
-    table = np.empty((b1 - b0, 3 * n + 1))
+    r = limit_ratios(qh, dt_s, limits)[:, 3:]  # (3, K, n)
+    n = qh.shape[1]
+    K = qh.shape[0] - 3
+    table = np.empty((K, 3 * n + 1))
     for kind in range(3):
         table[:, kind * n:(kind + 1) * n] = r[kind]
     with np.errstate(invalid="ignore"):
@@ -313,27 +457,20 @@ def _ratio_table(traj, machine, lim_axes: str, b0: int, b1: int) -> np.ndarray:
     return table
 
 
-def _segment_messages(traj, segments) -> tuple[list[int], list[bytes]]:
-    """Sample index where each segment starts (ascending) and its encoded message."""
+def _fixed_segments(traj, segments) -> tuple[np.ndarray, list[bytes]]:
+    """Sample index where each given segment (line, s_start, s_end) starts (ascending)
+    and its encoded message, from a whole trajectory."""
     t, s, feed = traj.t, traj.s, traj.feed
     K = traj.n_samples
     if K == 0:
-        return [], []
-    if segments is None:
-        line = np.asarray(traj.line)
-        change = np.flatnonzero(np.diff(line) != 0) + 1
-        starts = np.concatenate([[0], change])
-        ends = np.concatenate([change, [K - 1]])  # a segment ends where the next begins
-        keep = line[starts] != 0
-        starts, ends, lines = starts[keep], ends[keep], line[starts][keep]
-    else:
-        seg = np.asarray(segments, dtype=float).reshape(-1, 3)
-        lines = seg[:, 0].astype(np.int64)
-        starts = np.clip(np.searchsorted(s, seg[:, 1], side="left"), 0, K - 1)
-        ends = np.clip(np.searchsorted(s, seg[:, 2], side="left"), 0, K - 1)
-        ends = np.maximum(ends, starts)
-        order = np.argsort(starts, kind="stable")
-        starts, ends, lines = starts[order], ends[order], lines[order]
+        return np.zeros(0, dtype=np.int64), []
+    seg = np.asarray(segments, dtype=float).reshape(-1, 3)
+    lines = seg[:, 0].astype(np.int64)
+    starts = np.clip(np.searchsorted(s, seg[:, 1], side="left"), 0, K - 1)
+    ends = np.clip(np.searchsorted(s, seg[:, 2], side="left"), 0, K - 1)
+    ends = np.maximum(ends, starts)
+    order = np.argsort(starts, kind="stable")
+    starts, ends, lines = starts[order], ends[order], lines[order]
     fmt = _template(_SEG_FIELDS)
     msgs = []
     for i0, i1, ln in zip(starts.tolist(), ends.tolist(), lines.tolist()):
@@ -343,7 +480,7 @@ def _segment_messages(traj, segments) -> tuple[list[int], list[bytes]]:
                 _num(fin.min()) if fin.size else "null", _num(fin.max()) if fin.size else "null",
                 int(i1 - i0 + 1))
         msgs.append((fmt % vals).encode())
-    return starts.tolist(), msgs
+    return np.asarray(starts, dtype=np.int64), msgs
 
 
 def _num(x) -> str:
@@ -408,7 +545,7 @@ def _limits_schema(axes: str) -> dict:
             "required": list(props)}
 
 
-def _metadata_records(traj, metadata, machine, mcap_version) -> list[tuple[str, dict]]:
+def _metadata_records(planner: dict, metadata, machine, mcap_version) -> list[tuple[str, dict]]:
     from .. import __version__
 
     records: dict[str, dict] = {}
@@ -422,10 +559,7 @@ def _metadata_records(traj, metadata, machine, mcap_version) -> list[tuple[str, 
                              ("jmax", machine.jmax)):
                 rec[f"{a}.{lim}"] = float(arr[i])
         records["machine"] = rec
-    records["planner"] = {"name": traj.planner, "status": traj.status,
-                          "dt_s": float(traj.dt_s), "axes": traj.axes,
-                          "samples": traj.n_samples, "duration_s": traj.duration_s,
-                          "settings": _dumps(traj.settings)}
+    records["planner"] = dict(planner)
     records["tool"] = {"name": "cnc-interp", "version": __version__,
                        "mcap_library": f"mcap-python/{mcap_version}"}
     for name, rec in (metadata or {}).items():

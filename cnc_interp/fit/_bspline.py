@@ -293,7 +293,9 @@ def check(t, m, c, xc, ref, tol_lin, tol_rot, lin, metric, exp_speed, exp_lin_sp
         e_all = np.sqrt(e_all)
         e_lin = np.sqrt(e_lin)
         if j < n_hard:
-            dev_ok = e_lin <= tol_lin[j] and e_rot <= tol_rot
+            # nodes: Euclidean in the scaled metric too (linear and scaled rotary errors
+            # each within the tolerance could sum to √2 of it), and each rotary axis
+            dev_ok = e_all <= tol_lin[j] and e_rot <= tol_rot
         else:
             # chord points: one Euclidean allowance in the scaled metric (it holds the sagitta)
             dev_ok = e_all <= tol_lin[j]
@@ -348,7 +350,7 @@ def segment_sources_kernel(x, u, line, feed):
 def refine(u, y, tol, chords, clen, lin_ratio, interior, total, d1s, d2s, d1e, d2e, start_mode,
            end_mode, xc0, ref0, tol_c0, exp_lin0, u_data0, y_data0, w_data0, span_f, tol_ref,
            tol_rot, lin, metric, between_safety, smoothing, ridge, min_ratio, stop_ratio,
-           max_rounds, stale_rounds, min_span):
+           max_rounds, stale_rounds, min_span, max_interior):
     """The knot-insertion rounds of ``nodes.fit_polyline`` (see its module docstring),
     compiled: one call instead of a Python loop with dozens of array operations per
     round. Returns (t, m, c, ok): the knot vector, coefficient count, coefficients
@@ -359,7 +361,8 @@ def refine(u, y, tol, chords, clen, lin_ratio, interior, total, d1s, d2s, d1e, d
     tolerances tol (n,), chords (n-1, d), clen (n-1,), lin_ratio (n-1,); the initial
     interior knots; the end states (mode 1 imposes d1/d2); the node and chord check
     points (xc0, ref0, tol_c0, exp_lin0) and data (u_data0, y_data0, w_data0); span_f
-    the fractions of a knot span that get points on the programmed moves.
+    the fractions of a knot span that get points on the programmed moves; no more than
+    ``max_interior`` interior knots (-1: no limit) are inserted.
     """
     n, d = y.shape
     ns = span_f.shape[0]
@@ -464,6 +467,8 @@ def refine(u, y, tol, chords, clen, lin_ratio, interior, total, d1s, d2s, d1e, d
         for sp in range(m + 1):
             if not bad[sp]:
                 continue
+            if max_interior >= 0 and ni + nn >= max_interior:
+                break
             lo_t = t[sp]
             hi_t = t[sp + 1]
             if not (hi_t - lo_t > 2.0 * min_span):

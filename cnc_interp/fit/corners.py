@@ -17,7 +17,7 @@ alone. Nodes strictly inside a curve never split.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -38,7 +38,10 @@ class PreparedRun:
 
     nodes (N', n), line/feed_mm_s (N',) of the move ending at each node (node 0
     repeats node 1), tol_mm (N',) resolved tolerance (0 = G61), curves re-indexed,
-    lin (n,) linear axes, scale (n,) metric scale, rot_only (N'-1,) per move.
+    lin (n,) linear axes, scale (n,) metric scale, rot_only (N'-1,) per move;
+    blends: the blended corners (``add_blends``); orig_index (N',): each row's node
+    before blend points were inserted (-1 for an inserted point); stops: nodes where
+    the path must stop (a repair's corner that cannot be blended).
     """
 
     axes: str
@@ -50,6 +53,13 @@ class PreparedRun:
     lin: np.ndarray
     scale: np.ndarray
     rot_only: np.ndarray
+    blends: tuple = ()
+    orig_index: np.ndarray | None = None
+    stops: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+
+    def __post_init__(self) -> None:
+        if self.orig_index is None:
+            object.__setattr__(self, "orig_index", np.arange(self.nodes.shape[0]))
 
 
 @dataclass(frozen=True)
@@ -57,7 +67,8 @@ class SubRun:
     """Nodes i0..i1 (inclusive) of a prepared run, fitted as one path.
 
     kind: ``"straight"`` (collinear G61 moves: one exact line) or ``"fit"``;
-    rotary: the path moves rotary axes only (metric in degrees).
+    rotary: the path moves rotary axes only (metric in degrees); blends: the
+    blended corners inside (``blends.Blend``).
     """
 
     i0: int
@@ -65,16 +76,21 @@ class SubRun:
     kind: str
     rotary: bool
     curves: tuple[CurvePiece, ...]
+    blends: tuple = ()
 
 
 def prepare_run(run: Run, settings) -> PreparedRun:
     """Merge duplicate nodes, resolve tolerances and re-index curve pieces."""
     nodes = np.asarray(run.nodes, dtype=float)
     lin = np.array([a in LINEAR_AXES for a in run.axes], dtype=bool)
-    scale = np.where(lin, 1.0, settings.tol_mm / settings.tol_deg)
     tol = settings.node_tolerance(run.tol_mm)
     if tol.size > 1:
         tol[0] = tol[1]
+    # rotary axes count tol_ref / tol_deg mm per degree, tol_ref the run's largest
+    # tolerance (the sub-runs' fit and measurement use theirs: the same where G64 P is
+    # constant), so corners are judged in the metric the fit works in
+    ref = float(tol.max()) if tol.size and tol.max() > 0 else settings.fit_tol_mm
+    scale = np.where(lin, 1.0, ref / settings.fit_tol_deg)
     feed = np.asarray(run.feed_mm_s, dtype=float).copy()
     line = np.asarray(run.line, dtype=np.int64)
     n = nodes.shape[0]
@@ -123,15 +139,13 @@ def _distinct_nodes_seq(scaled: np.ndarray, threshold: float) -> np.ndarray:
     return distinct_nodes(scaled, threshold)
 
 
-def split_run(pr: PreparedRun, settings, evals: dict | None = None) -> list[SubRun]:
-    """Cut a prepared run into sub-runs at corners, G61 nodes and metric changes.
-
-    ``evals`` optionally shares each curve's ``CurveEval`` with the fitter."""
+def corner_turns(pr: PreparedRun, evals: dict | None = None):
+    """Turn angle (deg) at every node (n,) in the fitter's metric (and, with rotary axes,
+    the larger of that and the linear axes' own turn), and the nodes strictly inside a
+    curve (n,) bool."""
     from .curves import curve_eval, end_states
 
     n = pr.nodes.shape[0]
-    if n < 2:
-        return []
     chords = np.diff(pr.nodes * pr.scale, axis=0)
     d_in = np.zeros((n, chords.shape[1]))
     d_out = np.zeros((n, chords.shape[1]))
@@ -148,6 +162,18 @@ def split_run(pr: PreparedRun, settings, evals: dict | None = None) -> list[SubR
         # the tool's own path (linear axes) must not turn sharply either, however much
         # the rotary axes move: a corner there would be a near-stop of the arc length s
         turn = np.maximum(turn, np.degrees(turn_angles(d_in[:, pr.lin], d_out[:, pr.lin])))
+    return turn, inside
+
+
+def split_run(pr: PreparedRun, settings, evals: dict | None = None) -> list[SubRun]:
+    """Cut a prepared run into sub-runs at corners, G61 nodes and metric changes; a
+    blended corner (``pr.blends``) does not cut.
+
+    ``evals`` optionally shares each curve's ``CurveEval`` with the fitter."""
+    n = pr.nodes.shape[0]
+    if n < 2:
+        return []
+    turn, inside = corner_turns(pr, evals)
     cut = np.zeros(n, dtype=bool)
     j = np.arange(1, n - 1)
     tol_move = pr.tol_mm  # tolerance of the move ending at each node
@@ -155,6 +181,10 @@ def split_run(pr: PreparedRun, settings, evals: dict | None = None) -> list[SubR
     cut[j] = (turn[j] > settings.corner_deg) | (g61 & (turn[j] > FIT_COLLINEAR_DEG))
     cut[j] |= pr.rot_only[j - 1] != pr.rot_only[j]
     cut &= ~inside
+    corner = np.array([bl.i + 1 for bl in pr.blends], dtype=np.int64)
+    cut[corner] = False
+    stops = pr.stops[(pr.stops > 0) & (pr.stops < n - 1)]
+    cut[stops[~inside[stops]]] = True
     edges = np.concatenate(([0], np.nonzero(cut)[0], [n - 1]))
     # curves never straddle a cut (their inner nodes do not split): sub-run of each curve
     firsts = np.array([c.first for c in pr.curves], dtype=np.int64)
@@ -162,14 +192,105 @@ def split_run(pr: PreparedRun, settings, evals: dict | None = None) -> list[SubR
     by_sub: dict[int, list] = {}
     for c, o in zip(pr.curves, owner):
         by_sub.setdefault(int(o), []).append(c)
+    bl_owner = np.searchsorted(edges, corner, side="right") - 1
+    bl_sub: dict[int, list] = {}
+    for bl, o in zip(pr.blends, bl_owner):
+        bl_sub.setdefault(int(o), []).append(bl)
     zero = pr.tol_mm == 0
     n_zero = np.concatenate(([0], np.cumsum(zero)))
     subs = []
     for k, (a, b) in enumerate(zip(edges[:-1].tolist(), edges[1:].tolist())):
         cs = tuple(by_sub.get(k, ()))
-        exact = not cs and (n_zero[b + 1] - n_zero[a + 1]) == b - a
-        subs.append(SubRun(a, b, "straight" if exact else "fit", bool(pr.rot_only[a]), cs))
+        bs = tuple(bl_sub.get(k, ()))
+        exact = not cs and not bs and (n_zero[b + 1] - n_zero[a + 1]) == b - a
+        subs.append(SubRun(a, b, "straight" if exact else "fit", bool(pr.rot_only[a]), cs, bs))
     return subs
+
+
+def add_blends(pr: PreparedRun, settings, evals: dict | None = None,
+               force: np.ndarray | None = None) -> PreparedRun:
+    """``pr`` with its sharp corners blended (``blends.py``): a node at each blend's
+    start and end is inserted on the two moves (taking that move's line, feed and
+    tolerance), and ``blends`` lists them. A corner is a candidate when it turns more
+    than ``corner_deg`` (or ``force`` (n,) marks it), both its moves are straight (no
+    exact curve) and within one metric, and neither is under G61."""
+    from .blends import Blend, blend_piece, plan_blends
+
+    n = pr.nodes.shape[0]
+    if n < 3:
+        return pr if force is None else replace(pr, stops=np.nonzero(force)[0])
+    turn, inside = corner_turns(pr, evals)
+    cand = turn > settings.corner_deg
+    if force is not None:
+        cand |= force & (turn > FIT_COLLINEAR_DEG)
+    cand[0] = cand[-1] = False
+    j = np.arange(1, n - 1)
+    cand[j] &= (pr.tol_mm[j] > 0) & (pr.tol_mm[j + 1] > 0) & (pr.rot_only[j - 1] == pr.rot_only[j])
+    for cp in pr.curves:  # the moves into and out of a corner must be straight
+        cand[cp.first:cp.last + 1] = False
+    # forced nodes that cannot be blended are stops
+    no_blend = np.zeros(n, dtype=bool) if force is None else force.copy()
+    if not cand.any():
+        return replace(pr, stops=np.nonzero(no_blend)[0])
+    scaled = pr.nodes * pr.scale
+    tol_rot = settings.fit_tol_deg * float(pr.scale[~pr.lin].max()) if (~pr.lin).any() else np.inf
+    ok, dist, shape = plan_blends(scaled, pr.lin, pr.tol_mm, cand, force, tol_rot_scaled=tol_rot)
+    no_blend &= ~ok
+    corners = np.nonzero(ok)[0]
+    if corners.size == 0:
+        return replace(pr, stops=np.nonzero(no_blend)[0])
+    chords = np.diff(scaled, axis=0)
+    clen = np.linalg.norm(chords, axis=1)
+    # new rows on move m (node m -> m+1): the end of the blend at m (dist[m] after node m)
+    # and the start of the blend at m+1 (dist[m+1] before node m+1); one shared point where
+    # the two meet (both at the move's middle)
+    f_end = np.where(ok[:-1], dist[:-1] / clen, -1.0)  # fraction along move m, or none
+    f_start = np.where(ok[1:], 1.0 - dist[1:] / clen, -1.0)
+    shared = (f_end >= 0) & (f_start >= 0) & (f_start - f_end <= 1e-12)
+    has_end = f_end >= 0
+    has_start = (f_start >= 0) & ~shared
+    extra = np.concatenate((has_end.astype(np.int64) + has_start, [0]))
+    new_index = np.concatenate(([0], np.cumsum(1 + extra)[:-1]))
+    total = int(new_index[-1]) + 1
+    # each row: a point on move src -> src + 1 at fraction frac (0: the programmed node)
+    src = np.empty(total, dtype=np.int64)
+    frac = np.zeros(total)
+    take = np.empty(total, dtype=np.int64)  # row of line / feed / tol it takes
+    src[new_index] = np.arange(n)
+    take[new_index] = np.arange(n)
+    at_end = np.full(n, -1, dtype=np.int64)    # row of the blend-at-m's end point
+    at_start = np.full(n, -1, dtype=np.int64)  # row of the blend-at-m's start point
+    m = np.nonzero(has_end)[0]
+    at_end[m] = new_index[m] + 1
+    src[at_end[m]] = m
+    frac[at_end[m]] = np.where(shared[m], 0.5, f_end[m])
+    m = np.nonzero(has_start)[0]
+    rows = new_index[m] + 1 + has_end[m]
+    at_start[m + 1] = rows
+    src[rows] = m
+    frac[rows] = f_start[m]
+    m = np.nonzero(shared)[0]
+    at_start[m + 1] = at_end[m]
+    inserted = frac > 0
+    take[inserted] = src[inserted] + 1  # a point on move m -> m+1 takes that move's data
+    nodes = pr.nodes[src].copy()
+    k = np.nonzero(inserted)[0]
+    nodes[k] += (pr.nodes[src[k] + 1] - pr.nodes[src[k]]) * frac[k, None]
+    ia, ib = at_start[corners], at_end[corners]
+    t_in = chords[corners - 1] / clen[corners - 1, None]
+    t_out = chords[corners] / clen[corners, None]
+    coef, h = blend_piece(nodes[ia], nodes[ib], t_in, t_out, dist[corners], shape[corners], pr.scale)
+    feed = np.minimum(pr.feed_mm_s[corners], pr.feed_mm_s[corners + 1])
+    blends = [Blend(int(ia[k]), float(h[k]), coef[k], int(pr.line[c]), float(feed[k]), t_in[k], t_out[k])
+              for k, c in enumerate(corners.tolist())]
+    curves = tuple(CurvePiece(int(new_index[cp.first]), int(new_index[cp.last]), cp.curve)
+                   for cp in pr.curves)
+    rot_only = pr.rot_only[take[1:] - 1]
+    orig = np.full(nodes.shape[0], -1, dtype=np.int64)
+    orig[new_index] = np.arange(n)
+    return PreparedRun(pr.axes, nodes, pr.line[take], pr.feed_mm_s[take], pr.tol_mm[take], curves,
+                       pr.lin, pr.scale, rot_only, tuple(blends), orig,
+                       new_index[np.nonzero(no_blend)[0]])
 
 
 def fit_tolerance(tol_mm: np.ndarray) -> np.ndarray:

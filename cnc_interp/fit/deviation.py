@@ -151,7 +151,7 @@ def path_deviation(breaks: np.ndarray, coef: np.ndarray, nodes: np.ndarray, tol_
 
 def rotary_path_deviation(breaks: np.ndarray, coef: np.ndarray, nodes: np.ndarray,
                           tol_mm: np.ndarray, tol_deg: float, lin: np.ndarray, moving: np.ndarray,
-                          curves=(), i0: int = 0) -> float:
+                          curves=(), i0: int = 0, tol_ref: float | None = None) -> float:
     """Worst deviation of the programmed path from the fit where rotary axes move, over
     the tolerance (<= 1 is within); ``moving`` (d,) marks the axes that move.
 
@@ -176,8 +176,10 @@ def rotary_path_deviation(breaks: np.ndarray, coef: np.ndarray, nodes: np.ndarra
     pts, tol = programmed_samples(nodes, tol_mm, curves, i0, spacing)
     if pts.shape[0] == 0:
         return 0.0
-    # the projection's metric: rotary axes scaled by the largest linear tolerance over tol_deg
-    s_path = np.where(rot, float(np.max(tol)) / float(tol_deg), 1.0)
+    # the projection's metric: rotary axes scaled by the largest linear tolerance (or
+    # ``tol_ref``, that of the whole sub-run a part of it is measured for) over tol_deg
+    ref = float(np.max(tol)) if tol_ref is None else float(tol_ref)
+    s_path = np.where(rot, ref / float(tol_deg), 1.0)
     _, kf, tf = project_onto_pieces(breaks, coef * s_path, pts * s_path, np.ones_like(lin), tol,
                                     spacing)
     c = coef[kf]  # (K, 6, d)

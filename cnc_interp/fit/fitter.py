@@ -3,14 +3,24 @@
 Which fitter handles what:
 
 * rapid runs: one straight ``Path(rapid=True)`` per G0 move;
-* G61 stretches: exact straight lines, a stop at every non-collinear node;
-* feed paths without exact curves that move exactly two axes: paper 000's
-  planar method (``planar.py``; ``FitSettings.method`` = "auto"/"planar"), with
-  the N-axis fitter as fallback when an inherited tangent leaves the next frame;
-* everything else: sections — exact curves (``curves.py``) and the polylines
-  between them (``nodes.py``), joined G2: a polyline next to a curve takes the
-  curve's exact tangent and curvature vector at the junction, two curves meet at
-  their averaged tangent / curvature.
+* G61 stretches: exact straight lines, a stop at every non-collinear node (one
+  segment per feed in a collinear chain: each move keeps its F);
+* with ``FitSettings.method`` = "planar"/"auto", feed paths without exact curves
+  that move exactly two axes: paper 000's planar method (``planar.py``), with the
+  N-axis fitter as fallback when an inherited tangent leaves the next frame;
+* everything else (the default "nodes" everywhere): sharp corners between straight
+  moves get G2 blends (``blends.py``, ``corners.add_blends``); then sections — exact
+  curves (``curves.py``), blends, and the polylines between them (``nodes.py``),
+  joined G2: a polyline next to a curve or blend takes its exact tangent and
+  curvature vector at the junction, two curves meet at their averaged tangent /
+  curvature.
+
+Every fitted sub-run is measured against the programmed path (``deviation.py``);
+one outside its tolerance is refitted tighter, then repaired locally over a few
+rounds (blends, or stops where a corner cannot be blended, at nodes of its failing
+sections), and as the last resort becomes its exact moves with stops. A fit still
+outside is reported in the statistics; ``result.require_within_tolerance`` turns
+that into a ``FitError`` for the commands.
 """
 
 from __future__ import annotations
@@ -22,14 +32,17 @@ import numpy as np
 from ..constants import (
     ARC_LENGTH_MAX_SUB,
     ARC_LENGTH_REL_TOL,
+    FIT_REPAIR_ROUNDS,
+    FIT_REPAIR_SPLITS,
+    FIT_REPAIR_TOL_SHARE,
     PATH_DEV_SLACK,
 )
 from ..gcode.program import Dwell, Program, Run, Stop
 from .deviation import path_deviation, polyline_deviation, rotary_path_deviation
-from .corners import PreparedRun, SubRun, fit_tolerance, prepare_run, split_run
+from .corners import PreparedRun, SubRun, add_blends, fit_tolerance, prepare_run, split_run
 from .nodes import EndState, fit_polyline, straight_piece
 from .path import Path, PlanarSegments
-from .result import FitResult
+from .result import FitResult, fit_outside_error
 from .settings import FitSettings
 
 
@@ -45,6 +58,8 @@ class _Raw:
     weights: np.ndarray
     rapid: bool = False
     planar: PlanarSegments | None = None
+    #: (kind, first node, last node, first segment, end segment) per section of a sub-run
+    sections: list | None = None
 
     def build(self, start: np.ndarray | None = None) -> Path:
         coef = self.coef
@@ -62,28 +77,57 @@ class _Raw:
                     feed_mm_s=self.feed, weights=self.weights, rapid=self.rapid, planar=planar)
 
 
+#: paths built per compiled call while streaming a run (any value gives the same paths)
+FIT_STREAM_BATCH = 128
+
+
 def fit_program(program: Program, settings: FitSettings | None = None) -> FitResult:
     """Fit every run of ``program``; dwells and stops pass through (see ``FitResult``)."""
+    stats: dict = {}
+    items = tuple(iter_fit(program.items, settings, stats))
+    return FitResult(program=program, items=items, stats=stats)
+
+
+def iter_fit(items, settings: FitSettings | None = None, stats: dict | None = None,
+             batch: int = FIT_STREAM_BATCH, source: str | None = None):
+    """Fit a program's items lazily, in order: each run's paths as soon as they are
+    fitted (``batch`` at a time), dwells and stops passed through. ``stats`` (a dict) is
+    filled with ``fit_program``'s statistics, complete when the iteration ends. The paths
+    are the same as ``fit_program``'s, whatever ``batch`` is. A run is fitted whole (its
+    repair rounds refit the whole run), so a run's paths come out together. With
+    ``source`` (the part program's name), a run whose fit stays outside its tolerance
+    raises ``FitError`` before any of its paths is handed on."""
+    from .quantum import QuantumDetector
+
     settings = settings or FitSettings()
-    items = []
+    quantum = QuantumDetector()
     runs_info = []
     prev_end = None
     totals = dict(nodes_in=0, segments_out=0, feed_paths=0, rapid_moves=0,
                   max_node_dev_mm=0.0, max_node_dev_deg=0.0, max_path_dev_mm=0.0,
-                  max_path_dev_ratio=0.0, max_path_dev_rot_ratio=0.0, within_tolerance=True)
-    for idx, it in enumerate(program.items):
+                  max_path_dev_ratio=0.0, max_path_dev_rot_ratio=0.0, within_tolerance=True,
+                  max_tol_mm=0.0)
+    for idx, it in enumerate(items):
         if isinstance(it, Run):
-            raws, info = _fit_run_raw(it, settings)
+            # half the printed quantum of the moves so far widens the tolerance (quantum.py)
+            quantum.add_run(it)
+            q = quantum.result()
+            run_settings = replace(settings, quantum_mm=q["quantum_mm"], quantum_deg=q["quantum_deg"])
+            raws_all, info = _fit_run_raw(it, run_settings)
             info["item"] = idx
             runs_info.append(info)
-            paths, prev_end = _build_paths(raws, prev_end)
-            items.extend(paths)
+            if source is not None and not info["within_tolerance"]:
+                raise fit_outside_error(info, source)
+            n_raws = len(raws_all)
+            for b0 in range(0, n_raws, batch):
+                paths, prev_end = _build_paths(raws_all[b0:b0 + batch], prev_end)
+                yield from paths
             if it.kind == "rapid":
-                totals["rapid_moves"] += len(raws)
+                totals["rapid_moves"] += n_raws
             else:
                 totals["nodes_in"] += info["nodes_in"]
                 totals["segments_out"] += info["segments_out"]
-                totals["feed_paths"] += len(raws)
+                totals["feed_paths"] += n_raws
                 totals["max_node_dev_mm"] = max(totals["max_node_dev_mm"], info["max_node_dev_mm"])
                 totals["max_node_dev_deg"] = max(totals["max_node_dev_deg"], info["max_node_dev_deg"])
                 totals["max_path_dev_mm"] = max(totals["max_path_dev_mm"], info["max_path_dev_mm"])
@@ -91,20 +135,28 @@ def fit_program(program: Program, settings: FitSettings | None = None) -> FitRes
                 totals["max_path_dev_rot_ratio"] = max(totals["max_path_dev_rot_ratio"],
                                                        info["max_path_dev_rot_ratio"])
                 totals["within_tolerance"] &= info["within_tolerance"]
+                totals["max_tol_mm"] = max(totals["max_tol_mm"], info.get("max_tol_mm", 0.0))
         elif isinstance(it, (Dwell, Stop)):
-            items.append(it)
+            yield it
             prev_end = None
         else:  # pragma: no cover - the item type is closed
             raise TypeError(type(it))
-    stats = dict(totals)
-    stats["segments_per_node"] = (totals["segments_out"] / totals["nodes_in"]) if totals["nodes_in"] else 0.0
-    stats["tol_mm"] = settings.tol_mm
-    stats["tol_deg"] = settings.tol_deg
-    stats["corner_deg"] = settings.corner_deg
-    stats["tol_mode"] = settings.tol_mode
-    stats["method"] = settings.method
-    stats["runs"] = runs_info
-    return FitResult(program=program, items=tuple(items), stats=stats)
+    out = dict(totals)
+    out["segments_per_node"] = (totals["segments_out"] / totals["nodes_in"]) if totals["nodes_in"] else 0.0
+    out["tol_mm"] = settings.tol_mm
+    out["tol_deg"] = settings.tol_deg
+    out["tol_cap_mm"] = settings.tol_cap_mm
+    q = quantum.result()
+    out["quantum"] = q
+    final = replace(settings, quantum_mm=q["quantum_mm"], quantum_deg=q["quantum_deg"])
+    out["fit_tol_mm"] = final.fit_tol_mm
+    out["fit_tol_deg"] = final.fit_tol_deg
+    out["corner_deg"] = settings.corner_deg
+    out["tol_mode"] = settings.tol_mode
+    out["method"] = settings.method
+    out["runs"] = runs_info
+    if stats is not None:
+        stats.update(out)
 
 
 def fit_run(run: Run, settings: FitSettings | None = None) -> list[Path]:
@@ -178,78 +230,194 @@ def _weights(lin: np.ndarray, rotary: bool) -> np.ndarray:
     return (1.0 - w) if rotary else w
 
 
-def _fit_run_raw(run: Run, settings: FitSettings):
-    lin = np.array([a in "XYZUVW" for a in run.axes], dtype=bool)
-    info = dict(kind=run.kind, first_line=int(run.line[0]) if run.n_nodes else 0,
+def _run_info(run: Run) -> dict:
+    return dict(kind=run.kind, first_line=int(run.line[0]) if run.n_nodes else 0,
                 last_line=int(run.line[-1]) if run.n_nodes else 0, nodes_in=0, segments_out=0,
                 paths=0, methods=[], max_node_dev_mm=0.0, max_node_dev_deg=0.0,
                 max_path_dev_mm=0.0, max_path_dev_ratio=0.0, max_path_dev_rot_ratio=0.0,
                 within_tolerance=True)
+
+
+def _fit_run_raw(run: Run, settings: FitSettings):
+    lin = np.array([a in "XYZUVW" for a in run.axes], dtype=bool)
+    info = _run_info(run)
     if run.kind == "rapid":
         return _rapid_raws(run, lin), info
     pr = prepare_run(run, settings)
+    evals: dict = {}  # CurveEval per curve, shared by the corner split and the fit
     info["nodes_in"] = int(run.n_nodes)
+    info["max_tol_mm"] = float(pr.tol_mm.max()) if pr.tol_mm.size else 0.0
+    # fit; where the measurement finds a stretch outside its tolerance, repair it
+    # locally: blends (or, where a corner cannot be blended, stops) at nodes inside the
+    # failing sections, then refit; the last round forces every node there
+    force = np.zeros(pr.nodes.shape[0], dtype=bool)
+    for attempt in range(FIT_REPAIR_ROUNDS + 1):
+        prb = pr
+        if settings.blend_corners and settings.method == "nodes":
+            prb = add_blends(pr, settings, evals, force=force if force.any() else None)
+        elif force.any():
+            prb = replace(pr, stops=np.nonzero(force)[0])
+        results, more = _fit_run_once(prb, settings, evals, info, attempt)
+        if not more.size:
+            break
+        info["repaired"] = info.get("repaired", 0) + 1
+        force[_original_index(pr, prb, more)] = True
     raws = []
     methods = set()
     dmm_max = ddeg_max = pdev_max = pratio_max = rratio_max = 0.0
     ok_all = True
     n_seg = 0
-    evals: dict = {}  # CurveEval per curve, shared by the corner split and the fit
+    for m in results:
+        raws.append(m.raw)
+        methods.add(m.method)
+        dmm_max = max(dmm_max, m.dev_mm)
+        ddeg_max = max(ddeg_max, m.dev_deg)
+        pdev_max = max(pdev_max, m.path_dev_mm)
+        pratio_max = max(pratio_max, m.path_ratio)
+        rratio_max = max(rratio_max, m.rot_ratio)
+        if not m.ok and "outside_lines" not in info:
+            info["outside_lines"] = [int(prb.line[m.i0 + 1]), int(prb.line[m.i1])]
+        ok_all &= m.ok
+        n_seg += int(m.raw.coef.shape[0])
+    if info.get("repaired"):
+        info["repair_stops"] = int(prb.stops.size)
+    info.update(max_node_dev_mm=dmm_max, max_node_dev_deg=ddeg_max, max_path_dev_mm=pdev_max,
+                max_path_dev_ratio=pratio_max, max_path_dev_rot_ratio=rratio_max,
+                within_tolerance=ok_all, segments_out=n_seg,
+                paths=len(raws), methods=sorted(methods))
+    return raws, info
+
+
+def _original_index(pr: PreparedRun, prb: PreparedRun, idx: np.ndarray) -> np.ndarray:
+    """Indices in ``pr`` of nodes ``idx`` of ``prb`` (``pr`` with blend points inserted,
+    which are never asked for: the nodes to force are programmed ones)."""
+    return prb.orig_index[idx]
+
+
+def _fit_run_once(pr: PreparedRun, settings: FitSettings, evals: dict, info: dict, attempt: int):
+    """Fit every sub-run of a prepared run (repair round ``attempt``): (measured fits in path
+    order, nodes of ``pr`` where the next round should put blends or stops; empty when all
+    are within). In the last round a sub-run still outside becomes its exact moves."""
+    last = attempt == FIT_REPAIR_ROUNDS
+    results = []
+    more = []
     lin_all, rot_all = _weights(pr.lin, False), _weights(pr.lin, True)
-    no_lin = np.zeros_like(pr.lin)
     for sub in split_run(pr, settings, evals):
         a, b = sub.i0, sub.i1
         if b - a == 1 and not sub.curves:
             # a single move: the exact line through its two nodes. Node and path deviation
             # are 0 by construction (the programmed path IS the fitted segment), so neither
             # the generic fitter nor the sampled path-deviation check is run for it.
-            raws.append(_single_move_raw(pr, a, b, rot_all if sub.rotary else lin_all))
-            methods.add("line")
-            n_seg += 1
+            raw = _single_move_raw(pr, a, b, rot_all if sub.rotary else lin_all)
+            results.append(_Measured(a, b, raw, "line", 0.0, 0.0, 0.0, 0.0, 0.0, True))
             continue
-        raw, meth, dmm, ddeg, ok = _fit_sub(pr, sub, settings, evals)
-        # the programmed path (moves and exact curves) against the fit, everywhere
-        measured = pr.lin if not sub.rotary else no_lin  # rotary-only: no linear axis
-        tol_sub = fit_tolerance(pr.tol_mm[a:b + 1])
-        if sub.curves:
-            pdev, pratio = path_deviation(raw.breaks, raw.coef, pr.nodes[a:b + 1], tol_sub,
-                                          measured, sub.curves, a)
-        else:
-            pdev, pratio = polyline_deviation(raw.breaks, raw.coef, pr.nodes[a:b + 1], tol_sub,
-                                              measured)
-        # where rotary axes move: position and orientation at one point of the fit
-        moving = np.ptp(pr.nodes[a:b + 1], axis=0) > 0
-        rratio = 0.0
-        if (moving & ~pr.lin).any():
-            rratio = rotary_path_deviation(raw.breaks, raw.coef, pr.nodes[a:b + 1], tol_sub,
-                                           settings.tol_deg, pr.lin, moving, sub.curves, a)
-        sub_ok = bool(ok) and max(pratio, rratio) <= 1.0 + PATH_DEV_SLACK
-        if not sub_ok and not sub.curves:
-            # repair, never report: the moves themselves, exact lines with a stop at each
-            # node, are within any tolerance (slower, but never outside the part)
-            w = rot_all if sub.rotary else lin_all
-            raws.extend(_single_move_raw(pr, j, j + 1, w) for j in range(a, b))
-            methods.add("line-fallback")
-            info["fallback_lines"] = info.get("fallback_lines", []) + [int(pr.line[a + 1]),
-                                                                       int(pr.line[b])]
-            n_seg += b - a
+        m = _fit_measured(pr, sub, settings, evals)
+        if not m.ok and not sub.curves:
+            retry = _fit_measured(pr, sub, settings, evals, FIT_REPAIR_TOL_SHARE)
+            if retry.ok:
+                info["repaired"] = info.get("repaired", 0) + 1
+                m = retry
+        if not m.ok and not sub.curves:
+            nodes = np.zeros(0, dtype=np.int64)
+            if not last:
+                nodes = _repair_nodes(pr, sub, m, settings, attempt == FIT_REPAIR_ROUNDS - 1)
+            if nodes.size:
+                more.append(nodes)
+            else:
+                # nothing left to blend: the moves themselves, exact lines with a stop at
+                # each node, are within any tolerance (slower, but never outside the part)
+                w = rot_all if sub.rotary else lin_all
+                for j in range(a, b):
+                    results.append(_Measured(j, j + 1, _single_move_raw(pr, j, j + 1, w),
+                                             "line-fallback", 0.0, 0.0, 0.0, 0.0, 0.0, True))
+                info["fallback_lines"] = info.get("fallback_lines", []) + [int(pr.line[a + 1]),
+                                                                           int(pr.line[b])]
+                continue
+        results.append(m)
+    more = np.unique(np.concatenate(more)) if more else np.zeros(0, dtype=np.int64)
+    return results, more
+
+
+def _repair_nodes(pr: PreparedRun, sub: SubRun, m: "_Measured", settings: FitSettings,
+                  every: bool) -> np.ndarray:
+    """Programmed nodes of a failing sub-run to blend (or stop at) in the next round: in
+    every polyline section the measurement finds outside (all of them if none alone is),
+    ``FIT_REPAIR_SPLITS`` nodes spread over it, or with ``every`` all its nodes."""
+    sections = m.raw.sections or [("poly", sub.i0, sub.i1, 0, m.raw.coef.shape[0])]
+    polys = [sec for sec in sections if sec[0] == "poly" and sec[2] - sec[1] >= 2]
+    bad = [sec for sec in polys if not _section_ok(pr, sub, m.raw, sec, settings)]
+    if not bad:
+        bad = polys
+    out = []
+    inserted = pr.orig_index < 0
+    for _, i, j, _, _ in bad:
+        inner = np.arange(i + 1, j)
+        inner = inner[~inserted[inner]]
+        if inner.size == 0:
             continue
-        raws.append(raw)
-        methods.add(meth)
-        dmm_max = max(dmm_max, dmm)
-        ddeg_max = max(ddeg_max, ddeg)
-        pdev_max = max(pdev_max, pdev)
-        pratio_max = max(pratio_max, pratio)
-        rratio_max = max(rratio_max, rratio)
-        if not sub_ok and "outside_lines" not in info:
-            info["outside_lines"] = [int(pr.line[a + 1]), int(pr.line[b])]
-        ok_all &= sub_ok
-        n_seg += int(raw.coef.shape[0])
-    info.update(max_node_dev_mm=dmm_max, max_node_dev_deg=ddeg_max, max_path_dev_mm=pdev_max,
-                max_path_dev_ratio=pratio_max, max_path_dev_rot_ratio=rratio_max,
-                within_tolerance=ok_all, segments_out=n_seg,
-                paths=len(raws), methods=sorted(methods))
-    return raws, info
+        if not every and inner.size > FIT_REPAIR_SPLITS:
+            pick = np.linspace(0, inner.size - 1, FIT_REPAIR_SPLITS + 2)[1:-1]
+            inner = inner[np.unique(np.rint(pick).astype(np.int64))]
+        out.append(inner)
+    return np.concatenate(out) if out else np.zeros(0, dtype=np.int64)
+
+
+def _section_ok(pr: PreparedRun, sub: SubRun, raw: _Raw, sec, settings: FitSettings) -> bool:
+    """The measurement of one polyline section against its own fitted segments."""
+    _, i, j, k0, k1 = sec
+    breaks = raw.breaks[k0:k1 + 1] - raw.breaks[k0]
+    coef = raw.coef[k0:k1]
+    nodes = pr.nodes[i:j + 1]
+    tol = fit_tolerance(pr.tol_mm[i:j + 1])
+    measured = pr.lin if not sub.rotary else np.zeros_like(pr.lin)
+    _, ratio = polyline_deviation(breaks, coef, nodes, tol, measured)
+    moving = np.ptp(nodes, axis=0) > 0
+    if (moving & ~pr.lin).any():
+        # in the sub-run's rotary scale (its largest tolerance), as the whole measurement
+        tol_ref = float(np.max(fit_tolerance(pr.tol_mm[sub.i0:sub.i1 + 1])))
+        ratio = max(ratio, rotary_path_deviation(breaks, coef, nodes, tol, settings.fit_tol_deg,
+                                                 pr.lin, moving, tol_ref=tol_ref))
+    return ratio <= 1.0 + PATH_DEV_SLACK
+
+
+@dataclass
+class _Measured:
+    """One fitted sub-run (nodes i0..i1) and its independently measured deviations."""
+
+    i0: int
+    i1: int
+    raw: _Raw
+    method: str
+    dev_mm: float
+    dev_deg: float
+    path_dev_mm: float
+    path_ratio: float
+    rot_ratio: float
+    ok: bool
+
+
+def _fit_measured(pr: PreparedRun, sub: SubRun, settings: FitSettings, evals: dict,
+                  tol_share: float = 1.0) -> _Measured:
+    """Fit a sub-run (to ``tol_share`` of its tolerance) and measure the programmed path
+    (moves and exact curves) against the fit everywhere."""
+    a, b = sub.i0, sub.i1
+    raw, meth, dmm, ddeg, ok = _fit_sub(pr, sub, settings, evals, tol_share)
+    measured = pr.lin if not sub.rotary else np.zeros_like(pr.lin)  # rotary-only: no linear axis
+    tol_sub = fit_tolerance(pr.tol_mm[a:b + 1])
+    if sub.curves:
+        pdev, pratio = path_deviation(raw.breaks, raw.coef, pr.nodes[a:b + 1], tol_sub,
+                                      measured, sub.curves, a)
+    else:
+        pdev, pratio = polyline_deviation(raw.breaks, raw.coef, pr.nodes[a:b + 1], tol_sub,
+                                          measured)
+    # where rotary axes move: position and orientation at one point of the fit
+    moving = np.ptp(pr.nodes[a:b + 1], axis=0) > 0
+    rratio = 0.0
+    if (moving & ~pr.lin).any():
+        rratio = rotary_path_deviation(raw.breaks, raw.coef, pr.nodes[a:b + 1], tol_sub,
+                                       settings.fit_tol_deg, pr.lin, moving, sub.curves, a)
+    sub_ok = bool(ok) and max(pratio, rratio) <= 1.0 + PATH_DEV_SLACK
+    return _Measured(a, b, raw, meth, dmm, ddeg, pdev, pratio, rratio, sub_ok)
 
 
 def _single_move_raw(pr: PreparedRun, a: int, b: int, weights: np.ndarray) -> _Raw:
@@ -281,8 +449,10 @@ def _rapid_raws(run: Run, lin: np.ndarray) -> list[_Raw]:
     return out
 
 
-def _fit_sub(pr: PreparedRun, sub: SubRun, settings: FitSettings, evals: dict | None = None):
-    """Fit one sub-run: (raw path, method name, max dev mm, max dev deg, ok)."""
+def _fit_sub(pr: PreparedRun, sub: SubRun, settings: FitSettings, evals: dict | None = None,
+             tol_share: float = 1.0):
+    """Fit one sub-run: (raw path, method name, max dev mm, max dev deg, ok); the fitters
+    aim at ``tol_share`` of the tolerance (a repair's retry)."""
     a, b = sub.i0, sub.i1
     nodes = pr.nodes[a:b + 1]
     line = pr.line[a:b + 1]
@@ -290,26 +460,26 @@ def _fit_sub(pr: PreparedRun, sub: SubRun, settings: FitSettings, evals: dict | 
     weights = _weights(pr.lin, sub.rotary)
     metric = weights > 0
     if sub.kind == "straight" or (b - a == 1 and not sub.curves):
-        chord = (nodes[-1] - nodes[0]) * pr.scale
-        length = float(np.linalg.norm(chord))
-        # collinear G61 chain: the straight line from the first to the last node
-        pf = straight_piece(nodes[0], nodes[-1], length, int(line[-1]), float(feed[1:].min()))
+        # collinear G61 chain: the straight line from the first to the last node, with a
+        # segment boundary wherever the programmed feed changes (each move keeps its F)
+        breaks, coef, seg_line, seg_feed = _straight_chain(nodes, line, feed, pr.scale)
         dev = _line_dev(nodes, pr.lin)
-        raw = _Raw(pr.axes, pf.breaks, pf.coef, pf.line, pf.feed_mm_s, weights)
+        raw = _Raw(pr.axes, breaks, coef, seg_line, seg_feed, weights)
         return raw, "line", dev, 0.0, True
     tol = fit_tolerance(pr.tol_mm[a:b + 1])
+    tol_fit = tol * tol_share
     moving = np.ptp(nodes, axis=0) > 0
     if (not sub.curves and settings.method in ("auto", "planar") and int(moving.sum()) == 2
             and bool(np.all(pr.lin[moving]))):
         from .planar import breaks_of, fit_planar
 
         plane = tuple(int(i) for i in np.nonzero(moving)[0])
-        got = fit_planar(nodes, plane, tol, pr.axes, line, feed, weights)
+        got = fit_planar(nodes, plane, tol_fit, pr.axes, line, feed, weights)
         if got is not None:
             planar, coef, seg_line, seg_feed, dev = got
             raw = _Raw(pr.axes, breaks_of(planar), coef, seg_line, seg_feed, weights, planar=planar)
             return raw, "planar-" + pr.axes[plane[0]] + pr.axes[plane[1]], dev, 0.0, True
-    pieces, dmm, ddeg, ok = _fit_sections(pr, sub, tol, metric, settings, evals)
+    pieces, dmm, ddeg, ok, spans = _fit_sections(pr, sub, tol, metric, settings, evals, tol_fit)
     breaks = [np.zeros(1)]
     off = 0.0
     for pf in pieces:
@@ -318,7 +488,37 @@ def _fit_sub(pr: PreparedRun, sub: SubRun, settings: FitSettings, evals: dict | 
     raw = _Raw(pr.axes, np.concatenate(breaks), np.concatenate([p.coef for p in pieces]),
                np.concatenate([p.line for p in pieces]), np.concatenate([p.feed_mm_s for p in pieces]),
                weights)
+    seg0 = np.concatenate(([0], np.cumsum([p.coef.shape[0] for p in pieces])))
+    raw.sections = [(kind, i, j, int(seg0[k]), int(seg0[k + 1])) for k, (kind, i, j) in enumerate(spans)]
     return raw, ("curves+nodes" if sub.curves else "nodes"), dmm, ddeg, ok
+
+
+def _straight_chain(nodes: np.ndarray, line: np.ndarray, feed: np.ndarray, scale: np.ndarray):
+    """The straight line nodes[0] -> nodes[-1] of a collinear chain (n, d) as one segment per
+    run of equal feeds: breaks (K+1,), coef (K, 6, d), line (K,), feed (K,). A boundary
+    sits at the projection onto the line of each node where the feed changes (the
+    chain's nodes lie on it within ``FIT_COLLINEAR_DEG``)."""
+    n, d = nodes.shape
+    chord = (nodes[-1] - nodes[0]) * scale
+    length = float(np.linalg.norm(chord))
+    f = np.asarray(feed, dtype=float)
+    brk = np.nonzero(f[1:-1] != f[2:])[0] + 1 if n > 2 else np.zeros(0, dtype=np.int64)
+    direction = chord / length
+    pos = np.clip(((nodes[brk] - nodes[0]) * scale) @ direction, 0.0, length)
+    # (collinear forward moves project in order; a break that would give an empty
+    # segment is dropped and its moves merge with the next ones)
+    ok = (pos > 0) & (pos < length) & np.concatenate(([True], np.diff(pos) > 0))
+    u = np.concatenate(([0.0], pos[ok], [length]))
+    ends = np.concatenate((brk[ok], [n - 1]))
+    k = u.size - 1
+    coef = np.zeros((k, 6, d))
+    step = (nodes[-1] - nodes[0]) / length
+    coef[:, 0] = nodes[0] + u[:-1, None] * step
+    coef[0, 0] = nodes[0]
+    coef[:, 1] = step
+    starts = np.concatenate(([0], ends[:-1]))
+    seg_feed = np.array([f[a + 1:b + 1].min() for a, b in zip(starts, ends)])
+    return u, coef, np.asarray(line)[ends], seg_feed
 
 
 def _line_dev(nodes: np.ndarray, lin: np.ndarray) -> float:
@@ -335,27 +535,56 @@ def _line_dev(nodes: np.ndarray, lin: np.ndarray) -> float:
 
 
 def _fit_sections(pr: PreparedRun, sub: SubRun, tol: np.ndarray, metric: np.ndarray,
-                  settings: FitSettings, evals: dict | None = None):
-    """Curves and the polylines between them, joined G2 (see module docstring)."""
+                  settings: FitSettings, evals: dict | None = None,
+                  tol_fit: np.ndarray | None = None):
+    """Curves, corner blends and the polylines between them, joined G2 (see module
+    docstring): a polyline next to a curve or blend takes its exact tangent and
+    curvature vector at the junction, two curves meet at their averaged tangent and
+    curvature, and a straight move between two blends is the exact line."""
     from .curves import curve_eval, end_states, fit_curve
+    from .nodes import PieceFit
 
     a, b = sub.i0, sub.i1
-    secs = []  # ("poly", i, j) or ("curve", CurvePiece)
+    # the rotary axes' metric scale tol_ref / tol_deg: the sub-run's largest tolerance,
+    # as in the measurement (``rotary_path_deviation``), so that a fit within the scaled
+    # Euclidean tolerance is within both tolerances at the measured foot points; every
+    # imposed end state is expressed in it
+    tol_ref = float(np.max(tol))
+    scale = np.where(pr.lin, 1.0, tol_ref / settings.fit_tol_deg)
+    if tol_fit is not None:  # a repair's retry aims below the tolerance
+        tol = tol_fit
+    items = sorted([(cp.first, cp.last, "curve", cp) for cp in sub.curves]
+                   + [(bl.i, bl.i + 2, "blend", bl) for bl in sub.blends], key=lambda x: x[0])
+    secs = []  # ("poly", i, j), ("curve", CurvePiece) or ("blend", Blend)
     pos = a
-    for cp in sub.curves:
-        if cp.first > pos:
-            secs.append(("poly", pos, cp.first))
-        secs.append(("curve", cp))
-        pos = cp.last
+    for first, last, kind, obj in items:
+        if first > pos:
+            secs.append(("poly", pos, first))
+        secs.append((kind, obj))
+        pos = last
     if pos < b:
         secs.append(("poly", pos, b))
-    # exact end states of the curves, then the states imposed at each junction
-    evs = [curve_eval(s[1].curve, evals) if s[0] == "curve" else None for s in secs]
-    states = [end_states(ev, pr.scale) if ev is not None else None for ev in evs]
+    # exact end states of the curves and blends, then the states imposed at each junction
+    evs = [curve_eval(s_[1].curve, evals) if s_[0] == "curve" else None for s_ in secs]
+    states = []
+    zero = np.zeros(scale.size)
+    same = bool(np.array_equal(scale, pr.scale))  # always without rotary axes
+    for s_, ev in zip(secs, evs):
+        if ev is not None:
+            states.append(end_states(ev, scale))
+        elif s_[0] == "blend":
+            bl = s_[1]
+            if same:
+                states.append(((bl.t_in, zero), (bl.t_out, zero)))
+            else:
+                t0, t1 = (_unit(t / pr.scale * scale) for t in (bl.t_in, bl.t_out))
+                states.append(((t0, zero), (t1, zero)))
+        else:
+            states.append(None)
     start_of = [None] * len(secs)
     end_of = [None] * len(secs)
     for k in range(len(secs) - 1):
-        ca, cb = secs[k][0] == "curve", secs[k + 1][0] == "curve"
+        ca, cb = secs[k][0] != "poly", secs[k + 1][0] != "poly"
         if ca and cb:
             (t1, k1), (t2, k2) = states[k][1], states[k + 1][0]
             T = t1 + t2
@@ -373,22 +602,48 @@ def _fit_sections(pr: PreparedRun, sub: SubRun, tol: np.ndarray, metric: np.ndar
     pieces = []
     dmm = ddeg = 0.0
     ok = True
-    tol_ref = settings.tol_mm
-    for k, s in enumerate(secs):
-        if s[0] == "curve":
-            cp = s[1]
+    for k, s_ in enumerate(secs):
+        if s_[0] == "curve":
+            cp = s_[1]
             t_c = float(tol[cp.last - a])
-            pf = fit_curve(evs[k], pr.scale, pr.lin, t_c, settings.tol_deg, cp.curve.line,
+            pf = fit_curve(evs[k], scale, pr.lin, t_c, settings.fit_tol_deg, cp.curve.line,
                            float(pr.feed_mm_s[cp.last]),
                            start=start_of[k], end=end_of[k])
+        elif s_[0] == "blend":
+            bl = s_[1]
+            pf = PieceFit(np.array([0.0, bl.h]), bl.coef[None], np.array([bl.line]),
+                          np.array([bl.feed_mm_s]), 0.0, 0.0, True, 3)
         else:
-            i, j = s[1], s[2]
-            st = EndState(*start_of[k]) if start_of[k] is not None else None
-            en = EndState(*end_of[k]) if end_of[k] is not None else None
-            pf = fit_polyline(pr.nodes[i:j + 1], tol[i - a:j - a + 1], settings.tol_deg, pr.lin,
-                              metric, pr.line[i:j + 1], pr.feed_mm_s[i:j + 1], tol_ref, st, en)
+            i, j = s_[1], s_[2]
+            free_or_blend = (
+                (start_of[k] is None or secs[k - 1][0] == "blend")
+                and (end_of[k] is None or secs[k + 1][0] == "blend"))
+            if j == i + 1 and free_or_blend:
+                # a move between blends (or a blend and the path's end): the move itself,
+                # G2 with the blends (their ends lie on it, tangent, with zero curvature)
+                length = float(np.linalg.norm((pr.nodes[j] - pr.nodes[i]) * pr.scale))
+                pf = straight_piece(pr.nodes[i], pr.nodes[j], length, int(pr.line[j]),
+                                    float(pr.feed_mm_s[j]))
+            else:
+                st = EndState(*start_of[k]) if start_of[k] is not None else None
+                en = EndState(*end_of[k]) if end_of[k] is not None else None
+                pf = fit_polyline(pr.nodes[i:j + 1], tol[i - a:j - a + 1], settings.fit_tol_deg,
+                                  pr.lin, metric, pr.line[i:j + 1], pr.feed_mm_s[i:j + 1], tol_ref,
+                                  st, en)
         pieces.append(pf)
         dmm = max(dmm, pf.max_dev_mm)
         ddeg = max(ddeg, pf.max_dev_deg)
         ok &= pf.ok
-    return pieces, dmm, ddeg, ok
+    spans = []
+    for s_ in secs:
+        if s_[0] == "poly":
+            spans.append(s_)
+        elif s_[0] == "curve":
+            spans.append(("curve", s_[1].first, s_[1].last))
+        else:
+            spans.append(("blend", s_[1].i, s_[1].i + 2))
+    return pieces, dmm, ddeg, ok, spans
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v)

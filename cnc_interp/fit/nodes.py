@@ -20,7 +20,8 @@ Method (robust, O(n) per round; the rounds run in one numba kernel, ``_bspline.r
   ``FIT_MIN_SPEED_RATIO`` of the chord's — soft, and below ``FIT_STOP_SPEED_RATIO``
   (a stop, a cusp) — hard;
 * every knot span with a failing point gets a knot at its middle node (or its
-  middle if it holds no node); repeat until everything passes, or until only soft
+  middle if it holds no node; where rotary axes move, no more knots than moves: at
+  most one segment per move); repeat until everything passes, or until only soft
   checks fail and ``FIT_SOFT_STALE_ROUNDS`` rounds did not reduce them.
 
 A quintic B-spline is C4 in u at simple knots, hence C2 in arc length and G2
@@ -157,12 +158,22 @@ def fit_polyline(nodes: np.ndarray, tol_mm: np.ndarray, tol_deg: float, lin: np.
     interior = u[step:n - 1:step].copy()
     if interior.size and total - interior[-1] < 0.5 * (interior[-1] - (interior[-2] if interior.size > 1 else 0.0)):
         interior = interior[:-1]
+    # a knot (a segment boundary) wherever the programmed feed changes: every segment
+    # then lies within one feed (``segment_sources``) and each move keeps its own F
+    f_in = np.asarray(feed, dtype=float)
+    brk = np.nonzero(f_in[1:-1] != f_in[2:])[0] + 1 if n > 2 else np.zeros(0, dtype=np.int64)
+    if brk.size:
+        interior = np.unique(np.concatenate((interior, u[brk])))
     zero = np.zeros(d)
     d1s = start.d1 if start is not None else zero
     d2s = start.d2 if start is not None else zero
     d1e = end.d1 if end is not None else zero
     d2e = end.d2 if end is not None else zero
     f64 = np.ascontiguousarray
+    # where rotary axes move, at most one segment per move (knots chasing the soft speed
+    # check of the tool's own path, whose share of the motion jumps from move to move,
+    # multiplied the segments several times over)
+    rotary_moves = bool(np.any(np.ptp(nodes[:, ~lin], axis=0) > 0)) if (~lin).any() else False
     # the knot-insertion rounds (compiled; see bs.refine)
     t, m, c, ok = bs.refine(
         f64(u), f64(y), f64(tol), f64(chords), f64(clen), f64(lin_ratio), f64(interior), float(total),
@@ -171,7 +182,7 @@ def fit_polyline(nodes: np.ndarray, tol_mm: np.ndarray, tol_deg: float, lin: np.
         f64(exp_lin0), f64(u_data0), f64(y_data0), f64(w_data0), f64(span_f), float(tol_ref_mm),
         float(tol_rot), f64(lin, dtype=np.bool_), f64(metric, dtype=np.bool_), FIT_BETWEEN_NODES_SAFETY,
         FIT_SMOOTHING, _RIDGE, FIT_MIN_SPEED_RATIO, FIT_STOP_SPEED_RATIO, FIT_MAX_ROUNDS,
-        FIT_SOFT_STALE_ROUNDS, FIT_MIN_SPAN_REL * total)
+        FIT_SOFT_STALE_ROUNDS, FIT_MIN_SPAN_REL * total, n - 2 if rotary_moves else -1)
     val = np.empty((n, d))
     der = np.empty((n, d))
     bs.evaluate(t, m, c, u, val, der)

@@ -449,7 +449,7 @@ def _rotate(H, V, s, r, n_rot, c, sn, xs_all, zs_all):
 
 @njit(cache=True)
 def planar_fit_kernel(H, V, tol, alpha, S, w_end, w_win, max_incl, keep, band, mu,
-                      out_theta, out_start, out_end, out_b, per_x, max_checks,
+                      out_theta, out_start, out_end, out_b, per_x, max_checks, next_brk,
                       s0=0, k0=0, constrained0=False, phi0=0.0, kappa0=0.0, max_dev0=0.0):
     """Segment and fit nodes (H, V) (n,); returns (n_seg, status, max_dev, s,
     constrained, phi_abs, kappa): on status 2, the failing segment's first node s and the
@@ -460,6 +460,8 @@ def planar_fit_kernel(H, V, tol, alpha, S, w_end, w_win, max_incl, keep, band, m
     2 = a single chord cannot be fitted within the tolerance (an inherited curvature
     too strong for it): the caller falls back to the N-axis fitter.
     out_* are preallocated with n-1 rows; segment k covers nodes out_start[k]..out_end[k].
+    ``next_brk`` (n,): for every node the next node at which a segment must end (a
+    change of the programmed feed: no segment straddles one), n - 1 if none.
     """
     n = H.shape[0]
     s = s0
@@ -508,6 +510,8 @@ def planar_fit_kernel(H, V, tol, alpha, S, w_end, w_win, max_incl, keep, band, m
                 g_end += 1
             g_th = th
             g_cached = g_end
+        if g_end > next_brk[s]:
+            g_end = next_brk[s]  # a segment ends where the programmed feed changes
         c = math.cos(th)
         sn = math.sin(th)
         # Eq. (2) for the nodes s..s+n_rot-1 (rotated on demand: a group can hold many
@@ -640,7 +644,7 @@ def fit_planar(nodes: np.ndarray, plane: tuple[int, int], tol_mm: np.ndarray, ax
             H, V, tol, alpha, S, PLANAR_END_WEIGHT, PLANAR_END_WINDOW, PLANAR_MAX_INCLINATION_PI * np.pi,
             PLANAR_KEEP_INCLINATION_PI * np.pi, PLANAR_GROUP_INCLINATION_PI * np.pi,
             PLANAR_SMOOTHING, out_theta, out_start, out_end, out_b, PLANAR_CHECKS_PER_SEGMENT,
-            FIT_MAX_CHORD_CHECKS, *state)
+            FIT_MAX_CHORD_CHECKS, feed_breaks(feed), *state)
         if status != 2 or attempt == PLANAR_MAX_RETRIES or s_fail == last_fail:
             break
         # the chord after node s_fail cannot follow the curvature it inherits: nodes on it
@@ -666,6 +670,17 @@ def fit_planar(nodes: np.ndarray, plane: tuple[int, int], tol_mm: np.ndarray, ax
     u = _node_params(H, V, st, en, c, s_, breaks)
     seg_line, seg_feed = segment_sources(breaks, u, line, feed)
     return planar, planar_coef(planar, nodes[0], len(axes)), seg_line, seg_feed, float(max_dev)
+
+
+def feed_breaks(feed: np.ndarray) -> np.ndarray:
+    """For every node (n,) the next node after it where the programmed feed changes
+    (``feed[j]`` is the move ending at node j), n - 1 if none: the nodes where a
+    segment must end so that each segment keeps its own move's feed."""
+    f = np.asarray(feed, dtype=float)
+    n = f.size
+    brk = np.nonzero(f[1:-1] != f[2:])[0] + 1 if n > 2 else np.zeros(0, dtype=np.int64)
+    stops = np.concatenate((brk, [n - 1])).astype(np.int64)
+    return stops[np.searchsorted(stops, np.arange(n), side="right").clip(max=stops.size - 1)]
 
 
 @njit(cache=True)

@@ -98,8 +98,8 @@ def format_statistics(stats: dict) -> str:
         f"  nodes in           {stats['nodes_in']}",
         f"  segments out       {stats['segments_out']}  ({stats['segments_per_node']:.4f} per node)",
         f"  paths              {stats['paths']}  ({stats['feed_paths']} feed, {stats['rapid_moves']} rapid)",
-        f"  max node deviation {stats['max_node_dev_mm']:.3e} mm, {stats['max_node_dev_deg']:.3e} deg"
-        f"  (tolerance {stats['tol_mm']:g} mm, {stats['tol_deg']:g} deg)",
+        _tolerance_line(stats),
+        f"  max node deviation {stats['max_node_dev_mm']:.3e} mm, {stats['max_node_dev_deg']:.3e} deg",
         f"  max path deviation {stats.get('max_path_dev_mm', 0.0):.3e} mm"
         f"  ({stats.get('max_path_dev_ratio', 0.0):.3f} of the tolerance; programmed moves and curves)",
         f"  with rotary axes   {stats.get('max_path_dev_rot_ratio', 0.0):.3f} of the tolerances"
@@ -110,6 +110,34 @@ def format_statistics(stats: dict) -> str:
         f"  methods            {', '.join(methods) if methods else '-'}",
     ]
     return "\n".join(lines)
+
+
+def _tolerance_line(stats: dict) -> str:
+    """The tolerance the fit worked to: the default (plain G64), the cap, G64 P, and the
+    half quantum of the printed coordinates added to it."""
+    tol = stats["tol_mm"]
+    cap = stats.get("tol_cap_mm")
+    q = stats.get("quantum") or {}
+    parts = [f"{tol:g} mm, {stats['tol_deg']:g} deg"]
+    if cap is not None:
+        parts.append(f"--tol cap {cap:g} mm")
+    text = f"  tolerance          {', '.join(parts)}"
+    if q.get("quantum_mm") or q.get("quantum_deg"):
+        add = []
+        if q.get("quantum_mm"):
+            add.append(f"{0.5 * q['quantum_mm']:.6g} mm")
+        if q.get("quantum_deg"):
+            add.append(f"{0.5 * q['quantum_deg']:.6g} deg")
+        labels = ", ".join(x for x in (q.get("label_mm"), q.get("label_deg")) if x)
+        text += (f"; + ½ quantum {' / '.join(add)} (coordinates printed to {labels})"
+                 f" = {stats.get('fit_tol_mm', tol):g} mm, {stats.get('fit_tol_deg', 0.0):g} deg")
+    elif q.get("detected_mm") or q.get("detected_deg"):
+        labels = ", ".join(x for x in (q.get("label_mm"), q.get("label_deg")) if x)
+        text += f"; coordinates printed to {labels}, taken as exact"
+    top = stats.get("max_tol_mm", 0.0)
+    if top and abs(top - stats.get("fit_tol_mm", tol)) > 1e-12:
+        text += f"; largest move tolerance {top:g} mm (G64 P)"
+    return text
 
 
 def segments_document(result: FitResult) -> dict:
@@ -140,7 +168,8 @@ def segments_document(result: FitResult) -> dict:
     st = result.stats
     return {"format": "cnc-interp-segments", "version": 1, "source": prog.source, "axes": prog.axes,
             "units": {"linear": "mm", "rotary": "deg", "feed": "mm/s"},
-            "settings": {k: st.get(k) for k in ("tol_mm", "tol_deg", "corner_deg", "tol_mode", "method")},
+            "settings": {k: st.get(k) for k in ("tol_mm", "tol_deg", "corner_deg", "tol_mode", "method",
+                                                "tol_cap_mm", "fit_tol_mm", "fit_tol_deg")},
             "items": items}
 
 

@@ -32,3 +32,29 @@ class FitResult:
     @property
     def paths(self) -> tuple[Path, ...]:
         return tuple(it for it in self.items if isinstance(it, Path))
+
+
+def require_within_tolerance(result: FitResult) -> FitResult:
+    """``result`` unchanged when every fitted path is within its tolerance; otherwise
+    ``FitError`` (exit 1) naming the first source line where it is not: a fit status is
+    an outcome, never just a line of the report."""
+    st = result.stats
+    if st.get("within_tolerance", True):
+        return result
+    run = next((r for r in st.get("runs", []) if r.get("outside_lines")), {})
+    raise fit_outside_error(run, result.program.source, st)
+
+
+def fit_outside_error(run_info: dict, source: str, stats: dict | None = None):
+    """The ``FitError`` (exit 1) for a run whose fit misses its tolerance (``run_info``:
+    the fit's per-run statistics; ``stats``: the program's, for its worst ratios)."""
+    from ..errors import FitError, SourceLocation
+
+    st = stats if stats is not None else run_info
+    lines = run_info.get("outside_lines") or [0, 0]
+    span = f"lines {lines[0]}-{lines[1]}" if lines[1] != lines[0] else f"line {lines[0]}"
+    return FitError(
+        f"the fitted path misses the tolerance on {span} (path deviation "
+        f"{st.get('max_path_dev_ratio', 0.0):.3f}, rotary {st.get('max_path_dev_rot_ratio', 0.0):.3f} "
+        f"of the tolerance) and could not be repaired; please report it",
+        SourceLocation(file=source, line=int(lines[0])))

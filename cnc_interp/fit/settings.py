@@ -8,8 +8,8 @@ from dataclasses import dataclass
 from ..constants import DEFAULT_CORNER_DEG, DEFAULT_TOL_DEG, DEFAULT_TOL_MM
 from ..errors import UsageError
 
-TOL_MODES = ("stricter", "gcode")
-METHODS = ("auto", "planar", "nodes")
+TOL_MODES = ("gcode", "stricter")
+METHODS = ("nodes", "planar", "auto")
 
 
 @dataclass(frozen=True)
@@ -17,24 +17,38 @@ class FitSettings:
     """How closely and how the fit follows the programmed nodes.
 
     Attributes:
-        tol_mm: maximum permissible error for linear axes, mm (``--tol``).
+        tol_mm: maximum permissible error for linear axes, mm, where the program gives
+            none (plain ``G64``): ``--tol``, else the machine's ``tol``, else 0.001.
         tol_deg: maximum permissible error for rotary axes, deg.
-        corner_deg: a turn between consecutive moves sharper than this splits
-            the path there (the planner stops); below it the fit rounds the
-            corner within the tolerance.
-        tol_mode: how a block's ``G64 P`` combines with ``tol_mm``:
-            ``"stricter"`` (default) takes the smaller one, ``"gcode"`` lets
-            ``G64 P`` win. ``G61`` (tolerance 0) always means exact path.
-        method: ``"auto"`` (paper 000's planar fit for runs that move exactly two
-            axes, the N-axis fit otherwise), ``"planar"`` (planar wherever it
-            applies) or ``"nodes"`` (N-axis fit everywhere).
+        tol_cap_mm: the user's cap (``--tol``): no move gets a larger tolerance, whatever
+            its ``G64 P`` says; ``None``: no cap. 0 makes every move exact (``G61``).
+        corner_deg: the smooth fit rounds turns up to this within the tolerance; a
+            sharper corner gets a blend (``blend_corners``) or splits the path there
+            (the planner stops).
+        tol_mode: how a block's ``G64 P`` combines with ``tol_mm``: ``"gcode"``
+            (default) lets ``G64 P`` win, ``"stricter"`` takes the smaller one. The
+            cap applies in both; ``G61`` (tolerance 0) always means exact path.
+        blend_corners: a corner sharper than ``corner_deg`` is rounded by a G2 blend
+            within the tolerance (``fit.blends``) rather than stopping the machine
+            (N-axis fit only; the planar method and ``G61`` stop as in paper 000).
+        quantum_mm / quantum_deg: the grid the program's coordinates are printed on
+            (``fit.quantum``), set by ``fit_program``; half of it is added to every
+            tolerance, since a printed point is only known to ±½ of its last digit.
+        method: ``"nodes"`` (default: the N-axis fit everywhere), ``"planar"``
+            (paper 000's planar fit for runs of lines that move exactly two axes, the
+            N-axis fit otherwise; what the FPGA stage streams as segments) or
+            ``"auto"`` (the same as ``"planar"``, its former name).
     """
 
     tol_mm: float = DEFAULT_TOL_MM
     tol_deg: float = DEFAULT_TOL_DEG
     corner_deg: float = DEFAULT_CORNER_DEG
-    tol_mode: str = "stricter"
-    method: str = "auto"
+    tol_mode: str = "gcode"
+    method: str = "nodes"
+    tol_cap_mm: float | None = None
+    quantum_mm: float = 0.0
+    quantum_deg: float = 0.0
+    blend_corners: bool = True
 
     def __post_init__(self) -> None:
         for name in ("tol_mm", "tol_deg"):
@@ -43,6 +57,13 @@ class FitSettings:
                 raise UsageError(f"fit tolerance {name} must be a positive number, got {v!r}")
         if not (0.0 <= self.corner_deg <= 180.0):
             raise UsageError(f"corner angle must be within [0, 180] deg, got {self.corner_deg!r}")
+        cap = self.tol_cap_mm
+        if cap is not None and not (math.isfinite(cap) and cap >= 0):
+            raise UsageError(f"fit tolerance cap must be a number >= 0, got {cap!r}")
+        for name in ("quantum_mm", "quantum_deg"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise UsageError(f"{name} must be a number >= 0, got {v!r}")
         if self.tol_mode not in TOL_MODES:
             raise UsageError(f"tol_mode must be one of {TOL_MODES}, got {self.tol_mode!r}")
         if self.method not in METHODS:
@@ -52,17 +73,22 @@ class FitSettings:
     def from_options(cls, tol_mm: float | None = None, corner_deg: float | None = None,
                      machine=None, method: str | None = None, **extra) -> "FitSettings":
         """Settings from CLI options; the machine's ``tol_mm`` is used when ``--tol`` is absent,
-        ``"auto"`` when ``--fit-method`` is.
+        ``"nodes"`` when ``--fit-method`` is.
 
+        ``--tol`` is both the tolerance of moves without ``G64 P`` and the user's cap on
+        every move's (``tol_cap_mm``); a machine's ``tol`` is only the former.
         ``--tol 0`` asks for the exact path: it is kept as the smallest tolerance the
         fitter accepts for curves (``FIT_EXACT_CURVE_TOL_MM``); straight moves stop
         at every corner as under G61.
         """
         from ..constants import FIT_EXACT_CURVE_TOL_MM
 
+        kw = dict(extra)
+        user_tol = tol_mm
         if tol_mm is None and machine is not None and getattr(machine, "tol_mm", None):
             tol_mm = float(machine.tol_mm)
-        kw = dict(extra)
+        if user_tol is not None:
+            kw["tol_cap_mm"] = max(float(user_tol), 0.0)
         if tol_mm is not None:
             kw["tol_mm"] = max(float(tol_mm), FIT_EXACT_CURVE_TOL_MM) if tol_mm > 0 else FIT_EXACT_CURVE_TOL_MM
             if tol_mm == 0:
@@ -73,8 +99,21 @@ class FitSettings:
             kw["method"] = method
         return cls(**kw)
 
+    @property
+    def fit_tol_mm(self) -> float:
+        """The default tolerance the fit works to: ``tol_mm`` (capped) + ½ quantum."""
+        t = self.tol_mm if self.tol_cap_mm is None else min(self.tol_mm, self.tol_cap_mm)
+        return t + 0.5 * self.quantum_mm if t > 0 else self.tol_mm
+
+    @property
+    def fit_tol_deg(self) -> float:
+        """The rotary tolerance the fit works to: ``tol_deg`` + ½ quantum."""
+        return self.tol_deg + 0.5 * self.quantum_deg
+
     def node_tolerance(self, tol_block_mm):
-        """Per-move tolerance (mm) from the blocks' ``tol_mm`` (nan / 0 / G64 P) array."""
+        """Per-move tolerance (mm) from the blocks' ``tol_mm`` (nan / 0 / G64 P) array:
+        ``G64 P`` where given (``tol_mode``), else ``tol_mm``; at most the cap; 0 (exact
+        path) under ``G61`` or a cap of 0; plus ½ quantum where it is not 0."""
         import numpy as np
 
         t = np.asarray(tol_block_mm, dtype=float)
@@ -84,5 +123,9 @@ class FitSettings:
             out[p] = np.minimum(t[p], self.tol_mm)
         else:
             out[p] = t[p]
+        if self.tol_cap_mm is not None:
+            np.minimum(out, self.tol_cap_mm, out=out)
         out[np.isfinite(t) & (t == 0)] = 0.0
+        if self.quantum_mm > 0:
+            out[out > 0] += 0.5 * self.quantum_mm
         return out

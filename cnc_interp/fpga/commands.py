@@ -37,12 +37,12 @@ def _say(quiet: bool, msg: str) -> None:
 def emulate_frames(frames, source: str = "<frames>"):
     """Feed decoded frames to a device core in order; returns the core (raises UsageError on a reject)."""
     from .device import DONE, DeviceCore
-    from .frames import ErrorFlag, FrameType
+    from .frames import CONTROL_TYPES, ErrorFlag
 
     core = DeviceCore(buffer_bytes=1 << 62)
     for i, f in enumerate(frames):
-        if f.type == FrameType.POLL:  # a host request, never part of a program's stream
-            raise UsageError(f"frame {i + 1} (seq {f.seq}) is a POLL frame; a frame file holds "
+        if f.type in CONTROL_TYPES:  # a host request, never part of a program's stream
+            raise UsageError(f"frame {i + 1} (seq {f.seq}) is a {f.type.name} frame; a frame file holds "
                              "a program's frames only", SourceLocation(file=source))
         if not core.handle(f):
             flags = ErrorFlag(core.status().errors)
@@ -87,12 +87,18 @@ def emulate_file(frames_path: str, out: str) -> None:
 
 
 # -- stream ----------------------------------------------------------------------------------
-def plan_for_stream(opts: StreamOptions):
-    """Parse, fit, plan and verify like ``plan`` does: (FitResult, Trajectory).
+def plan_for_stream(opts: StreamOptions, formats=None, with_machine: bool = False):
+    """Parse, fit, plan and verify like ``plan`` does: (FitResult, Trajectory[, Machine]).
 
     The same steps as ``pipeline.plan_part``, kept here because the stream needs
     the fitted paths (their planar form), which ``PlanOutcome`` does not carry.
+    The plan is made against the machine's limits less the device margin
+    (``fpga/limits.py``) so that the device's rounded setpoints hold the real limits;
+    ``with_machine`` also returns the real machine (limits unscaled).
     """
+    from .fixed import FpgaFormats
+    from .limits import device_margin, with_margin
+
     from ..errors import PlanError
     from ..fit.settings import FitSettings
     from ..gcode import read_program
@@ -108,6 +114,8 @@ def plan_for_stream(opts: StreamOptions):
                                          machine=machine)
     machine = machine.with_dt(settings.dt_s)
     name, data = read_part(opts.part)
+    real = machine
+    machine = with_margin(machine, device_margin(machine, formats or FpgaFormats(), name))
     program = read_program(data, source=name, axes=machine.axes, start=machine.start,
                            tool_table=machine.tool_table)
     fitted = fit_loaded(program, FitSettings.from_options(tol_mm=opts.tol_mm, machine=machine,
@@ -120,19 +128,33 @@ def plan_for_stream(opts: StreamOptions):
         axis, kind, ratio, idx = report.worst()
         raise PlanError(f"bug: plan violates the {axis} {kind} limit (ratio {ratio:.12g} at "
                         f"sample {idx}); please report it", SourceLocation(file=name))
-    return fitted, traj
+    return (fitted, traj, real) if with_machine else (fitted, traj)
 
 
 def build_stream(opts: StreamOptions):
     """Plan and quantize: (FpgaProgram, frames, frame infos)."""
+    prog, frames, infos, _traj, _machine = build_stream_full(opts)
+    return prog, frames, infos
+
+
+def build_stream_full(opts: StreamOptions):
+    """Plan and quantize: (FpgaProgram, frames, infos, planned Trajectory, real Machine)."""
     from .frames import program_frames
     from .program import build_program
 
-    fit, traj = plan_for_stream(opts)
+    from ..errors import PlanError
+
+    fit, traj, machine = plan_for_stream(opts, with_machine=True)
     source = "<stdin>" if opts.part == "-" else opts.part
-    prog = build_program(traj, fit.paths, source=source)
+    idx = [machine.axes.index(a) for a in traj.axes]
+    prog = build_program(traj, fit.paths, source=source, limits=machine.limits()[:, idx])
+    if not prog.stats["verify_ok"]:
+        # a device must never be sent a stream that breaks the machine's limits
+        raise PlanError(f"refusing to stream: the device's setpoints would exceed the "
+                        f"{prog.stats['verify_worst']} limit (ratio {prog.stats['verify_ratio']:.12g})",
+                        SourceLocation(file=source))
     frames, infos = program_frames(prog)
-    return prog, frames, infos
+    return prog, frames, infos, traj, machine
 
 
 def summary_line(prog, frames) -> str:
@@ -140,7 +162,9 @@ def summary_line(prog, frames) -> str:
     return (f"fpga: {len(frames)} frames, {sum(map(len, frames))} bytes, {st['segments']} segments "
             f"({st['profile_pieces']} profile pieces), {st['setpoint_samples']} of {prog.n_samples} "
             f"samples as setpoint blocks; worst deviation from the float plan "
-            f"{st['max_dev_mm'] * 1e3:.4f} µm, segment-end drift {st['max_segment_end_drift_mm'] * 1e3:.2e} µm")
+            f"{st['max_dev_mm'] * 1e3:.4f} µm, segment-end drift {st['max_segment_end_drift_mm'] * 1e3:.2e} µm; "
+            f"{st.get('repaired_segments', 0)} segments re-sent as setpoints for the limits, "
+            f"device verify ratio {st.get('verify_ratio', float('nan')):.9f}")
 
 
 def run_stream(opts: StreamOptions, backend=None) -> None:

@@ -5,6 +5,16 @@ simulator (``device_sim``) and ``emulate`` both drive it. Frames are applied
 exactly once: a frame is accepted only with seq = last accepted + 1 and a good
 CRC; an older seq is a duplicate (ignored, acknowledged again), a newer one means
 a frame was lost (rejected, flagged, the host resends).
+
+Real time (``clocked=True``; ``advance(n)`` lets n sample periods pass): START arms the
+device, whose sample clock starts once ``prefill`` samples are buffered (or STOP arrived,
+or the buffer is full); a sample the clock needs that has not arrived is an UNDERRUN
+(state and error flag; the output holds its last value). HOLD (unsequenced) lets the
+clock run on to the next sample where the output is at rest — that sample and the three
+before it equal, so velocity, acceleration and jerk are zero there — and holds it
+(state HELD) until RESUME; the limits hold through a feed hold. ABORT stops at once,
+drops every buffered frame (state ABORTED) and waits for a new program (CONFIG seq 1).
+Without ``clocked`` (``emulate``) samples count as output when they are computed.
 """
 
 from __future__ import annotations
@@ -20,6 +30,8 @@ from .frames import (
     FrameParser,
     FrameType,
     HEADER_SIZE,
+    CONTROL_TYPES,
+    START,
     STOP,
     TRAILER_SIZE,
     Status,
@@ -31,7 +43,8 @@ from .frames import (
 )
 from .model import DatapathState
 
-IDLE, CONFIGURED, RUNNING, DONE = 0, 1, 2, 3
+IDLE, CONFIGURED, RUNNING, DONE, ARMED, HELD, UNDERRUN, ABORTED = range(8)
+STATE_NAMES = ("idle", "configured", "running", "done", "armed", "held", "underrun", "aborted")
 
 
 class DeviceCore:
@@ -42,9 +55,12 @@ class DeviceCore:
     device executing samples while the host waits), ``None`` = everything.
     """
 
-    def __init__(self, buffer_bytes: int = FPGA_DEVICE_BUFFER, drain_per_poll: int | None = None):
+    def __init__(self, buffer_bytes: int = FPGA_DEVICE_BUFFER, drain_per_poll: int | None = None,
+                 clocked: bool = False, samples_per_poll: int = 0):
         self.buffer_bytes = buffer_bytes
         self.drain_per_poll = drain_per_poll
+        self.clocked = clocked
+        self.samples_per_poll = samples_per_poll  # sample periods that pass per status poll
         self.reset()
 
     def reset(self) -> None:
@@ -63,6 +79,14 @@ class DeviceCore:
         self._pending = None  # (segment, n_pieces, pieces so far)
         self.responses: deque[bytes] = deque()  # STATUS frames waiting for IN transfers
         self._crc_seen = 0
+        self.prefill = 0
+        self.stopped = False  # STOP accepted
+        self.samples_out = 0  # samples the sample clock has output
+        self.hold_pending = False
+        self.output: list[tuple[int, ...]] = []  # clocked: the position at every sample period
+        self._last_out: tuple[int, ...] | None = None
+        self._start: tuple[int, ...] = ()
+        self.run_period = -1
 
     # -- flow control ------------------------------------------------------------------
     @property
@@ -81,10 +105,70 @@ class DeviceCore:
             if self._fifo[0] == 0:
                 self._fifo.popleft()
 
+    # -- real time -------------------------------------------------------------------
+    def _received(self) -> int:
+        return self.datapath.next_sample if self.datapath is not None else 0
+
+    def _sample(self, k: int) -> tuple[int, ...]:
+        """Output sample k (k < received); before sample 0 the start position."""
+        if k < 0:
+            return self._start
+        out = self.datapath
+        for blk in out.q_blocks:  # blocks are few per test; a device reads its output FIFO
+            if k < blk.shape[0]:
+                return tuple(int(v) for v in blk[k])
+            k -= blk.shape[0]
+        raise IndexError(k)
+
+    def _at_rest(self, k: int) -> bool:
+        """Sample k equals the three before it (zero velocity, acceleration and jerk)."""
+        q = self._sample(k)
+        return all(self._sample(k - i) == q for i in (1, 2, 3))
+
+    def advance(self, periods: int) -> None:
+        """Let ``periods`` sample periods pass (clocked mode): the sample clock outputs samples."""
+        for _ in range(int(periods)):
+            if self.state == ARMED:
+                full = self.free_bytes < 2 * (HEADER_SIZE + TRAILER_SIZE + 4096)
+                if self._received() >= self.prefill or self.stopped or full:
+                    self.state = RUNNING
+                    self.run_period = len(self.output)  # the period of the first sample out
+            if self.state == RUNNING:
+                if self.samples_out < self._received():
+                    k = self.samples_out
+                    self._last_out = self._sample(k)
+                    self.samples_out += 1
+                    if self.hold_pending and self._at_rest(k):
+                        self.state, self.hold_pending = HELD, False
+                    if self.stopped and self.samples_out == self.n_samples:
+                        self.state = DONE
+                else:
+                    self.state = UNDERRUN
+                    self.errors |= ErrorFlag.UNDERRUN
+            if self._last_out is not None:
+                self.output.append(self._last_out)
+
+    def _control(self, f: Frame) -> None:
+        if f.type == FrameType.HOLD and self.state in (RUNNING, ARMED):
+            self.hold_pending = True
+        elif f.type == FrameType.RESUME:
+            self.hold_pending = False
+            if self.state == HELD:
+                self.state = RUNNING if self.samples_out < self.n_samples or not self.stopped else DONE
+        elif f.type == FrameType.ABORT and self.state not in (IDLE,):
+            self.state = ABORTED
+            self.hold_pending = False
+            self._fifo.clear()
+            self._used = 0
+            self._pending = None
+            self.parser.buf.clear()
+
     def status(self, poll_id: int = 0) -> Status:
         """Current status; error flags are cleared once reported."""
+        if self.clocked and self.samples_per_poll:
+            self.advance(self.samples_per_poll)
         self.drain()
-        done = self.datapath.next_sample if self.datapath is not None else 0
+        done = self.samples_out if self.clocked else self._received()
         st = Status(self.free_bytes, self.last_seq, self.errors, self.state, done, self.bytes_accepted,
                     poll_id, self.program_id)
         self.errors = 0
@@ -108,13 +192,18 @@ class DeviceCore:
     def handle(self, f: Frame) -> bool:
         """Apply one decoded frame if it is the next in sequence; True if accepted."""
         size = HEADER_SIZE + len(f.payload) + TRAILER_SIZE
-        if f.type == FrameType.POLL:
-            # unsequenced: answer with exactly one STATUS on the IN endpoint
+        if f.type in CONTROL_TYPES:
+            # unsequenced: act at once, answer with exactly one STATUS on the IN endpoint
+            if f.type != FrameType.POLL:
+                self._control(f)
             self.responses.append(status_frame(self.status(f.seq)))
             return False
-        restart = f.type == FrameType.CONFIG and f.seq == 1 and self.state in (IDLE, DONE)
-        if restart and self.state == DONE:
+        restart = f.type == FrameType.CONFIG and f.seq == 1 and self.state in (IDLE, DONE, ABORTED)
+        if restart and self.state in (DONE, ABORTED):
             self.reset()
+        if self.state == ABORTED:
+            self.errors |= ErrorFlag.BAD_FRAME  # nothing but a new program after an abort
+            return False
         if f.seq <= self.last_seq:
             self.errors |= ErrorFlag.DUPLICATE
             return False
@@ -143,6 +232,8 @@ class DeviceCore:
                 raise FrameError("CONFIG must be the first frame")
             cfg = decode_config(f.payload)
             self.datapath = DatapathState(cfg.axes, cfg.formats, cfg.start, cfg.source)
+            self._start = tuple(int(v) for v in cfg.start)
+            self._last_out = self._start if self.clocked else None
             self.n_samples = cfg.n_samples
             self.dt_s = cfg.dt_s
             self.program_id = cfg.program_id
@@ -151,7 +242,10 @@ class DeviceCore:
         if self.datapath is None:
             raise FrameError("frame before CONFIG")
         if t == FrameType.START:
-            self.state = RUNNING
+            if self.state != CONFIGURED:
+                raise FrameError("START twice")
+            _total, self.prefill = START.unpack(f.payload)
+            self.state = ARMED if self.clocked else RUNNING
         elif t == FrameType.SEGMENT:
             if self._pending is not None:
                 raise FrameError("SEGMENT before the previous segment's profile is complete")
@@ -193,6 +287,8 @@ class DeviceCore:
             total, _n_items = STOP.unpack(f.payload)
             if self._pending is not None or total != self.datapath.next_sample:
                 raise FrameError("STOP before every sample arrived")
-            self.state = DONE
+            self.stopped = True
+            if not self.clocked or self.samples_out == self.n_samples:
+                self.state = DONE
         else:
             raise FrameError(f"unexpected frame type {t.name}")

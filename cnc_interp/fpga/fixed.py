@@ -24,17 +24,23 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..constants import (
-    FPGA_ACC_WORD,
     FPGA_COEF_WORD,
+    FPGA_HORNER_WORD,
+    FPGA_INT_WORD,
+    FPGA_MULT_WORD,
     FPGA_PARAM_FORMAT,
     FPGA_POS_FORMAT,
     FPGA_TRIG_FORMAT,
 )
 from ..errors import PlanError, SourceLocation
 
-#: block exponents are sent as int8; this range keeps shifts in a small barrel shifter
+#: block exponents are sent as int8; the datapath's barrel shifter rounds right by up to
+#: SHIFT_RIGHT_MAX bits or shifts left by up to SHIFT_LEFT_MAX (exponent minus the output
+#: fraction), so every exponent is clamped to keep the shift in that range
 EXP_MIN = -16
 EXP_MAX = 120
+SHIFT_RIGHT_MAX = 63
+SHIFT_LEFT_MAX = 31
 
 
 class FixedPointOverflow(PlanError):
@@ -126,32 +132,54 @@ def _loc(where: Where | None) -> SourceLocation:
 class FpgaFormats:
     """Every fixed-point format of the datapath (defaults from ``constants``).
 
-    pos: positions, origins, x_end and per-sample increments (mm or deg).
+    pos: positions, origins and per-sample increments (mm or deg).
     trig: cos θ and sin θ of each segment's rotation.
     param: the normalised variables τ (time in a profile piece) and ξ = x*/x_end.
-    coef_word: bits of each polynomial coefficient mantissa (block exponent per polynomial).
-    acc_word: bits of the Horner accumulators and of the position integrators.
+    coef_word: bits of each polynomial mantissa (block exponent per polynomial; x_end too).
+    horner_word: bits of the Horner accumulators (one multiplier operand each step).
+    int_word: bits of the two rotation integrators (full-width products, never rounded).
+    mult_word: bits of every multiplier operand; increments Δx*, Δz* must fit it.
     """
 
     pos: FixedFormat = FixedFormat(*FPGA_POS_FORMAT)
     trig: FixedFormat = FixedFormat(*FPGA_TRIG_FORMAT)
     param: FixedFormat = FixedFormat(*FPGA_PARAM_FORMAT)
     coef_word: int = FPGA_COEF_WORD
-    acc_word: int = FPGA_ACC_WORD
+    horner_word: int = FPGA_HORNER_WORD
+    int_word: int = FPGA_INT_WORD
+    mult_word: int = FPGA_MULT_WORD
+
+    def __post_init__(self) -> None:
+        if not (2 <= self.coef_word <= 64 and 2 <= self.horner_word <= 128
+                and 2 <= self.int_word <= 200 and 2 <= self.mult_word <= 128):
+            raise ValueError(f"bad fixed-point widths {self.as_tuple()}")
+        if max(self.trig.word, self.param.word, self.horner_word) > self.mult_word:
+            raise ValueError("trig, param and Horner words must fit the multiplier operand")
 
     @property
-    def acc(self) -> FixedFormat:
-        """Accumulator range check (fraction irrelevant for overflow)."""
-        return FixedFormat(self.acc_word, 0)
+    def horner(self) -> FixedFormat:
+        """Horner accumulator range check (fraction irrelevant for overflow)."""
+        return FixedFormat(self.horner_word, 0)
+
+    @property
+    def integ(self) -> FixedFormat:
+        """Rotation integrator range check."""
+        return FixedFormat(self.int_word, 0)
+
+    @property
+    def operand(self) -> FixedFormat:
+        """Multiplier operand range check (increments)."""
+        return FixedFormat(self.mult_word, 0)
 
     def as_tuple(self) -> tuple[int, ...]:
         return (self.pos.word, self.pos.frac, self.trig.word, self.trig.frac,
-                self.param.word, self.param.frac, self.coef_word, self.acc_word)
+                self.param.word, self.param.frac, self.coef_word, self.horner_word,
+                self.int_word, self.mult_word)
 
     @classmethod
     def from_tuple(cls, t) -> "FpgaFormats":
         return cls(FixedFormat(t[0], t[1]), FixedFormat(t[2], t[3]), FixedFormat(t[4], t[5]),
-                   int(t[6]), int(t[7]))
+                   int(t[6]), int(t[7]), int(t[8]), int(t[9]))
 
 
 # -- integer primitives -------------------------------------------------------------
@@ -184,23 +212,35 @@ def round_shift(x, shift: int):
     return x
 
 
-def choose_exponent(coefs: np.ndarray, word: int) -> int:
-    """Block exponent (fraction bits) so that max |coef| * 2**e fills ``word`` signed bits."""
+def choose_exponent(coefs: np.ndarray, word: int, lo: int = EXP_MIN, hi: int = EXP_MAX) -> int:
+    """Block exponent (fraction bits) so that max |coef| * 2**e fills ``word`` signed bits,
+    clamped to [lo, hi] (the shifter's range)."""
     m = float(np.max(np.abs(coefs))) if np.size(coefs) else 0.0
     if m == 0.0 or not math.isfinite(m):
-        return 0
+        return max(lo, min(hi, 0))
     _, e2 = math.frexp(m)  # m = f * 2**e2, 0.5 <= f < 1
     e = word - 1 - e2
     # rounding may push the largest mantissa to 2**(word-1): use one bit less then
     if math.floor(math.ldexp(m, e) + 0.5) > (1 << (word - 1)) - 1:
         e -= 1
-    return max(EXP_MIN, min(EXP_MAX, e))
+    return max(lo, min(hi, e))
 
 
-def quantize_block(coefs, word: int, what: str, where: Where | None = None) -> tuple[int, list[int]]:
-    """(exponent, mantissas) of a coefficient vector with one shared exponent."""
+def exponent_range(out_frac: int) -> tuple[int, int]:
+    """Exponents whose final shift (exponent - out_frac) the datapath's shifter can do."""
+    return (max(EXP_MIN, out_frac - SHIFT_LEFT_MAX), min(EXP_MAX, out_frac + SHIFT_RIGHT_MAX))
+
+
+def quantize_block(coefs, word: int, what: str, where: Where | None = None,
+                   out_frac: int | None = None) -> tuple[int, list[int]]:
+    """(exponent, mantissas) of a coefficient vector with one shared exponent.
+
+    ``out_frac``: fraction bits of the value the polynomial is rounded to; the exponent is
+    kept within the shifter's reach of it (``exponent_range``).
+    """
     c = np.asarray(coefs, dtype=float)
-    e = choose_exponent(c, word)
+    lo, hi = exponent_range(out_frac) if out_frac is not None else (EXP_MIN, EXP_MAX)
+    e = choose_exponent(c, word, lo, hi)
     mant = FixedFormat(word, 0).quantize(np.ldexp(c, e), what, where)
     return e, [int(v) for v in np.asarray(mant, dtype=object).reshape(-1)]
 

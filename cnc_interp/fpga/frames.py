@@ -30,7 +30,7 @@ from .fixed import FpgaFormats
 from .model import FixedSegment, FpgaProgram, ProfilePiece, SetpointBlock
 
 MAGIC = b"CNCF"
-VERSION = 1
+VERSION = 2  # 2: separate Horner/integrator widths, x_end as mantissa + exponent
 HEADER = struct.Struct("<4sBBHII")
 HEADER_SIZE = HEADER.size + 4
 TRAILER_SIZE = 4
@@ -46,6 +46,13 @@ class FrameType(enum.IntEnum):
     STOP = 6
     STATUS = 7
     POLL = 8  # host asks for one STATUS; unsequenced (seq field = poll id)
+    HOLD = 9  # feed hold: stop at the next sample where the plan is at rest; unsequenced
+    RESUME = 10  # leave a hold (or cancel a pending one); unsequenced
+    ABORT = 11  # stop at once and drop everything; unsequenced
+
+
+#: control frames: acted on at once, outside the sequence, each answered by one STATUS
+CONTROL_TYPES = (FrameType.POLL, FrameType.HOLD, FrameType.RESUME, FrameType.ABORT)
 
 
 class ErrorFlag(enum.IntFlag):
@@ -57,6 +64,7 @@ class ErrorFlag(enum.IntFlag):
     OVERFLOW = 8  # more bytes arrived than the buffer had room for
     OVERRUN = 16  # a fixed-point overflow inside the datapath
     DUPLICATE = 32  # a frame with seq <= last accepted arrived (ignored)
+    UNDERRUN = 64  # the sample clock needed a sample that had not arrived (output held)
 
 
 # -- payload layouts ------------------------------------------------------------------------
@@ -65,15 +73,15 @@ CONFIG_DT_MIN_S, CONFIG_DT_MAX_S = 1e-6, 1.0
 #: most samples a program may declare: 2^28 is 74 h at 1 kHz, and keeps an emulation of
 #: the whole program (a few tens of bytes per sample and axis) within a workstation
 MAX_PROGRAM_SAMPLES = 1 << 28
-CONFIG = struct.Struct("<B16sdQQI8B")  # n_axes, axes, dt_s, dt_ns, n_samples, n_items, formats
-SEGMENT = struct.Struct("<IIQBBqqqqqb6qI")  # index, line, start, plane h, v, cos, sin, oh, ov,
-#                                             x_end, p_exp, p_mant[6], n_pieces
+CONFIG = struct.Struct("<B16sdQQI10B")  # n_axes, axes, dt_s, dt_ns, n_samples, n_items, formats
+SEGMENT = struct.Struct("<IIQBBqqqqbqb6qI")  # index, line, start, plane h, v, cos, sin, oh, ov,
+#                                              x_exp, x_mant, p_exp, p_mant[6], n_pieces
 PROFILE_HEAD = struct.Struct("<IIH")  # segment index, first piece, count in this frame
 PIECE = struct.Struct("<IQb6q")  # n_samples, dtau, exp, mant[6]
 SETPOINTS_HEAD = struct.Struct("<QIBI")  # start sample, n samples, n_axes, source line
-START = struct.Struct("<Q")  # total samples
+START = struct.Struct("<QQ")  # total samples, prefill samples (run once this many are buffered)
 STOP = struct.Struct("<QI")  # total samples, number of items
-STATUS = struct.Struct("<IIIIQQII")  # free bytes, last seq, errors, state, samples done,
+STATUS = struct.Struct("<IIIIQQII")  # free bytes, last seq, errors, state, samples done (output),
 #                                      bytes accepted, poll id answered, program id
 POLL = struct.Struct("<I")  # poll id
 
@@ -99,7 +107,7 @@ class Status:
     free_bytes: int
     last_seq: int
     errors: int
-    state: int  # 0 idle, 1 configured, 2 running, 3 done
+    state: int  # 0 idle, 1 configured, 2 running, 3 done, 4 armed, 5 held, 6 underrun, 7 aborted
     samples_done: int
     bytes_accepted: int
     poll_id: int = 0
@@ -201,7 +209,15 @@ class FrameInfo:
     line: int
 
 
-def program_frames(prog: FpgaProgram) -> tuple[list[bytes], list[FrameInfo]]:
+def default_prefill(prog: FpgaProgram) -> int:
+    """Samples the device buffers before its sample clock starts: ``FPGA_PREFILL_S`` of motion
+    (the device also starts when STOP arrived or its buffer is full)."""
+    from ..constants import FPGA_PREFILL_S
+
+    return int(min(prog.n_samples, max(1, round(FPGA_PREFILL_S / prog.dt_s))))
+
+
+def program_frames(prog: FpgaProgram, prefill_samples: int | None = None) -> tuple[list[bytes], list[FrameInfo]]:
     """Encode a program: CONFIG, START, items (segments + profiles, setpoint blocks), STOP."""
     frames: list[bytes] = []
     infos: list[FrameInfo] = []
@@ -214,14 +230,15 @@ def program_frames(prog: FpgaProgram) -> tuple[list[bytes], list[FrameInfo]]:
     n_axes = len(prog.axes)
     frames.append(b"")  # CONFIG goes first; it carries the program id of all the others
     infos.append(FrameInfo(1, "config", -1, 0))
-    add(FrameType.START, START.pack(prog.n_samples), "start")
+    prefill = default_prefill(prog) if prefill_samples is None else int(prefill_samples)
+    add(FrameType.START, START.pack(prog.n_samples, prefill), "start")
     per_block = (MAX_PAYLOAD - SETPOINTS_HEAD.size) // (8 * n_axes)
     per_profile = (MAX_PAYLOAD - PROFILE_HEAD.size) // PIECE.size
     n_items = 0
     for item in prog.items:
         if isinstance(item, FixedSegment):
             seg = SEGMENT.pack(item.index, item.line, item.start_sample, item.plane[0], item.plane[1],
-                               item.cos, item.sin, item.origin[0], item.origin[1], item.x_end,
+                               item.cos, item.sin, item.origin[0], item.origin[1], item.x_exp, item.x_mant,
                                item.p_exp, *item.p_mant, len(item.pieces))
             add(FrameType.SEGMENT, seg, "segment", item.index, item.line)
             for first in range(0, len(item.pieces), per_profile):
@@ -290,9 +307,9 @@ def decode_segment(payload: bytes) -> tuple[FixedSegment, int]:
     except struct.error as exc:
         raise FrameError(f"bad SEGMENT payload: {exc}") from None
     seg = FixedSegment(index=v[0], line=v[1], start_sample=v[2], plane=(v[3], v[4]), cos=v[5],
-                       sin=v[6], origin=(v[7], v[8]), x_end=v[9], p_exp=v[10],
-                       p_mant=tuple(v[11:17]), pieces=())
-    return seg, v[17]
+                       sin=v[6], origin=(v[7], v[8]), x_exp=v[9], x_mant=v[10], p_exp=v[11],
+                       p_mant=tuple(v[12:18]), pieces=())
+    return seg, v[18]
 
 
 def decode_profile(payload: bytes) -> tuple[int, int, list[ProfilePiece]]:
@@ -333,6 +350,13 @@ def status_frame(st: Status) -> bytes:
 
 def poll_frame(poll_id: int) -> bytes:
     return encode_frame(FrameType.POLL, poll_id, POLL.pack(poll_id & 0xFFFFFFFF))
+
+
+def control_frame(kind: FrameType, command_id: int) -> bytes:
+    """HOLD, RESUME or ABORT (payload: the command id, echoed as the STATUS's poll id)."""
+    if kind not in CONTROL_TYPES:
+        raise ValueError(f"{kind!r} is not a control frame")
+    return encode_frame(kind, command_id, POLL.pack(command_id & 0xFFFFFFFF))
 
 
 def read_frame_file(path: str) -> list[Frame]:

@@ -6,15 +6,22 @@ Per sample n of a planar segment (all integers, formats in ``FpgaFormats``):
    stepping by Δτ), ξ_n = Horner(profile mantissas, τ_n): the normalised abscissa
    x*/x_end in [0, 1] (paper 000's parametric technique: the profile drives the
    curve parameter);
-2. polynomial evaluation: x*_n = ξ_n·x_end and z*_n = Horner(P mantissas, ξ_n) with
+2. polynomial evaluation: x*_n = ξ_n·x_end (x_end as a mantissa with a block
+   exponent, so it is one multiplier operand) and z*_n = Horner(P mantissas, ξ_n) with
    P(ξ) = p(ξ·x_end) (normalised so the word is used whatever the segment length);
-   Δx*_n = x*_n − x*_{n−1}, Δz*_n = z*_n − z*_{n−1} (both start at 0 on the segment);
+   Δx*_n = x*_n − x*_{n−1}, Δz*_n = z*_n − z*_{n−1} (both start at 0 on the segment;
+   they must fit the multiplier operand, ``mult_word`` bits);
 3. rotation by θ: (Δx*·cos θ − Δz*·sin θ, Δx*·sin θ + Δz*·cos θ), products kept at
    full width (pos.frac + trig.frac fraction bits);
-4. integrators: I += rotated increment (``acc_word`` bits, no rounding inside the
+4. integrators: I += rotated increment (``int_word`` bits, no rounding inside the
    loop), output q = origin + round(I) in the position format. At every segment
    start the integrators are resynchronised: I = 0, q = origin of the segment
    (sent by the host), so rounding never carries from one segment to the next.
+
+Every multiplication of the datapath has two operands of at most ``mult_word``
+(35) bits, so one shared 35×35 multiplier (four ECP5 MULT18X18D) does all 15 of a
+sample; the Horner accumulators (``horner_word``) and the integrators (``int_word``)
+are separate registers, each range-checked (``FixedPointOverflow``).
 
 Why p rather than p': the paper's block evaluates p' and integrates
 Δz* = p'·Δx*. That is forward Euler on the curve and drifts by about ½·Δx*²·p''
@@ -60,7 +67,8 @@ class FixedSegment:
     line: source line of the G-code block the segment ends on.
     plane: machine axis indices (horizontal, vertical) of the rotated frame.
     cos, sin: rotation (trig format); origin: (2,) ints (pos format);
-    x_end: rotated abscissa of the segment end (pos format);
+    x_exp, x_mant: the rotated abscissa of the segment end, x_end = x_mant·2^-x_exp mm
+    (a ``coef_word`` mantissa, so x* = ξ·x_end is one multiplication);
     p_exp, p_mant: block exponent and 6 mantissas of P(ξ) = p(ξ·x_end), mm.
     start_sample: global index of the segment's first sample; pieces: its profile.
     """
@@ -71,7 +79,8 @@ class FixedSegment:
     cos: int
     sin: int
     origin: tuple[int, int]
-    x_end: int
+    x_exp: int
+    x_mant: int
     p_exp: int
     p_mant: tuple[int, ...]
     start_sample: int
@@ -145,8 +154,10 @@ def profile_xi(pieces, fmts: FpgaFormats, where: Where | None = None) -> np.ndar
     tau = obj(j) * dtau
     mant = np.array([p.mant for p in pieces], dtype=object)[rep]
     exp = np.array([p.exp for p in pieces], dtype=np.int64)[rep]
-    return horner_rows(mant, exp, tau, fmts.param.frac, fmts.param.frac, fmts.acc,
-                       "profile accumulator", where)
+    xi = horner_rows(mant, exp, tau, fmts.param.frac, fmts.param.frac, fmts.horner,
+                     "profile accumulator", where)
+    fmts.param.check(xi, "profile output ξ", where)
+    return xi
 
 
 @dataclass(frozen=True)
@@ -160,23 +171,30 @@ class SegmentRun:
     z: np.ndarray  # (n,) z* = P(ξ) (pos format)
 
 
+def x_star(xi, seg: FixedSegment, fmts: FpgaFormats):
+    """x* = ξ·x_end in the position format (one product, rounded once)."""
+    return round_shift(xi * seg.x_mant, fmts.param.frac + seg.x_exp - fmts.pos.frac)
+
+
 def run_segment(seg: FixedSegment, fmts: FpgaFormats, file: str = "<input>") -> SegmentRun:
     """Evaluate one segment exactly as the hardware does (see module docstring)."""
     where = Where(seg.index, seg.line, file)
     fp, ft, fx = fmts.pos.frac, fmts.trig.frac, fmts.param.frac
     xi = profile_xi(seg.pieces, fmts, where)
-    x = round_shift(xi * seg.x_end, fx)
+    x = x_star(xi, seg, fmts)
     pm = np.array([seg.p_mant], dtype=object).repeat(xi.shape[0], axis=0)
     pe = np.full(xi.shape[0], seg.p_exp, dtype=np.int64)
-    z = horner_rows(pm, pe, xi, fx, fp, fmts.acc, "path polynomial accumulator", where)
+    z = horner_rows(pm, pe, xi, fx, fp, fmts.horner, "path polynomial accumulator", where)
     zero = np.zeros(1, dtype=object)
     dx = np.diff(np.concatenate((zero, x)))
     dz = np.diff(np.concatenate((zero, z)))
+    fmts.operand.check(dx, "abscissa increment Δx*", where)
+    fmts.operand.check(dz, "ordinate increment Δz*", where)
     c, s = seg.cos, seg.sin
     ih = np.cumsum(c * dx - s * dz)
     iv = np.cumsum(s * dx + c * dz)
-    fmts.acc.check(ih, "X integrator", where)
-    fmts.acc.check(iv, "Z integrator", where)
+    fmts.integ.check(ih, "horizontal integrator", where)
+    fmts.integ.check(iv, "vertical integrator", where)
     out = np.empty((xi.shape[0], 2), dtype=object)
     out[:, 0] = seg.origin[0] + round_shift(ih, ft)
     out[:, 1] = seg.origin[1] + round_shift(iv, ft)
@@ -185,8 +203,8 @@ def run_segment(seg: FixedSegment, fmts: FpgaFormats, file: str = "<input>") -> 
     one = 1 << fx
     from .fixed import horner
 
-    z1 = horner(list(seg.p_mant), seg.p_exp, one, fx, fp, fmts.acc)
-    x1 = seg.x_end
+    z1 = horner(list(seg.p_mant), seg.p_exp, one, fx, fp, fmts.horner)
+    x1 = x_star(one, seg, fmts)
     end = (seg.origin[0] + round_shift(c * x1 - s * z1, ft),
            seg.origin[1] + round_shift(s * x1 + c * z1, ft))
     return SegmentRun(out, end, xi, x, z)

@@ -2,8 +2,8 @@
 
 ``export_test_vectors(prog, out_dir)`` writes, for the program's planar segments:
 
-- ``segments.hex``: per segment, 13 words: cos, sin, origin_h, origin_v, x_end,
-  p_exp, p_mant[0..5], n_pieces;
+- ``segments.hex``: per segment, 14 words: cos, sin, origin_h, origin_v, x_exp,
+  x_mant, p_exp, p_mant[0..5], n_pieces;
 - ``pieces.hex``: per profile piece (segments in order), 9 words:
   n_samples, dtau, exp, mant[0..5];
 - ``expected.hex``: per sample, 5 words: ξ, x*, z*, q_h, q_v (the golden model's
@@ -23,7 +23,7 @@ import os
 from .model import FixedSegment, FpgaProgram, run_segment
 
 VECTOR_WORD_BITS = 128
-SEGMENT_WORDS = ("cos", "sin", "origin_h", "origin_v", "x_end", "p_exp",
+SEGMENT_WORDS = ("cos", "sin", "origin_h", "origin_v", "x_exp", "x_mant", "p_exp",
                  "p_mant0", "p_mant1", "p_mant2", "p_mant3", "p_mant4", "p_mant5", "n_pieces")
 PIECE_WORDS = ("n_samples", "dtau", "exp", "mant0", "mant1", "mant2", "mant3", "mant4", "mant5")
 SAMPLE_WORDS = ("xi", "x_star", "z_star", "q_h", "q_v")
@@ -52,8 +52,8 @@ def export_test_vectors(prog: FpgaProgram, out_dir: str, max_segments: int | Non
         segs = segs[:max_segments]
     seg_lines, piece_lines, sample_lines = [], [], []
     for seg in segs:
-        seg_lines += [hex_word(v) for v in (seg.cos, seg.sin, seg.origin[0], seg.origin[1], seg.x_end,
-                                            seg.p_exp, *seg.p_mant, len(seg.pieces))]
+        seg_lines += [hex_word(v) for v in (seg.cos, seg.sin, seg.origin[0], seg.origin[1], seg.x_exp,
+                                            seg.x_mant, seg.p_exp, *seg.p_mant, len(seg.pieces))]
         for p in seg.pieces:
             piece_lines += [hex_word(v) for v in (p.n_samples, p.dtau, p.exp, *p.mant)]
         run = run_segment(seg, prog.formats, prog.source)
@@ -70,7 +70,8 @@ def export_test_vectors(prog: FpgaProgram, out_dir: str, max_segments: int | Non
         "samples": sum(s.n_samples for s in segs),
         "formats": {"pos": [f.pos.word, f.pos.frac], "trig": [f.trig.word, f.trig.frac],
                     "param": [f.param.word, f.param.frac], "coef_word": f.coef_word,
-                    "acc_word": f.acc_word},
+                    "horner_word": f.horner_word, "int_word": f.int_word,
+                    "mult_word": f.mult_word},
         "rounding": "round half up: add 2^(shift-1), arithmetic shift right",
         "integrators": "reset to the segment origin at each segment start (resynchronisation)",
     }
@@ -99,7 +100,7 @@ def replay_vectors(out_dir: str, formats) -> list[tuple[int, int, int, int, int]
     out = []
     pi = 0
     for k in range(0, len(sw), len(SEGMENT_WORDS)):
-        c, s, oh, ov, x_end, p_exp, *rest = sw[k:k + len(SEGMENT_WORDS)]
+        c, s, oh, ov, x_exp, x_mant, p_exp, *rest = sw[k:k + len(SEGMENT_WORDS)]
         p_mant, n_pieces = tuple(rest[:6]), rest[6]
         pieces = []
         for _ in range(n_pieces):
@@ -107,7 +108,7 @@ def replay_vectors(out_dir: str, formats) -> list[tuple[int, int, int, int, int]
             pieces.append(ProfilePiece(n, dtau, exp, tuple(mant)))
             pi += len(PIECE_WORDS)
         seg = FixedSegment(index=k // len(SEGMENT_WORDS), line=0, plane=(0, 1), cos=c, sin=s,
-                           origin=(oh, ov), x_end=x_end, p_exp=p_exp, p_mant=p_mant,
+                           origin=(oh, ov), x_exp=x_exp, x_mant=x_mant, p_exp=p_exp, p_mant=p_mant,
                            start_sample=0, pieces=tuple(pieces))
         run = run_segment(seg, formats)
         out += [(int(run.xi[j]), int(run.x[j]), int(run.z[j]), int(run.q[j, 0]), int(run.q[j, 1]))

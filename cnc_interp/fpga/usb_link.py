@@ -175,6 +175,12 @@ class UsbLink:
                     continue
                 if st.errors:
                     self.report.device_errors += 1
+                if st.state == 6:  # UNDERRUN: the sample clock ran out of samples
+                    raise DeviceError(f"the device ran out of samples at sample {st.samples_done} "
+                                      "(underrun: the link is slower than the motion); its output "
+                                      "holds there")
+                if st.state == 7:
+                    raise DeviceError(f"the device aborted the program at sample {st.samples_done}")
                 return st
         raise DeviceError(f"the device answered no status request in {self.retries + 1} attempts")
 
@@ -281,7 +287,7 @@ class UsbLink:
     def _first_seq(self, st: Status, n_frames: int, resume_from: int | None,
                    infos: list[FrameInfo], source: str) -> int:
         if resume_from is None:
-            if st.last_seq and st.state not in (0, 3):
+            if st.last_seq and st.state not in (0, 3, 7):
                 raise DeviceError(f"the device holds a partly sent program (up to frame {st.last_seq}); "
                                   f"resume with --resume-from {st.last_seq} or power-cycle it")
             return 0

@@ -29,22 +29,23 @@ def program_summary(program: Program) -> dict:
     lo = np.array(program.start, dtype=float)
     hi = lo.copy()
     feed_len = rapid_len = feed_time = dwell_time = 0.0
-    n_nodes = n_feed_runs = n_rapid_runs = n_arcs = n_nurbs = n_dwell = 0
+    n_nodes = n_rapid_moves = n_feed_runs = n_rapid_runs = n_arcs = n_nurbs = n_dwell = 0
     stops: dict[str, int] = {}
     end_reasons: dict[str, int] = {}
     for it in program.items:
         if isinstance(it, Run):
-            n_nodes += it.n_nodes
             lo = np.minimum(lo, it.nodes.min(axis=0))
             hi = np.maximum(hi, it.nodes.max(axis=0))
             seg = _segment_lengths(it)
             end_reasons[it.end_reason] = end_reasons.get(it.end_reason, 0) + 1
             if it.kind == "feed":
+                n_nodes += it.n_nodes  # one definition with fit and batch: feed-run nodes
                 n_feed_runs += 1
                 feed_len += float(seg.sum())
                 feed_time += float((seg / it.feed_mm_s[1:]).sum())
             else:
                 n_rapid_runs += 1
+                n_rapid_moves += max(it.n_nodes - 1, 0)
                 rapid_len += float(seg.sum())
             for cp in it.curves:
                 if isinstance(cp.curve, Arc):
@@ -67,6 +68,7 @@ def program_summary(program: Program) -> dict:
         "rapid_runs": n_rapid_runs,
         "run_end_reasons": end_reasons,
         "nodes": int(n_nodes),
+        "rapid_moves": int(n_rapid_moves),
         "arcs": n_arcs,
         "splines": n_nurbs,
         "dwells": n_dwell,
@@ -98,7 +100,7 @@ def format_summary(summary: dict) -> str:
     lines = [
         f"{s['source']}: {s['lines']} lines, {s['blocks']} blocks, axes {s['axes']}",
         f"  runs       {s['runs']} ({s['feed_runs']} feed, {s['rapid_runs']} rapid), "
-        f"{s['nodes']} nodes",
+        f"{s['nodes']} nodes, {s['rapid_moves']} rapid moves",
         f"  curves     {s['arcs']} arcs, {s['splines']} splines/NURBS",
         f"  dwells     {s['dwells']} ({s['dwell_time_s']:.3f} s)",
     ]

@@ -1,9 +1,13 @@
 """Planning: fitted paths + machine -> setpoints every dt (``Trajectory``).
 
-* ``timeline.plan_program(fit_result, machine, settings)`` plans a whole program:
-  paths (VPOp or a paper-000 planner), rapids (VPOp at the axes' limits), dwells and
-  stops on one sample clock;
-* ``vpop.plan_path_vpop`` is paper 001's maximum-feed interpolator for one path;
+* ``timeline.iter_timeline(items, machine, settings, start)`` plans a program as a stream
+  of sample blocks in bounded memory: paths (VPOp or a paper-000 planner), rapids (VPOp
+  at the axes' limits), dwells and stops on one sample clock, paths planned ahead on
+  worker threads; ``timeline.plan_program`` is the same in memory (a ``Trajectory``);
+* ``base`` is the planners' contract (one-shot ``PathPlan`` or a stream of chunks);
+* ``vpop.plan_path_vpop`` / ``vpop.iter_path_plan_vpop`` is paper 001's maximum-feed
+  interpolator for one path (streaming within the path), ``vpop_drive`` its compiled
+  driver and batch kernel;
 * ``verify.verify`` re-checks every limit from the emitted setpoints;
 * ``optimality`` holds the references used to measure how close to minimum time a
   plan is.

@@ -1,10 +1,15 @@
 """Refuse, before planning, a plan that cannot fit in memory.
 
-A plan holds every sample in memory (positions, path position, feed, source line, and the
-verify pass's differences). ``--dt 1e-6`` on an hour-long program asks for billions of
-samples: without this check the process grows until the operating system kills it, with
-no message. The check uses a lower bound of the cycle time (``min_cycle_time_s``), so it
-never refuses a plan that would fit.
+An in-memory plan (``plan_program``, ``plan_part``: batch, the FPGA stage) holds every
+sample (positions, path position, feed, source line, and the verify pass's
+differences). ``--dt 1e-6`` on an hour-long program asks for billions of samples:
+without this check the process grows until the operating system kills it, with no
+message. ``check_sample_budget`` uses a lower bound of the cycle time
+(``min_cycle_time_s``), so it never refuses a plan that would fit.
+
+The streaming plan (``cnc-interp plan``) holds a window, not the cycle: ``WindowBudget``
+checks what one window needs (one whole path for planners that do not stream within a
+path; nothing for those that do).
 """
 
 from __future__ import annotations
@@ -17,8 +22,8 @@ from ..constants import PLAN_BUDGET_MARGIN, PLAN_PEAK_BYTES_PER_SAMPLE_COLUMN
 from ..errors import PlanError, SourceLocation
 
 
-def min_cycle_time_s(paths, machine=None) -> float:
-    """A lower bound (s) of the cycle time of ``paths``; dwells count as zero.
+def path_min_times_s(paths, machine=None) -> np.ndarray:
+    """A lower bound (s) of each path's planned time (P,); dwells are not paths.
 
     Each feed path takes at least its length over its largest programmed feed (no planner
     exceeds F). Every path starts and ends at rest, so with ``machine`` and trivial
@@ -26,26 +31,35 @@ def min_cycle_time_s(paths, machine=None) -> float:
     max(d_i / vmax_i, 2 sqrt(d_i / amax_i), (32 d_i / jmax_i)^(1/3)): the least times to
     cover d_i from rest to rest under each limit alone.
     """
-    paths = [p for p in paths if p.coef.shape[0]]
-    if not paths:
-        return 0.0
+    paths = list(paths)
     t = np.zeros(len(paths))
-    for i, p in enumerate(paths):
+    real = [i for i, p in enumerate(paths) if p.coef.shape[0]]
+    if not real:
+        return t
+    for i in real:
+        p = paths[i]
         feed = float(p.feed_mm_s.max())
         if not p.rapid and np.isfinite(feed) and feed > 0:
             t[i] = float(p.length) / feed
     if machine is not None and machine.kinematics == "trivial":
-        start = np.array([p.coef[0, 0] for p in paths])  # (P, n)
-        last = np.array([p.coef[-1] for p in paths])  # (P, 6, n): the last piece at its end
-        h = np.array([p.breaks[-1] - p.breaks[-2] for p in paths])[:, None]
+        sel = [paths[i] for i in real]
+        start = np.array([p.coef[0, 0] for p in sel])  # (P, n)
+        last = np.array([p.coef[-1] for p in sel])  # (P, 6, n): the last piece at its end
+        h = np.array([p.breaks[-1] - p.breaks[-2] for p in sel])[:, None]
         end = last[:, 5]
         for k in range(4, -1, -1):
             end = end * h + last[:, k]
         d = np.abs(end - start)
         t_axis = np.maximum.reduce([d / machine.vmax, 2.0 * np.sqrt(d / machine.amax),
                                     np.cbrt(32.0 * d / machine.jmax)])
-        t = np.maximum(t, t_axis.max(axis=1))
-    return float(t.sum())
+        t[real] = np.maximum(t[real], t_axis.max(axis=1))
+    return t
+
+
+def min_cycle_time_s(paths, machine=None) -> float:
+    """A lower bound (s) of the cycle time of ``paths``; dwells count as zero (the sum of
+    ``path_min_times_s``)."""
+    return float(path_min_times_s(paths, machine).sum())
 
 
 def available_memory_bytes() -> int | None:
@@ -102,3 +116,51 @@ def check_sample_budget(paths, machine, dt_s: float, source: str,
         f"planning at dt = {dt_s:g} s needs at least {n_min:.3g} samples (about "
         f"{need / 1e9:.3g} GB of memory) but {available / 1e9:.3g} GB are available; "
         f"use a larger --dt", SourceLocation(source))
+
+
+class WindowBudget:
+    """The memory check of the streaming timeline (``plan.timeline.iter_timeline``).
+
+    What is in memory at once is a window of the program, not the whole cycle: for a
+    planner that streams within a path (VPOp) the window is bounded by its settings, so
+    nothing is refused; a planner that returns a whole path at once (one chunk) needs
+    that path's samples in memory, so each path is checked, before it is planned, with
+    the same lower bound of its time (``path_min_times_s``) that ``check_sample_budget``
+    sums over the whole program.
+    """
+
+    def __init__(self, machine, dt_s: float, source: str, streams: bool, window=None):
+        self.machine = machine
+        self.dt_s = float(dt_s)
+        self.source = source
+        self.streams = streams
+        self.available: int | None = None
+        self._asked = False
+        self._vmin = float(np.min(machine.vmax))
+        self._ramp = float(np.max(machine.vmax / machine.amax + machine.amax / machine.jmax))
+
+    def rough_samples(self, path) -> float:
+        """A rough sample count of ``path`` (to size the timeline's jobs; not a bound)."""
+        feed = float(path.feed_mm_s.max()) if not path.rapid else self._vmin
+        v = min(feed, self._vmin) if feed > 0 else self._vmin
+        return (float(path.length) / v + 2.0 * self._ramp) / self.dt_s
+
+    def check(self, paths) -> None:
+        """Raise ``PlanError`` when one of ``paths``, planned whole, cannot fit in memory."""
+        if self.streams or not paths:
+            return
+        feed_paths = [p for p in paths if not p.rapid]  # rapids are always streamed (VPOp)
+        if not feed_paths:
+            return
+        longest = float(path_min_times_s(feed_paths, self.machine).max())
+        n_min = PLAN_BUDGET_MARGIN * longest / self.dt_s
+        need = n_min * PLAN_PEAK_BYTES_PER_SAMPLE_COLUMN * (5 + self.machine.n_axes)
+        if not self._asked:
+            self.available = available_memory_bytes()
+            self._asked = True
+        if self.available is None or need <= self.available:
+            return
+        raise PlanError(
+            f"planning at dt = {self.dt_s:g} s needs at least {n_min:.3g} samples of one path "
+            f"in memory (about {need / 1e9:.3g} GB of memory) but {self.available / 1e9:.3g} GB are "
+            f"available; use a larger --dt", SourceLocation(self.source))

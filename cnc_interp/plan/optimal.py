@@ -1,8 +1,9 @@
 """The near-time-optimal planner: a feed-profile LP, an exact sampler, window refinement.
 
 ``plan_path_optimal(path, joint_map, machine, dt_s, settings)`` plans one path from
-rest to rest; ``iter_path_plan`` is the same plan as a generator of (s, q) chunks
-(their concatenation is byte for byte the one-shot plan). Stages, each a generator
+rest to rest; ``iter_path_plan_optimal`` is the same plan as a generator of
+``PathPlan`` chunks (``plan.base``'s streaming contract: their concatenation is byte for
+byte the one-shot plan). Stages, each a generator
 that only ever looks a bounded distance ahead:
 
 1. profile (``feedprofile``): w(s) = ṡ², near-time-optimal under every axis's
@@ -30,7 +31,7 @@ import numpy as np
 
 from ..constants import VPOP_LIMIT_SHRINK, VPOP_MIN_LENGTH, VPOP_ROUNDING_ULPS
 from ..errors import PlanError
-from .base import PathPlan
+from .base import PathPlan, collect_path_plan
 
 #: depths of the successive dips of w around a place where the sampler got stuck
 OPT_RETRY_DEPTHS = (0.04, 0.1, 0.2, 0.4)
@@ -62,14 +63,15 @@ OPT_ROUTE_SHARE = 0.03
 OPT_ROUTE_MIN_S = 0.5
 #: paths whose travel at the feed plus ramps is shorter than this take VPOp at once
 OPT_ROUTE_TINY_S = 0.1
-#: a profile-routed path whose rough duration is at most this (s) is also planned by
-#: VPOp and the shorter plan kept; longer paths stream the profile's plan. (On fitted
+#: a profile-routed path whose rough duration is at most this many samples is also
+#: planned by VPOp and the shorter plan kept (both whole: this bounds the memory a path
+#: takes, like VPOp's own stream window); longer paths stream the profile's plan. (On fitted
 #: CAM contours whose q_sss jumps from segment to segment the continuous profile can be
 #: ~0.3 % slower than VPOp, which samples them; the comparison keeps the better.) The
 #: ``compare_s`` option overrides it: 0 makes every sample depend on the path up to one
 #: profile window ahead only, as a streaming pipeline wants.
-OPT_COMPARE_S = 600.0
-#: samples per chunk of ``iter_path_plan`` (the plan does not depend on it)
+OPT_COMPARE_SAMPLES = 1 << 18
+#: samples per chunk of ``iter_path_plan_optimal`` (the plan does not depend on it)
 OPT_CHUNK = 4096
 #: a profile piece whose time law spends more than this many times the estimated time
 #: on a node interval is refused (the profile nearly stops where nothing asks for it:
@@ -126,13 +128,24 @@ class _Path:
         self.stats = {"lp_iterations": 0, "knots": 0, "clamped": 0, "retries": 0,
                       "handover": -1, "refined_periods": 0, "table_pieces": int(table.C.shape[0])}
         self._vrun = None
+        self._prep = None
 
     def vrun(self):
         from .vpop import VpopRun
 
         if self._vrun is None:
-            self._vrun = VpopRun(self.table, self.path, self.machine, self.dt, self.settings)
+            self._vrun = VpopRun(self.table, self.path, self.machine, self.dt, self.settings,
+                                 self.joint_map)
         return self._vrun
+
+    def prepared(self):
+        """VPOp's preparation of this path on the same joint table."""
+        from .vpop import _Prepared
+
+        if self._prep is None:
+            self._prep = _Prepared(self.path, self.joint_map, self.machine, self.dt,
+                                   self.settings, table=self.table)
+        return self._prep
 
 
 class _Nodes:
@@ -425,17 +438,30 @@ def _rechunk(blocks, chunk: int):
         yield np.concatenate(buf_s), np.concatenate(buf_q)
 
 
-def iter_path_plan(path, joint_map, machine, dt_s: float, settings=None):
-    """Yield the plan of one path as (s (K,), q (K, n)) chunks of ``chunk_samples``
-    (settings option, default ``OPT_CHUNK``) samples; their concatenation is the
-    one-shot plan (see module docstring). The last chunk ends with the path's exact
-    end point; the machine is at rest before the first sample and after the last."""
+def iter_path_plan_optimal(path, joint_map, machine, dt_s: float, settings=None,
+                           window: int | None = None):
+    """The plan of one path as a stream of ``PathPlan`` chunks (``plan.base``'s contract):
+    chunks of ``chunk_samples`` (settings option, default ``OPT_CHUNK``) samples as soon
+    as no later stage can change them; only the last (``last=True``) carries the stats.
+    Their concatenation is the one-shot plan whatever ``window`` (VPOp's own stream
+    buffer on paths VPOp plans; ``None``: whole) and chunk size."""
     stats = {}
-    yield from _iter(path, joint_map, machine, dt_s, settings, stats)
+    pending = None
+    for s, q in _iter(path, joint_map, machine, dt_s, settings, stats, window):
+        if pending is not None:
+            yield PathPlan(s=pending[0], q=pending[1], last=False)
+        pending = (s, q)
+    stats["samples"] = stats.get("samples_total", 0)
+    stats.pop("samples_total", None)
+    yield PathPlan(s=pending[0], q=pending[1], stats=stats)
 
 
-def _iter(path, joint_map, machine, dt_s, settings, stats):
-    from .vpop import _positions, plan_path_vpop
+iter_path_plan_optimal.streams = True
+
+
+def _iter(path, joint_map, machine, dt_s, settings, stats, window):
+    """(s, q) chunks of the plan (see ``iter_path_plan_optimal``); fills ``stats``."""
+    from .vpop import _positions
 
     if path.rapid:
         joint_map = None
@@ -444,10 +470,11 @@ def _iter(path, joint_map, machine, dt_s, settings, stats):
         raise PlanError(f"bug: the fitted path ending at line {int(path.line[-1])} is not finite")
     chunk = max(1, int(_option(settings, "chunk_samples", OPT_CHUNK)))
     if path.length <= VPOP_MIN_LENGTH:
-        stats["samples"] = 1
+        stats["samples_total"] = 1
         yield np.zeros(1), _positions(path, path.breaks[:1], joint_map)
         return
     ctx = _Path(path, joint_map, machine, dt, settings)
+    ctx.window = window
     targeted = dt < OPT_FULL_REFINE_DT
     route = _option(settings, "route", None) or _route(ctx)
     ctx.stats["route"] = route
@@ -456,15 +483,16 @@ def _iter(path, joint_map, machine, dt_s, settings, stats):
     # discrete optimum, and windows on every short path would cost more than planning)
     default_passes = OPT_REFINE_PASSES if not targeted else (1 if route == "profile" else 0)
     passes = int(_option(settings, "refine_passes", default_passes))
-    stage = _sampled(ctx) if route == "profile" else _vpop_stage(ctx)
+    stage = _sampled(ctx) if route == "profile" else _vpop_stage(ctx, window)
     for _ in range(passes):
         stage = _refined(ctx, stage, targeted)
-    if route == "profile" and ctx.rough_s <= float(_option(settings, "compare_s", OPT_COMPARE_S)):
+    limit_s = float(_option(settings, "compare_s", OPT_COMPARE_SAMPLES * dt))
+    if route == "profile" and ctx.rough_s <= limit_s:
         stage = _better_of(ctx, stage, passes if not targeted else 0, targeted)
-    produced = False
+    produced = 0
     try:
         for s, q in _rechunk(stage, chunk):
-            produced = True
+            produced += s.shape[0]
             yield s, q
     except _Fallback as why:
         if produced:
@@ -473,22 +501,23 @@ def _iter(path, joint_map, machine, dt_s, settings, stats):
         ctx.stats["fallback"] = str(why)
         if targeted:
             passes = int(_option(settings, "refine_passes", 0))
-        stage = _vpop_stage(ctx)
+        stage = _vpop_stage(ctx, window)
         for _ in range(passes):
             stage = _refined(ctx, stage, targeted)
-        yield from _rechunk(stage, chunk)
+        for s, q in _rechunk(stage, chunk):
+            produced += s.shape[0]
+            yield s, q
     stats.update(ctx.stats)
+    stats["samples_total"] = produced
 
 
 def _better_of(ctx, stage, vpop_passes, targeted):
-    """The profile's plan or VPOp's, whichever is shorter (both whole: short paths)."""
-    try:
-        blocks = list(stage)
-    except _Fallback:
-        raise
+    """The profile's plan or VPOp's, whichever is shorter (both whole: bounded by
+    ``OPT_COMPARE_SAMPLES``)."""
+    blocks = list(stage)
     s = np.concatenate([b[0] for b in blocks])
     q = np.concatenate([b[1] for b in blocks])
-    alt = _vpop_stage(ctx)
+    alt = _vpop_stage(ctx, None)
     for _ in range(vpop_passes):
         alt = _refined(ctx, alt, targeted)
     alt = list(alt)
@@ -535,43 +564,43 @@ def _route(ctx) -> str:
     return "profile" if share >= OPT_ROUTE_SHARE and long_enough else "vpop"
 
 
-def _vpop_stage(ctx):
-    """VPOp's plan of the whole path as one block (it plans a path in one call)."""
-    sh = np.zeros(ctx.vrun().cap)
-    qh = np.zeros((sh.shape[0], ctx.n))
-    qh[0] = ctx.table.qstart
-    st, k, sh, qh = ctx.vrun().run(sh, qh, 1, 0)
-    if st != ctx.vrun().core.OK:
-        # VPOp got stuck (issue 13's A+Z moves): the profile if this path did not come
-        # from it, else the safe S-curve, which cannot fail
-        ctx.stats["vpop_failed"] = True
-        if ctx.stats.get("route") == "vpop" and "fallback" not in ctx.stats:
-            ctx.stats["route"] = "profile"
-            try:
-                yield from _sampled(ctx)
-                return
-            except _Fallback:
-                pass
-        from .safe import plan_path_safe
+def _vpop_stage(ctx, window):
+    """VPOp's plan of the path as a stream of (s, q) blocks (its own stream: ``window``
+    bounds its buffers, the samples do not depend on it)."""
+    from .vpop import VpopFailed, iter_prepared
 
-        plan = plan_path_safe(ctx.path, ctx.joint_map, ctx.machine, ctx.dt, ctx.settings)
-        ctx.stats["safe"] = True
-        yield plan.s, plan.q
+    handed = False
+    try:
+        for c in iter_prepared(ctx.prepared(), ctx.joint_map, ctx.machine, ctx.settings,
+                               window, safe_fallback=False):
+            if c.last and c.stats:
+                ctx.stats["exact"] = bool(c.stats.get("exact", False))
+            handed = True
+            yield c.s, c.q
         return
-    last = k - 1
-    while last > 0 and sh[last - 1] == ctx.L:
-        last -= 1
-    q = qh[: last + 1].copy()
-    q[-1] = ctx.table.qend
-    yield sh[: last + 1].copy(), q
+    except VpopFailed:
+        if handed:
+            raise
+    # VPOp got stuck (issue 13's A+Z moves): the profile if this path did not come
+    # from it, else the safe S-curve, which cannot fail
+    ctx.stats["vpop_failed"] = True
+    if ctx.stats.get("route") == "vpop" and "fallback" not in ctx.stats:
+        ctx.stats["route"] = "profile"
+        try:
+            blocks = list(_sampled(ctx))  # whole: it may still give up
+        except _Fallback:
+            blocks = None
+        if blocks is not None:
+            yield from blocks
+            return
+    from .safe import plan_path_safe
+
+    plan = plan_path_safe(ctx.path, ctx.joint_map, ctx.machine, ctx.dt, ctx.settings)
+    ctx.stats["safe"] = True
+    yield plan.s, plan.q
 
 
 def plan_path_optimal(path, joint_map, machine, dt_s: float, settings=None) -> PathPlan:
     """Plan one path from rest to rest (see module docstring): the concatenation of
-    ``iter_path_plan``'s chunks."""
-    stats = {}
-    parts = list(_iter(path, joint_map, machine, dt_s, settings, stats))
-    s = np.concatenate([p[0] for p in parts])
-    q = np.concatenate([p[1] for p in parts])
-    stats["samples"] = int(s.shape[0])
-    return PathPlan(s=s, q=q, stats=stats)
+    ``iter_path_plan_optimal``'s chunks."""
+    return collect_path_plan(iter_path_plan_optimal(path, joint_map, machine, dt_s, settings))

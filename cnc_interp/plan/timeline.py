@@ -1,9 +1,10 @@
 """The whole-program timeline: every fitted item planned onto one sample clock.
 
-``plan_program`` walks a ``FitResult``'s items in order:
+``iter_timeline`` walks fitted items (a ``FitResult``'s, or the fit's stream) in order
+and yields the samples as ``SampleBlock``s, in bounded memory:
 
 * ``Path`` (cutting): the chosen per-path planner (``plan.planners``) through the
-  machine's kinematics, from rest to rest;
+  machine's kinematics, from rest to rest, as the planner's stream of chunks;
 * ``Path(rapid=True)``: always VPOp with no feed limit (the axes' own limits),
   straight in joint space;
 * ``Dwell``: the position held for ceil(seconds / dt) samples;
@@ -15,11 +16,21 @@ three equal samples, so every backward difference (up to jerk) across the joint
 sees the machine at rest, as each per-path plan assumed. ``s`` is the cumulative
 path length (rapids included), ``feed`` its backward difference and ``line`` the
 source line executed at each sample.
+
+Paths are planned independently (rest to rest), so consecutive paths are grouped into
+jobs that worker threads plan ahead (the compiled step loops release the GIL) while the
+caller consumes the samples in program order. The look-ahead is bounded (``Window``),
+and the samples do not depend on it: ``plan_program`` (everything in one window) and
+the stream with the smallest window give the same bytes.
 """
 
 from __future__ import annotations
 
 import math
+import queue
+import threading
+from collections import deque
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -30,6 +41,70 @@ from .trajectory import Trajectory
 _REST_RUN = 3
 #: the start of a path may differ from where the machine is by float rounding only
 _JOIN_TOL = 1e-6
+#: samples in the first block handed out (then each block doubles up to the window's)
+_FIRST_BLOCK = 256
+
+
+@dataclass(frozen=True)
+class Window:
+    """How much of the program is in flight at once (memory and parallelism; never the
+    result).
+
+    Attributes:
+        block_samples: samples per ``SampleBlock`` handed to the consumer.
+        job_paths: most paths planned as one job by a worker.
+        job_samples: a job is closed once its paths' rough sample estimate reaches this.
+        jobs_ahead: most jobs planned ahead of the one being consumed.
+        chunks_ahead: most chunks of one job waiting for the consumer.
+        path_window: a streaming planner's own buffer (samples), ``None`` = whole path.
+    """
+
+    block_samples: int = 1 << 16
+    job_paths: int = 256
+    job_samples: int = 1 << 15
+    jobs_ahead: int = 8
+    chunks_ahead: int = 16
+    path_window: int | None = 1 << 18
+
+    @classmethod
+    def whole(cls) -> "Window":
+        """Everything at once (what ``plan_program`` uses)."""
+        big = 1 << 62
+        return cls(block_samples=big, job_paths=big, job_samples=big, jobs_ahead=big,
+                   chunks_ahead=big, path_window=None)
+
+
+@dataclass(frozen=True, eq=False)
+class SampleBlock:
+    """Consecutive samples k0 .. k0+K-1 of the timeline.
+
+    Attributes (K samples, n machine axes): k0 index of the first sample (t = k·dt);
+    s (K,) cumulative path length, mm; q (K, n) joint setpoints, mm / deg; line (K,)
+    int64 source line executing (0 = none).
+    """
+
+    k0: int
+    s: np.ndarray
+    q: np.ndarray
+    line: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return int(self.s.shape[0])
+
+
+@dataclass
+class TimelineInfo:
+    """What the stream knows at its end: samples, planner status, item counts and the
+    planners' profiles (kept only when asked: they are for the FPGA stage)."""
+
+    samples: int = 0
+    status: str = "ok"
+    stats: dict = field(default_factory=lambda: {"paths": 0, "rapids": 0, "dwells": 0,
+                                                 "stops": 0})
+    profiles: list = field(default_factory=list)
+    path_length_mm: float = 0.0
+    plan_cpu_s: float = 0.0  # CPU time of the planning (all threads)
 
 
 def _plan_threads() -> int:
@@ -42,19 +117,6 @@ def _plan_threads() -> int:
     if env and env.isdigit() and int(env) > 0:
         return int(env)
     return max(1, min(os.cpu_count() or 1, PLAN_MAX_THREADS))
-
-
-def _item_kind(item) -> str:
-    from ..fit.path import Path
-    from ..gcode.program import Dwell, Stop
-
-    if isinstance(item, Path):
-        return "path"
-    if isinstance(item, Dwell):
-        return "dwell"
-    if isinstance(item, Stop):
-        return "stop"
-    raise PlanError(f"bug: unknown timeline item {type(item).__name__}")
 
 
 def _joint_rapid(path, kin):
@@ -87,8 +149,395 @@ def _count_planner_stats(stats: dict, path_stats) -> None:
         stats["safe"] = stats.get("safe", 0) + 1
 
 
-def plan_program(fit_result, machine, settings, progress=None) -> Trajectory:
-    """Plan every item of ``fit_result`` on one timeline (see module docstring).
+# -- workers ------------------------------------------------------------------------------
+_DONE = object()
+
+
+class _Job:
+    """Consecutive paths planned by one worker; their chunks arrive in ``out`` in order
+    as (path index in the job, chunk), then ``_DONE`` (or the exception raised)."""
+
+    __slots__ = ("paths", "out")
+
+    def __init__(self, paths: list, chunks_ahead: int):
+        self.paths = paths
+        self.out: queue.Queue = queue.Queue(maxsize=max(1, chunks_ahead))
+
+
+class _Workers:
+    """Daemon threads planning jobs in submission order (FIFO: the oldest job always has
+    a thread, so a worker blocked on a full queue of a later job cannot stall it). Daemon
+    threads never keep an interrupted process alive."""
+
+    def __init__(self, count: int, plan_chunks, info: TimelineInfo, plan_many=None):
+        self.info = info
+        self.plan_many = plan_many
+        self.lock = threading.Lock()
+        self.jobs: queue.Queue = queue.Queue()
+        self.stop = threading.Event()
+        self.plan_chunks = plan_chunks
+        self.threads = [threading.Thread(target=self._loop, daemon=True,
+                                         name=f"cnc-interp-plan-{i}") for i in range(count)]
+        for t in self.threads:
+            t.start()
+
+    def submit(self, job: _Job) -> None:
+        self.jobs.put(job)
+
+    def _put(self, job: _Job, value) -> bool:
+        while not self.stop.is_set():
+            try:
+                job.out.put(value, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def _loop(self) -> None:
+        import time
+
+        while not self.stop.is_set():
+            job = self.jobs.get()
+            if job is None:
+                return
+            t0 = time.thread_time()
+            try:
+                for item in _plan_job(job, self.plan_chunks, self.plan_many):
+                    if not self._put(job, item):
+                        return
+                self._put(job, _DONE)
+            except BaseException as exc:  # handed to the consumer, raised there
+                self._put(job, exc)
+            finally:
+                with self.lock:
+                    self.info.plan_cpu_s += time.thread_time() - t0
+
+    def close(self) -> None:
+        self.stop.set()
+        for _ in self.threads:
+            self.jobs.put(None)
+
+
+class _Inline:
+    """The same interface without threads: a job is planned when it is consumed."""
+
+    def __init__(self, plan_chunks, info: TimelineInfo, plan_many=None):
+        self.plan_chunks = plan_chunks
+        self.info = info
+        self.plan_many = plan_many
+
+    def submit(self, job: _Job) -> None:
+        pass
+
+    def results(self, job: _Job):
+        import time
+
+        it = _plan_job(job, self.plan_chunks, self.plan_many)
+        while True:
+            t0 = time.thread_time()
+            got = next(it, None)
+            self.info.plan_cpu_s += time.thread_time() - t0
+            if got is None:
+                break
+            yield got
+
+    def close(self) -> None:
+        pass
+
+
+_FLUSH = object()
+
+
+def _closing(items, ready, pending):
+    """``items``, with ``_FLUSH`` before a pull that would wait for the fit while a job is
+    being filled (jobs only group paths for the workers: where they end changes no sample)."""
+    it = iter(items)
+    while True:
+        if ready is not None and pending() and not ready():
+            yield _FLUSH
+        try:
+            item = next(it)
+        except StopIteration:
+            return
+        yield item
+
+
+def _plan_job(job: _Job, plan_chunks, plan_many):
+    """(path index, chunk) of a job's paths in order: the paths ``plan_many`` plans in one
+    call, the others through their planner's stream."""
+    pre = plan_many(job.paths) if plan_many is not None else None
+    for i, path in enumerate(job.paths):
+        got = pre[i] if pre is not None else None
+        if got is not None:
+            yield i, got
+            continue
+        for chunk in plan_chunks(path):
+            yield i, chunk
+
+
+def _job_results(pool, job: _Job):
+    if isinstance(pool, _Inline):
+        yield from pool.results(job)
+        return
+    while True:
+        got = job.out.get()
+        if got is _DONE:
+            return
+        if isinstance(got, BaseException):
+            raise got
+        yield got
+
+
+# -- the stream -----------------------------------------------------------------------------
+class _Blocks:
+    """Collects samples into blocks of ``size`` (copies: the pieces may be views)."""
+
+    def __init__(self, size: int, n: int):
+        self.full = max(1, int(size))
+        # the first blocks are small (the first rows reach the consumer early), then double
+        self.size = min(self.full, _FIRST_BLOCK)
+        self.n = n
+        self.k = 0  # samples handed out
+        self.parts: list = []
+        self.count = 0
+
+    def add(self, s: np.ndarray, q: np.ndarray, line: np.ndarray):
+        """Append samples; yields the blocks that are full."""
+        a = 0
+        m = s.shape[0]
+        while a < m:
+            b = min(m, a + self.size - self.count)
+            self.parts.append((s[a:b], q[a:b], line[a:b]))
+            self.count += b - a
+            a = b
+            if self.count >= self.size:
+                yield self.flush()
+
+    def flush(self) -> SampleBlock | None:
+        if not self.count:
+            return None
+        if len(self.parts) == 1:
+            s, q, line = (np.array(x) for x in self.parts[0])
+        else:
+            s = np.concatenate([p[0] for p in self.parts])
+            q = np.concatenate([p[1] for p in self.parts], axis=0)
+            line = np.concatenate([p[2] for p in self.parts])
+        block = SampleBlock(self.k, s, q, line)
+        self.k += self.count
+        self.parts, self.count = [], 0
+        self.size = min(self.full, 2 * self.size)
+        return block
+
+
+def iter_timeline(items, machine, settings, start, window: Window | None = None,
+                  info: TimelineInfo | None = None, progress=None, keep_profiles: bool = False,
+                  source: str = "", threads: int | None = None):
+    """Plan fitted ``items`` (an iterable, consumed lazily) onto one sample clock.
+
+    Args:
+        items: fitted items in program order (``Path``, ``Dwell``, ``Stop``).
+        machine: ``Machine`` (limits, kinematics); ``settings.dt_s`` is the period.
+        settings: ``PlanSettings``.
+        start: (n,) program-space position before the first item.
+        window: the look-ahead (``Window``; default ``Window()``).
+        info: a ``TimelineInfo`` filled in as the stream runs (complete at its end).
+        progress: optional callable told how much path length (mm) has been planned.
+        keep_profiles: collect the planners' profiles in ``info.profiles``.
+        source: the part program's name (for the memory check's message).
+        threads: worker threads (default ``_plan_threads()``; 1 plans inline).
+    Yields:
+        ``SampleBlock``s, from rest at the start to rest at the end.
+    """
+    from ..fit.path import Path
+    from ..gcode.program import Dwell, Stop
+    from .budget import WindowBudget
+    from .kinematics import make_kinematics
+    from .planners import get_path_iterator
+    from .vpop import iter_path_plan_vpop
+
+    window = window or Window()
+    info = info if info is not None else TimelineInfo()
+    dt = float(settings.dt_s)
+    kin = make_kinematics(machine)
+    joint_map = None if kin.is_identity else kin
+    planner = get_path_iterator(settings.planner)
+    streams = bool(getattr(planner, "streams", False))
+    start_prog = np.asarray(start, dtype=float).reshape(1, -1)
+    q_now = kin.to_joints(start_prog)[0] if joint_map is not None else start_prog[0].copy()
+    n = machine.n_axes
+    if q_now.shape[0] != n:
+        raise PlanError(f"bug: the program has {q_now.shape[0]} axes, the machine {n}")
+    budget = WindowBudget(machine, dt, source, streams, window)
+    pw = window.path_window
+
+    def plan_many(paths):
+        """VPOp's compiled batch for the paths it plans in joint = program space (rapids;
+        every path without kinematics when VPOp is the planner): the same samples."""
+        from .vpop import plan_many_vpop
+
+        sel = [i for i, p in enumerate(paths)
+               if p.rapid or (settings.planner == "vpop" and joint_map is None)]
+        out = [None] * len(paths)
+        if sel:
+            got = plan_many_vpop([paths[i] for i in sel], machine, dt, settings)
+            for i, g in zip(sel, got):
+                out[i] = g
+        return out
+
+    def plan_chunks(item):
+        if item.rapid:
+            return iter_path_plan_vpop(item, None, machine, dt, settings, window=pw)
+        if streams:
+            return planner(item, joint_map, machine, dt, settings, window=pw)
+        return planner(item, joint_map, machine, dt, settings)
+
+    ready = getattr(items, "ready", None)  # a prefetching source tells if a pull would wait
+
+    def units():
+        """Jobs of consecutive paths, and the dwells and stops between them. The first
+        jobs are small (the first samples come out early), then each doubles up to the
+        window's size."""
+        job: list = []
+        est = 0.0
+        limit = [1, 1.0]  # paths, samples of the job being filled
+        for item in _closing(items, ready, lambda: bool(job)):
+            if item is _FLUSH:  # the fit has nothing yet: plan what is there
+                yield "job", job
+                job, est = [], 0.0
+                continue
+            if isinstance(item, Path):
+                if joint_map is not None and item.rapid:
+                    item = _joint_rapid(item, kin)
+                if item.axes != machine.axes:
+                    raise PlanError(f"bug: path axes {item.axes} differ from machine axes "
+                                    f"{machine.axes}")
+                job.append(item)
+                est += budget.rough_samples(item)
+                if len(job) >= min(limit[0], window.job_paths) or \
+                        est >= min(limit[1], window.job_samples):
+                    yield "job", job
+                    job, est = [], 0.0
+                    limit = [2 * limit[0], 2.0 * max(limit[1], 64.0)]
+            elif isinstance(item, (Dwell, Stop)):
+                if job:
+                    yield "job", job
+                    job, est = [], 0.0
+                yield "item", item
+            else:
+                raise PlanError(f"bug: unknown timeline item {type(item).__name__}")
+        if job:
+            yield "job", job
+
+    workers = threads if threads is not None else _plan_threads()
+    pool = (_Workers(workers, plan_chunks, info, plan_many) if workers > 1
+            else _Inline(plan_chunks, info, plan_many))
+    ahead: deque = deque()
+    source_units = units()
+    in_flight = 0
+    exhausted = False
+    blocks = _Blocks(window.block_samples, n)
+    rest = _REST_RUN  # the machine is at rest before the first sample
+    last_line = 0
+    s_off = 0.0
+    stats = info.stats
+
+    def refill():
+        nonlocal in_flight, exhausted
+        while not exhausted and in_flight < max(1, window.jobs_ahead):
+            if ahead and ready is not None and not ready():
+                break  # consume what is planned rather than wait for the fit
+            u = next(source_units, None)
+            if u is None:
+                exhausted = True
+                break
+            if u[0] == "job":
+                budget.check(u[1])
+                job = _Job(u[1], window.chunks_ahead)
+                pool.submit(job)
+                in_flight += 1
+                ahead.append(("job", job))
+            else:
+                ahead.append(u)
+
+    def hold(count: int, line: int):
+        if count > 0:
+            yield from blocks.add(np.full(count, s_off), np.repeat(q_now[None, :], count, axis=0),
+                                  np.full(count, line, dtype=np.int64))
+
+    try:
+        yield from blocks.add(np.zeros(1), q_now[None, :].copy(), np.zeros(1, dtype=np.int64))
+        while True:
+            refill()
+            if not ahead:
+                break
+            kind, unit = ahead.popleft()
+            if kind == "item":
+                if isinstance(unit, Dwell):
+                    count = int(math.ceil(unit.seconds / dt - 1e-9)) if unit.seconds > 0 else 0
+                    last_line = int(unit.line)
+                    yield from hold(count, last_line)
+                    rest += count
+                    stats["dwells"] += 1
+                else:  # stop: come to rest (already at rest between paths)
+                    last_line = int(unit.line)
+                    yield from hold(_REST_RUN - rest, last_line)
+                    rest = max(rest, _REST_RUN)
+                    stats["stops"] += 1
+                continue
+            in_flight -= 1
+            cur = -1
+            first = False
+            item = None
+            for i, chunk in _job_results(pool, unit):
+                if i != cur:  # a new path's first chunk
+                    cur, item, first = i, unit.paths[i], True
+                s, q = chunk.s, chunk.q
+                if first:
+                    q0 = q[0]
+                    if not np.all(np.abs(q0 - q_now) <= _JOIN_TOL * np.maximum(1.0, np.abs(q_now))):
+                        raise PlanError(f"bug: path at line {int(item.line[0])} starts at "
+                                        f"{q0.tolist()}, the machine is at {q_now.tolist()}")
+                    s, q = s[1:], q[1:]
+                    if s.shape[0] or not chunk.last:
+                        moving = True
+                    else:
+                        moving = False
+                    if moving:
+                        yield from hold(_REST_RUN - rest, last_line)
+                        rest = 1
+                    first = False
+                if s.shape[0]:
+                    seg = item.segment_of_s(s)
+                    yield from blocks.add(s_off + s, q, item.line[seg])
+                    q_now = q[-1].copy()
+                    last_line = int(item.line[-1])
+                if chunk.last:
+                    if item.rapid:
+                        stats["rapids"] += 1
+                    else:
+                        stats["paths"] += 1
+                        _count_planner_stats(stats, chunk.stats)
+                        if keep_profiles and chunk.profiles is not None:
+                            info.profiles.append(chunk.profiles)
+                    if chunk.status != "ok":
+                        info.status = chunk.status
+                    s_off += float(item.length)
+                    if progress is not None:
+                        progress(float(item.length))
+        # the program ends at rest even without M2/M30: the held samples make it explicit
+        yield from hold(_REST_RUN - rest, last_line)
+        last = blocks.flush()
+        if last is not None:
+            yield last
+        info.samples = blocks.k
+        info.path_length_mm = s_off
+    finally:
+        pool.close()
+
+
+def plan_program(fit_result, machine, settings, progress=None, window: Window | None = None
+                 ) -> Trajectory:
+    """Plan every item of ``fit_result`` on one timeline, in memory (see module docstring).
 
     Args:
         fit_result: ``FitResult`` (items in program order).
@@ -96,125 +545,98 @@ def plan_program(fit_result, machine, settings, progress=None) -> Trajectory:
         settings: ``PlanSettings``.
         progress: optional callable ``progress(n)`` told how much path length (mm)
             has been planned since its last call.
+        window: the look-ahead (default: everything at once); the result is the same.
     Returns:
         ``Trajectory`` on the machine's axes, from rest at the start to rest at the end.
     """
-    from .kinematics import make_kinematics
-    from .planners import get_planner
-    from .vpop import plan_path_vpop
+    info = TimelineInfo()
+    blocks = list(iter_timeline(fit_result.items, machine, settings, fit_result.program.start,
+                                window=window or Window.whole(), info=info, progress=progress,
+                                keep_profiles=True, source=fit_result.program.source))
+    return trajectory_of(blocks, machine, settings, info)
 
-    dt = float(settings.dt_s)
-    kin = make_kinematics(machine)
-    joint_map = None if kin.is_identity else kin
-    planner = get_planner(settings.planner)
-    start_prog = np.asarray(fit_result.program.start, dtype=float).reshape(1, -1)
-    q_now = kin.to_joints(start_prog)[0] if joint_map is not None else start_prog[0].copy()
-    n = machine.n_axes
-    if q_now.shape[0] != n:
-        raise PlanError(f"bug: the program has {q_now.shape[0]} axes, the machine {n}")
 
-    qs = [q_now[None, :]]
-    ss = [np.zeros(1)]
-    lines = [np.zeros(1, dtype=np.int64)]
-    s_off = 0.0
-    rest = _REST_RUN  # the machine is at rest before the first sample
-    last_line = 0
-    status = "ok"
-    stats = {"paths": 0, "rapids": 0, "dwells": 0, "stops": 0}
-    profiles = []
-
-    def hold(count: int, line: int) -> None:
-        if count > 0:
-            qs.append(np.repeat(qs[-1][-1:], count, axis=0))
-            ss.append(np.full(count, s_off))
-            lines.append(np.full(count, line, dtype=np.int64))
-
-    def plan_one(item):
-        if item.rapid:
-            return plan_path_vpop(item, None, machine, dt, settings)
-        return planner(item, joint_map, machine, dt, settings)
-
-    # Rapids are straight in joint space: under non-trivial kinematics the fitted
-    # (program-space) rapid is replaced by the joint-space line between its ends.
-    items = tuple(_joint_rapid(it, kin) if (joint_map is not None and _item_kind(it) == "path"
-                                            and it.rapid) else it
-                  for it in fit_result.items)
-    paths = [it for it in items if _item_kind(it) == "path"]
-    for it in paths:
-        if it.axes != machine.axes:
-            raise PlanError(f"bug: path axes {it.axes} differ from machine axes {machine.axes}")
-    # paths are planned independently (rest to rest): spread them over threads (the
-    # compiled step loop releases the GIL) and join them in program order
-    workers = min(_plan_threads(), len(paths))
-    if workers > 1:
-        from concurrent.futures import ThreadPoolExecutor
-
-        pool = ThreadPoolExecutor(max_workers=workers)
-        futures = iter([pool.submit(plan_one, it) for it in paths])
-    else:
-        pool = None
-        futures = None
-
-    for item in items:
-        kind = _item_kind(item)
-        if kind == "path":
-            try:
-                plan = next(futures).result() if futures is not None else plan_one(item)
-            except BaseException:
-                if pool is not None:
-                    pool.shutdown(wait=False, cancel_futures=True)
-                raise
-            if item.rapid:
-                stats["rapids"] += 1
-            else:
-                stats["paths"] += 1
-                if plan.profiles is not None:
-                    profiles.append(plan.profiles)
-                _count_planner_stats(stats, plan.stats)
-            if plan.status != "ok":
-                status = plan.status
-            q0 = plan.q[0]
-            if not np.all(np.abs(q0 - q_now) <= _JOIN_TOL * np.maximum(1.0, np.abs(q_now))):
-                raise PlanError(f"bug: path at line {int(item.line[0])} starts at {q0.tolist()}, "
-                                f"the machine is at {q_now.tolist()}")
-            moves = plan.q.shape[0] > 1
-            if moves:
-                hold(_REST_RUN - rest, last_line)
-                seg = item.segment_of_s(plan.s[1:])
-                qs.append(plan.q[1:])
-                ss.append(s_off + plan.s[1:])
-                lines.append(item.line[seg])
-                last_line = int(item.line[-1])
-                q_now = plan.q[-1].copy()
-                rest = 1
-            s_off += float(item.length)
-            if progress is not None:
-                progress(float(item.length))
-        elif kind == "dwell":
-            count = int(math.ceil(item.seconds / dt - 1e-9)) if item.seconds > 0 else 0
-            last_line = int(item.line)
-            hold(count, last_line)
-            rest += count
-            stats["dwells"] += 1
-        else:  # stop: come to rest (already at rest between paths)
-            last_line = int(item.line)
-            hold(_REST_RUN - rest, last_line)
-            rest = max(rest, _REST_RUN)
-            stats["stops"] += 1
-
-    # the program ends at rest even without M2/M30: the held samples make it explicit
-    hold(_REST_RUN - rest, last_line)
-    if pool is not None:
-        pool.shutdown()
-    q = np.concatenate(qs, axis=0)
-    s = np.concatenate(ss)
-    line = np.concatenate(lines)
-    k = q.shape[0]
-    feed = np.zeros(k)
-    if k > 1:
+def feed_of(s: np.ndarray, s_prev: float | None, dt: float) -> np.ndarray:
+    """Path speed (K,) of samples s: backward difference, 0 at the very first sample
+    (``s_prev`` None); the same values whatever the blocks are."""
+    feed = np.empty(s.shape[0])
+    if s.shape[0] == 0:
+        return feed
+    feed[0] = 0.0 if s_prev is None else (s[0] - s_prev) / dt
+    if s.shape[0] > 1:
         feed[1:] = np.diff(s) / dt
+    return feed
+
+
+def trajectory_of(blocks, machine, settings, info: TimelineInfo) -> Trajectory:
+    """A ``Trajectory`` from the whole stream's blocks."""
+    dt = float(settings.dt_s)
+    n = machine.n_axes
+    if blocks:
+        s = np.concatenate([b.s for b in blocks])
+        q = np.concatenate([b.q for b in blocks], axis=0)
+        line = np.concatenate([b.line for b in blocks])
+    else:
+        s, q, line = np.zeros(0), np.zeros((0, n)), np.zeros(0, dtype=np.int64)
+    k = q.shape[0]
     settings_dict = settings.to_dict() if hasattr(settings, "to_dict") else dict(settings)
-    settings_dict["stats"] = stats
-    return Trajectory(axes=machine.axes, dt_s=dt, t=np.arange(k) * dt, s=s, feed=feed, q=q,
-                      line=line, planner=settings.planner, settings=settings_dict,
-                      status=status, profiles=profiles or None)
+    settings_dict["stats"] = dict(info.stats)
+    return Trajectory(axes=machine.axes, dt_s=dt, t=np.arange(k) * dt, s=s,
+                      feed=feed_of(s, None, dt), q=q, line=line, planner=settings.planner,
+                      settings=settings_dict, status=info.status, profiles=info.profiles or None)
+
+
+class Prefetch:
+    """Iterates ``iterable`` in a thread of its own, ``ahead`` items ahead: the fit runs
+    while the timeline hands out samples, and ``ready()`` tells the timeline whether the
+    next item is there (so that it consumes planned samples instead of waiting). The
+    thread's CPU time is ``cpu_s``; an exception is raised where the consumer reaches it."""
+
+    def __init__(self, iterable, ahead: int = 512):
+        self.q: queue.Queue = queue.Queue(maxsize=max(1, ahead))
+        self.cpu_s = 0.0
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._run, args=(iterable,), daemon=True,
+                                       name="cnc-interp-fit")
+        self.thread.start()
+
+    def _put(self, value) -> bool:
+        while not self.stop.is_set():
+            try:
+                self.q.put(value, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def _run(self, iterable) -> None:
+        import time
+
+        t0 = time.thread_time()
+        try:
+            for item in iterable:
+                if not self._put(("item", item)):
+                    return
+            self._put(("end", None))
+        except BaseException as exc:
+            self._put(("error", exc))
+        finally:
+            self.cpu_s = time.thread_time() - t0
+
+    def ready(self) -> bool:
+        return not self.q.empty()
+
+    def __iter__(self):
+        try:
+            while True:
+                kind, value = self.q.get()
+                if kind == "end":
+                    return
+                if kind == "error":
+                    raise value
+                yield value
+        finally:
+            self.close()
+
+    def close(self) -> None:
+        self.stop.set()

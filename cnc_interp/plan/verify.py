@@ -175,3 +175,103 @@ def verify(traj, machine) -> VerifyReport:
     idx = np.array(idx, dtype=int)
     return verify_arrays(traj.q, traj.dt_s, machine.vmax[idx], machine.amax[idx],
                          machine.jmax[idx], axes=traj.axes)
+
+
+class StreamVerifier:
+    """``verify_arrays`` over a stream of sample blocks, with the same report.
+
+    Each block's differences are taken with the last three samples before it (the rest
+    padding before the first sample), so every stencil is computed once, from the same
+    stored values as on the whole array; the trailing rest padding is added by
+    ``report``. ``add`` returns False as soon as a block breaks a limit (or holds NaN), so
+    a caller can stop before writing it.
+    """
+
+    def __init__(self, dt_s: float, vmax, amax, jmax, axes: str):
+        n = len(axes)
+        self.axes = axes
+        self.dt_s = float(dt_s)
+        self.limits = np.stack([np.broadcast_to(np.asarray(x, dtype=float), (n,))
+                                for x in (vmax, amax, jmax)], axis=1)  # (n, 3)
+        self.scale = np.array([dt_s, dt_s ** 2, dt_s ** 3])
+        self.best = np.zeros((n, 3))  # worst |d^m q| so far (stored values, not scaled)
+        self.where = np.zeros((n, 3), dtype=np.int64)
+        self.first_bad = np.full(n, -1, dtype=np.int64)  # first non-finite sample per axis
+        self.k = 0
+        self.tail: np.ndarray | None = None  # the last VERIFY_REST_PADDING padded samples
+        self.n = n
+
+    @classmethod
+    def for_machine(cls, machine, dt_s: float) -> "StreamVerifier":
+        return cls(dt_s, machine.vmax, machine.amax, machine.jmax, machine.axes)
+
+    def _scan(self, x: np.ndarray, e0: int, skip: int) -> None:
+        """Differences of the padded run ``x`` (m, n) whose first stencil of order 1 ends
+        at padded index e0; stencils ending before e0 + skip were seen already."""
+        pad = VERIFY_REST_PADDING
+        d = x
+        for m in range(3):
+            d = np.diff(d, axis=0)
+            # d[i] ends at padded index e0 + i (order m+1 starts one later each time)
+            start = max(skip - m, 0)
+            if start >= d.shape[0]:
+                continue
+            ad = np.abs(d[start:])
+            i = np.argmax(ad, axis=0)
+            v = ad[i, np.arange(self.n)]
+            better = v > self.best[:, m]
+            if better.any():
+                self.best[better, m] = v[better]
+                self.where[better, m] = (e0 + m + start + i[better]) - pad
+        return None
+
+    def add(self, q: np.ndarray) -> bool:
+        """Check the next block of samples (K, n); False if a limit is broken in it."""
+        pad = VERIFY_REST_PADDING
+        q = np.asarray(q, dtype=float)
+        if not q.shape[0]:
+            return self.ok_so_far()
+        finite = np.isfinite(q)
+        if not finite.all():
+            bad = ~finite.all(axis=0)
+            rows = np.argmin(finite, axis=0)
+            newly = bad & (self.first_bad < 0)
+            self.first_bad[newly] = self.k + rows[newly]
+            q = np.where(finite, q, 0.0)  # the rest of the axis is reported as NaN anyway
+        if self.tail is None:
+            self.tail = np.repeat(q[:1], pad, axis=0)
+        x = np.concatenate([self.tail, q], axis=0)
+        # x[0] is padded index self.k (the sample k - pad); the first diff ends at +1
+        self._scan(x, self.k + 1, pad - 1)
+        self.tail = x[-pad:]
+        self.k += q.shape[0]
+        return self.ok_so_far()
+
+    def ratios(self) -> np.ndarray:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return (self.best / self.scale) / self.limits
+
+    def ok_so_far(self) -> bool:
+        return bool((self.first_bad < 0).all()) and bool(np.all(self.ratios()
+                                                                <= 1.0 + VERIFY_RATIO_SLACK))
+
+    def report(self) -> VerifyReport:
+        """The report of everything added, with the rest padding after the last sample."""
+        pad = VERIFY_REST_PADDING
+        if self.tail is not None:
+            x = np.concatenate([self.tail, np.repeat(self.tail[-1:], pad, axis=0)], axis=0)
+            self._scan(x, self.k + 1, pad - 1)
+        values = self.best / self.scale
+        where = self.where.copy()
+        where[values == 0] = 0  # an axis that never moves has no "worst" sample
+        nan_found = bool((self.first_bad >= 0).any())
+        for i in np.flatnonzero(self.first_bad >= 0):
+            values[i] = np.nan
+            where[i] = self.first_bad[i]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ratios = values / self.limits
+        ok = (not nan_found) and bool(np.all(ratios <= 1.0 + VERIFY_RATIO_SLACK))
+        self.tail = None  # the padding is added once
+        return VerifyReport(axes=self.axes, dt_s=self.dt_s, n_samples=int(self.k), ratios=ratios,
+                            values=values, limits=self.limits, where=where, ok=ok,
+                            nan_found=nan_found)

@@ -52,7 +52,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-# status codes returned by plan_core
+# status codes returned by plan_core (YIELD = 4 below)
 OK = 0
 NEED_SPACE = 1
 STUCK = 2
@@ -504,31 +504,72 @@ def _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, mode, hint, 
     return True, xl, hint
 
 
+#: pieces per block of the range-max table: spans shorter than two blocks are scanned
+_RM_BLOCK = 32
+#: header of the packed range-max table: m, blocks, levels
+_RM_HEAD = 3
+
+
 @njit(cache=True)
 def _window_max(T, p0, p1):
-    """Largest value over the table pieces p0..p1; ``T`` is the sparse table (levels, m)
-    of ``range_max_table`` (O(1) per query)."""
-    span = p1 - p0 + 1
+    """Largest value over the table pieces p0..p1 of ``range_max_table``'s packed table:
+    short spans (the usual case: a brake distance) are scanned, long ones read the
+    sparse table of block maxima for the whole blocks inside."""
+    B = _RM_BLOCK
+    if p1 - p0 < 2 * B:
+        best = T[_RM_HEAD + p0]
+        for p in range(p0 + 1, p1 + 1):
+            v = T[_RM_HEAD + p]
+            if v > best:
+                best = v
+        return best
+    m = int(T[0])
+    nb = int(T[1])
+    fb = (p0 + B - 1) // B  # first and last whole block inside [p0, p1]
+    lb = (p1 + 1) // B - 1
+    best = -np.inf
+    for p in range(p0, fb * B):
+        v = T[_RM_HEAD + p]
+        if v > best:
+            best = v
+    for p in range((lb + 1) * B, p1 + 1):
+        v = T[_RM_HEAD + p]
+        if v > best:
+            best = v
+    span = lb - fb + 1
     lvl = 0
     while (2 << lvl) <= span:
         lvl += 1
-    a = T[lvl, p0]
-    b = T[lvl, p1 - (1 << lvl) + 1]
-    return a if a > b else b
+    off = _RM_HEAD + m + lvl * nb
+    a = T[off + fb]
+    c = T[off + lb - (1 << lvl) + 1]
+    if a > best:
+        best = a
+    if c > best:
+        best = c
+    return best
 
 
 def range_max_table(K: np.ndarray) -> np.ndarray:
-    """Sparse table: row l holds max(K[p : p + 2**l]) (clipped at the end)."""
+    """Packed range-max table of K (m,): [m, blocks, levels, K, sparse table of the block
+    maxima (row l: max over 2**l blocks)], about 1.1 m values (a full sparse table of K
+    would take m log2 m: gigabytes on a path of a million moves)."""
+    K = np.asarray(K, dtype=float)
     m = K.shape[0]
-    levels = max(1, int(np.floor(np.log2(max(m, 1)))) + 1)
-    T = np.empty((levels, m))
-    T[0] = K
+    B = _RM_BLOCK
+    nb = max(1, (m + B - 1) // B)
+    pad = np.full(nb * B, -np.inf)
+    pad[:m] = K
+    bm = pad.reshape(nb, B).max(axis=1)
+    levels = max(1, int(np.floor(np.log2(nb))) + 1)
+    T = np.empty((levels, nb))
+    T[0] = bm
     for lvl in range(1, levels):
         w = 1 << (lvl - 1)
         prev = T[lvl - 1]
-        shifted = np.concatenate((prev[w:], np.full(w, -np.inf)))[:m]
+        shifted = np.concatenate((prev[w:], np.full(w, -np.inf)))[:nb]
         T[lvl] = np.maximum(prev, shifted)
-    return T
+    return np.concatenate((np.array([m, nb, levels], dtype=float), K, T.ravel()))
 
 
 @njit(cache=True)
@@ -836,13 +877,53 @@ def _chain_search(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, j, m, c
     return best, best_cert, hint
 
 
-@njit(cache=True, nogil=True)
-def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol, max_steps,
-              bs, bq, stats, K2, K3, K23, KV, easy_frac, gap_tol, fast, chain_seq):
-    """Run VPOp from sample k0 (samples < k0 fixed, b0 the last brake-fixed sample).
+#: plan_core's persistent state (``st``, int64): sample k, last brake-fixed sample b, the
+#: chain flag, the certificate's start c_at and length c_len, the certified-up-to index,
+#: where the last max run failed and was fixed, and the table lookup hint. Indices are
+#: local to the caller's buffers (global = local + the caller's base).
+ST_K, ST_B, ST_CHAIN, ST_CAT, ST_CLEN, ST_CERT, ST_LASTK, ST_LASTJ, ST_HINT = range(9)
+ST_SIZE = 9
+#: plan_core returned at an iteration boundary because k reached ``stop_k``
+YIELD = 4
 
-    Fills ``sh`` (K,), ``qh`` (K, n). Returns (status, k, b). Status NEED_SPACE asks the
-    caller to grow ``sh``/``qh`` and call again with (k, b).
+
+def new_state() -> np.ndarray:
+    """The state of a path about to be planned: sample 0 fixed (at rest), k = 1."""
+    st = np.zeros(ST_SIZE, dtype=np.int64)
+    st[ST_K] = 1
+    st[ST_CAT] = -1
+    st[ST_CERT] = _BIG
+    return st
+
+
+@njit(cache=True)
+def _save(st, k, b, chain, c_at, c_len, cert, last_k, last_j, hint):
+    st[ST_K] = k
+    st[ST_B] = b
+    st[ST_CHAIN] = 1 if chain else 0
+    st[ST_CAT] = c_at
+    st[ST_CLEN] = c_len
+    st[ST_CERT] = cert
+    st[ST_LASTK] = last_k
+    st[ST_LASTJ] = last_j
+    st[ST_HINT] = hint
+
+
+@njit(cache=True, nogil=True)
+def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, st, cs, cq, tol, max_steps,
+              bs, bq, stats, K2, K3, K23, KV, easy_frac, gap_tol, fast, chain_seq, floor_h,
+              stop_k, k_base):
+    """Run VPOp from the state ``st`` (samples < st[ST_K] fixed; see ``ST_*``).
+
+    Fills ``sh`` (K,), ``qh`` (K, n) and returns the status; the state is saved in ``st``
+    at every return, so a call that returns OK... YIELD or NEED_SPACE resumes exactly where
+    it stopped: the result does not depend on where the caller's buffers end. ``cs``/``cq``
+    (brake-run sized) hold the certificate of the last fix across calls.
+    Returns at the top of an iteration only: NEED_SPACE when fewer than a brake run's
+    worth of samples (``bs``'s length) is left in ``sh``, YIELD when k >= ``stop_k``.
+    ``floor_h`` > 0 bounds the backtracking: no sample before k - floor_h is changed
+    (samples up to b are final), so a caller may hand out and drop old samples.
+    ``k_base`` is the global index of local sample 0 (for ``max_steps``).
     stats: [backtracks, brake runs, brake-run steps, max steps, aim runs committed].
     ``easy_frac`` > 0 lets brake runs end early (see ``_easy``); ``gap_tol`` is how far
     short of L a committed aim run may stop; ``fast`` bounds brake runs by ``_horizon``;
@@ -854,26 +935,33 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol
     lo = np.empty(n)
     hi = np.empty(n)
     wk = np.empty((3, n))
-    cs = np.empty(bs.shape[0])  # the brake run that certified the last fix
-    cq = np.empty((bs.shape[0], n))
-    c_at = -1  # main index of its first sample (cs[3]); -1: none
-    c_len = 0
-    k = k0
-    b = b0
-    hint = 0
+    k = st[ST_K]
+    b = st[ST_B]
+    chain = st[ST_CHAIN] != 0  # the last sample was fixed by a backtrack
+    c_at = st[ST_CAT]  # main index of the certificate's first sample (cs[3]); -1: none
+    c_len = st[ST_CLEN]
+    cert = st[ST_CERT]  # _BIG: sample 0 is at rest
+    last_k = st[ST_LASTK]  # where the last max run failed, and the step it was fixed at
+    last_j = st[ST_LASTJ]
+    hint = st[ST_HINT]
     cap = sh.shape[0]
-    cert = _BIG  # sample 0 is at rest
-    chain = False  # the last sample was fixed by a backtrack
-    last_k = 0  # where the last max run failed, and the step it was fixed at
-    last_j = 0
+    room = bs.shape[0] + 8  # an iteration writes at most a brake run past k
     while True:
+        if floor_h > 0 and k - floor_h - 1 > b:
+            b = k - floor_h - 1  # a bounded look-back: older samples are final
         # done: three equal samples at the end point
         if k >= 3 and sh[k - 1] == L and sh[k - 2] == L and sh[k - 3] == L:
-            return OK, k, b
-        if k >= cap:
-            return NEED_SPACE, k, b
-        if k >= max_steps:
-            return STUCK, k, b
+            _save(st, k, b, chain, c_at, c_len, cert, last_k, last_j, hint)
+            return OK
+        if k + room >= cap:
+            _save(st, k, b, chain, c_at, c_len, cert, last_k, last_j, hint)
+            return NEED_SPACE
+        if k + k_base >= max_steps:
+            _save(st, k, b, chain, c_at, c_len, cert, last_k, last_j, hint)
+            return STUCK
+        if k >= stop_k:
+            _save(st, k, b, chain, c_at, c_len, cert, last_k, last_j, hint)
+            return YIELD
         if chain and c_at == k - 1 and c_len >= 3 and k + c_len + 1 < cap:
             # the chain after a fix, along the fix's own brake run, by bisection
             P, pc, hint = _chain_search(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh,
@@ -913,13 +1001,15 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol
                                                  tol, stats, K2, K3, K23, KV, easy_frac, hz, wk,
                                                  cs, cq)
                 if not ok:
-                    return INFEASIBLE, k, b
+                    _save(st, k, b, chain, c_at, c_len, cert, last_k, last_j, hint)
+                    return INFEASIBLE
                 c_at = k
-            st, c, hint = _brake_fix(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, bs,
-                                     bq, max_steps, q, qs, lo, hi, tol, stats, K2, K3, K23, KV,
-                                     easy_frac, hint, wk)
-            if st != OK:
-                return st, k, b
+            stf, c, hint = _brake_fix(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV,
+                                      bs, bq, max_steps, q, qs, lo, hi, tol, stats, K2, K3, K23,
+                                      KV, easy_frac, hint, wk)
+            if stf != OK:
+                _save(st, k, b, chain, c_at, c_len, cert, last_k, last_j, hint)
+                return stf
             if c >= 0:
                 cert = c
                 c_at = -1
@@ -939,7 +1029,8 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol
         lo_j = b + 1
         hi_j = k  # braking from k is impossible (its set is empty)
         if lo_j >= hi_j:
-            return INFEASIBLE, k, b
+            _save(st, k, b, chain, c_at, c_len, cert, last_k, last_j, hint)
+            return INFEASIBLE
         # braking from lo_j + 1 almost always succeeds (the test would fail about once
         # in 5000 backtracks): bisect above it first, and run that test only when no
         # later step passes (its run is then the certificate)
@@ -974,14 +1065,16 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol
                 else:
                     lo_j = base - 1
         j = lo_j
-        if not tested and j + 1 >= cert:
-            # fast mode: the brake chain has run past what its last run certified
+        if not tested and (j + 1 >= cert or (floor_h > 0 and j <= k - floor_h)):
+            # fast mode: the brake chain has run past what its last run certified; or the
+            # look-back floor, not a brake fix, is all that is left below (never assumed)
             ok, cert, c_len = _certified_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB,
                                              FV, bs, bq, max_steps, q, qs, lo, hi, tol, stats, K2,
                                              K3, K23, KV, easy_frac, _horizon(k, j, fast), wk,
                                              cs, cq)
             if not ok:
-                return INFEASIBLE, k, b
+                _save(st, k, b, chain, c_at, c_len, cert, last_k, last_j, hint)
+                return INFEASIBLE
             c_at = j
         # the end is what stops us: try to land on it with the aim policy in one run
         if gap_tol > 0.0 and k >= 2 and sh[k - 1] >= L - 2.0 * (sh[k - 1] - sh[k - 2]) - tol:
@@ -996,8 +1089,6 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol
                 kk = r[1]
                 if r[0] and L - bs[kk - 1] <= gap_tol:
                     need = jj + kk - 3
-                    if need + 3 > cap:
-                        return NEED_SPACE, k, b
                     for t in range(3, kk):
                         sh[jj + t - 3] = bs[t]
                         for i in range(n):
@@ -1009,11 +1100,12 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k0, b0, tol
                     break
             if done:
                 continue
-        st, c, hint = _brake_fix(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq,
-                                 max_steps, q, qs, lo, hi, tol, stats, K2, K3, K23, KV, easy_frac,
-                                 hint, wk)
-        if st != OK:
-            return st, j, b
+        stf, c, hint = _brake_fix(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs,
+                                  bq, max_steps, q, qs, lo, hi, tol, stats, K2, K3, K23, KV,
+                                  easy_frac, hint, wk)
+        if stf != OK:
+            _save(st, j, b, chain, c_at, c_len, cert, last_k, last_j, hint)
+            return stf
         if c >= 0:
             cert = c
             c_at = -1
