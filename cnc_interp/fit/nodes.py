@@ -173,7 +173,8 @@ def fit_polyline(nodes: np.ndarray, tol_mm: np.ndarray, tol_deg: float, lin: np.
     def f64(a, dtype=float):
         # contiguous and writeable: a read-only view (a frozen Path's arrays) would be a
         # separate numba specialization, compiled again on a first run
-        return np.require(a, dtype=dtype, requirements=["C", "W"])
+        a = np.ascontiguousarray(a, dtype=dtype)
+        return a if a.flags.writeable else a.copy()
     # where rotary axes move, at most one segment per move (knots chasing the soft speed
     # check of the tool's own path, whose share of the motion jumps from move to move,
     # multiplied the segments several times over)
