@@ -18,7 +18,8 @@ import os
 import sys
 import time
 
-CORPUS = os.environ.get("CNC_CORPUS", os.path.normpath(os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "shared", "corpus", "linuxcnc")))
+CORPUS = os.environ.get("CNC_CORPUS", os.path.normpath(os.path.join(
+    os.path.dirname(os.path.abspath(__file__)), "..", "..", "shared", "corpus", "linuxcnc")))
 DEFAULT_FILES = [
     os.path.join(CORPUS, "performance", "circle_small_segments_ncd.ngc"),
     os.path.join(CORPUS, "performance", "3D_Chips.ngc"),

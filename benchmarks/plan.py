@@ -5,7 +5,8 @@
     .venv/bin/python benchmarks/plan.py --json out.json
 
 For each program: parse + fit + plan (VPOp) + verify, with the plan stage timed on
-its own (numba compiled beforehand; the selection keeps the fastest of ``--repeat`` runs). "x real time" = cycle time / planning wall time.
+its own (numba compiled beforehand; the selection keeps the fastest of ``--repeat`` runs).
+"x real time" = cycle time / planning wall time.
 The sweep plans every corpus program that parses on a LinuxCNC configuration
 (corpus ``configs/*.ini``, default jerk where the INI has none), checks every limit,
 and lists failures with their error message.

@@ -1,16 +1,61 @@
 """cnc-interp: G-code in, jerk-limited axis setpoints out.
 
+::
+
+    import cnc_interp as ci
+    m = ci.load_machine("generic-mill")
+    traj = ci.plan(ci.fit(ci.read_program("samples/gcode/mill-contour.ngc", machine=m)), m)
+    assert ci.verify(traj, m).ok
+    ci.write(traj, "plan.csv")
+
 The package is a pipeline, one subpackage per stage::
 
     gcode  ->  fit  ->  plan  ->  export
                   \\->  fpga
 
-Importing the package is cheap: no stage, and nothing heavy (matplotlib, USB,
-numba), is imported here. It only checks (about 20 ms) that numba's cached
-kernels are not older than a module they call (``_kernel_cache``).
+with the public calls in ``api`` (re-exported here) and the command line (``cli``) on
+top. Importing the package is cheap: the API's names are loaded on first use (PEP 562),
+and nothing heavy (matplotlib, USB, numba) is imported here. It only checks (about
+20 ms) that numba's cached kernels are not older than a module they call
+(``_kernel_cache``).
 """
 
 __version__ = "0.1.0"
+
+#: public names -> the module that defines them (loaded on first attribute access)
+_LAZY = {
+    "load_machine": "api", "read_program": "api",
+    "verify": "api", "write": "api", "run": "api", "PlanResult": "api",
+    "DEFAULT_PLANNER": "api",
+    "CncInterpError": "errors", "GCodeError": "errors", "MachineError": "errors",
+    "FitError": "errors", "PlanError": "errors", "UsageError": "errors",
+    "Machine": "plan.machine", "Program": "gcode.program", "FitResult": "fit.result",
+    "Trajectory": "plan.trajectory", "VerifyReport": "plan.verify",
+    "PLANNER_NAMES": "plan.planners",
+}
+
+#: the stage packages that are also calls (``_stage_call``): ``fit(program)``, ``plan(...)``
+_STAGE_CALLS = ("fit", "plan")
+
+__all__ = ["__version__", *_LAZY, *_STAGE_CALLS]
+
+
+def __getattr__(name: str):
+    import importlib
+
+    if name in _STAGE_CALLS:  # importing the package sets the attribute itself
+        return importlib.import_module(f"{__name__}.{name}")
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'cnc_interp' has no attribute {name!r}")
+
+    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(__all__)
 
 
 def _refresh_kernel_cache() -> None:

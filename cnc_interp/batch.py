@@ -32,6 +32,7 @@ import time
 from dataclasses import dataclass
 
 from .errors import SourceLocation, UsageError
+from .plan.settings import DEFAULT_PLANNER
 
 #: file name endings taken as part programs when a directory is given
 GCODE_SUFFIXES = (".ngc", ".nc", ".gcode", ".gc", ".g", ".tap", ".cnc")
@@ -58,7 +59,7 @@ class BatchOptions:
 
     paths: tuple[str, ...]
     machine_spec: str
-    planner: str = "optimal"
+    planner: str = DEFAULT_PLANNER
     dt_s: float | None = None
     tol_mm: float | None = None
     fit_method: str | None = None
@@ -345,7 +346,7 @@ def format_table(report: dict) -> str:
 
 def write_report(report: dict, path: str) -> None:
     """``.csv``: one row per program; anything else: the JSON report. Written atomically."""
-    from .export.atomic import atomic_write
+    from .outfile import atomic_write
 
     if path.lower().endswith(".csv"):
         buf = io.StringIO()

@@ -17,6 +17,7 @@ import click
 
 from . import __version__
 from .errors import CncInterpError
+from .plan.settings import DEFAULT_PLANNER
 
 PLANNERS = ("optimal", "vpop", "constant", "variable")
 
@@ -158,7 +159,7 @@ def fit(part, machine_spec, tool_table, tol_mm, corner_deg, fit_method, out, as_
 @click.argument("part", type=click.Path(allow_dash=True, dir_okay=False))
 @_machine_option()
 @_tool_table_option
-@click.option("--planner", type=click.Choice(PLANNERS), default="optimal", show_default=True,
+@click.option("--planner", type=click.Choice(PLANNERS), default=DEFAULT_PLANNER, show_default=True,
               help="optimal (near-time-optimal: feed-profile LP, exact sampler), VPOp "
                    "(paper 001), or paper 000's constant / variable feedrate planner.")
 @_dt_option
@@ -176,6 +177,12 @@ def fit(part, machine_spec, tool_table, tol_mm, corner_deg, fit_method, out, as_
 def plan(part, machine_spec, tool_table, planner, dt_s, tol_mm, fit_method, start, out, quiet,
          as_json) -> None:
     """Plan PART into setpoints every dt for MACHINE's axes."""
+    from .outfile import watch_interrupts
+
+    # Ctrl-C taken by a thread of its own, before numpy's and the stream's threads start
+    # (they inherit SIGINT blocked); a signal landing in any of them would wait for the
+    # main thread to wake up on its own
+    watch_interrupts()
     from .pipeline import PlanOptions, run_plan
 
     opts = PlanOptions(part=part, machine_spec=machine_spec, planner=planner, dt_s=dt_s,
@@ -275,7 +282,7 @@ def stream(part, machine_spec, planner, dt_s, tol_mm, fit_method, device, dry_ru
 @main.command()
 @click.argument("paths", nargs=-1, required=True, type=click.Path(exists=True))
 @_machine_option(required=True)
-@click.option("--planner", type=click.Choice(PLANNERS), default="optimal", show_default=True,
+@click.option("--planner", type=click.Choice(PLANNERS), default=DEFAULT_PLANNER, show_default=True,
               help="optimal (near-time-optimal: feed-profile LP, exact sampler), VPOp "
                    "(paper 001), or paper 000's constant / variable feedrate planner.")
 @_dt_option
@@ -320,7 +327,10 @@ def run() -> None:
         # One line, like every other error; `--help` shows the usage.
         _stderr(f"cnc-interp: error: {exc.format_message()}")
         sys.exit(exc.exit_code if isinstance(exc, click.UsageError) else 2)
-    except click.exceptions.Abort:
+    except click.exceptions.Abort:  # Ctrl-C inside click: it has printed its newline
+        from .outfile import interrupt_reported
+
+        interrupt_reported()
         sys.exit(130)
     except CncInterpError as exc:
         _stderr(exc.format())
@@ -330,8 +340,7 @@ def run() -> None:
         _silence_stdout()
         sys.exit(0)
     except KeyboardInterrupt:
-        _stderr("cnc-interp: interrupted")
-        sys.exit(130)
+        _interrupted()
     except MemoryError:
         _stderr("cnc-interp: error: out of memory")
         sys.exit(1)
@@ -339,14 +348,21 @@ def run() -> None:
         if _caused_by_interrupt(exc):
             # Ctrl-C while compiled code returned: numba reports the pending
             # KeyboardInterrupt as a SystemError whose cause it is
-            _stderr("cnc-interp: interrupted")
-            sys.exit(130)
+            _interrupted()
         if os.environ.get("CNC_INTERP_DEBUG"):
             raise
         _stderr(f"cnc-interp: internal error: {type(exc).__name__}: {exc} "
                 "(please report it; set CNC_INTERP_DEBUG=1 for the traceback)")
         sys.exit(1)
     _flush_stdout()
+
+
+def _interrupted() -> None:
+    from .outfile import interrupt_reported
+
+    _stderr("cnc-interp: interrupted")
+    interrupt_reported()
+    sys.exit(130)
 
 
 def _warnings_as_lines() -> None:

@@ -27,12 +27,21 @@ import os
 import stat
 import sys
 import tempfile
+import threading
 from typing import BinaryIO, Iterable, Iterator
 
 from .errors import OutputError, SourceLocation, UsageError
 
 #: ``errno`` values that mean the disk (or quota) is full: a plan failure, not bad input
 _FULL = {28, 122}  # ENOSPC, EDQUOT
+
+#: after Ctrl-C, the time the program has to unwind (discard its output, say so) before it
+#: is ended regardless: a compiled kernel can hold a thread for long, and interpreter exit
+#: waits for the planning threads
+INTERRUPT_GRACE_S = 2.0
+
+_INTERRUPTED = threading.Event()  # Ctrl-C seen: no output is committed after it
+_REPORTED = threading.Event()  # the CLI has printed its "interrupted" line
 
 
 def _umask() -> int:
@@ -132,6 +141,8 @@ def atomic_write(path: str) -> Iterator[BinaryIO]:
                 fh.flush()
                 os.fsync(fh.fileno())
                 os.fchmod(fh.fileno(), mode)
+                if _INTERRUPTED.is_set():  # Ctrl-C, however late, keeps the old file
+                    raise KeyboardInterrupt
                 if tmp is None:  # an unnamed file: give it a name only now, then rename
                     linked = _temp_name(directory, os.path.basename(target))
                     _link_fd(fh.fileno(), linked)
@@ -209,6 +220,44 @@ def _remove_on_termination() -> None:
     for sig in (signal.SIGTERM, signal.SIGHUP):
         if signal.getsignal(sig) in (signal.SIG_DFL, None):
             signal.signal(sig, handler)
+
+
+def watch_interrupts() -> None:
+    """Make Ctrl-C end a long plan promptly and without output.
+
+    SIGINT is blocked in this (the main) thread, and so in every thread started after it,
+    and taken by a watcher thread with ``sigwait``, which runs whatever the main thread is
+    doing (a Python-level handler waits for it to reach a bytecode). The watcher marks the
+    process interrupted (``atomic_write`` then commits nothing), raises
+    ``KeyboardInterrupt`` in the main thread, and ends the process with status 130 if it
+    is still running ``INTERRUPT_GRACE_S`` later. Call it before any other thread starts;
+    elsewhere than in the main thread it does nothing.
+    """
+    import signal
+    import time
+
+    if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "sigwait"):
+        return
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+
+    def watch() -> None:
+        import _thread
+
+        signal.sigwait({signal.SIGINT})
+        _INTERRUPTED.set()
+        _thread.interrupt_main()
+        time.sleep(INTERRUPT_GRACE_S)
+        remove_temporaries()  # an unnamed (O_TMPFILE) output vanishes with the process
+        if not _REPORTED.is_set():
+            os.write(2, b"cnc-interp: interrupted\n")
+        os._exit(130)
+
+    threading.Thread(target=watch, daemon=True, name="cnc-interp-sigint").start()
+
+
+def interrupt_reported() -> None:
+    """The CLI printed its one "interrupted" line: the watcher must not print another."""
+    _REPORTED.set()
 
 
 def remove_temporaries() -> None:

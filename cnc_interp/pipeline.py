@@ -10,19 +10,8 @@ from __future__ import annotations
 import numpy as np
 
 from .errors import SourceLocation, UsageError
-
-
-def read_part(part: str) -> tuple[str, bytes]:
-    """Read a part program given as a path or ``-`` (stdin): (display name, raw bytes)."""
-    import sys
-
-    if part == "-":
-        return "<stdin>", sys.stdin.buffer.read()
-    try:
-        with open(part, "rb") as fh:
-            return part, fh.read()
-    except OSError as exc:
-        raise UsageError(f"cannot read part program: {exc.strerror}", _loc(part)) from None
+from .api import read_part  # noqa: F401  (re-exported: the CLI and batch read parts here)
+from .plan.settings import DEFAULT_PLANNER
 
 
 def _loc(name: str):
@@ -47,7 +36,7 @@ def load_program_for(part: str, machine_spec: str | None, require_machine: bool 
     Without a machine the program's own axes are used (at least XYZ). ``tool_table``
     (a LinuxCNC tool table file) overrides the machine's (``[EMCIO] TOOL_TABLE``).
     """
-    from .gcode import read_program
+    from .api import read_program
 
     machine = load_machine_spec(machine_spec)
     if machine is None and require_machine:
@@ -55,12 +44,7 @@ def load_program_for(part: str, machine_spec: str | None, require_machine: bool 
 
         machine = load_machine(DEFAULT_PRESET)
     name, data = read_part(part)
-    axes = machine.axes if machine is not None else None
-    if start is None and machine is not None:
-        start = machine.start
-    if tool_table is None and machine is not None:
-        tool_table = machine.tool_table
-    program = read_program(data, source=name, axes=axes, start=start, tool_table=tool_table)
+    program = read_program(data, machine, name=name, start=start, tool_table=tool_table)
     return program, machine
 
 
@@ -74,7 +58,7 @@ def fit_loaded(program, settings):
 
 
 # --- batch: one program from bytes to a result record (H3a, issue 7) ----------
-def process_program(name: str, data: bytes, machine, planner: str = "optimal",
+def process_program(name: str, data: bytes, machine, planner: str = DEFAULT_PLANNER,
                     dt_s: float | None = None, tol_mm: float | None = None,
                     fit_method: str | None = None) -> dict:
     """Parse, fit, plan and verify one program; the batch's per-program record.
@@ -84,22 +68,11 @@ def process_program(name: str, data: bytes, machine, planner: str = "optimal",
     ``nodes``, ``segments``, ``path_length_mm`` (rapids included), ``cycle_time_s``,
     ``worst_ratio`` (verify), ``worst`` (axis/limit/sample of it), ``max_fit_dev_mm``.
     """
-    from .fit.settings import FitSettings
-    from .gcode import read_program
-    from .plan.budget import check_sample_budget, held_time_s
-    from .plan.settings import PlanSettings
-    from .plan.timeline import plan_program
-    from .plan.verify import verify
+    from .api import run
 
-    program = read_program(data, source=name, axes=machine.axes, start=machine.start,
-                           tool_table=machine.tool_table)
-    fit_settings = FitSettings.from_options(tol_mm=tol_mm, machine=machine, method=fit_method)
-    result = fit_loaded(program, fit_settings)
-    settings = PlanSettings.from_options(planner=planner, dt_s=dt_s, tol_mm=tol_mm, machine=machine)
-    check_sample_budget(result.paths, machine, settings.dt_s, program.source,
-                        held_s=held_time_s(result.items))
-    traj = plan_program(result, machine.with_dt(settings.dt_s), settings)
-    report = verify(traj, machine)
+    res = run(data, machine, planner=planner, dt_s=dt_s, tol_mm=tol_mm, fit_method=fit_method,
+              name=name, check=False)
+    program, result, traj, report = res.program, res.fit, res.trajectory, res.report
     axis, kind, ratio, sample = report.worst()
     return {
         "status": "ok" if report.ok else "violation",
@@ -138,7 +111,7 @@ class PlanOptions:
 
     part: str
     machine_spec: str | None = None
-    planner: str = "optimal"
+    planner: str = DEFAULT_PLANNER
     dt_s: float | None = None
     tol_mm: float | None = None
     fit_method: str | None = None
@@ -162,6 +135,7 @@ class PlanOutcome:
     timings: dict
     source: str
     input_meta: dict | None = None
+    fit: object = None  # the FitResult planned
 
     def summary(self) -> dict:
         """Plain JSON-able summary (what ``plan`` prints on stderr)."""
@@ -205,7 +179,7 @@ def parse_start(spec: str | None, axes: str, base: np.ndarray | None = None) -> 
     return out
 
 
-def plan_part(part: str, machine_spec: str | None = None, planner: str = "optimal",
+def plan_part(part: str, machine_spec: str | None = None, planner: str = DEFAULT_PLANNER,
               dt_s: float | None = None, tol_mm: float | None = None,
               start: str | np.ndarray | None = None, progress=None,
               fit_method: str | None = None, tool_table: str | None = None) -> PlanOutcome:
@@ -213,74 +187,25 @@ def plan_part(part: str, machine_spec: str | None = None, planner: str = "optima
 
     Raises ``PlanError`` (exit 1) when the plan violates a limit: that is a bug.
     """
-    import time
-
-    from .errors import PlanError
-    from .fit.settings import FitSettings
-    from .plan.budget import check_sample_budget, held_time_s
+    from .api import run
     from .plan.machine_io import DEFAULT_PRESET, load_machine
-    from .plan.settings import PlanSettings
-    from .plan.timeline import plan_program
-    from .plan.verify import verify
 
-    timings = {}
-    t0 = time.perf_counter()
     machine = load_machine(machine_spec if machine_spec is not None else DEFAULT_PRESET)
     if isinstance(start, str):
         start = parse_start(start, machine.axes, machine.start)
-    machine = machine.with_start(start)
-    settings = PlanSettings.from_options(planner=planner, dt_s=dt_s, tol_mm=tol_mm, machine=machine)
-    machine = machine.with_dt(settings.dt_s)
-    from .gcode import read_program
-
     name, data = read_part(part)
-    program = read_program(data, source=name, axes=machine.axes, start=machine.start,
-                           tool_table=tool_table if tool_table is not None else machine.tool_table)
-    input_meta = _input_meta(name, data)
-    t1 = time.perf_counter()
-    timings["parse"] = t1 - t0
-    fit_settings = FitSettings.from_options(tol_mm=tol_mm, machine=machine, method=fit_method)
-    fitted = fit_loaded(program, fit_settings)
-    t2 = time.perf_counter()
-    timings["fit"] = t2 - t1
-    check_sample_budget(fitted.paths, machine, settings.dt_s, program.source,
-                        held_s=held_time_s(fitted.items))
-    try:
-        traj = plan_program(fitted, machine, settings, progress=progress)
-    except PlanError as exc:
-        if exc.location.line == 0 and exc.location.file == SourceLocation().file:  # name the part program
-            raise PlanError(exc.message, _loc(program.source)) from None
-        raise
-    t3 = time.perf_counter()
-    timings["plan"] = t3 - t2
-    report = verify(traj, machine)
-    timings["verify"] = time.perf_counter() - t3
-    if not report.ok:
-        axis, kind, ratio, idx = report.worst()
-        raise PlanError(f"bug: plan violates the {axis} {kind} limit (ratio {ratio:.12g} at "
-                        f"sample {idx}, t = {idx * traj.dt_s:.6g} s); please report it",
-                        _loc(program.source))
-    return PlanOutcome(trajectory=traj, report=report, machine=machine, settings=settings,
-                       fit_stats=dict(getattr(fitted, "stats", {}) or {}), timings=timings,
-                       source=program.source, input_meta=input_meta)
+    res = run(data, machine, planner=planner, dt_s=dt_s, tol_mm=tol_mm, fit_method=fit_method,
+              start=start, tool_table=tool_table, name=name, progress=progress)
+    return PlanOutcome(trajectory=res.trajectory, report=res.report, machine=res.machine,
+                       settings=res.settings, fit_stats=dict(res.fit.stats or {}),
+                       timings=res.timings_s, source=res.program.source,
+                       input_meta=_input_meta(name, data), fit=res.fit)
 
 
 def _input_meta(name: str, data: bytes) -> dict:
-    """Name, size, line count and SHA-256 of the part program (MCAP ``input`` record)."""
-    import hashlib
+    from .export.mcap_io import input_metadata
 
-    lines = data.count(b"\n") + (1 if data and not data.endswith(b"\n") else 0)
-    return {"name": name, "sha256": hashlib.sha256(data).hexdigest(), "lines": lines,
-            "bytes": len(data)}
-
-
-def _load_with(part: str, machine):
-    """Parse ``part`` for ``machine`` (its axes and start): (Program, Machine)."""
-    from .gcode import read_program
-
-    name, data = read_part(part)
-    return read_program(data, source=name, axes=machine.axes, start=machine.start,
-                        tool_table=machine.tool_table), machine
+    return input_metadata(name, data)
 
 
 def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | None = None) -> dict:
@@ -303,7 +228,7 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
     import time
 
     from .errors import PlanError
-    from .export.atomic import atomic_write
+    from .outfile import atomic_write
     from .fit.fitter import iter_fit
     from .fit.settings import FitSettings
     from .gcode.stream import ProgramStream
@@ -447,7 +372,7 @@ def run_plan(opts: PlanOptions) -> None:
     import json
     import sys
 
-    from .export.atomic import check_writable
+    from .outfile import check_writable
     from .export.progress import progress as progress_bar
 
     out = opts.out or "-"

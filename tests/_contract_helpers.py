@@ -20,10 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-REPO = os.path.dirname(HERE)
-SAMPLES = os.path.join(REPO, "samples", "gcode")
-CORPUS = os.path.normpath(os.path.join(REPO, "..", "shared", "corpus", "linuxcnc"))
+from .conftest import CORPUS, HERE, REPO, SAMPLES  # noqa: F401  (re-exported to the tests)
 
 #: one plan of a small program, even on a loaded 2-core machine
 PROC_TIMEOUT_S = 300

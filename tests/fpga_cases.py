@@ -30,9 +30,12 @@ def planar_path(theta, p, x_end, origin0=(0.0, 0.0), axes="XZ", plane=(0, 1), ot
         # q_h = o_h + x c - p(x) s ; q_v = o_v + x s + p(x) c  (quintics in x)
         ch = -s * p[k]
         cv = c * p[k]
-        ch = ch.copy(); cv = cv.copy()
-        ch[0] += o[0]; cv[0] += o[1]
-        ch[1] += c; cv[1] += s
+        ch = ch.copy()
+        cv = cv.copy()
+        ch[0] += o[0]
+        cv[0] += o[1]
+        ch[1] += c
+        cv[1] += s
         coef[k, :, h] = ch
         coef[k, :, v] = cv
         for i in range(n_axes):

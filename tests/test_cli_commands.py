@@ -11,7 +11,7 @@ from click.testing import CliRunner
 
 from cnc_interp import cli
 from cnc_interp.errors import CncInterpError
-from cnc_interp.export.atomic import atomic_write
+from cnc_interp.outfile import atomic_write
 from cnc_interp.export.csv_io import write_csv
 from cnc_interp.export.mcap_io import write_mcap
 

@@ -480,7 +480,7 @@ def test_ctrl_c_leaves_no_output_and_no_temp_file(tmp_path, phase):
         if proc.poll() is None:
             proc.kill()
             proc.wait()
-    assert os.listdir(work) == [], f"left behind: {os.listdir(work)}"
+    assert os.listdir(work) == [], f"left behind: {os.listdir(work)} (exit {code}: {err!r})"
     assert code in (130, -signal.SIGINT), (code, err)
     assert "Traceback" not in err, err
     assert err.count("\n") <= 1, err

@@ -7,7 +7,7 @@ import sys
 import numpy as np
 import pytest
 
-from cnc_interp.export.atomic import atomic_write
+from cnc_interp.outfile import atomic_write
 from cnc_interp.export.csv_io import PlanFileError, read_csv, write_csv
 from cnc_interp.plan.trajectory import Trajectory
 

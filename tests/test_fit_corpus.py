@@ -18,7 +18,7 @@ from cnc_interp.errors import CncInterpError
 from cnc_interp.fit import FitSettings, Path, fit_program
 from cnc_interp.fit.report import fit_statistics
 
-CORPUS = os.environ.get("CNC_CORPUS", os.path.normpath(os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "shared", "corpus", "linuxcnc")))
+from .conftest import CORPUS  # noqa: E402
 
 SUBSET = [
     "performance/circle_small_segments_ncd.ngc",

@@ -127,7 +127,8 @@ def test_compiled_polyline_deviation_equals_path_deviation(seed):
 def test_single_moves_are_exact_lines_with_zero_deviation():
     # a square: four sharp corners, every side a single move
     sq = np.array([[0, 0, 0], [10, 0, 0], [10, 10, 0], [0, 10, 0], [0, 0, 0]], float) + 1000.0
-    res = fit_program(Program("sq", "XYZ", (_run(sq), Stop(5, "M2", sq[-1])), sq[0], 6), FitSettings(blend_corners=False))
+    res = fit_program(Program("sq", "XYZ", (_run(sq), Stop(5, "M2", sq[-1])), sq[0], 6),
+                      FitSettings(blend_corners=False))
     paths = res.paths
     assert len(paths) == 4
     for k, p in enumerate(paths):

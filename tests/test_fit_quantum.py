@@ -13,8 +13,7 @@ from cnc_interp.fit import FitSettings, fit_program
 from cnc_interp.fit.quantum import coordinate_quantum
 from cnc_interp.gcode import read_program
 
-CORPUS = os.environ.get("CNC_CORPUS", os.path.normpath(os.path.join(
-    os.path.dirname(os.path.abspath(__file__)), "..", "..", "shared", "corpus", "linuxcnc")))
+from .conftest import CORPUS  # noqa: E402
 
 
 def _circle(decimals: int, units: str = "G21", n: int = 200, r: float = 1.0, extra: str = "") -> str:

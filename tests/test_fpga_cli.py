@@ -15,7 +15,7 @@ from cnc_interp.fpga.program import build_program
 
 from .fpga_cases import gentle_curve, quintic_plan
 
-CORPUS = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "corpus", "linuxcnc")
+from .conftest import CORPUS  # noqa: E402
 XZ_INI = os.path.join(CORPUS, "configs", "XZ.ini")
 
 

@@ -25,7 +25,7 @@ from cnc_interp.fpga.frames import (
     read_frame_file,
     status_frame,
 )
-from cnc_interp.fpga.model import run_program, to_mm
+from cnc_interp.fpga.model import run_program
 from cnc_interp.fpga.program import build_program
 from cnc_interp.fpga.testvectors import export_test_vectors, parse_hex_word, replay_vectors
 

@@ -15,11 +15,11 @@ import pytest
 
 from cnc_interp.fpga.model import run_program
 
-pytestmark = pytest.mark.skipif(os.environ.get("CNC_INTERP_QEMU") != "1",
-                                reason="QEMU USB integration test is opt-in (CNC_INTERP_QEMU=1)")
+pytestmark = [pytest.mark.qemu, pytest.mark.skipif(os.environ.get("CNC_INTERP_QEMU") != "1",
+                                reason="QEMU USB integration test is opt-in (CNC_INTERP_QEMU=1)")]
 
 
-CORPUS = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "corpus", "linuxcnc")
+from .conftest import CORPUS  # noqa: E402
 
 
 def test_stream_through_qemu_usb_stack(tmp_path):

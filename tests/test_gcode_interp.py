@@ -9,7 +9,7 @@ import pytest
 from numpy.testing import assert_allclose
 
 from cnc_interp.errors import GCodeError, UnsupportedError
-from cnc_interp.gcode import Dwell, Run, Stop, read_program
+from cnc_interp.gcode import Stop, read_program
 
 
 def prog(text: str, **kw):
@@ -288,7 +288,7 @@ def _random_program(rng) -> str:
             w = f"X{x!r} Y{y!r}" + (f" Z{z!r}" if z is not None else "")
             lines.append(("G1 " if rng.random() < 0.3 else "") + w)
         if rng.random() < 0.05:
-            lines.append(f"G91 G1 X0.5\nG90")
+            lines.append("G91 G1 X0.5\nG90")
             x += 0.5
     return "\n".join(lines) + "\nM2\n"
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from numpy.testing import assert_allclose
 
 from cnc_interp.errors import GCodeError
 from cnc_interp.gcode import Dwell, Run, read_program

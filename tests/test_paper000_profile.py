@@ -1,6 +1,5 @@
 """Paper 000's polynomial feed transition, profile data and look-ahead."""
 
-import math
 
 import numpy as np
 import pytest

@@ -18,7 +18,7 @@ from cnc_interp.plan.timeline import Window
 
 from ._contract_helpers import SAMPLES, console_script
 
-CORPUS = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "corpus", "linuxcnc")
+from .conftest import CORPUS  # noqa: E402
 #: the smallest window there is: blocks of 7 samples, one path per job, nothing ahead
 TINY = Window(block_samples=7, job_paths=1, job_samples=1, jobs_ahead=1, chunks_ahead=1,
               path_window=1)

@@ -11,7 +11,7 @@ import pytest
 from cnc_interp.errors import CncInterpError
 from cnc_interp.pipeline import plan_part
 
-CORPUS = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "corpus", "linuxcnc")
+from .conftest import CORPUS  # noqa: E402
 INI = os.path.join(CORPUS, "configs", "axis_mm.ini")
 SUBSET = [
     "arc-feed/basic_xy.ngc",

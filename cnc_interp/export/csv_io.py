@@ -16,7 +16,7 @@ import numpy as np
 
 from ..constants import ALL_AXES, CSV_CHUNK_ROWS, CSV_TIME_REL_TOL
 from ..errors import CncInterpError, SourceLocation
-from .atomic import atomic_write
+from ..outfile import atomic_write
 
 _FIXED = ("t", "s", "feed")
 #: blocks of at least this many rows are formatted in two halves on two threads

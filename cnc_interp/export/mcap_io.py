@@ -28,7 +28,6 @@ for looking at, carry 9 significant digits.
 from __future__ import annotations
 
 import hashlib
-import io
 import json
 import math
 import operator
@@ -37,11 +36,11 @@ from typing import Iterable, Mapping
 import numpy as np
 
 from ..constants import MCAP_CHUNK_BYTES
+from ..errors import SourceLocation, UsageError
 
 #: a /segments message covers at most this many samples (a longer run of one source
 #: line, e.g. a long dwell, is split): the messages of an open segment wait for its end
 MCAP_SEGMENT_MAX_SAMPLES = 1 << 16
-from ..errors import SourceLocation, UsageError
 
 #: samples formatted per batch (bounds memory for very long plans)
 _BATCH = 65536
@@ -85,7 +84,7 @@ def write_mcap(traj, out: str, metadata: Mapping | None = None, machine=None,
     Returns:
         The number of messages written.
     """
-    from .atomic import atomic_write
+    from ..outfile import atomic_write
 
     fixed = _fixed_segments(traj, segments) if segments is not None else None
     with atomic_write(out) as fh:

@@ -59,7 +59,7 @@ def plot_trajectory(traj, machine, out: str, title: str = "") -> str:
     import matplotlib.pyplot as plt
     from matplotlib.backend_bases import FigureCanvasBase
 
-    from .atomic import atomic_write
+    from ..outfile import atomic_write
 
     fmt = os.path.splitext(out)[1].lstrip(".").lower() or "png"
     supported = FigureCanvasBase.get_supported_filetypes()

@@ -12,3 +12,7 @@ from .result import FitResult
 from .settings import FitSettings
 
 __all__ = ["fit_program", "fit_run", "FitSettings", "Path", "PlanarSegments", "FitResult"]
+
+from .._stage_call import make_callable  # noqa: E402
+
+make_callable(__name__)  # ``cnc_interp.fit(program, tol_mm=...)`` is ``api.fit``

@@ -107,9 +107,9 @@ def prepare_run(run: Run, settings) -> PreparedRun:
     line_k[0] = line[0]
     curves = []
     for cp in run.curves:
-        f, l = int(new_index[cp.first]), int(new_index[cp.last])
-        if l > f:
-            curves.append(CurvePiece(f, l, cp.curve))
+        first, last = int(new_index[cp.first]), int(new_index[cp.last])
+        if last > first:
+            curves.append(CurvePiece(first, last, cp.curve))
     d = np.diff(nodes_k, axis=0)
     lin_len = np.sqrt((d[:, lin] ** 2).sum(axis=1)) if lin.any() else np.zeros(len(d))
     rot_only = (lin_len <= FIT_LINEAR_ZERO_MM) & (~lin).any()

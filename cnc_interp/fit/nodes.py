@@ -6,7 +6,8 @@ Method (robust, O(n) per round; the rounds run in one numba kernel, ``_bspline.r
   rotary axes scaled to mm by tol_mm / tol_deg), so |dq/du| ≈ 1;
 * a clamped quintic B-spline with interior knots at every
   ``FIT_INITIAL_NODES_PER_SPAN``-th node is fitted by weighted least squares to the
-  nodes (weight tol_ref / tol_node) and to points on every chord (half that weight), with a small third-divided-difference smoothing term and a
+  nodes (weight tol_ref / tol_node) and to points on every chord (half that weight), with a
+  small third-divided-difference smoothing term and a
   vanishing ridge (both keep knot spans without data well posed); its end positions
   are the end nodes exactly, and optionally its end derivatives in u are imposed (a
   G2 junction with an exact curve);
@@ -169,7 +170,11 @@ def fit_polyline(nodes: np.ndarray, tol_mm: np.ndarray, tol_deg: float, lin: np.
     d2s = start.d2 if start is not None else zero
     d1e = end.d1 if end is not None else zero
     d2e = end.d2 if end is not None else zero
-    f64 = np.ascontiguousarray
+    def f64(a, dtype=float):
+        # contiguous and writeable: a read-only view (a frozen Path's arrays) would be a
+        # separate numba specialization, compiled again on a first run
+        a = np.ascontiguousarray(a, dtype=dtype)
+        return a if a.flags.writeable else a.copy()
     # where rotary axes move, at most one segment per move (knots chasing the soft speed
     # check of the tool's own path, whose share of the motion jumps from move to move,
     # multiplied the segments several times over)

@@ -403,7 +403,8 @@ def _try(xs, zs, tol, constrained, rho1, rho2, mu, b, e, th, H, V, S, max_incl, 
          per_x, max_checks, work):
     """Fit and test the segment ending at node e (its rotated nodes xs, zs): True when
     every node and every point along every chord (the programmed moves; the tolerance
-    bounds the distance to the programmed path everywhere) is within its tolerance. Stops at the first failure, checking from the
+    bounds the distance to the programmed path everywhere) is within its tolerance. Stops at
+    the first failure, checking from the
     segment's end (where a too long segment fails first); the vertical residual
     bounds the distance, so the Newton projection runs only where it exceeds the
     tolerance. The end is pulled towards the slope and curvature of the nodes within
@@ -622,7 +623,8 @@ def fit_planar(nodes: np.ndarray, plane: tuple[int, int], tol_mm: np.ndarray, ax
     segments room for short transitions; the tolerance holds along every move.
     """
     h, v = plane
-    nodes, line, feed, tol_mm = densify_chords(nodes, plane, line, feed, np.asarray(tol_mm, dtype=float) * FIT_TOL_SAFETY)
+    nodes, line, feed, tol_mm = densify_chords(nodes, plane, line, feed,
+                                               np.asarray(tol_mm, dtype=float) * FIT_TOL_SAFETY)
     tol_mm = tol_mm / FIT_TOL_SAFETY
     state = (0, 0, False, 0.0, 0.0, 0.0)
     kept = None

@@ -3,9 +3,13 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 from ..gcode.program import Dwell, Program, Stop
 from .path import Path
+
+if TYPE_CHECKING:
+    from ..errors import FitError
 
 #: one entry of the fitted timeline
 FittedItem = Path | Dwell | Stop
@@ -27,7 +31,7 @@ class FitResult:
 
     program: Program
     items: tuple[FittedItem, ...]
-    stats: dict = field(default_factory=dict)
+    stats: dict[str, Any] = field(default_factory=dict)
 
     @property
     def paths(self) -> tuple[Path, ...]:
@@ -41,11 +45,12 @@ def require_within_tolerance(result: FitResult) -> FitResult:
     st = result.stats
     if st.get("within_tolerance", True):
         return result
-    run = next((r for r in st.get("runs", []) if r.get("outside_lines")), {})
+    run: dict[str, Any] = next((r for r in st.get("runs", []) if r.get("outside_lines")), {})
     raise fit_outside_error(run, result.program.source, st)
 
 
-def fit_outside_error(run_info: dict, source: str, stats: dict | None = None):
+def fit_outside_error(run_info: dict[str, Any], source: str,
+                      stats: dict[str, Any] | None = None) -> "FitError":
     """The ``FitError`` (exit 1) for a run whose fit misses its tolerance (``run_info``:
     the fit's per-run statistics; ``stats``: the program's, for its worst ratios)."""
     from ..errors import FitError, SourceLocation

@@ -90,45 +90,25 @@ def emulate_file(frames_path: str, out: str) -> None:
 def plan_for_stream(opts: StreamOptions, formats=None, with_machine: bool = False):
     """Parse, fit, plan and verify like ``plan`` does: (FitResult, Trajectory[, Machine]).
 
-    The same steps as ``pipeline.plan_part``, kept here because the stream needs
-    the fitted paths (their planar form), which ``PlanOutcome`` does not carry.
-    The plan is made against the machine's limits less the device margin
-    (``fpga/limits.py``) so that the device's rounded setpoints hold the real limits;
-    ``with_machine`` also returns the real machine (limits unscaled).
+    ``api.run`` on the machine's limits less the device margin (``fpga/limits.py``), so
+    that the device's rounded setpoints hold the real limits; ``with_machine`` also
+    returns the real machine (limits unscaled).
     """
     from .fixed import FpgaFormats
     from .limits import device_margin, with_margin
 
-    from ..errors import PlanError
-    from ..fit.settings import FitSettings
-    from ..gcode import read_program
-    from ..pipeline import fit_loaded, read_part
-    from ..plan.budget import check_sample_budget, held_time_s
+    from ..api import read_part, run
     from ..plan.machine_io import DEFAULT_PRESET, load_machine
     from ..plan.settings import PlanSettings
-    from ..plan.timeline import plan_program
-    from ..plan.verify import verify
 
     machine = load_machine(opts.machine_spec if opts.machine_spec is not None else DEFAULT_PRESET)
-    settings = PlanSettings.from_options(planner=opts.planner, dt_s=opts.dt_s, tol_mm=opts.tol_mm,
-                                         machine=machine)
-    machine = machine.with_dt(settings.dt_s)
+    dt_s = PlanSettings.from_options(planner=opts.planner, dt_s=opts.dt_s, machine=machine).dt_s
+    real = machine.with_dt(dt_s)
     name, data = read_part(opts.part)
-    real = machine
-    machine = with_margin(machine, device_margin(machine, formats or FpgaFormats(), name))
-    program = read_program(data, source=name, axes=machine.axes, start=machine.start,
-                           tool_table=machine.tool_table)
-    fitted = fit_loaded(program, FitSettings.from_options(tol_mm=opts.tol_mm, machine=machine,
-                                                          method=opts.fit_method))
-    check_sample_budget(fitted.paths, machine, settings.dt_s, program.source,
-                        held_s=held_time_s(fitted.items))
-    traj = plan_program(fitted, machine, settings)
-    report = verify(traj, machine)
-    if not report.ok:
-        axis, kind, ratio, idx = report.worst()
-        raise PlanError(f"bug: plan violates the {axis} {kind} limit (ratio {ratio:.12g} at "
-                        f"sample {idx}); please report it", SourceLocation(file=name))
-    return (fitted, traj, real) if with_machine else (fitted, traj)
+    margined = with_margin(real, device_margin(real, formats or FpgaFormats(), name))
+    res = run(data, margined, planner=opts.planner, dt_s=dt_s, tol_mm=opts.tol_mm,
+              fit_method=opts.fit_method, name=name)
+    return (res.fit, res.trajectory, real) if with_machine else (res.fit, res.trajectory)
 
 
 def build_stream(opts: StreamOptions):

@@ -44,7 +44,7 @@ def parse_hex_word(text: str, bits: int = VECTOR_WORD_BITS) -> int:
 
 def export_test_vectors(prog: FpgaProgram, out_dir: str, max_segments: int | None = None) -> dict:
     """Write the vector files into ``out_dir`` (created); returns the layout written."""
-    from ..export.atomic import atomic_write
+    from ..outfile import atomic_write
 
     os.makedirs(out_dir, exist_ok=True)
     segs = [it for it in prog.items if isinstance(it, FixedSegment)]

@@ -18,6 +18,7 @@ Every run starts where the previous item left the machine (``nodes[0]``).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -56,7 +57,8 @@ class Arc:
         r = r0 + (r1 - r0) * frac
         out[:, i] = self.center[0] + r * np.cos(ang)
         out[:, j] = self.center[1] + r * np.sin(ang)
-        return out
+        result: np.ndarray = out
+        return result
 
 
 @dataclass(frozen=True)
@@ -83,7 +85,8 @@ class Nurbs:
         w = self.weights
         num = BSpline(self.knots, self.control * w[:, None], k)(u)
         den = BSpline(self.knots, w, k)(u)
-        return num / den[:, None]
+        points: np.ndarray = num / den[:, None]
+        return points
 
 
 Curve = Arc | Nurbs
@@ -186,7 +189,7 @@ class Program:
     start: np.ndarray
     line_count: int
     block_count: int = 0
-    metadata: dict = field(default_factory=dict)
+    metadata: dict[str, Any] = field(default_factory=dict)
 
     @property
     def runs(self) -> tuple[Run, ...]:

@@ -11,7 +11,6 @@ consumer reaches them; warnings are issued when the stream ends.
 from __future__ import annotations
 
 import os
-import queue
 import threading
 import warnings
 

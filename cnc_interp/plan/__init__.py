@@ -14,3 +14,7 @@
 
 Nothing heavy is imported here: the submodules load numpy/numba only when used.
 """
+
+from .._stage_call import make_callable  # noqa: E402
+
+make_callable(__name__)  # ``cnc_interp.plan(fitted, machine, ...)`` is ``api.plan``

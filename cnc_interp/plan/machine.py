@@ -7,6 +7,7 @@ module holds only the type.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -51,8 +52,9 @@ class Machine:
     jmax: np.ndarray
     dt_s: float
     kinematics: str = "trivial"
-    kinematics_params: dict = field(default_factory=dict)
-    start: np.ndarray | None = None
+    kinematics_params: dict[str, float] = field(default_factory=dict)
+    #: (n,) mm / deg; ``None`` given is stored as zeros, so it is an array once built
+    start: np.ndarray = None  # type: ignore[assignment]
     tol_mm: float | None = None
     source: str = ""
     tool_table: str | None = None
@@ -106,13 +108,13 @@ class Machine:
             return self
         return replace(self, dt_s=float(dt_s))
 
-    def with_start(self, start) -> "Machine":
+    def with_start(self, start: "np.ndarray | list[float] | None") -> "Machine":
         """This machine with another start position ((n,) mm / deg; ``None`` keeps it)."""
         if start is None:
             return self
         return replace(self, start=np.asarray(start, dtype=float).reshape(self.n_axes))
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         """Plain JSON-able description (for reports and MCAP metadata)."""
         return {
             "name": self.name,

@@ -160,17 +160,14 @@ def path_lower_bound(path, joint_map, machine, n_grid: int = 2000) -> float:
 def program_lower_bound(outcome, n_grid: int = 2000) -> float:
     """Sum of ``path_lower_bound`` over a planned program's paths plus its dwell times, s.
 
-    ``outcome`` is a ``pipeline.PlanOutcome``; the fit is re-run to get the paths.
+    ``outcome`` is a planned program with its ``fit`` (``FitResult``) and ``machine``
+    (``api.PlanResult`` or ``pipeline.PlanOutcome``).
     """
-    from ..fit.settings import FitSettings
     from ..gcode.program import Dwell
-    from ..pipeline import _load_with, fit_loaded
     from .kinematics import make_kinematics
 
     machine = outcome.machine
-    program, _ = _load_with(outcome.source, machine)
-    fitted = fit_loaded(program, FitSettings.from_options(tol_mm=outcome.settings.tol_mm,
-                                                          machine=machine))
+    fitted = outcome.fit
     kin = make_kinematics(machine)
     jm = None if kin.is_identity else kin
     total = 0.0

@@ -4,9 +4,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
+from typing import TYPE_CHECKING, Any
 
 from ..constants import DEFAULT_DT_S
 from ..errors import UsageError
+
+if TYPE_CHECKING:
+    from .machine import Machine
+
+#: the planner of ``plan`` and ``batch`` when none is named (``stream`` has its own)
+DEFAULT_PLANNER = "optimal"
 
 
 @dataclass(frozen=True)
@@ -21,10 +28,10 @@ class PlanSettings:
         options: planner-specific extras (plain JSON-able values), read with ``get``.
     """
 
-    planner: str = "optimal"
+    planner: str = DEFAULT_PLANNER
     dt_s: float = DEFAULT_DT_S
     tol_mm: float | None = None
-    options: dict = field(default_factory=dict)
+    options: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         from .planners import PLANNER_NAMES
@@ -35,19 +42,20 @@ class PlanSettings:
             raise UsageError(f"sample period must be a positive number of seconds, got {self.dt_s!r}")
 
     @classmethod
-    def from_options(cls, planner: str = "optimal", dt_s: float | None = None,
-                     tol_mm: float | None = None, machine=None, **options) -> "PlanSettings":
+    def from_options(cls, planner: str = DEFAULT_PLANNER, dt_s: float | None = None,
+                     tol_mm: float | None = None, machine: "Machine | None" = None,
+                     **options: Any) -> "PlanSettings":
         """Settings from CLI options: ``--dt`` wins over the machine's period, then the default."""
         if dt_s is None:
             dt_s = float(machine.dt_s) if machine is not None and machine.dt_s else DEFAULT_DT_S
-        if tol_mm is None and machine is not None and getattr(machine, "tol_mm", None):
+        if tol_mm is None and machine is not None and machine.tol_mm:
             tol_mm = float(machine.tol_mm)
         return cls(planner=planner, dt_s=float(dt_s), tol_mm=tol_mm, options=dict(options))
 
-    def get(self, key: str, default=None):
+    def get(self, key: str, default: Any = None) -> Any:
         """A planner option (paper-000 planners read their extras this way)."""
         return self.options.get(key, default)
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         """Plain JSON-able form (stored in ``Trajectory.settings``)."""
         return asdict(self)

@@ -21,10 +21,16 @@ K..K+2 denote the held positions before the start and after the end.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..constants import VERIFY_RATIO_SLACK, VERIFY_REST_PADDING
+
+if TYPE_CHECKING:
+    from .machine import Machine
+    from .trajectory import Trajectory
 
 _KINDS = ("velocity", "acceleration", "jerk")
 _UNITS = ("/s", "/s^2", "/s^3")
@@ -71,9 +77,9 @@ class VerifyReport:
         i, k = np.unravel_index(int(np.argmax(r)), r.shape)
         return self.axes[i], _KINDS[k], float(self.ratios[i, k]), int(self.where[i, k])
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         """JSON-able form (no NaN: a NaN ratio becomes ``None``)."""
-        def num(x):
+        def num(x: float) -> float | None:
             x = float(x)
             return x if np.isfinite(x) else None
 
@@ -114,7 +120,7 @@ class VerifyReport:
         return "\n".join(lines)
 
 
-def _axis_extremes(col: np.ndarray, pad: int):
+def _axis_extremes(col: np.ndarray, pad: int) -> tuple[np.ndarray, np.ndarray]:
     """Worst |d^m q| for m = 1..3 of one axis with rest padding: (values (3,), where (3,))."""
     x = np.concatenate([np.full(pad, col[0]), col, np.full(pad, col[-1])])
     vals = np.empty(3)
@@ -130,7 +136,8 @@ def _axis_extremes(col: np.ndarray, pad: int):
     return vals, where
 
 
-def verify_arrays(q: np.ndarray, dt_s: float, vmax, amax, jmax, axes: str | None = None) -> VerifyReport:
+def verify_arrays(q: np.ndarray, dt_s: float, vmax: ArrayLike, amax: ArrayLike, jmax: ArrayLike,
+                  axes: str | None = None) -> VerifyReport:
     """Verify setpoints ``q`` (K, n) at period ``dt_s`` against per-axis limits (n,) each."""
     q = np.asarray(q, dtype=float)
     if q.ndim == 1:
@@ -162,17 +169,15 @@ def verify_arrays(q: np.ndarray, dt_s: float, vmax, amax, jmax, axes: str | None
                         values=values, limits=limits, where=where, ok=ok, nan_found=nan_found)
 
 
-def verify(traj, machine) -> VerifyReport:
+def verify(traj: "Trajectory", machine: "Machine") -> VerifyReport:
     """Verify a ``Trajectory`` against a ``Machine``'s limits (axes matched by letter)."""
     from ..errors import MachineError, SourceLocation
 
-    idx = []
     for a in traj.axes:
         if a not in machine.axes:
             raise MachineError(f"the plan has axis {a}, which machine '{machine.name}' "
                                f"({machine.axes}) does not have", SourceLocation(machine.source or "<machine>"))
-        idx.append(machine.axes.index(a))
-    idx = np.array(idx, dtype=int)
+    idx = np.array([machine.axes.index(a) for a in traj.axes], dtype=int)
     return verify_arrays(traj.q, traj.dt_s, machine.vmax[idx], machine.amax[idx],
                          machine.jmax[idx], axes=traj.axes)
 
@@ -187,7 +192,7 @@ class StreamVerifier:
     a caller can stop before writing it.
     """
 
-    def __init__(self, dt_s: float, vmax, amax, jmax, axes: str):
+    def __init__(self, dt_s: float, vmax: ArrayLike, amax: ArrayLike, jmax: ArrayLike, axes: str):
         n = len(axes)
         self.axes = axes
         self.dt_s = float(dt_s)
@@ -202,7 +207,7 @@ class StreamVerifier:
         self.n = n
 
     @classmethod
-    def for_machine(cls, machine, dt_s: float) -> "StreamVerifier":
+    def for_machine(cls, machine: "Machine", dt_s: float) -> "StreamVerifier":
         return cls(dt_s, machine.vmax, machine.amax, machine.jmax, machine.axes)
 
     def _scan(self, x: np.ndarray, e0: int, skip: int) -> None:
@@ -249,7 +254,8 @@ class StreamVerifier:
 
     def ratios(self) -> np.ndarray:
         with np.errstate(invalid="ignore", divide="ignore"):
-            return (self.best / self.scale) / self.limits
+            ratios: np.ndarray = (self.best / self.scale) / self.limits
+        return ratios
 
     def ok_so_far(self) -> bool:
         return bool((self.first_bad < 0).all()) and bool(np.all(self.ratios()

@@ -295,7 +295,7 @@ class _Prepared:
         if path.rapid:
             joint_map = None
         self.path = path
-        self.n = n = path.n_axes
+        self.n = path.n_axes
         self.dt = dt = float(dt_s)
         mc = _machine_consts(machine, dt)
         self.brake_cap = mc["brake_cap"]

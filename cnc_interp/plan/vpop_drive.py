@@ -18,7 +18,7 @@ import numpy as np
 from numba import njit
 
 from . import vpop_core as core
-from ._table_kernels import NO_LENGTH, NOT_FINITE, build_identity, curvature_bounds, speed_bound
+from ._table_kernels import NO_LENGTH, build_identity, curvature_bounds, speed_bound
 from ._table_kernels import OK as TABLE_OK
 
 # drive's results

@@ -1,0 +1,272 @@
+"""The public Python API: one call per stage, the same sequence the CLI runs.
+
+::
+
+    import cnc_interp as ci
+    m = ci.load_machine("generic-mill")
+    traj = ci.plan(ci.fit(ci.read_program("samples/gcode/mill-contour.ngc", machine=m)), m)
+    assert ci.verify(traj, m).ok
+    ci.write(traj, "plan.csv")
+
+Each stage takes the previous stage's frozen result (``Program`` → ``FitResult`` →
+``Trajectory`` → ``VerifyReport``) and raises a ``CncInterpError`` with the source location
+on bad input, as the CLI does (``error.format()`` is its one line, ``error.exit_code`` its
+exit status). ``run`` is the whole sequence in one call with its result (``PlanResult``);
+``cnc-interp plan`` streams the same stages in bounded windows (``pipeline.stream_plan``)
+and writes byte-identical samples.
+"""
+
+from __future__ import annotations
+
+import os
+import weakref
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Callable
+
+if TYPE_CHECKING:  # the stages are imported when called: ``import cnc_interp`` stays cheap
+    import numpy as np
+
+    from .fit.result import FitResult
+    from .gcode.tooltable import ToolTable
+    from .gcode.program import Program
+    from .plan.machine import Machine
+    from .plan.settings import PlanSettings
+    from .plan.trajectory import Trajectory
+    from .plan.verify import VerifyReport
+
+__all__ = ["load_machine", "read_program", "fit", "plan", "verify", "write", "run",
+           "PlanResult", "Progress", "DEFAULT_PLANNER"]
+
+from .plan.settings import DEFAULT_PLANNER  # noqa: E402  (a string; plan.settings is light)
+
+#: the machine each program was read for (``fit`` takes its tolerance from it); keyed by
+#: id with a finalizer, since a ``Program`` holds arrays and is not hashable
+_MACHINE_OF: dict[int, "Machine"] = {}
+
+
+def load_machine(spec: "str | os.PathLike[str] | Machine") -> "Machine":
+    """A machine from a preset name (``cnc-interp machines`` lists them), a TOML file or a
+    LinuxCNC INI file; a ``Machine`` is returned as it is. Raises ``MachineError`` (with the
+    file's line) on a bad machine file."""
+    from .plan.machine import Machine
+    from .plan.machine_io import load_machine as _load
+
+    if isinstance(spec, Machine):
+        return spec
+    return _load(os.fspath(spec))
+
+
+def read_program(source: "str | bytes | os.PathLike[str]", machine: "Machine | str | None" = None,
+                 *, name: str | None = None, start: "np.ndarray | None" = None,
+                 tool_table: "str | ToolTable | None" = None) -> "Program":
+    """Interpret a part program for ``machine`` (its axes, start position and tool table).
+
+    Args:
+        source: a file path, or the G-code itself (``bytes``, or a ``str`` with a newline).
+        machine: a ``Machine`` or anything ``load_machine`` takes; ``None``: the program's
+            own axes (at least XYZ), no tool table.
+        name: the name errors use (default: the path, or ``"<string>"``).
+        start: machine position before the program, (n_axes,) mm/deg (default: the
+            machine's start, else 0).
+        tool_table: a LinuxCNC tool table path or ``ToolTable`` (default: the machine's).
+    Returns:
+        ``Program`` in machine coordinates, mm / deg / s. Raises ``GCodeError`` (exit 2)
+        with ``FILE:LINE:COL`` on bad input.
+    """
+    from .gcode import read_program as _read
+
+    data, name = _source_bytes(source, name)
+    m = load_machine(machine) if machine is not None else None
+    if m is not None:
+        start = m.start if start is None else start
+        tool_table = m.tool_table if tool_table is None else tool_table
+    program: Program = _read(data, source=name, axes=m.axes if m is not None else None,
+                             start=start, tool_table=tool_table)
+    if m is not None:
+        key = id(program)
+        _MACHINE_OF[key] = m
+        weakref.finalize(program, _MACHINE_OF.pop, key, None)
+    return program
+
+
+def fit(program: "Program", tol_mm: float | None = None, *, machine: "Machine | str | None" = None,
+        method: str | None = None, corner_deg: float | None = None) -> "FitResult":
+    """Fit the program's moves with quintic segments within the path tolerance.
+
+    Args:
+        program: from ``read_program``.
+        tol_mm: the tolerance of moves without ``G64 P`` and the cap on every move's
+            (``--tol``); default: the machine's ``tol``, else the fit's default.
+        machine: whose ``tol`` applies (default: the machine the program was read for).
+        method: ``"nodes"`` (default) or ``"auto"`` (``--fit-method``).
+        corner_deg: corners sharper than this stop (default: the fit's).
+    Returns:
+        ``FitResult`` (items in program order, statistics). Raises ``FitError`` (exit 1)
+        naming the lines whose fit misses its tolerance.
+    """
+    from .fit import fit_program
+    from .fit.result import require_within_tolerance
+    from .fit.settings import FitSettings
+
+    m = load_machine(machine) if machine is not None else _MACHINE_OF.get(id(program))
+    settings = FitSettings.from_options(tol_mm=tol_mm, corner_deg=corner_deg, machine=m,
+                                        method=method)
+    result: FitResult = require_within_tolerance(fit_program(program, settings))
+    return result
+
+
+#: ``progress(mm)``: told the path length planned since its last call
+Progress = Callable[[float], None]
+
+
+def plan(fitted: "FitResult", machine: "Machine | str", planner: str = DEFAULT_PLANNER,
+         dt_s: float | None = None, tol_mm: float | None = None,
+         progress: Progress | None = None) -> "Trajectory":
+    """Plan the fitted program's feed under ``machine``'s limits, sampled every ``dt_s``.
+
+    Args:
+        fitted: from ``fit``.
+        machine: limits, kinematics and (by default) the sample period.
+        planner: one of ``planners`` (``cnc-interp plan --planner``).
+        dt_s: sample period, s (default: the machine's).
+        tol_mm: the tolerance recorded with the plan (default: the machine's).
+        progress: optional ``progress(mm)`` told the path length planned since its last call.
+    Returns:
+        ``Trajectory`` from rest to rest. Raises ``PlanError`` (exit 1) when the plan cannot
+        be made (e.g. more samples than memory holds). It is not verified: ``verify`` is
+        the independent check.
+    """
+    traj, _ = _plan(fitted, load_machine(machine), planner, dt_s, tol_mm, progress)
+    return traj
+
+
+def _plan(fitted: "FitResult", machine: "Machine", planner: str, dt_s: float | None,
+          tol_mm: float | None, progress: Progress | None) -> "tuple[Trajectory, PlanSettings]":
+    from .errors import PlanError, SourceLocation
+    from .plan.budget import check_sample_budget, held_time_s
+    from .plan.settings import PlanSettings
+    from .plan.timeline import plan_program
+
+    settings = PlanSettings.from_options(planner=planner, dt_s=dt_s, tol_mm=tol_mm, machine=machine)
+    machine = machine.with_dt(settings.dt_s)
+    source = fitted.program.source
+    check_sample_budget(fitted.paths, machine, settings.dt_s, source,
+                        held_s=held_time_s(fitted.items))
+    try:
+        traj: Trajectory = plan_program(fitted, machine, settings, progress=progress)
+        return traj, settings
+    except PlanError as exc:
+        if exc.location.line == 0 and exc.location.file == SourceLocation().file:
+            raise PlanError(exc.message, SourceLocation(file=source)) from None  # name the part
+        raise
+
+
+def verify(traj: "Trajectory", machine: "Machine | str") -> "VerifyReport":
+    """The independent check: per-axis finite-difference velocity, acceleration and jerk
+    of the samples against ``machine``'s limits (``VerifyReport.ok``, ``worst()``)."""
+    from .plan.verify import verify as _verify
+
+    report: VerifyReport = _verify(traj, load_machine(machine))
+    return report
+
+
+def write(traj: "Trajectory", path: "str | os.PathLike[str]", machine: "Machine | str | None" = None,
+          metadata: "dict[str, Any] | None" = None) -> None:
+    """Write the samples to ``path``: MCAP when it ends in ``.mcap`` (with ``machine``'s
+    limits and ``metadata`` records), else CSV; ``"-"`` is standard output. The file
+    appears only complete (written to a temporary file, then renamed)."""
+    path = os.fspath(path)
+    if path.lower().endswith(".mcap"):
+        from .export.mcap_io import write_mcap
+
+        write_mcap(traj, path, metadata=metadata,
+                   machine=load_machine(machine) if machine is not None else None)
+    else:
+        from .export.csv_io import write_csv
+
+        write_csv(traj, path)
+
+
+@dataclass(frozen=True, eq=False)
+class PlanResult:
+    """One part program planned and verified: every stage's result.
+
+    ``program`` (``Program``), ``fit`` (``FitResult``), ``trajectory`` (``Trajectory``),
+    ``report`` (``VerifyReport``), ``machine`` (the ``Machine`` used, its ``dt_s`` the
+    plan's), ``settings`` (``PlanSettings``) and ``timings_s`` (wall time per stage, s)."""
+
+    program: "Program"
+    fit: "FitResult"
+    trajectory: "Trajectory"
+    report: "VerifyReport"
+    machine: "Machine"
+    settings: "PlanSettings"
+    timings_s: "dict[str, float]" = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        """True when every sample is within the limits."""
+        return bool(self.report.ok)
+
+
+def run(source: "str | bytes | os.PathLike[str]", machine: "Machine | str", *,
+        planner: str = DEFAULT_PLANNER, dt_s: float | None = None, tol_mm: float | None = None,
+        fit_method: str | None = None, start: "np.ndarray | None" = None,
+        tool_table: "str | ToolTable | None" = None, name: str | None = None,
+        progress: Progress | None = None, check: bool = True) -> PlanResult:
+    """``read_program`` → ``fit`` → ``plan`` → ``verify`` in one call.
+
+    With ``check`` (the default) a plan that violates a limit raises ``PlanError``
+    (exit 1: a bug of the planner, never an expected outcome); without it the report
+    says so. Other arguments as the stages take them.
+    """
+    import time
+
+    from .errors import PlanError, SourceLocation
+
+    t0 = time.perf_counter()
+    m = load_machine(machine).with_start(start)
+    program = read_program(source, m, name=name, tool_table=tool_table)
+    t1 = time.perf_counter()
+    fitted = fit(program, tol_mm, machine=m, method=fit_method)
+    t2 = time.perf_counter()
+    traj, settings = _plan(fitted, m, planner, dt_s, tol_mm, progress)
+    m = m.with_dt(settings.dt_s)
+    t3 = time.perf_counter()
+    report = verify(traj, m)
+    t4 = time.perf_counter()
+    if check and not report.ok:
+        axis, kind, ratio, idx = report.worst()
+        raise PlanError(f"bug: plan violates the {axis} {kind} limit (ratio {ratio:.12g} at "
+                        f"sample {idx}, t = {idx * traj.dt_s:.6g} s); please report it",
+                        SourceLocation(file=program.source))
+    return PlanResult(program=program, fit=fitted, trajectory=traj, report=report, machine=m,
+                      settings=settings,
+                      timings_s={"parse": t1 - t0, "fit": t2 - t1, "plan": t3 - t2, "verify": t4 - t3})
+
+
+def _source_bytes(source: "str | bytes | os.PathLike[str]", name: str | None
+                  ) -> tuple[bytes | str, str]:
+    """(G-code, display name) of a path, ``bytes`` or G-code text."""
+    if isinstance(source, bytes):
+        return source, name or "<bytes>"
+    if isinstance(source, str) and ("\n" in source or "\r" in source):
+        return source, name or "<string>"
+    display, data = read_part(os.fspath(source))
+    return data, name or display
+
+
+def read_part(part: str) -> tuple[str, bytes]:
+    """Read a part program given as a path or ``-`` (stdin): (display name, raw bytes)."""
+    import sys
+
+    from .errors import SourceLocation, UsageError
+
+    if part == "-":
+        return "<stdin>", sys.stdin.buffer.read()
+    try:
+        with open(part, "rb") as fh:
+            return part, fh.read()
+    except OSError as exc:
+        raise UsageError(f"cannot read part program: {exc.strerror}",
+                         SourceLocation(file=part)) from None

@@ -1,0 +1,107 @@
+"""The package's floors: a module imports only from its own floor or below.
+
+    base    cnc_interp (root), errors, constants, outfile, _kernel_cache, _stage_call
+    gcode   G-code -> Program
+    fit     Program -> Paths
+    plan    Paths + Machine -> Trajectory (and the Machine itself, for now)
+    export | fpga   (siblings: neither imports the other)
+    top     api, pipeline, batch, batch_workers, cli, fpga.commands
+
+Every import counts, also those inside functions (the package imports lazily, so an
+upward import would only show when its function runs). The test fails naming the edge.
+"""
+
+from __future__ import annotations
+
+import ast
+import os
+
+import cnc_interp
+
+PKG_DIR = os.path.dirname(cnc_interp.__file__)
+
+FLOORS = {"base": 0, "gcode": 1, "fit": 2, "plan": 3, "export": 4, "fpga": 4, "top": 5}
+TOP = {"api", "pipeline", "batch", "batch_workers", "cli", "fpga.commands"}
+BASE = {"", "errors", "constants", "outfile", "_kernel_cache", "_stage_call"}
+#: deliberate upward edges, each with its reason
+ALLOWED = {
+    # calling ``cnc_interp.fit(...)`` / ``cnc_interp.plan(...)`` runs the API function
+    ("_stage_call", "api"),
+}
+
+
+def _floor(mod: str) -> str:
+    """Floor name of ``mod`` (a dotted name below ``cnc_interp``, '' for the root)."""
+    if mod in TOP or any(mod.startswith(t + ".") for t in TOP):
+        return "top"
+    if mod in BASE:
+        return "base"
+    head = mod.split(".")[0]
+    if head in FLOORS:
+        return head
+    raise AssertionError(f"module cnc_interp.{mod} is on no floor: add it to this test")
+
+
+def _modules():
+    for d, _, files in os.walk(PKG_DIR):
+        for f in files:
+            if f.endswith(".py"):
+                path = os.path.join(d, f)
+                rel = os.path.relpath(path, PKG_DIR)[:-3].replace(os.sep, ".")
+                is_pkg = rel.endswith("__init__")
+                name = rel[: -len("__init__")].rstrip(".") if is_pkg else rel
+                yield name, is_pkg, path
+
+
+def _imports(name: str, is_pkg: bool, path: str):
+    """Dotted names (below ``cnc_interp``) that the module at ``path`` imports."""
+    package = name if is_pkg else name.rpartition(".")[0]
+    with open(path, encoding="utf-8") as fh:
+        tree = ast.parse(fh.read())
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                parts = package.split(".") if package else []
+                parts = parts[: len(parts) - node.level + 1]
+                base = ".".join(parts + ([node.module] if node.module else []))
+            elif node.module and (node.module + ".").startswith("cnc_interp."):
+                base = node.module[len("cnc_interp."):] if node.module != "cnc_interp" else ""
+            else:
+                continue
+            for alias in node.names:
+                full = f"{base}.{alias.name}" if base else alias.name
+                # ``from . import api`` names a module; ``from .errors import X`` a value
+                yield full if os.path.exists(_file_of(full)) else base, node.lineno
+        elif isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.name.startswith("cnc_interp."):
+                    yield alias.name[len("cnc_interp."):], node.lineno
+
+
+def _file_of(mod: str) -> str:
+    p = os.path.join(PKG_DIR, *mod.split("."))
+    return p + ".py" if os.path.exists(p + ".py") else os.path.join(p, "__init__.py")
+
+
+def test_no_module_imports_from_a_higher_floor():
+    bad = []
+    for name, is_pkg, path in _modules():
+        src = _floor(name)
+        for target, line in _imports(name, is_pkg, path):
+            dst = _floor(target)
+            if (name, target) in ALLOWED or target == name:
+                continue
+            upward = FLOORS[dst] > FLOORS[src]
+            sideways = FLOORS[dst] == FLOORS[src] == 4 and dst != src
+            if upward or sideways:
+                bad.append(f"cnc_interp/{os.path.relpath(path, PKG_DIR)}:{line}: "
+                           f"{src} imports {dst} (cnc_interp.{target})")
+    assert not bad, "\n".join(bad)
+
+
+def test_the_check_sees_an_upward_import(tmp_path):
+    # the checker itself: a gcode module importing the planner is reported
+    fake = tmp_path / "bad.py"
+    fake.write_text("def f():\n    from ..plan.timeline import plan_program\n")
+    found = list(_imports("gcode.bad", False, str(fake)))
+    assert ("plan.timeline", 2) in found and FLOORS[_floor("plan.timeline")] > FLOORS["gcode"]
