@@ -1279,6 +1279,7 @@ class Interpreter:
 
 
 def _move_length(s, e) -> float:
+    """``program.move_lengths`` for one move of the 9 axes (scalar: the interpreter's hot path)."""
     lin = 0.0
     rot = 0.0
     for k in range(9):
