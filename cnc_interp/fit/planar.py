@@ -577,8 +577,8 @@ def planar_fit_kernel(H, V, tol, alpha, S, w_end, w_win, max_incl, keep, band, m
         if e >= n - 1:
             break
         # hand the end tangent angle (absolute) and curvature to the next segment
-        p1 = _dpoly(b, 1.0) / X
-        p2 = _ddpoly(b, 1.0) / (X * X)
+        p1 = _dpoly(b, np.float64(1.0)) / X
+        p2 = _ddpoly(b, np.float64(1.0)) / (X * X)
         kappa = p2 / (1.0 + p1 * p1) ** 1.5
         phi_abs = math.atan(p1) + th
         constrained = True
