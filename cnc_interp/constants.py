@@ -95,41 +95,12 @@ P000_BISECT_ITERS = 80
 P000_MIN_LENGTH_MM = 1e-12
 
 # --- fpga ----------------------------------------------------------------------
-#: fixed-point defaults (word bits, fraction bits); see cnc_interp/fpga/fixed.py and the width
-#: sweep in benchmarks/fpga_widths.py (docs/fpga-protocol.md section 4 gives the reasoning)
-FPGA_POS_FORMAT = (42, 28)  # positions, origins, increments: ±8192 mm, LSB 3.7e-9 mm
-FPGA_TRIG_FORMAT = (35, 33)  # cos θ, sin θ: one 35×35 multiplier operand (4 MULT18X18D)
-FPGA_PARAM_FORMAT = (35, 33)  # normalised abscissa ξ = x*/x_end and time τ, both in [0, 1]
-FPGA_COEF_WORD = 32  # polynomial mantissas (block exponent per polynomial); 3 guard bits below
-FPGA_HORNER_WORD = 35  # Horner accumulator: sum of six 32-bit mantissas fits, and it is a
-#                        multiplier operand; overflow is an error naming the segment
-FPGA_INT_WORD = 76  # rotation integrators: position word + trig fraction + 1 (never rounded)
-FPGA_MULT_WORD = 35  # every multiplier operand (increments, x_end mantissa) fits this
 #: relative margin below every limit that ``stream`` plans with, on top of the position
 #: rounding budget (cnc_interp/fpga/limits.py): room for the profile fit's error, so that
 #: most planned segments reproduce within the limits instead of falling back to setpoints
 FPGA_LIMIT_MARGIN = 1e-4
-#: the rounding budget (LSB/dt, 2 LSB/dt², 4 LSB/dt³ over the limits) counts this many times
-FPGA_MARGIN_QUANTA = 2.0
-#: a margin above this (a dt too short for the position LSB) is refused
-FPGA_LIMIT_MARGIN_MAX = 1e-2
-#: largest error the fitted parametric profile ξ(τ) may add along the path (mm)
-FPGA_PROFILE_TOL_MM = 2e-5
-#: a planar path is streamed as segments only if its samples lie on its planar form within this (mm)
-FPGA_PLANAR_MATCH_MM = 1e-7
 #: accuracy target of the round trip plan -> frames -> emulate (mm)
 FPGA_ROUNDTRIP_TARGET_MM = 1e-4
-#: largest frame payload (bytes); longer data is split over several frames
-FPGA_MAX_PAYLOAD = 4096
-#: motion the device buffers after START before its sample clock runs (s)
-FPGA_PREFILL_S = 0.25
-#: emulated device receive buffer (bytes)
-FPGA_DEVICE_BUFFER = 16384
-#: USB transfer timeout (ms) and retry budget per frame
-FPGA_USB_TIMEOUT_MS = 1000
-FPGA_USB_RETRIES = 8
-#: polls of an unchanged full buffer before the link gives up (flow-control stall)
-FPGA_USB_STALL_POLLS = 10_000
 #: default USB ids of the controller (pid.codes test range)
 FPGA_USB_VID = 0x1209
 FPGA_USB_PID = 0x0001
