@@ -15,9 +15,9 @@ import cnc_interp as ci
 from .conftest import EXAMPLES, REPO, SAMPLES
 
 
-def test_the_documented_five_lines_plan_like_the_cli(tmp_path, cli):
+def test_the_documented_five_lines_plan_like_the_cli(tmp_path, cli, monkeypatch):
     # README's and the package docstring's use, exactly (with the sample's path)
-    os.chdir(tmp_path)
+    monkeypatch.chdir(tmp_path)
     m = ci.load_machine("generic-mill")
     traj = ci.plan(ci.fit(ci.read_program(os.path.join(SAMPLES, "mill-contour.ngc"), machine=m)), m)
     assert ci.verify(traj, m).ok

@@ -378,6 +378,7 @@ def test_mcap_records_the_input(tmp_path):
     assert meta.get("input", {}).get("sha256") == digest
 
 
+@pytest.mark.slow
 def test_byte_identical_across_processes(plans, tmp_path):
     """Same input -> same CSV and MCAP bytes, in another process with another hash seed."""
     _, path, _ = plans(MAIN_PART, MAIN_MACHINE)

@@ -14,16 +14,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cnc_interp.constants import (
-    PATH_DEV_FAR_WINDOW,
-    PATH_DEV_FIT_SAMPLES,
-    PATH_DEV_LOCAL_FRAC,
-    PATH_DEV_MAX_SAMPLES,
-    PATH_DEV_MIN_SAMPLES,
-    PATH_DEV_NEWTON_ITERS,
-    PATH_DEV_SAMPLES_PER_SPAN,
-    PATH_DEV_WINDOW,
-)
+from cnc_interp.fit.deviation import PATH_DEV_FAR_WINDOW
+from cnc_interp.fit.deviation import PATH_DEV_WINDOW
+from cnc_interp.fit.deviation import PATH_DEV_LOCAL_FRAC
+from cnc_interp.fit.deviation import PATH_DEV_NEWTON_ITERS
+from cnc_interp.fit.deviation import PATH_DEV_FIT_SAMPLES
+from cnc_interp.fit.deviation import PATH_DEV_MAX_SAMPLES
+from cnc_interp.fit.deviation import PATH_DEV_MIN_SAMPLES
+from cnc_interp.fit.deviation import PATH_DEV_SAMPLES_PER_SPAN
 from cnc_interp.fit import FitSettings, Path, fit_program
 from cnc_interp.fit._linedev import polyline_path_deviation
 from cnc_interp.fit.deviation import path_deviation

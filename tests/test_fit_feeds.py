@@ -49,6 +49,7 @@ def test_collinear_moves_keep_their_own_feed(g61):
 
 
 @pytest.mark.parametrize("method", ["planar", "nodes"])
+@pytest.mark.slow
 def test_curved_polyline_segments_never_straddle_a_feed_change(method):
     # a polyline of an arc (XY, two axes: the planar fit applies) with F changing every
     # 25 moves: each segment must lie inside one feed's moves

@@ -93,7 +93,8 @@ def test_march_beside_a_circle_of_hermite_pieces():
 
 def test_programmed_samples_of_a_polyline():
     """Every move sampled clip(ceil(L / spacing), min, max) times, shared ends once, in order."""
-    from cnc_interp.constants import PATH_DEV_MAX_SAMPLES, PATH_DEV_MIN_SAMPLES
+    from cnc_interp.fit.deviation import PATH_DEV_MAX_SAMPLES
+    from cnc_interp.fit.deviation import PATH_DEV_MIN_SAMPLES
 
     nodes = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 0.05], [1.0, 100.0]])
     tol = np.array([1e-3, 1e-3, 2e-3, 3e-3])

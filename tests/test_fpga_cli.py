@@ -69,6 +69,7 @@ def _xz_part(tmp_path):
     return part
 
 
+@pytest.mark.slow
 def test_stream_dry_run_round_trip_matches_plan(tmp_path):
     part = _xz_part(tmp_path)
     frames = tmp_path / "p.bin"
@@ -89,6 +90,7 @@ def test_stream_dry_run_round_trip_matches_plan(tmp_path):
     assert np.max(np.abs(a.q - b.q)) < FPGA_ROUNDTRIP_TARGET_MM
 
 
+@pytest.mark.slow
 def test_stream_fit_method_nodes_round_trips(tmp_path):
     # a lathe profile of G1 moves in XZ: planar segments by default, N-axis ones on request
     part = tmp_path / "polyline.ngc"

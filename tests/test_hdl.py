@@ -48,6 +48,7 @@ def test_amaranth_simulator_matches_golden_model():
     assert SAMPLE_CYCLES + 1 <= res.cycles / n <= 64
 
 
+@pytest.mark.slow
 def test_verilog_datapath_bit_exact_ci_subset(tmp_path):
     tool = iverilog_sim.available()
     if tool is None:

@@ -67,6 +67,7 @@ def test_damaged_stream_gives_the_same_setpoints(three_axis):
     assert any(s[1] for s in st)
 
 
+@pytest.mark.slow
 def test_dry_run_frame_file_through_the_verilog_device(tmp_path):
     # a whole `stream --dry-run` frame file (arcs as segments, rapids as setpoints), damaged on
     # the way: the generated Verilog under Verilator against the Python device

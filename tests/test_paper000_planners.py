@@ -308,6 +308,7 @@ CORPUS = __import__("pathlib").Path(__file__).resolve().parents[2] / "shared" / 
     (str(CORPUS / "nurbs-g5" / "trident-xy.ngc"), "mikron-ucp710"),
     (str(CORPUS / "performance" / "spiral_lines.ngc"), "generic-mill"),
 ])
+@pytest.mark.slow
 def test_golden_runs_verify(part, preset, planner):
     """Whole programs through parse, fit, timeline and verify (plan_part raises on a violation)."""
     import os

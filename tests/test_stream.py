@@ -69,6 +69,7 @@ def test_window_size_does_not_change_the_bytes_optimal(tmp_path, name):
 
 
 @pytest.mark.parametrize("planner", ["constant", "variable"])
+@pytest.mark.slow
 def test_window_size_does_not_change_the_bytes_paper000(tmp_path, planner):
     _invariant(tmp_path, os.path.join(SAMPLES, "mill-contour.ngc"), "generic-mill", planner)
 
@@ -138,6 +139,7 @@ def test_a_long_path_streams_in_bounded_chunks(small_checkpoints):
     assert verify_arrays(both.q, m.dt_s, m.vmax, m.amax, m.jmax).ok
 
 
+@pytest.mark.slow
 def test_a_fast_mode_failure_replans_from_the_last_checkpoint(small_checkpoints, monkeypatch):
     """A failure of the fast mode far into a path re-plans exactly from the last checkpoint
     (never from the start, which may have been handed out): the streamed and the whole
@@ -229,6 +231,7 @@ def _written_bytes(pid: int, folder) -> int:
     return -1
 
 
+@pytest.mark.slow
 def test_ctrl_c_after_rows_were_written_leaves_no_file(tmp_path):
     """SIGINT once rows are in the (unnamed) output file: no output file, no temporary."""
     part = os.path.join(CORPUS, "performance", "stellabee1.ngc")

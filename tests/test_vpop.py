@@ -148,6 +148,7 @@ def test_five_axis_xyzac_trt():
     assert_allclose(back, p.derivatives_u(u, 0)[0], atol=1e-6)
 
 
+@pytest.mark.slow
 def test_table_matches_path_within_its_tolerance():
     rng = np.random.default_rng(11)
     p = hermite_path(random_curve(rng, scale=30.0), 7, 100.0)

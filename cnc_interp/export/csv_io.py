@@ -14,9 +14,16 @@ from typing import BinaryIO
 
 import numpy as np
 
-from ..constants import ALL_AXES, CSV_CHUNK_ROWS, CSV_TIME_REL_TOL
+from ..constants import ALL_AXES
 from ..errors import CncInterpError, SourceLocation
 from ..outfile import atomic_write
+
+
+#: rows per chunk when writing CSV (bounds memory of the string conversion)
+CSV_CHUNK_ROWS = 65_536
+
+#: relative tolerance on t[k] = t[0] + k*dt when reading a plan back
+CSV_TIME_REL_TOL = 1e-9
 
 _FIXED = ("t", "s", "feed")
 #: blocks of at least this many rows are formatted in two halves on two threads

@@ -35,8 +35,11 @@ from typing import Iterable, Mapping
 
 import numpy as np
 
-from ..constants import MCAP_CHUNK_BYTES
 from ..errors import SourceLocation, UsageError
+
+
+#: MCAP chunk size (uncompressed bytes); fixed so the same plan gives the same file
+MCAP_CHUNK_BYTES = 4 * 1024 * 1024
 
 #: a /segments message covers at most this many samples (a longer run of one source
 #: line, e.g. a long dwell, is split): the messages of an open segment wait for its end

@@ -15,7 +15,14 @@ import os
 
 import numpy as np
 
-from ..constants import LINEAR_AXES, PLOT_ENVELOPE_BINS, PLOT_MAX_PATH_POINTS
+from ..constants import LINEAR_AXES
+
+
+#: most tool-path points a plot draws (longer plans are decimated for the picture only)
+PLOT_MAX_PATH_POINTS = 100_000
+
+#: time bins of the min/max envelope a plot draws for long plans
+PLOT_ENVELOPE_BINS = 2000
 
 #: the feed panel turns logarithmic when the fastest move is this many times the median
 #: moving feed (a mill's rapids against its cutting feeds)...

@@ -22,7 +22,15 @@ import time
 from contextlib import contextmanager
 from typing import Callable, Iterator, TextIO
 
-from ..constants import PROGRESS_DELAY_S, PROGRESS_MAX_WIDTH, PROGRESS_REFRESH_S
+
+#: a progress bar appears only once the work has run this long (s)
+PROGRESS_DELAY_S = 1.0
+
+#: least time between two redraws of the progress bar (s)
+PROGRESS_REFRESH_S = 0.1
+
+#: widest progress line drawn, characters
+PROGRESS_MAX_WIDTH = 80
 
 
 class ProgressBar:

@@ -230,7 +230,7 @@ def march_feet(coef, h, pts, tol, local_frac, window_u, far_window_u, n_coarse, 
         u0[kk + 1] = u0[kk] + h[kk]
     k = 0
     t = 0.0
-    r2, t = _piece_min(coef, 0, h[0], pts[0], n_coarse, iters)
+    r2, t = _piece_min(coef, np.int64(0), h[0], pts[0], n_coarse, iters)
     for i in range(K):
         p = pts[i]
         if i > 0:
@@ -248,7 +248,7 @@ def march_feet(coef, h, pts, tol, local_frac, window_u, far_window_u, n_coarse, 
             else:
                 break
         if not moved:
-            while k > 0 and (t <= h[k] * _END_REL or _slope(coef, k, 0.0, p) > 0.0):
+            while k > 0 and (t <= h[k] * _END_REL or _slope(coef, k, np.float64(0.0), p) > 0.0):
                 r2n, tn = _piece_min(coef, k - 1, h[k - 1], p, n_coarse, iters)
                 if r2n < r2:
                     k -= 1

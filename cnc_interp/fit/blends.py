@@ -47,14 +47,29 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..constants import (
-    FIT_BLEND_MAX_CROWDING,
-    FIT_BLEND_MAX_TURN_DEG,
-    FIT_BLEND_MIN_LIN_SPEED,
-    FIT_BLEND_MIN_MM,
-    FIT_BLEND_TOL_SHARE,
-)
 from .nodes import hermite
+
+
+#: corner blends (fit/blends.py): a corner turning more than this (deg) is a near-reversal
+#: and stops the path (the blend would be a near-cusp: parameter speed 0.64 at 175°)
+FIT_BLEND_MAX_TURN_DEG = 175.0
+
+#: share of the tolerance a blend may use (the rest absorbs the tabulated deviation's
+#: interpolation and float rounding; the deviation is measured independently after)
+FIT_BLEND_TOL_SHARE = 0.95
+
+#: a corner whose blend, at its tolerance, would be more than this many times longer than
+#: the room its moves leave (half the shorter move) stops instead: squeezed blends were
+#: slower than stops (a dense-corner program at G64 P0.05: 103.0 s blended, 100.3 s with
+#: stops; 101.5 s at 4, and the stellabee kink test keeps its 124.5 s)
+FIT_BLEND_MAX_CROWDING = 4.0
+
+#: shortest blend (mm, scaled metric): below it (moves of nanometres) the path stops instead
+FIT_BLEND_MIN_MM = 1e-5
+
+#: with rotary axes: least share of the linear axes in either move's direction (scaled metric)
+#: for a blend; below it the tool's own path would nearly stop inside the blend
+FIT_BLEND_MIN_LIN_SPEED = 0.05
 
 #: candidate shapes r = h / d (the blend is a near-loop beyond 16/5, where its middle
 #: reaches the corner)

@@ -21,15 +21,16 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..constants import (
-    FIT_COLLINEAR_DEG,
-    FIT_DUPLICATE_NODE_MM,
-    FIT_EXACT_CURVE_TOL_MM,
-    FIT_LINEAR_ZERO_MM,
-    LINEAR_AXES,
-)
+from ..constants import FIT_COLLINEAR_DEG, FIT_EXACT_CURVE_TOL_MM, LINEAR_AXES
 from ..gcode.program import CurvePiece, Run
 from .nodes import turn_angles
+
+
+#: nodes closer than this (mm, combined metric) are merged before fitting
+FIT_DUPLICATE_NODE_MM = 1e-9
+
+#: a move whose linear axes travel less than this (mm) counts as rotary-only (zero speed in s)
+FIT_LINEAR_ZERO_MM = 1e-6
 
 
 @dataclass(frozen=True)

@@ -21,9 +21,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..constants import CURVE_CHECK_POINTS, CURVE_MAX_DEPTH, FIT_TOL_SAFETY
+from ..constants import FIT_TOL_SAFETY
 from ..gcode.program import Arc, Nurbs
 from .nodes import PieceFit, hermite
+
+
+#: curves: exact-geometry check points per quintic piece when converting arcs / NURBS
+CURVE_CHECK_POINTS = 16
+
+#: curves: deepest halving of a curve piece before giving up (2**depth pieces)
+CURVE_MAX_DEPTH = 30
 
 
 class CurveEval:

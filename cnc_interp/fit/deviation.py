@@ -22,16 +22,30 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..constants import (
-    PATH_DEV_FAR_WINDOW,
-    PATH_DEV_FIT_SAMPLES,
-    PATH_DEV_LOCAL_FRAC,
-    PATH_DEV_MAX_SAMPLES,
-    PATH_DEV_MIN_SAMPLES,
-    PATH_DEV_NEWTON_ITERS,
-    PATH_DEV_SAMPLES_PER_SPAN,
-    PATH_DEV_WINDOW,
-)
+
+#: path deviation: samples of the programmed path per typical fitted knot span
+PATH_DEV_SAMPLES_PER_SPAN = 4
+
+#: path deviation: fewest / most samples of one programmed move (or per node of a curve)
+PATH_DEV_MIN_SAMPLES = 3
+
+PATH_DEV_MAX_SAMPLES = 64
+
+#: path deviation: coarse samples per fitted segment before Newton (a segment entered afresh)
+PATH_DEV_FIT_SAMPLES = 8
+
+#: path deviation: Newton steps of the projection onto the fitted path
+PATH_DEV_NEWTON_ITERS = 8
+
+#: path deviation: a marched distance above this share of the tolerance is searched
+#: again among the segments nearby along the path (beyond the tolerance: farther)
+PATH_DEV_LOCAL_FRAC = 0.5
+
+#: path deviation: reach of that second search along the path, in sample spacings each side
+PATH_DEV_WINDOW = 8
+
+#: path deviation: reach of the search for a point beyond its tolerance, in sample spacings
+PATH_DEV_FAR_WINDOW = 256
 
 
 def distance_to_pieces(breaks: np.ndarray, coef: np.ndarray, points: np.ndarray,

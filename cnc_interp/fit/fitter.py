@@ -29,14 +29,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..constants import (
-    ARC_LENGTH_MAX_SUB,
-    ARC_LENGTH_REL_TOL,
-    FIT_REPAIR_ROUNDS,
-    FIT_REPAIR_SPLITS,
-    FIT_REPAIR_TOL_SHARE,
-    PATH_DEV_SLACK,
-)
+from ..constants import ARC_LENGTH_MAX_SUB, ARC_LENGTH_REL_TOL
 from ..gcode.program import Dwell, Program, Run, Stop
 from .deviation import path_deviation, polyline_deviation, rotary_path_deviation
 from .corners import PreparedRun, SubRun, add_blends, fit_tolerance, prepare_run, split_run
@@ -44,6 +37,22 @@ from .nodes import EndState, fit_polyline, straight_piece
 from .path import Path, PlanarSegments
 from .result import FitResult, fit_outside_error
 from .settings import FitSettings
+
+
+#: path deviation: relative slack over the tolerance (float rounding of the projection)
+PATH_DEV_SLACK = 1e-6
+
+#: a fit the measurement finds outside its tolerance is fitted again aiming at this share
+#: of it before the sub-run is split (the fitter checks sampled points; the measurement is
+#: denser, so a miss is usually by a few per cent)
+FIT_REPAIR_TOL_SHARE = 0.7
+
+#: repair rounds of a run whose fit the measurement finds outside its tolerance: each puts
+#: blends (stops where a corner cannot be blended) at FIT_REPAIR_SPLITS nodes spread over
+#: every failing section and refits; the last one at every node of the sections still failing
+FIT_REPAIR_ROUNDS = 4
+
+FIT_REPAIR_SPLITS = 8
 
 
 @dataclass

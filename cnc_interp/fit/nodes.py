@@ -36,18 +36,32 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..constants import (
-    FIT_INITIAL_NODES_PER_SPAN,
-    FIT_MAX_ROUNDS,
-    FIT_MIN_SPAN_REL,
-    FIT_MIN_SPEED_RATIO,
-    FIT_SMOOTHING,
-    FIT_SOFT_STALE_ROUNDS,
-    FIT_SPAN_CHECKS,
-    FIT_BETWEEN_NODES_SAFETY,
-    FIT_STOP_SPEED_RATIO,
-    FIT_TOL_SAFETY,
-)
+from ..constants import FIT_BETWEEN_NODES_SAFETY, FIT_TOL_SAFETY
+
+
+#: N-axis fitter: weight of the 3rd-divided-difference smoothing term (in tolerance units)
+FIT_SMOOTHING = 1e-4
+
+#: N-axis fitter: most knot-insertion rounds before the fit falls back to a knot per node
+FIT_MAX_ROUNDS = 40
+
+#: N-axis fitter: nodes per span of the initial knot vector
+FIT_INITIAL_NODES_PER_SPAN = 512
+
+#: N-axis fitter: least fitted speed |dq/du| relative to the chord's, at nodes and mid-chords
+FIT_MIN_SPEED_RATIO = 0.25
+
+#: N-axis fitter: a fitted speed below this share of the chord's is a stop and never accepted
+FIT_STOP_SPEED_RATIO = 0.01
+
+#: N-axis fitter: rounds without fewer chord-point failures before refinement stops
+FIT_SOFT_STALE_ROUNDS = 3
+
+#: N-axis fitter: smallest knot span relative to the run's parameter length
+FIT_MIN_SPAN_REL = 1e-6
+
+#: N-axis fitter: check points per knot span between the nodes (on the programmed moves)
+FIT_SPAN_CHECKS = 6
 
 _FRACS = np.arange(1, 8) / 8.0
 _RIDGE = 1e-10

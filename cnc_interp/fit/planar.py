@@ -50,22 +50,49 @@ import math
 import numpy as np
 from numba import njit
 
-from ..constants import (
-    FIT_BETWEEN_NODES_SAFETY,
-    FIT_MAX_CHORD_CHECKS,
-    FIT_TOL_SAFETY,
-    PLANAR_CHECKS_PER_SEGMENT,
-    PLANAR_END_WEIGHT,
-    PLANAR_END_WINDOW,
-    PLANAR_LONG_CHORD_RATIO,
-    PLANAR_MAX_RETRIES,
-    PLANAR_GROUP_INCLINATION_PI,
-    PLANAR_KEEP_INCLINATION_PI,
-    PLANAR_MAX_INCLINATION_PI,
-    PLANAR_SMOOTHING,
-)
+from ..constants import FIT_BETWEEN_NODES_SAFETY, FIT_TOL_SAFETY
 from .nodes import segment_sources
 from .path import Path, PlanarSegments
+
+
+#: N-axis / planar fitter: check points per chord are at most this many
+FIT_MAX_CHORD_CHECKS = 16
+
+#: planar fit: inclinations are kept within ±this (rad/π) of the frame, as Eq. (1) guarantees
+PLANAR_MAX_INCLINATION_PI = 0.49
+
+#: planar fit: a segment keeps its predecessor's frame while the inherited tangent and its
+#: first chord stay within ±this (rad/π) of it, else takes the nearest of the frames π/2
+#: apart (hysteresis of 0.05π on either side of their π/4 boundary: quantized chords scatter)
+PLANAR_KEEP_INCLINATION_PI = 0.3
+
+#: planar fit: a segment takes the chords within ±this (rad/π) of its frame
+PLANAR_GROUP_INCLINATION_PI = 0.4
+
+#: planar fit: weight of the ∫p'''² smoothing term relative to the node residuals
+PLANAR_SMOOTHING = 1e-6
+
+#: planar fit: weight of the soft end conditions (slope, curvature from the neighbouring
+#: nodes) that keep the forward propagation of p', p'' stable; 0 = the paper's bare method
+#: (unstable: the fit then falls back to the N-axis fitter). Of 0.06-4, 0.25 gave the
+#: shortest cycles over the corpus's two-axis programs at 1 and 2 µm (none better at 10 µm)
+PLANAR_END_WEIGHT = 0.25
+
+#: planar fit: the end conditions' tangent and curvature come from a least-squares quadratic
+#: over the nodes within ± this fraction of the segment's length around its end node (a
+#: three-point estimate on quantized coordinates is off by ~2δ/ℓ² and becomes a spike)
+PLANAR_END_WINDOW = 0.25
+
+#: planar fit: check points along a chord per whole segment length (3 more on every chord)
+PLANAR_CHECKS_PER_SEGMENT = 32
+
+#: planar fit: a chord longer than this many times its shorter neighbour gets extra nodes at
+#: geometrically growing distances from its ends (room for a short curvature transition)
+PLANAR_LONG_CHORD_RATIO = 4.0
+
+#: planar fit: most resumptions with extra nodes on a chord that could not be fitted before
+#: falling back to the N-axis fitter
+PLANAR_MAX_RETRIES = 256
 
 _PI = math.pi
 
@@ -577,8 +604,8 @@ def planar_fit_kernel(H, V, tol, alpha, S, w_end, w_win, max_incl, keep, band, m
         if e >= n - 1:
             break
         # hand the end tangent angle (absolute) and curvature to the next segment
-        p1 = _dpoly(b, 1.0) / X
-        p2 = _ddpoly(b, 1.0) / (X * X)
+        p1 = _dpoly(b, np.float64(1.0)) / X
+        p2 = _ddpoly(b, np.float64(1.0)) / (X * X)
         kappa = p2 / (1.0 + p1 * p1) ** 1.5
         phi_abs = math.atan(p1) + th
         constrained = True

@@ -18,16 +18,26 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..constants import (
-    FIT_QUANTUM_MAX_DECIMALS,
-    FIT_QUANTUM_MAX_DEG,
-    FIT_QUANTUM_MAX_MM,
-    FIT_QUANTUM_MATCH,
-    FIT_QUANTUM_MIN_MOVES,
-    LINEAR_AXES,
-    MM_PER_INCH,
-)
+from ..constants import LINEAR_AXES, MM_PER_INCH
 from ..gcode.program import Program, Run
+
+
+#: quantum of printed coordinates (fit/quantum.py): decimals tried (10^-D mm and 10^-D in)
+FIT_QUANTUM_MAX_DECIMALS = 6
+
+#: only a quantum up to this (mm) widens the tolerance by its half: 0.0001 in (2.54 µm) and
+#: 0.001 mm count; coordinates printed to 0.01 mm or 0.001 in are taken as exact values
+FIT_QUANTUM_MAX_MM = 0.003
+
+#: the same for rotary axes (deg): 0.001° counts, 0.01° does not
+FIT_QUANTUM_MAX_DEG = 0.003
+
+#: a displacement is on a grid q when it is within this many q of a multiple of q (float
+#: rounding of inch -> mm and offsets is ~1e-11 q; a random value passes with odds 2e-6)
+FIT_QUANTUM_MATCH = 1e-6
+
+#: fewer straight feed moves than this in a program: no quantum is inferred
+FIT_QUANTUM_MIN_MOVES = 16
 
 #: displacements tested first, before a candidate grid is checked on all of them
 _PROBE = 4096

@@ -5,8 +5,17 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ..constants import DEFAULT_CORNER_DEG, DEFAULT_TOL_DEG, DEFAULT_TOL_MM
 from ..errors import UsageError
+
+
+#: default maximum permissible error of the fit (mm); `--tol` overrides
+DEFAULT_TOL_MM = 0.001
+
+#: default tolerance for rotary axes (deg)
+DEFAULT_TOL_DEG = 0.001
+
+#: a turn sharper than this (deg) between consecutive moves splits the path; the planner stops there
+DEFAULT_CORNER_DEG = 30.0
 
 TOL_MODES = ("gcode", "stricter")
 METHODS = ("nodes", "planar", "auto")

@@ -7,7 +7,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..constants import LINEAR_AXES
 from ..errors import SourceLocation, UsageError
 
 
@@ -55,6 +54,7 @@ def emulate_frames(frames, source: str = "<frames>"):
 
 def trajectory_from_device(core, planner: str = "fpga-emulate"):
     """The device's setpoints as a ``Trajectory`` (s = chord length of the emulated samples)."""
+    from ..gcode.program import move_lengths
     from ..plan.trajectory import Trajectory
     from .model import to_mm
 
@@ -63,11 +63,7 @@ def trajectory_from_device(core, planner: str = "fpga-emulate"):
     q = to_mm(out.q, dp.formats)
     dt = float(core.dt_s)
     K = q.shape[0]
-    lin = np.array([a in LINEAR_AXES for a in dp.axes], dtype=bool)
-    d = np.diff(q, axis=0)
-    step_lin = np.sqrt((d[:, lin] ** 2).sum(axis=1)) if lin.any() else np.zeros(max(K - 1, 0))
-    step_rot = np.sqrt((d[:, ~lin] ** 2).sum(axis=1)) if (~lin).any() else np.zeros(max(K - 1, 0))
-    step = np.where(step_lin > 0, step_lin, step_rot)
+    step = move_lengths(q, dp.axes) if K else np.zeros(0)
     s = np.concatenate(([0.0], np.cumsum(step))) if K else np.zeros(0)
     feed = np.concatenate(([0.0], step / dt)) if K else np.zeros(0)
     return Trajectory(axes=dp.axes, dt_s=dt, t=np.arange(K) * dt, s=s, feed=feed, q=q,

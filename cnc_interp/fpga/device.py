@@ -21,7 +21,6 @@ from __future__ import annotations
 
 from collections import deque
 
-from ..constants import FPGA_DEVICE_BUFFER
 from .fixed import FixedPointOverflow
 from .frames import (
     ErrorFlag,
@@ -42,6 +41,10 @@ from .frames import (
     status_frame,
 )
 from .model import DatapathState
+
+
+#: emulated device receive buffer (bytes)
+FPGA_DEVICE_BUFFER = 16384
 
 IDLE, CONFIGURED, RUNNING, DONE, ARMED, HELD, UNDERRUN, ABORTED = range(8)
 STATE_NAMES = ("idle", "configured", "running", "done", "armed", "held", "underrun", "aborted")

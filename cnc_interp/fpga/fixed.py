@@ -23,16 +23,25 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..constants import (
-    FPGA_COEF_WORD,
-    FPGA_HORNER_WORD,
-    FPGA_INT_WORD,
-    FPGA_MULT_WORD,
-    FPGA_PARAM_FORMAT,
-    FPGA_POS_FORMAT,
-    FPGA_TRIG_FORMAT,
-)
 from ..errors import PlanError, SourceLocation
+
+
+#: fixed-point defaults (word bits, fraction bits); see cnc_interp/fpga/fixed.py and the width
+#: sweep in benchmarks/fpga_widths.py (docs/fpga-protocol.md section 4 gives the reasoning)
+FPGA_POS_FORMAT = (42, 28)  # positions, origins, increments: ±8192 mm, LSB 3.7e-9 mm
+
+FPGA_TRIG_FORMAT = (35, 33)  # cos θ, sin θ: one 35×35 multiplier operand (4 MULT18X18D)
+
+FPGA_PARAM_FORMAT = (35, 33)  # normalised abscissa ξ = x*/x_end and time τ, both in [0, 1]
+
+FPGA_COEF_WORD = 32  # polynomial mantissas (block exponent per polynomial); 3 guard bits below
+
+FPGA_HORNER_WORD = 35  # Horner accumulator: sum of six 32-bit mantissas fits, and it is a
+
+#                        multiplier operand; overflow is an error naming the segment
+FPGA_INT_WORD = 76  # rotation integrators: position word + trig fraction + 1 (never rounded)
+
+FPGA_MULT_WORD = 35  # every multiplier operand (increments, x_end mantissa) fits this
 
 #: block exponents are sent as int8; the datapath's barrel shifter rounds right by up to
 #: SHIFT_RIGHT_MAX bits or shifts left by up to SHIFT_LEFT_MAX (exponent minus the output

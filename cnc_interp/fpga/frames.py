@@ -25,9 +25,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..constants import ALL_AXES, FPGA_MAX_PAYLOAD
+from ..constants import ALL_AXES
 from .fixed import FpgaFormats
 from .model import FixedSegment, FpgaProgram, ProfilePiece, SetpointBlock
+
+
+#: largest frame payload (bytes); longer data is split over several frames
+FPGA_MAX_PAYLOAD = 4096
+
+#: motion the device buffers after START before its sample clock runs (s)
+FPGA_PREFILL_S = 0.25
 
 MAGIC = b"CNCF"
 VERSION = 2  # 2: separate Horner/integrator widths, x_end as mantissa + exponent
@@ -212,7 +219,6 @@ class FrameInfo:
 def default_prefill(prog: FpgaProgram) -> int:
     """Samples the device buffers before its sample clock starts: ``FPGA_PREFILL_S`` of motion
     (the device also starts when STOP arrived or its buffer is full)."""
-    from ..constants import FPGA_PREFILL_S
 
     return int(min(prog.n_samples, max(1, round(FPGA_PREFILL_S / prog.dt_s))))
 

@@ -24,8 +24,15 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..constants import FPGA_LIMIT_MARGIN, FPGA_LIMIT_MARGIN_MAX, FPGA_MARGIN_QUANTA, VERIFY_REST_PADDING
+from ..constants import FPGA_LIMIT_MARGIN, VERIFY_REST_PADDING
 from ..errors import PlanError, SourceLocation
+
+
+#: the rounding budget (LSB/dt, 2 LSB/dt², 4 LSB/dt³ over the limits) counts this many times
+FPGA_MARGIN_QUANTA = 2.0
+
+#: a margin above this (a dt too short for the position LSB) is refused
+FPGA_LIMIT_MARGIN_MAX = 1e-2
 
 
 def rounding_budget(limits: np.ndarray, dt_s: float, lsb: float) -> float:

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..constants import FPGA_LIMIT_MARGIN, FPGA_PLANAR_MATCH_MM, FPGA_PROFILE_TOL_MM
+from ..constants import FPGA_LIMIT_MARGIN
 from ..errors import SourceLocation
 from .fixed import FixedFormat, FixedPointOverflow, FpgaFormats, Where, quantize_block
 from .model import (
@@ -29,6 +29,13 @@ from .model import (
     run_program,
     to_mm,
 )
+
+
+#: largest error the fitted parametric profile ξ(τ) may add along the path (mm)
+FPGA_PROFILE_TOL_MM = 2e-5
+
+#: a planar path is streamed as segments only if its samples lie on its planar form within this (mm)
+FPGA_PLANAR_MATCH_MM = 1e-7
 
 _DEG = 5
 

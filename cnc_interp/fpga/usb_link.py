@@ -17,13 +17,7 @@ from __future__ import annotations
 import errno
 from dataclasses import dataclass, field
 
-from ..constants import (
-    FPGA_USB_PID,
-    FPGA_USB_RETRIES,
-    FPGA_USB_STALL_POLLS,
-    FPGA_USB_TIMEOUT_MS,
-    FPGA_USB_VID,
-)
+from ..constants import FPGA_USB_PID, FPGA_USB_VID
 from ..errors import DeviceError, SourceLocation, UsageError
 from .frames import (
     ErrorFlag,
@@ -35,6 +29,15 @@ from .frames import (
     decode_status,
     poll_frame,
 )
+
+
+#: USB transfer timeout (ms) and retry budget per frame
+FPGA_USB_TIMEOUT_MS = 1000
+
+FPGA_USB_RETRIES = 8
+
+#: polls of an unchanged full buffer before the link gives up (flow-control stall)
+FPGA_USB_STALL_POLLS = 10_000
 
 _STATUS_READ_BYTES = 512
 _NO_DEVICE_CODES = {-4}  # LIBUSB_ERROR_NO_DEVICE

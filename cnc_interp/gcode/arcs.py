@@ -17,10 +17,34 @@ import math
 
 import numpy as np
 
-from ..constants import (ALL_AXES, ARC_MAX_SEGMENT_DEG, ARC_MIN_RADIUS_MM, ARC_MIN_SEGMENTS,
-                         ARC_R_REACH_TOL_MM, ARC_RADIUS_TOL_INCH, ARC_RADIUS_TOL_MAX_INCH,
-                         ARC_RADIUS_TOL_MAX_MM, ARC_RADIUS_TOL_MM, ARC_RADIUS_TOL_REL,
-                         CURVE_CHORD_TOL_MM, LINEAR_AXES, MM_PER_INCH)
+from ..constants import ALL_AXES, CURVE_CHORD_TOL_MM, LINEAR_AXES, MM_PER_INCH
+
+
+#: I/J/K arcs, LinuxCNC's documented rule: |r_start - r_end| is an error when it exceeds
+#: ARC_RADIUS_TOL_MAX_* or (ARC_RADIUS_TOL_* and ARC_RADIUS_TOL_REL * radius). mm programs:
+ARC_RADIUS_TOL_MM = 0.005
+
+ARC_RADIUS_TOL_MAX_MM = 0.5
+
+#: the same for inch programs (G20), in inches
+ARC_RADIUS_TOL_INCH = 0.0005
+
+ARC_RADIUS_TOL_MAX_INCH = 0.05
+
+#: relative part of the rule (0.1 % of the radius)
+ARC_RADIUS_TOL_REL = 0.001
+
+#: an arc radius (start or end) below this is a "zero-radius arc" error (mm; LinuxCNC 0.00005 in)
+ARC_MIN_RADIUS_MM = 0.00127
+
+#: R-format arcs: how far the chord may exceed the diameter before "radius too small" (mm)
+ARC_R_REACH_TOL_MM = 0.00127
+
+#: every arc gets at least this many node segments (so curvature shows in the nodes)
+ARC_MIN_SEGMENTS = 4
+
+#: longest angle one sampled arc segment may span, deg
+ARC_MAX_SEGMENT_DEG = 5.0
 TWO_PI = 2.0 * math.pi
 _LINEAR9 = [a in LINEAR_AXES for a in ALL_AXES]
 

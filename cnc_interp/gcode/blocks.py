@@ -41,12 +41,15 @@ from collections.abc import Iterator
 from itertools import repeat
 from typing import NamedTuple
 
-from ..constants import FAST_CHUNK_LINES
 from ..errors import SourceLocation
 from .expr import evaluate
 from .lexer import EMPTY, PERCENT, WORDS, LineCode, lex_line, snippet
 from .oword import Executor, Structure
 from .params import ParamStore
+
+
+#: fast path: source lines tokenised per numpy chunk (bounds memory on huge files)
+FAST_CHUNK_LINES = 32768
 
 
 class Block(NamedTuple):

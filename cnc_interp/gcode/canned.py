@@ -24,7 +24,11 @@ The moves run as exact path (tolerance 0), as LinuxCNC switches to G61 inside cy
 
 from __future__ import annotations
 
-from ..constants import LOOP_ITERATION_LIMIT, PECK_CLEARANCE_MM
+from ..constants import LOOP_ITERATION_LIMIT
+
+
+#: G73/G83 peck: rapid back down to this far above the previous depth (LinuxCNC: 0.010 in)
+PECK_CLEARANCE_MM = 0.254
 
 #: plane code (G17 = 170, ...) -> (aa, bb, cc) indices into ALL_AXES
 CYCLE_AXES = {170: (0, 1, 2), 180: (2, 0, 1), 190: (1, 2, 0)}

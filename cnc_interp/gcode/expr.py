@@ -35,8 +35,12 @@ import math
 import re
 from collections.abc import Callable
 
-from ..constants import EXPR_EQUAL_TOL, EXPR_INTEGER_TOL
+from ..constants import EXPR_INTEGER_TOL
 from ..errors import GCodeError, SourceLocation
+
+
+#: EQ / NE compare within this tolerance (LinuxCNC TOLERANCE_EQUAL)
+EXPR_EQUAL_TOL = 0.0001
 
 # opcodes of the reverse Polish code: tuples (opcode, argument, source column)
 CONST, NUMREAD, NAMEREAD, EXISTS, NEG, FUNC, BIN, ATAN, NUMREAD_K = range(9)

@@ -22,14 +22,17 @@ from operator import itemgetter
 
 import numpy as np
 
-from ..constants import (ALL_AXES, ARC_MAX_TURNS, CURVE_CHORD_TOL_MM, CURVE_MAX_NODES, LINEAR_AXES,
-                         MM_PER_INCH, SECONDS_PER_MINUTE)
+from ..constants import (ALL_AXES, CURVE_CHORD_TOL_MM, CURVE_MAX_NODES, LINEAR_AXES, MM_PER_INCH, SECONDS_PER_MINUTE)
 from ..errors import GCodeError, SourceLocation, UnsupportedError
 from .arcs import GeometryError, arc_length_mm, centre_from_ijk, centre_from_r, segment_count
 from .canned import SUPPORTED as CYCLE_CODES, CycleError, expand_cycle
 from .program import Dwell, Program, Stop
 from .runs import RunBuilder, finish_run
 from .splines import bezier, make_nurbs, sample_nurbs
+
+
+#: largest G2/G3 P (full turns) accepted; more is treated as a runaway expression
+ARC_MAX_TURNS = 10_000
 
 INF = math.inf
 NAN = math.nan
@@ -1279,6 +1282,7 @@ class Interpreter:
 
 
 def _move_length(s, e) -> float:
+    """``program.move_lengths`` for one move of the 9 axes (scalar: the interpreter's hot path)."""
     lin = 0.0
     rot = 0.0
     for k in range(9):

@@ -13,11 +13,16 @@ Line indices are 0-based; ``src`` is the block layer's source (``line(i)``,
 
 from __future__ import annotations
 
-from ..constants import LOOP_ITERATION_LIMIT, LOOP_TOTAL_ITERATION_LIMIT, MAX_CALL_DEPTH
+from ..constants import LOOP_ITERATION_LIMIT, MAX_CALL_DEPTH
 from ..errors import GCodeError, SourceLocation
 from .expr import evaluate, to_int
 from .lexer import EMPTY, OWORD, PERCENT, LineCode, snippet
 from .params import ParamStore
+
+
+#: upper bound on loop iterations of a whole program, all loops and nestings together (as
+#: many as a ten-million-line program has blocks)
+LOOP_TOTAL_ITERATION_LIMIT = 10_000_000
 
 
 class Structure:

@@ -196,14 +196,23 @@ class Program:
         return tuple(it for it in self.items if isinstance(it, Run))
 
 
-def polyline_length(nodes: np.ndarray, axes: str) -> float:
-    """Length of a polyline by LinuxCNC's feed convention (see ``metric_weights``)."""
+def move_lengths(points: np.ndarray, axes: str) -> np.ndarray:
+    """Lengths (K-1,) of the moves between consecutive points (K, n_axes) by LinuxCNC's
+    feed convention: the linear axes' distance (mm), or the rotary axes' (deg) where no
+    linear axis moves. The one definition: the feed of a move, the program summary, the
+    FPGA emulator's path length (``interp._move_length`` is its scalar form)."""
     from ..constants import LINEAR_AXES
 
-    if nodes.shape[0] < 2:
-        return 0.0
-    d = np.diff(nodes, axis=0)
+    d = np.diff(points, axis=0)
     lin = np.array([a in LINEAR_AXES for a in axes], dtype=bool)
     lin_len = np.sqrt((d[:, lin] ** 2).sum(axis=1)) if lin.any() else np.zeros(len(d))
     rot_len = np.sqrt((d[:, ~lin] ** 2).sum(axis=1)) if (~lin).any() else np.zeros(len(d))
-    return float(np.where(lin_len > 0, lin_len, rot_len).sum())
+    lengths: np.ndarray = np.where(lin_len > 0, lin_len, rot_len)
+    return lengths
+
+
+def polyline_length(nodes: np.ndarray, axes: str) -> float:
+    """Length of a polyline by LinuxCNC's feed convention (``move_lengths``)."""
+    if nodes.shape[0] < 2:
+        return 0.0
+    return float(move_lengths(nodes, axes).sum())

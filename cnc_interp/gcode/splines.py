@@ -21,10 +21,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..constants import (CURVE_CHORD_TOL_MM, CURVE_MAX_NODES, SPLINE_MIN_SEGMENTS_PER_SPAN,
-                         SPLINE_REFINE_PASSES)
+from ..constants import CURVE_CHORD_TOL_MM, CURVE_MAX_NODES
 from .arcs import GeometryError
 from .program import Nurbs
+
+
+#: every NURBS/spline knot span gets at least this many node segments
+SPLINE_MIN_SEGMENTS_PER_SPAN = 8
+
+#: most bisection passes when sampling a spline to CURVE_CHORD_TOL_MM
+#: (CURVE_MAX_NODES bounds the work)
+SPLINE_REFINE_PASSES = 48
 
 
 def clamped_uniform_knots(n_control: int, order: int) -> np.ndarray:

@@ -4,17 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..constants import LINEAR_AXES
-from .program import Arc, Dwell, Program, Run, Stop
+from .program import Arc, Dwell, Program, Run, Stop, move_lengths
 
 
 def _segment_lengths(run: Run) -> np.ndarray:
     """Per-move lengths (N-1,) by the feed convention: linear axes, else rotary (mm / deg)."""
-    d = np.diff(run.nodes, axis=0)
-    lin = np.array([a in LINEAR_AXES for a in run.axes], dtype=bool)
-    lin_len = np.sqrt((d[:, lin] ** 2).sum(axis=1)) if lin.any() else np.zeros(len(d))
-    rot_len = np.sqrt((d[:, ~lin] ** 2).sum(axis=1)) if (~lin).any() else np.zeros(len(d))
-    return np.where(lin_len > 0, lin_len, rot_len)
+    return move_lengths(run.nodes, run.axes)
 
 
 def program_summary(program: Program) -> dict:

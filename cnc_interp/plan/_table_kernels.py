@@ -221,10 +221,10 @@ def piece_errors(h, QA, QB, off, qc):
     c = np.empty((1, 6, QA.shape[2]))
     err = np.empty(m)
     for p in range(m):
-        _hermite(h[p], QA, p, QB, p, c, 0)
+        _hermite(h[p], QA, p, QB, p, c, np.int64(0))
         e = 0.0
         for j in range(3):
-            ej = _piece_err(c, 0, off[p, j], qc, p, j)
+            ej = _piece_err(c, np.int64(0), off[p, j], qc, p, j)
             if not ej <= e:
                 e = ej
         err[p] = e
@@ -313,8 +313,8 @@ def _refine(coef, breaks, w, ua0, ub0, seg0, tol, scale, max_depth, glx, glw):
         st_a[0] = ua0[p0]
         st_b[0] = ub0[p0]
         st_d[0] = 0
-        _knot(coef, breaks, w, ua0[p0], st_qa, 0)
-        _knot(coef, breaks, w, ub0[p0], st_qb, 0)
+        _knot(coef, breaks, w, ua0[p0], st_qa, np.int64(0))
+        _knot(coef, breaks, w, ub0[p0], st_qb, np.int64(0))
         top = 1
         while top > 0:
             top -= 1
@@ -327,28 +327,28 @@ def _refine(coef, breaks, w, ua0, ub0, seg0, tol, scale, max_depth, glx, glw):
                 continue
             # the same floating-point operations as _finish and hermite_check: with the
             # final scale, a piece passes here exactly when it passes in the table
-            _hermite((s_run + ds * scale) - s_run, st_qa, top, st_qb, top, c, 0)
+            _hermite((s_run + ds * scale) - s_run, st_qa, top, st_qb, top, c, np.int64(0))
             e = 0.0
             acc = 0.0
             for j in range(3):
                 acc += sub[j]
-                _pos(coef, k, uc[j] - base, qt, 0, j)
-                ej = _piece_err(c, 0, (s_run + acc * scale) - s_run, qt, 0, j)
+                _pos(coef, k, uc[j] - base, qt, np.int64(0), j)
+                ej = _piece_err(c, np.int64(0), (s_run + acc * scale) - s_run, qt, np.int64(0), j)
                 if not ej <= e:
                     e = ej
             if not e <= tol and d < max_depth:
                 mid = 0.5 * (a + b)
                 if a < mid < b:
-                    _knot(coef, breaks, w, mid, qm, 0)
+                    _knot(coef, breaks, w, mid, qm, np.int64(0))
                     # left half above the right one: it is processed first
                     st_a[top + 1] = a
                     st_b[top + 1] = mid
                     st_d[top + 1] = d + 1
                     _copy_knot(st_qa, top, st_qa, top + 1)
-                    _copy_knot(qm, 0, st_qb, top + 1)
+                    _copy_knot(qm, np.int64(0), st_qb, top + 1)
                     st_a[top] = mid  # (st_b[top], st_qb[top] stay b's)
                     st_d[top] = d + 1
-                    _copy_knot(qm, 0, st_qa, top)
+                    _copy_knot(qm, np.int64(0), st_qa, top)
                     top += 2
                     continue
             if m == cap:
@@ -435,7 +435,7 @@ def build_identity(coef, breaks, s_breaks, w, length, tol, max_depth, max_piece,
     err = np.empty(0)
     n_seg = breaks.shape[0] - 1
     qend = np.empty((1, 1, coef.shape[2]))
-    _pos(coef, n_seg - 1, breaks[n_seg] - breaks[n_seg - 1], qend, 0, 0)
+    _pos(coef, n_seg - 1, breaks[n_seg] - breaks[n_seg - 1], qend, np.int64(0), np.int64(0))
     for attempt in range(max_tries):
         ua, ub, seg, dep, ds, off, e_loc, Q, qc = _refine(coef, breaks, w, ua0, ub0, seg0,
                                                           tol_in, sc_in, max_depth, glx, glw)

@@ -393,21 +393,21 @@ def _brake_value(S, C, QEND, qh, k, vl, al, jl, js_lim, lo, hi, s0, d1, b, guess
     # which side of the allowed interval is the target on? (linearised at the target)
     L, H = _lin_interval(q, qs, qh[k - 1], lo, hi, target, s0, b)
     if target < L or L > H:
-        okl, xl, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, target, False,
-                                hint, q, qs, tol, wk, True, L, H, True)
+        okl, xl, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, target, np.bool_(False),
+                                hint, q, qs, tol, wk, np.bool_(True), L, H, np.bool_(True))
         if okl and xl >= target:
             return True, xl, hint
         if not okl:
             return False, s0, hint
-    oku, xu, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, target, True,
-                            hint, q, qs, tol, wk, True, L, H)
+    oku, xu, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, target, np.bool_(True),
+                            hint, q, qs, tol, wk, np.bool_(True), L, H, np.bool_(False))
     if not oku:
         return False, s0, hint
     if xu <= target:
         return True, xu, hint
     # the linear model misled: the target lies inside; fall back to the lower end
-    okl, xl, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, False,
-                            hint, q, qs, tol, wk, False, 0.0, 0.0, True)
+    okl, xl, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, np.bool_(False),
+                            hint, q, qs, tol, wk, np.bool_(False), np.float64(0.0), np.float64(0.0), np.bool_(True))
     if not okl:
         return False, s0, hint
     if xl >= target:
@@ -458,8 +458,8 @@ def _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, mode, hint, 
     b = _cap(s0, dt, L, FB, FV)
     guess = s0 + d1 + d2
     if mode == 0:
-        ok, x, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, True, hint,
-                              q, qs, tol, wk)
+        ok, x, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, np.bool_(True), hint,
+                              q, qs, tol, wk, np.bool_(False), np.float64(0.0), np.float64(0.0), np.bool_(False))
         if ok:
             return ok, x, hint
         # the linearised search can miss a narrow allowed set (near a sharp turn the
@@ -468,17 +468,17 @@ def _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, mode, hint, 
                                      guess, hint, q, qs, tol, wk, qs0_known)
         if not okb:
             return False, s0, hint
-        return _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, xb, True, hint, q, qs, tol,
-                       wk)
+        return _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, xb, np.bool_(True), hint, q, qs, tol,
+                       wk, np.bool_(False), np.float64(0.0), np.float64(0.0), np.bool_(False))
     hint = _eval(S, C, QEND, s0, hint, q, qs)
     jd, ad = _path_limits(qs, jl, al)
     # aim: the largest step whose continuous stop distance still fits before L
-    okl, xl, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, False,
-                            hint, q, qs, tol, wk)
+    okl, xl, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, np.bool_(False),
+                            hint, q, qs, tol, wk, np.bool_(False), np.float64(0.0), np.float64(0.0), np.bool_(False))
     if not okl:
         return False, s0, hint
-    oku, xu, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, True, hint,
-                            q, qs, tol, wk)
+    oku, xu, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, np.bool_(True), hint,
+                            q, qs, tol, wk, np.bool_(False), np.float64(0.0), np.float64(0.0), np.bool_(False))
     jd = jd * aim_jerk
     x = xl
     if xu >= L and L - s0 <= jd:
@@ -622,8 +622,8 @@ def _brake_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq,
         bs[r] = sh[src]
         for i in range(n):
             bq[r, i] = qh[src, i]
-    hint = 0
-    kk = 3
+    hint = np.int64(0)
+    kk = np.int64(3)
     cap = bs.shape[0]
     while True:
         if mode == 1:
@@ -631,7 +631,7 @@ def _brake_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq,
                                       hint, q, qs, lo, hi, tol, wk, kk > 3)
         else:
             ok, x, hint = _step(S, C, QEND, bs, bq, kk, vl, al, jl, js_lim, dt, L, FB, FV, mode,
-                                hint, q, qs, lo, hi, tol, wk, kk > 3)
+                                hint, q, qs, lo, hi, tol, wk, kk > 3, np.float64(1.0))
         if not ok:
             return False, kk, 0
         bs[kk] = x
@@ -646,7 +646,7 @@ def _brake_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq,
                                                    L, easy_frac, wk[2], hint):
             return True, kk, _BIG
         if horizon > 0 and j + kk - 3 >= horizon and \
-                _easy(S, K2, K3, K23, KV, bs, kk, al, js_lim, L, 0.6, wk[2], hint):
+                _easy(S, K2, K3, K23, KV, bs, kk, al, js_lim, L, np.float64(0.6), wk[2], hint):
             return True, kk, j + kk - 3
         if kk >= cap or kk >= max_steps:
             return False, kk, 0
@@ -676,8 +676,8 @@ def _rest_value(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq
     sh[j]/qh[j] set, or ok False when float resolution leaves none."""
     n = qh.shape[1]
     s0 = sh[j - 1]
-    ok, xm, hint = _step(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, 0,
-                         hint, q, qs, lo, hi, tol, wk, False)
+    ok, xm, hint = _step(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, np.int64(0),
+                         hint, q, qs, lo, hi, tol, wk, np.bool_(False), np.float64(1.0))
     if not ok or not xm > s0:
         return False, s0, 0, hint
     good = s0
@@ -691,8 +691,8 @@ def _rest_value(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq
             for i in range(n):
                 qh[j, i] = q[i]
             r = _brake_run(S, C, QEND, sh, qh, j + 1, vl, al, jl, js_lim, dt, L, FB, FV,
-                           bs, bq, max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23, KV,
-                           easy_frac, 0, wk)
+                           bs, bq, max_steps, q, qs, lo, hi, tol, stats, np.int64(1), K2, K3, K23, KV,
+                           easy_frac, np.int64(0), wk)
             stats[1] += 1
             passed = r[0]
         else:
@@ -723,8 +723,8 @@ def _brake_fix(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq,
     """Fix sample j at the brake value (at rest where that would stay put: ``_rest_value``).
     Returns (status OK / INFEASIBLE / STUCK, the certificate of a rest value or -1, hint)."""
     n = qh.shape[1]
-    ok, x, hint = _step(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, 1,
-                        hint, q, qs, lo, hi, tol, wk, False)
+    ok, x, hint = _step(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, np.int64(1),
+                        hint, q, qs, lo, hi, tol, wk, np.bool_(False), np.float64(1.0))
     if not ok:
         return INFEASIBLE, -1, hint
     c = -1
@@ -757,7 +757,7 @@ def _certified_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs,
     """A brake run from j; when it succeeds it is kept in cs/cq as the certificate the
     chain after a fix at j bisects along. Returns (ok, certified-up-to, its length)."""
     r = _brake_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq,
-                   max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23, KV, easy_frac,
+                   max_steps, q, qs, lo, hi, tol, stats, np.int64(1), K2, K3, K23, KV, easy_frac,
                    horizon, wk)
     stats[1] += 1
     if not r[0]:
@@ -792,7 +792,7 @@ def _max_then_brake(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, t, x,
         qh[t, i] = q[i]
     hz = (t + 1 + 2 * (last_k - last_j) + 8) if fast else 0
     r = _brake_run(S, C, QEND, sh, qh, t + 1, vl, al, jl, js_lim, dt, L, FB, FV,
-                   bs, bq, max_steps, q, qs, lo, hi, tol, stats, 1, K2, K3, K23, KV,
+                   bs, bq, max_steps, q, qs, lo, hi, tol, stats, np.int64(1), K2, K3, K23, KV,
                    easy_frac, hz, wk)
     stats[1] += 1
     return r
@@ -805,8 +805,8 @@ def _chain_test(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, j, t, cs,
     """Samples j+1..t-1 from the certificate, the max step at t, then a brake run from
     t+1: (passed, certified-up-to, hint)."""
     _put_cert(sh, qh, cs, cq, j, j + 1, t)
-    ok, x, hint = _step(S, C, QEND, sh, qh, t, vl, al, jl, js_lim, dt, L, FB, FV, 0,
-                        hint, q, qs, lo, hi, tol, wk, False)
+    ok, x, hint = _step(S, C, QEND, sh, qh, t, vl, al, jl, js_lim, dt, L, FB, FV, np.int64(0),
+                        hint, q, qs, lo, hi, tol, wk, np.bool_(False), np.float64(1.0))
     stats[3] += 1
     if not ok:
         return False, 0, hint
@@ -869,8 +869,8 @@ def _chain_search(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, j, m, c
         _put_cert(sh, qh, cs, cq, j, j + 1, j + m)
         return -1, 0, hint
     _put_cert(sh, qh, cs, cq, j, j + 1, best)
-    ok, x, hint = _step(S, C, QEND, sh, qh, best, vl, al, jl, js_lim, dt, L, FB, FV, 0,
-                        hint, q, qs, lo, hi, tol, wk, False)
+    ok, x, hint = _step(S, C, QEND, sh, qh, best, vl, al, jl, js_lim, dt, L, FB, FV, np.int64(0),
+                        hint, q, qs, lo, hi, tol, wk, np.bool_(False), np.float64(1.0))
     sh[best] = x
     for i in range(n):
         qh[best, i] = q[i]
@@ -971,7 +971,7 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, st, cs, cq,
             c_at = -1
             if P >= 0:
                 cert = pc
-                chain = False
+                chain = np.bool_(False)
                 if P - 1 > b:
                     b = P - 1
                 k = P + 1
@@ -979,8 +979,8 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, st, cs, cq,
                 b = k + c_len - 2
                 k = k + c_len - 1
             continue
-        ok, x, hint = _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, 0,
-                            hint, q, qs, lo, hi, tol, wk, False)
+        ok, x, hint = _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, np.int64(0),
+                            hint, q, qs, lo, hi, tol, wk, np.bool_(False), np.float64(1.0))
         stats[3] += 1
         if ok and chain and k + 1 < cap:
             # right after a brake fix the next failure is usually imminent: test the max
@@ -991,7 +991,7 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, st, cs, cq,
                                 easy_frac, fast, last_k, last_j, wk)
             if r[0]:
                 cert = r[2]
-                chain = False
+                chain = np.bool_(False)
                 k += 1
                 continue
             if k + 1 >= cert:
@@ -1022,7 +1022,7 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, st, cs, cq,
                 qh[k, i] = q[i]
             k += 1
             continue
-        chain = False
+        chain = np.bool_(False)
         last_k = k
         # empty set at k: latest j in [b+1, k-1] from which braking reaches rest
         stats[0] += 1
@@ -1084,8 +1084,8 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, st, cs, cq,
                 if jj <= b:
                     break
                 r = _brake_run(S, C, QEND, sh, qh, jj, vl, al, jl, js_lim, dt, L, FB, FV,
-                               bs, bq, max_steps, q, qs, lo, hi, tol, stats, 2, K2, K3, K23, KV,
-                               0.0, 0, wk)
+                               bs, bq, max_steps, q, qs, lo, hi, tol, stats, np.int64(2), K2, K3, K23, KV,
+                               np.float64(0.0), np.int64(0), wk)
                 kk = r[1]
                 if r[0] and L - bs[kk - 1] <= gap_tol:
                     need = jj + kk - 3
@@ -1112,4 +1112,4 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, st, cs, cq,
         k = j + 1
         b = j
         last_j = j
-        chain = True
+        chain = np.bool_(True)

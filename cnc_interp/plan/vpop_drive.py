@@ -272,7 +272,7 @@ def drive(S, C, QEND, vl, al, jl, js, dt, L, FB, FV, tol, max_steps, K2, K3, K23
             ds[DS_END] = st[core.ST_K] + base
             return DONE, sh, qh
         if status == core.YIELD:
-            checkpoint(sh, qh, st, cs, cq, ds, ck_st, ck_cs, ck_cq, ck_sh, ck_qh, False)
+            checkpoint(sh, qh, st, cs, cq, ds, ck_st, ck_cs, ck_cq, ck_sh, ck_qh, np.bool_(False))
             ds[DS_NEXT_CK] += checkpoint_every
             continue
         if status == core.NEED_SPACE:
@@ -410,10 +410,10 @@ def plan_identity_batch(coef, breaks, s_breaks, weights, lengths, feed, seg_off,
          max_steps, floor_h, pieces, max_err) = r
         L = lengths[p]
         sh, qh, st, cs, cq, bs, bq, stats, ds, ck_st, ck_cs, ck_cq, ck_sh, ck_qh, max_cap = \
-            new_loop(n, qstart, est, brake_cap, floor_h, room, 0, checkpoint_every)
+            new_loop(n, qstart, est, brake_cap, floor_h, room, np.int64(0), checkpoint_every)
         ds[DS_NEXT_CK] = checkpoint_every
         ds[DS_FAST] = 1 if fast0 else 0
-        checkpoint(sh, qh, st, cs, cq, ds, ck_st, ck_cs, ck_cq, ck_sh, ck_qh, True)
+        checkpoint(sh, qh, st, cs, cq, ds, ck_st, ck_cs, ck_cq, ck_sh, ck_qh, np.bool_(True))
         res, sh, qh = drive(S, C, QEND, vl, al, jl, js, dt, L, FB, FV, tol, max_steps, K2, K3,
                             K23, KV, gap_tol, floor_h, easy_fraction, chain_seq,
                             checkpoint_every, sh, qh, st, cs, cq, bs, bq, stats, ds, ck_st,
@@ -421,7 +421,7 @@ def plan_identity_batch(coef, breaks, s_breaks, weights, lengths, feed, seg_off,
         if res != DONE:
             off[p + 1] = total
             continue
-        last = end_index(sh, 0, 0, ds[DS_END], L)
+        last = end_index(sh, np.int64(0), np.int64(0), ds[DS_END], L)
         m = last + 1
         if total + m > cap:
             cap = max(2 * cap, total + m)
