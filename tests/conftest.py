@@ -1,5 +1,4 @@
-"""Shared test set-up: where the samples and the corpus are, one CLI runner, program files;
-long sweeps (``@pytest.mark.slow``) are opt-in: ``--runslow`` or CNC_INTERP_SLOW=1.
+"""Shared test set-up: where the samples and the corpus are, one CLI runner, program files.
 
 Module constants (importable as ``from conftest import CORPUS``, since pytest puts this
 folder on ``sys.path``) for parametrisation at collection time; fixtures for the rest.
@@ -53,17 +52,3 @@ def gcode_file(tmp_path):
         return path
 
     return make
-
-
-def pytest_addoption(parser):
-    parser.addoption("--runslow", action="store_true", default=False,
-                     help="also run tests marked slow (long sweeps)")
-
-
-def pytest_collection_modifyitems(config, items):
-    if config.getoption("--runslow") or os.environ.get("CNC_INTERP_SLOW") == "1":
-        return
-    skip = pytest.mark.skip(reason="slow sweep: run with --runslow or CNC_INTERP_SLOW=1")
-    for item in items:
-        if "slow" in item.keywords:
-            item.add_marker(skip)

@@ -73,7 +73,7 @@ def test_the_fit_stays_within_its_tolerance(seed, n, step_mm, turn_deg, tol_mm):
 limit = st.floats(0.5, 2.0)
 
 
-@pytest.mark.parametrize("planner", ["vpop", "constant", "variable"])
+@pytest.mark.parametrize("planner", ["optimal", "vpop", "constant", "variable"])
 @given(st.integers(0, 10_000), st.integers(2, 15), limit, limit, limit,
        st.sampled_from([0.001, 0.002, 0.006]))
 def test_every_planner_keeps_every_limit(planner, seed, n, kv, ka, kj, dt_s):
