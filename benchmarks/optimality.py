@@ -14,7 +14,8 @@ plan's samples and computes the least number of periods that path can be run in
 under the same limits. Its result depends on the path, not on the plan it was given,
 so it runs once per case (on the first planner's plan) and is cached in
 ``--cache`` (default ``~/.cache/cnc-interp/optimality.json``, keyed on the case's
-program, machine and period) because it takes seconds to minutes per case.
+program, machine and period, and the fitted path's length: a change of the fit is a
+new geometry) because it takes seconds to minutes per case.
 
 The ratio of a planner is its main move's periods over the oracle's. Programs come
 inline (synthetic) or as excerpts of corpus files read in place (``CNC_CORPUS``).
@@ -172,9 +173,10 @@ def _program(case) -> str:
     return prog() if callable(prog) else prog
 
 
-def _key(case, text: str) -> str:
+def _key(case, text: str, length_mm: float) -> str:
     h = hashlib.sha256()
-    for part in (text, case[2], repr(case[3]), repr(case[4]), repr(case[5]), repr(case[6])):
+    for part in (text, case[2], repr(case[3]), repr(case[4]), repr(case[5]), repr(case[6]),
+                 f"{length_mm:.6f}"):
         h.update(part.encode())
     return h.hexdigest()[:20]
 
@@ -199,7 +201,7 @@ def _plan(case, text: str, planner: str, work: str) -> dict:
     traj = out.trajectory
     steps = _main_move(traj.q)
     return {"planner": planner, "csv": csv, "machine": mach, "cycle_s": traj.duration_s,
-            "main_steps": steps, "plan_wall_s": out.timings["plan"], "plan_cpu_s": cpu,
+            "main_steps": steps, "length_mm": float(traj.s[-1]), "plan_wall_s": out.timings["plan"], "plan_cpu_s": cpu,
             "worst_ratio": out.report.worst_ratio}
 
 
@@ -263,8 +265,8 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="cnc-opt-") as work:
         for case in cases:
             text = _program(case)
-            key = _key(case, text)
             plans = [_plan(case, text, p, work) for p in args.planners]
+            key = _key(case, text, plans[0]["length_mm"])
             opt = cache.get(key)
             if opt is None and not args.no_oracle:
                 best = min(plans, key=lambda r: r["main_steps"])
