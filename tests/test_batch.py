@@ -96,7 +96,7 @@ def test_bad_baseline(tmp_path):
 
 def test_options_defaults():
     o = BatchOptions(paths=("a",), machine_spec="generic-mill")
-    assert o.planner == "optimal" and o.max_slowdown == "1%" and o.dask_address is None
+    assert o.planner == "vpop" and o.max_slowdown == "1%" and o.dask_address is None
 
 
 # --- full runs through parse, fit, plan, verify --------------------------------

@@ -74,7 +74,7 @@ def test_stdin_to_stdout_json_summary_and_start():
     assert summary["samples"] == rows.shape[0]
     assert summary["cycle_time_s"] == pytest.approx(rows[-1, 0])
     assert summary["worst_ratio"] <= 1 + 1e-9
-    assert summary["planner"] == "optimal"  # the default
+    assert summary["planner"] == "vpop"  # the default
 
 
 def test_bad_gcode_and_bad_start_exit_2(tmp_path):
