@@ -4,8 +4,13 @@ Mirrors ``cnc_interp.fpga.frames.FrameParser`` and the sequencing of
 ``cnc_interp.fpga.device.DeviceCore.handle`` (docs/fpga-protocol.md sections 2 and 3):
 
 - received bytes go into a circular buffer (``BUFFER_BYTES``, block RAM); the parser reads
-  them back, so that after a bad header or CRC it can drop one byte and search again from
-  the byte after the failed frame's start, exactly as the Python parser re-scans its buffer;
+  them back, one byte per cycle through a registered read pipeline, so that after a bad
+  header or CRC it can drop one byte and search again from the byte after the failed
+  frame's start, exactly as the Python parser re-scans its buffer;
+- an accepted CONFIG/SEGMENT/PROFILE/SETPOINTS payload is read a second time for the
+  decoder (``dec_*``), through a second read port, while the parser already checks the
+  next frame: a byte costs one parser cycle and one decoder cycle, in parallel; a frame's
+  bytes are freed when its payload is decoded;
 - magic ``CNCF``, version, length ≤ 4096 and the header CRC-32 are checked when the 20
   header bytes are in; the frame CRC-32 (IEEE, reflected, computed bytewise by an unrolled
   8-step XOR network) when the trailer is; an unknown type counts as a CRC error (as
@@ -79,10 +84,17 @@ class FrameParser(wiring.Component):
         # not transparent: a byte is read only after the cycle it was written in (pos < avail),
         # and the writer never overwrites a byte still held (wr − base < n), so no bypass logic
         rp = mem.read_port()
+        # a second read port for the decoder's pass over an accepted payload, so that it runs
+        # while the parser checks the next frame (the buffer is duplicated in block RAM)
+        dp = mem.read_port()
 
         wr = Signal(B + 1)  # bytes written (mod 2n)
-        base = Signal(B + 1)  # first byte still held (frame start being parsed)
-        m.d.comb += self.in_ready.eq((wr - base)[:B + 1] < n)
+        base = Signal(B + 1)  # start of the frame being parsed
+        d_busy = Signal()  # the decoder holds an accepted frame's payload
+        d_base = Signal(B + 1)  # start of that frame
+        hold = Signal(B + 1)  # first byte still needed
+        m.d.comb += hold.eq(Mux(d_busy, d_base, base))
+        m.d.comb += self.in_ready.eq((wr - hold)[:B + 1] < n)
         m.d.comb += [wp.addr.eq(wr[:B]), wp.data.eq(self.in_data),
                      wp.en.eq(self.in_valid & self.in_ready)]
         with m.If(self.in_valid & self.in_ready):
@@ -107,32 +119,34 @@ class FrameParser(wiring.Component):
         rx = Signal(32)  # received CRC field (header or trailer), little-endian
         n_axes = Signal(8)
         pid = Signal(32)
-        dec_end = Signal(16)  # 20 + payload length: first offset past the payload
+
+        # the decoder's pass (below): offset of its next read, address, end, frame type
+        d_pos = Signal(16)
+        d_addr = Signal(B)
+        d_end = Signal(16)  # 20 + payload length: first offset past the payload
+        d_type = Signal(8)
 
         # -- read pipeline: one byte per cycle -------------------------------------------------
         # stage 0 requests the byte at offset rd_pos (address rd_addr = base + rd_pos, kept as
         # a register so that the block RAM's address comes straight from flip-flops); stage 1
         # is the block RAM's read (its data on rp.data); stage 2 registers that byte (so the
         # RAM's slow clock-to-out ends at a flip-flop) and stage C uses it the next cycle. A
-        # frame start that fails, an accepted frame and the end of a payload restart the
-        # pipeline at a new offset (``restart``: the bytes in flight are dropped).
+        # frame start that fails and a frame's end restart the pipeline at a new offset
+        # (``restart``: the bytes in flight are dropped).
         rd_pos = Signal(16)
         rd_addr = Signal(B)
         s1_valid = Signal()
         s1_pos = Signal(16)
         s2_valid = Signal()
         s2_pos = Signal(16)
-        s2_dpos = Signal(16)  # s2_pos − 20: offset in the payload
         byte = Signal(8)  # stage 2's byte
         issue = Signal()
-        stall = Signal()  # the decoder does not take stage 2's byte: hold every stage
         pos = s2_pos
-        m.d.comb += [rp.addr.eq(rd_addr), rp.en.eq(~stall)]
-        with m.If(~stall):
-            m.d.sync += [s2_valid.eq(s1_valid), s2_pos.eq(s1_pos), s2_dpos.eq(s1_pos - 20),
-                         byte.eq(rp.data), s1_valid.eq(issue), s1_pos.eq(rd_pos)]
-            with m.If(issue):
-                m.d.sync += [rd_pos.eq(rd_pos + 1), rd_addr.eq(rd_addr + 1)]
+        m.d.comb += rp.addr.eq(rd_addr)
+        m.d.sync += [s2_valid.eq(s1_valid), s2_pos.eq(s1_pos), byte.eq(rp.data),
+                     s1_valid.eq(issue), s1_pos.eq(rd_pos)]
+        with m.If(issue):
+            m.d.sync += [rd_pos.eq(rd_pos + 1), rd_addr.eq(rd_addr + 1)]
 
         def restart(new_base, offset=0):
             # drop the bytes in flight; read on from offset ``offset`` of ``new_base``
@@ -198,7 +212,6 @@ class FrameParser(wiring.Component):
                         with m.Else():
                             # hold the frame's bytes; the reads past it are dropped
                             m.d.sync += restart(base)
-                            m.d.sync += dec_end.eq(20 + length)
                             m.next = "HANDLE"
             with m.State("HANDLE"):
                 # the frame's bytes stay in the buffer until its payload is decoded
@@ -245,8 +258,8 @@ class FrameParser(wiring.Component):
                         with m.If(((ftype == FrameType.CONFIG) | (ftype == FrameType.SEGMENT)
                                    | (ftype == FrameType.PROFILE) | (ftype == FrameType.SETPOINTS))
                                   & (length != 0)):
-                            m.d.sync += restart(base, 20)
-                            m.next = "DECODE"
+                            m.d.sync += restart(base)
+                            m.next = "HANDOFF"
                         with m.Switch(ftype):
                             with m.Case(FrameType.CONFIG):
                                 m.d.sync += [configured.eq(1), state.eq(CONFIGURED), program_id.eq(pid)]
@@ -254,13 +267,36 @@ class FrameParser(wiring.Component):
                                 m.d.sync += state.eq(ARMED if self.clocked else RUNNING)
                             with m.Case(FrameType.STOP):
                                 m.d.sync += state.eq(DONE)
-            with m.State("DECODE"):
-                # second pass over the payload, one byte per cycle while the decoder takes them
-                m.d.comb += [issue.eq(rd_pos < dec_end), stall.eq(s2_valid & ~self.dec_ready)]
-                with m.If(s2_valid):
-                    m.d.comb += [self.dec_valid.eq(1), self.dec_data.eq(byte), self.dec_pos.eq(s2_dpos),
-                                 self.dec_type.eq(ftype)]
-                    with m.If(self.dec_ready & (pos + 1 == dec_end)):
-                        m.d.sync += restart(base + total)
-                        m.next = "READ"
+            with m.State("HANDOFF"):
+                # give the payload to the decoder once it has finished the previous one, then
+                # parse on from the next frame while it is decoded
+                with m.If(~d_busy):
+                    m.d.sync += [d_busy.eq(1), d_base.eq(base), d_pos.eq(20), d_addr.eq((base + 20)[:B]),
+                                 d_end.eq(20 + length), d_type.eq(ftype)]
+                    m.d.sync += restart(base + total)
+                    m.next = "READ"
+
+        # -- decoder's pass over an accepted CONFIG/SEGMENT/PROFILE/SETPOINTS payload ---------
+        # the same three stages as the parser's reads, on the second port; one byte per cycle
+        # while the decoder takes them (``dec_ready``), every stage held while it does not
+        d1_valid = Signal()
+        d1_pos = Signal(16)
+        d2_valid = Signal()
+        d2_last = Signal()
+        d2_dpos = Signal(16)  # offset in the payload
+        d_byte = Signal(8)
+        d_stall = Signal()
+        d_issue = Signal()
+        m.d.comb += [d_stall.eq(d2_valid & ~self.dec_ready),
+                     d_issue.eq(d_busy & (d_pos < d_end) & ~d_stall),
+                     dp.addr.eq(d_addr), dp.en.eq(~d_stall)]
+        with m.If(~d_stall):
+            m.d.sync += [d2_valid.eq(d1_valid), d2_dpos.eq(d1_pos - 20), d2_last.eq(d1_pos + 1 == d_end),
+                         d_byte.eq(dp.data), d1_valid.eq(d_issue), d1_pos.eq(d_pos)]
+            with m.If(d_issue):
+                m.d.sync += [d_pos.eq(d_pos + 1), d_addr.eq(d_addr + 1)]
+        m.d.comb += [self.dec_valid.eq(d2_valid), self.dec_data.eq(d_byte), self.dec_pos.eq(d2_dpos),
+                     self.dec_type.eq(d_type)]
+        with m.If(d2_valid & self.dec_ready & d2_last):
+            m.d.sync += d_busy.eq(0)
         return m
