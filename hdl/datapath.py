@@ -189,9 +189,12 @@ class Datapath(wiring.Component):
         m.submodules.seg_fifo = sf = fifo.SyncFIFOBuffered(width=width(self.seg_layout), depth=self.seg_depth)
         m.submodules.piece_fifo = pf = fifo.SyncFIFOBuffered(width=width(self.piece_layout),
                                                              depth=self.piece_depth)
-        m.d.comb += [sf.w_data.eq(self.seg_data), sf.w_en.eq(self.seg_valid), self.seg_ready.eq(sf.w_rdy),
-                     pf.w_data.eq(self.piece_data), pf.w_en.eq(self.piece_valid),
-                     self.piece_ready.eq(pf.w_rdy)]
+        m.d.comb += [sf.w_data.eq(self.seg_data), sf.w_en.eq(self.seg_valid & self.seg_ready),
+                     pf.w_data.eq(self.piece_data), pf.w_en.eq(self.piece_valid & self.piece_ready)]
+        # ready from a flip-flop (the writer's whole decode logic hangs on it): "two places free
+        # a cycle ago" leaves at least one now, as at most one word is written per cycle
+        m.d.sync += [self.seg_ready.eq(sf.w_level < self.seg_depth - 1),
+                     self.piece_ready.eq(pf.w_level < self.piece_depth - 1)]
         sfd = _fields(sf.r_data, self.seg_layout)
         pfd = _fields(pf.r_data, self.piece_layout)
 

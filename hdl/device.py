@@ -79,8 +79,11 @@ class Device(wiring.Component):
         # -- payload decoder ----------------------------------------------------------
         byte, p = ps.dec_data, ps.dec_pos
         ready = Signal()
-        m.d.comb += [ready.eq(dp.seg_ready & dp.piece_ready & spf.w_rdy & tf.w_rdy),
-                     ps.dec_ready.eq(ready)]
+        # from flip-flops only, like the datapath's readies: two places free a cycle ago (at most
+        # one write a cycle) leaves one now
+        fifos_ok = Signal()
+        m.d.sync += fifos_ok.eq((spf.w_level < spf.depth - 1) & (tf.w_level < tf.depth - 1))
+        m.d.comb += [ready.eq(dp.seg_ready & dp.piece_ready & fifos_ok), ps.dec_ready.eq(ready)]
         seg_sr = Signal(8 * (SEGMENT_BYTES - 1))
         piece_sr = Signal(8 * (PIECE_BYTES - 1))
         w64 = Signal(56)
