@@ -24,6 +24,9 @@ c+3: the consumer uses it. A Horner step therefore takes four cycles.
 
 from __future__ import annotations
 
+import functools
+import operator
+
 from amaranth import Cat, Const, Module, Mux, Signal, signed, unsigned
 from amaranth.lib import fifo, wiring
 from amaranth.lib.wiring import In, Out
@@ -88,6 +91,12 @@ def _fields(data, layout):
         out[name] = data[off:off + bits]
         off += bits
     return out
+
+
+def _one_hot(at, pairs):
+    """OR of ``value`` gated by its step's flip-flop ``at(step)``: the value of the step that is
+    on (the steps are one-hot), 0 when none is."""
+    return functools.reduce(operator.or_, [Mux(at(c), v, 0) for c, v in pairs])
 
 
 class Multiplier35(wiring.Component):
@@ -189,9 +198,12 @@ class Datapath(wiring.Component):
         m.submodules.seg_fifo = sf = fifo.SyncFIFOBuffered(width=width(self.seg_layout), depth=self.seg_depth)
         m.submodules.piece_fifo = pf = fifo.SyncFIFOBuffered(width=width(self.piece_layout),
                                                              depth=self.piece_depth)
-        m.d.comb += [sf.w_data.eq(self.seg_data), sf.w_en.eq(self.seg_valid), self.seg_ready.eq(sf.w_rdy),
-                     pf.w_data.eq(self.piece_data), pf.w_en.eq(self.piece_valid),
-                     self.piece_ready.eq(pf.w_rdy)]
+        m.d.comb += [sf.w_data.eq(self.seg_data), sf.w_en.eq(self.seg_valid & self.seg_ready),
+                     pf.w_data.eq(self.piece_data), pf.w_en.eq(self.piece_valid & self.piece_ready)]
+        # ready from a flip-flop (the writer's whole decode logic hangs on it): "two places free
+        # a cycle ago" leaves at least one now, as at most one word is written per cycle
+        m.d.sync += [self.seg_ready.eq(sf.w_level < self.seg_depth - 1),
+                     self.piece_ready.eq(pf.w_level < self.piece_depth - 1)]
         sfd = _fields(sf.r_data, self.seg_layout)
         pfd = _fields(pf.r_data, self.piece_layout)
 
@@ -211,6 +223,10 @@ class Datapath(wiring.Component):
         e_exp = Signal(signed(8))
         mant = [Signal(signed(f.coef_word), name=f"mant{i}") for i in range(6)]
         tau = Signal(signed(f.param.word))
+        # shift amounts of ξ, x*, z* (piece / segment constants)
+        amt_xi = Signal(signed(9))
+        amt_x = Signal(signed(9))
+        amt_z = Signal(signed(9))
 
         # datapath registers
         acc = Signal(signed(f.horner_word))
@@ -233,7 +249,12 @@ class Datapath(wiring.Component):
         m.d.sync += [mul.a.eq(a_op), mul.b.eq(b_op)]
         p = mul.p
 
-        cyc = Signal(range(SAMPLE_CYCLES + 1))
+        # the sample's cycle as a one-hot shift register: each scheduled step is enabled by one
+        # flip-flop (no counter compare in front of the wide adders and the shifter)
+        hot = Signal(SAMPLE_CYCLES)
+
+        def at(c):
+            return hot[c]
 
         def fits(v, bits):
             # v is within the signed range of ``bits``
@@ -257,7 +278,9 @@ class Datapath(wiring.Component):
                     m.d.sync += [cos.eq(sfd["cos"]), sin.eq(sfd["sin"]), org_h.eq(sfd["origin_h"]),
                                  org_v.eq(sfd["origin_v"]), x_exp.eq(sfd["x_exp"]), x_mant.eq(sfd["x_mant"]),
                                  p_exp.eq(sfd["p_exp"]), pieces_left.eq(sfd["n_pieces"]),
-                                 i_h.eq(0), i_v.eq(0), x_prev.eq(0), z_prev.eq(0)]
+                                 i_h.eq(0), i_v.eq(0), x_prev.eq(0), z_prev.eq(0),
+                                 amt_x.eq(fx + sfd["x_exp"].as_signed() - fp),
+                                 amt_z.eq(sfd["p_exp"].as_signed() - fp)]
                     m.d.sync += [p_mant[i].eq(sfd[f"p_mant{i}"]) for i in range(6)]
                     m.next = "PIECE"
             with m.State("PIECE"):
@@ -266,72 +289,69 @@ class Datapath(wiring.Component):
                 with m.Elif(pf.r_rdy):
                     m.d.comb += pf.r_en.eq(1)
                     m.d.sync += [left.eq(pfd["n_samples"]), dtau.eq(pfd["dtau"]), e_exp.eq(pfd["exp"]),
-                                 tau.eq(0), pieces_left.eq(pieces_left - 1)]
+                                 tau.eq(0), pieces_left.eq(pieces_left - 1),
+                                 amt_xi.eq(pfd["exp"].as_signed() - fx)]
                     m.d.sync += [mant[i].eq(pfd[f"mant{i}"]) for i in range(6)]
                     m.next = "WAIT"
             with m.State("WAIT"):
                 with m.If(left == 0):
                     m.next = "PIECE"
                 with m.Elif(self.tick):
-                    m.d.sync += cyc.eq(0)
+                    m.d.sync += hot.eq(1)
                     m.next = "RUN"
             with m.State("RUN"):
                 m.d.comb += running.eq(1)
-                m.d.sync += cyc.eq(cyc + 1)
-                # -- multiplier issues
-                for k, c in enumerate(PROFILE_ISSUE):
-                    with m.If(cyc == c):
-                        m.d.comb += [a_op.eq(mant[5] if k == 0 else acc), b_op.eq(tau)]
-                with m.If(cyc == ISSUE_X):
-                    m.d.comb += [a_op.eq(xi), b_op.eq(x_mant)]
-                for k, c in enumerate(PATH_ISSUE):
-                    with m.If(cyc == c):
-                        m.d.comb += [a_op.eq(p_mant[5] if k == 0 else acc), b_op.eq(xi)]
-                for c, (u, v) in ((ISSUE_CDX, (cos, dx)), (ISSUE_SDX, (sin, dx)),
-                                  (ISSUE_SDZ, (sin, dz)), (ISSUE_CDZ, (cos, dz))):
-                    with m.If(cyc == c):
-                        m.d.comb += [a_op.eq(u), b_op.eq(v)]
+                m.d.sync += hot.eq(hot << 1)
+                # -- multiplier issues: an AND-OR of the one-hot steps (one level of OR tree,
+                # not a chain of 15 priority multiplexers in front of the multiplier's registers)
+                issues = ([(c, mant[5] if k == 0 else acc, tau) for k, c in enumerate(PROFILE_ISSUE)]
+                          + [(ISSUE_X, xi, x_mant)]
+                          + [(c, p_mant[5] if k == 0 else acc, xi) for k, c in enumerate(PATH_ISSUE)]
+                          + [(ISSUE_CDX, cos, dx), (ISSUE_SDX, sin, dx), (ISSUE_SDZ, sin, dz),
+                             (ISSUE_CDZ, cos, dz)])
+                m.d.comb += [a_op.eq(_one_hot(at, [(c, u) for c, u, _ in issues])),
+                             b_op.eq(_one_hot(at, [(c, v) for c, _, v in issues]))]
                 # -- Horner posts (product usable MUL_LATENCY cycles after the issue)
-                for coefs, issues in ((mant, PROFILE_ISSUE), (p_mant, PATH_ISSUE)):
-                    for k, c in enumerate(issues):
-                        with m.If(cyc == c + MUL_LATENCY):
-                            m.d.comb += m_sel.eq(coefs[4 - k])
-                            m.d.sync += acc.eq(horner_next)
-                            with m.If(~fits(horner_next, f.horner_word)):
-                                m.d.sync += ovf.eq(1)
-                # -- variable shifts (two cycles each; the unit is free in between)
-                with m.If(cyc == SHIFT_XI):
-                    m.d.comb += [sh.v.eq(acc), sh.amount.eq(e_exp - fx)]
-                with m.If(cyc == SHIFT_XI + 2):
+                posts = [(c + MUL_LATENCY, coefs[4 - k])
+                         for coefs, issues in ((mant, PROFILE_ISSUE), (p_mant, PATH_ISSUE))
+                         for k, c in enumerate(issues)]
+                m.d.comb += m_sel.eq(_one_hot(at, posts))
+                for c, _ in posts:
+                    with m.If(at(c)):
+                        m.d.sync += acc.eq(horner_next)
+                        with m.If(~fits(horner_next, f.horner_word)):
+                            m.d.sync += ovf.eq(1)
+                # -- variable shifts (two cycles each; the unit is free in between); the
+                # amounts are per piece / per segment registers
+                m.d.comb += [sh.v.eq(_one_hot(at, [(SHIFT_XI, acc), (SHIFT_X, p), (SHIFT_Z, acc)])),
+                             sh.amount.eq(_one_hot(at, [(SHIFT_XI, amt_xi), (SHIFT_X, amt_x),
+                                                        (SHIFT_Z, amt_z)]))]
+                with m.If(at(SHIFT_XI + 2)):
                     m.d.sync += xi.eq(sh.out)
                     with m.If(~fits(sh.out, f.param.word)):
                         m.d.sync += ovf.eq(1)
-                with m.If(cyc == SHIFT_X):
-                    m.d.comb += [sh.v.eq(p), sh.amount.eq(fx + x_exp - fp)]
-                with m.If(cyc == SHIFT_X + 2):
+                with m.If(at(SHIFT_X + 2)):
                     m.d.sync += x.eq(sh.out)
-                with m.If(cyc == DIFF_X):
+                with m.If(at(DIFF_X)):
                     m.d.sync += [dx.eq(x - x_prev), x_prev.eq(x)]
                     with m.If(~fits(x - x_prev, W)):
                         m.d.sync += ovf.eq(1)
-                with m.If(cyc == SHIFT_Z):
-                    m.d.comb += [sh.v.eq(acc), sh.amount.eq(p_exp - fp)]
-                with m.If(cyc == SHIFT_Z + 2):
+                with m.If(at(SHIFT_Z + 2)):
                     m.d.sync += z.eq(sh.out)
-                with m.If(cyc == DIFF_Z):
+                with m.If(at(DIFF_Z)):
                     m.d.sync += [dz.eq(z - z_prev), z_prev.eq(z)]
                     with m.If(~fits(z - z_prev, W)):
                         m.d.sync += ovf.eq(1)
                 # -- integrators
                 for c, reg, sign in ((ISSUE_CDX, i_h, 1), (ISSUE_SDX, i_v, 1),
                                      (ISSUE_SDZ, i_h, -1), (ISSUE_CDZ, i_v, 1)):
-                    with m.If(cyc == c + MUL_LATENCY):
+                    with m.If(at(c + MUL_LATENCY)):
                         nxt = reg + p if sign > 0 else reg - p
                         m.d.sync += reg.eq(nxt)
                         with m.If(~fits(nxt, f.int_word)):
                             m.d.sync += ovf.eq(1)
                 # -- output
-                with m.If(cyc == OUTPUT):
+                with m.If(at(OUTPUT)):
                     qh = org_h + ((i_h >> (ft - 1)) + 1 >> 1)
                     qv = org_v + ((i_v >> (ft - 1)) + 1 >> 1)
                     m.d.sync += [self.out_h.eq(qh), self.out_v.eq(qv), self.out_xi.eq(xi),
@@ -339,7 +359,7 @@ class Datapath(wiring.Component):
                                  self.out_last.eq((left == 1) & (pieces_left == 0))]
                     with m.If(~fits(qh, f.pos.word) | ~fits(qv, f.pos.word)):
                         m.d.sync += ovf.eq(1)
-                with m.If(cyc == SAMPLE_CYCLES - 1):
+                with m.If(at(SAMPLE_CYCLES - 1)):
                     m.d.sync += [tau.eq(tau + dtau), left.eq(left - 1)]
                     m.next = "WAIT"
         return m

@@ -25,10 +25,13 @@ from amaranth.lib.wiring import In, Out
 from cnc_interp.fpga.fixed import FpgaFormats
 from cnc_interp.fpga.frames import FrameType
 
-from .datapath import Datapath
+from .datapath import SAMPLE_CYCLES, Datapath
 from .frame_parser import FrameParser
 
 MAX_AXES = 6
+# the merger writes and emits a segment sample in 2 + n_axes cycles, while the datapath already
+# computes the next one (see the tick below): that needs a datapath sample to take longer
+assert SAMPLE_CYCLES > MAX_AXES + 2
 SEGMENT_BYTES = 112
 PROFILE_HEAD_BYTES = 10
 PIECE_BYTES = 61
@@ -76,8 +79,11 @@ class Device(wiring.Component):
         # -- payload decoder ----------------------------------------------------------
         byte, p = ps.dec_data, ps.dec_pos
         ready = Signal()
-        m.d.comb += [ready.eq(dp.seg_ready & dp.piece_ready & spf.w_rdy & tf.w_rdy),
-                     ps.dec_ready.eq(ready)]
+        # from flip-flops only, like the datapath's readies: two places free a cycle ago (at most
+        # one write a cycle) leaves one now
+        fifos_ok = Signal()
+        m.d.sync += fifos_ok.eq((spf.w_level < spf.depth - 1) & (tf.w_level < tf.depth - 1))
+        m.d.comb += [ready.eq(dp.seg_ready & dp.piece_ready & fifos_ok), ps.dec_ready.eq(ready)]
         seg_sr = Signal(8 * (SEGMENT_BYTES - 1))
         piece_sr = Signal(8 * (PIECE_BYTES - 1))
         w64 = Signal(56)
@@ -145,7 +151,7 @@ class Device(wiring.Component):
         held_v = Signal(signed(W))
         m.d.comb += [tf.r_en.eq(0), spf.r_en.eq(0)]
         m.d.sync += self.smp_valid.eq(0)
-        with m.FSM():
+        with m.FSM() as merger:
             with m.State("IDLE"):
                 with m.If(tf.r_rdy):
                     m.d.comb += tf.r_en.eq(1)
@@ -156,8 +162,6 @@ class Device(wiring.Component):
                     with m.Else():
                         m.next = "SEG"
             with m.State("SEG"):
-                # the datapath starts a sample only while the merger waits for it
-                m.d.comb += dp.tick.eq(self.tick)
                 with m.If(dp.out_valid):
                     m.d.comb += [wen.eq(1), widx.eq(ph), wval.eq(dp.out_h)]
                     m.d.sync += [axis.eq(0), last.eq(dp.out_last), held_v.eq(dp.out_v)]
@@ -191,4 +195,10 @@ class Device(wiring.Component):
                         m.next = "IDLE"
                     with m.Else():
                         m.next = "SEG"
+        # the datapath may start the next sample of the same segment while this one is still
+        # being written and emitted: its next output comes SAMPLE_CYCLES later, long after the
+        # merger is back in SEG (so segment samples cost the datapath's cycles, not + n_axes)
+        m.d.comb += dp.tick.eq(self.tick & (merger.ongoing("SEG")
+                                            | ((merger.ongoing("SEG_V") | merger.ongoing("EMIT"))
+                                               & ~kind & ~last)))
         return m

@@ -49,7 +49,7 @@ module tb;
     cycles <= cycles + 1;
     if (in_valid && in_ready) bi <= bi + 1;
     if (smp_valid) begin
-      $fwrite(fd, "v %h\\n", smp_value);
+      $fwrite(fd, "v %h %0d\\n", smp_value, cycles);
       nv = nv + 1;
       idle = 0;
     end else if (bi >= {nb}) idle = idle + 1;
@@ -65,7 +65,10 @@ endmodule
 
 
 def run_device(data: bytes, n_axes: int, fmts: FpgaFormats | None = None, workdir: str | None = None):
-    """(samples (K, n_axes) int64, STATUS answers [(last seq, errors, state)], cycles)."""
+    """(samples (K, n_axes) int64, STATUS answers [(last seq, errors, state)], stamps (K,) int64).
+
+    stamps[k]: the clock cycle (counted from reset, bytes offered one per cycle from cycle 0)
+    at which the device put out the last axis of sample k."""
     from amaranth.back import verilog
 
     fmts = fmts or FpgaFormats()
@@ -80,7 +83,7 @@ def run_device(data: bytes, n_axes: int, fmts: FpgaFormats | None = None, workdi
         with open(os.path.join(tmp, "bytes.hex"), "w") as fh:
             fh.write("\n".join(f"{b:02x}" for b in data) + "\n")
         with open(os.path.join(tmp, "tb.v"), "w") as fh:
-            # the parser reads every byte twice at two cycles each: a full 16 KiB buffer is ~64k
+            # the parser reads every byte twice (one cycle each): a full 16 KiB buffer is ~32k
             # cycles without a sample out; the run ends after 300k idle cycles
             fh.write(TB.format(nb=len(data), qw=fmts.pos.word, idle_limit=300_000,
                                limit=200 * len(data) + 1_000_000_000))
@@ -94,7 +97,7 @@ def run_device(data: bytes, n_axes: int, fmts: FpgaFormats | None = None, workdi
             subprocess.run(["iverilog", "-g2012", "-o", "tb.vvp", "tb.v", "device.v"], cwd=tmp,
                            check=True, capture_output=True)
             subprocess.run(["vvp", "-n", "tb.vvp"], cwd=tmp, check=True, capture_output=True)
-        vals, sts, cycles = [], [], 0
+        vals, stamps, sts = [], [], []
         bits = fmts.pos.word
         with open(os.path.join(tmp, "out.txt")) as fh:
             for line in fh:
@@ -102,12 +105,12 @@ def run_device(data: bytes, n_axes: int, fmts: FpgaFormats | None = None, workdi
                 if parts[0] == "v":
                     v = int(parts[1], 16)
                     vals.append(v - (1 << bits) if v >> (bits - 1) else v)
+                    stamps.append(int(parts[2]))
                 elif parts[0] == "s":
                     sts.append(tuple(int(x) for x in parts[1:]))
-                elif parts[0] == "end":
-                    cycles = int(parts[1])
         q = np.array(vals[: len(vals) - len(vals) % n_axes], dtype=np.int64).reshape(-1, n_axes)
-        return q, sts, cycles
+        k = q.shape[0]
+        return q, sts, np.array(stamps[n_axes - 1:k * n_axes:n_axes], dtype=np.int64)
     finally:
         if workdir is None:
             shutil.rmtree(tmp, ignore_errors=True)

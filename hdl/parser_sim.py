@@ -40,7 +40,7 @@ def run_hdl(data: bytes, clocked: bool = False, buffer_bits: int = 13):
             if sv:
                 statuses.append((ls, er, st, by, pid, prg))
             idle = idle + 1 if done["n"] else 0
-            if idle > 4 * len(data) + 200:  # time to read every byte twice (two cycles per byte)
+            if idle > 4 * len(data) + 200:  # ample: every byte is read twice, one cycle per read
                 return
 
     sim = Simulator(dut)

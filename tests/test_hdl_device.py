@@ -9,7 +9,7 @@ import pytest
 
 pytest.importorskip("amaranth", reason="needs the [hdl] extra (amaranth)")
 
-from cnc_interp.fpga.frames import poll_frame, program_frames  # noqa: E402
+from cnc_interp.fpga.frames import FrameType, poll_frame, program_frames  # noqa: E402
 from cnc_interp.fpga.model import FixedSegment, SetpointBlock  # noqa: E402
 from cnc_interp.fpga.program import build_program  # noqa: E402
 from hdl.device_sim import run_device_hdl, run_device_python  # noqa: E402
@@ -103,3 +103,31 @@ def test_dry_run_frame_file_through_the_verilog_device(tmp_path):
     assert qp.shape[0] > 1000
     np.testing.assert_array_equal(qh, qp)
     assert sh == sp and sp[-1][2] == 3
+
+
+def test_setpoint_samples_through_the_verilog_device_at_the_byte_rate(tmp_path):
+    # every sample of the program as setpoints: identical to the Python device, and the device
+    # keeps up with bytes offered one per cycle — the parser's check of a frame and the decoder's
+    # pass over the previous one overlap, so a 3-axis sample (24 bytes) costs about 24 cycles,
+    # not the 48 of two passes one after the other (issue 18b; a cycle count, not a wall time)
+    import dataclasses
+
+    from hdl import iverilog_sim
+    from hdl.device_verilator import run_device
+
+    if iverilog_sim.available() is None:
+        pytest.skip("no Verilog simulator (apt-get install verilator)")
+    from cnc_interp.fpga.model import run_program
+
+    path = gentle_curve(3, seed=8, axes="XYZ", plane=(0, 2), other=np.array([0.0, -2.5, 0.0]))
+    prog = build_program(quintic_plan(path, feed_mm_s=60.0), [path], start=None)  # 766 samples
+    sp = dataclasses.replace(prog, items=(SetpointBlock(0, 1, run_program(prog).q),))
+    frames = program_frames(sp)[0]
+    assert sum(f[5] == FrameType.SETPOINTS for f in frames) >= 3  # several SETPOINTS frames: the overlap is exercised
+    data = _polled(frames)
+    qh, sh, stamps = run_device(data, 3, workdir=str(tmp_path / "sim"))
+    qp, sp_status = run_device_python(data)
+    np.testing.assert_array_equal(qh, qp)
+    assert sh == sp_status
+    per_sample = (stamps[-1] - stamps[0]) / (len(stamps) - 1)
+    assert per_sample <= 8 * 3 + 2, per_sample
