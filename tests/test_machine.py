@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from cnc_interp.constants import DEFAULT_JERK_PER_ACCEL_1_S, MM_PER_INCH
+from cnc_interp.constants import MM_PER_INCH
+from cnc_interp.plan.machine_io import DEFAULT_JERK_PER_ACCEL_1_S
 from cnc_interp.errors import MachineError
 from cnc_interp.plan.machine_io import (
     DEFAULT_PRESET, PRESETS, format_presets, load_machine, preset_table)

@@ -6,7 +6,9 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from cnc_interp.constants import P000_CURV_ACCEL_SHARE, P000_CURV_JERK_SHARE, VERIFY_RATIO_SLACK
+from cnc_interp.constants import VERIFY_RATIO_SLACK
+from cnc_interp.plan.paper000.limits import P000_CURV_JERK_SHARE
+from cnc_interp.plan.paper000.limits import P000_CURV_ACCEL_SHARE
 from cnc_interp.plan.machine import Machine
 from cnc_interp.plan.paper000 import shapes
 from cnc_interp.plan.paper000.constant import constant_feed, plan_path_constant

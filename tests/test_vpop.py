@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from cnc_interp.constants import VERIFY_RATIO_SLACK, VPOP_TABLE_TOL
+from cnc_interp.constants import VERIFY_RATIO_SLACK
+from cnc_interp.plan.vpop import VPOP_TABLE_TOL
 from cnc_interp.fit.path import Path
 from cnc_interp.plan.kinematics import make_kinematics
 from cnc_interp.plan.machine import Machine

@@ -4,7 +4,9 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from cnc_interp.constants import VPOP_TABLE_MAX_ROUNDS, VPOP_TABLE_MAX_TRIES, VPOP_TABLE_TOL
+from cnc_interp.plan.vpop import VPOP_TABLE_MAX_TRIES
+from cnc_interp.plan.vpop import VPOP_TABLE_MAX_ROUNDS
+from cnc_interp.plan.vpop import VPOP_TABLE_TOL
 from cnc_interp.errors import PlanError
 from cnc_interp.fit.path import Path
 from cnc_interp.plan.kinematics import Kinematics, make_kinematics

@@ -39,17 +39,15 @@ import stat
 
 import numpy as np
 
-from ..constants import (
-    ALL_AXES,
-    DEFAULT_DT_S,
-    DEFAULT_JERK_PER_ACCEL_1_S,
-    MM_PER_INCH,
-    ROTARY_AXES,
-)
+from ..constants import ALL_AXES, DEFAULT_DT_S, MM_PER_INCH, ROTARY_AXES
 from ..errors import MachineError, SourceLocation
 from .kinematics import KINEMATICS, normalise_params
 from .machine import DT_MAX_S, DT_MIN_S, LIMIT_MAX, START_MAX, TOL_MAX_MM, Machine
 from .presets import DEFAULT_PRESET, PRESETS
+
+
+#: default jerk (per axis, as a multiple of amax per second) when a LinuxCNC INI has none
+DEFAULT_JERK_PER_ACCEL_1_S = 10.0
 
 __all__ = ["load_machine", "machine_from_data", "preset_table", "format_presets",
            "DEFAULT_PRESET", "PRESETS"]

@@ -37,6 +37,10 @@ import numpy as np
 from ..errors import PlanError
 from .trajectory import Trajectory
 
+
+#: most threads the timeline plans paths on (CNC_INTERP_THREADS overrides)
+PLAN_MAX_THREADS = 4
+
 #: samples at rest needed between motions (v, a, j stencils all at rest)
 _REST_RUN = 3
 #: the start of a path may differ from where the machine is by float rounding only
@@ -111,7 +115,6 @@ def _plan_threads() -> int:
     """Threads planning paths at once: CNC_INTERP_THREADS, else the CPUs (at most PLAN_MAX_THREADS)."""
     import os
 
-    from ..constants import PLAN_MAX_THREADS
 
     env = os.environ.get("CNC_INTERP_THREADS")
     if env and env.isdigit() and int(env) > 0:

@@ -22,7 +22,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...constants import P000_CURV_REFINE_ITERS, P000_GEOM_MARGIN, P000_GEOM_SAMPLES
+
+#: geometry samples per segment when taking the maxima of |q'|, |q''|, |q'''|
+P000_GEOM_SAMPLES = 33
+
+#: safety factor applied to those sampled maxima (grid may miss a peak slightly)
+P000_GEOM_MARGIN = 1.0
+
+#: golden-section iterations refining a numerical curvature peak
+P000_CURV_REFINE_ITERS = 30
+
 
 _GOLD = 0.5 * (np.sqrt(5.0) - 1.0)
 

@@ -40,11 +40,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...constants import (
-    P000_CROSS_JERK_SHARE,
-    P000_CURV_ACCEL_SHARE,
-    P000_CURV_JERK_SHARE,
-)
+
+#: share of each axis's amax the centripetal term q''·v² may use at cruise (Eq. 6's A_m);
+#: the rest is left to the tangential acceleration of the feed transitions
+P000_CURV_ACCEL_SHARE = 0.8
+
+#: share of each axis's jmax the path-geometry jerk term q'''·v³ may use at cruise
+P000_CURV_JERK_SHARE = 0.5
+
+#: share of the jerk left after q'''·v³ that the cross term 3·q''·v·a_t may use
+P000_CROSS_JERK_SHARE = 0.5
 
 
 def option(settings, key: str, default: float) -> float:

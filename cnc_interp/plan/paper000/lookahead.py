@@ -20,8 +20,11 @@ import math
 import numpy as np
 from numba import njit
 
-from ...constants import P000_BISECT_ITERS
 from .profile import ACC_PEAK, JERK_PEAK
+
+
+#: bisection steps of the look-ahead passes (reach / cruise feed)
+P000_BISECT_ITERS = 80
 
 
 @njit(cache=True)

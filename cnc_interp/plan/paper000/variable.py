@@ -16,20 +16,31 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...constants import (
-    P000_MAX_REPLANS,
-    P000_MAX_SAMPLES,
-    P000_MERGE_BAND,
-    P000_MIN_LENGTH_MM,
-    P000_REPLAN_FEED_FACTOR,
-    VERIFY_RATIO_SLACK,
-)
+from ...constants import VERIFY_RATIO_SLACK
 from ...errors import PlanError
 from ..base import PathPlan
 from .common import joint_positions, sample_profile, sample_ratios, worst_ratio
 from .curvature import segment_geometry
 from .limits import feed_caps, junction_caps, option, shares
 from .profile import build_profiles, stretch_to_period
+
+
+#: verify-and-replan rounds before a plan is declared failed
+P000_MAX_REPLANS = 40
+
+#: factor applied to a violating segment's feed cap (and its square to a_t, j_t) per round
+P000_REPLAN_FEED_FACTOR = 0.9
+
+#: a segment/path shorter than this is treated as zero length (mm)
+P000_MIN_LENGTH_MM = 1e-12
+
+#: variable planner: consecutive segments whose feed caps lie within this relative band
+#: share one profile piece (0 = one piece per segment, the paper's literal form)
+P000_MERGE_BAND = 0.1
+
+#: a paper-000 plan longer than this many samples is refused (a degenerate path, e.g.
+#: a cusp with unbounded curvature, would otherwise crawl for days and exhaust memory)
+P000_MAX_SAMPLES = 20_000_000
 
 
 def _band(settings) -> float:
