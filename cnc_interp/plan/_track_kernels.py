@@ -52,21 +52,29 @@ def _herm_v(s0, v0, a0, s1, v1, a1, h, tau):
 
 
 @njit(cache=True)
+def _bracket(grid, n, x, hint):
+    """The node interval i (0 <= i <= n-2) of x in the increasing grid (n,), searched
+    from ``hint`` (the previous call's interval: the reference is walked in order)."""
+    i = hint
+    if i < 0:
+        i = 0
+    if i > n - 2:
+        i = n - 2
+    while i > 0 and x < grid[i]:
+        i -= 1
+    while i < n - 2 and x >= grid[i + 1]:
+        i += 1
+    return i
+
+
+@njit(cache=True)
 def ref_s_of_t(ns, nt, nv, na, n, t, hint):
     """s at time t (clipped to the nodes' range); returns (s, node hint)."""
     if t <= nt[0]:
         return ns[0], 0
     if t >= nt[n - 1]:
         return ns[n - 1], n - 2
-    i = hint
-    if i < 0:
-        i = 0
-    if i > n - 2:
-        i = n - 2
-    while i > 0 and t < nt[i]:
-        i -= 1
-    while i < n - 2 and t >= nt[i + 1]:
-        i += 1
+    i = _bracket(nt, n, t, hint)
     h = nt[i + 1] - nt[i]
     if not h > 0.0:
         return ns[i + 1], i
@@ -80,15 +88,7 @@ def ref_t_of_s(ns, nt, nv, na, n, s, hint):
         return nt[0], 0
     if s >= ns[n - 1]:
         return nt[n - 1], n - 2
-    i = hint
-    if i < 0:
-        i = 0
-    if i > n - 2:
-        i = n - 2
-    while i > 0 and s < ns[i]:
-        i -= 1
-    while i < n - 2 and s >= ns[i + 1]:
-        i += 1
+    i = _bracket(ns, n, s, hint)
     h = nt[i + 1] - nt[i]
     if not h > 0.0:
         return nt[i], i

@@ -287,13 +287,16 @@ class FeedProfileBuilder:
         ahead = np.concatenate((S[p1 + 1:p2 + 1], 0.5 * (S[p1:p2] + S[p1 + 1:p2 + 1])))
         ahead.sort()
         wa_raw, qa = self._raw_estimate(ahead) if ahead.size else (np.zeros(0), None)
-        for _ in range(3):
+        def enveloped_spacing(probe):
             w_raw, q1 = self._raw_estimate(probe)
             xs = np.concatenate((probe, ahead))
             ws = np.concatenate((w_raw, wa_raw))
             qs = np.concatenate((q1, qa)) if ahead.size else q1
             w = self._envelope(xs, ws, qs, self._carry)[: probe.shape[0]]
-            h = self._spacing(probe, w)
+            return w, self._spacing(probe, w)
+
+        for _ in range(3):
+            w, h = enveloped_spacing(probe)
             gap = np.diff(probe)
             need = np.ceil(gap / (0.25 * np.minimum(h[:-1], h[1:]))).astype(np.int64)
             if not np.any(need > 1):
@@ -302,12 +305,7 @@ class FeedProfileBuilder:
                      for i in np.flatnonzero(need > 1)]
             probe = np.unique(np.concatenate([probe] + extra))
         else:
-            w_raw, q1 = self._raw_estimate(probe)
-            xs = np.concatenate((probe, ahead))
-            ws = np.concatenate((w_raw, wa_raw))
-            qs = np.concatenate((q1, qa)) if ahead.size else q1
-            w = self._envelope(xs, ws, qs, self._carry)[: probe.shape[0]]
-            h = self._spacing(probe, w)
+            w, h = enveloped_spacing(probe)
         self._carry = (float(probe[-1]), float(w[-1]))
         self._ex = np.concatenate((self._ex, probe))
         self._ew = np.concatenate((self._ew, w))

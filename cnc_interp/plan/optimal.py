@@ -279,14 +279,8 @@ def _sampled(ctx):
                 final = piece.s1 >= L
                 continue
         if status == TK.OK:
-            last = k - 1
-            while last > 0 and sh[last - 1] == L:
-                last -= 1
-            out_s = sh[emitted - base: last + 1].copy()
-            out_q = qh[emitted - base: last + 1].copy()
-            out_q[-1] = ctx.table.qend
             ctx.stats["clamped"] = int(stats[0])
-            yield out_s, out_q
+            yield _final_chunk(sh, qh, k, L, emitted - base, ctx.table.qend)
             return
         if status == TK.NEED_SPACE:
             # emit what no retry can change, then compact the buffer
@@ -337,14 +331,8 @@ def _sampled(ctx):
         if not done:
             raise _Fallback("stuck")
         status = TK.OK
-        last = k - 1
-        while last > 0 and sh[last - 1] == L:
-            last -= 1
-        out_s = sh[emitted - base: last + 1].copy()
-        out_q = qh[emitted - base: last + 1].copy()
-        out_q[-1] = ctx.table.qend
         ctx.stats["clamped"] = int(stats[0])
-        yield out_s, out_q
+        yield _final_chunk(sh, qh, k, L, emitted - base, ctx.table.qend)
         return
 
 
@@ -604,3 +592,15 @@ def plan_path_optimal(path, joint_map, machine, dt_s: float, settings=None) -> P
     """Plan one path from rest to rest (see module docstring): the concatenation of
     ``iter_path_plan_optimal``'s chunks."""
     return collect_path_plan(iter_path_plan_optimal(path, joint_map, machine, dt_s, settings))
+
+
+def _final_chunk(sh, qh, k: int, L: float, first: int, qend):
+    """The path's last chunk: buffer rows ``first``..the first sample at the end L (the
+    repeats of L after it dropped), its last position exactly the path's end ``qend``."""
+    last = k - 1
+    while last > 0 and sh[last - 1] == L:
+        last -= 1
+    out_s = sh[first: last + 1].copy()
+    out_q = qh[first: last + 1].copy()
+    out_q[-1] = qend
+    return out_s, out_q
