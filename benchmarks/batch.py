@@ -30,8 +30,10 @@ def _stable(report: dict) -> list[dict]:
 def _line(label: str, report: dict) -> str:
     s = report["summary"]
     counts = ", ".join(f"{n} {k}" for k, n in s["status_counts"].items())
-    return (f"{label:<22} {s['programs']} programs in {s['wall_s']:.1f} s = "
-            f"{s['programs_per_minute']:.1f} programs/min ({counts})")
+    return (
+        f"{label:<22} {s['programs']} programs in {s['wall_s']:.1f} s = "
+        f"{s['programs_per_minute']:.1f} programs/min ({counts})"
+    )
 
 
 def main() -> None:
@@ -43,8 +45,7 @@ def main() -> None:
     ap.add_argument("--report", default=None, help="also write the local run's JSON report here")
     args = ap.parse_args()
 
-    base = dict(paths=(args.corpus,), machine_spec=args.machine, jobs=2, timeout_s=args.timeout,
-                quiet=True)
+    base = dict(paths=(args.corpus,), machine_spec=args.machine, jobs=2, timeout_s=args.timeout, quiet=True)
     local = build_report(BatchOptions(**base))
     print(_line("local, 2 workers:", local))
     if args.report:
@@ -53,8 +54,9 @@ def main() -> None:
         return
     from distributed import LocalCluster
 
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                      dashboard_address=None) as cluster:
+    with LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None
+    ) as cluster:
         t0 = time.monotonic()
         dask = build_report(BatchOptions(**base, dask_address=cluster.scheduler_address))
         print(_line("dask LocalCluster, 2:", dask))

@@ -54,17 +54,20 @@ def main() -> int:
     if size is None:
         from cnc_interp.export.csv_io import format_rows
 
-        size = sum(len(format_rows(np.stack([t[a:a + block], s[a:a + block], feed[a:a + block],
-                                             *q[a:a + block].T])))
-                   for a in range(0, rows, block)) + len(b"t,s,feed,X,Y,Z\n")
-    print(f"{rows} rows, {size / 1e6:.0f} MB: {size / wall / 1e6:.0f} MB/s wall "
-          f"({rows / wall / 1e6:.2f} M rows/s), {size / cpu / 1e6:.0f} MB/s CPU "
-          f"(load {os.getloadavg()[0]:.1f})")
+        size = sum(
+            len(format_rows(np.stack([t[a : a + block], s[a : a + block], feed[a : a + block], *q[a : a + block].T])))
+            for a in range(0, rows, block)
+        ) + len(b"t,s,feed,X,Y,Z\n")
+    print(
+        f"{rows} rows, {size / 1e6:.0f} MB: {size / wall / 1e6:.0f} MB/s wall "
+        f"({rows / wall / 1e6:.2f} M rows/s), {size / cpu / 1e6:.0f} MB/s CPU "
+        f"(load {os.getloadavg()[0]:.1f})"
+    )
     rng = np.random.default_rng(0)
     from cnc_interp.export.csv_io import format_rows
 
     for i in rng.integers(0, rows, 200).tolist():
-        text = format_rows(np.array([[t[i]], [s[i]], [feed[i]], *q[i:i + 1].T])).decode()
+        text = format_rows(np.array([[t[i]], [s[i]], [feed[i]], *q[i : i + 1].T])).decode()
         want = ",".join(repr(float(v)) for v in (t[i], s[i], feed[i], *q[i])) + "\n"
         assert text == want, (text, want)
     return 0

@@ -65,9 +65,12 @@ def _wait(proc) -> tuple[int, float, float]:
 def run_file(part: str, machine: str, out: str) -> dict:
     t0 = time.perf_counter()
     load0 = os.getloadavg()[0]
-    proc = subprocess.Popen([console_script(), "plan", part, "-m", machine, "-o", out, "--json",
-                             "-q"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            stdin=subprocess.DEVNULL)
+    proc = subprocess.Popen(
+        [console_script(), "plan", part, "-m", machine, "-o", out, "--json", "-q"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        stdin=subprocess.DEVNULL,
+    )
     summary = proc.stdout.read()
     err = proc.stderr.read()
     code, cpu, rss = _wait(proc)
@@ -76,18 +79,31 @@ def run_file(part: str, machine: str, out: str) -> dict:
         raise SystemExit(f"plan failed ({code}): {err.decode()}")
     s = json.loads(summary)
     size = os.path.getsize(out)
-    return {"mode": "file", "wall_s": wall, "cpu_s": cpu, "peak_rss_mb": rss,
-            "bytes": size, "write_mb_s_overall": size / wall / 1e6, "samples": s["samples"],
-            "cycle_time_s": s["cycle_time_s"], "timings_s": s["timings_s"],
-            "load_before": load0, "load_after": os.getloadavg()[0]}
+    return {
+        "mode": "file",
+        "wall_s": wall,
+        "cpu_s": cpu,
+        "peak_rss_mb": rss,
+        "bytes": size,
+        "write_mb_s_overall": size / wall / 1e6,
+        "samples": s["samples"],
+        "cycle_time_s": s["cycle_time_s"],
+        "timings_s": s["timings_s"],
+        "load_before": load0,
+        "load_after": os.getloadavg()[0],
+    }
 
 
 def run_pipe(part: str, machine: str) -> dict:
     t0 = time.perf_counter()
     load0 = os.getloadavg()[0]
-    proc = subprocess.Popen([console_script(), "plan", part, "-m", machine, "-o", "-", "-q"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, stdin=subprocess.DEVNULL,
-                            bufsize=0)
+    proc = subprocess.Popen(
+        [console_script(), "plan", part, "-m", machine, "-o", "-", "-q"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        stdin=subprocess.DEVNULL,
+        bufsize=0,
+    )
     first = None
     total = 0
     rows = 0
@@ -104,9 +120,17 @@ def run_pipe(part: str, machine: str) -> dict:
     wall = time.perf_counter() - t0
     if code != 0:
         raise SystemExit(f"plan failed ({code}): {err.decode()}")
-    return {"mode": "pipe", "wall_s": wall, "cpu_s": cpu, "peak_rss_mb": rss,
-            "first_row_s": first, "bytes": total, "rows": rows - 1,
-            "load_before": load0, "load_after": os.getloadavg()[0]}
+    return {
+        "mode": "pipe",
+        "wall_s": wall,
+        "cpu_s": cpu,
+        "peak_rss_mb": rss,
+        "first_row_s": first,
+        "bytes": total,
+        "rows": rows - 1,
+        "load_before": load0,
+        "load_after": os.getloadavg()[0],
+    }
 
 
 def warm_up(machine: str) -> None:
@@ -115,8 +139,11 @@ def warm_up(machine: str) -> None:
         p = os.path.join(d, "w.ngc")
         with open(p, "w") as fh:
             fh.write("G21 G90\nG0 X1 Y1\nG1 X5 Y3 F600\nG2 X7 Y5 I1 J1\nG1 X5 Z-1\nM2\n")
-        subprocess.run([console_script(), "plan", p, "-m", machine, "-o", os.path.join(d, "w.csv"),
-                        "-q"], check=True, stdin=subprocess.DEVNULL)
+        subprocess.run(
+            [console_script(), "plan", p, "-m", machine, "-o", os.path.join(d, "w.csv"), "-q"],
+            check=True,
+            stdin=subprocess.DEVNULL,
+        )
 
 
 def main(argv=None) -> int:
@@ -148,14 +175,20 @@ def main(argv=None) -> int:
             rec["file"] = run_file(part, args.machine, out)
             os.unlink(out)
             f = rec["file"]
-            print(f"{name} -o file: wall {f['wall_s']:.1f} s, CPU {f['cpu_s']:.1f} s, peak RSS "
-                  f"{f['peak_rss_mb']:.0f} MB, {f['samples']} samples, {f['bytes'] / 1e6:.0f} MB "
-                  f"(load {f['load_before']:.1f} -> {f['load_after']:.1f}); stages "
-                  + ", ".join(f"{k} {v:.1f}" for k, v in sorted(f["timings_s"].items())), flush=True)
+            print(
+                f"{name} -o file: wall {f['wall_s']:.1f} s, CPU {f['cpu_s']:.1f} s, peak RSS "
+                f"{f['peak_rss_mb']:.0f} MB, {f['samples']} samples, {f['bytes'] / 1e6:.0f} MB "
+                f"(load {f['load_before']:.1f} -> {f['load_after']:.1f}); stages "
+                + ", ".join(f"{k} {v:.1f}" for k, v in sorted(f["timings_s"].items())),
+                flush=True,
+            )
         rec["pipe"] = p = run_pipe(part, args.machine)
-        print(f"{name} -o - | reader: first row {p['first_row_s']:.2f} s, wall {p['wall_s']:.1f} s, "
-              f"CPU {p['cpu_s']:.1f} s, peak RSS {p['peak_rss_mb']:.0f} MB, {p['rows']} rows "
-              f"(load {p['load_before']:.1f} -> {p['load_after']:.1f})", flush=True)
+        print(
+            f"{name} -o - | reader: first row {p['first_row_s']:.2f} s, wall {p['wall_s']:.1f} s, "
+            f"CPU {p['cpu_s']:.1f} s, peak RSS {p['peak_rss_mb']:.0f} MB, {p['rows']} rows "
+            f"(load {p['load_before']:.1f} -> {p['load_after']:.1f})",
+            flush=True,
+        )
         results.append(rec)
     if args.json:
         with open(args.json, "w") as fh:

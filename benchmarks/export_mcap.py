@@ -38,8 +38,7 @@ def synthetic(k: int) -> tuple[Trajectory, Machine]:
     feed = np.concatenate([[0.0], step / dt])
     line = 10 + (u * 5000).astype(np.int64)
     traj = Trajectory(axes="XYZ", dt_s=dt, t=t, s=s, feed=feed, q=q, line=line, planner="bench")
-    machine = Machine(name="bench", axes="XYZ", vmax=[500.0] * 3, amax=[5000.0] * 3,
-                      jmax=[50000.0] * 3, dt_s=dt)
+    machine = Machine(name="bench", axes="XYZ", vmax=[500.0] * 3, amax=[5000.0] * 3, jmax=[50000.0] * 3, dt_s=dt)
     return traj, machine
 
 
@@ -67,8 +66,10 @@ def main() -> None:
 
         outcome, tp = timed(lambda: plan_part(arg, sys.argv[2] if len(sys.argv) > 2 else None))
         traj, machine = outcome.trajectory, outcome.machine
-        name = (f"{os.path.basename(arg)} on {machine.name}: {traj.n_samples:,} samples, "
-                f"axes {traj.axes} (planned in {tp:.1f} s)")
+        name = (
+            f"{os.path.basename(arg)} on {machine.name}: {traj.n_samples:,} samples, "
+            f"axes {traj.axes} (planned in {tp:.1f} s)"
+        )
     k = traj.n_samples
     print(name)
     with tempfile.TemporaryDirectory() as d:
@@ -79,8 +80,10 @@ def main() -> None:
             if label.endswith("limits)") and machine is None:
                 continue
             n, tm = timed(lambda: write_mcap(traj, mcap_path, {"input": {"name": name}}, m))
-            print(f"  {label}: {tm:6.2f} s  {k / tm:>10,.0f} samples/s  {n / tm:>10,.0f} msg/s  "
-                  f"{os.path.getsize(mcap_path) / 1e6:8.1f} MB  ({n:,} messages)")
+            print(
+                f"  {label}: {tm:6.2f} s  {k / tm:>10,.0f} samples/s  {n / tm:>10,.0f} msg/s  "
+                f"{os.path.getsize(mcap_path) / 1e6:8.1f} MB  ({n:,} messages)"
+            )
         _, tr = timed(lambda: read_mcap(mcap_path))
         print(f"  MCAP read back: {tr:6.2f} s  {k / tr:>10,.0f} samples/s")
 

@@ -18,8 +18,12 @@ import os
 import sys
 import time
 
-CORPUS = os.environ.get("CNC_CORPUS", os.path.normpath(os.path.join(
-    os.path.dirname(os.path.abspath(__file__)), "..", "..", "shared", "corpus", "linuxcnc")))
+CORPUS = os.environ.get(
+    "CNC_CORPUS",
+    os.path.normpath(
+        os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "shared", "corpus", "linuxcnc")
+    ),
+)
 DEFAULT_FILES = [
     os.path.join(CORPUS, "performance", "circle_small_segments_ncd.ngc"),
     os.path.join(CORPUS, "performance", "3D_Chips.ngc"),
@@ -38,8 +42,10 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat", type=int, default=10)
     args = ap.parse_args(argv)
     settings = FitSettings.from_options(tol_mm=args.tol, method=args.method)
-    print(f"{'file':40s} {'nodes':>8s} {'segs':>7s} {'seg/node':>8s} {'best s':>8s} {'nodes/s':>10s} "
-          f"{'cpu s':>8s} {'nodes/cpu-s':>11s} {'max dev mm':>10s} {'path/tol':>8s}")
+    print(
+        f"{'file':40s} {'nodes':>8s} {'segs':>7s} {'seg/node':>8s} {'best s':>8s} {'nodes/s':>10s} "
+        f"{'cpu s':>8s} {'nodes/cpu-s':>11s} {'max dev mm':>10s} {'path/tol':>8s}"
+    )
     for f in args.files:
         with open(f, "rb") as fh:
             prog = read_program(fh.read(), source=f)
@@ -52,9 +58,11 @@ def main(argv=None) -> int:
             best_cpu = min(best_cpu, time.process_time() - c0)
         st = fit_statistics(res)
         n = st["nodes_in"]
-        print(f"{os.path.basename(f)[:40]:40s} {n:8d} {st['segments_out']:7d} {st['segments_per_node']:8.3f} "
-              f"{best:8.3f} {n / best:10.0f} {best_cpu:8.3f} {n / best_cpu:11.0f} {st['max_node_dev_mm']:10.2e} "
-              f"{st['max_path_dev_ratio']:8.4f}")
+        print(
+            f"{os.path.basename(f)[:40]:40s} {n:8d} {st['segments_out']:7d} {st['segments_per_node']:8.3f} "
+            f"{best:8.3f} {n / best:10.0f} {best_cpu:8.3f} {n / best_cpu:11.0f} {st['max_node_dev_mm']:10.2e} "
+            f"{st['max_path_dev_ratio']:8.4f}"
+        )
     return 0
 
 

@@ -31,15 +31,38 @@ from cnc_interp.plan.verify import verify_arrays  # noqa: E402
 
 CORPUS = os.path.join(ROOT, "..", "shared", "corpus", "linuxcnc")
 XYZ_INI = os.path.join(CORPUS, "configs", "XYZ.ini")
-SAMPLES = [("drilling-cycles.ngc", "generic-mill"), ("five-axis-xyzac.ngc", "mikron-ucp710"),
-           ("lathe-profile.ngc", "xz-lathe"), ("mill-contour.ngc", "generic-mill"),
-           ("nurbs-trident.ngc", "mikron-ucp710")]
-CORPUS_20 = ["quick-tests/" + n for n in (
-    "arc-arc-concave-convex.ngc", "arc-arc-sawtooth.ngc", "arc-arc-test.ngc", "arc-terminal.ngc",
-    "corner_decel.ngc", "dodecagon_0.1in.ngc", "g0_corners.ngc", "line-arc.ngc", "linearc.ngc",
-    "long-kink.ngc", "naive_cam_corner1.ngc", "parabolic_bump.ngc", "ramp_test.ngc",
-    "rapid_3d_corners.ngc", "sawtooth.ngc", "single_circle.ngc", "square.ngc", "square_spiral.ngc",
-    "straight_segments.ngc", "tangent_helix.ngc")] + ["nurbs-g5/trident-xy.ngc"]
+SAMPLES = [
+    ("drilling-cycles.ngc", "generic-mill"),
+    ("five-axis-xyzac.ngc", "mikron-ucp710"),
+    ("lathe-profile.ngc", "xz-lathe"),
+    ("mill-contour.ngc", "generic-mill"),
+    ("nurbs-trident.ngc", "mikron-ucp710"),
+]
+CORPUS_20 = [
+    "quick-tests/" + n
+    for n in (
+        "arc-arc-concave-convex.ngc",
+        "arc-arc-sawtooth.ngc",
+        "arc-arc-test.ngc",
+        "arc-terminal.ngc",
+        "corner_decel.ngc",
+        "dodecagon_0.1in.ngc",
+        "g0_corners.ngc",
+        "line-arc.ngc",
+        "linearc.ngc",
+        "long-kink.ngc",
+        "naive_cam_corner1.ngc",
+        "parabolic_bump.ngc",
+        "ramp_test.ngc",
+        "rapid_3d_corners.ngc",
+        "sawtooth.ngc",
+        "single_circle.ngc",
+        "square.ngc",
+        "square_spiral.ngc",
+        "straight_segments.ngc",
+        "tangent_helix.ngc",
+    )
+] + ["nurbs-g5/trident-xy.ngc"]
 
 
 def run_one(part: str, machine: str, planner: str) -> dict:
@@ -54,12 +77,18 @@ def run_one(part: str, machine: str, planner: str) -> dict:
     idx = [m.axes.index(a) for a in traj.axes]
     rep = verify_arrays(q, traj.dt_s, m.vmax[idx], m.amax[idx], m.jmax[idx], axes=traj.axes)
     st = prog.stats
-    return {"samples": prog.n_samples, "segments": st["segments"],
-            "share": st["planar_samples"] / max(1, prog.n_samples),
-            "bytes_per_sample": sum(map(len, frames)) / max(1, prog.n_samples),
-            "bytes": sum(map(len, frames)), "repaired": st["repaired_segments"],
-            "dev_um": float(np.max(np.abs(q - traj.q))) * 1e3, "ratio": rep.worst_ratio,
-            "ok": rep.ok, "t": t1 - t0}
+    return {
+        "samples": prog.n_samples,
+        "segments": st["segments"],
+        "share": st["planar_samples"] / max(1, prog.n_samples),
+        "bytes_per_sample": sum(map(len, frames)) / max(1, prog.n_samples),
+        "bytes": sum(map(len, frames)),
+        "repaired": st["repaired_segments"],
+        "dev_um": float(np.max(np.abs(q - traj.q))) * 1e3,
+        "ratio": rep.worst_ratio,
+        "ok": rep.ok,
+        "t": t1 - t0,
+    }
 
 
 def main() -> int:
@@ -67,16 +96,18 @@ def main() -> int:
     ap.add_argument("parts", nargs="*")
     ap.add_argument("-m", "--machine", default=XYZ_INI)
     ap.add_argument("--planner", default="all", help="vpop, constant, variable or all")
-    ap.add_argument("--done-when", action="store_true",
-                    help="every sample program (own machine) and 21 corpus programs (XYZ.ini)")
+    ap.add_argument(
+        "--done-when", action="store_true", help="every sample program (own machine) and 21 corpus programs (XYZ.ini)"
+    )
     args = ap.parse_args()
     planners = ("vpop", "constant", "variable") if args.planner == "all" else (args.planner,)
     jobs = [(p, args.machine) for p in args.parts]
     if args.done_when:
         jobs = [(os.path.join(ROOT, "samples", "gcode", n), m) for n, m in SAMPLES]
         jobs += [(os.path.join(CORPUS, n), XYZ_INI) for n in CORPUS_20]
-    print("| program | planner | samples | on segments | bytes/sample | re-sent | max dev µm | "
-          "device verify ratio | s |")
+    print(
+        "| program | planner | samples | on segments | bytes/sample | re-sent | max dev µm | device verify ratio | s |"
+    )
     print("|---|---|---|---|---|---|---|---|---|")
     runs = fails = errors = 0
     worst_ratio = worst_dev = 0.0
@@ -93,11 +124,16 @@ def main() -> int:
             fails += not r["ok"]
             worst_ratio = max(worst_ratio, r["ratio"])
             worst_dev = max(worst_dev, r["dev_um"])
-            print(f"| {name} | {planner} | {r['samples']} | {100 * r['share']:.1f} % | "
-                  f"{r['bytes_per_sample']:.2f} | {r['repaired']} | {r['dev_um']:.4f} | "
-                  f"{r['ratio']:.12f} | {r['t']:.1f} |", flush=True)
-    print(f"fpga round trip: {runs} runs, {fails} verify failures, {errors} errors, worst ratio "
-          f"{worst_ratio:.12f}, worst deviation {worst_dev:.4f} µm")
+            print(
+                f"| {name} | {planner} | {r['samples']} | {100 * r['share']:.1f} % | "
+                f"{r['bytes_per_sample']:.2f} | {r['repaired']} | {r['dev_um']:.4f} | "
+                f"{r['ratio']:.12f} | {r['t']:.1f} |",
+                flush=True,
+            )
+    print(
+        f"fpga round trip: {runs} runs, {fails} verify failures, {errors} errors, worst ratio "
+        f"{worst_ratio:.12f}, worst deviation {worst_dev:.4f} µm"
+    )
     return 1 if fails else 0
 
 

@@ -35,9 +35,15 @@ def formats(pos_frac: int, mult: int, int_bits: int = 14):
     from cnc_interp.fpga.fixed import FixedFormat, FpgaFormats
 
     pos = FixedFormat(pos_frac + int_bits, pos_frac)
-    return FpgaFormats(pos=pos, trig=FixedFormat(mult, mult - 2), param=FixedFormat(mult, mult - 2),
-                       coef_word=mult - 3, horner_word=mult, int_word=pos.word + mult - 2 + 1,
-                       mult_word=mult)
+    return FpgaFormats(
+        pos=pos,
+        trig=FixedFormat(mult, mult - 2),
+        param=FixedFormat(mult, mult - 2),
+        coef_word=mult - 3,
+        horner_word=mult,
+        int_word=pos.word + mult - 2 + 1,
+        mult_word=mult,
+    )
 
 
 def main() -> int:
@@ -63,9 +69,11 @@ def main() -> int:
                 key = (pf, name)
                 try:
                     if key not in plans:
-                        plans[key] = plan_for_stream(StreamOptions(part=part, machine_spec=machine,
-                                                                   planner="variable", quiet=True),
-                                                     formats=fm, with_machine=True)
+                        plans[key] = plan_for_stream(
+                            StreamOptions(part=part, machine_spec=machine, planner="variable", quiet=True),
+                            formats=fm,
+                            with_machine=True,
+                        )
                     fit, traj, m = plans[key]
                     idx = [m.axes.index(a) for a in traj.axes]
                     prog = build_program(traj, fit.paths, formats=fm, limits=m.limits()[:, idx])
@@ -83,8 +91,11 @@ def main() -> int:
             dev = f"{max(devs) * 1e3:.4f}" if devs else "—"
             rat = f"{max(ratios):.9f}" if ratios else "—"
             share = f"{100 * seg_s / max(1, tot_s):.1f} %"
-            print(f"| Q{14}.{pf} ({pf + 14} bits) | {mw} | {margin:.2e} | {dev} | {rat} | {share} | "
-                  f"{'; '.join(notes) or ''} ({time.perf_counter() - t0:.0f} s) |", flush=True)
+            print(
+                f"| Q{14}.{pf} ({pf + 14} bits) | {mw} | {margin:.2e} | {dev} | {rat} | {share} | "
+                f"{'; '.join(notes) or ''} ({time.perf_counter() - t0:.0f} s) |",
+                flush=True,
+            )
     return 0
 
 

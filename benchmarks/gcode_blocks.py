@@ -47,12 +47,7 @@ def cam_program(n_lines: int, seed: int = 1) -> bytes:
 def oword_program(n_iter: int) -> bytes:
     """A while loop with an expression-valued move: 4 executed lines per iteration."""
     return (
-        "#1 = 0\n"
-        f"o100 while [#1 LT {n_iter}]\n"
-        "  G1 X[#1 * 0.01] Y[SIN[#1]] F1000\n"
-        "  #1 = [#1 + 1]\n"
-        "o100 endwhile\n"
-        "M2\n"
+        f"#1 = 0\no100 while [#1 LT {n_iter}]\n  G1 X[#1 * 0.01] Y[SIN[#1]] F1000\n  #1 = [#1 + 1]\no100 endwhile\nM2\n"
     ).encode()
 
 

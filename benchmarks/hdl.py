@@ -43,8 +43,8 @@ def _item_index(prog):
     item = np.zeros(prog.n_samples, np.int64)
     kind = np.zeros(prog.n_samples, np.int64)
     for i, it in enumerate(prog.items):
-        item[it.start_sample:it.start_sample + it.n_samples] = i
-        kind[it.start_sample:it.start_sample + it.n_samples] = isinstance(it, SetpointBlock)
+        item[it.start_sample : it.start_sample + it.n_samples] = i
+        kind[it.start_sample : it.start_sample + it.n_samples] = isinstance(it, SetpointBlock)
     return item, kind
 
 
@@ -68,11 +68,12 @@ def device_check(quick: bool) -> tuple[int, int, dict]:
     from hdl.device_sim import run_device_python
     from hdl.device_verilator import run_device
 
-    parts = [("arc-arc-test", os.path.join(CORPUS, "quick-tests", "arc-arc-test.ngc"), XYZ_INI),
-             ("lathe-profile", os.path.join(ROOT, "samples", "gcode", "lathe-profile.ngc"), "xz-lathe")]
+    parts = [
+        ("arc-arc-test", os.path.join(CORPUS, "quick-tests", "arc-arc-test.ngc"), XYZ_INI),
+        ("lathe-profile", os.path.join(ROOT, "samples", "gcode", "lathe-profile.ngc"), "xz-lathe"),
+    ]
     if not quick:
-        parts.append(("mill-contour", os.path.join(ROOT, "samples", "gcode", "mill-contour.ngc"),
-                      "generic-mill"))
+        parts.append(("mill-contour", os.path.join(ROOT, "samples", "gcode", "mill-contour.ngc"), "generic-mill"))
     bad = total = 0
     seg_cycles = seg_n = 0
     cycles = {}
@@ -90,19 +91,21 @@ def device_check(quick: bool) -> tuple[int, int, dict]:
             bad += diff
             total += len(qp)
             item, kind = _item_index(pr)
-            gap = np.diff(stamps[:pr.n_samples])
-            same = (item[1:] == item[:-1])[:len(gap)]
-            segs = same & (kind[1:len(gap) + 1] == 0)
+            gap = np.diff(stamps[: pr.n_samples])
+            same = (item[1:] == item[:-1])[: len(gap)]
+            segs = same & (kind[1 : len(gap) + 1] == 0)
             seg_cycles += int(gap[segs].sum())
             seg_n += int(segs.sum())
             per = f"{stamps[-1] / max(1, len(stamps)):.1f}" if len(stamps) else "-"
             if variant:
                 key = f"setpoints {len(pr.axes)} axes"
                 cycles[key] = max(cycles.get(key, 0.0), stamps[-1] / max(1, len(stamps)))
-            print(f"  device {name}{variant}: {len(data)} frame bytes, {len(qp)} samples x {len(pr.axes)} "
-                  f"axes, {len(spy)} STATUS answers; {diff} differences; last sample at cycle "
-                  f"{stamps[-1] if len(stamps) else 0} ({per} per sample), {time.perf_counter() - t0:.1f} s",
-                  flush=True)
+            print(
+                f"  device {name}{variant}: {len(data)} frame bytes, {len(qp)} samples x {len(pr.axes)} "
+                f"axes, {len(spy)} STATUS answers; {diff} differences; last sample at cycle "
+                f"{stamps[-1] if len(stamps) else 0} ({per} per sample), {time.perf_counter() - t0:.1f} s",
+                flush=True,
+            )
     cycles["segment"] = seg_cycles / max(1, seg_n)
     return bad, total, cycles
 
@@ -115,8 +118,10 @@ def programs(n_random: int, quick: bool):
     from cnc_interp.fpga.program import build_program
     from tests.fpga_cases import gentle_curve, quintic_plan
 
-    parts = [("lathe-profile (xz-lathe)", os.path.join(ROOT, "samples", "gcode", "lathe-profile.ngc"), "xz-lathe"),
-             ("arc-arc-test", os.path.join(CORPUS, "quick-tests", "arc-arc-test.ngc"), XYZ_INI)]
+    parts = [
+        ("lathe-profile (xz-lathe)", os.path.join(ROOT, "samples", "gcode", "lathe-profile.ngc"), "xz-lathe"),
+        ("arc-arc-test", os.path.join(CORPUS, "quick-tests", "arc-arc-test.ngc"), XYZ_INI),
+    ]
     if not quick:
         parts.insert(0, ("line-contouring-xz", os.path.join(CORPUS, "performance", "line-contouring-xz.ngc"), XYZ_INI))
     for name, part, machine in parts:
@@ -125,8 +130,7 @@ def programs(n_random: int, quick: bool):
     for seed in range(n_random):
         rng = np.random.default_rng(1000 + seed)
         path = gentle_curve(int(rng.integers(3, 10)), seed=seed)
-        traj = quintic_plan(path, feed_mm_s=float(rng.uniform(5, 300)),
-                            dt_s=float(rng.choice([5e-4, 1e-3, 2e-3])))
+        traj = quintic_plan(path, feed_mm_s=float(rng.uniform(5, 300)), dt_s=float(rng.choice([5e-4, 1e-3, 2e-3])))
         yield f"random curve {seed}", build_program(traj, [path])
 
 
@@ -141,8 +145,11 @@ def run_sim(n_random: int, quick: bool) -> tuple[int, int, float]:
     for name, prog in programs(n_random, quick):
         s = [it for it in prog.items if isinstance(it, FixedSegment)]
         n = sum(x.n_samples for x in s)
-        print(f"  {name}: {len(s)} segments, {n} samples through the datapath "
-              f"({100 * n / max(1, prog.n_samples):.1f} % of {prog.n_samples})", flush=True)
+        print(
+            f"  {name}: {len(s)} segments, {n} samples through the datapath "
+            f"({100 * n / max(1, prog.n_samples):.1f} % of {prog.n_samples})",
+            flush=True,
+        )
         segs += s
         fmts = prog.formats
     t0 = time.perf_counter()
@@ -151,8 +158,10 @@ def run_sim(n_random: int, quick: bool) -> tuple[int, int, float]:
     ref = golden_samples(segs, fmts)
     bad = sum(1 for a, b in zip(res.samples, ref) if tuple(a) != tuple(b)) + abs(len(ref) - len(res.samples))
     cps = res.cycles / max(1, len(ref))
-    print(f"  simulated {len(ref)} samples in {t1 - t0:.1f} s ({available()}); {res.cycles} cycles, "
-          f"{cps:.2f} cycles per sample; overflow flag {int(res.overflow)}")
+    print(
+        f"  simulated {len(ref)} samples in {t1 - t0:.1f} s ({available()}); {res.cycles} cycles, "
+        f"{cps:.2f} cycles per sample; overflow flag {int(res.overflow)}"
+    )
     print(f"hdl sim: {bad} mismatches in {len(ref)} samples", flush=True)
     return bad, len(ref), cps
 
@@ -165,8 +174,7 @@ def main() -> int:
     args = ap.parse_args()
     dbad, dn, dcyc = device_check(quick=False)
     print(f"hdl device: {dbad} differences in {dn} samples (frames in, every axis out)", flush=True)
-    print("hdl device cycles per sample: " + ", ".join(f"{k} {v:.1f}" for k, v in sorted(dcyc.items())),
-          flush=True)
+    print("hdl device cycles per sample: " + ", ".join(f"{k} {v:.1f}" for k, v in sorted(dcyc.items())), flush=True)
     bad, n, cps = run_sim(args.random, quick=False)
     if args.sim_only:
         return 1 if bad or dbad else 0
@@ -175,12 +183,16 @@ def main() -> int:
 
     t0 = time.perf_counter()
     r = synthesize(seeds=tuple(range(1, args.seeds + 1)), log=lambda s: print("  " + s, flush=True))
-    print(f"  synthesis + {args.seeds} place-and-route runs: {time.perf_counter() - t0:.0f} s; "
-          f"Fmax per seed {', '.join(f'{f:.1f}' for f in r.fmax_mhz)} MHz; "
-          f"datapath schedule {SAMPLE_CYCLES + 1} cycles per sample, measured {cps:.2f}")
+    print(
+        f"  synthesis + {args.seeds} place-and-route runs: {time.perf_counter() - t0:.0f} s; "
+        f"Fmax per seed {', '.join(f'{f:.1f}' for f in r.fmax_mhz)} MHz; "
+        f"datapath schedule {SAMPLE_CYCLES + 1} cycles per sample, measured {cps:.2f}"
+    )
     worst = max(dcyc.values())  # the whole device, the slowest sample kind
-    print(f"hdl synth: Fmax {min(r.fmax_mhz):.1f} MHz, MULT18X18D {r.mult18}, LUT4 {r.lut4_pct:.1f} %, "
-          f"{worst:.1f} cycles per sample")
+    print(
+        f"hdl synth: Fmax {min(r.fmax_mhz):.1f} MHz, MULT18X18D {r.mult18}, LUT4 {r.lut4_pct:.1f} %, "
+        f"{worst:.1f} cycles per sample"
+    )
     return 1 if bad or dbad else 0
 
 

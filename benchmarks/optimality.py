@@ -38,8 +38,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 CORPUS = os.environ.get("CNC_CORPUS", os.path.join(HERE, "..", "..", "shared", "corpus", "linuxcnc"))
-ORACLE = os.environ.get("CNC_OPTIMUM_GAP", os.path.join(HERE, "..", "..", "shared", "tools",
-                                                        "optimum_gap.py"))
+ORACLE = os.environ.get("CNC_OPTIMUM_GAP", os.path.join(HERE, "..", "..", "shared", "tools", "optimum_gap.py"))
 
 MIKRON_TOML = """name = "Mikron UCP 710"
 dt = 0.006
@@ -135,7 +134,7 @@ def _excerpt(rel: str, head: int, lo: int, hi: int, feed: str | None = None) -> 
     """Corpus lines 1..head (setup) plus lo..hi (1-based, inclusive) and M2."""
     with open(os.path.join(CORPUS, rel), encoding="latin-1") as fh:
         text = fh.read().splitlines()
-    body = text[:head] + text[lo - 1: hi]
+    body = text[:head] + text[lo - 1 : hi]
     if feed:
         body.insert(head, feed)
     return "\n".join(body + ["M2"]) + "\n"
@@ -146,25 +145,33 @@ CASES = [
     ("line-1ms", "G21 G90\nG1 X100 F5000\nM2\n", MILL_TOML, 0.001, None, None, 5000),
     ("line-6ms", "G21 G90\nG1 X100 F5000\nM2\n", MIKRON_TOML, 0.006, None, None, 5000),
     ("corner-1ms", "G21 G90\nG1 X20 F6000\nG1 X40 Y7.279\nM2\n", MILL_TOML, 0.001, None, None, 6000),
-    ("circle-1ms", "G21 G90 G17\nG1 X5 F6000\nG2 X5 Y0 I-5 J0\nM2\n", MILL_TOML, 0.001,
-     "X=5", None, 6000),
-    ("helix-1ms", "G21 G90 G17\nG1 X5 F4000\nG2 X5 Y0 Z-3 I-5 J0 P3\nM2\n", MILL_TOML, 0.001,
-     "X=5", None, 4000),
-    ("arc-accel-1ms", "G21 G90 G17\nG1 X10 F60000\nG2 X10 Y0 I-10 J0\nM2\n", MILL_TOML, 0.001,
-     "X=10", None, 60000),
+    ("circle-1ms", "G21 G90 G17\nG1 X5 F6000\nG2 X5 Y0 I-5 J0\nM2\n", MILL_TOML, 0.001, "X=5", None, 6000),
+    ("helix-1ms", "G21 G90 G17\nG1 X5 F4000\nG2 X5 Y0 Z-3 I-5 J0 P3\nM2\n", MILL_TOML, 0.001, "X=5", None, 4000),
+    ("arc-accel-1ms", "G21 G90 G17\nG1 X10 F60000\nG2 X10 Y0 I-10 J0\nM2\n", MILL_TOML, 0.001, "X=10", None, 60000),
     ("trident-nurbs-6ms", TRIDENT, MIKRON_TOML, 0.006, "X=10", None, 2500),
     ("trident-nurbs-1ms", TRIDENT, MIKRON_TOML, 0.001, "X=10", None, 2500),
     ("trident-g1-6ms", _trident_polyline, MIKRON_TOML, 0.006, "X=10", "nodes", 2500),
     ("five-axis-6ms", _five_axis, MIKRON_TOML, 0.006, "Y=-20", None, 50000),
-    ("spiral-lines-1ms", lambda: _excerpt("performance/spiral_lines.ngc", 2, 5, 20),
-     MILL_TOML, 0.001, "X=43.8058052,Y=-25.7233674", None, 999 * 25.4),
-    ("trochoidal-1ms", lambda: _excerpt("performance/trochoidal.ngc", 13, 18, 110),
-     MILL_TOML, 0.001, None, None, 3600),
-    ("3dchips-1ms", lambda: _excerpt("performance/3D_Chips.ngc", 21, 22, 160), MILL_TOML,
-     0.001, None, None, 225000),
-    ("circle-segments-1ms", lambda: _excerpt("performance/circle_small_segments_ncd.ngc", 6,
-                                             7, 600), MILL_TOML, 0.001, "Y=25.4", None,
-     9999 * 25.4),
+    (
+        "spiral-lines-1ms",
+        lambda: _excerpt("performance/spiral_lines.ngc", 2, 5, 20),
+        MILL_TOML,
+        0.001,
+        "X=43.8058052,Y=-25.7233674",
+        None,
+        999 * 25.4,
+    ),
+    ("trochoidal-1ms", lambda: _excerpt("performance/trochoidal.ngc", 13, 18, 110), MILL_TOML, 0.001, None, None, 3600),
+    ("3dchips-1ms", lambda: _excerpt("performance/3D_Chips.ngc", 21, 22, 160), MILL_TOML, 0.001, None, None, 225000),
+    (
+        "circle-segments-1ms",
+        lambda: _excerpt("performance/circle_small_segments_ncd.ngc", 6, 7, 600),
+        MILL_TOML,
+        0.001,
+        "Y=25.4",
+        None,
+        9999 * 25.4,
+    ),
 ]
 
 
@@ -175,8 +182,7 @@ def _program(case) -> str:
 
 def _key(case, text: str, length_mm: float) -> str:
     h = hashlib.sha256()
-    for part in (text, case[2], repr(case[3]), repr(case[4]), repr(case[5]), repr(case[6]),
-                 f"{length_mm:.6f}"):
+    for part in (text, case[2], repr(case[3]), repr(case[4]), repr(case[5]), repr(case[6]), f"{length_mm:.6f}"):
         h.update(part.encode())
     return h.hexdigest()[:20]
 
@@ -200,9 +206,17 @@ def _plan(case, text: str, planner: str, work: str) -> dict:
     write_csv(out.trajectory, csv)
     traj = out.trajectory
     steps = _main_move(traj.q)
-    return {"planner": planner, "csv": csv, "machine": mach, "cycle_s": traj.duration_s,
-            "main_steps": steps, "length_mm": float(traj.s[-1]), "plan_wall_s": out.timings["plan"], "plan_cpu_s": cpu,
-            "worst_ratio": out.report.worst_ratio}
+    return {
+        "planner": planner,
+        "csv": csv,
+        "machine": mach,
+        "cycle_s": traj.duration_s,
+        "main_steps": steps,
+        "length_mm": float(traj.s[-1]),
+        "plan_wall_s": out.timings["plan"],
+        "plan_cpu_s": cpu,
+        "worst_ratio": out.report.worst_ratio,
+    }
 
 
 def _main_move(q) -> int:
@@ -220,8 +234,17 @@ def _main_move(q) -> int:
 def _oracle(case, plan: dict, cache: dict, key: str, timeout: float) -> dict | None:
     if key in cache:
         return cache[key]
-    cmd = [sys.executable, ORACLE, plan["csv"], plan["machine"], "--feed", str(case[6]),
-           "--dt", repr(case[3]), "--json"]
+    cmd = [
+        sys.executable,
+        ORACLE,
+        plan["csv"],
+        plan["machine"],
+        "--feed",
+        str(case[6]),
+        "--dt",
+        repr(case[3]),
+        "--json",
+    ]
     t0 = time.perf_counter()
     try:
         res = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
@@ -231,10 +254,15 @@ def _oracle(case, plan: dict, cache: dict, key: str, timeout: float) -> dict | N
         tail = (res.stderr.strip().splitlines() or ["?"])[-1]
         return {"error": f"oracle exit {res.returncode}: {tail}"}
     data = json.loads(res.stdout)
-    out = {"N": data["optimum"]["N"], "T": data["optimum"]["T"],
-           "verified": data["optimum"]["verify"]["ok"], "wall_s": time.perf_counter() - t0,
-           "warnings": data.get("warnings", []),
-           "midpoint_err": data["geometry"]["midpoint_err"], "plan_N": data["plan"]["N"]}
+    out = {
+        "N": data["optimum"]["N"],
+        "T": data["optimum"]["T"],
+        "verified": data["optimum"]["verify"]["ok"],
+        "wall_s": time.perf_counter() - t0,
+        "warnings": data.get("warnings", []),
+        "midpoint_err": data["geometry"]["midpoint_err"],
+        "plan_N": data["plan"]["N"],
+    }
     cache[key] = out
     return out
 
@@ -245,8 +273,7 @@ def main() -> None:
     ap.add_argument("--planners", nargs="*", default=["optimal", "vpop"])
     ap.add_argument("--list", action="store_true", help="list the cases and exit")
     ap.add_argument("--no-oracle", action="store_true", help="plan only (cached optima still used)")
-    ap.add_argument("--cache", default=os.path.join(os.path.expanduser("~"), ".cache",
-                                                    "cnc-interp", "optimality.json"))
+    ap.add_argument("--cache", default=os.path.join(os.path.expanduser("~"), ".cache", "cnc-interp", "optimality.json"))
     ap.add_argument("--oracle-timeout", type=float, default=3600.0)
     ap.add_argument("--json", default=None)
     ap.add_argument("--markdown", action="store_true", help="print a README table")
@@ -292,19 +319,24 @@ def main() -> None:
 def _print(row: dict) -> None:
     opt = row["oracle"] or {}
     on = opt.get("N")
-    head = f"{row['case']:22s} dt {row['dt_s'] * 1e3:.0f} ms  optimum " + (
-        f"{on:6d} steps" if on else f"{'-':>6s}      ") + (f" ({opt['error']})" if "error" in opt else "")
+    head = (
+        f"{row['case']:22s} dt {row['dt_s'] * 1e3:.0f} ms  optimum "
+        + (f"{on:6d} steps" if on else f"{'-':>6s}      ")
+        + (f" ({opt['error']})" if "error" in opt else "")
+    )
     print(head, flush=True)
     for p in row["plans"]:
         r = f"{p['ratio']:.4f}" if p["ratio"] else "   -  "
-        print(f"    {p['planner']:8s} {p['main_steps']:6d} steps  ratio {r}  cycle {p['cycle_s']:8.3f} s"
-              f"  plan {p['plan_wall_s'] * 1e3:8.1f} ms wall {p['plan_cpu_s'] * 1e3:8.1f} ms cpu"
-              f"  worst {p['worst_ratio']:.9f}", flush=True)
+        print(
+            f"    {p['planner']:8s} {p['main_steps']:6d} steps  ratio {r}  cycle {p['cycle_s']:8.3f} s"
+            f"  plan {p['plan_wall_s'] * 1e3:8.1f} ms wall {p['plan_cpu_s'] * 1e3:8.1f} ms cpu"
+            f"  worst {p['worst_ratio']:.9f}",
+            flush=True,
+        )
 
 
 def _markdown(rows, planners) -> None:
-    print("\n| case | dt | optimum (periods) | " + " | ".join(
-        f"{p} (periods, ratio)" for p in planners) + " |")
+    print("\n| case | dt | optimum (periods) | " + " | ".join(f"{p} (periods, ratio)" for p in planners) + " |")
     print("|---|---|---|" + "---|" * len(planners))
     for row in rows:
         opt = row["oracle"] or {}

@@ -52,8 +52,14 @@ print(json.dumps({"seconds": best, "cpu_seconds": best_cpu, "lines": prog.line_c
 def generate_cam_file(path: str, n_lines: int, seed: int = 1) -> None:
     """Write a deterministic CAM-style program of ``n_lines`` lines to ``path``."""
     rng = random.Random(seed)
-    out = ["%", "(generated CAM-style benchmark program)", "G21 G90 G17 G94 G64 P0.01",
-           "G0 Z5.000", "G0 X0.000 Y0.000", "G1 Z-1.000 F300"]
+    out = [
+        "%",
+        "(generated CAM-style benchmark program)",
+        "G21 G90 G17 G94 G64 P0.01",
+        "G0 Z5.000",
+        "G0 X0.000 Y0.000",
+        "G1 Z-1.000 F300",
+    ]
     x = y = 0.0
     z = -1.0
     heading = 0.0
@@ -104,8 +110,9 @@ def generate_cam_file(path: str, n_lines: int, seed: int = 1) -> None:
 def measure(path: str, repeat: int) -> dict:
     env = dict(os.environ)
     env["PYTHONPATH"] = ROOT + os.pathsep + env.get("PYTHONPATH", "")
-    res = subprocess.run([sys.executable, "-c", _CHILD, path, str(repeat)], capture_output=True,
-                         text=True, env=env, check=False)
+    res = subprocess.run(
+        [sys.executable, "-c", _CHILD, path, str(repeat)], capture_output=True, text=True, env=env, check=False
+    )
     if res.returncode != 0:
         raise SystemExit(f"parse of {path} failed:\n{res.stderr}")
     return json.loads(res.stdout.strip().splitlines()[-1])
@@ -129,15 +136,28 @@ def main() -> None:
             r = measure(path, args.repeat)
             if args.repeat > 1:  # peak memory of one parse, without heap fragmentation of N
                 r["rss_mb"] = measure(path, 1)["rss_mb"]
-            rows.append((name, r["lines"], r["nodes"], r["seconds"], r["lines"] / r["seconds"],
-                         r["lines"] / r["cpu_seconds"], r["rss_mb"]))
-    print(f"{'program':34s} {'lines':>10s} {'nodes':>10s} {'wall s':>7s} {'lines/s':>9s} "
-          f"{'lines/CPU-s':>11s} {'peak MB':>8s}")
+            rows.append(
+                (
+                    name,
+                    r["lines"],
+                    r["nodes"],
+                    r["seconds"],
+                    r["lines"] / r["seconds"],
+                    r["lines"] / r["cpu_seconds"],
+                    r["rss_mb"],
+                )
+            )
+    print(
+        f"{'program':34s} {'lines':>10s} {'nodes':>10s} {'wall s':>7s} {'lines/s':>9s} "
+        f"{'lines/CPU-s':>11s} {'peak MB':>8s}"
+    )
     for name, lines, nodes, sec, lps, lpc, mb in rows:
         print(f"{name:34s} {lines:10,d} {nodes:10,d} {sec:7.2f} {lps:9,.0f} {lpc:11,.0f} {mb:8.0f}")
     if os.getloadavg()[0] > (os.cpu_count() or 1):
-        print(f"note: load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs; wall-clock "
-              "figures are inflated, lines/CPU-s is the steadier figure")
+        print(
+            f"note: load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs; wall-clock "
+            "figures are inflated, lines/CPU-s is the steadier figure"
+        )
 
 
 if __name__ == "__main__":

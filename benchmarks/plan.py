@@ -23,8 +23,9 @@ import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
-CORPUS = os.environ.get("CNC_CORPUS", os.path.join(os.path.dirname(__file__), "..", "..",
-                                                     "shared", "corpus", "linuxcnc"))
+CORPUS = os.environ.get(
+    "CNC_CORPUS", os.path.join(os.path.dirname(__file__), "..", "..", "shared", "corpus", "linuxcnc")
+)
 TRIDENT = os.path.join(CORPUS, "nurbs-g5", "trident-xy.ngc")
 SELECTION = [
     ("nurbs-g5/trident-xy.ngc", "mikron-ucp710"),
@@ -44,8 +45,9 @@ def corpus_programs():
     return sorted(set(files))
 
 
-def plan_one(path: str, machine: str, dt_s: float | None = 0.001, optimality: bool = False,
-             planner: str = "vpop") -> dict:
+def plan_one(
+    path: str, machine: str, dt_s: float | None = 0.001, optimality: bool = False, planner: str = "vpop"
+) -> dict:
     from cnc_interp.errors import CncInterpError
     from cnc_interp.pipeline import plan_part
 
@@ -55,19 +57,32 @@ def plan_one(path: str, machine: str, dt_s: float | None = 0.001, optimality: bo
         out = plan_part(path, machine, planner, dt_s)
         cpu = time.process_time() - c0
     except CncInterpError as exc:
-        return {"program": os.path.relpath(path, CORPUS), "machine": machine,
-                "status": "error", "exit_code": exc.exit_code, "message": exc.format(),
-                "wall_s": time.perf_counter() - t0}
+        return {
+            "program": os.path.relpath(path, CORPUS),
+            "machine": machine,
+            "status": "error",
+            "exit_code": exc.exit_code,
+            "message": exc.format(),
+            "wall_s": time.perf_counter() - t0,
+        }
     traj = out.trajectory
     plan_s = out.timings["plan"]
-    rec = {"program": os.path.relpath(path, CORPUS), "machine": machine, "status": "ok",
-           "planner": planner, "cpu_s": cpu,
-           "samples": traj.n_samples, "cycle_time_s": traj.duration_s,
-           "plan_s": plan_s, "setpoints_per_s": traj.n_samples / plan_s if plan_s else None,
-           "x_real_time": traj.duration_s / plan_s if plan_s else None,
-           "worst_ratio": out.report.worst_ratio, "timings": out.timings,
-           "stats": traj.settings.get("stats", {}),
-           "wall_s": time.perf_counter() - t0}
+    rec = {
+        "program": os.path.relpath(path, CORPUS),
+        "machine": machine,
+        "status": "ok",
+        "planner": planner,
+        "cpu_s": cpu,
+        "samples": traj.n_samples,
+        "cycle_time_s": traj.duration_s,
+        "plan_s": plan_s,
+        "setpoints_per_s": traj.n_samples / plan_s if plan_s else None,
+        "x_real_time": traj.duration_s / plan_s if plan_s else None,
+        "worst_ratio": out.report.worst_ratio,
+        "timings": out.timings,
+        "stats": traj.settings.get("stats", {}),
+        "wall_s": time.perf_counter() - t0,
+    }
     if optimality:
         from cnc_interp.plan.optimality import program_lower_bound
 
@@ -84,11 +99,20 @@ def main() -> None:
     ap.add_argument("--json", default=None)
     ap.add_argument("--planner", default="vpop", help="the per-path planner (default vpop)")
     ap.add_argument("--no-bound", action="store_true", help="skip the V/A lower bound")
-    ap.add_argument("--exclude", action="append", default=[], metavar="TEXT",
-                    help="skip sweep programs whose path contains TEXT (repeatable)")
-    ap.add_argument("--repeat", type=int, default=3,
-                    help="selection runs per program; the fastest plan stage counts (a plan of "
-                         "a few tens of ms is dominated by first-run effects otherwise)")
+    ap.add_argument(
+        "--exclude",
+        action="append",
+        default=[],
+        metavar="TEXT",
+        help="skip sweep programs whose path contains TEXT (repeatable)",
+    )
+    ap.add_argument(
+        "--repeat",
+        type=int,
+        default=3,
+        help="selection runs per program; the fastest plan stage counts (a plan of "
+        "a few tens of ms is dominated by first-run effects otherwise)",
+    )
     args = ap.parse_args()
     # compile once outside the timings
     plan_one(TRIDENT, "generic-mill", planner=args.planner)
@@ -120,9 +144,11 @@ def main() -> None:
         tot_plan = sum(r["plan_s"] for r in ok)
         tot_cpu = sum(r.get("cpu_s", 0.0) for r in ok)
         tot_samples = sum(r["samples"] for r in ok)
-        print(f"TOTAL {len(ok)}/{len(rows)} ok: {tot_samples} setpoints, cycle {tot_cycle:.2f} s, "
-              f"plan {tot_plan:.2f} s -> {tot_samples / tot_plan:,.0f} setpoints/s, "
-              f"{tot_cycle / tot_plan:.1f}x real time (process CPU {tot_cpu:.2f} s)")
+        print(
+            f"TOTAL {len(ok)}/{len(rows)} ok: {tot_samples} setpoints, cycle {tot_cycle:.2f} s, "
+            f"plan {tot_plan:.2f} s -> {tot_samples / tot_plan:,.0f} setpoints/s, "
+            f"{tot_cycle / tot_plan:.1f}x real time (process CPU {tot_cpu:.2f} s)"
+        )
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(rows, fh, indent=1)
@@ -133,10 +159,12 @@ def _print(r: dict) -> None:
         print(f"{r['program']:48s} {r['machine'][-20:]:>20s} ERROR {r['message'][:100]}", flush=True)
         return
     extra = f" bound-ratio {r['ratio_to_bound']:.3f}" if r.get("ratio_to_bound") else ""
-    print(f"{r['program']:48s} {os.path.basename(r['machine'])[-20:]:>20s} {r['samples']:8d} samples "
-          f"cycle {r['cycle_time_s']:8.3f} s plan {r['plan_s']:7.3f} s "
-          f"{r['x_real_time']:7.1f}x RT cpu {r.get('cpu_s', 0):6.3f} s worst {r['worst_ratio']:.9f}{extra}",
-          flush=True)
+    print(
+        f"{r['program']:48s} {os.path.basename(r['machine'])[-20:]:>20s} {r['samples']:8d} samples "
+        f"cycle {r['cycle_time_s']:8.3f} s plan {r['plan_s']:7.3f} s "
+        f"{r['x_real_time']:7.1f}x RT cpu {r.get('cpu_s', 0):6.3f} s worst {r['worst_ratio']:.9f}{extra}",
+        flush=True,
+    )
 
 
 if __name__ == "__main__":

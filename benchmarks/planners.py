@@ -37,8 +37,7 @@ def _with_feed(data: bytes, feed_mm_min: float) -> bytes:
     return re.sub(rb"([Ff])\s*[-+]?[0-9]*\.?[0-9]+", b"F%r" % feed_mm_min, data)
 
 
-def run_one(spec: str, dt_s: float | None, tol_mm: float | None,
-            feed_mm_min: float | None = None) -> dict:
+def run_one(spec: str, dt_s: float | None, tol_mm: float | None, feed_mm_min: float | None = None) -> dict:
     """Parse and fit ``spec`` (PATH[@PRESET]) once, plan it with every planner."""
     from cnc_interp.errors import CncInterpError
     from cnc_interp.fit.settings import FitSettings
@@ -52,8 +51,10 @@ def run_one(spec: str, dt_s: float | None, tol_mm: float | None,
     path, _, preset = spec.partition("@")
     full = path if os.path.isabs(path) else os.path.join(CORPUS, path)
     machine = load_machine(preset or "mikron-ucp710")
-    row = {"program": path + ("" if feed_mm_min is None else f" (F{feed_mm_min:g})"),
-           "machine": preset or "mikron-ucp710"}
+    row = {
+        "program": path + ("" if feed_mm_min is None else f" (F{feed_mm_min:g})"),
+        "machine": preset or "mikron-ucp710",
+    }
     try:
         base = PlanSettings.from_options(planner="vpop", dt_s=dt_s, tol_mm=tol_mm, machine=machine)
         machine = machine.with_dt(base.dt_s)
@@ -71,16 +72,19 @@ def run_one(spec: str, dt_s: float | None, tol_mm: float | None,
         row["error"] = exc.format()
         return row
     for name in PLANNERS:
-        settings = PlanSettings.from_options(planner=name, dt_s=base.dt_s, tol_mm=tol_mm,
-                                             machine=machine)
+        settings = PlanSettings.from_options(planner=name, dt_s=base.dt_s, tol_mm=tol_mm, machine=machine)
         try:
             t0 = time.perf_counter()
             traj = plan_program(fitted, machine, settings)
             wall = time.perf_counter() - t0
             rep = verify(traj, machine)
-            row[name] = {"cycle_s": traj.duration_s, "plan_wall_s": wall,
-                         "worst_ratio": rep.worst_ratio, "samples": traj.n_samples,
-                         "length_mm": float(traj.s[-1]) if traj.n_samples else 0.0}
+            row[name] = {
+                "cycle_s": traj.duration_s,
+                "plan_wall_s": wall,
+                "worst_ratio": rep.worst_ratio,
+                "samples": traj.n_samples,
+                "length_mm": float(traj.s[-1]) if traj.n_samples else 0.0,
+            }
         except CncInterpError as exc:
             row[name] = {"error": exc.format()}
     return row
@@ -95,8 +99,10 @@ def _cell(res: dict | None, key: str, fmt: str) -> str:
 
 
 def table(rows: list[dict]) -> str:
-    head = ("| program | machine | segments | constant (s) | variable (s) | VPOp (s) "
-            "| plan wall c / v / p (s) | worst ratio c / v / p |")
+    head = (
+        "| program | machine | segments | constant (s) | variable (s) | VPOp (s) "
+        "| plan wall c / v / p (s) | worst ratio c / v / p |"
+    )
     out = [head, "|" + "---|" * 8]
     for r in rows:
         if "error" in r:
@@ -105,8 +111,9 @@ def table(rows: list[dict]) -> str:
         cyc = [_cell(r.get(p), "cycle_s", ".3f") for p in PLANNERS]
         wall = " / ".join(_cell(r.get(p), "plan_wall_s", ".2f") for p in PLANNERS)
         worst = " / ".join(_cell(r.get(p), "worst_ratio", ".4f") for p in PLANNERS)
-        out.append(f"| {r['program']} | {r['machine']} | {r['segments']} | {cyc[0]} | {cyc[1]} "
-                   f"| {cyc[2]} | {wall} | {worst} |")
+        out.append(
+            f"| {r['program']} | {r['machine']} | {r['segments']} | {cyc[0]} | {cyc[1]} | {cyc[2]} | {wall} | {worst} |"
+        )
     return "\n".join(out)
 
 
@@ -116,16 +123,21 @@ def main() -> None:
     ap.add_argument("--dt", type=float, default=None, help="sample period, s (default: machine's)")
     ap.add_argument("--tol", type=float, default=None, help="fit tolerance, mm")
     ap.add_argument("--json", default=None, help="also write the raw rows as JSON here")
-    ap.add_argument("--feed", type=float, default=None,
-                    help="what-if: replace every F word by this feed (mm/min or the program's units)")
+    ap.add_argument(
+        "--feed",
+        type=float,
+        default=None,
+        help="what-if: replace every F word by this feed (mm/min or the program's units)",
+    )
     args = ap.parse_args()
     rows = []
     for spec in args.programs:
         rows.append(run_one(spec, args.dt, args.tol, args.feed))
         print(f"done {spec}", flush=True)
     print(table(rows))
-    errors = {r["program"]: {p: r[p]["error"] for p in PLANNERS if "error" in r.get(p, {})}
-              for r in rows if "error" not in r}
+    errors = {
+        r["program"]: {p: r[p]["error"] for p in PLANNERS if "error" in r.get(p, {})} for r in rows if "error" not in r
+    }
     for prog, errs in errors.items():
         for p, msg in errs.items():
             print(f"{prog} [{p}]: {msg}")

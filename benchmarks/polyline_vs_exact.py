@@ -44,8 +44,10 @@ def main() -> None:
     args = ap.parse_args()
     rows = []
     names = args.case or list(cases())
-    print(f"{'case':16s} {'chord':>6s} {'nodes':>6s} {'exact s':>9s} {'polyline s':>10s} {'ratio':>7s} "
-          f"{'segments':>8s} {'cpu s':>6s}")
+    print(
+        f"{'case':16s} {'chord':>6s} {'nodes':>6s} {'exact s':>9s} {'polyline s':>10s} {'ratio':>7s} "
+        f"{'segments':>8s} {'cpu s':>6s}"
+    )
     with tempfile.TemporaryDirectory() as d:
         for name in names:
             for e in CHORD_ERRORS_MM:
@@ -55,17 +57,26 @@ def main() -> None:
                 te, tp = ex.trajectory.duration_s, po.trajectory.duration_s
                 nodes = poly_text.count("\nG1 ")
                 segs = po.fit_stats.get("segments_out")
-                row = dict(case=name, chord_mm=e, nodes=nodes, exact_s=te, polyline_s=tp,
-                           ratio=tp / te, segments=segs, cpu_s=cpu,
-                           fit_method=po.fit_stats.get("method"))
+                row = dict(
+                    case=name,
+                    chord_mm=e,
+                    nodes=nodes,
+                    exact_s=te,
+                    polyline_s=tp,
+                    ratio=tp / te,
+                    segments=segs,
+                    cpu_s=cpu,
+                    fit_method=po.fit_stats.get("method"),
+                )
                 rows.append(row)
-                print(f"{name:16s} {e * 1000:4.0f}µm {nodes:6d} {te:9.3f} {tp:10.3f} {tp / te:7.4f} "
-                      f"{segs:8d} {cpu:6.2f}", flush=True)
+                print(
+                    f"{name:16s} {e * 1000:4.0f}µm {nodes:6d} {te:9.3f} {tp:10.3f} {tp / te:7.4f} {segs:8d} {cpu:6.2f}",
+                    flush=True,
+                )
     worst = max(r["ratio"] for r in rows)
     total_e = sum(r["exact_s"] for r in rows)
     total_p = sum(r["polyline_s"] for r in rows)
-    print(f"worst ratio {worst:.4f}; total exact {total_e:.3f} s, polyline {total_p:.3f} s "
-          f"({total_p / total_e:.4f})")
+    print(f"worst ratio {worst:.4f}; total exact {total_e:.3f} s, polyline {total_p:.3f} s ({total_p / total_e:.4f})")
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(rows, fh, indent=1)

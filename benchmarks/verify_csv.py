@@ -29,9 +29,16 @@ def main() -> None:
     # smooth-ish positions with realistic magnitudes (hundreds of mm, full digits)
     q = np.cumsum(np.cumsum(rng.normal(size=(k, len(axes))), axis=0), axis=0) * 1e-6 + 123.456
     s = np.cumsum(np.abs(rng.normal(size=k))) * 1e-2
-    tr = Trajectory(axes=axes, dt_s=dt, t=np.arange(k) * dt, s=s,
-                    feed=np.concatenate([[0.0], np.diff(s) / dt]), q=q,
-                    line=np.zeros(k, dtype=int), planner="bench")
+    tr = Trajectory(
+        axes=axes,
+        dt_s=dt,
+        t=np.arange(k) * dt,
+        s=s,
+        feed=np.concatenate([[0.0], np.diff(s) / dt]),
+        q=q,
+        line=np.zeros(k, dtype=int),
+        planner="bench",
+    )
     t0 = time.perf_counter()
     verify_arrays(q, dt, 1e9, 1e9, 1e9, axes=axes)
     tv = time.perf_counter() - t0
@@ -42,8 +49,10 @@ def main() -> None:
         write_csv(tr, path)
         tw = time.perf_counter() - t0
         size = os.path.getsize(path) / 1e6
-        print(f"csv write: {k:,} rows x {3 + len(axes)} cols in {tw:.2f} s = "
-              f"{k / tw / 1e3:.0f} k rows/s, {size / tw:.0f} MB/s ({size:.0f} MB)")
+        print(
+            f"csv write: {k:,} rows x {3 + len(axes)} cols in {tw:.2f} s = "
+            f"{k / tw / 1e3:.0f} k rows/s, {size / tw:.0f} MB/s ({size:.0f} MB)"
+        )
         t0 = time.perf_counter()
         back = read_csv(path)
         tr_ = time.perf_counter() - t0
@@ -54,8 +63,7 @@ def main() -> None:
             for a in axes:
                 fh.write(f"[axes.{a}]\nvmax = 1e6\namax = 1e9\njmax = 1e13\n")
         exe = os.path.join(os.path.dirname(sys.executable), "cnc-interp")
-        for cmd in (["verify", path, "-m", machine], ["plot", path, "-m", machine, "-o",
-                                                       os.path.join(d, "p.png")]):
+        for cmd in (["verify", path, "-m", machine], ["plot", path, "-m", machine, "-o", os.path.join(d, "p.png")]):
             t0 = time.perf_counter()
             r = subprocess.run([exe, *cmd], capture_output=True)
             dt_cmd = time.perf_counter() - t0

@@ -17,8 +17,9 @@ import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
-CORPUS = os.environ.get("CNC_CORPUS", os.path.join(os.path.dirname(__file__), "..", "..",
-                                                     "shared", "corpus", "linuxcnc"))
+CORPUS = os.environ.get(
+    "CNC_CORPUS", os.path.join(os.path.dirname(__file__), "..", "..", "shared", "corpus", "linuxcnc")
+)
 DEFAULT = ["performance/circle_small_segments_ncd.ngc", "performance/3D_Chips.ngc"]
 
 
@@ -49,8 +50,7 @@ def main() -> None:
     ap.add_argument("--machine", default="generic-mill")
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args()
-    print(f"{'program':44s} {'paths':>5s} {'pieces':>7s} {'max_err':>8s} {'table s':>8s} "
-          f"{'bounds s':>8s}")
+    print(f"{'program':44s} {'paths':>5s} {'pieces':>7s} {'max_err':>8s} {'table s':>8s} {'bounds s':>8s}")
     for rel in args.programs:
         m, items = fitted_paths(rel, args.machine)
         JointTable(*items[0])  # load the compiled kernels

@@ -24,13 +24,24 @@ __version__ = "0.1.0"
 
 #: public names -> the module that defines them (loaded on first attribute access)
 _LAZY = {
-    "load_machine": "api", "read_program": "api",
-    "verify": "api", "write": "api", "run": "api", "PlanResult": "api",
+    "load_machine": "api",
+    "read_program": "api",
+    "verify": "api",
+    "write": "api",
+    "run": "api",
+    "PlanResult": "api",
     "DEFAULT_PLANNER": "api",
-    "CncInterpError": "errors", "GCodeError": "errors", "MachineError": "errors",
-    "FitError": "errors", "PlanError": "errors", "UsageError": "errors",
-    "Machine": "plan.machine", "Program": "gcode.program", "FitResult": "fit.result",
-    "Trajectory": "plan.trajectory", "VerifyReport": "plan.verify",
+    "CncInterpError": "errors",
+    "GCodeError": "errors",
+    "MachineError": "errors",
+    "FitError": "errors",
+    "PlanError": "errors",
+    "UsageError": "errors",
+    "Machine": "plan.machine",
+    "Program": "gcode.program",
+    "FitResult": "fit.result",
+    "Trajectory": "plan.trajectory",
+    "VerifyReport": "plan.verify",
     "PLANNER_NAMES": "plan.planners",
 }
 

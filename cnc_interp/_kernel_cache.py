@@ -47,8 +47,7 @@ def refresh(root: str) -> list[str]:
         old = {}
     if old == hashes:
         return []
-    dropped = [m for m in sorted(hashes)
-               if old.get(m) != hashes[m] and _drop_cache(root, m, m in packages)]
+    dropped = [m for m in sorted(hashes) if old.get(m) != hashes[m] and _drop_cache(root, m, m in packages)]
     tmp = f"{stamp}.{os.getpid()}.tmp"
     try:
         with open(tmp, "w", encoding="utf-8") as fh:
@@ -71,7 +70,7 @@ def _read_sources(root: str) -> tuple[dict[str, bytes], set[str]]:
                 rel = os.path.relpath(os.path.join(dirpath, name), root)[:-3]
                 mod = rel.replace(os.sep, ".")
                 if name == "__init__.py":
-                    mod = mod[:-len("__init__")].rstrip(".")
+                    mod = mod[: -len("__init__")].rstrip(".")
                     packages.add(mod)
                 with open(os.path.join(dirpath, name), "rb") as fh:
                     out[mod] = fh.read()
@@ -87,7 +86,7 @@ def _imports(mod: str, src: bytes, known: dict, is_pkg: bool) -> set[str]:
         up = len(dots) - (1 if is_pkg else 0)
         if up > len(parts):
             continue
-        base = parts[:len(parts) - up]
+        base = parts[: len(parts) - up]
         target = ".".join(base + ([name.decode()] if name else []))
         if target in known:
             found.add(target)
@@ -147,8 +146,15 @@ def _drop_cache(root: str, mod: str, is_pkg: bool) -> bool:
 
 
 #: the compiled modules a plan runs through (fit and the VPOp planner)
-PLAN_KERNEL_MODULES = ("fit._arclen", "fit._bspline", "fit._project", "fit._linedev", "fit.planar",
-                       "plan._table_kernels", "plan.vpop_core")
+PLAN_KERNEL_MODULES = (
+    "fit._arclen",
+    "fit._bspline",
+    "fit._project",
+    "fit._linedev",
+    "fit.planar",
+    "plan._table_kernels",
+    "plan.vpop_core",
+)
 #: what compiling them from scratch takes, measured on the project's 2-core machine
 #: (quick-start plan of mill-contour.ngc, idle: 95 s of CPU)
 FIRST_COMPILE_ESTIMATE = "about 2 minutes"
@@ -182,7 +188,8 @@ def announce_first_compile(stream=None, root: str | None = None) -> bool:
     root = root or os.path.dirname(os.path.abspath(__file__))
     if not missing_kernels(root):
         return False
-    stream.write(f"cnc-interp: first run: compiling planner kernels, {FIRST_COMPILE_ESTIMATE} "
-                 "on 2 cores, cached for next time\n")
+    stream.write(
+        f"cnc-interp: first run: compiling planner kernels, {FIRST_COMPILE_ESTIMATE} on 2 cores, cached for next time\n"
+    )
     stream.flush()
     return True

@@ -34,8 +34,18 @@ if TYPE_CHECKING:  # the stages are imported when called: ``import cnc_interp`` 
     from .plan.trajectory import Trajectory
     from .plan.verify import VerifyReport
 
-__all__ = ["load_machine", "read_program", "fit", "plan", "verify", "write", "run",
-           "PlanResult", "Progress", "DEFAULT_PLANNER"]
+__all__ = [
+    "load_machine",
+    "read_program",
+    "fit",
+    "plan",
+    "verify",
+    "write",
+    "run",
+    "PlanResult",
+    "Progress",
+    "DEFAULT_PLANNER",
+]
 
 from .plan.settings import DEFAULT_PLANNER  # noqa: E402  (a string; plan.settings is light)
 
@@ -56,9 +66,14 @@ def load_machine(spec: "str | os.PathLike[str] | Machine") -> "Machine":
     return _load(os.fspath(spec))
 
 
-def read_program(source: "str | bytes | os.PathLike[str]", machine: "Machine | str | None" = None,
-                 *, name: str | None = None, start: "np.ndarray | None" = None,
-                 tool_table: "str | ToolTable | None" = None) -> "Program":
+def read_program(
+    source: "str | bytes | os.PathLike[str]",
+    machine: "Machine | str | None" = None,
+    *,
+    name: str | None = None,
+    start: "np.ndarray | None" = None,
+    tool_table: "str | ToolTable | None" = None,
+) -> "Program":
     """Interpret a part program for ``machine`` (its axes, start position and tool table).
 
     Args:
@@ -80,8 +95,9 @@ def read_program(source: "str | bytes | os.PathLike[str]", machine: "Machine | s
     if m is not None:
         start = m.start if start is None else start
         tool_table = m.tool_table if tool_table is None else tool_table
-    program: Program = _read(data, source=name, axes=m.axes if m is not None else None,
-                             start=start, tool_table=tool_table)
+    program: Program = _read(
+        data, source=name, axes=m.axes if m is not None else None, start=start, tool_table=tool_table
+    )
     if m is not None:
         key = id(program)
         _MACHINE_OF[key] = m
@@ -89,8 +105,14 @@ def read_program(source: "str | bytes | os.PathLike[str]", machine: "Machine | s
     return program
 
 
-def fit(program: "Program", tol_mm: float | None = None, *, machine: "Machine | str | None" = None,
-        method: str | None = None, corner_deg: float | None = None) -> "FitResult":
+def fit(
+    program: "Program",
+    tol_mm: float | None = None,
+    *,
+    machine: "Machine | str | None" = None,
+    method: str | None = None,
+    corner_deg: float | None = None,
+) -> "FitResult":
     """Fit the program's moves with quintic segments within the path tolerance.
 
     Args:
@@ -109,8 +131,7 @@ def fit(program: "Program", tol_mm: float | None = None, *, machine: "Machine | 
     from .fit.settings import FitSettings
 
     m = load_machine(machine) if machine is not None else _MACHINE_OF.get(id(program))
-    settings = FitSettings.from_options(tol_mm=tol_mm, corner_deg=corner_deg, machine=m,
-                                        method=method)
+    settings = FitSettings.from_options(tol_mm=tol_mm, corner_deg=corner_deg, machine=m, method=method)
     result: FitResult = require_within_tolerance(fit_program(program, settings))
     return result
 
@@ -119,9 +140,14 @@ def fit(program: "Program", tol_mm: float | None = None, *, machine: "Machine | 
 Progress = Callable[[float], None]
 
 
-def plan(fitted: "FitResult", machine: "Machine | str", planner: str = DEFAULT_PLANNER,
-         dt_s: float | None = None, tol_mm: float | None = None,
-         progress: Progress | None = None) -> "Trajectory":
+def plan(
+    fitted: "FitResult",
+    machine: "Machine | str",
+    planner: str = DEFAULT_PLANNER,
+    dt_s: float | None = None,
+    tol_mm: float | None = None,
+    progress: Progress | None = None,
+) -> "Trajectory":
     """Plan the fitted program's feed under ``machine``'s limits, sampled every ``dt_s``.
 
     Args:
@@ -140,8 +166,14 @@ def plan(fitted: "FitResult", machine: "Machine | str", planner: str = DEFAULT_P
     return traj
 
 
-def _plan(fitted: "FitResult", machine: "Machine", planner: str, dt_s: float | None,
-          tol_mm: float | None, progress: Progress | None) -> "tuple[Trajectory, PlanSettings]":
+def _plan(
+    fitted: "FitResult",
+    machine: "Machine",
+    planner: str,
+    dt_s: float | None,
+    tol_mm: float | None,
+    progress: Progress | None,
+) -> "tuple[Trajectory, PlanSettings]":
     from .errors import PlanError, SourceLocation
     from .plan.budget import check_sample_budget, held_time_s
     from .plan.settings import PlanSettings
@@ -150,8 +182,7 @@ def _plan(fitted: "FitResult", machine: "Machine", planner: str, dt_s: float | N
     settings = PlanSettings.from_options(planner=planner, dt_s=dt_s, tol_mm=tol_mm, machine=machine)
     machine = machine.with_dt(settings.dt_s)
     source = fitted.program.source
-    check_sample_budget(fitted.paths, machine, settings.dt_s, source,
-                        held_s=held_time_s(fitted.items))
+    check_sample_budget(fitted.paths, machine, settings.dt_s, source, held_s=held_time_s(fitted.items))
     try:
         traj: Trajectory = plan_program(fitted, machine, settings, progress=progress)
         return traj, settings
@@ -170,8 +201,12 @@ def verify(traj: "Trajectory", machine: "Machine | str") -> "VerifyReport":
     return report
 
 
-def write(traj: "Trajectory", path: "str | os.PathLike[str]", machine: "Machine | str | None" = None,
-          metadata: "dict[str, Any] | None" = None) -> None:
+def write(
+    traj: "Trajectory",
+    path: "str | os.PathLike[str]",
+    machine: "Machine | str | None" = None,
+    metadata: "dict[str, Any] | None" = None,
+) -> None:
     """Write the samples to ``path``: MCAP when it ends in ``.mcap`` (with ``machine``'s
     limits and ``metadata`` records), else CSV; ``"-"`` is standard output. The file
     appears only complete (written to a temporary file, then renamed)."""
@@ -179,8 +214,7 @@ def write(traj: "Trajectory", path: "str | os.PathLike[str]", machine: "Machine 
     if path.lower().endswith(".mcap"):
         from .export.mcap_io import write_mcap
 
-        write_mcap(traj, path, metadata=metadata,
-                   machine=load_machine(machine) if machine is not None else None)
+        write_mcap(traj, path, metadata=metadata, machine=load_machine(machine) if machine is not None else None)
     else:
         from .export.csv_io import write_csv
 
@@ -209,11 +243,20 @@ class PlanResult:
         return bool(self.report.ok)
 
 
-def run(source: "str | bytes | os.PathLike[str]", machine: "Machine | str", *,
-        planner: str = DEFAULT_PLANNER, dt_s: float | None = None, tol_mm: float | None = None,
-        fit_method: str | None = None, start: "np.ndarray | None" = None,
-        tool_table: "str | ToolTable | None" = None, name: str | None = None,
-        progress: Progress | None = None, check: bool = True) -> PlanResult:
+def run(
+    source: "str | bytes | os.PathLike[str]",
+    machine: "Machine | str",
+    *,
+    planner: str = DEFAULT_PLANNER,
+    dt_s: float | None = None,
+    tol_mm: float | None = None,
+    fit_method: str | None = None,
+    start: "np.ndarray | None" = None,
+    tool_table: "str | ToolTable | None" = None,
+    name: str | None = None,
+    progress: Progress | None = None,
+    check: bool = True,
+) -> PlanResult:
     """``read_program`` → ``fit`` → ``plan`` → ``verify`` in one call.
 
     With ``check`` (the default) a plan that violates a limit raises ``PlanError``
@@ -237,16 +280,23 @@ def run(source: "str | bytes | os.PathLike[str]", machine: "Machine | str", *,
     t4 = time.perf_counter()
     if check and not report.ok:
         axis, kind, ratio, idx = report.worst()
-        raise PlanError(f"bug: plan violates the {axis} {kind} limit (ratio {ratio:.12g} at "
-                        f"sample {idx}, t = {idx * traj.dt_s:.6g} s); please report it",
-                        SourceLocation(file=program.source))
-    return PlanResult(program=program, fit=fitted, trajectory=traj, report=report, machine=m,
-                      settings=settings,
-                      timings_s={"parse": t1 - t0, "fit": t2 - t1, "plan": t3 - t2, "verify": t4 - t3})
+        raise PlanError(
+            f"bug: plan violates the {axis} {kind} limit (ratio {ratio:.12g} at "
+            f"sample {idx}, t = {idx * traj.dt_s:.6g} s); please report it",
+            SourceLocation(file=program.source),
+        )
+    return PlanResult(
+        program=program,
+        fit=fitted,
+        trajectory=traj,
+        report=report,
+        machine=m,
+        settings=settings,
+        timings_s={"parse": t1 - t0, "fit": t2 - t1, "plan": t3 - t2, "verify": t4 - t3},
+    )
 
 
-def _source_bytes(source: "str | bytes | os.PathLike[str]", name: str | None
-                  ) -> tuple[bytes | str, str]:
+def _source_bytes(source: "str | bytes | os.PathLike[str]", name: str | None) -> tuple[bytes | str, str]:
     """(G-code, display name) of a path, ``bytes`` or G-code text."""
     if isinstance(source, bytes):
         return source, name or "<bytes>"
@@ -268,5 +318,4 @@ def read_part(part: str) -> tuple[str, bytes]:
         with open(part, "rb") as fh:
             return part, fh.read()
     except OSError as exc:
-        raise UsageError(f"cannot read part program: {exc.strerror}",
-                         SourceLocation(file=part)) from None
+        raise UsageError(f"cannot read part program: {exc.strerror}", SourceLocation(file=part)) from None

@@ -39,9 +39,24 @@ GCODE_SUFFIXES = (".ngc", ".nc", ".gcode", ".gc", ".g", ".tap", ".cnc")
 #: report format version (bump on incompatible changes)
 REPORT_VERSION = 1
 #: result fields, in report / CSV column order
-FIELDS = ("key", "status", "message", "error_line", "lines", "nodes", "segments",
-          "path_length_mm", "cycle_time_s", "samples", "worst_ratio", "max_fit_dev_mm", "warnings",
-          "first_warning", "wall_s", "peak_mem_mb")
+FIELDS = (
+    "key",
+    "status",
+    "message",
+    "error_line",
+    "lines",
+    "nodes",
+    "segments",
+    "path_length_mm",
+    "cycle_time_s",
+    "samples",
+    "worst_ratio",
+    "max_fit_dev_mm",
+    "warnings",
+    "first_warning",
+    "wall_s",
+    "peak_mem_mb",
+)
 #: fields that differ from run to run (excluded when comparing runs for identity)
 VOLATILE_FIELDS = ("wall_s", "peak_mem_mb")
 #: how long to try to reach a Dask scheduler before giving up (s)
@@ -82,8 +97,7 @@ def parse_slowdown(text: str) -> float:
     except ValueError:
         value = float("nan")
     if not math.isfinite(value) or value < 0:
-        raise UsageError(f"--max-slowdown must be a non-negative fraction or percentage "
-                         f"like 1% or 0.01, not '{text}'")
+        raise UsageError(f"--max-slowdown must be a non-negative fraction or percentage like 1% or 0.01, not '{text}'")
     return value
 
 
@@ -100,8 +114,7 @@ def collect_programs(paths) -> list[tuple[str, str]]:
                 for name in filenames:
                     path = os.path.join(dirpath, name)
                     # regular files only: a FIFO would block, a link to /dev/zero never ends
-                    if (name.lower().endswith(GCODE_SUFFIXES) and not name.startswith(".")
-                            and os.path.isfile(path)):
+                    if name.lower().endswith(GCODE_SUFFIXES) and not name.startswith(".") and os.path.isfile(path):
                         rel = os.path.relpath(path, root).replace(os.sep, "/")
                         found.setdefault(f"{base}/{rel}", path)
         elif os.path.isfile(arg):
@@ -111,8 +124,10 @@ def collect_programs(paths) -> list[tuple[str, str]]:
         else:
             raise UsageError("no such file or directory", SourceLocation(file=arg))
     if not found:
-        raise UsageError("no part programs found (looked for "
-                         f"{', '.join(GCODE_SUFFIXES)})", SourceLocation(file=" ".join(map(str, paths))))
+        raise UsageError(
+            f"no part programs found (looked for {', '.join(GCODE_SUFFIXES)})",
+            SourceLocation(file=" ".join(map(str, paths))),
+        )
     return sorted(found.items())
 
 
@@ -122,18 +137,20 @@ def load_baseline(path: str) -> dict:
         with open(path, "rb") as fh:
             text = fh.read().decode("utf-8")
     except (OSError, UnicodeDecodeError) as exc:
-        raise UsageError(f"cannot read baseline: {getattr(exc, 'strerror', None) or exc}",
-                         SourceLocation(file=path)) from None
+        raise UsageError(
+            f"cannot read baseline: {getattr(exc, 'strerror', None) or exc}", SourceLocation(file=path)
+        ) from None
     try:
         data = json.loads(text)
     except json.JSONDecodeError as exc:
-        raise UsageError(f"baseline is not JSON: {exc.msg}",
-                         SourceLocation(path, exc.lineno, exc.colno)) from None
+        raise UsageError(f"baseline is not JSON: {exc.msg}", SourceLocation(path, exc.lineno, exc.colno)) from None
     programs = data.get("programs") if isinstance(data, dict) else None
-    if not isinstance(programs, list) or not all(isinstance(p, dict) and isinstance(p.get("key"), str)
-                                                 for p in programs):
-        raise UsageError("baseline is not a cnc-interp batch JSON report (no 'programs' list)",
-                         SourceLocation(file=path))
+    if not isinstance(programs, list) or not all(
+        isinstance(p, dict) and isinstance(p.get("key"), str) for p in programs
+    ):
+        raise UsageError(
+            "baseline is not a cnc-interp batch JSON report (no 'programs' list)", SourceLocation(file=path)
+        )
     return {p["key"]: p for p in programs}
 
 
@@ -148,8 +165,16 @@ def _default_jobs() -> int:
 def _make_jobs(programs, machine, opts: BatchOptions, embed: bool) -> list[dict]:
     jobs = []
     for key, path in programs:
-        job = {"key": key, "path": path, "machine": machine, "planner": opts.planner,
-               "dt_s": opts.dt_s, "tol_mm": opts.tol_mm, "fit_method": opts.fit_method, "data": None}
+        job = {
+            "key": key,
+            "path": path,
+            "machine": machine,
+            "planner": opts.planner,
+            "dt_s": opts.dt_s,
+            "tol_mm": opts.tol_mm,
+            "fit_method": opts.fit_method,
+            "data": None,
+        }
         if embed:  # Dask workers may not share our file system: ship the program text
             with open(path, "rb") as fh:
                 job["data"] = fh.read()
@@ -161,8 +186,7 @@ def warm_up_program(axes: str) -> bytes:
     """A tiny program on ``axes`` touching every stage: a rapid, lines, an arc, a dwell."""
     if "X" in axes and ("Y" in axes or "Z" in axes):
         b, plane, off = ("Y", "G17", "J") if "Y" in axes else ("Z", "G18", "K")
-        text = (f"G21 G90 {plane}\nG0 X1 {b}1\nG1 X2 {b}1 F600\nG2 X4 {b}1 I1 {off}0\n"
-                f"G4 P0.01\nG1 X4 {b}2\nM2\n")
+        text = f"G21 G90 {plane}\nG0 X1 {b}1\nG1 X2 {b}1 F600\nG2 X4 {b}1 I1 {off}0\nG4 P0.01\nG1 X4 {b}2\nM2\n"
     else:
         a = axes[0]
         text = f"G21 G90\nG0 {a}1\nG1 {a}2 F600\nG4 P0.01\nG1 {a}3\nM2\n"
@@ -175,8 +199,17 @@ def warm_up(machine, planner: str) -> dict:
     from .batch_workers import run_job
 
     # run_job never raises for a program's own failure; warming is best effort anyway
-    return run_job({"key": "warm-up", "path": "<warm-up>", "machine": machine, "planner": planner,
-                    "dt_s": None, "tol_mm": None, "data": warm_up_program(machine.axes)})
+    return run_job(
+        {
+            "key": "warm-up",
+            "path": "<warm-up>",
+            "machine": machine,
+            "planner": planner,
+            "dt_s": None,
+            "tol_mm": None,
+            "data": warm_up_program(machine.axes),
+        }
+    )
 
 
 def _run_local(jobs, opts: BatchOptions, on_done) -> list[dict]:
@@ -201,23 +234,26 @@ def _run_dask(jobs, opts: BatchOptions, on_done) -> list[dict]:
     try:
         from distributed import Client, as_completed
     except ImportError:
-        raise UsageError("--dask needs the 'distributed' package "
-                         "(pip install 'cnc-interp[dask]')") from None
+        raise UsageError("--dask needs the 'distributed' package (pip install 'cnc-interp[dask]')") from None
     try:
         client = Client(opts.dask_address, timeout=f"{DASK_CONNECT_TIMEOUT_S}s")
     except Exception as exc:  # noqa: BLE001 - any connection failure is the user's address
         raise UsageError(f"cannot connect to the Dask scheduler at {opts.dask_address}: {exc}") from None
     results: list[dict | None] = [None] * len(jobs)
     try:
-        futures = {client.submit(_dask_task, job, opts.timeout_s, pure=False): i
-                   for i, job in enumerate(jobs)}
+        futures = {client.submit(_dask_task, job, opts.timeout_s, pure=False): i for i, job in enumerate(jobs)}
         for fut in as_completed(list(futures)):
             i = futures[fut]
             try:
                 res = fut.result()
             except Exception as exc:  # noqa: BLE001 - a lost worker is that program's crash
-                res = {"status": "crash", "message": f"dask task failed: {type(exc).__name__}: {exc}",
-                       "error_line": 0, "wall_s": None, "peak_mem_mb": None}
+                res = {
+                    "status": "crash",
+                    "message": f"dask task failed: {type(exc).__name__}: {exc}",
+                    "error_line": 0,
+                    "wall_s": None,
+                    "peak_mem_mb": None,
+                }
             results[i] = res
             on_done(i, res)
     finally:
@@ -268,8 +304,9 @@ def compare(records: list[dict], baseline: dict | None, max_slowdown: float) -> 
                 out["new"].append(r["key"])
                 continue
             if b.get("status") != r["status"]:
-                out["status_changed"].append({"key": r["key"], "was": b.get("status"), "now": r["status"],
-                                              "message": r["message"]})
+                out["status_changed"].append(
+                    {"key": r["key"], "was": b.get("status"), "now": r["status"], "message": r["message"]}
+                )
                 continue
             was, now = b.get("cycle_time_s"), r["cycle_time_s"]
             if isinstance(was, (int, float)) and isinstance(now, (int, float)) and was > 0:
@@ -282,11 +319,12 @@ def compare(records: list[dict], baseline: dict | None, max_slowdown: float) -> 
     # a program that did not plan is a failure unless the baseline expects it: a crash or a
     # timeout always, an input error when there is no baseline to say it is known
     failing = ("crash", "timeout") if baseline is not None else ("crash", "timeout", "error")
-    out["failed"] = [{"key": r["key"], "status": r["status"], "message": r["message"]}
-                     for r in records if r["status"] in failing
-                     and (baseline is None or r["key"] not in baseline)]  # else: status_changed
-    out["regressions"] = (len(out["violations"]) + len(out["status_changed"]) + len(out["slower"])
-                          + len(out["failed"]))
+    out["failed"] = [
+        {"key": r["key"], "status": r["status"], "message": r["message"]}
+        for r in records
+        if r["status"] in failing and (baseline is None or r["key"] not in baseline)
+    ]  # else: status_changed
+    out["regressions"] = len(out["violations"]) + len(out["status_changed"]) + len(out["slower"]) + len(out["failed"])
     return out
 
 
@@ -311,12 +349,13 @@ def _fmt(v, spec: str) -> str:
 
 def format_table(report: dict) -> str:
     """The human summary printed on stdout."""
-    rows = [f"{'status':<9} {'lines':>7} {'segs':>6} {'cycle_s':>10} {'worst':>9} {'wall_s':>7} "
-            f"{'mem_MB':>7}  program"]
+    rows = [f"{'status':<9} {'lines':>7} {'segs':>6} {'cycle_s':>10} {'worst':>9} {'wall_s':>7} {'mem_MB':>7}  program"]
     for r in report["programs"]:
-        rows.append(f"{r['status']:<9} {_fmt(r['lines'], 'd'):>7} {_fmt(r['segments'], 'd'):>6} "
-                    f"{_fmt(r['cycle_time_s'], '.3f'):>10} {_fmt(r['worst_ratio'], '.6f'):>9} "
-                    f"{_fmt(r['wall_s'], '.2f'):>7} {_fmt(r['peak_mem_mb'], '.0f'):>7}  {r['key']}")
+        rows.append(
+            f"{r['status']:<9} {_fmt(r['lines'], 'd'):>7} {_fmt(r['segments'], 'd'):>6} "
+            f"{_fmt(r['cycle_time_s'], '.3f'):>10} {_fmt(r['worst_ratio'], '.6f'):>9} "
+            f"{_fmt(r['wall_s'], '.2f'):>7} {_fmt(r['peak_mem_mb'], '.0f'):>7}  {r['key']}"
+        )
         if r["message"] and r["status"] != "ok":
             rows.append(f"{'':<9} {r['message']}")
         if r.get("warnings"):
@@ -324,16 +363,19 @@ def format_table(report: dict) -> str:
     s = report["summary"]
     counts = ", ".join(f"{n} {k}" for k, n in s["status_counts"].items())
     ppm = s["programs_per_minute"]
-    rows.append(f"{s['programs']} programs: {counts}; total cycle time {s['total_cycle_time_s']:.3f} s; "
-                f"wall {s['wall_s']:.1f} s ({_fmt(ppm, '.1f')} programs/min)")
+    rows.append(
+        f"{s['programs']} programs: {counts}; total cycle time {s['total_cycle_time_s']:.3f} s; "
+        f"wall {s['wall_s']:.1f} s ({_fmt(ppm, '.1f')} programs/min)"
+    )
     c = report["comparison"]
     for v in c["violations"]:
         rows.append(f"REGRESSION violation: {v['key']} (worst ratio {_fmt(v['worst_ratio'], '.9f')})")
     for v in c["status_changed"]:
         rows.append(f"REGRESSION status {v['was']} -> {v['now']}: {v['key']}")
     for v in c["slower"]:
-        rows.append(f"REGRESSION slower {v['change'] * 100:+.2f}%: {v['key']} "
-                    f"({v['was_s']:.4f} s -> {v['now_s']:.4f} s)")
+        rows.append(
+            f"REGRESSION slower {v['change'] * 100:+.2f}%: {v['key']} ({v['was_s']:.4f} s -> {v['now_s']:.4f} s)"
+        )
     for v in c["faster"]:
         rows.append(f"faster {v['change'] * 100:+.2f}%: {v['key']}")
     for k in c["new"]:
@@ -353,8 +395,7 @@ def write_report(report: dict, path: str) -> None:
         w = csv.writer(buf, lineterminator="\n")
         w.writerow(FIELDS)
         for r in report["programs"]:
-            w.writerow(["" if r[f] is None else (repr(r[f]) if isinstance(r[f], float) else r[f])
-                        for f in FIELDS])
+            w.writerow(["" if r[f] is None else (repr(r[f]) if isinstance(r[f], float) else r[f]) for f in FIELDS])
         data = buf.getvalue().encode("utf-8")
     else:
         data = (json.dumps(report, indent=2, sort_keys=True, allow_nan=False) + "\n").encode("utf-8")

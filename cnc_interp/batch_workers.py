@@ -38,8 +38,9 @@ def run_job(job: dict) -> dict:
     result["warnings"] = len(caught)
     if caught:
         first = caught[0]
-        result["first_warning"] = (f"{first.category.__name__}: {first.message} "
-                                   f"({os.path.basename(first.filename)}:{first.lineno})")
+        result["first_warning"] = (
+            f"{first.category.__name__}: {first.message} ({os.path.basename(first.filename)}:{first.lineno})"
+        )
     return result
 
 
@@ -59,9 +60,15 @@ def _run_job(job: dict) -> dict:
         if data is None:
             with open(job["path"], "rb") as fh:
                 data = fh.read()
-        return process_program(job["path"], data, job["machine"], planner=job["planner"],
-                               dt_s=job.get("dt_s"), tol_mm=job.get("tol_mm"),
-                               fit_method=job.get("fit_method"))
+        return process_program(
+            job["path"],
+            data,
+            job["machine"],
+            planner=job["planner"],
+            dt_s=job.get("dt_s"),
+            tol_mm=job.get("tol_mm"),
+            fit_method=job.get("fit_method"),
+        )
     except CncInterpError as exc:
         return {"status": "error", "message": exc.format(), "error_line": exc.location.line}
     except MemoryError:
@@ -71,8 +78,7 @@ def _run_job(job: dict) -> dict:
     except Exception as exc:  # a bug in a stage: report it, keep the batch going
         tb = traceback.extract_tb(exc.__traceback__)
         where = f" at {os.path.basename(tb[-1].filename)}:{tb[-1].lineno}" if tb else ""
-        return {"status": "crash", "message": f"internal error: {type(exc).__name__}: {exc}{where}",
-                "error_line": 0}
+        return {"status": "crash", "message": f"internal error: {type(exc).__name__}: {exc}{where}", "error_line": 0}
 
 
 def _child(func: Callable[[dict], dict], job: dict, wfd: int) -> None:
@@ -86,8 +92,7 @@ def _child(func: Callable[[dict], dict], job: dict, wfd: int) -> None:
         result = func(job)
         payload = pickle.dumps(result, protocol=pickle.HIGHEST_PROTOCOL)
     except BaseException as exc:  # noqa: BLE001 - nothing may escape a forked child
-        payload = pickle.dumps({"status": "crash", "message": f"worker: {type(exc).__name__}: {exc}",
-                                "error_line": 0})
+        payload = pickle.dumps({"status": "crash", "message": f"worker: {type(exc).__name__}: {exc}", "error_line": 0})
         code = 1
     try:
         view = memoryview(payload)
@@ -145,9 +150,13 @@ def _finish(run: _Running, timed_out: bool) -> dict:
     return result
 
 
-def run_pool(jobs: list[dict], workers: int, timeout_s: float | None,
-             func: Callable[[dict], dict] = run_job,
-             on_done: Callable[[int, dict], None] | None = None) -> list[dict]:
+def run_pool(
+    jobs: list[dict],
+    workers: int,
+    timeout_s: float | None,
+    func: Callable[[dict], dict] = run_job,
+    on_done: Callable[[int, dict], None] | None = None,
+) -> list[dict]:
     """Run ``func(job)`` for every job in forked children, ``workers`` at a time.
 
     Returns the results in job order; ``on_done(index, result)`` is called as each
@@ -239,7 +248,6 @@ def _restore(previous: dict | None) -> None:
         signal.signal(sig, old)
 
 
-def run_isolated(job: dict, timeout_s: float | None = None,
-                 func: Callable[[dict], dict] = run_job) -> dict:
+def run_isolated(job: dict, timeout_s: float | None = None, func: Callable[[dict], dict] = run_job) -> dict:
     """One job in one forked child (used as the Dask task: isolation on the worker too)."""
     return run_pool([job], 1, timeout_s, func=func)[0]

@@ -38,38 +38,62 @@ class _Finite(click.FloatRange):
 
 def _dt_option(f):
     # the same range a machine file accepts (plan/machine.py)
-    return click.option("--dt", "dt_s", type=_Finite(min=1e-6, max=1.0), default=None,
-                        help="Sample period in seconds, 1e-6 to 1 (default: the machine's).")(f)
+    return click.option(
+        "--dt",
+        "dt_s",
+        type=_Finite(min=1e-6, max=1.0),
+        default=None,
+        help="Sample period in seconds, 1e-6 to 1 (default: the machine's).",
+    )(f)
 
 
 def _tol_option(f):
-    return click.option("--tol", "tol_mm", type=_Finite(min=0, max=10.0), default=None,
-                        help="Maximum permissible fit error in mm, 0 to 10 (default 0.001, or "
-                             "the machine's).")(f)
+    return click.option(
+        "--tol",
+        "tol_mm",
+        type=_Finite(min=0, max=10.0),
+        default=None,
+        help="Maximum permissible fit error in mm, 0 to 10 (default 0.001, or the machine's).",
+    )(f)
 
 
 def _fit_method_option(f):
-    return click.option("--fit-method", "fit_method", type=click.Choice(("nodes", "planar", "auto")),
-                        default=None,
-                        help="nodes (default; stream: planar): the N-axis fit everywhere; planar: "
-                             "paper 000's planar fit for runs of lines that move exactly two axes, "
-                             "the N-axis fit elsewhere; auto: the same as planar.")(f)
+    return click.option(
+        "--fit-method",
+        "fit_method",
+        type=click.Choice(("nodes", "planar", "auto")),
+        default=None,
+        help="nodes (default; stream: planar): the N-axis fit everywhere; planar: "
+        "paper 000's planar fit for runs of lines that move exactly two axes, "
+        "the N-axis fit elsewhere; auto: the same as planar.",
+    )(f)
 
 
 def _tool_table_option(f):
-    return click.option("--tool-table", "tool_table", default=None, metavar="FILE",
-                        type=click.Path(exists=True, dir_okay=False),
-                        help="LinuxCNC tool table (T1 P1 Z+12.5 ...) for G43 Hn tool lengths "
-                             "(default: the INI machine's [EMCIO] TOOL_TABLE; without one, "
-                             "G43 Hn applies length 0 with a warning).")(f)
+    return click.option(
+        "--tool-table",
+        "tool_table",
+        default=None,
+        metavar="FILE",
+        type=click.Path(exists=True, dir_okay=False),
+        help="LinuxCNC tool table (T1 P1 Z+12.5 ...) for G43 Hn tool lengths "
+        "(default: the INI machine's [EMCIO] TOOL_TABLE; without one, "
+        "G43 Hn applies length 0 with a warning).",
+    )(f)
 
 
 def _machine_option(required: bool = False):
     def deco(f):
-        return click.option("-m", "--machine", "machine_spec", required=required, default=None,
-                            metavar="MACHINE",
-                            help="Machine: TOML file, LinuxCNC INI file or preset name "
-                                 "(see `cnc-interp machines`).")(f)
+        return click.option(
+            "-m",
+            "--machine",
+            "machine_spec",
+            required=required,
+            default=None,
+            metavar="MACHINE",
+            help="Machine: TOML file, LinuxCNC INI file or preset name (see `cnc-interp machines`).",
+        )(f)
+
     return deco
 
 
@@ -108,8 +132,7 @@ def parse(part: str, machine_spec: str | None, tool_table: str | None, as_json: 
     from .gcode.summary import format_summary, program_summary
     from .pipeline import load_program_for
 
-    program, _ = load_program_for(part, machine_spec, require_machine=False,
-                                  tool_table=tool_table)
+    program, _ = load_program_for(part, machine_spec, require_machine=False, tool_table=tool_table)
     summary = program_summary(program)
     if as_json:
         _emit_json(summary)
@@ -123,12 +146,15 @@ def parse(part: str, machine_spec: str | None, tool_table: str | None, as_json: 
 @_machine_option()
 @_tool_table_option
 @_tol_option
-@click.option("--corner-deg", type=click.FloatRange(min=0, max=180), default=None,
-              help="Turns up to this are rounded by the smooth fit; sharper corners get a G2 "
-                   "blend within the tolerance, or a stop where none fits (default 30).")
+@click.option(
+    "--corner-deg",
+    type=click.FloatRange(min=0, max=180),
+    default=None,
+    help="Turns up to this are rounded by the smooth fit; sharper corners get a G2 "
+    "blend within the tolerance, or a stop where none fits (default 30).",
+)
 @_fit_method_option
-@click.option("-o", "--output", "out", default=None, metavar="SEGMENTS.json",
-              help="Write the fitted segments as JSON.")
+@click.option("-o", "--output", "out", default=None, metavar="SEGMENTS.json", help="Write the fitted segments as JSON.")
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable statistics on stdout.")
 def fit(part, machine_spec, tool_table, tol_mm, corner_deg, fit_method, out, as_json) -> None:
     """Fit PART's tool path with G2-continuous quintic segments."""
@@ -140,10 +166,8 @@ def fit(part, machine_spec, tool_table, tol_mm, corner_deg, fit_method, out, as_
         from .outfile import check_writable
 
         check_writable(out, inputs=(part, machine_spec))
-    program, machine = load_program_for(part, machine_spec, require_machine=False,
-                                        tool_table=tool_table)
-    settings = FitSettings.from_options(tol_mm=tol_mm, corner_deg=corner_deg, machine=machine,
-                                        method=fit_method)
+    program, machine = load_program_for(part, machine_spec, require_machine=False, tool_table=tool_table)
+    settings = FitSettings.from_options(tol_mm=tol_mm, corner_deg=corner_deg, machine=machine, method=fit_method)
     result = fit_loaded(program, settings)
     if out:
         write_segments_json(result, out)
@@ -159,23 +183,34 @@ def fit(part, machine_spec, tool_table, tol_mm, corner_deg, fit_method, out, as_
 @click.argument("part", type=click.Path(allow_dash=True, dir_okay=False))
 @_machine_option()
 @_tool_table_option
-@click.option("--planner", type=click.Choice(PLANNERS), default=DEFAULT_PLANNER, show_default=True,
-              help="optimal (near-time-optimal: feed-profile LP, exact sampler), VPOp "
-                   "(paper 001), or paper 000's constant / variable feedrate planner.")
+@click.option(
+    "--planner",
+    type=click.Choice(PLANNERS),
+    default=DEFAULT_PLANNER,
+    show_default=True,
+    help="optimal (near-time-optimal: feed-profile LP, exact sampler), VPOp "
+    "(paper 001), or paper 000's constant / variable feedrate planner.",
+)
 @_dt_option
 @_tol_option
 @_fit_method_option
-@click.option("--start", "start", default=None, metavar="X=..,Y=..",
-              help="Machine position before the program (default: the machine's, else all 0); "
-                   "axes not named keep the machine's.")
-@click.option("-o", "--output", "out", default="-", metavar="OUT",
-              help="OUT.csv or OUT.mcap; - (default) writes CSV to stdout.")
-@click.option("--quiet", "-q", is_flag=True, help="No progress bar and no summary line on stderr "
-              "(--json is still written).")
-@click.option("--json", "as_json", is_flag=True, help="Summary as JSON on stdout (on stderr when "
-              "stdout carries the plan, -o -).")
-def plan(part, machine_spec, tool_table, planner, dt_s, tol_mm, fit_method, start, out, quiet,
-         as_json) -> None:
+@click.option(
+    "--start",
+    "start",
+    default=None,
+    metavar="X=..,Y=..",
+    help="Machine position before the program (default: the machine's, else all 0); axes not named keep the machine's.",
+)
+@click.option(
+    "-o", "--output", "out", default="-", metavar="OUT", help="OUT.csv or OUT.mcap; - (default) writes CSV to stdout."
+)
+@click.option(
+    "--quiet", "-q", is_flag=True, help="No progress bar and no summary line on stderr (--json is still written)."
+)
+@click.option(
+    "--json", "as_json", is_flag=True, help="Summary as JSON on stdout (on stderr when stdout carries the plan, -o -)."
+)
+def plan(part, machine_spec, tool_table, planner, dt_s, tol_mm, fit_method, start, out, quiet, as_json) -> None:
     """Plan PART into setpoints every dt for MACHINE's axes."""
     from .outfile import watch_interrupts
 
@@ -185,9 +220,19 @@ def plan(part, machine_spec, tool_table, planner, dt_s, tol_mm, fit_method, star
     watch_interrupts()
     from .pipeline import PlanOptions, run_plan
 
-    opts = PlanOptions(part=part, machine_spec=machine_spec, planner=planner, dt_s=dt_s,
-                       tol_mm=tol_mm, fit_method=fit_method, start=start, tool_table=tool_table,
-                       out=out, quiet=quiet, summary_json=as_json)
+    opts = PlanOptions(
+        part=part,
+        machine_spec=machine_spec,
+        planner=planner,
+        dt_s=dt_s,
+        tol_mm=tol_mm,
+        fit_method=fit_method,
+        start=start,
+        tool_table=tool_table,
+        out=out,
+        quiet=quiet,
+        summary_json=as_json,
+    )
     run_plan(opts)
 
 
@@ -229,8 +274,7 @@ def verify(plan_file, machine_spec, as_json) -> None:
 @main.command()
 @click.argument("plan_file", metavar="OUT", type=click.Path(exists=True, dir_okay=False))
 @_machine_option()
-@click.option("-o", "--output", "out", default=None, metavar="FIG.png",
-              help="Image file (default: OUT with .png).")
+@click.option("-o", "--output", "out", default=None, metavar="FIG.png", help="Image file (default: OUT with .png).")
 def plot(plan_file, machine_spec, out) -> None:
     """Plot a plan: tool path coloured by feed, and axis limits against time."""
     from .export.plot import plot_file
@@ -242,8 +286,7 @@ def plot(plan_file, machine_spec, out) -> None:
 # -- FPGA ---------------------------------------------------------------------
 @main.command()
 @click.argument("frames", metavar="FRAMES.bin", type=click.Path(exists=True, dir_okay=False))
-@click.option("-o", "--output", "out", default="-", metavar="OUT.csv",
-              help="Setpoints CSV (default stdout).")
+@click.option("-o", "--output", "out", default="-", metavar="OUT.csv", help="Setpoints CSV (default stdout).")
 def emulate(frames, out) -> None:
     """Replay a frame file through the bit-exact FPGA model into plan CSV."""
     from .fpga.commands import emulate_file
@@ -254,65 +297,135 @@ def emulate(frames, out) -> None:
 @main.command()
 @click.argument("part", type=click.Path(allow_dash=True, dir_okay=False))
 @_machine_option(required=True)
-@click.option("--planner", type=click.Choice(PLANNERS), default="variable", show_default=True,
-              help="The planner whose plan is quantized (variable: paper 000's, whose "
-                   "segments the device evaluates).")
+@click.option(
+    "--planner",
+    type=click.Choice(PLANNERS),
+    default="variable",
+    show_default=True,
+    help="The planner whose plan is quantized (variable: paper 000's, whose segments the device evaluates).",
+)
 @_dt_option
 @_tol_option
 @_fit_method_option
 @click.option("--device", default=None, metavar="VID:PID", help="USB device (hex VID:PID).")
-@click.option("--dry-run", "dry_run", default=None, metavar="FRAMES.bin",
-              help="Write the frames to a file instead of a device.")
-@click.option("--resume-from", "resume_from", type=int, default=None, metavar="SEQ",
-              help="Resume a broken stream after the last acknowledged sequence number.")
+@click.option(
+    "--dry-run", "dry_run", default=None, metavar="FRAMES.bin", help="Write the frames to a file instead of a device."
+)
+@click.option(
+    "--resume-from",
+    "resume_from",
+    type=int,
+    default=None,
+    metavar="SEQ",
+    help="Resume a broken stream after the last acknowledged sequence number.",
+)
 @click.option("--quiet", "-q", is_flag=True, help="No summary lines on stderr.")
-def stream(part, machine_spec, planner, dt_s, tol_mm, fit_method, device, dry_run, resume_from,
-           quiet) -> None:
+def stream(part, machine_spec, planner, dt_s, tol_mm, fit_method, device, dry_run, resume_from, quiet) -> None:
     """Quantize PART's plan to fixed point and stream it to the FPGA over USB."""
     from .fpga.commands import StreamOptions, run_stream
 
     # the FPGA evaluates paper 000's planar segments: stream keeps that fit by default
-    run_stream(StreamOptions(part=part, machine_spec=machine_spec, planner=planner, dt_s=dt_s,
-                             tol_mm=tol_mm, fit_method=fit_method or "planar", device=device,
-                             dry_run=dry_run,
-                             resume_from=resume_from, quiet=quiet))
+    run_stream(
+        StreamOptions(
+            part=part,
+            machine_spec=machine_spec,
+            planner=planner,
+            dt_s=dt_s,
+            tol_mm=tol_mm,
+            fit_method=fit_method or "planar",
+            device=device,
+            dry_run=dry_run,
+            resume_from=resume_from,
+            quiet=quiet,
+        )
+    )
 
 
 # -- batch --------------------------------------------------------------------
 @main.command()
 @click.argument("paths", nargs=-1, required=True, type=click.Path(exists=True))
 @_machine_option(required=True)
-@click.option("--planner", type=click.Choice(PLANNERS), default=DEFAULT_PLANNER, show_default=True,
-              help="optimal (near-time-optimal: feed-profile LP, exact sampler), VPOp "
-                   "(paper 001), or paper 000's constant / variable feedrate planner.")
+@click.option(
+    "--planner",
+    type=click.Choice(PLANNERS),
+    default=DEFAULT_PLANNER,
+    show_default=True,
+    help="optimal (near-time-optimal: feed-profile LP, exact sampler), VPOp "
+    "(paper 001), or paper 000's constant / variable feedrate planner.",
+)
 @_dt_option
 @_tol_option
 @_fit_method_option
 @click.option("--jobs", "-j", type=click.IntRange(min=1), default=None, help="Worker processes.")
-@click.option("--report", "report", default=None, metavar="FILE.json|FILE.csv",
-              help="Write the per-program report (JSON, or CSV by extension).")
-@click.option("--baseline", default=None, metavar="FILE.json",
-              help="A previous --report JSON: status changes and slowdowns are regressions.")
-@click.option("--max-slowdown", default="1%", show_default=True,
-              help="Cycle-time growth against --baseline that counts as a regression.")
-@click.option("--timeout", "timeout_s", type=_Finite(min=0, min_open=True), default=1800.0,
-              show_default=True, help="Per-program time limit, s.")
-@click.option("--dask", "dask_address", default=None, metavar="ADDRESS",
-              help="Run on an existing Dask distributed scheduler.")
+@click.option(
+    "--report",
+    "report",
+    default=None,
+    metavar="FILE.json|FILE.csv",
+    help="Write the per-program report (JSON, or CSV by extension).",
+)
+@click.option(
+    "--baseline",
+    default=None,
+    metavar="FILE.json",
+    help="A previous --report JSON: status changes and slowdowns are regressions.",
+)
+@click.option(
+    "--max-slowdown",
+    default="1%",
+    show_default=True,
+    help="Cycle-time growth against --baseline that counts as a regression.",
+)
+@click.option(
+    "--timeout",
+    "timeout_s",
+    type=_Finite(min=0, min_open=True),
+    default=1800.0,
+    show_default=True,
+    help="Per-program time limit, s.",
+)
+@click.option(
+    "--dask", "dask_address", default=None, metavar="ADDRESS", help="Run on an existing Dask distributed scheduler."
+)
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar.")
-@click.option("--json", "as_json", is_flag=True, help="The report as JSON on stdout instead of "
-              "the table.")
-def batch(paths, machine_spec, planner, dt_s, tol_mm, fit_method, jobs, report, baseline, max_slowdown,
-          timeout_s, dask_address, quiet, as_json) -> None:
+@click.option("--json", "as_json", is_flag=True, help="The report as JSON on stdout instead of the table.")
+def batch(
+    paths,
+    machine_spec,
+    planner,
+    dt_s,
+    tol_mm,
+    fit_method,
+    jobs,
+    report,
+    baseline,
+    max_slowdown,
+    timeout_s,
+    dask_address,
+    quiet,
+    as_json,
+) -> None:
     """Run every program under PATHS through parse, fit, plan and verify."""
     from .batch import BatchOptions, run_batch
 
-    code = run_batch(BatchOptions(paths=paths, machine_spec=machine_spec, planner=planner,
-                                  dt_s=dt_s, tol_mm=tol_mm, fit_method=fit_method, jobs=jobs,
-                                  report=report,
-                                  baseline=baseline, max_slowdown=max_slowdown,
-                                  timeout_s=timeout_s, dask_address=dask_address, quiet=quiet,
-                                  as_json=as_json))
+    code = run_batch(
+        BatchOptions(
+            paths=paths,
+            machine_spec=machine_spec,
+            planner=planner,
+            dt_s=dt_s,
+            tol_mm=tol_mm,
+            fit_method=fit_method,
+            jobs=jobs,
+            report=report,
+            baseline=baseline,
+            max_slowdown=max_slowdown,
+            timeout_s=timeout_s,
+            dask_address=dask_address,
+            quiet=quiet,
+            as_json=as_json,
+        )
+    )
     sys.exit(code)
 
 
@@ -351,8 +464,10 @@ def run() -> None:
             _interrupted()
         if os.environ.get("CNC_INTERP_DEBUG"):
             raise
-        _stderr(f"cnc-interp: internal error: {type(exc).__name__}: {exc} "
-                "(please report it; set CNC_INTERP_DEBUG=1 for the traceback)")
+        _stderr(
+            f"cnc-interp: internal error: {type(exc).__name__}: {exc} "
+            "(please report it; set CNC_INTERP_DEBUG=1 for the traceback)"
+        )
         sys.exit(1)
     _flush_stdout()
 

@@ -4,7 +4,6 @@ A constant that one module uses lives at the top of that module, with its unit a
 this file holds only what several modules must agree on.
 """
 
-
 # --- units -------------------------------------------------------------------
 MM_PER_INCH = 25.4
 SECONDS_PER_MINUTE = 60.0
@@ -87,4 +86,3 @@ VPOP_LIMIT_SHRINK = 1e-10
 VPOP_ROUNDING_ULPS = 16.0
 #: a path shorter than this (mm or deg of arc length) is planned as a held position
 VPOP_MIN_LENGTH = 1e-12
-

@@ -29,8 +29,13 @@ def load_machine_spec(spec: str | None):
     return load_machine(spec)
 
 
-def load_program_for(part: str, machine_spec: str | None, require_machine: bool = False,
-                     start: np.ndarray | None = None, tool_table: str | None = None):
+def load_program_for(
+    part: str,
+    machine_spec: str | None,
+    require_machine: bool = False,
+    start: np.ndarray | None = None,
+    tool_table: str | None = None,
+):
     """Parse ``part`` for the machine named by ``machine_spec``: (Program, Machine | None).
 
     Without a machine the program's own axes are used (at least XYZ). ``tool_table``
@@ -58,9 +63,15 @@ def fit_loaded(program, settings):
 
 
 # --- batch: one program from bytes to a result record (H3a, issue 7) ----------
-def process_program(name: str, data: bytes, machine, planner: str = DEFAULT_PLANNER,
-                    dt_s: float | None = None, tol_mm: float | None = None,
-                    fit_method: str | None = None) -> dict:
+def process_program(
+    name: str,
+    data: bytes,
+    machine,
+    planner: str = DEFAULT_PLANNER,
+    dt_s: float | None = None,
+    tol_mm: float | None = None,
+    fit_method: str | None = None,
+) -> dict:
     """Parse, fit, plan and verify one program; the batch's per-program record.
 
     Raises ``CncInterpError`` for bad input (the batch records it as an error).
@@ -70,8 +81,7 @@ def process_program(name: str, data: bytes, machine, planner: str = DEFAULT_PLAN
     """
     from .api import run
 
-    res = run(data, machine, planner=planner, dt_s=dt_s, tol_mm=tol_mm, fit_method=fit_method,
-              name=name, check=False)
+    res = run(data, machine, planner=planner, dt_s=dt_s, tol_mm=tol_mm, fit_method=fit_method, name=name, check=False)
     program, result, traj, report = res.program, res.fit, res.trajectory, res.report
     axis, kind, ratio, sample = report.worst()
     return {
@@ -143,11 +153,17 @@ class PlanOutcome:
         axis, kind, ratio, idx = rep.worst()
         plan_s = self.timings.get("plan", 0.0)
         return {
-            "part": self.source, "machine": self.machine.name, "planner": traj.planner,
-            "dt_s": traj.dt_s, "samples": traj.n_samples, "cycle_time_s": traj.duration_s,
+            "part": self.source,
+            "machine": self.machine.name,
+            "planner": traj.planner,
+            "dt_s": traj.dt_s,
+            "samples": traj.n_samples,
+            "cycle_time_s": traj.duration_s,
             "path_length_mm": float(traj.s[-1]) if traj.n_samples else 0.0,
-            "worst_ratio": rep.worst_ratio, "worst": {"axis": axis, "limit": kind, "sample": idx},
-            "status": traj.status, "timings_s": self.timings,
+            "worst_ratio": rep.worst_ratio,
+            "worst": {"axis": axis, "limit": kind, "sample": idx},
+            "status": traj.status,
+            "timings_s": self.timings,
             "fit_method": self.fit_stats.get("method"),
             "x_real_time": (traj.duration_s / plan_s) if plan_s > 0 else None,
         }
@@ -173,16 +189,22 @@ def parse_start(spec: str | None, axes: str, base: np.ndarray | None = None) -> 
         except ValueError:
             raise UsageError(f"bad --start value in '{part}': not a number") from None
         if not np.isfinite(v) or abs(v) > START_MAX:
-            raise UsageError(f"bad --start value in '{part}': not a finite coordinate "
-                             f"within ±{START_MAX:g}")
+            raise UsageError(f"bad --start value in '{part}': not a finite coordinate within ±{START_MAX:g}")
         out[axes.index(name)] = v
     return out
 
 
-def plan_part(part: str, machine_spec: str | None = None, planner: str = DEFAULT_PLANNER,
-              dt_s: float | None = None, tol_mm: float | None = None,
-              start: str | np.ndarray | None = None, progress=None,
-              fit_method: str | None = None, tool_table: str | None = None) -> PlanOutcome:
+def plan_part(
+    part: str,
+    machine_spec: str | None = None,
+    planner: str = DEFAULT_PLANNER,
+    dt_s: float | None = None,
+    tol_mm: float | None = None,
+    start: str | np.ndarray | None = None,
+    progress=None,
+    fit_method: str | None = None,
+    tool_table: str | None = None,
+) -> PlanOutcome:
     """Parse, fit, plan and verify one part program (no output written).
 
     Raises ``PlanError`` (exit 1) when the plan violates a limit: that is a bug.
@@ -194,12 +216,29 @@ def plan_part(part: str, machine_spec: str | None = None, planner: str = DEFAULT
     if isinstance(start, str):
         start = parse_start(start, machine.axes, machine.start)
     name, data = read_part(part)
-    res = run(data, machine, planner=planner, dt_s=dt_s, tol_mm=tol_mm, fit_method=fit_method,
-              start=start, tool_table=tool_table, name=name, progress=progress)
-    return PlanOutcome(trajectory=res.trajectory, report=res.report, machine=res.machine,
-                       settings=res.settings, fit_stats=dict(res.fit.stats or {}),
-                       timings=res.timings_s, source=res.program.source,
-                       input_meta=_input_meta(name, data), fit=res.fit)
+    res = run(
+        data,
+        machine,
+        planner=planner,
+        dt_s=dt_s,
+        tol_mm=tol_mm,
+        fit_method=fit_method,
+        start=start,
+        tool_table=tool_table,
+        name=name,
+        progress=progress,
+    )
+    return PlanOutcome(
+        trajectory=res.trajectory,
+        report=res.report,
+        machine=res.machine,
+        settings=res.settings,
+        fit_stats=dict(res.fit.stats or {}),
+        timings=res.timings_s,
+        source=res.program.source,
+        input_meta=_input_meta(name, data),
+        fit=res.fit,
+    )
 
 
 def _input_meta(name: str, data: bytes) -> dict:
@@ -245,8 +284,7 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
     if isinstance(start, str):
         start = parse_start(start, machine.axes, machine.start)
     machine = machine.with_start(start)
-    settings = PlanSettings.from_options(planner=opts.planner, dt_s=opts.dt_s, tol_mm=opts.tol_mm,
-                                         machine=machine)
+    settings = PlanSettings.from_options(planner=opts.planner, dt_s=opts.dt_s, tol_mm=opts.tol_mm, machine=machine)
     machine = machine.with_dt(settings.dt_s)
     dt = float(settings.dt_s)
     name, data = read_part(opts.part)
@@ -254,8 +292,7 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
     tool_table = opts.tool_table if opts.tool_table is not None else machine.tool_table
     program = ProgramStream(data, name, machine.axes, machine.start, tool_table)
     del data
-    fit_settings = FitSettings.from_options(tol_mm=opts.tol_mm, machine=machine,
-                                            method=opts.fit_method)
+    fit_settings = FitSettings.from_options(tol_mm=opts.tol_mm, machine=machine, method=opts.fit_method)
     fit_stats: dict = {}
     # the fit runs in a thread of its own, a bounded number of items ahead
     fitted = Prefetch(iter_fit(program, fit_settings, fit_stats, source=name))
@@ -263,8 +300,9 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
     n = machine.n_axes
     start_pos = np.zeros(n) if machine.start is None else np.asarray(machine.start, dtype=float)
     info = TimelineInfo()
-    blocks = iter_timeline(fitted, machine, settings, start_pos, window=window,
-                           info=info, progress=progress, source=name, threads=threads)
+    blocks = iter_timeline(
+        fitted, machine, settings, start_pos, window=window, info=info, progress=progress, source=name, threads=threads
+    )
     mcap = out.lower().endswith(".mcap")
 
     def violation(report):
@@ -286,8 +324,9 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
 
                     stats_settings = settings.to_dict()
                     stats_settings["stats"] = dict(info.stats)
-                    planner = planner_record(settings.planner, info.status, dt, machine.axes,
-                                             info.samples, stats_settings)
+                    planner = planner_record(
+                        settings.planner, info.status, dt, machine.axes, info.samples, stats_settings
+                    )
                     meta = {"planner": settings.to_dict(), "input": input_meta}
                 report = sink.finish(planner, meta)
             except BaseException:
@@ -305,15 +344,29 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
     samples = info.samples
     cycle = float((samples - 1) * dt) if samples else 0.0
     total = time.perf_counter() - t_start
-    timings = {"parse": program.thread_cpu_s, "fit": fitted.cpu_s, "plan": info.plan_cpu_s,
-               "verify": sink.verify_s, "write": sink.write_s,
-               "first_row": first_row if first_row is not None else total, "total": total}
+    timings = {
+        "parse": program.thread_cpu_s,
+        "fit": fitted.cpu_s,
+        "plan": info.plan_cpu_s,
+        "verify": sink.verify_s,
+        "write": sink.write_s,
+        "first_row": first_row if first_row is not None else total,
+        "total": total,
+    }
     axis, kind, ratio, idx = report.worst()
     return {
-        "part": name, "machine": machine.name, "planner": settings.planner, "dt_s": dt,
-        "samples": samples, "cycle_time_s": cycle, "path_length_mm": last_s,
-        "worst_ratio": report.worst_ratio, "worst": {"axis": axis, "limit": kind, "sample": idx},
-        "status": info.status, "timings_s": timings, "fit_method": fit_stats.get("method"),
+        "part": name,
+        "machine": machine.name,
+        "planner": settings.planner,
+        "dt_s": dt,
+        "samples": samples,
+        "cycle_time_s": cycle,
+        "path_length_mm": last_s,
+        "worst_ratio": report.worst_ratio,
+        "worst": {"axis": axis, "limit": kind, "sample": idx},
+        "status": info.status,
+        "timings_s": timings,
+        "fit_method": fit_stats.get("method"),
         "x_real_time": (cycle / total) if total > 0 else None,
     }
 
@@ -362,8 +415,11 @@ def _warm_kernels() -> None:
 
 def _violation(report, name: str, error) -> None:
     axis, kind, ratio, idx = report.worst()
-    raise error(f"bug: plan violates the {axis} {kind} limit (ratio {ratio:.12g} at sample "
-                f"{idx}, t = {idx * report.dt_s:.6g} s); please report it", _loc(name))
+    raise error(
+        f"bug: plan violates the {axis} {kind} limit (ratio {ratio:.12g} at sample "
+        f"{idx}, t = {idx * report.dt_s:.6g} s); please report it",
+        _loc(name),
+    )
 
 
 def run_plan(opts: PlanOptions) -> None:
@@ -396,5 +452,6 @@ def run_plan(opts: PlanOptions) -> None:
         f"cycle time {summary['cycle_time_s']:.6g} s, {summary['samples']} samples at "
         f"dt = {summary['dt_s']:g} s, path {summary['path_length_mm']:.6g} mm, "
         f"worst limit ratio {summary['worst_ratio']:.9f} "
-        f"({summary['worst']['axis']} {summary['worst']['limit']})\n")
+        f"({summary['worst']['axis']} {summary['worst']['limit']})\n"
+    )
     sys.stderr.flush()

@@ -32,8 +32,7 @@ def main(folder: str, machine_spec: str) -> int:
             continue
         traj = result.trajectory
         total_s += traj.duration_s
-        print(f"{name:32s} cycle {traj.duration_s:9.3f} s  worst ratio "
-              f"{result.report.worst_ratio:.6f}")
+        print(f"{name:32s} cycle {traj.duration_s:9.3f} s  worst ratio {result.report.worst_ratio:.6f}")
     print(f"total cycle {total_s:.3f} s, {failed} program(s) not planned")
     return 1 if failed else 0
 

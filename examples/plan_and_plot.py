@@ -29,8 +29,10 @@ def main(part: str, machine_spec: str, out_dir: str) -> int:
 
     plot_trajectory(traj, result.machine, os.path.join(out_dir, stem + ".png"), title=part)
     axis, kind, ratio, _ = result.report.worst()
-    print(f"{part}: {traj.n_samples} samples every {traj.dt_s * 1e3:g} ms, "
-          f"cycle {traj.duration_s:.3f} s, worst {axis} {kind} at {ratio:.4f} of its limit")
+    print(
+        f"{part}: {traj.n_samples} samples every {traj.dt_s * 1e3:g} ms, "
+        f"cycle {traj.duration_s:.3f} s, worst {axis} {kind} at {ratio:.4f} of its limit"
+    )
     return 0
 
 

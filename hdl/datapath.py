@@ -49,23 +49,35 @@ SAMPLE_CYCLES = 55  # OUTPUT + 1 (outputs valid) + 1 (next sample's bookkeeping)
 MUL_LATENCY = 3  # issue at c, product usable at c + 3
 
 SCHEDULE = {
-    "profile": PROFILE_ISSUE, "x": ISSUE_X, "path": PATH_ISSUE,
-    "rotation": (ISSUE_CDX, ISSUE_SDX, ISSUE_SDZ, ISSUE_CDZ), "output": OUTPUT,
+    "profile": PROFILE_ISSUE,
+    "x": ISSUE_X,
+    "path": PATH_ISSUE,
+    "rotation": (ISSUE_CDX, ISSUE_SDX, ISSUE_SDZ, ISSUE_CDZ),
+    "output": OUTPUT,
     "cycles_per_sample": SAMPLE_CYCLES,
 }
 
 
 def segment_layout(f: FpgaFormats) -> list[tuple[str, int]]:
     """Fields of a segment FIFO entry, low bits first: (name, bits)."""
-    return ([("cos", f.trig.word), ("sin", f.trig.word), ("origin_h", f.pos.word),
-             ("origin_v", f.pos.word), ("x_exp", 8), ("x_mant", f.mult_word), ("p_exp", 8)]
-            + [(f"p_mant{i}", f.coef_word) for i in range(6)] + [("n_pieces", 16)])
+    return (
+        [
+            ("cos", f.trig.word),
+            ("sin", f.trig.word),
+            ("origin_h", f.pos.word),
+            ("origin_v", f.pos.word),
+            ("x_exp", 8),
+            ("x_mant", f.mult_word),
+            ("p_exp", 8),
+        ]
+        + [(f"p_mant{i}", f.coef_word) for i in range(6)]
+        + [("n_pieces", 16)]
+    )
 
 
 def piece_layout(f: FpgaFormats) -> list[tuple[str, int]]:
     """Fields of a profile-piece FIFO entry, low bits first."""
-    return ([("n_samples", 32), ("dtau", f.param.word), ("exp", 8)]
-            + [(f"mant{i}", f.coef_word) for i in range(6)])
+    return [("n_samples", 32), ("dtau", f.param.word), ("exp", 8)] + [(f"mant{i}", f.coef_word) for i in range(6)]
 
 
 def pack(layout, values: dict) -> int:
@@ -88,7 +100,7 @@ def _fields(data, layout):
     """Slice a FIFO word into named fields (registered copies are made by the caller)."""
     out, off = {}, 0
     for name, bits in layout:
-        out[name] = data[off:off + bits]
+        out[name] = data[off : off + bits]
         off += bits
     return out
 
@@ -118,8 +130,12 @@ class Multiplier35(wiring.Component):
         b_lo = Signal(signed(18))
         a_hi = Signal(signed(w - lo))
         b_hi = Signal(signed(w - lo))
-        m.d.comb += [a_lo.eq(Cat(self.a[:lo], Const(0, 1))), b_lo.eq(Cat(self.b[:lo], Const(0, 1))),
-                     a_hi.eq(self.a[lo:]), b_hi.eq(self.b[lo:])]
+        m.d.comb += [
+            a_lo.eq(Cat(self.a[:lo], Const(0, 1))),
+            b_lo.eq(Cat(self.b[:lo], Const(0, 1))),
+            a_hi.eq(self.a[lo:]),
+            b_hi.eq(self.b[lo:]),
+        ]
         ll = Signal(unsigned(2 * lo))
         lh = Signal(signed(w + 1))
         hl = Signal(signed(w + 1))
@@ -179,15 +195,26 @@ class Datapath(wiring.Component):
         self.seg_layout = segment_layout(f)
         self.piece_layout = piece_layout(f)
         self.seg_depth, self.piece_depth = seg_depth, piece_depth
-        super().__init__({
-            "seg_data": In(width(self.seg_layout)), "seg_valid": In(1), "seg_ready": Out(1),
-            "piece_data": In(width(self.piece_layout)), "piece_valid": In(1), "piece_ready": Out(1),
-            "tick": In(1),
-            "out_valid": Out(1), "out_h": Out(signed(f.pos.word)), "out_v": Out(signed(f.pos.word)),
-            "out_xi": Out(signed(f.param.word)), "out_x": Out(signed(f.pos.word)),
-            "out_z": Out(signed(f.pos.word)), "out_last": Out(1),
-            "busy": Out(1), "overflow": Out(1),
-        })
+        super().__init__(
+            {
+                "seg_data": In(width(self.seg_layout)),
+                "seg_valid": In(1),
+                "seg_ready": Out(1),
+                "piece_data": In(width(self.piece_layout)),
+                "piece_valid": In(1),
+                "piece_ready": Out(1),
+                "tick": In(1),
+                "out_valid": Out(1),
+                "out_h": Out(signed(f.pos.word)),
+                "out_v": Out(signed(f.pos.word)),
+                "out_xi": Out(signed(f.param.word)),
+                "out_x": Out(signed(f.pos.word)),
+                "out_z": Out(signed(f.pos.word)),
+                "out_last": Out(1),
+                "busy": Out(1),
+                "overflow": Out(1),
+            }
+        )
 
     def elaborate(self, platform):
         m = Module()
@@ -196,14 +223,19 @@ class Datapath(wiring.Component):
         fx, fp, ft = f.param.frac, f.pos.frac, f.trig.frac
 
         m.submodules.seg_fifo = sf = fifo.SyncFIFOBuffered(width=width(self.seg_layout), depth=self.seg_depth)
-        m.submodules.piece_fifo = pf = fifo.SyncFIFOBuffered(width=width(self.piece_layout),
-                                                             depth=self.piece_depth)
-        m.d.comb += [sf.w_data.eq(self.seg_data), sf.w_en.eq(self.seg_valid & self.seg_ready),
-                     pf.w_data.eq(self.piece_data), pf.w_en.eq(self.piece_valid & self.piece_ready)]
+        m.submodules.piece_fifo = pf = fifo.SyncFIFOBuffered(width=width(self.piece_layout), depth=self.piece_depth)
+        m.d.comb += [
+            sf.w_data.eq(self.seg_data),
+            sf.w_en.eq(self.seg_valid & self.seg_ready),
+            pf.w_data.eq(self.piece_data),
+            pf.w_en.eq(self.piece_valid & self.piece_ready),
+        ]
         # ready from a flip-flop (the writer's whole decode logic hangs on it): "two places free
         # a cycle ago" leaves at least one now, as at most one word is written per cycle
-        m.d.sync += [self.seg_ready.eq(sf.w_level < self.seg_depth - 1),
-                     self.piece_ready.eq(pf.w_level < self.piece_depth - 1)]
+        m.d.sync += [
+            self.seg_ready.eq(sf.w_level < self.seg_depth - 1),
+            self.piece_ready.eq(pf.w_level < self.piece_depth - 1),
+        ]
         sfd = _fields(sf.r_data, self.seg_layout)
         pfd = _fields(pf.r_data, self.piece_layout)
 
@@ -275,12 +307,22 @@ class Datapath(wiring.Component):
             with m.State("IDLE"):
                 with m.If(sf.r_rdy):
                     m.d.comb += sf.r_en.eq(1)
-                    m.d.sync += [cos.eq(sfd["cos"]), sin.eq(sfd["sin"]), org_h.eq(sfd["origin_h"]),
-                                 org_v.eq(sfd["origin_v"]), x_exp.eq(sfd["x_exp"]), x_mant.eq(sfd["x_mant"]),
-                                 p_exp.eq(sfd["p_exp"]), pieces_left.eq(sfd["n_pieces"]),
-                                 i_h.eq(0), i_v.eq(0), x_prev.eq(0), z_prev.eq(0),
-                                 amt_x.eq(fx + sfd["x_exp"].as_signed() - fp),
-                                 amt_z.eq(sfd["p_exp"].as_signed() - fp)]
+                    m.d.sync += [
+                        cos.eq(sfd["cos"]),
+                        sin.eq(sfd["sin"]),
+                        org_h.eq(sfd["origin_h"]),
+                        org_v.eq(sfd["origin_v"]),
+                        x_exp.eq(sfd["x_exp"]),
+                        x_mant.eq(sfd["x_mant"]),
+                        p_exp.eq(sfd["p_exp"]),
+                        pieces_left.eq(sfd["n_pieces"]),
+                        i_h.eq(0),
+                        i_v.eq(0),
+                        x_prev.eq(0),
+                        z_prev.eq(0),
+                        amt_x.eq(fx + sfd["x_exp"].as_signed() - fp),
+                        amt_z.eq(sfd["p_exp"].as_signed() - fp),
+                    ]
                     m.d.sync += [p_mant[i].eq(sfd[f"p_mant{i}"]) for i in range(6)]
                     m.next = "PIECE"
             with m.State("PIECE"):
@@ -288,9 +330,14 @@ class Datapath(wiring.Component):
                     m.next = "IDLE"
                 with m.Elif(pf.r_rdy):
                     m.d.comb += pf.r_en.eq(1)
-                    m.d.sync += [left.eq(pfd["n_samples"]), dtau.eq(pfd["dtau"]), e_exp.eq(pfd["exp"]),
-                                 tau.eq(0), pieces_left.eq(pieces_left - 1),
-                                 amt_xi.eq(pfd["exp"].as_signed() - fx)]
+                    m.d.sync += [
+                        left.eq(pfd["n_samples"]),
+                        dtau.eq(pfd["dtau"]),
+                        e_exp.eq(pfd["exp"]),
+                        tau.eq(0),
+                        pieces_left.eq(pieces_left - 1),
+                        amt_xi.eq(pfd["exp"].as_signed() - fx),
+                    ]
                     m.d.sync += [mant[i].eq(pfd[f"mant{i}"]) for i in range(6)]
                     m.next = "WAIT"
             with m.State("WAIT"):
@@ -304,17 +351,22 @@ class Datapath(wiring.Component):
                 m.d.sync += hot.eq(hot << 1)
                 # -- multiplier issues: an AND-OR of the one-hot steps (one level of OR tree,
                 # not a chain of 15 priority multiplexers in front of the multiplier's registers)
-                issues = ([(c, mant[5] if k == 0 else acc, tau) for k, c in enumerate(PROFILE_ISSUE)]
-                          + [(ISSUE_X, xi, x_mant)]
-                          + [(c, p_mant[5] if k == 0 else acc, xi) for k, c in enumerate(PATH_ISSUE)]
-                          + [(ISSUE_CDX, cos, dx), (ISSUE_SDX, sin, dx), (ISSUE_SDZ, sin, dz),
-                             (ISSUE_CDZ, cos, dz)])
-                m.d.comb += [a_op.eq(_one_hot(at, [(c, u) for c, u, _ in issues])),
-                             b_op.eq(_one_hot(at, [(c, v) for c, _, v in issues]))]
+                issues = (
+                    [(c, mant[5] if k == 0 else acc, tau) for k, c in enumerate(PROFILE_ISSUE)]
+                    + [(ISSUE_X, xi, x_mant)]
+                    + [(c, p_mant[5] if k == 0 else acc, xi) for k, c in enumerate(PATH_ISSUE)]
+                    + [(ISSUE_CDX, cos, dx), (ISSUE_SDX, sin, dx), (ISSUE_SDZ, sin, dz), (ISSUE_CDZ, cos, dz)]
+                )
+                m.d.comb += [
+                    a_op.eq(_one_hot(at, [(c, u) for c, u, _ in issues])),
+                    b_op.eq(_one_hot(at, [(c, v) for c, _, v in issues])),
+                ]
                 # -- Horner posts (product usable MUL_LATENCY cycles after the issue)
-                posts = [(c + MUL_LATENCY, coefs[4 - k])
-                         for coefs, issues in ((mant, PROFILE_ISSUE), (p_mant, PATH_ISSUE))
-                         for k, c in enumerate(issues)]
+                posts = [
+                    (c + MUL_LATENCY, coefs[4 - k])
+                    for coefs, issues in ((mant, PROFILE_ISSUE), (p_mant, PATH_ISSUE))
+                    for k, c in enumerate(issues)
+                ]
                 m.d.comb += m_sel.eq(_one_hot(at, posts))
                 for c, _ in posts:
                     with m.If(at(c)):
@@ -323,9 +375,10 @@ class Datapath(wiring.Component):
                             m.d.sync += ovf.eq(1)
                 # -- variable shifts (two cycles each; the unit is free in between); the
                 # amounts are per piece / per segment registers
-                m.d.comb += [sh.v.eq(_one_hot(at, [(SHIFT_XI, acc), (SHIFT_X, p), (SHIFT_Z, acc)])),
-                             sh.amount.eq(_one_hot(at, [(SHIFT_XI, amt_xi), (SHIFT_X, amt_x),
-                                                        (SHIFT_Z, amt_z)]))]
+                m.d.comb += [
+                    sh.v.eq(_one_hot(at, [(SHIFT_XI, acc), (SHIFT_X, p), (SHIFT_Z, acc)])),
+                    sh.amount.eq(_one_hot(at, [(SHIFT_XI, amt_xi), (SHIFT_X, amt_x), (SHIFT_Z, amt_z)])),
+                ]
                 with m.If(at(SHIFT_XI + 2)):
                     m.d.sync += xi.eq(sh.out)
                     with m.If(~fits(sh.out, f.param.word)):
@@ -343,8 +396,12 @@ class Datapath(wiring.Component):
                     with m.If(~fits(z - z_prev, W)):
                         m.d.sync += ovf.eq(1)
                 # -- integrators
-                for c, reg, sign in ((ISSUE_CDX, i_h, 1), (ISSUE_SDX, i_v, 1),
-                                     (ISSUE_SDZ, i_h, -1), (ISSUE_CDZ, i_v, 1)):
+                for c, reg, sign in (
+                    (ISSUE_CDX, i_h, 1),
+                    (ISSUE_SDX, i_v, 1),
+                    (ISSUE_SDZ, i_h, -1),
+                    (ISSUE_CDZ, i_v, 1),
+                ):
                     with m.If(at(c + MUL_LATENCY)):
                         nxt = reg + p if sign > 0 else reg - p
                         m.d.sync += reg.eq(nxt)
@@ -354,9 +411,15 @@ class Datapath(wiring.Component):
                 with m.If(at(OUTPUT)):
                     qh = org_h + ((i_h >> (ft - 1)) + 1 >> 1)
                     qv = org_v + ((i_v >> (ft - 1)) + 1 >> 1)
-                    m.d.sync += [self.out_h.eq(qh), self.out_v.eq(qv), self.out_xi.eq(xi),
-                                 self.out_x.eq(x), self.out_z.eq(z), self.out_valid.eq(1),
-                                 self.out_last.eq((left == 1) & (pieces_left == 0))]
+                    m.d.sync += [
+                        self.out_h.eq(qh),
+                        self.out_v.eq(qv),
+                        self.out_xi.eq(xi),
+                        self.out_x.eq(x),
+                        self.out_z.eq(z),
+                        self.out_valid.eq(1),
+                        self.out_last.eq((left == 1) & (pieces_left == 0)),
+                    ]
                     with m.If(~fits(qh, f.pos.word) | ~fits(qv, f.pos.word)):
                         m.d.sync += ovf.eq(1)
                 with m.If(at(SAMPLE_CYCLES - 1)):

@@ -43,12 +43,22 @@ class Device(wiring.Component):
     def __init__(self, fmts: FpgaFormats | None = None, buffer_bits: int = 14):
         self.f = fmts or FpgaFormats()
         self.buffer_bits = buffer_bits
-        super().__init__({
-            "in_data": In(8), "in_valid": In(1), "in_ready": Out(1), "tick": In(1),
-            "smp_valid": Out(1), "smp_axis": Out(4), "smp_value": Out(signed(self.f.pos.word)),
-            "status_valid": Out(1), "st_last_seq": Out(32), "st_errors": Out(8), "st_state": Out(3),
-            "overflow": Out(1),
-        })
+        super().__init__(
+            {
+                "in_data": In(8),
+                "in_valid": In(1),
+                "in_ready": Out(1),
+                "tick": In(1),
+                "smp_valid": Out(1),
+                "smp_axis": Out(4),
+                "smp_value": Out(signed(self.f.pos.word)),
+                "status_valid": Out(1),
+                "st_last_seq": Out(32),
+                "st_errors": Out(8),
+                "st_state": Out(3),
+                "overflow": Out(1),
+            }
+        )
 
     def elaborate(self, platform):
         m = Module()
@@ -58,11 +68,16 @@ class Device(wiring.Component):
         m.submodules.dp = dp = Datapath(f)
         m.submodules.sp_fifo = spf = fifo.SyncFIFOBuffered(width=W, depth=512)  # block RAM
         m.submodules.tag_fifo = tf = fifo.SyncFIFOBuffered(width=1 + 4 + 4 + 32, depth=512)
-        m.d.comb += [ps.in_data.eq(self.in_data), ps.in_valid.eq(self.in_valid),
-                     self.in_ready.eq(ps.in_ready),
-                     self.status_valid.eq(ps.status_valid), self.st_last_seq.eq(ps.st_last_seq),
-                     self.st_errors.eq(ps.st_errors), self.st_state.eq(ps.st_state),
-                     self.overflow.eq(dp.overflow)]
+        m.d.comb += [
+            ps.in_data.eq(self.in_data),
+            ps.in_valid.eq(self.in_valid),
+            self.in_ready.eq(ps.in_ready),
+            self.status_valid.eq(ps.status_valid),
+            self.st_last_seq.eq(ps.st_last_seq),
+            self.st_errors.eq(ps.st_errors),
+            self.st_state.eq(ps.st_state),
+            self.overflow.eq(dp.overflow),
+        ]
 
         n_axes = Signal(4)
         pos = [Signal(signed(W), name=f"pos{i}") for i in range(MAX_AXES)]
@@ -92,21 +107,33 @@ class Device(wiring.Component):
         take = ps.dec_valid & ready
 
         def le(buf, off, n):  # little-endian field of a completed shift register
-            return buf[8 * off:8 * (off + n)]
+            return buf[8 * off : 8 * (off + n)]
 
         seg_full = Cat(seg_sr, byte)
         piece_full = Cat(piece_sr, byte)
         val64 = Cat(w64, byte)
         m.d.comb += [dp.seg_valid.eq(0), dp.piece_valid.eq(0), spf.w_en.eq(0), tf.w_en.eq(0)]
-        m.d.comb += dp.seg_data.eq(Cat(
-            le(seg_full, 18, 8)[:f.trig.word], le(seg_full, 26, 8)[:f.trig.word],
-            le(seg_full, 34, 8)[:W], le(seg_full, 42, 8)[:W], le(seg_full, 50, 1),
-            le(seg_full, 51, 8)[:f.mult_word], le(seg_full, 59, 1),
-            *[le(seg_full, 60 + 8 * i, 8)[:f.coef_word] for i in range(6)],
-            le(seg_full, 108, 4)[:16]))
-        m.d.comb += dp.piece_data.eq(Cat(
-            le(piece_full, 0, 4), le(piece_full, 4, 8)[:f.param.word], le(piece_full, 12, 1),
-            *[le(piece_full, 13 + 8 * i, 8)[:f.coef_word] for i in range(6)]))
+        m.d.comb += dp.seg_data.eq(
+            Cat(
+                le(seg_full, 18, 8)[: f.trig.word],
+                le(seg_full, 26, 8)[: f.trig.word],
+                le(seg_full, 34, 8)[:W],
+                le(seg_full, 42, 8)[:W],
+                le(seg_full, 50, 1),
+                le(seg_full, 51, 8)[: f.mult_word],
+                le(seg_full, 59, 1),
+                *[le(seg_full, 60 + 8 * i, 8)[: f.coef_word] for i in range(6)],
+                le(seg_full, 108, 4)[:16],
+            )
+        )
+        m.d.comb += dp.piece_data.eq(
+            Cat(
+                le(piece_full, 0, 4),
+                le(piece_full, 4, 8)[: f.param.word],
+                le(piece_full, 12, 1),
+                *[le(piece_full, 13 + 8 * i, 8)[: f.coef_word] for i in range(6)],
+            )
+        )
         m.d.comb += spf.w_data.eq(val64[:W])
         with m.If(take):
             with m.Switch(ps.dec_type):
@@ -121,9 +148,13 @@ class Device(wiring.Component):
                 with m.Case(FrameType.SEGMENT):
                     m.d.sync += seg_sr.eq(seg_full[8:])
                     with m.If(p == SEGMENT_BYTES - 1):
-                        m.d.comb += [dp.seg_valid.eq(1), tf.w_en.eq(1),
-                                     tf.w_data.eq(Cat(Const(0, 1), le(seg_full, 16, 1)[:4],
-                                                      le(seg_full, 17, 1)[:4], Const(0, 32)))]
+                        m.d.comb += [
+                            dp.seg_valid.eq(1),
+                            tf.w_en.eq(1),
+                            tf.w_data.eq(
+                                Cat(Const(0, 1), le(seg_full, 16, 1)[:4], le(seg_full, 17, 1)[:4], Const(0, 32))
+                            ),
+                        ]
                 with m.Case(FrameType.PROFILE):
                     with m.If(p == 0):
                         m.d.sync += piece_byte.eq(0)
@@ -155,8 +186,12 @@ class Device(wiring.Component):
             with m.State("IDLE"):
                 with m.If(tf.r_rdy):
                     m.d.comb += tf.r_en.eq(1)
-                    m.d.sync += [kind.eq(tf.r_data[0]), ph.eq(tf.r_data[1:5]), pv.eq(tf.r_data[5:9]),
-                                 count.eq(tf.r_data[9:41])]
+                    m.d.sync += [
+                        kind.eq(tf.r_data[0]),
+                        ph.eq(tf.r_data[1:5]),
+                        pv.eq(tf.r_data[5:9]),
+                        count.eq(tf.r_data[9:41]),
+                    ]
                     with m.If(tf.r_data[0]):
                         m.next = "SETP"
                     with m.Else():
@@ -198,7 +233,7 @@ class Device(wiring.Component):
         # the datapath may start the next sample of the same segment while this one is still
         # being written and emitted: its next output comes SAMPLE_CYCLES later, long after the
         # merger is back in SEG (so segment samples cost the datapath's cycles, not + n_axes)
-        m.d.comb += dp.tick.eq(self.tick & (merger.ongoing("SEG")
-                                            | ((merger.ongoing("SEG_V") | merger.ongoing("EMIT"))
-                                               & ~kind & ~last)))
+        m.d.comb += dp.tick.eq(
+            self.tick & (merger.ongoing("SEG") | ((merger.ongoing("SEG_V") | merger.ongoing("EMIT")) & ~kind & ~last))
+        )
         return m

@@ -33,9 +33,9 @@ def run_device_hdl(data: bytes, n_axes: int, n_samples: int, fmts=None):
 
     async def watcher(ctx):
         idle = 0
-        async for (_c, _r, sv, sa, sval, stv, ls, er, st) in ctx.tick().sample(
-                dut.smp_valid, dut.smp_axis, dut.smp_value, dut.status_valid, dut.st_last_seq,
-                dut.st_errors, dut.st_state):
+        async for _c, _r, sv, sa, sval, stv, ls, er, st in ctx.tick().sample(
+            dut.smp_valid, dut.smp_axis, dut.smp_value, dut.status_valid, dut.st_last_seq, dut.st_errors, dut.st_state
+        ):
             if sv:
                 vals.append(sval)
                 idle = 0

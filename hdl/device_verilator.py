@@ -85,17 +85,37 @@ def run_device(data: bytes, n_axes: int, fmts: FpgaFormats | None = None, workdi
         with open(os.path.join(tmp, "tb.v"), "w") as fh:
             # the parser reads every byte twice (one cycle each): a full 16 KiB buffer is ~32k
             # cycles without a sample out; the run ends after 300k idle cycles
-            fh.write(TB.format(nb=len(data), qw=fmts.pos.word, idle_limit=300_000,
-                               limit=200 * len(data) + 1_000_000_000))
+            fh.write(
+                TB.format(nb=len(data), qw=fmts.pos.word, idle_limit=300_000, limit=200 * len(data) + 1_000_000_000)
+            )
         if tool == "verilator":
-            subprocess.run(["verilator", "--binary", "--timing", "-j", "2", "-O3", "-Wno-fatal",
-                            "-Wno-lint", "-Wno-style", "--top-module", "tb", "-o", "tbsim",
-                            "tb.v", "device.v"], cwd=tmp, check=True, capture_output=True)
-            subprocess.run([os.path.join(tmp, "obj_dir", "tbsim")], cwd=tmp, check=True,
-                           capture_output=True)
+            subprocess.run(
+                [
+                    "verilator",
+                    "--binary",
+                    "--timing",
+                    "-j",
+                    "2",
+                    "-O3",
+                    "-Wno-fatal",
+                    "-Wno-lint",
+                    "-Wno-style",
+                    "--top-module",
+                    "tb",
+                    "-o",
+                    "tbsim",
+                    "tb.v",
+                    "device.v",
+                ],
+                cwd=tmp,
+                check=True,
+                capture_output=True,
+            )
+            subprocess.run([os.path.join(tmp, "obj_dir", "tbsim")], cwd=tmp, check=True, capture_output=True)
         else:
-            subprocess.run(["iverilog", "-g2012", "-o", "tb.vvp", "tb.v", "device.v"], cwd=tmp,
-                           check=True, capture_output=True)
+            subprocess.run(
+                ["iverilog", "-g2012", "-o", "tb.vvp", "tb.v", "device.v"], cwd=tmp, check=True, capture_output=True
+            )
             subprocess.run(["vvp", "-n", "tb.vvp"], cwd=tmp, check=True, capture_output=True)
         vals, stamps, sts = [], [], []
         bits = fmts.pos.word
@@ -110,7 +130,7 @@ def run_device(data: bytes, n_axes: int, fmts: FpgaFormats | None = None, workdi
                     sts.append(tuple(int(x) for x in parts[1:]))
         q = np.array(vals[: len(vals) - len(vals) % n_axes], dtype=np.int64).reshape(-1, n_axes)
         k = q.shape[0]
-        return q, sts, np.array(stamps[n_axes - 1:k * n_axes:n_axes], dtype=np.int64)
+        return q, sts, np.array(stamps[n_axes - 1 : k * n_axes : n_axes], dtype=np.int64)
     finally:
         if workdir is None:
             shutil.rmtree(tmp, ignore_errors=True)

@@ -65,15 +65,30 @@ class FrameParser(wiring.Component):
     def __init__(self, clocked: bool = False, buffer_bits: int = BUFFER_BITS):
         self.clocked = clocked
         self.buffer_bits = buffer_bits
-        super().__init__({
-            "in_data": In(8), "in_valid": In(1), "in_ready": Out(1),
-            "acc_valid": Out(1), "acc_type": Out(8), "acc_seq": Out(32), "acc_len": Out(16),
-            "status_valid": Out(1), "st_last_seq": Out(32), "st_errors": Out(8), "st_state": Out(3),
-            "st_bytes": Out(64), "st_poll_id": Out(32), "st_program_id": Out(32),
-            # second pass over an accepted CONFIG/SEGMENT/PROFILE/SETPOINTS payload, for the decoder
-            "dec_valid": Out(1), "dec_ready": In(1), "dec_data": Out(8), "dec_pos": Out(16),
-            "dec_type": Out(8),
-        })
+        super().__init__(
+            {
+                "in_data": In(8),
+                "in_valid": In(1),
+                "in_ready": Out(1),
+                "acc_valid": Out(1),
+                "acc_type": Out(8),
+                "acc_seq": Out(32),
+                "acc_len": Out(16),
+                "status_valid": Out(1),
+                "st_last_seq": Out(32),
+                "st_errors": Out(8),
+                "st_state": Out(3),
+                "st_bytes": Out(64),
+                "st_poll_id": Out(32),
+                "st_program_id": Out(32),
+                # second pass over an accepted CONFIG/SEGMENT/PROFILE/SETPOINTS payload, for the decoder
+                "dec_valid": Out(1),
+                "dec_ready": In(1),
+                "dec_data": Out(8),
+                "dec_pos": Out(16),
+                "dec_type": Out(8),
+            }
+        )
 
     def elaborate(self, platform):
         m = Module()
@@ -94,9 +109,8 @@ class FrameParser(wiring.Component):
         d_base = Signal(B + 1)  # start of that frame
         hold = Signal(B + 1)  # first byte still needed
         m.d.comb += hold.eq(Mux(d_busy, d_base, base))
-        m.d.comb += self.in_ready.eq((wr - hold)[:B + 1] < n)
-        m.d.comb += [wp.addr.eq(wr[:B]), wp.data.eq(self.in_data),
-                     wp.en.eq(self.in_valid & self.in_ready)]
+        m.d.comb += self.in_ready.eq((wr - hold)[: B + 1] < n)
+        m.d.comb += [wp.addr.eq(wr[:B]), wp.data.eq(self.in_data), wp.en.eq(self.in_valid & self.in_ready)]
         with m.If(self.in_valid & self.in_ready):
             m.d.sync += wr.eq(wr + 1)
         avail = Signal(B + 1)
@@ -143,22 +157,33 @@ class FrameParser(wiring.Component):
         issue = Signal()
         pos = s2_pos
         m.d.comb += rp.addr.eq(rd_addr)
-        m.d.sync += [s2_valid.eq(s1_valid), s2_pos.eq(s1_pos), byte.eq(rp.data),
-                     s1_valid.eq(issue), s1_pos.eq(rd_pos)]
+        m.d.sync += [s2_valid.eq(s1_valid), s2_pos.eq(s1_pos), byte.eq(rp.data), s1_valid.eq(issue), s1_pos.eq(rd_pos)]
         with m.If(issue):
             m.d.sync += [rd_pos.eq(rd_pos + 1), rd_addr.eq(rd_addr + 1)]
 
         def restart(new_base, offset=0):
             # drop the bytes in flight; read on from offset ``offset`` of ``new_base``
-            return [base.eq(new_base), rd_pos.eq(offset), rd_addr.eq((new_base + offset)[:B]),
-                    s1_valid.eq(0), s2_valid.eq(0)]
+            return [
+                base.eq(new_base),
+                rd_pos.eq(offset),
+                rd_addr.eq((new_base + offset)[:B]),
+                s1_valid.eq(0),
+                s2_valid.eq(0),
+            ]
 
         m.d.sync += [self.acc_valid.eq(0), self.status_valid.eq(0)]
 
         def snapshot(poll_id):
-            return [self.status_valid.eq(1), self.st_last_seq.eq(last_seq), self.st_errors.eq(errors),
-                    self.st_state.eq(state), self.st_bytes.eq(bytes_acc), self.st_poll_id.eq(poll_id),
-                    self.st_program_id.eq(program_id), errors.eq(0)]
+            return [
+                self.status_valid.eq(1),
+                self.st_last_seq.eq(last_seq),
+                self.st_errors.eq(errors),
+                self.st_state.eq(state),
+                self.st_bytes.eq(bytes_acc),
+                self.st_poll_id.eq(poll_id),
+                self.st_program_id.eq(program_id),
+                errors.eq(0),
+            ]
 
         def fail():
             # drop one byte and search again from the next (a CRC error, as in Python)
@@ -217,10 +242,15 @@ class FrameParser(wiring.Component):
                 # the frame's bytes stay in the buffer until its payload is decoded
                 m.d.sync += restart(base + total)
                 m.next = "READ"
-                control = ((ftype == FrameType.POLL) | (ftype == FrameType.HOLD)
-                           | (ftype == FrameType.RESUME) | (ftype == FrameType.ABORT))
-                restart_dev = ((ftype == FrameType.CONFIG) & (seq == 1)
-                               & ((state == IDLE) | (state == DONE) | (state == ABORTED)))
+                control = (
+                    (ftype == FrameType.POLL)
+                    | (ftype == FrameType.HOLD)
+                    | (ftype == FrameType.RESUME)
+                    | (ftype == FrameType.ABORT)
+                )
+                restart_dev = (
+                    (ftype == FrameType.CONFIG) & (seq == 1) & ((state == IDLE) | (state == DONE) | (state == ABORTED))
+                )
                 with m.If(control):
                     with m.If((ftype == FrameType.ABORT) & (state != IDLE)):
                         m.d.sync += state.eq(ABORTED)
@@ -235,14 +265,21 @@ class FrameParser(wiring.Component):
                     cur_err = Mux(restart_dev, 0, errors)
                     cur_bytes = Mux(restart_dev, 0, bytes_acc)
                     with m.If(restart_dev):
-                        m.d.sync += [last_seq.eq(0), state.eq(IDLE), configured.eq(0), errors.eq(0),
-                                     bytes_acc.eq(0), program_id.eq(0)]
+                        m.d.sync += [
+                            last_seq.eq(0),
+                            state.eq(IDLE),
+                            configured.eq(0),
+                            errors.eq(0),
+                            bytes_acc.eq(0),
+                            program_id.eq(0),
+                        ]
                     bad = Signal()
                     m.d.comb += bad.eq(
                         ((ftype == FrameType.CONFIG) & (seq != 1))
                         | ((ftype != FrameType.CONFIG) & ~cur_cfg)
                         | ((ftype == FrameType.START) & (cur_state != CONFIGURED))
-                        | (ftype == FrameType.STATUS))
+                        | (ftype == FrameType.STATUS)
+                    )
                     with m.If(cur_state == ABORTED):
                         m.d.sync += errors.eq(cur_err | ErrorFlag.BAD_FRAME)
                     with m.Elif(seq <= cur_last):
@@ -252,12 +289,23 @@ class FrameParser(wiring.Component):
                     with m.Elif(bad):
                         m.d.sync += errors.eq(cur_err | ErrorFlag.BAD_FRAME)
                     with m.Else():
-                        m.d.sync += [last_seq.eq(seq), bytes_acc.eq(cur_bytes + total),
-                                     self.acc_valid.eq(1), self.acc_type.eq(ftype),
-                                     self.acc_seq.eq(seq), self.acc_len.eq(length)]
-                        with m.If(((ftype == FrameType.CONFIG) | (ftype == FrameType.SEGMENT)
-                                   | (ftype == FrameType.PROFILE) | (ftype == FrameType.SETPOINTS))
-                                  & (length != 0)):
+                        m.d.sync += [
+                            last_seq.eq(seq),
+                            bytes_acc.eq(cur_bytes + total),
+                            self.acc_valid.eq(1),
+                            self.acc_type.eq(ftype),
+                            self.acc_seq.eq(seq),
+                            self.acc_len.eq(length),
+                        ]
+                        with m.If(
+                            (
+                                (ftype == FrameType.CONFIG)
+                                | (ftype == FrameType.SEGMENT)
+                                | (ftype == FrameType.PROFILE)
+                                | (ftype == FrameType.SETPOINTS)
+                            )
+                            & (length != 0)
+                        ):
                             m.d.sync += restart(base)
                             m.next = "HANDOFF"
                         with m.Switch(ftype):
@@ -271,8 +319,14 @@ class FrameParser(wiring.Component):
                 # give the payload to the decoder once it has finished the previous one, then
                 # parse on from the next frame while it is decoded
                 with m.If(~d_busy):
-                    m.d.sync += [d_busy.eq(1), d_base.eq(base), d_pos.eq(20), d_addr.eq((base + 20)[:B]),
-                                 d_end.eq(20 + length), d_type.eq(ftype)]
+                    m.d.sync += [
+                        d_busy.eq(1),
+                        d_base.eq(base),
+                        d_pos.eq(20),
+                        d_addr.eq((base + 20)[:B]),
+                        d_end.eq(20 + length),
+                        d_type.eq(ftype),
+                    ]
                     m.d.sync += restart(base + total)
                     m.next = "READ"
 
@@ -287,16 +341,29 @@ class FrameParser(wiring.Component):
         d_byte = Signal(8)
         d_stall = Signal()
         d_issue = Signal()
-        m.d.comb += [d_stall.eq(d2_valid & ~self.dec_ready),
-                     d_issue.eq(d_busy & (d_pos < d_end) & ~d_stall),
-                     dp.addr.eq(d_addr), dp.en.eq(~d_stall)]
+        m.d.comb += [
+            d_stall.eq(d2_valid & ~self.dec_ready),
+            d_issue.eq(d_busy & (d_pos < d_end) & ~d_stall),
+            dp.addr.eq(d_addr),
+            dp.en.eq(~d_stall),
+        ]
         with m.If(~d_stall):
-            m.d.sync += [d2_valid.eq(d1_valid), d2_dpos.eq(d1_pos - 20), d2_last.eq(d1_pos + 1 == d_end),
-                         d_byte.eq(dp.data), d1_valid.eq(d_issue), d1_pos.eq(d_pos)]
+            m.d.sync += [
+                d2_valid.eq(d1_valid),
+                d2_dpos.eq(d1_pos - 20),
+                d2_last.eq(d1_pos + 1 == d_end),
+                d_byte.eq(dp.data),
+                d1_valid.eq(d_issue),
+                d1_pos.eq(d_pos),
+            ]
             with m.If(d_issue):
                 m.d.sync += [d_pos.eq(d_pos + 1), d_addr.eq(d_addr + 1)]
-        m.d.comb += [self.dec_valid.eq(d2_valid), self.dec_data.eq(d_byte), self.dec_pos.eq(d2_dpos),
-                     self.dec_type.eq(d_type)]
+        m.d.comb += [
+            self.dec_valid.eq(d2_valid),
+            self.dec_data.eq(d_byte),
+            self.dec_pos.eq(d2_dpos),
+            self.dec_type.eq(d_type),
+        ]
         with m.If(d2_valid & self.dec_ready & d2_last):
             m.d.sync += d_busy.eq(0)
         return m

@@ -108,18 +108,47 @@ def simulate(segments, fmts: FpgaFormats | None = None, workdir: str | None = No
         with open(os.path.join(tmp, "pieces.hex"), "w") as fh:
             fh.write("\n".join(piece_lines) + "\n")
         with open(os.path.join(tmp, "tb.v"), "w") as fh:
-            fh.write(TB.format(sw=sw, pw=pw, ns=len(seg_lines), np=len(piece_lines), total=total,
-                               xw=fmts.param.word, qw=fmts.pos.word, limit=100 * total + 10_000))
+            fh.write(
+                TB.format(
+                    sw=sw,
+                    pw=pw,
+                    ns=len(seg_lines),
+                    np=len(piece_lines),
+                    total=total,
+                    xw=fmts.param.word,
+                    qw=fmts.pos.word,
+                    limit=100 * total + 10_000,
+                )
+            )
         tool = available()
         if tool == "verilator":
-            subprocess.run(["verilator", "--binary", "--timing", "-j", "2", "-O3", "-Wno-fatal",
-                            "-Wno-lint", "-Wno-style", "--top-module", "tb", "-o", "tbsim",
-                            "tb.v", "datapath.v"], cwd=tmp, check=True, capture_output=True)
-            subprocess.run([os.path.join(tmp, "obj_dir", "tbsim")], cwd=tmp, check=True,
-                           capture_output=True)
+            subprocess.run(
+                [
+                    "verilator",
+                    "--binary",
+                    "--timing",
+                    "-j",
+                    "2",
+                    "-O3",
+                    "-Wno-fatal",
+                    "-Wno-lint",
+                    "-Wno-style",
+                    "--top-module",
+                    "tb",
+                    "-o",
+                    "tbsim",
+                    "tb.v",
+                    "datapath.v",
+                ],
+                cwd=tmp,
+                check=True,
+                capture_output=True,
+            )
+            subprocess.run([os.path.join(tmp, "obj_dir", "tbsim")], cwd=tmp, check=True, capture_output=True)
         elif tool == "iverilog":
-            subprocess.run(["iverilog", "-g2012", "-o", "tb.vvp", "tb.v", "datapath.v"], cwd=tmp,
-                           check=True, capture_output=True)
+            subprocess.run(
+                ["iverilog", "-g2012", "-o", "tb.vvp", "tb.v", "datapath.v"], cwd=tmp, check=True, capture_output=True
+            )
             subprocess.run(["vvp", "-n", "tb.vvp"], cwd=tmp, check=True, capture_output=True)
         else:
             raise RuntimeError("no Verilog simulator: install verilator or iverilog")

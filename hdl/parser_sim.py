@@ -32,9 +32,19 @@ def run_hdl(data: bytes, clocked: bool = False, buffer_bits: int = 13):
 
     async def watcher(ctx):
         idle = 0
-        async for (_c, _r, av, at, aseq, alen, sv, ls, er, st, by, pid, prg) in ctx.tick().sample(
-                dut.acc_valid, dut.acc_type, dut.acc_seq, dut.acc_len, dut.status_valid, dut.st_last_seq,
-                dut.st_errors, dut.st_state, dut.st_bytes, dut.st_poll_id, dut.st_program_id):
+        async for _c, _r, av, at, aseq, alen, sv, ls, er, st, by, pid, prg in ctx.tick().sample(
+            dut.acc_valid,
+            dut.acc_type,
+            dut.acc_seq,
+            dut.acc_len,
+            dut.status_valid,
+            dut.st_last_seq,
+            dut.st_errors,
+            dut.st_state,
+            dut.st_bytes,
+            dut.st_poll_id,
+            dut.st_program_id,
+        ):
             if av:
                 accepted.append((at, aseq, alen))
             if sv:
@@ -65,8 +75,7 @@ def run_python(data: bytes):
             accepted.append((int(f.type), f.seq, len(f.payload)))
         while core.responses:
             st = decode_status(decode_frame(core.responses.popleft()).payload)
-            statuses.append((st.last_seq, st.errors, st.state, st.bytes_accepted, st.poll_id,
-                             st.program_id))
+            statuses.append((st.last_seq, st.errors, st.state, st.bytes_accepted, st.poll_id, st.program_id))
         return ok
 
     core.handle = handle

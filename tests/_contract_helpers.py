@@ -54,8 +54,7 @@ def run_inproc(*args, stdin: bytes = b"") -> Result:
     saved = sys.argv, sys.stdin, sys.stdout, sys.stderr
     out_buf, err_buf = io.BytesIO(), io.BytesIO()
     out = io.TextIOWrapper(out_buf, encoding="utf-8", write_through=True)
-    err = io.TextIOWrapper(err_buf, encoding="utf-8", errors="backslashreplace",
-                           write_through=True)
+    err = io.TextIOWrapper(err_buf, encoding="utf-8", errors="backslashreplace", write_through=True)
     sys.argv = ["cnc-interp", *map(str, args)]
     sys.stdin = io.TextIOWrapper(io.BytesIO(stdin), encoding="utf-8")
     sys.stdout, sys.stderr = out, err
@@ -71,22 +70,29 @@ def run_inproc(*args, stdin: bytes = b"") -> Result:
     return Result(code, out_buf.getvalue(), err_buf.getvalue().decode("utf-8", "replace"))
 
 
-def run_proc(*args, stdin: bytes | None = None, env: dict | None = None,
-             cwd: str | None = None, timeout: float = PROC_TIMEOUT_S) -> Result:
+def run_proc(
+    *args, stdin: bytes | None = None, env: dict | None = None, cwd: str | None = None, timeout: float = PROC_TIMEOUT_S
+) -> Result:
     """Run the installed console script in a subprocess."""
     full_env = dict(os.environ)
     full_env.pop("CNC_INTERP_DEBUG", None)
     full_env.update(env or {})
-    r = subprocess.run([console_script(), *map(str, args)], input=stdin if stdin is not None
-                       else b"", capture_output=True, timeout=timeout, env=full_env, cwd=cwd)
+    r = subprocess.run(
+        [console_script(), *map(str, args)],
+        input=stdin if stdin is not None else b"",
+        capture_output=True,
+        timeout=timeout,
+        env=full_env,
+        cwd=cwd,
+    )
     return Result(r.returncode, r.stdout, r.stderr.decode("utf-8", "replace"))
 
 
 @dataclass
 class PlanCsv:
     header: list[str]
-    fields: list[list[str]]   # the text of every field, row by row
-    data: np.ndarray          # (K, 3 + n) float64: t, s, feed, axes...
+    fields: list[list[str]]  # the text of every field, row by row
+    data: np.ndarray  # (K, 3 + n) float64: t, s, feed, axes...
 
     @property
     def q(self) -> np.ndarray:

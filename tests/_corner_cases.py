@@ -9,8 +9,9 @@ from __future__ import annotations
 import numpy as np
 
 
-def bear_like_program(n_moves: int = 15000, seed: int = 14, g64_p_mm: float | None = None,
-                      feed_mm_min: float = 6000.0) -> str:
+def bear_like_program(
+    n_moves: int = 15000, seed: int = 14, g64_p_mm: float | None = None, feed_mm_min: float = 6000.0
+) -> str:
     """A seeded walk of ``n_moves`` G1 moves of 0.2-1.5 mm in XY with small Z steps: half
     the turns gentle (< 20°), half sharp (40-150°), as a contour-parallel relief pass.
     ``g64_p_mm``: the program's ``G64 P`` (None: plain G64, the default tolerance)."""
@@ -24,7 +25,12 @@ def bear_like_program(n_moves: int = 15000, seed: int = 14, g64_p_mm: float | No
     # keep the walk on a 100 x 100 mm stock: fold it back at the edges
     xy = 50.0 - np.abs(np.mod(xy + 50.0, 200.0) - 100.0)
     z = -1.0 - 0.5 * (1 + np.sin(np.arange(n_moves) * 0.01))
-    head = ["G21 G90 G17 G94", "G64" + (f" P{g64_p_mm:g}" if g64_p_mm else ""),
-            "G0 X0 Y0 Z5", "G1 Z-1 F1000", f"F{feed_mm_min:g}"]
+    head = [
+        "G21 G90 G17 G94",
+        "G64" + (f" P{g64_p_mm:g}" if g64_p_mm else ""),
+        "G0 X0 Y0 Z5",
+        "G1 Z-1 F1000",
+        f"F{feed_mm_min:g}",
+    ]
     body = [f"G1 X{x:.4f} Y{y:.4f} Z{zz:.4f}" for (x, y), zz in zip(xy, z)]
     return "\n".join(head + body + ["G0 Z5", "M2"]) + "\n"

@@ -18,8 +18,9 @@ def _eval(coef_k: np.ndarray, t: np.ndarray, d: int) -> np.ndarray:
     return out
 
 
-def distance_to_path(path: Path, points: np.ndarray, axes_mask: np.ndarray | None = None,
-                     samples_per_seg: int = 48, candidates: int = 1) -> np.ndarray:
+def distance_to_path(
+    path: Path, points: np.ndarray, axes_mask: np.ndarray | None = None, samples_per_seg: int = 48, candidates: int = 1
+) -> np.ndarray:
     """Distance (K,) from points (K, n) to the path, over the axes in ``axes_mask``.
 
     Dense sampling + KD-tree for the nearest sample, then Newton on the squared
@@ -83,8 +84,7 @@ def continuity(path: Path) -> tuple[float, float, float]:
 
     t_l, c_l = s_derivs(left)
     t_r, c_r = s_derivs(right)
-    return (float(np.abs(left[0] - right[0]).max()), float(np.abs(t_l - t_r).max()),
-            float(np.abs(c_l - c_r).max()))
+    return (float(np.abs(left[0] - right[0]).max()), float(np.abs(t_l - t_r).max()), float(np.abs(c_l - c_r).max()))
 
 
 def min_speed(path: Path, samples_per_seg: int = 32) -> float:
@@ -97,5 +97,4 @@ def min_speed(path: Path, samples_per_seg: int = 32) -> float:
 
 
 def all_finite(path: Path) -> bool:
-    return bool(np.all(np.isfinite(path.coef)) and np.all(np.isfinite(path.breaks))
-                and np.isfinite(path.length))
+    return bool(np.all(np.isfinite(path.coef)) and np.all(np.isfinite(path.breaks)) and np.isfinite(path.length))

@@ -48,17 +48,29 @@ def cases() -> dict[str, tuple[str, list[str]]]:
     """name -> (axes of the machine it needs, exact program body lines)."""
     wave = [(0, 0), (15, 25), (30, -20), (45, 30), (60, -25), (75, 20), (90, -10), (105, 5)]
     out = {
-        "nurbs-cubic": ("XYZ", ["G0 X0 Y0 Z0", "G5.2 P1 L4"]
-                        + [f"X{x} Y{y} P1" for x, y in wave[1:]] + ["G5.3"]),
-        "nurbs-rational": ("XYZ", ["G0 X0 Y0 Z0", "G5.2 P1 L3", "X20 Y40 P3", "X50 Y40 P0.5",
-                                   "X70 Y0 P2", "X100 Y30 P1", "X120 Y-10 P1", "G5.3"]),
+        "nurbs-cubic": ("XYZ", ["G0 X0 Y0 Z0", "G5.2 P1 L4"] + [f"X{x} Y{y} P1" for x, y in wave[1:]] + ["G5.3"]),
+        "nurbs-rational": (
+            "XYZ",
+            [
+                "G0 X0 Y0 Z0",
+                "G5.2 P1 L3",
+                "X20 Y40 P3",
+                "X50 Y40 P0.5",
+                "X70 Y0 P2",
+                "X100 Y30 P1",
+                "X120 Y-10 P1",
+                "G5.3",
+            ],
+        ),
         "arc-r5": ("XYZ", ["G0 X5 Y0 Z0", "G3 X5 Y0 I-5 J0"]),
         "arc-r25": ("XYZ", ["G0 X25 Y0 Z0", "G3 X25 Y0 I-25 J0"]),
         "arc-r100-90deg": ("XYZ", ["G0 X100 Y0 Z0", "G3 X0 Y100 I-100 J0"]),
         "helix-r10": ("XYZ", ["G0 X10 Y0 Z0", "G2 X10 Y0 Z-6 I-10 J0 P3"]),
         "spiral-nurbs": ("XYZ", _spiral_nurbs_text()),
-        "5axis-arc": ("XYZAC", ["G0 X20 Y0 Z0 A0 C0", "G3 X-20 Y0 Z-5 I-20 J0 A20 C90",
-                                "G3 X20 Y0 Z-10 I20 J0 A-10 C180"]),
+        "5axis-arc": (
+            "XYZAC",
+            ["G0 X20 Y0 Z0 A0 C0", "G3 X-20 Y0 Z-5 I-20 J0 A20 C90", "G3 X20 Y0 Z-10 I20 J0 A-10 C180"],
+        ),
     }
     return out
 
@@ -81,7 +93,7 @@ def _sample_chords(pts: np.ndarray, lin: np.ndarray, chord_mm: float) -> np.ndar
         a, b = p[i], p[j]
         ab = b - a
         L2 = float(ab @ ab)
-        q = p[i + 1:j] - a
+        q = p[i + 1 : j] - a
         if L2 == 0:
             return bool(np.all(np.linalg.norm(q, axis=1) <= chord_mm))
         t = np.clip(q @ ab / L2, 0, 1)

@@ -15,12 +15,10 @@ def line_path(a, b, feed_mm_s: float, axes: str = "XYZ", line: int = 1, rapid: b
     coef = np.zeros((1, 6, a.shape[0]))
     coef[0, 0] = a
     coef[0, 1] = b - a
-    return Path(axes=axes, breaks=np.array([0.0, 1.0]), coef=coef, line=[line],
-                feed_mm_s=[feed_mm_s], rapid=rapid)
+    return Path(axes=axes, breaks=np.array([0.0, 1.0]), coef=coef, line=[line], feed_mm_s=[feed_mm_s], rapid=rapid)
 
 
-def hermite_path(fun, n_seg: int, feed_mm_s: float, axes: str = "XYZ", u1: float = 1.0,
-                 line0: int = 1) -> Path:
+def hermite_path(fun, n_seg: int, feed_mm_s: float, axes: str = "XYZ", u1: float = 1.0, line0: int = 1) -> Path:
     """Quintic Hermite interpolation of a smooth curve ``fun(u) -> (p, p_u, p_uu)`` on [0, u1].
 
     Each segment matches position, first and second derivatives at its ends, so the
@@ -29,8 +27,9 @@ def hermite_path(fun, n_seg: int, feed_mm_s: float, axes: str = "XYZ", u1: float
     u = np.linspace(0.0, u1, n_seg + 1)
     p, d1, d2 = (np.asarray(x, dtype=float) for x in fun(u))
     coef = _hermite(u, p, d1, d2)  # the planner's own quintic Hermite construction
-    return Path(axes=axes, breaks=u, coef=coef, line=np.arange(line0, line0 + n_seg),
-                feed_mm_s=np.full(n_seg, feed_mm_s))
+    return Path(
+        axes=axes, breaks=u, coef=coef, line=np.arange(line0, line0 + n_seg), feed_mm_s=np.full(n_seg, feed_mm_s)
+    )
 
 
 def random_curve(rng: np.random.Generator, n_axes: int = 3, scale: float = 20.0, n_waves: int = 3):

@@ -15,8 +15,7 @@ REPO = os.path.dirname(HERE)
 SAMPLES = os.path.join(REPO, "samples", "gcode")
 EXAMPLES = os.path.join(REPO, "examples")
 #: LinuxCNC's G-code corpus beside the repository (``../shared``), or CNC_CORPUS
-CORPUS = os.environ.get("CNC_CORPUS") or os.path.normpath(
-    os.path.join(REPO, "..", "shared", "corpus", "linuxcnc"))
+CORPUS = os.environ.get("CNC_CORPUS") or os.path.normpath(os.path.join(REPO, "..", "shared", "corpus", "linuxcnc"))
 CORPUS_ROOT = os.path.dirname(CORPUS)  # holds ``linuxcnc/`` (names in reports start there)
 HAVE_CORPUS = os.path.isdir(CORPUS)
 

@@ -8,8 +8,7 @@ from cnc_interp.fit.path import Path, PlanarSegments
 from cnc_interp.plan.trajectory import Trajectory
 
 
-def planar_path(theta, p, x_end, origin0=(0.0, 0.0), axes="XZ", plane=(0, 1), other=None,
-                line0=10) -> Path:
+def planar_path(theta, p, x_end, origin0=(0.0, 0.0), axes="XZ", plane=(0, 1), other=None, line0=10) -> Path:
     """A Path made of paper-000 segments, each starting where the previous one ends.
 
     theta (n,), p (n, 6) with p[:, 0] = 0, x_end (n,). ``other``: fixed values of
@@ -45,8 +44,9 @@ def planar_path(theta, p, x_end, origin0=(0.0, 0.0), axes="XZ", plane=(0, 1), ot
         o = o + np.array([x_end[k] * c - pe * s, x_end[k] * s + pe * c])
     breaks = np.concatenate(([0.0], np.cumsum(x_end)))
     planar = PlanarSegments(plane=plane, theta=theta, origin=origin, x_end=x_end, p=p)
-    return Path(axes=axes, breaks=breaks, coef=coef, line=np.arange(n) + line0,
-                feed_mm_s=np.full(n, 100.0), planar=planar)
+    return Path(
+        axes=axes, breaks=breaks, coef=coef, line=np.arange(n) + line0, feed_mm_s=np.full(n, 100.0), planar=planar
+    )
 
 
 def gentle_curve(n_seg=6, seed=0, axes="XZ", plane=(0, 1), other=None) -> Path:
@@ -63,8 +63,9 @@ def gentle_curve(n_seg=6, seed=0, axes="XZ", plane=(0, 1), other=None) -> Path:
     return planar_path(theta, p, x_end, axes=axes, plane=plane, other=other)
 
 
-def quintic_plan(path: Path, dt_s=0.001, duration_s=None, feed_mm_s=50.0, rest_before=3,
-                 rest_after=3, s_offset=0.0, t0_index=0) -> Trajectory:
+def quintic_plan(
+    path: Path, dt_s=0.001, duration_s=None, feed_mm_s=50.0, rest_before=3, rest_after=3, s_offset=0.0, t0_index=0
+) -> Trajectory:
     """Rest-to-rest plan along ``path`` with s(τ) = L(10τ³ − 15τ⁴ + 6τ⁵)."""
     L = path.length
     T = duration_s or max(1.875 * L / feed_mm_s, 10 * dt_s)
@@ -78,5 +79,6 @@ def quintic_plan(path: Path, dt_s=0.001, duration_s=None, feed_mm_s=50.0, rest_b
     t = (np.arange(K) + t0_index) * dt_s
     feed = np.concatenate(([0.0], np.diff(s) / dt_s))
     seg = path.segment_of_s(s)
-    return Trajectory(axes=path.axes, dt_s=dt_s, t=t, s=s + s_offset, feed=feed, q=q,
-                      line=path.line[seg], planner="test")
+    return Trajectory(
+        axes=path.axes, dt_s=dt_s, t=t, s=s + s_offset, feed=feed, q=q, line=path.line[seg], planner="test"
+    )

@@ -56,8 +56,7 @@ def test_fit_takes_the_tolerance_of_the_machine_the_program_was_read_for(tmp_pat
     base = ci.load_machine("generic-mill")
     lines = ['name = "tol"', "dt = 0.001", "tol = 0.05"]
     for i, a in enumerate(base.axes):
-        lines += [f"[axes.{a}]", f"vmax = {base.vmax[i]}", f"amax = {base.amax[i]}",
-                  f"jmax = {base.jmax[i]}"]
+        lines += [f"[axes.{a}]", f"vmax = {base.vmax[i]}", f"amax = {base.amax[i]}", f"jmax = {base.jmax[i]}"]
     toml.write_text("\n".join(lines) + "\n")
     m = ci.load_machine(toml)
     assert m.tol_mm == 0.05
@@ -90,20 +89,26 @@ def test_write_chooses_the_format_by_extension(tmp_path):
 
 
 def test_importing_the_package_loads_no_stage():
-    code = ("import sys, cnc_interp as ci; ci.DEFAULT_PLANNER; "
-            "heavy = [m for m in sys.modules if m.split('.')[0] in "
-            "('numpy', 'numba', 'scipy', 'matplotlib', 'usb', 'mcap')]; "
-            "print(heavy)")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO,
-                         check=True).stdout.strip()
+    code = (
+        "import sys, cnc_interp as ci; ci.DEFAULT_PLANNER; "
+        "heavy = [m for m in sys.modules if m.split('.')[0] in "
+        "('numpy', 'numba', 'scipy', 'matplotlib', 'usb', 'mcap')]; "
+        "print(heavy)"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, check=True
+    ).stdout.strip()
     assert out == "[]"
 
 
-@pytest.mark.parametrize("script, args, code", [
-    ("plan_and_plot.py", ["mill-contour.ngc", "generic-mill"], 0),
-    # five-axis-xyzac.ngc has an A axis the generic mill lacks: its error line, exit 1
-    ("batch_folder.py", [".", "generic-mill"], 1),
-])
+@pytest.mark.parametrize(
+    "script, args, code",
+    [
+        ("plan_and_plot.py", ["mill-contour.ngc", "generic-mill"], 0),
+        # five-axis-xyzac.ngc has an A axis the generic mill lacks: its error line, exit 1
+        ("batch_folder.py", [".", "generic-mill"], 1),
+    ],
+)
 def test_examples_run(tmp_path, script, args, code):
     pytest.importorskip("matplotlib")
     argv = [os.path.join(SAMPLES, a) if a != "generic-mill" else a for a in args]
@@ -111,8 +116,13 @@ def test_examples_run(tmp_path, script, args, code):
         argv.append(str(tmp_path))
     else:
         argv[0] = SAMPLES
-    r = subprocess.run([sys.executable, os.path.join(EXAMPLES, script), *argv],
-                       capture_output=True, text=True, cwd=tmp_path, timeout=600)
+    r = subprocess.run(
+        [sys.executable, os.path.join(EXAMPLES, script), *argv],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        timeout=600,
+    )
     assert r.returncode == code, r.stdout + r.stderr
     assert "Traceback" not in r.stderr
     if script == "plan_and_plot.py":

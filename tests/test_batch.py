@@ -6,15 +6,32 @@ import json
 import pytest
 
 from cnc_interp.batch import (
-    FIELDS, VOLATILE_FIELDS, BatchOptions, collect_programs, compare, format_table,
-    load_baseline, parse_slowdown, summarise, write_report)
+    FIELDS,
+    VOLATILE_FIELDS,
+    BatchOptions,
+    collect_programs,
+    compare,
+    format_table,
+    load_baseline,
+    parse_slowdown,
+    summarise,
+    write_report,
+)
 from cnc_interp.errors import UsageError
 
 
 def rec(key, status="ok", cycle=1.0, worst=0.5, **kw):
     r = {f: None for f in FIELDS}
-    r.update(key=key, status=status, message=kw.pop("message", ""), error_line=0,
-             cycle_time_s=cycle, worst_ratio=worst, wall_s=0.1, peak_mem_mb=50.0)
+    r.update(
+        key=key,
+        status=status,
+        message=kw.pop("message", ""),
+        error_line=0,
+        cycle_time_s=cycle,
+        worst_ratio=worst,
+        wall_s=0.1,
+        peak_mem_mb=50.0,
+    )
     r.update(kw)
     return r
 
@@ -48,13 +65,17 @@ def test_collect_programs(tmp_path):
 
 
 def test_compare_rules():
-    base = {r["key"]: r for r in [rec("a"), rec("b", cycle=2.0), rec("c", status="error"),
-                                  rec("d"), rec("gone")]}
-    cur = [rec("a", cycle=1.005), rec("b", cycle=2.1), rec("c", status="error"),
-           rec("d", status="violation", worst=1.2), rec("new", cycle=3.0)]
+    base = {r["key"]: r for r in [rec("a"), rec("b", cycle=2.0), rec("c", status="error"), rec("d"), rec("gone")]}
+    cur = [
+        rec("a", cycle=1.005),
+        rec("b", cycle=2.1),
+        rec("c", status="error"),
+        rec("d", status="violation", worst=1.2),
+        rec("new", cycle=3.0),
+    ]
     out = compare(cur, base, 0.01)
-    assert [s["key"] for s in out["slower"]] == ["b"]             # +5% > 1%; a is +0.5%
-    assert [s["key"] for s in out["status_changed"]] == ["d"]     # ok -> violation
+    assert [s["key"] for s in out["slower"]] == ["b"]  # +5% > 1%; a is +0.5%
+    assert [s["key"] for s in out["status_changed"]] == ["d"]  # ok -> violation
     assert [v["key"] for v in out["violations"]] == ["d"]
     assert out["new"] == ["new"] and out["missing"] == ["gone"]
     assert out["regressions"] == 3
@@ -67,10 +88,11 @@ def test_compare_rules():
 
 
 def test_reports_round_trip(tmp_path):
-    records = [rec("x.ngc", lines=10, segments=3), rec("y.ngc", status="error", cycle=None, worst=None,
-                                                       message="y.ngc:3:1: error: bad word")]
-    report = {"programs": records, "summary": summarise(records, 2.0),
-              "comparison": compare(records, None, 0.01)}
+    records = [
+        rec("x.ngc", lines=10, segments=3),
+        rec("y.ngc", status="error", cycle=None, worst=None, message="y.ngc:3:1: error: bad word"),
+    ]
+    report = {"programs": records, "summary": summarise(records, 2.0), "comparison": compare(records, None, 0.01)}
     jpath, cpath = str(tmp_path / "r.json"), str(tmp_path / "r.csv")
     write_report(report, jpath)
     write_report(report, cpath)
@@ -156,7 +178,7 @@ def test_batch_with_broken_program_and_baseline_rules(tmp_path, folder):
     m = machine_file(tmp_path, 20000.0)
     rep = str(tmp_path / "r.json")
     res = run_cli(["batch", str(folder), "-m", m, "--jobs", "2", "--report", rep, "-q"])
-    assert res.exit_code == 1, res.output           # without a baseline, a failure fails the run
+    assert res.exit_code == 1, res.output  # without a baseline, a failure fails the run
     report = json.load(open(rep))
     by = {r["key"]: r for r in report["programs"]}
     assert sorted(by) == ["progs/arc.ngc", "progs/square.ngc", "progs/sub/broken.ngc"]
@@ -169,8 +191,7 @@ def test_batch_with_broken_program_and_baseline_rules(tmp_path, folder):
         assert r["path_length_mm"] > 20 and r["peak_mem_mb"] > 0 and r["wall_s"] > 0
     assert "progs/sub/broken.ngc" in res.output and "1 error, 2 ok" in res.output
     # same run against itself: no regression; CSV report too
-    res2 = run_cli(["batch", str(folder), "-m", m, "--baseline", rep, "--report",
-                    str(tmp_path / "r.csv"), "-q"])
+    res2 = run_cli(["batch", str(folder), "-m", m, "--baseline", rep, "--report", str(tmp_path / "r.csv"), "-q"])
     assert res2.exit_code == 0, res2.output
     assert "0 regression(s)" in res2.output
     assert open(tmp_path / "r.csv").readline().startswith("key,status,message")
@@ -185,11 +206,9 @@ def test_batch_with_broken_program_and_baseline_rules(tmp_path, folder):
 def test_baseline_flags_lowered_jerk_as_slower(tmp_path, folder):
     (folder / "sub" / "broken.ngc").unlink()
     rep = str(tmp_path / "base.json")
-    assert run_cli(["batch", str(folder), "-m", machine_file(tmp_path, 20000.0), "--report", rep,
-                    "-q"]).exit_code == 0
+    assert run_cli(["batch", str(folder), "-m", machine_file(tmp_path, 20000.0), "--report", rep, "-q"]).exit_code == 0
     slow = machine_file(tmp_path, 2000.0, "slow.toml")
-    res = run_cli(["batch", str(folder), "-m", slow, "--baseline", rep, "--max-slowdown", "1%",
-                   "-q", "--json"])
+    res = run_cli(["batch", str(folder), "-m", slow, "--baseline", rep, "--max-slowdown", "1%", "-q", "--json"])
     assert res.exit_code == 1
     out = json.loads(res.output)
     slower = {s["key"] for s in out["comparison"]["slower"]}
@@ -200,8 +219,20 @@ def test_baseline_flags_lowered_jerk_as_slower(tmp_path, folder):
     assert all(s["change"] > 0.01 for s in out["comparison"]["slower"])
     # a generous allowance accepts the same slowdown
     worst = max(s["change"] for s in out["comparison"]["slower"])
-    res2 = run_cli(["batch", str(folder), "-m", slow, "--baseline", rep, "--max-slowdown",
-                    f"{worst * 100 + 1:.3f}%", "-q", "--json"])
+    res2 = run_cli(
+        [
+            "batch",
+            str(folder),
+            "-m",
+            slow,
+            "--baseline",
+            rep,
+            "--max-slowdown",
+            f"{worst * 100 + 1:.3f}%",
+            "-q",
+            "--json",
+        ]
+    )
     assert json.loads(res2.output)["comparison"]["slower"] == []
     assert res2.exit_code == (1 if out["comparison"]["status_changed"] else 0)
 
@@ -209,8 +240,11 @@ def test_baseline_flags_lowered_jerk_as_slower(tmp_path, folder):
 def test_timeout_is_a_status_not_a_failure(tmp_path, folder):
     from cnc_interp.batch import build_report
 
-    report = build_report(BatchOptions(paths=(str(folder),), machine_spec=machine_file(tmp_path, 20000.0),
-                                       jobs=2, timeout_s=1e-4, quiet=True))
+    report = build_report(
+        BatchOptions(
+            paths=(str(folder),), machine_spec=machine_file(tmp_path, 20000.0), jobs=2, timeout_s=1e-4, quiet=True
+        )
+    )
     assert {r["status"] for r in report["programs"]} <= {"timeout", "error"}
     assert any(r["status"] == "timeout" for r in report["programs"])
 
@@ -219,8 +253,11 @@ def test_bad_machine_and_usage_exit_2(tmp_path, folder):
     import subprocess
     import sys
 
-    proc = subprocess.run([sys.executable, "-m", "cnc_interp.cli", "batch", str(folder), "-m",
-                           "no-such-preset"], capture_output=True, text=True)
+    proc = subprocess.run(
+        [sys.executable, "-m", "cnc_interp.cli", "batch", str(folder), "-m", "no-such-preset"],
+        capture_output=True,
+        text=True,
+    )
     assert proc.returncode == 2 and "error: no machine file or preset named" in proc.stderr
     from cnc_interp.batch import run_batch
     from cnc_interp.errors import MachineError
@@ -237,10 +274,12 @@ def test_dask_local_cluster_matches_local(tmp_path, folder):
 
     m = machine_file(tmp_path, 20000.0)
     local = build_report(BatchOptions(paths=(str(folder),), machine_spec=m, jobs=2, quiet=True))
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  host="127.0.0.1", dashboard_address=None) as cluster:
-        remote = build_report(BatchOptions(paths=(str(folder),), machine_spec=m, quiet=True,
-                                           dask_address=cluster.scheduler_address))
+    with distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None
+    ) as cluster:
+        remote = build_report(
+            BatchOptions(paths=(str(folder),), machine_spec=m, quiet=True, dask_address=cluster.scheduler_address)
+        )
     assert remote["executor"] == "dask" and local["executor"] == "local"
     assert stable(remote) == stable(local)
     assert remote["comparison"] == local["comparison"]
@@ -255,8 +294,11 @@ def test_dask_unreachable_scheduler_is_usage_error(tmp_path, folder, monkeypatch
     monkeypatch.setattr(batch_mod, "DASK_CONNECT_TIMEOUT_S", 1)
 
     with pytest.raises(UsageError, match="cannot connect"):
-        run_batch(BatchOptions(paths=(str(folder),), machine_spec="generic-mill", quiet=True,
-                               dask_address="tcp://127.0.0.1:9"))
+        run_batch(
+            BatchOptions(
+                paths=(str(folder),), machine_spec="generic-mill", quiet=True, dask_address="tcp://127.0.0.1:9"
+            )
+        )
 
 
 def test_fit_method_reaches_the_workers(tmp_path, folder):
@@ -268,8 +310,7 @@ def test_fit_method_reaches_the_workers(tmp_path, folder):
     moves = "".join(f"G1 X{20 * np.cos(t):.4f} Y{20 * np.sin(t):.4f}\n" for t in th[1:])
     (folder / "polygon.ngc").write_text("G21 G90 G17\nG0 X20 Y0\nG1 F3000\n" + moves + "M2\n")
     m = machine_file(tmp_path, 20000.0)
-    auto = build_report(BatchOptions(paths=(str(folder),), machine_spec=m, jobs=1, quiet=True,
-                                     fit_method="planar"))
+    auto = build_report(BatchOptions(paths=(str(folder),), machine_spec=m, jobs=1, quiet=True, fit_method="planar"))
     nodes = build_report(BatchOptions(paths=(str(folder),), machine_spec=m, jobs=1, quiet=True))
     assert auto["fit_method"] == "planar" and nodes["fit_method"] == "nodes"
     ok = [k for k, r in enumerate(auto["programs"]) if r["status"] == "ok"]

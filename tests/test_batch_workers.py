@@ -46,7 +46,7 @@ def test_failures_are_isolated():
     assert "ValueError: bad thing" in res[1]["message"]
     assert "SIGSEGV" in res[2]["message"]
     assert "status 3" in res[3]["message"]
-    assert len(res[5]["blob"]) == 3_000_000     # large results cross the pipe intact
+    assert len(res[5]["blob"]) == 3_000_000  # large results cross the pipe intact
 
 
 def test_run_isolated_single():

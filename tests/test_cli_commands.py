@@ -65,8 +65,7 @@ def test_verify_good_plan_exits_0(files, plan):
 
 @pytest.mark.parametrize("plan", ["plan.csv", "plan.mcap"])
 def test_verify_violating_plan_exits_1(files, plan):
-    res = CliRunner().invoke(cli.main, ["verify", str(files / plan), "-m", str(files / "tight.toml"),
-                                        "--json"])
+    res = CliRunner().invoke(cli.main, ["verify", str(files / plan), "-m", str(files / "tight.toml"), "--json"])
     assert res.exit_code == 1
     report = json.loads(res.output)
     assert report["ok"] is False
@@ -74,8 +73,7 @@ def test_verify_violating_plan_exits_1(files, plan):
 
 
 def test_verify_json_good(files):
-    res = CliRunner().invoke(cli.main, ["verify", str(files / "plan.csv"), "-m",
-                                        str(files / "good.toml"), "--json"])
+    res = CliRunner().invoke(cli.main, ["verify", str(files / "plan.csv"), "-m", str(files / "good.toml"), "--json"])
     assert res.exit_code == 0
     report = json.loads(res.output)
     assert report["ok"] is True and report["worst_ratio"] == pytest.approx(0.8, rel=1e-9)
@@ -83,20 +81,16 @@ def test_verify_json_good(files):
 
 
 def test_verify_bad_machine_exits_2(files, monkeypatch, capsys):
-    code, out, err = _run_cli(monkeypatch, capsys, "verify", str(files / "plan.csv"),
-                              "-m", str(files / "bad.toml"))
+    code, out, err = _run_cli(monkeypatch, capsys, "verify", str(files / "plan.csv"), "-m", str(files / "bad.toml"))
     assert code == 2
     assert "bad.toml" in err and "error:" in err and "Traceback" not in err
-    code, _, err = _run_cli(monkeypatch, capsys, "verify", str(files / "plan.csv"),
-                            "-m", "no-such-preset")
+    code, _, err = _run_cli(monkeypatch, capsys, "verify", str(files / "plan.csv"), "-m", "no-such-preset")
     assert code == 2 and "error:" in err
 
 
 def test_verify_exit_codes_through_entry_point(files, monkeypatch, capsys):
-    assert _run_cli(monkeypatch, capsys, "verify", str(files / "plan.mcap"),
-                    "-m", str(files / "good.toml"))[0] == 0
-    assert _run_cli(monkeypatch, capsys, "verify", str(files / "plan.mcap"),
-                    "-m", str(files / "tight.toml"))[0] == 1
+    assert _run_cli(monkeypatch, capsys, "verify", str(files / "plan.mcap"), "-m", str(files / "good.toml"))[0] == 0
+    assert _run_cli(monkeypatch, capsys, "verify", str(files / "plan.mcap"), "-m", str(files / "tight.toml"))[0] == 1
     # a file that is not a plan is bad input, not a crash
     junk = files / "junk.csv"
     junk.write_text("hello,world\n1,2\n")
@@ -109,8 +103,9 @@ def test_verify_exit_codes_through_entry_point(files, monkeypatch, capsys):
 
 def test_plot_command(files, tmp_path):
     out = tmp_path / "fig.png"
-    res = CliRunner().invoke(cli.main, ["plot", str(files / "plan.mcap"), "-m",
-                                        str(files / "good.toml"), "-o", str(out)])
+    res = CliRunner().invoke(
+        cli.main, ["plot", str(files / "plan.mcap"), "-m", str(files / "good.toml"), "-o", str(out)]
+    )
     assert res.exit_code == 0, res.output
     assert res.output.strip() == str(out)
     assert out.stat().st_size > 20_000
@@ -118,8 +113,9 @@ def test_plot_command(files, tmp_path):
 
 def test_plot_bad_machine_exits_2(files, monkeypatch, capsys, tmp_path):
     out = tmp_path / "fig.png"
-    code, _, err = _run_cli(monkeypatch, capsys, "plot", str(files / "plan.csv"),
-                            "-m", str(files / "bad.toml"), "-o", str(out))
+    code, _, err = _run_cli(
+        monkeypatch, capsys, "plot", str(files / "plan.csv"), "-m", str(files / "bad.toml"), "-o", str(out)
+    )
     assert code == 2 and not out.exists()
 
 
@@ -185,8 +181,7 @@ def test_outputs_byte_identical(tmp_path):
 
 
 def test_error_is_cnc_interp_error_under_clirunner(files):
-    res = CliRunner().invoke(cli.main, ["verify", str(files / "plan.csv"), "-m",
-                                        str(files / "bad.toml")])
+    res = CliRunner().invoke(cli.main, ["verify", str(files / "plan.csv"), "-m", str(files / "bad.toml")])
     assert isinstance(res.exception, CncInterpError) and res.exception.exit_code == 2
 
 
@@ -198,8 +193,9 @@ def test_interrupt_inside_compiled_code_is_ctrl_c(monkeypatch, capsys, wrapped):
 
     def fake_main(*args, **kwargs):
         if wrapped:
-            raise SystemError("CPUDispatcher(<function refine>) returned a result with an "
-                              "exception set") from KeyboardInterrupt()
+            raise SystemError(
+                "CPUDispatcher(<function refine>) returned a result with an exception set"
+            ) from KeyboardInterrupt()
         raise SystemError("something else")
 
     monkeypatch.setattr(cli.main, "main", fake_main)

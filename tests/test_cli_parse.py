@@ -69,13 +69,16 @@ def test_stdin():
     assert abs(s["feed_time_s"] - 1.0) < 1e-12
 
 
-@pytest.mark.parametrize("text,where,what", [
-    (b"G21\nG0 G1 X1\n", ":2:4: error:", "same modal group"),
-    (b"G1 X1\n", ":1:1: error:", "feed"),
-    (b"G0 X10\nG3 X0 Y11 I-10 J0 F60\n", ":2:1: error:", "not on the circle"),
-    (b"G41 D1\n", ":1:1: error:", "cutter radius compensation"),
-    (b"F60\nG5.2 P1\nX1 Y1 P1\n", ":2:1: error:", "G5.3"),
-])
+@pytest.mark.parametrize(
+    "text,where,what",
+    [
+        (b"G21\nG0 G1 X1\n", ":2:4: error:", "same modal group"),
+        (b"G1 X1\n", ":1:1: error:", "feed"),
+        (b"G0 X10\nG3 X0 Y11 I-10 J0 F60\n", ":2:1: error:", "not on the circle"),
+        (b"G41 D1\n", ":1:1: error:", "cutter radius compensation"),
+        (b"F60\nG5.2 P1\nX1 Y1 P1\n", ":2:1: error:", "G5.3"),
+    ],
+)
 def test_errors_exit_2_with_location(text, where, what):
     res = run_cli("parse", "-", stdin=text)
     assert res.returncode == 2
@@ -116,8 +119,10 @@ def test_parse_fit_and_batch_count_nodes_and_segments_alike(tmp_path):
     from cnc_interp.plan.machine_io import load_machine
 
     part = tmp_path / "p.ngc"
-    part.write_text("G21 G90\nG0 X5 Y5 Z2\nG0 X5 Y5 Z2\nG1 Z0 F600\nG1 X20\nG2 X30 Y15 R10\n"
-                    "G1 Y40\nG0 Z5\nG0 X0 Y0\nG1 Z-1 F300\nG1 X3 Y4\nM2\n")
+    part.write_text(
+        "G21 G90\nG0 X5 Y5 Z2\nG0 X5 Y5 Z2\nG1 Z0 F600\nG1 X20\nG2 X30 Y15 R10\n"
+        "G1 Y40\nG0 Z5\nG0 X0 Y0\nG1 Z-1 F300\nG1 X3 Y4\nM2\n"
+    )
     parsed = json.loads(CliRunner().invoke(main, ["parse", str(part), "--json"]).output)
     fitted = json.loads(CliRunner().invoke(main, ["fit", str(part), "--json"]).output)
     record = process_program(str(part), part.read_bytes(), load_machine("generic-mill"))

@@ -48,14 +48,14 @@ CASES = [
     _case("five-axis-xyzac", os.path.join(SAMPLES, "five-axis-xyzac.ngc"), "mikron-ucp710"),
     _case("square", os.path.join(CORPUS, "quick-tests", "square.ngc"), XYZ_INI),
     # every machine axis gets a column, moved or not
-    _case("square-9axis", os.path.join(CORPUS, "quick-tests", "square.ngc"),
-          os.path.join(CORPUS, "configs", "9axis.ini")),
+    _case(
+        "square-9axis", os.path.join(CORPUS, "quick-tests", "square.ngc"), os.path.join(CORPUS, "configs", "9axis.ini")
+    ),
     _case("simple_arc3", os.path.join(CORPUS, "arc-feed", "simple_arc3.ngc"), XYZ_INI),
     _case("tangent_helix", os.path.join(CORPUS, "quick-tests", "tangent_helix.ngc"), XYZ_INI),
     _case("g0_corners", os.path.join(CORPUS, "quick-tests", "g0_corners.ngc"), XYZ_INI),
     _case("nurbs-xy", os.path.join(CORPUS, "nurbs-g5", "nurbs-xy.ngc"), XYZ_INI),
-    _case("short_segments", os.path.join(CORPUS, "performance", "short_segments_0.001.ngc"),
-          XYZ_INI),
+    _case("short_segments", os.path.join(CORPUS, "performance", "short_segments_0.001.ngc"), XYZ_INI),
 ]
 
 #: CAM-style programs of tiny moves: one fitted segment spans several blocks and names the
@@ -263,8 +263,10 @@ def test_start_position_from_machine_file_and_option(tmp_path):
     """The machine file's [start] table, else all 0; --start overrides it; the program's
     opening rapid (from there to its first point) is part of the plan."""
     mfile = tmp_path / "m.toml"
-    mfile.write_text('name = "with start"\n[start]\nX = 5.0\nZ = 50.0\n' + "".join(
-        f"[axes.{a}]\nvmax = 200.0\namax = 2000.0\njmax = 50000.0\n" for a in "XYZ"))
+    mfile.write_text(
+        'name = "with start"\n[start]\nX = 5.0\nZ = 50.0\n'
+        + "".join(f"[axes.{a}]\nvmax = 200.0\namax = 2000.0\njmax = 50000.0\n" for a in "XYZ")
+    )
     part = tmp_path / "p.ngc"
     part.write_text("G21 G90\nG0 X10 Y10 Z5\nG1 Z0 F600\nG1 X20\nM2\n")
     res = run_inproc("plan", part, "-m", mfile, "-q")
@@ -335,8 +337,7 @@ def test_quiet_and_json_summary(plans, tmp_path):
     assert res.code == 0 and res.err == "", res.explain()
     summary = json.loads(res.out)  # stdout: it does not carry the plan here
     # --quiet never hides the JSON; with -o - the JSON moves to stderr
-    quiet = run_inproc("plan", MAIN_PART, "-m", MAIN_MACHINE, "-o", tmp_path / "k.csv", "--json",
-                       "-q")
+    quiet = run_inproc("plan", MAIN_PART, "-m", MAIN_MACHINE, "-o", tmp_path / "k.csv", "--json", "-q")
     assert json.loads(quiet.out)["samples"] == summary["samples"] and quiet.err == ""
     piped = run_inproc("plan", MAIN_PART, "-m", MAIN_MACHINE, "--json", "-q")
     assert piped.out.startswith(b"t,s,feed,")
@@ -387,13 +388,11 @@ def test_byte_identical_across_processes(plans, tmp_path):
     with open(MAIN_PART, "rb") as fh:
         program = fh.read()
     # the console script, stdin -> stdout
-    res = run_proc("plan", "-", "-m", MAIN_MACHINE, "-q", stdin=program,
-                   env={"PYTHONHASHSEED": "12345"})
+    res = run_proc("plan", "-", "-m", MAIN_MACHINE, "-q", stdin=program, env={"PYTHONHASHSEED": "12345"})
     assert res.code == 0, res.explain()
     assert res.out == open(path, "rb").read()
     mcap_b = tmp_path / "b.mcap"
-    res = run_proc("plan", MAIN_PART, "-m", MAIN_MACHINE, "-o", mcap_b, "-q",
-                   env={"PYTHONHASHSEED": "777"})
+    res = run_proc("plan", MAIN_PART, "-m", MAIN_MACHINE, "-o", mcap_b, "-q", env={"PYTHONHASHSEED": "777"})
     assert res.code == 0 and res.err == "", res.explain()
     assert mcap_b.read_bytes() == mcap_a.read_bytes()
 
@@ -401,9 +400,12 @@ def test_byte_identical_across_processes(plans, tmp_path):
 # -- processes: pipes and signals ----------------------------------------------------------
 def test_reader_closing_early_is_quiet():
     """``cnc-interp plan big.ngc | head -n 3``: no traceback, no 'Broken pipe' noise."""
-    proc = subprocess.Popen([console_script(), "plan", MAIN_PART, "-m", MAIN_MACHINE],
-                            stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE)
+    proc = subprocess.Popen(
+        [console_script(), "plan", MAIN_PART, "-m", MAIN_MACHINE],
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
     try:
         head = [proc.stdout.readline() for _ in range(3)]
         proc.stdout.close()  # what `head` does after its third line
@@ -456,9 +458,13 @@ def test_ctrl_c_leaves_no_output_and_no_temp_file(tmp_path, phase):
         part = str(tmp_path / "slow.ngc")
         with open(part, "wb") as fh:
             fh.write(SLOW_LINE)
-    proc = subprocess.Popen([console_script(), "plan", part, "-m", MAIN_MACHINE, "-o",
-                             "out.csv"], cwd=work, stdin=subprocess.DEVNULL,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(
+        [console_script(), "plan", part, "-m", MAIN_MACHINE, "-o", "out.csv"],
+        cwd=work,
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+    )
     try:
         t0 = time.monotonic()
         if phase == "plan":
@@ -468,8 +474,7 @@ def test_ctrl_c_leaves_no_output_and_no_temp_file(tmp_path, phase):
         else:
             # the output is written to an unnamed file in ``work`` (O_TMPFILE): wait until
             # the process holds one open there
-            while (proc.poll() is None and time.monotonic() - t0 < 240
-                   and not _writes_into(proc.pid, work)):
+            while proc.poll() is None and time.monotonic() - t0 < 240 and not _writes_into(proc.pid, work):
                 time.sleep(0.005)
             assert _writes_into(proc.pid, work), "no temporary output file appeared"
             assert "out.csv" not in os.listdir(work), "the output appeared before the signal"

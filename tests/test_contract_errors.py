@@ -42,14 +42,12 @@ GCODE_CASES = [
     ("unterminated-comment", b"G21\nG1 X1 (unterminated\n", "generic-mill", 2, 7, "comment"),
     ("letter-without-number", b"G21\nG1 X F100\n", "generic-mill", 2, 4, "no value"),
     ("two-motion-codes", b"G21\nG0 G1 X1 F100\n", "generic-mill", 2, 4, "same modal group"),
-    ("arc-off-circle", b"G21\nG0 X10\nG3 X0 Y11 I-10 J0 F60\n", "generic-mill", 3, 1,
-     "not on the circle"),
+    ("arc-off-circle", b"G21\nG0 X10\nG3 X0 Y11 I-10 J0 F60\n", "generic-mill", 3, 1, "not on the circle"),
     ("arc-radius-too-small", b"G21\nG2 X10 Y0 R4 F60\n", "generic-mill", 2, None, "radius"),
     ("missing-feed", b"G21\nG1 X5\n", "generic-mill", 2, 1, "feed"),
     ("zero-feed", b"G21\nG1 X5 F0\n", "generic-mill", 2, None, "feed"),
     ("division-by-zero", b"G21\nG1 X[1/0] F100\n", "generic-mill", 2, 7, "division by zero"),
-    ("undefined-parameter", b"G21\nG1 X#<nope> F100\n", "generic-mill", 2, 5,
-     "undefined parameter"),
+    ("undefined-parameter", b"G21\nG1 X#<nope> F100\n", "generic-mill", 2, 5, "undefined parameter"),
     ("unterminated-bracket", b"G21\nG1 X[1+2 F100\n", "generic-mill", 2, None, "]"),
     ("nan", b"G21\nG1 X[SQRT[-1]] F100\n", "generic-mill", 2, None, "SQRT"),
     ("exponent", b"G21\nG1 X1e999 F100\n", "generic-mill", 2, None, "exponent"),
@@ -58,16 +56,14 @@ GCODE_CASES = [
     ("endless-loop", b"o100 while [1]\no100 endwhile\n", "generic-mill", 1, 1, "loop"),
     ("g41-unsupported", b"G21\nG41 D1\nG1 X1 F100\n", "generic-mill", 2, 1, "G41"),
     ("g95-unsupported", b"G21\nG95 G1 X1 F1\n", "generic-mill", 2, 1, "G95"),
-    ("axis-the-machine-lacks", b"G21\nG1 A10 F100\n", "generic-mill", 2, 4,
-     "axis A is not on this machine"),
+    ("axis-the-machine-lacks", b"G21\nG1 A10 F100\n", "generic-mill", 2, 4, "axis A is not on this machine"),
     ("lathe-has-no-y", b"G18 G21\nG1 X1 Y1 F100\n", "xz-lathe", 2, 7, "axis Y"),
     ("binary-garbage", _garbage(), "generic-mill", 1, None, ""),
     ("2mb-line", b"G1 X" + b"1" * 2_000_000 + b" F100\n", "generic-mill", 1, None, "long"),
 ]
 
 
-@pytest.mark.parametrize("data,machine,line,col,what",
-                         [pytest.param(*c[1:], id=c[0]) for c in GCODE_CASES])
+@pytest.mark.parametrize("data,machine,line,col,what", [pytest.param(*c[1:], id=c[0]) for c in GCODE_CASES])
 def test_bad_gcode(tmp_path, data, machine, line, col, what):
     part = tmp_path / "part.ngc"
     part.write_bytes(data)
@@ -118,30 +114,46 @@ MACHINE_CASES = [
     # id, file name, contents, line (None: no line), text the message must contain
     ("toml-syntax", "m.toml", 'name = "x"\ndt = 0.001\n[axes.X\nvmax = 1\n', 3, "TOML"),
     ("no-axis-table", "m.toml", 'name = "x"\ndt = 0.001\n', None, "axes"),
-    ("negative-limit", "m.toml",
-     'name = "x"\n[axes.X]\nvmax = 100.0\namax = -5.0\njmax = 1000.0\n' + _AXES_OK, 4, "amax"),
-    ("unknown-key", "m.toml", 'name = "x"\nfoo = 3\n[axes.X]\nvmax = 1.0\namax = 1.0\n'
-     'jmax = 1.0\n' + _AXES_OK, 2, "unknown key 'foo'"),
-    ("unknown-axis-key", "m.toml", '[axes.X]\nvmax = 1.0\namax = 1.0\njmax = 1.0\nvmx = 2\n'
-     + _AXES_OK, 5, "vmx"),
-    ("missing-jmax", "m.toml", '[axes.X]\nvmax = 1.0\namax = 1.0\n' + _AXES_OK, 1, "jmax"),
-    ("nan-limit", "m.toml", '[axes.X]\nvmax = nan\namax = 1.0\njmax = 1.0\n' + _AXES_OK, 2,
-     "finite"),
-    ("negative-dt", "m.toml", 'dt = -0.001\n[axes.X]\nvmax = 1.0\namax = 1.0\njmax = 1.0\n'
-     + _AXES_OK, 1, "dt"),
-    ("unknown-kinematics", "m.toml", 'kinematics = "warp"\n[axes.X]\nvmax = 1.0\namax = 1.0\n'
-     'jmax = 1.0\n' + _AXES_OK, 1, "warp"),
+    (
+        "negative-limit",
+        "m.toml",
+        'name = "x"\n[axes.X]\nvmax = 100.0\namax = -5.0\njmax = 1000.0\n' + _AXES_OK,
+        4,
+        "amax",
+    ),
+    (
+        "unknown-key",
+        "m.toml",
+        'name = "x"\nfoo = 3\n[axes.X]\nvmax = 1.0\namax = 1.0\njmax = 1.0\n' + _AXES_OK,
+        2,
+        "unknown key 'foo'",
+    ),
+    ("unknown-axis-key", "m.toml", "[axes.X]\nvmax = 1.0\namax = 1.0\njmax = 1.0\nvmx = 2\n" + _AXES_OK, 5, "vmx"),
+    ("missing-jmax", "m.toml", "[axes.X]\nvmax = 1.0\namax = 1.0\n" + _AXES_OK, 1, "jmax"),
+    ("nan-limit", "m.toml", "[axes.X]\nvmax = nan\namax = 1.0\njmax = 1.0\n" + _AXES_OK, 2, "finite"),
+    ("negative-dt", "m.toml", "dt = -0.001\n[axes.X]\nvmax = 1.0\namax = 1.0\njmax = 1.0\n" + _AXES_OK, 1, "dt"),
+    (
+        "unknown-kinematics",
+        "m.toml",
+        'kinematics = "warp"\n[axes.X]\nvmax = 1.0\namax = 1.0\njmax = 1.0\n' + _AXES_OK,
+        1,
+        "warp",
+    ),
     ("not-utf8", "m.toml", b"\xff\xfe garbage", 1, "UTF-8"),
-    ("ini-negative-velocity", "m.ini", "[TRAJ]\nCOORDINATES = X Y Z\nLINEAR_UNITS = mm\n"
-     "[AXIS_X]\nMAX_VELOCITY = -3\nMAX_ACCELERATION = 10\n[AXIS_Y]\nMAX_VELOCITY = 3\n"
-     "MAX_ACCELERATION = 10\n[AXIS_Z]\nMAX_VELOCITY = 3\nMAX_ACCELERATION = 10\n", 5,
-     "MAX_VELOCITY"),
+    (
+        "ini-negative-velocity",
+        "m.ini",
+        "[TRAJ]\nCOORDINATES = X Y Z\nLINEAR_UNITS = mm\n"
+        "[AXIS_X]\nMAX_VELOCITY = -3\nMAX_ACCELERATION = 10\n[AXIS_Y]\nMAX_VELOCITY = 3\n"
+        "MAX_ACCELERATION = 10\n[AXIS_Z]\nMAX_VELOCITY = 3\nMAX_ACCELERATION = 10\n",
+        5,
+        "MAX_VELOCITY",
+    ),
     ("ini-no-axes", "m.ini", "[TRAJ]\nLINEAR_UNITS = mm\n", 1, "COORDINATES"),
 ]
 
 
-@pytest.mark.parametrize("name,text,line,what",
-                         [pytest.param(*c[1:], id=c[0]) for c in MACHINE_CASES])
+@pytest.mark.parametrize("name,text,line,what", [pytest.param(*c[1:], id=c[0]) for c in MACHINE_CASES])
 def test_bad_machine_file(tmp_path, name, text, line, what):
     part = tmp_path / "part.ngc"
     part.write_text("G21\nG1 X1 Y1 Z-1 F600\n")
@@ -157,15 +169,15 @@ def test_machine_without_an_axis_the_program_moves(tmp_path):
     part = tmp_path / "part.ngc"
     part.write_text("G21\nG1 Z1 F100\n")
     mfile = tmp_path / "xy.toml"
-    mfile.write_text('name = "xy"\n' + "".join(
-        f"[axes.{a}]\nvmax = 1.0\namax = 1.0\njmax = 1.0\n" for a in "XY"))
+    mfile.write_text('name = "xy"\n' + "".join(f"[axes.{a}]\nvmax = 1.0\namax = 1.0\njmax = 1.0\n" for a in "XY"))
     res = run_inproc("plan", part, "-m", mfile)
     assert res.code == 2
     _check_one_error_line(res, str(part), 2, 4, "axis Z is not on this machine")
 
 
-@pytest.mark.parametrize("spec,what", [("nosuchpreset", "no machine file or preset"),
-                                       ("/nonexistent/m.toml", "not found")])
+@pytest.mark.parametrize(
+    "spec,what", [("nosuchpreset", "no machine file or preset"), ("/nonexistent/m.toml", "not found")]
+)
 def test_unknown_machine(tmp_path, spec, what):
     part = tmp_path / "part.ngc"
     part.write_text("G21\nG1 X1 F100\n")
@@ -208,14 +220,17 @@ def test_bad_option_is_one_error_line(good_part, opts):
     assert res.err.count("\n") == 1 and ": error: " in res.err, res.err
 
 
-@pytest.mark.parametrize("opts,what", [
-    (["--start", "Q=1"], "--start"),
-    (["--start", "X=abc"], "--start"),
-    (["--dt", "nan"], "'--dt'"),
-    (["--dt", "inf"], "'--dt'"),
-    (["--dt", "100"], "'--dt'"),
-    (["--tol", "nan"], "'--tol'"),
-])
+@pytest.mark.parametrize(
+    "opts,what",
+    [
+        (["--start", "Q=1"], "--start"),
+        (["--start", "X=abc"], "--start"),
+        (["--dt", "nan"], "'--dt'"),
+        (["--dt", "inf"], "'--dt'"),
+        (["--dt", "100"], "'--dt'"),
+        (["--tol", "nan"], "'--tol'"),
+    ],
+)
 def test_bad_option_value_one_line(good_part, opts, what):
     res = run_inproc("plan", good_part, *opts)
     assert res.code == 2, res.explain()
@@ -264,10 +279,13 @@ def test_plan_too_big_for_memory_is_exit_1(tmp_path):
 
     part = tmp_path / "slow.ngc"
     part.write_text("G21\nG1 X10 F0.001\n")
-    r = subprocess.run([console_script(), "plan", str(part), "--planner", "constant", "-o",
-                        str(tmp_path / "out.csv")],
-                       capture_output=True, timeout=300, preexec_fn=_limit_memory,
-                       stdin=subprocess.DEVNULL)
+    r = subprocess.run(
+        [console_script(), "plan", str(part), "--planner", "constant", "-o", str(tmp_path / "out.csv")],
+        capture_output=True,
+        timeout=300,
+        preexec_fn=_limit_memory,
+        stdin=subprocess.DEVNULL,
+    )
     err = r.stderr.decode("utf-8", "replace")
     assert r.returncode == 1, err
     assert "Traceback" not in err and err.count("\n") == 1 and "error" in err, err
@@ -275,12 +293,15 @@ def test_plan_too_big_for_memory_is_exit_1(tmp_path):
 
 
 # -- verify on a doctored plan file ---------------------------------------------------------
-@pytest.mark.parametrize("col,value,code,line", [
-    (4, "nan", 1, None),      # a NaN setpoint: the plan fails verify
-    (4, "inf", 1, None),
-    (0, "0.0495", 2, 51),     # t off the k*dt grid: not a plan file (bad input, its line)
-    (4, "abc", 2, 51),        # not a number
-])
+@pytest.mark.parametrize(
+    "col,value,code,line",
+    [
+        (4, "nan", 1, None),  # a NaN setpoint: the plan fails verify
+        (4, "inf", 1, None),
+        (0, "0.0495", 2, 51),  # t off the k*dt grid: not a plan file (bad input, its line)
+        (4, "abc", 2, 51),  # not a number
+    ],
+)
 def test_verify_doctored_file(tmp_path, col, value, code, line):
     res = run_inproc("plan", "-", "-q", stdin=b"G21\nG1 X1 Y1 F600\nM2\n")
     assert res.code == 0, res.explain()

@@ -17,13 +17,20 @@ def make(k=1000, axes="XYZAC", dt=0.001, seed=0):
     q = np.cumsum(rng.normal(size=(k, len(axes))), axis=0) * np.pi
     if k > 3 and len(axes) > 2:
         q[0, 0] = -0.0
-        q[1, 1] = 1e-300          # tiny, subnormal and huge values all round-trip
+        q[1, 1] = 1e-300  # tiny, subnormal and huge values all round-trip
         q[2, 2] = 5e-324
         q[3, 0] = 1.2345678901234567e17
     s = np.cumsum(np.abs(rng.normal(size=k)))
-    return Trajectory(axes=axes, dt_s=dt, t=np.arange(k) * dt, s=s,
-                      feed=np.concatenate([[0.0], np.diff(s) / dt]), q=q,
-                      line=np.zeros(k, dtype=int), planner="vpop")
+    return Trajectory(
+        axes=axes,
+        dt_s=dt,
+        t=np.arange(k) * dt,
+        s=s,
+        feed=np.concatenate([[0.0], np.diff(s) / dt]),
+        q=q,
+        line=np.zeros(k, dtype=int),
+        planner="vpop",
+    )
 
 
 def test_round_trip_bit_exact(tmp_path):
@@ -43,7 +50,7 @@ def test_format_header_and_repr(tmp_path):
     write_csv(tr, path)
     lines = open(path, "rb").read().split(b"\n")
     assert lines[0] == b"t,s,feed,X,Z"
-    assert lines[-1] == b"" and len(lines) == 5          # ends with a newline, no comments
+    assert lines[-1] == b"" and len(lines) == 5  # ends with a newline, no comments
     row = lines[2].decode().split(",")
     assert row[0] == repr(0.25) and row[3] == repr(float(tr.q[1, 0]))
     # same trajectory -> identical bytes
@@ -52,14 +59,17 @@ def test_format_header_and_repr(tmp_path):
     assert open(path, "rb").read() == open(path2, "rb").read()
 
 
-@pytest.mark.parametrize("text,line,fragment", [
-    ("x,y\n1,2\n", 1, "t,s,feed"),
-    ("t,s,feed,X,X\n0,0,0,0,0\n", 1, "distinct"),
-    ("t,s,feed,X\n0,0,0,0\n0.001,0,0\n", 3, "fields"),
-    ("t,s,feed,X\n0,0,0,0\n0.001,0,0,abc\n", 3, "not a number"),
-    ("t,s,feed,X\n0,0,0,0\n0.001,0,0,0\n0.005,0,0,0\n", 4, "fixed period"),
-    ("t,s,feed,X\n", 1, "no samples"),
-])
+@pytest.mark.parametrize(
+    "text,line,fragment",
+    [
+        ("x,y\n1,2\n", 1, "t,s,feed"),
+        ("t,s,feed,X,X\n0,0,0,0,0\n", 1, "distinct"),
+        ("t,s,feed,X\n0,0,0,0\n0.001,0,0\n", 3, "fields"),
+        ("t,s,feed,X\n0,0,0,0\n0.001,0,0,abc\n", 3, "not a number"),
+        ("t,s,feed,X\n0,0,0,0\n0.001,0,0,0\n0.005,0,0,0\n", 4, "fixed period"),
+        ("t,s,feed,X\n", 1, "no samples"),
+    ],
+)
 def test_read_errors(tmp_path, text, line, fragment):
     p = tmp_path / "bad.csv"
     p.write_text(text)
@@ -91,14 +101,14 @@ def test_atomic_write_success_and_failure(tmp_path):
             fh.write(b"partial")
             raise KeyboardInterrupt
     assert path.read_bytes() == b"old"
-    assert sorted(os.listdir(tmp_path)) == ["out.bin"]      # no temporary left behind
+    assert sorted(os.listdir(tmp_path)) == ["out.bin"]  # no temporary left behind
     with atomic_write(str(path)) as fh:
         fh.write(b"new")
     assert path.read_bytes() == b"new"
     assert sorted(os.listdir(tmp_path)) == ["out.bin"]
     mask = os.umask(0)
     os.umask(mask)
-    assert path.stat().st_mode & 0o777 == 0o666 & ~mask     # as open() would create it
+    assert path.stat().st_mode & 0o777 == 0o666 & ~mask  # as open() would create it
 
 
 def test_stdout_and_broken_pipe():
@@ -120,8 +130,12 @@ def test_stdout_and_broken_pipe():
     full = subprocess.run([sys.executable, "-c", code], capture_output=True, check=True)
     assert full.stdout.startswith(b"t,s,feed,X\n0.0,0.0,0.0,0.0\n0.001,")
     assert full.stdout.count(b"\n") == 200001
-    proc = subprocess.run(f"'{sys.executable}' -c \"{code}\" | head -c 100 > /dev/null; "
-                          "echo ${PIPESTATUS[0]}", shell=True, executable="/bin/bash",
-                          capture_output=True, text=True)
-    assert proc.stdout.strip() == "7"           # BrokenPipeError reached the caller
+    proc = subprocess.run(
+        f"'{sys.executable}' -c \"{code}\" | head -c 100 > /dev/null; echo ${{PIPESTATUS[0]}}",
+        shell=True,
+        executable="/bin/bash",
+        capture_output=True,
+        text=True,
+    )
+    assert proc.stdout.strip() == "7"  # BrokenPipeError reached the caller
     assert "Traceback" not in proc.stderr

@@ -24,8 +24,10 @@ PROGRAM = b"G21 G90\nG1 X20 Y0 F600\nG2 X0 Y-20 I-20 J0\nM2\n"
 
 def _strict_json(data: bytes):
     """json.loads that rejects NaN/Infinity (which are not JSON)."""
+
     def bad(name):
         raise ValueError(f"non-JSON constant {name}")
+
     return json.loads(data, parse_constant=bad)
 
 
@@ -87,8 +89,9 @@ def _foxglove_fields(schema: dict, path: str = "") -> list[str]:
     fields = []
     for name, field in schema["properties"].items():
         kind = field["type"]
-        assert kind in ("boolean", "string", "number", "integer", "object", "array"), \
+        assert kind in ("boolean", "string", "number", "integer", "object", "array"), (
             f"{path}.{name}: Foxglove cannot read type {kind!r}"
+        )
         if kind == "object":
             fields += _foxglove_fields(field, f"{path}.{name}")
         else:
@@ -216,8 +219,17 @@ def test_nan_written_as_null(tmp_path):
     traj = arc_trajectory(duration_s=0.2)
     q = traj.q.copy()
     q[50, 1] = np.nan
-    bad = Trajectory(axes=traj.axes, dt_s=traj.dt_s, t=traj.t, s=traj.s, feed=traj.feed, q=q,
-                     line=traj.line, planner="x", settings={"w": float("inf")})
+    bad = Trajectory(
+        axes=traj.axes,
+        dt_s=traj.dt_s,
+        t=traj.t,
+        s=traj.s,
+        feed=traj.feed,
+        q=q,
+        line=traj.line,
+        planner="x",
+        settings={"w": float("inf")},
+    )
     path = str(tmp_path / "n.mcap")
     write_mcap(bad, path, {"input": {"note": float("nan")}}, machine_for(traj, 1.5))
     _, meta, msgs = _read_all(path)
@@ -289,8 +301,7 @@ def test_bulk_writer_matches_mcap_writer(chunk_size):
     chans[:5] = [3, 3, 1, 2, 1]  # first appearance order differs from registration order
     times = np.sort(rng.integers(0, 10**9, size=n))
     times[100:110] = times[100]  # equal times
-    datas = [bytes(rng.integers(32, 127, size=int(rng.integers(0, 90))).astype(np.uint8))
-             for _ in range(n)]
+    datas = [bytes(rng.integers(32, 127, size=int(rng.integers(0, 90))).astype(np.uint8)) for _ in range(n)]
 
     def calls(w):
         w.start(profile="", library="test")
@@ -328,8 +339,11 @@ def test_bulk_writer_no_messages_matches_mcap_writer():
     outs = []
     for cls in (Writer, BulkMcapWriter):
         buf = io.BytesIO()
-        w = cls(buf, chunk_size=1024) if cls is BulkMcapWriter else \
-            cls(buf, chunk_size=1024, compression=CompressionType.ZSTD)
+        w = (
+            cls(buf, chunk_size=1024)
+            if cls is BulkMcapWriter
+            else cls(buf, chunk_size=1024, compression=CompressionType.ZSTD)
+        )
         w.start(profile="", library="x")
         w.register_channel("/c", "json", w.register_schema("s", "jsonschema", b"{}"), {})
         w.add_metadata("m", {})
@@ -414,8 +428,7 @@ def test_plan_command_mcap_matches_its_csv(tmp_path):
     from cnc_interp import cli
 
     part = tmp_path / "part.ngc"
-    part.write_text("G21 G90 G17\nG0 X0 Y0 Z1\nG1 Z0 F300\nG1 X10 F1200\n"
-                    "G2 X20 Y0 I5 J0\nG1 Y-5\nG0 Z5\nM2\n")
+    part.write_text("G21 G90 G17\nG0 X0 Y0 Z1\nG1 Z0 F300\nG1 X10 F1200\nG2 X20 Y0 I5 J0\nG1 Y-5\nG0 Z5\nM2\n")
     runner = CliRunner()
     for ext in ("csv", "mcap"):
         res = runner.invoke(cli.main, ["plan", str(part), "-q", "-o", str(tmp_path / f"p.{ext}")])
@@ -447,8 +460,7 @@ def test_limits_batches_join_exactly(tmp_path, monkeypatch, batch):
     path = str(tmp_path / "b.mcap")
     write_mcap(traj, path, None, machine)
     _, _, msgs = _read_all(path)
-    got = np.array([[_strict_json(m.data)[k][a] for k in "vaj" for a in traj.axes]
-                    for m in msgs["/limits"]])
+    got = np.array([[_strict_json(m.data)[k][a] for k in "vaj" for a in traj.axes] for m in msgs["/limits"]])
     want = limit_ratios(traj.q, traj.dt_s, machine.limits())  # (3, K, n)
     want = np.concatenate(list(want), axis=1)
     assert_allclose(got, want, rtol=1e-8, atol=1e-300)

@@ -19,13 +19,22 @@ from ._fit_helpers import all_finite, continuity, distance_to_path, min_speed
 def _run(nodes, tol=np.nan, axes="XYZ", feed=50.0):
     nodes = np.asarray(nodes, float)
     n = nodes.shape[0]
-    return Run("feed", axes, nodes, np.arange(1, n + 1), np.ones(n, int), np.full(n, feed),
-               np.broadcast_to(np.asarray(tol, float), (n,)).copy(), np.full(n, np.nan))
+    return Run(
+        "feed",
+        axes,
+        nodes,
+        np.arange(1, n + 1),
+        np.ones(n, int),
+        np.full(n, feed),
+        np.broadcast_to(np.asarray(tol, float), (n,)).copy(),
+        np.full(n, np.nan),
+    )
 
 
 def _dense_polyline(nodes, per=400):
-    return np.concatenate([nodes[k] + (nodes[k + 1] - nodes[k]) * np.linspace(0, 1, per)[:, None]
-                           for k in range(len(nodes) - 1)])
+    return np.concatenate(
+        [nodes[k] + (nodes[k + 1] - nodes[k]) * np.linspace(0, 1, per)[:, None] for k in range(len(nodes) - 1)]
+    )
 
 
 def _hermite_eval(coef, t, k=0):
@@ -46,8 +55,7 @@ def test_blend_piece_is_g2_with_both_moves_and_within_tolerance(deg):
     (r,), (d,), (dev,) = choose_shapes(np.array([th]), np.array([tol]), np.array([np.inf]))
     assert dev <= tol * (1 + 1e-12)
     p_a, p_b = v - d * t_in, v + d * t_out
-    (coef,), (h,) = blend_piece(p_a[None], p_b[None], t_in[None], t_out[None], np.array([d]),
-                                np.array([r]), np.ones(3))
+    (coef,), (h,) = blend_piece(p_a[None], p_b[None], t_in[None], t_out[None], np.array([d]), np.array([r]), np.ones(3))
     ends = np.array([0.0, h])
     q, q1, q2 = (_hermite_eval(coef, ends, k) for k in range(3))
     assert_allclose(q, [p_a, p_b], atol=1e-12)
@@ -61,8 +69,7 @@ def test_blend_piece_is_g2_with_both_moves_and_within_tolerance(deg):
     path = Path(axes="XYZ", breaks=np.array([0.0, h]), coef=coef[None], line=[1], feed_mm_s=[1.0])
     assert distance_to_path(path, _dense_polyline(legs)).max() <= tol * (1 + 1e-9)
     seg = [(p_a, v), (v, p_b)]
-    off = np.min([np.linalg.norm(np.cross(pts - a, (b - a) / np.linalg.norm(b - a)), axis=1)
-                  for a, b in seg], axis=0)
+    off = np.min([np.linalg.norm(np.cross(pts - a, (b - a) / np.linalg.norm(b - a)), axis=1) for a, b in seg], axis=0)
     assert off.max() <= tol * (1 + 1e-9)
 
 
@@ -73,9 +80,15 @@ def test_unit_blend_table_matches_a_direct_computation():
     # the chosen shape's deviation against 20k samples of the same blend
     th = np.radians(73.0)
     (r,), (d,), (dev_c,) = choose_shapes(np.array([th]), np.array([1.0]), np.array([np.inf]))
-    (coef,), (h,) = blend_piece(np.array([[-d, 0.0]]), d * np.array([[np.cos(th), np.sin(th)]]),
-                                np.array([[1.0, 0.0]]), np.array([[np.cos(th), np.sin(th)]]),
-                                np.array([d]), np.array([r]), np.ones(2))
+    (coef,), (h,) = blend_piece(
+        np.array([[-d, 0.0]]),
+        d * np.array([[np.cos(th), np.sin(th)]]),
+        np.array([[1.0, 0.0]]),
+        np.array([[np.cos(th), np.sin(th)]]),
+        np.array([d]),
+        np.array([r]),
+        np.ones(2),
+    )
     pts = _hermite_eval(coef, np.linspace(0, h, 20001))
     true_dev = np.linalg.norm(pts, axis=1).min()
     assert true_dev <= dev_c <= 1.05 * max(true_dev, 1e-12) + 0.03
@@ -122,8 +135,9 @@ def test_seeded_sharp_polylines_blend_within_tolerance(seed):
         assert all_finite(p) and min_speed(p) > 0
         pos, tan, curv = continuity(p)
         assert pos < 1e-9 and tan < 1e-9 and curv < 1e-6 * max(1.0, np.abs(p.coef).max())
-    dist = np.min([distance_to_path(p, _dense_polyline(nodes, 60), samples_per_seg=200, candidates=8)
-                   for p in paths], axis=0)
+    dist = np.min(
+        [distance_to_path(p, _dense_polyline(nodes, 60), samples_per_seg=200, candidates=8) for p in paths], axis=0
+    )
     assert dist.max() <= tol * (1 + 1e-6)
     # most corners are blended: far fewer paths than corners sharper than 30°
     sharp = (np.degrees(np.abs(turn[1:])) > 30).sum()

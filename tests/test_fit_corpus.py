@@ -46,8 +46,9 @@ CURVATURE_REL_SLACK = 1e-5
 
 def _files():
     if os.environ.get("CNC_FIT_FULL_CORPUS"):
-        return sorted(os.path.relpath(f, CORPUS) for f in glob.glob(os.path.join(CORPUS, "**", "*.ngc"),
-                                                                   recursive=True))
+        return sorted(
+            os.path.relpath(f, CORPUS) for f in glob.glob(os.path.join(CORPUS, "**", "*.ngc"), recursive=True)
+        )
     return SUBSET
 
 

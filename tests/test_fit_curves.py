@@ -19,8 +19,7 @@ def _arc(R=5.0, sweep=np.pi, z1=0.0, c=(10.0, 5.0), a0=-np.pi / 2):
     start = np.array([c[0] + R * np.cos(a0), c[1] + R * np.sin(a0), 0.0])
     a1 = a0 + sweep
     end = np.array([c[0] + R * np.cos(a1), c[1] + R * np.sin(a1), z1])
-    return Arc(line=7, start=start, end=end, plane=(0, 1, 2), center=np.array(c), radius=R,
-               sweep_rad=sweep)
+    return Arc(line=7, start=start, end=end, plane=(0, 1, 2), center=np.array(c), radius=R, sweep_rad=sweep)
 
 
 def _path_of(pf, axes="XYZ"):
@@ -101,19 +100,36 @@ def test_polynomial_cubic_nurbs_within_tolerance_and_g2():
     assert pos < 1e-9 and tan < 1e-9 and curv < 1e-9
     # unit speed at every break (arc-length-like pieces)
     assert_allclose(np.linalg.norm(path.coef[:, 1, :], axis=1), 1.0, rtol=1e-12)
-    assert path.length == pytest.approx(np.linalg.norm(np.diff(ev.points(np.linspace(0, 1, 20001)), axis=0),
-                                                       axis=1).sum(), rel=1e-3)
+    assert path.length == pytest.approx(
+        np.linalg.norm(np.diff(ev.points(np.linspace(0, 1, 20001)), axis=0), axis=1).sum(), rel=1e-3
+    )
 
 
 def test_run_line_arc_line_is_g2_and_within_tolerance():
-    arc = Arc(line=2, start=np.array([10.0, 0, 0]), end=np.array([15.0, 5, 0]), plane=(0, 1, 2),
-              center=np.array([10.0, 5]), radius=5.0, sweep_rad=np.pi / 2)
+    arc = Arc(
+        line=2,
+        start=np.array([10.0, 0, 0]),
+        end=np.array([15.0, 5, 0]),
+        plane=(0, 1, 2),
+        center=np.array([10.0, 5]),
+        radius=5.0,
+        sweep_rad=np.pi / 2,
+    )
     apts = arc.points(np.linspace(0, 1, 9))
     nodes = np.vstack([[0, 0, 0], [5, 0, 0], [10, 0, 0], apts[1:], [15, 12, 0], [15, 20, 0]])
     n = nodes.shape[0]
     line = np.array([1, 1, 1] + [2] * 8 + [3, 3])
-    run = Run("feed", "XYZ", nodes, line, np.ones(n, int), np.full(n, 20.0), np.full(n, np.nan),
-              np.full(n, np.nan), (CurvePiece(2, 10, arc),))
+    run = Run(
+        "feed",
+        "XYZ",
+        nodes,
+        line,
+        np.ones(n, int),
+        np.full(n, 20.0),
+        np.full(n, np.nan),
+        np.full(n, np.nan),
+        (CurvePiece(2, 10, arc),),
+    )
     tol = 1e-3
     (path,) = fit_run(run, FitSettings(tol_mm=tol))
     assert all_finite(path)

@@ -32,8 +32,16 @@ from cnc_interp.gcode.program import Program, Run, Stop
 def _run(nodes, axes="XYZ", kind="feed"):
     nodes = np.asarray(nodes, float)
     n = nodes.shape[0]
-    return Run(kind, axes, nodes, np.arange(1, n + 1), np.ones(n, int),
-               np.full(n, np.inf if kind == "rapid" else 20.0), np.full(n, np.nan), np.full(n, np.nan))
+    return Run(
+        kind,
+        axes,
+        nodes,
+        np.arange(1, n + 1),
+        np.ones(n, int),
+        np.full(n, np.inf if kind == "rapid" else 20.0),
+        np.full(n, np.nan),
+        np.full(n, np.nan),
+    )
 
 
 def _zigzag(seed, n=40):
@@ -94,7 +102,7 @@ def test_build_paths_rejects_bad_breaks_like_path():
 @pytest.mark.parametrize("seed", range(8))
 def test_compiled_polyline_deviation_equals_path_deviation(seed):
     rng = np.random.default_rng(100 + seed)
-    nodes = _zigzag(seed, 12)[:, :2 + seed % 2]
+    nodes = _zigzag(seed, 12)[:, : 2 + seed % 2]
     nodes = np.ascontiguousarray(nodes)
     d = nodes.shape[1]
     # a perturbed piecewise quintic along the polyline: nonzero distances everywhere
@@ -112,21 +120,35 @@ def test_compiled_polyline_deviation_equals_path_deviation(seed):
     if seed % 3 == 0:
         lin[-1] = False
     want = path_deviation(breaks, coef, nodes, tol, lin)
-    got = polyline_path_deviation(breaks, coef, nodes, tol, lin, PATH_DEV_SAMPLES_PER_SPAN,
-                                  PATH_DEV_MIN_SAMPLES, PATH_DEV_MAX_SAMPLES, PATH_DEV_LOCAL_FRAC,
-                                  PATH_DEV_WINDOW, PATH_DEV_FAR_WINDOW, PATH_DEV_FIT_SAMPLES,
-                                  PATH_DEV_NEWTON_ITERS)
+    got = polyline_path_deviation(
+        breaks,
+        coef,
+        nodes,
+        tol,
+        lin,
+        PATH_DEV_SAMPLES_PER_SPAN,
+        PATH_DEV_MIN_SAMPLES,
+        PATH_DEV_MAX_SAMPLES,
+        PATH_DEV_LOCAL_FRAC,
+        PATH_DEV_WINDOW,
+        PATH_DEV_FAR_WINDOW,
+        PATH_DEV_FIT_SAMPLES,
+        PATH_DEV_NEWTON_ITERS,
+    )
     assert want[0] > 0
     assert got == want
-    assert polyline_path_deviation(breaks, coef, nodes, tol, np.zeros(d, dtype=bool), 4, 3, 64, 0.5,
-                                   8, 256, 8, 8) == (0.0, 0.0)
+    assert polyline_path_deviation(breaks, coef, nodes, tol, np.zeros(d, dtype=bool), 4, 3, 64, 0.5, 8, 256, 8, 8) == (
+        0.0,
+        0.0,
+    )
 
 
 def test_single_moves_are_exact_lines_with_zero_deviation():
     # a square: four sharp corners, every side a single move
     sq = np.array([[0, 0, 0], [10, 0, 0], [10, 10, 0], [0, 10, 0], [0, 0, 0]], float) + 1000.0
-    res = fit_program(Program("sq", "XYZ", (_run(sq), Stop(5, "M2", sq[-1])), sq[0], 6),
-                      FitSettings(blend_corners=False))
+    res = fit_program(
+        Program("sq", "XYZ", (_run(sq), Stop(5, "M2", sq[-1])), sq[0], 6), FitSettings(blend_corners=False)
+    )
     paths = res.paths
     assert len(paths) == 4
     for k, p in enumerate(paths):

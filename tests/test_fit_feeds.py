@@ -64,8 +64,9 @@ def test_curved_polyline_segments_never_straddle_a_feed_change(method):
     (p,) = [q for q in res.paths if not q.rapid]
     assert set(np.unique(p.feed_mm_s)) == {50.0, 10.0}
     # every segment's end point lies on the programmed arc part of its own feed
-    ang = np.arctan2(*[np.polynomial.polynomial.polyval(np.diff(p.breaks), p.coef[:, :, i].T,
-                                                       tensor=False) for i in (1, 0)])
+    ang = np.arctan2(
+        *[np.polynomial.polynomial.polyval(np.diff(p.breaks), p.coef[:, :, i].T, tensor=False) for i in (1, 0)]
+    )
     ang0 = np.arctan2(p.coef[:, 0, 1], p.coef[:, 0, 0])
     ang, ang0 = (np.where(x < -0.5 * np.pi, x + 2 * np.pi, x) for x in (ang, ang0))
     # (1e-3 of a move is 0.6 µm of arc: the fit lies within 1 µm of the nodes)

@@ -16,8 +16,16 @@ from ._fit_helpers import all_finite, continuity, distance_to_path, min_speed
 
 def _run(nodes, axes="XYZ", tol=np.nan, feed=20.0, kind="feed"):
     n = nodes.shape[0]
-    return Run(kind, axes, np.asarray(nodes, float), np.arange(1, n + 1), np.ones(n, int),
-               np.full(n, feed), np.full(n, tol), np.full(n, np.nan))
+    return Run(
+        kind,
+        axes,
+        np.asarray(nodes, float),
+        np.arange(1, n + 1),
+        np.ones(n, int),
+        np.full(n, feed),
+        np.full(n, tol),
+        np.full(n, np.nan),
+    )
 
 
 NODES = FitSettings(method="nodes")
@@ -127,8 +135,9 @@ def test_end_constraints_are_met_exactly():
     T1 = np.array([1.0, 0.02, 0.0]) / np.linalg.norm([1.0, 0.02, 0.0])
     K1 = np.array([0.0, -0.02, 0.0])
     K1 -= (K1 @ T1) * T1
-    pf = fit_polyline(nodes, np.full(4, 1e-3), 1e-3, lin, lin, np.arange(4), np.ones(4), 1e-3,
-                      EndState(T0, K0), EndState(T1, K1))
+    pf = fit_polyline(
+        nodes, np.full(4, 1e-3), 1e-3, lin, lin, np.arange(4), np.ones(4), 1e-3, EndState(T0, K0), EndState(T1, K1)
+    )
     path = Path("XYZ", pf.breaks, pf.coef, pf.line, pf.feed_mm_s)
     d = path.derivatives_s(np.array([0.0, path.breaks[-1]]), 2)
     assert_allclose(d[1][0], T0, atol=1e-9)

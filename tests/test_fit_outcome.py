@@ -66,8 +66,7 @@ def test_a_z_wrap_keeps_at_most_two_segments_per_move():
     z = 27.0 + np.cumsum(rng.normal(0, 0.15, 400))
     lines = ["G21 G90", f"G0 X80 Z{z[0]:.3f} A{a[0]:.3f}", "F3000"]
     lines += [f"G1 A{x:.3f} Z{y:.3f}" for x, y in zip(a[1:], z[1:])]
-    res = fit_program(read_program("\n".join(lines + ["M2"]) + "\n", source="w.ngc", axes="XYZA"),
-                      FitSettings())
+    res = fit_program(read_program("\n".join(lines + ["M2"]) + "\n", source="w.ngc", axes="XYZA"), FitSettings())
     st = res.stats
     assert st["within_tolerance"] and st["max_path_dev_rot_ratio"] <= 1 + 1e-6
     assert st["segments_out"] <= 2 * st["nodes_in"]
@@ -92,13 +91,14 @@ def test_a_fit_outside_its_tolerance_fails_with_exit_1_naming_the_line(tmp_path,
     monkeypatch.setattr(fitter, "_fit_run_raw", outside)
     f = tmp_path / "r.ngc"
     f.write_text(ROT9)
-    for cmd in (["fit", str(f), "-m", "mikron-ucp710"],
-                ["plan", str(f), "-m", "mikron-ucp710", "-o", str(tmp_path / "p.csv")]):
+    for cmd in (
+        ["fit", str(f), "-m", "mikron-ucp710"],
+        ["plan", str(f), "-m", "mikron-ucp710", "-o", str(tmp_path / "p.csv")],
+    ):
         r = CliRunner().invoke(main, cmd)
         # (``cli.run`` prints the error's one line and exits with its code)
         assert isinstance(r.exception, FitError) and r.exception.exit_code == 1
-        assert r.exception.format().startswith(
-            f"{f}:4:1: error: the fitted path misses the tolerance on lines 4-6")
+        assert r.exception.format().startswith(f"{f}:4:1: error: the fitted path misses the tolerance on lines 4-6")
         assert "within tolerance" not in r.output
     assert not (tmp_path / "p.csv").exists()
 

@@ -46,7 +46,7 @@ def _programmed_samples(run: Run, per_move: int = 100, per_curve: int = 1000) ->
     pts = []
     in_curve = np.zeros(run.n_nodes - 1, dtype=bool)
     for cp in run.curves:
-        in_curve[cp.first:cp.last] = True
+        in_curve[cp.first : cp.last] = True
         ev = CurveEval(cp.curve)
         pts.append(ev.points(np.linspace(ev.w0, ev.w1, per_curve)))
     f = np.linspace(0.0, 1.0, per_move)[:, None]
@@ -57,8 +57,9 @@ def _programmed_samples(run: Run, per_move: int = 100, per_curve: int = 1000) ->
 
 
 def _worst_distance(paths, points, mask=None, samples=32, candidates=6) -> float:
-    return float(np.min([distance_to_path(p, points, mask, samples, candidates=candidates) for p in paths],
-                        axis=0).max())
+    return float(
+        np.min([distance_to_path(p, points, mask, samples, candidates=candidates) for p in paths], axis=0).max()
+    )
 
 
 @pytest.mark.parametrize("method", ["auto", "nodes"])
@@ -163,8 +164,16 @@ def test_random_mixed_polylines_nodes_3d(seed):
     nodes = np.concatenate([xy, z[:, None]], axis=1)
     tol = float(10 ** rng.uniform(-3, -2))
     n = nodes.shape[0]
-    run = Run("feed", "XYZ", nodes, np.arange(1, n + 1), np.ones(n, int), np.full(n, 20.0),
-              np.full(n, np.nan), np.full(n, np.nan))
+    run = Run(
+        "feed",
+        "XYZ",
+        nodes,
+        np.arange(1, n + 1),
+        np.ones(n, int),
+        np.full(n, 20.0),
+        np.full(n, np.nan),
+        np.full(n, np.nan),
+    )
     settings = FitSettings(tol_mm=tol, method="nodes", corner_deg=60.0)
     paths = fit_run(run, settings)
     for p in paths:
@@ -204,8 +213,7 @@ def test_rotary_deviation_closed_form(extra_deg, expected):
     nodes_r = np.array([[5.0, 0.0, 3.0], [5.0, 20.0, 3.0]])
     lin_r = np.array([True, False, False])
     breaks, coef = _line_pieces(nodes_r[0], nodes_r[1], np.array([0.0, 0.0, extra_deg]))
-    r = rotary_path_deviation(breaks, coef, nodes_r, np.full(2, 1e-3), 1e-3, lin_r,
-                              np.array([False, True, False]))
+    r = rotary_path_deviation(breaks, coef, nodes_r, np.full(2, 1e-3), 1e-3, lin_r, np.array([False, True, False]))
     assert r == pytest.approx(expected, rel=1e-6, abs=1e-9)
 
 
@@ -216,8 +224,9 @@ def test_random_five_axis_polylines_hold_the_rotary_tolerance(seed):
     steps = rng.normal(size=(n, 5)) * np.array([1.0, 1.0, 0.3, 2.0, 5.0])
     pts = np.cumsum(steps, axis=0)
     body = "".join(f"G1 X{p[0]:.4f} Y{p[1]:.4f} Z{p[2]:.4f} A{p[3]:.4f} C{p[4]:.4f}\n" for p in pts)
-    prog = read_program(("G21 G90 G94\nG0 X0 Y0 Z0 A0 C0\nF1200\n" + body + "M2\n").encode(),
-                        source="five.ngc", axes="XYZAC")
+    prog = read_program(
+        ("G21 G90 G94\nG0 X0 Y0 Z0 A0 C0\nF1200\n" + body + "M2\n").encode(), source="five.ngc", axes="XYZAC"
+    )
     res = fit_program(prog, FitSettings(tol_mm=1e-3, tol_deg=1e-3, corner_deg=60.0))
     st = res.stats
     assert st["within_tolerance"]

@@ -20,18 +20,32 @@ from ._fit_helpers import all_finite, continuity, distance_to_path, min_speed
 PI = np.pi
 
 
-@pytest.mark.parametrize("alpha, theta", [
-    # third quadrant and the -π end: θ = π
-    (-PI, PI), (-0.75 * PI, PI), (-0.51 * PI, PI),
-    # fourth quadrant (and the lower end of the third): θ = -π/2 (corrected from "-π")
-    (-0.5100001 * PI, PI), (-0.50999 * PI, -PI / 2), (-0.25 * PI, -PI / 2), (-0.02 * PI, -PI / 2),
-    # first quadrant: θ = 0
-    (-0.019 * PI, 0.0), (0.0, 0.0), (0.25 * PI, 0.0), (0.47 * PI, 0.0),
-    # second quadrant: θ = π/2
-    (0.4701 * PI, PI / 2), (0.75 * PI, PI / 2), (0.96 * PI, PI / 2),
-    # near π: θ = π
-    (0.9601 * PI, PI), (PI, PI),
-])
+@pytest.mark.parametrize(
+    "alpha, theta",
+    [
+        # third quadrant and the -π end: θ = π
+        (-PI, PI),
+        (-0.75 * PI, PI),
+        (-0.51 * PI, PI),
+        # fourth quadrant (and the lower end of the third): θ = -π/2 (corrected from "-π")
+        (-0.5100001 * PI, PI),
+        (-0.50999 * PI, -PI / 2),
+        (-0.25 * PI, -PI / 2),
+        (-0.02 * PI, -PI / 2),
+        # first quadrant: θ = 0
+        (-0.019 * PI, 0.0),
+        (0.0, 0.0),
+        (0.25 * PI, 0.0),
+        (0.47 * PI, 0.0),
+        # second quadrant: θ = π/2
+        (0.4701 * PI, PI / 2),
+        (0.75 * PI, PI / 2),
+        (0.96 * PI, PI / 2),
+        # near π: θ = π
+        (0.9601 * PI, PI),
+        (PI, PI),
+    ],
+)
 def test_eq1_table(alpha, theta):
     assert rotation_angle(alpha) == pytest.approx(theta)
     assert rotation_angles(np.array([alpha]))[0] == pytest.approx(theta)
@@ -44,11 +58,24 @@ def test_eq1_keeps_rotated_inclination_within_049pi():
     assert incl.max() <= 0.49 * PI + 1e-12
 
 
-@pytest.mark.parametrize("alpha, theta", [
-    (-PI, PI), (-0.76 * PI, PI), (-0.74 * PI, -PI / 2), (-0.5 * PI, -PI / 2), (-0.26 * PI, -PI / 2),
-    (-0.24 * PI, 0.0), (-0.02 * PI, 0.0), (0.0, 0.0), (0.24 * PI, 0.0), (0.26 * PI, PI / 2),
-    (0.74 * PI, PI / 2), (0.76 * PI, PI), (PI, PI),
-])
+@pytest.mark.parametrize(
+    "alpha, theta",
+    [
+        (-PI, PI),
+        (-0.76 * PI, PI),
+        (-0.74 * PI, -PI / 2),
+        (-0.5 * PI, -PI / 2),
+        (-0.26 * PI, -PI / 2),
+        (-0.24 * PI, 0.0),
+        (-0.02 * PI, 0.0),
+        (0.0, 0.0),
+        (0.24 * PI, 0.0),
+        (0.26 * PI, PI / 2),
+        (0.74 * PI, PI / 2),
+        (0.76 * PI, PI),
+        (PI, PI),
+    ],
+)
 def test_frame_angle_is_the_nearest_quarter(alpha, theta):
     assert frame_angle(alpha) == pytest.approx(theta)
 

@@ -23,8 +23,16 @@ def _run(nodes, axes="XYZ", tol=np.nan, kind="feed", feed=20.0):
     nodes = np.asarray(nodes, float)
     n = nodes.shape[0]
     tol_arr = np.broadcast_to(np.asarray(tol, float), (n,)).copy()
-    return Run(kind, axes, nodes, np.arange(1, n + 1), np.ones(n, int),
-               np.full(n, np.inf if kind == "rapid" else feed), tol_arr, np.full(n, np.nan))
+    return Run(
+        kind,
+        axes,
+        nodes,
+        np.arange(1, n + 1),
+        np.ones(n, int),
+        np.full(n, np.inf if kind == "rapid" else feed),
+        tol_arr,
+        np.full(n, np.nan),
+    )
 
 
 def _polygon(n_sides, R=10.0, laps=1.0):
@@ -156,14 +164,11 @@ def test_settings_validation_and_from_options():
     assert exact.corner_deg == 0.0 and exact.tol_mm > 0
     blocks = np.array([np.nan, 0.0, 0.005, 0.5])  # plain G64, G61, G64 P0.005, G64 P0.5
     assert_allclose(FitSettings(tol_mm=0.01).node_tolerance(blocks), [0.01, 0.0, 0.005, 0.5])
-    assert_allclose(FitSettings(tol_mm=0.01, tol_mode="stricter").node_tolerance(blocks),
-                    [0.01, 0.0, 0.005, 0.01])
-    assert_allclose(FitSettings(tol_mm=0.01, tol_cap_mm=0.02).node_tolerance(blocks),
-                    [0.01, 0.0, 0.005, 0.02])
+    assert_allclose(FitSettings(tol_mm=0.01, tol_mode="stricter").node_tolerance(blocks), [0.01, 0.0, 0.005, 0.01])
+    assert_allclose(FitSettings(tol_mm=0.01, tol_cap_mm=0.02).node_tolerance(blocks), [0.01, 0.0, 0.005, 0.02])
     assert_allclose(FitSettings(tol_mm=0.01, tol_cap_mm=0.0).node_tolerance(blocks), [0, 0, 0, 0])
     # half the printed quantum is added wherever the path is not exact
-    assert_allclose(FitSettings(tol_mm=0.01, quantum_mm=0.002).node_tolerance(blocks),
-                    [0.011, 0.0, 0.006, 0.501])
+    assert_allclose(FitSettings(tol_mm=0.01, quantum_mm=0.002).node_tolerance(blocks), [0.011, 0.0, 0.006, 0.501])
     with pytest.raises(UsageError):
         FitSettings(tol_cap_mm=-1.0)
 

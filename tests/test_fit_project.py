@@ -44,8 +44,9 @@ def test_march_is_exact_beside_a_line(seed):
     d = distance_to_pieces(breaks, coef, pts, np.ones(3, bool), tol)
     np.testing.assert_allclose(d, np.abs(off), rtol=1e-9, atol=1e-13)
     # the exhaustive search agrees
-    np.testing.assert_allclose(distance_to_pieces(breaks, coef, pts, np.ones(3, bool)), np.abs(off),
-                               rtol=1e-9, atol=1e-13)
+    np.testing.assert_allclose(
+        distance_to_pieces(breaks, coef, pts, np.ones(3, bool)), np.abs(off), rtol=1e-9, atol=1e-13
+    )
 
 
 @pytest.mark.parametrize("seed", range(3))

@@ -23,11 +23,14 @@ def _circle(decimals: int, units: str = "G21", n: int = 200, r: float = 1.0, ext
     return "\n".join([units + " G90 G64", f"G0 X{fmt.format(r)} Y0", "F1000"] + body + ["M2"]) + "\n"
 
 
-@pytest.mark.parametrize("text, quantum_mm, label", [
-    (_circle(4, "G20"), 0.00254, "0.0001 in"),
-    (_circle(3), 0.001, "0.001 mm"),
-    (_circle(5, r=20.0), 0.00001, "0.00001 mm"),
-])
+@pytest.mark.parametrize(
+    "text, quantum_mm, label",
+    [
+        (_circle(4, "G20"), 0.00254, "0.0001 in"),
+        (_circle(3), 0.001, "0.001 mm"),
+        (_circle(5, r=20.0), 0.00001, "0.00001 mm"),
+    ],
+)
 def test_quantum_of_printed_coordinates(text, quantum_mm, label):
     q = coordinate_quantum(read_program(text, source="c.ngc"))
     assert q["detected_mm"] == pytest.approx(quantum_mm, rel=1e-12)
@@ -39,13 +42,23 @@ def test_coarse_or_computed_coordinates_are_exact():
     q = coordinate_quantum(read_program(_circle(2, r=20.0), source="c.ngc"))
     assert q["detected_mm"] == pytest.approx(0.01) and q["quantum_mm"] == 0.0
     # coordinates from expressions fall on no decimal grid
-    lines = ["G21 G90", "G0 X0 Y0", "F1000", "#1=0", "o100 while [#1 LT 40]",
-             "G1 X[COS[#1*9]*7] Y[SIN[#1*9]*7]", "#1=[#1+1]", "o100 endwhile", "M2"]
+    lines = [
+        "G21 G90",
+        "G0 X0 Y0",
+        "F1000",
+        "#1=0",
+        "o100 while [#1 LT 40]",
+        "G1 X[COS[#1*9]*7] Y[SIN[#1*9]*7]",
+        "#1=[#1+1]",
+        "o100 endwhile",
+        "M2",
+    ]
     q = coordinate_quantum(read_program("\n".join(lines) + "\n", source="e.ngc"))
     assert q["quantum_mm"] == 0.0 and q["detected_mm"] == 0.0
     # rotary axes have their own grid
-    text = "\n".join(["G21 G90", "G0 X0 Z0 A0", "F1000"]
-                     + [f"G1 Z{0.1 * k:.4f} A{1.234 * k:.3f}" for k in range(1, 40)] + ["M2"])
+    text = "\n".join(
+        ["G21 G90", "G0 X0 Z0 A0", "F1000"] + [f"G1 Z{0.1 * k:.4f} A{1.234 * k:.3f}" for k in range(1, 40)] + ["M2"]
+    )
     q = coordinate_quantum(read_program(text + "\n", source="a.ngc", axes="XYZA"))
     assert q["detected_deg"] == pytest.approx(0.001) and q["label_deg"] == "0.001 deg"
 
@@ -102,8 +115,9 @@ def test_circle_small_segments_plans_near_its_limits_on_the_xyza_machine():
     own limits allow about 2 s."""
     from cnc_interp.pipeline import plan_part
 
-    out = plan_part(os.path.join(CORPUS, "performance", "circle_small_segments_ncd.ngc"),
-                    os.path.join(CORPUS, "configs", "XYZ.ini"))
+    out = plan_part(
+        os.path.join(CORPUS, "performance", "circle_small_segments_ncd.ngc"), os.path.join(CORPUS, "configs", "XYZ.ini")
+    )
     assert out.report.ok
     assert out.trajectory.duration_s < 3.0
     assert out.fit_stats["quantum"]["label_mm"] == "0.0001 in"

@@ -16,12 +16,14 @@ from cnc_interp.fpga.program import build_program
 from .fpga_cases import gentle_curve, quintic_plan
 
 from .conftest import CORPUS  # noqa: E402
+
 XZ_INI = os.path.join(CORPUS, "configs", "XZ.ini")
 
 
 def cli(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "cnc_interp.cli", *args], capture_output=True,
-                          text=True, cwd=cwd, timeout=600)
+    return subprocess.run(
+        [sys.executable, "-m", "cnc_interp.cli", *args], capture_output=True, text=True, cwd=cwd, timeout=600
+    )
 
 
 @pytest.fixture(scope="module")
@@ -64,8 +66,10 @@ def test_emulate_damaged_file_is_a_clean_error(frame_file, tmp_path):
 
 def _xz_part(tmp_path):
     part = tmp_path / "profile.ngc"
-    part.write_text("G21 G18 G90 G94\nG0 X10 Z0\nF600\nG1 X10 Z-5\nG2 X14 Z-9 R4\n"
-                    "G1 X14 Z-15\nG3 X20 Z-21 K-6\nG1 X22 Z-30\nG0 X30 Z5\nM2\n")
+    part.write_text(
+        "G21 G18 G90 G94\nG0 X10 Z0\nF600\nG1 X10 Z-5\nG2 X14 Z-9 R4\n"
+        "G1 X14 Z-15\nG3 X20 Z-21 K-6\nG1 X22 Z-30\nG0 X30 Z5\nM2\n"
+    )
     return part
 
 
@@ -95,9 +99,11 @@ def test_stream_fit_method_nodes_round_trips(tmp_path):
     # a lathe profile of G1 moves in XZ: planar segments by default, N-axis ones on request
     part = tmp_path / "polyline.ngc"
     th = np.linspace(0.0, 0.5 * np.pi, 41)
-    part.write_text("G21 G18 G90 G94\nG0 X10 Z0\nF600\n"
-                    + "".join(f"G1 X{10 + 5 * np.sin(t):.4f} Z{-5 + 5 * np.cos(t):.4f}\n" for t in th[1:])
-                    + "G0 X30 Z5\nM2\n")
+    part.write_text(
+        "G21 G18 G90 G94\nG0 X10 Z0\nF600\n"
+        + "".join(f"G1 X{10 + 5 * np.sin(t):.4f} Z{-5 + 5 * np.cos(t):.4f}\n" for t in th[1:])
+        + "G0 X30 Z5\nM2\n"
+    )
     frames = {m: tmp_path / f"{m}.bin" for m in ("auto", "nodes")}
     for m, f in frames.items():
         r = cli("stream", str(part), "-m", XZ_INI, "--fit-method", m, "--dry-run", str(f))
@@ -106,8 +112,7 @@ def test_stream_fit_method_nodes_round_trips(tmp_path):
         assert cli("emulate", str(f), "-o", str(emu)).returncode == 0
         from cnc_interp.fpga.commands import StreamOptions, plan_for_stream
 
-        _, b = plan_for_stream(StreamOptions(part=str(part), machine_spec=XZ_INI, planner="variable",
-                                             fit_method=m))
+        _, b = plan_for_stream(StreamOptions(part=str(part), machine_spec=XZ_INI, planner="variable", fit_method=m))
         a = read_csv(str(emu))
         assert a.q.shape == b.q.shape
         assert np.max(np.abs(a.q - b.q)) < FPGA_ROUNDTRIP_TARGET_MM
@@ -151,8 +156,7 @@ def test_stream_errors(tmp_path):
 
     part = _xz_part(tmp_path)
     with pytest.raises(UsageError, match="--resume-from"):
-        run_stream(StreamOptions(part=str(part), machine_spec=XZ_INI, dry_run=str(tmp_path / "x.bin"),
-                                 resume_from=3))
+        run_stream(StreamOptions(part=str(part), machine_spec=XZ_INI, dry_run=str(tmp_path / "x.bin"), resume_from=3))
     # the real libusb backend: no such device on this machine
     with pytest.raises(DeviceError, match="no USB device ffff:fffe found") as ei:
         run_stream(StreamOptions(part=str(part), machine_spec=XZ_INI, device="ffff:fffe", quiet=True))

@@ -72,7 +72,7 @@ def test_parser_resynchronises_after_garbage_and_damage():
     p = FrameParser()
     got = []
     for k in range(0, len(stream), 7):  # arbitrary chunking
-        got += p.feed(stream[k:k + 7])
+        got += p.feed(stream[k : k + 7])
     got += p.feed(frames[4])
     assert [f.seq for f in got] == [1, 2, 4, 5]
     assert p.crc_errors >= 1
@@ -152,16 +152,15 @@ def test_test_vectors_round_trip(tmp_path, prog):
         lines = fh.read().split()
     assert len(lines) == 5 * layout["samples"]
     assert all(len(x) == 32 for x in lines)
-    expected = [tuple(parse_hex_word(x) for x in lines[i:i + 5]) for i in range(0, len(lines), 5)]
+    expected = [tuple(parse_hex_word(x) for x in lines[i : i + 5]) for i in range(0, len(lines), 5)]
     assert replay_vectors(str(tmp_path / "tv"), program.formats) == expected
     # the q columns are the golden model's outputs for those samples
     out = run_program(program)
     first = next(i for i in program.items if hasattr(i, "pieces"))
     h, v = first.plane
     s0 = first.start_sample
-    assert [e[3] for e in expected[:first.n_samples]] == list(out.q[s0:s0 + first.n_samples, h])
-    assert sorted(os.listdir(tmp_path / "tv")) == ["expected.hex", "layout.json", "pieces.hex",
-                                                    "segments.hex"]
+    assert [e[3] for e in expected[: first.n_samples]] == list(out.q[s0 : s0 + first.n_samples, h])
+    assert sorted(os.listdir(tmp_path / "tv")) == ["expected.hex", "layout.json", "pieces.hex", "segments.hex"]
 
 
 def test_same_plan_gives_identical_frames():

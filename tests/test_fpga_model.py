@@ -64,7 +64,7 @@ def test_vectorised_model_equals_sequential_hardware_loop():
     out = run_program(prog)
     for seg in (it for it in prog.items if isinstance(it, FixedSegment)):
         ref = np.array(sequential_segment(seg, prog.formats), dtype=np.int64)
-        got = out.q[seg.start_sample:seg.start_sample + seg.n_samples][:, list(seg.plane)]
+        got = out.q[seg.start_sample : seg.start_sample + seg.n_samples][:, list(seg.plane)]
         np.testing.assert_array_equal(got, ref)
 
 
@@ -125,8 +125,11 @@ def test_overflow_names_segment_and_line():
     msg = ei.value.format()
     import re
 
-    m = re.match(r"wave\.nc:(\d+):1: error: .* overflows Q4\.20 \(24 bits\) in segment (\d+), "
-                 r"source line (\d+)$", msg)
+    m = re.match(
+        r"wave\.nc:(\d+):1: error: .* overflows Q4\.20 \(24 bits\) in segment (\d+), "
+        r"source line (\d+)$",
+        msg,
+    )
     assert m, msg
     # gentle_curve numbers segment k's source line 10 + k
     assert int(m[1]) == int(m[3]) == 10 + int(m[2])
@@ -140,8 +143,14 @@ def _line_path(points, axes="XYZ", rapid=False):
     coef = np.zeros((n, 6, len(axes)))
     coef[:, 0, :] = pts[:-1]
     coef[:, 1, :] = np.diff(pts, axis=0)  # u in [0, 1] per segment
-    return Path(axes=axes, breaks=np.arange(n + 1, dtype=float), coef=coef, line=np.arange(n) + 5,
-                feed_mm_s=np.full(n, 50.0), rapid=rapid)
+    return Path(
+        axes=axes,
+        breaks=np.arange(n + 1, dtype=float),
+        coef=coef,
+        line=np.arange(n) + 5,
+        feed_mm_s=np.full(n, 50.0),
+        rapid=rapid,
+    )
 
 
 def test_straight_moves_in_a_plane_become_segments():
@@ -171,8 +180,7 @@ def test_straight_path_with_a_nonlinear_parametrisation():
     coef[0, :, 0] = [0.0, 2.0, 0.5, -0.1, 0.01, 0.0]
     coef[1, :, 0] = [2.41, 1.0, 0.0, 0.2, 0.0, -0.05]
     coef[:, 0, 1] = 4.0
-    path = Path(axes="XYZ", breaks=np.array([0.0, 1.0, 2.0]), coef=coef, line=[3, 4],
-                feed_mm_s=np.full(2, 20.0))
+    path = Path(axes="XYZ", breaks=np.array([0.0, 1.0, 2.0]), coef=coef, line=[3, 4], feed_mm_s=np.full(2, 20.0))
     pl = planar_form(path)
     assert pl is not None and not np.any(pl.p)
     traj = quintic_plan(path, feed_mm_s=20.0)
@@ -182,8 +190,12 @@ def test_straight_path_with_a_nonlinear_parametrisation():
     # a bent path is not straight
     bent = coef.copy()
     bent[0, 2, 1] = 1e-3
-    assert planar_form(Path(axes="XYZ", breaks=np.array([0.0, 1.0, 2.0]), coef=bent, line=[3, 4],
-                            feed_mm_s=np.full(2, 20.0))) is None
+    assert (
+        planar_form(
+            Path(axes="XYZ", breaks=np.array([0.0, 1.0, 2.0]), coef=bent, line=[3, 4], feed_mm_s=np.full(2, 20.0))
+        )
+        is None
+    )
 
 
 def test_arcs_go_as_segments_split_over_their_chords():

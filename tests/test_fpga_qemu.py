@@ -15,8 +15,12 @@ import pytest
 
 from cnc_interp.fpga.model import run_program
 
-pytestmark = [pytest.mark.qemu, pytest.mark.skipif(os.environ.get("CNC_INTERP_QEMU") != "1",
-                                reason="QEMU USB integration test is opt-in (CNC_INTERP_QEMU=1)")]
+pytestmark = [
+    pytest.mark.qemu,
+    pytest.mark.skipif(
+        os.environ.get("CNC_INTERP_QEMU") != "1", reason="QEMU USB integration test is opt-in (CNC_INTERP_QEMU=1)"
+    ),
+]
 
 
 from .conftest import CORPUS  # noqa: E402
@@ -28,8 +32,10 @@ def test_stream_through_qemu_usb_stack(tmp_path):
     from cnc_interp.fpga.commands import StreamOptions, build_stream
 
     # a whole corpus program (arcs as setpoint blocks, lines as segments), about 70 KB of frames
-    opts = StreamOptions(part=os.path.join(CORPUS, "quick-tests", "arc-arc-test.ngc"),
-                         machine_spec=os.path.join(CORPUS, "configs", "XYZ.ini"))
+    opts = StreamOptions(
+        part=os.path.join(CORPUS, "quick-tests", "arc-arc-test.ngc"),
+        machine_spec=os.path.join(CORPUS, "configs", "XYZ.ini"),
+    )
     prog, frames, _ = build_stream(opts)
     f = tmp_path / "frames.bin"
     f.write_bytes(b"".join(frames))

@@ -30,8 +30,16 @@ def _two_moves():
     b = quintic_plan(path, feed_mm_s=80.0, rest_before=0)
     q = np.concatenate((a.q, b.q - b.q[0] + a.q[-1]))
     K = q.shape[0]
-    traj = Trajectory(axes=a.axes, dt_s=a.dt_s, t=np.arange(K) * a.dt_s, s=np.zeros(K),
-                      feed=np.zeros(K), q=q, line=np.full(K, 7), planner="test")
+    traj = Trajectory(
+        axes=a.axes,
+        dt_s=a.dt_s,
+        t=np.arange(K) * a.dt_s,
+        s=np.zeros(K),
+        feed=np.zeros(K),
+        q=q,
+        line=np.full(K, 7),
+        planner="test",
+    )
     prog = build_program(traj, source="two.nc")
     return prog, a.q.shape[0]
 
@@ -42,7 +50,7 @@ def _limits(q, dt):
     out = []
     for m in range(1, 4):
         x = np.diff(x, axis=0)
-        out.append(np.abs(x).max(axis=0) / dt ** m)
+        out.append(np.abs(x).max(axis=0) / dt**m)
     return out
 
 
@@ -71,7 +79,7 @@ def test_prefill_then_run_to_done():
     # then exactly the program's samples, one per period
     k = core.run_period
     assert k > 0 and np.all(got[:k] == np.array(core._start))
-    np.testing.assert_array_equal(got[k:k + ref.shape[0]], ref)
+    np.testing.assert_array_equal(got[k : k + ref.shape[0]], ref)
 
 
 def test_underrun_is_a_status_and_the_output_holds():

@@ -117,11 +117,20 @@ def test_g80_with_a_motion_code_is_accepted():
     assert_allclose(p.runs[0].nodes[-1], [1, 0, 0])
 
 
-@pytest.mark.parametrize("code,name", [
-    ("G41 D1", "G41"), ("G42", "G42"), ("G38.2 Z-1 F10", "G38.2"), ("G33 Z-1 K1", "G33"),
-    ("G76 P1 Z-1", "G76"), ("M98 P100", "M98"), ("M99", "M99"),
-    ("G95", "G95"), ("M66 P0 L0", "M66"),
-])
+@pytest.mark.parametrize(
+    "code,name",
+    [
+        ("G41 D1", "G41"),
+        ("G42", "G42"),
+        ("G38.2 Z-1 F10", "G38.2"),
+        ("G33 Z-1 K1", "G33"),
+        ("G76 P1 Z-1", "G76"),
+        ("M98 P100", "M98"),
+        ("M99", "M99"),
+        ("G95", "G95"),
+        ("M66 P0 L0", "M66"),
+    ],
+)
 def test_unsupported_constructs_are_named(code, name):
     with pytest.raises(UnsupportedError) as ei:
         prog(f"G21\n{code}\n")
@@ -251,10 +260,18 @@ def test_units_switch_keeps_offsets_physical():
     assert_allclose(p.metadata["final_position"], [50.8, 0, 0])
 
 
-@pytest.mark.parametrize("text,letter", [
-    ("G1 X1 I5 F60\n", "I"), ("G0 X1 R2\n", "R"), ("G1 X1 Q1 F60\n", "Q"), ("G0 X1 L2\n", "L"),
-    ("G0 X1 P1\n", "P"), ("G1 X1 D1 F60\n", "D"), ("G0 X1 H1\n", "H"),
-])
+@pytest.mark.parametrize(
+    "text,letter",
+    [
+        ("G1 X1 I5 F60\n", "I"),
+        ("G0 X1 R2\n", "R"),
+        ("G1 X1 Q1 F60\n", "Q"),
+        ("G0 X1 L2\n", "L"),
+        ("G0 X1 P1\n", "P"),
+        ("G1 X1 D1 F60\n", "D"),
+        ("G0 X1 H1\n", "H"),
+    ],
+)
 def test_words_no_code_uses_are_errors(text, letter):
     with pytest.raises(GCodeError, match=f"{letter} word with no code") as ei:
         prog(text)
@@ -300,8 +317,7 @@ def test_fast_and_general_paths_agree(seed):
 
     text = _random_program(random.Random(seed))
     a = prog(text)
-    slow = "\n".join((ln + " G94") if ln.strip() and not ln.startswith("M2") else ln
-                     for ln in text.split("\n"))
+    slow = "\n".join((ln + " G94") if ln.strip() and not ln.startswith("M2") else ln for ln in text.split("\n"))
     b = prog(slow)
     assert len(a.items) == len(b.items)
     for ra, rb_ in zip(a.runs, b.runs):
@@ -316,8 +332,7 @@ def test_fast_and_general_paths_agree(seed):
 
 def test_coordinate_system_rotation_g10_l2_r():
     # G54 rotated 90 deg about its origin at X10: program +X is machine +Y
-    p = prog("G10 L2 P1 X10 R90\nG0 X1 Y0\nG1 X1 Y2 F60\nG91 X1\nG90\n#1=#5420\n#2=#5421\n"
-             "G0 X#1 Y[#2+1]\n")
+    p = prog("G10 L2 P1 X10 R90\nG0 X1 Y0\nG1 X1 Y2 F60\nG91 X1\nG90\n#1=#5420\n#2=#5421\nG0 X#1 Y[#2+1]\n")
     assert_allclose(p.runs[0].nodes[-1], [10, 1, 0], atol=1e-12)
     assert_allclose(p.runs[1].nodes[1:], [[8, 1, 0], [8, 2, 0]], atol=1e-12)
     assert_allclose(p.metadata["final_position"], [7, 2, 0], atol=1e-12)

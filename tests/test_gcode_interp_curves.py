@@ -30,16 +30,18 @@ def feed_run(p):
 
 def check_piece_nodes(run, piece, tol=CURVE_CHORD_TOL_MM * 1.01):
     """The piece's nodes lie on the exact curve and its ends match the run's nodes."""
-    nodes = run.nodes[piece.first:piece.last + 1]
+    nodes = run.nodes[piece.first : piece.last + 1]
     c = piece.curve
     if isinstance(c, Arc):
         i, j, _ = c.plane
         rr = np.hypot(nodes[:, i] - c.center[0], nodes[:, j] - c.center[1])
-        assert_allclose(rr, c.radius, atol=1e-9 + abs(np.hypot(*(c.start[[i, j]] - c.center))
-                                                    - np.hypot(*(c.end[[i, j]] - c.center))))
+        assert_allclose(
+            rr,
+            c.radius,
+            atol=1e-9 + abs(np.hypot(*(c.start[[i, j]] - c.center)) - np.hypot(*(c.end[[i, j]] - c.center))),
+        )
     assert_allclose(nodes[0], run.nodes[piece.first])
-    assert_allclose(nodes[-1], c.points(np.array([1.0]))[0] if isinstance(c, Arc) else
-                    c.control[-1], atol=1e-9)
+    assert_allclose(nodes[-1], c.points(np.array([1.0]))[0] if isinstance(c, Arc) else c.control[-1], atol=1e-9)
     # midpoints of consecutive nodes are within the chord tolerance of the curve
     if isinstance(c, Arc):
         i, j, _ = c.plane
@@ -64,7 +66,7 @@ def test_g3_quarter_arc_ijk():
     assert run.n_nodes - 2 >= 4
     check_piece_nodes(run, piece)
     # every node of the arc carries the arc's line and feed
-    assert set(run.line[piece.first + 1:]) == {2}
+    assert set(run.line[piece.first + 1 :]) == {2}
     assert_allclose(run.feed_mm_s, 10.0)
 
 
@@ -189,8 +191,7 @@ def _cox_de_boor(u, knots, k, i):
     if knots[i + k - 1] > knots[i]:
         out += (u - knots[i]) / (knots[i + k - 1] - knots[i]) * _cox_de_boor(u, knots, k - 1, i)
     if knots[i + k] > knots[i + 1]:
-        out += (knots[i + k] - u) / (knots[i + k] - knots[i + 1]) * _cox_de_boor(u, knots, k - 1,
-                                                                                i + 1)
+        out += (knots[i + k] - u) / (knots[i + k] - knots[i + 1]) * _cox_de_boor(u, knots, k - 1, i + 1)
     return out
 
 
@@ -201,15 +202,13 @@ def test_linuxcnc_knot_vector():
 
 
 def test_g5_2_nurbs_first_control_point_is_the_current_position():
-    text = ("G0 X10 Y0 Z1\nF600\nG5.2 P1 L4\nX22 Y20 P1\nX13 Y9 P2\nX10 Y22 P1\n"
-            "X7 Y9 P2\nX-2 Y20 P1\nX10 Y0 P1\nG5.3\n")
+    text = "G0 X10 Y0 Z1\nF600\nG5.2 P1 L4\nX22 Y20 P1\nX13 Y9 P2\nX10 Y22 P1\nX7 Y9 P2\nX-2 Y20 P1\nX10 Y0 P1\nG5.3\n"
     p = prog(text)
     piece = only_curve(p)
     c = piece.curve
     assert isinstance(c, Nurbs)
     assert c.order == 4
-    assert_allclose(c.control[:, :2], [[10, 0], [22, 20], [13, 9], [10, 22], [7, 9], [-2, 20],
-                                       [10, 0]])
+    assert_allclose(c.control[:, :2], [[10, 0], [22, 20], [13, 9], [10, 22], [7, 9], [-2, 20], [10, 0]])
     assert_allclose(c.control[:, 2], 1.0)  # Z stays where it was
     assert_allclose(c.weights, [1, 1, 2, 1, 2, 1, 1])
     assert_allclose(c.knots, [0, 0, 0, 0, 1, 2, 3, 4, 4, 4, 4])
@@ -235,8 +234,8 @@ def test_g5_2_nodes_carry_the_g5_2_line_like_the_curve():
     piece = only_curve(p)
     run = feed_run(p)
     assert piece.curve.line == 3
-    assert set(run.line[piece.first + 1:piece.last + 1].tolist()) == {3}
-    assert set(run.col[piece.first + 1:piece.last + 1].tolist()) == {1}
+    assert set(run.line[piece.first + 1 : piece.last + 1].tolist()) == {3}
+    assert set(run.col[piece.first + 1 : piece.last + 1].tolist()) == {1}
 
 
 def test_g5_2_default_order_and_weight_on_the_first_line():
@@ -290,8 +289,10 @@ def test_huge_curves_are_errors_not_hangs():
     with pytest.raises(GCodeError, match="too large"):
         prog("G0 X1000000\nG3 I-1000000 J0 P9000 F60\n")
     with pytest.raises(GCodeError, match="too large"):
-        prog("G0 X0\nF60 G5.2 P1 L3\nX1000000000000 Y1000000000000 P1\n"
-             "X-1000000000000 Y1000000000000 P0.000000001\nX0 Y1 P1000000000\nG5.3\n")
+        prog(
+            "G0 X0\nF60 G5.2 P1 L3\nX1000000000000 Y1000000000000 P1\n"
+            "X-1000000000000 Y1000000000000 P0.000000001\nX0 Y1 P1000000000\nG5.3\n"
+        )
 
 
 def test_arc_nodes_survive_a_new_axis_later_in_the_run():
@@ -301,6 +302,6 @@ def test_arc_nodes_survive_a_new_axis_later_in_the_run():
     for piece in run.curves:
         check_piece_nodes(run, piece)
     first, second = run.curves
-    assert np.all(run.nodes[first.first:first.last + 1, 3] == 0.0)
-    assert np.all(run.nodes[second.first:second.last + 1, 3] == 30.0)
+    assert np.all(run.nodes[first.first : first.last + 1, 3] == 0.0)
+    assert np.all(run.nodes[second.first : second.last + 1, 3] == 30.0)
     assert first.curve.plane == (0, 1, 2)

@@ -28,8 +28,14 @@ def moves(p):
 def test_g81_g98_returns_to_the_initial_level():
     p = prog("G0 X0 Y0 Z10\nG98 G81 X5 Y5 Z-2 R1 F60\nX8\nG80\n")
     assert moves(p)[1:] == [
-        ("rapid", (5, 5, 10)), ("rapid", (5, 5, 1)), ("feed", (5, 5, -2)), ("rapid", (5, 5, 10)),
-        ("rapid", (8, 5, 10)), ("rapid", (8, 5, 1)), ("feed", (8, 5, -2)), ("rapid", (8, 5, 10)),
+        ("rapid", (5, 5, 10)),
+        ("rapid", (5, 5, 1)),
+        ("feed", (5, 5, -2)),
+        ("rapid", (5, 5, 10)),
+        ("rapid", (8, 5, 10)),
+        ("rapid", (8, 5, 1)),
+        ("feed", (8, 5, -2)),
+        ("rapid", (8, 5, 10)),
     ]
     # cycles run as exact path
     feed = [r for r in p.runs if r.kind == "feed"][0]
@@ -39,21 +45,30 @@ def test_g81_g98_returns_to_the_initial_level():
 def test_g81_g99_returns_to_r():
     p = prog("G0 X0 Y0 Z10\nG99 G81 X5 Y5 Z-2 R1 F60\nX8\n")
     assert moves(p)[1:] == [
-        ("rapid", (5, 5, 10)), ("rapid", (5, 5, 1)), ("feed", (5, 5, -2)), ("rapid", (5, 5, 1)),
-        ("rapid", (8, 5, 1)), ("feed", (8, 5, -2)), ("rapid", (8, 5, 1)),
+        ("rapid", (5, 5, 10)),
+        ("rapid", (5, 5, 1)),
+        ("feed", (5, 5, -2)),
+        ("rapid", (5, 5, 1)),
+        ("rapid", (8, 5, 1)),
+        ("feed", (8, 5, -2)),
+        ("rapid", (8, 5, 1)),
     ]
 
 
 def test_below_r_first_rapids_up_to_r():
     p = prog("G0 X0 Y0 Z-1\nG98 G81 X5 Z-3 R2 F60\n")
-    assert moves(p)[1:] == [("rapid", (0, 0, 2)), ("rapid", (5, 0, 2)), ("feed", (5, 0, -3)),
-                            ("rapid", (5, 0, 2))]
+    assert moves(p)[1:] == [("rapid", (0, 0, 2)), ("rapid", (5, 0, 2)), ("feed", (5, 0, -3)), ("rapid", (5, 0, 2))]
 
 
 def test_g82_dwells_at_the_bottom():
     p = prog("G0 Z5\nG82 X1 Z-1 R1 P0.25 F60\n")
-    assert moves(p)[1:] == [("rapid", (1, 0, 5)), ("rapid", (1, 0, 1)), ("feed", (1, 0, -1)),
-                            ("dwell", 0.25), ("rapid", (1, 0, 5))]
+    assert moves(p)[1:] == [
+        ("rapid", (1, 0, 5)),
+        ("rapid", (1, 0, 1)),
+        ("feed", (1, 0, -1)),
+        ("dwell", 0.25),
+        ("rapid", (1, 0, 5)),
+    ]
 
 
 def test_g83_pecks_back_to_r_and_g73_backs_off():
@@ -61,27 +76,33 @@ def test_g83_pecks_back_to_r_and_g73_backs_off():
     m = moves(p)[1:]
     assert m == [
         ("rapid", (0, 0, 1)),
-        ("feed", (0, 0, -1.5)), ("rapid", (0, 0, 1)), ("rapid", (0, 0, -1.246)),
-        ("feed", (0, 0, -4)), ("rapid", (0, 0, 1)), ("rapid", (0, 0, -3.746)),
-        ("feed", (0, 0, -5)), ("rapid", (0, 0, 1)),
+        ("feed", (0, 0, -1.5)),
+        ("rapid", (0, 0, 1)),
+        ("rapid", (0, 0, -1.246)),
+        ("feed", (0, 0, -4)),
+        ("rapid", (0, 0, 1)),
+        ("rapid", (0, 0, -3.746)),
+        ("feed", (0, 0, -5)),
+        ("rapid", (0, 0, 1)),
     ]
     p = prog("G0 Z5\nG99 G73 X0 Y0 Z-5 R1 Q2.5 F60\n")
     m = moves(p)[1:]
     assert m == [
         ("rapid", (0, 0, 1)),
-        ("feed", (0, 0, -1.5)), ("rapid", (0, 0, -1.246)),
-        ("feed", (0, 0, -4)), ("rapid", (0, 0, -3.746)),
-        ("feed", (0, 0, -5)), ("rapid", (0, 0, 1)),
+        ("feed", (0, 0, -1.5)),
+        ("rapid", (0, 0, -1.246)),
+        ("feed", (0, 0, -4)),
+        ("rapid", (0, 0, -3.746)),
+        ("feed", (0, 0, -5)),
+        ("rapid", (0, 0, 1)),
     ]
 
 
 def test_g85_feeds_out_and_g89_dwells_then_feeds_out():
     p = prog("G0 Z5\nG98 G85 X0 Y0 Z-2 R1 F60\n")
-    assert moves(p)[1:] == [("rapid", (0, 0, 1)), ("feed", (0, 0, -2)), ("feed", (0, 0, 1)),
-                            ("rapid", (0, 0, 5))]
+    assert moves(p)[1:] == [("rapid", (0, 0, 1)), ("feed", (0, 0, -2)), ("feed", (0, 0, 1)), ("rapid", (0, 0, 5))]
     p = prog("G0 Z5\nG98 G89 X0 Y0 Z-2 R1 P1 F60\n")
-    assert moves(p)[1:] == [("rapid", (0, 0, 1)), ("feed", (0, 0, -2)), ("dwell", 1.0),
-                            ("feed", (0, 0, 5))]
+    assert moves(p)[1:] == [("rapid", (0, 0, 1)), ("feed", (0, 0, -2)), ("dwell", 1.0), ("feed", (0, 0, 5))]
 
 
 def test_incremental_repeats():
@@ -116,5 +137,4 @@ def test_g80_cancels_and_axis_words_after_it_need_a_motion():
 
 def test_g18_cycle_drills_along_y():
     p = prog("G18 G0 X0 Y5 Z0\nG98 G81 Z1 X2 Y-1 R1 F60\n")
-    assert moves(p)[1:] == [("rapid", (2, 5, 1)), ("rapid", (2, 1, 1)), ("feed", (2, -1, 1)),
-                            ("rapid", (2, 5, 1))]
+    assert moves(p)[1:] == [("rapid", (2, 5, 1)), ("rapid", (2, 1, 1)), ("feed", (2, -1, 1)), ("rapid", (2, 5, 1))]

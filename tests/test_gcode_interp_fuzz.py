@@ -10,10 +10,62 @@ import pytest
 from cnc_interp.errors import CncInterpError
 from cnc_interp.gcode import Run, read_program
 
-G_CODES = ["0", "1", "2", "3", "4", "5", "5.1", "5.2", "5.3", "10", "17", "18", "19", "20", "21",
-           "28", "28.1", "30", "40", "43", "49", "53", "54", "55", "59.3", "61", "61.1", "64",
-           "73", "80", "81", "82", "83", "85", "89", "90", "91", "90.1", "91.1", "92", "92.1",
-           "92.2", "92.3", "93", "94", "98", "99", "7", "8", "33", "38.2", "41", "95", "12"]
+G_CODES = [
+    "0",
+    "1",
+    "2",
+    "3",
+    "4",
+    "5",
+    "5.1",
+    "5.2",
+    "5.3",
+    "10",
+    "17",
+    "18",
+    "19",
+    "20",
+    "21",
+    "28",
+    "28.1",
+    "30",
+    "40",
+    "43",
+    "49",
+    "53",
+    "54",
+    "55",
+    "59.3",
+    "61",
+    "61.1",
+    "64",
+    "73",
+    "80",
+    "81",
+    "82",
+    "83",
+    "85",
+    "89",
+    "90",
+    "91",
+    "90.1",
+    "91.1",
+    "92",
+    "92.1",
+    "92.2",
+    "92.3",
+    "93",
+    "94",
+    "98",
+    "99",
+    "7",
+    "8",
+    "33",
+    "38.2",
+    "41",
+    "95",
+    "12",
+]
 M_CODES = ["0", "1", "2", "3", "5", "6", "8", "9", "30", "60", "48", "66", "98", "100", "200"]
 LETTERS = "XYZABCIJKRPQLFSTHD"
 
@@ -65,21 +117,53 @@ def _structured(rng: random.Random) -> str:
         elif r < 0.4:
             lines.append(f"G{rng.choice(['2', '3'])} X{_num(rng)} Y{_num(rng)} R{_num(rng, -30, 30)}")
         elif r < 0.45:
-            lines.append(f"G{rng.choice(['2', '3'])} I{_num(rng, -5, 5)} J{_num(rng, -5, 5)} "
-                         f"P{rng.randint(1, 3)}")
+            lines.append(f"G{rng.choice(['2', '3'])} I{_num(rng, -5, 5)} J{_num(rng, -5, 5)} P{rng.randint(1, 3)}")
         elif r < 0.5:
             code = rng.choice(["81", "82 P0.1", "83 Q1.5", "73 Q0.7", "85", "89 P0.2"])
-            lines.append(f"G{rng.choice(['98', '99'])} G{code} X{_num(rng)} Y{_num(rng)} "
-                         f"Z{_num(rng, -6, 0)} R{_num(rng, 0, 3)} L{rng.randint(1, 3)}")
+            lines.append(
+                f"G{rng.choice(['98', '99'])} G{code} X{_num(rng)} Y{_num(rng)} "
+                f"Z{_num(rng, -6, 0)} R{_num(rng, 0, 3)} L{rng.randint(1, 3)}"
+            )
             lines.append("G80")
         elif r < 0.55:
-            lines.append(rng.choice(["G91", "G90", "G20", "G21", "G61", "G61.1", "G64 P0.01",
-                                     "G64", "G18", "G19", "G17", "G90.1", "G91.1", "G93", "G94"]))
+            lines.append(
+                rng.choice(
+                    [
+                        "G91",
+                        "G90",
+                        "G20",
+                        "G21",
+                        "G61",
+                        "G61.1",
+                        "G64 P0.01",
+                        "G64",
+                        "G18",
+                        "G19",
+                        "G17",
+                        "G90.1",
+                        "G91.1",
+                        "G93",
+                        "G94",
+                    ]
+                )
+            )
         elif r < 0.6:
-            lines.append(rng.choice([f"G92 X{_num(rng)}", "G92.1", "G92.2", "G92.3",
-                                     f"G10 L2 P{rng.randint(0, 3)} X{_num(rng)} Y{_num(rng)}",
-                                     f"G10 L20 P1 Z{_num(rng)}", f"G5{rng.randint(4, 6)}",
-                                     "G28.1", "G28", f"G53 G0 Z{_num(rng, 0, 20)}"]))
+            lines.append(
+                rng.choice(
+                    [
+                        f"G92 X{_num(rng)}",
+                        "G92.1",
+                        "G92.2",
+                        "G92.3",
+                        f"G10 L2 P{rng.randint(0, 3)} X{_num(rng)} Y{_num(rng)}",
+                        f"G10 L20 P1 Z{_num(rng)}",
+                        f"G5{rng.randint(4, 6)}",
+                        "G28.1",
+                        "G28",
+                        f"G53 G0 Z{_num(rng, 0, 20)}",
+                    ]
+                )
+            )
         elif r < 0.65:
             lines.append(rng.choice(["G4 P0.5", "M0", "M1", "T1 M6", "M3 S1000", "M9"]))
         elif r < 0.7:
@@ -88,8 +172,10 @@ def _structured(rng: random.Random) -> str:
                 lines.append(f"X{_num(rng)} Y{_num(rng)} P{rng.choice(['1', '2', '0.5'])}")
             lines.append("G5.3")
         elif r < 0.75:
-            lines.append(f"G5 I{_num(rng, -3, 3)} J{_num(rng, -3, 3)} P{_num(rng, -3, 3)} "
-                         f"Q{_num(rng, -3, 3)} X{_num(rng)} Y{_num(rng)}")
+            lines.append(
+                f"G5 I{_num(rng, -3, 3)} J{_num(rng, -3, 3)} P{_num(rng, -3, 3)} "
+                f"Q{_num(rng, -3, 3)} X{_num(rng)} Y{_num(rng)}"
+            )
         elif r < 0.8:
             lines.append(f"G1 A{_num(rng, -90, 90)} C{_num(rng, 0, 360)} F{rng.randint(1, 900)}")
         else:

@@ -272,9 +272,35 @@ def test_random_text_never_crashes():
     """Seeded fuzz: arbitrary G-code-like text reads or ends in a clean GCodeError."""
     rng = random.Random(99)
     alphabet = list("GXYZIJKFNOE#[]<>()=+-*/.;%0123456789 \t") + [
-        "o1 ", "if", "while", "endwhile", "endif", "sub", "endsub", "call", "repeat",
-        "endrepeat", "do", "break", "continue", "return", "else", "elseif", "#<a>", "#<_b>",
-        "sin", "atan", "mod", "eq", "and", "exists", "\x00", "\xe9", "\n", "\n", "\n",
+        "o1 ",
+        "if",
+        "while",
+        "endwhile",
+        "endif",
+        "sub",
+        "endsub",
+        "call",
+        "repeat",
+        "endrepeat",
+        "do",
+        "break",
+        "continue",
+        "return",
+        "else",
+        "elseif",
+        "#<a>",
+        "#<_b>",
+        "sin",
+        "atan",
+        "mod",
+        "eq",
+        "and",
+        "exists",
+        "\x00",
+        "\xe9",
+        "\n",
+        "\n",
+        "\n",
     ]
     outcomes = {"ok": 0, "error": 0}
     for _ in range(1500):

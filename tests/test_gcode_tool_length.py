@@ -11,8 +11,7 @@ from cnc_interp.errors import CncInterpWarning, GCodeError, MachineError
 from cnc_interp.gcode import read_program
 from cnc_interp.gcode.tooltable import parse_tool_table
 
-TABLE = parse_tool_table("T1 P1 Z+12.5 D6 ;6 mm end mill\nT2 P2 X0.5 Z-3.25\n\n; spare\nT7 Z100\n",
-                         "tool.tbl")
+TABLE = parse_tool_table("T1 P1 Z+12.5 D6 ;6 mm end mill\nT2 P2 X0.5 Z-3.25\n\n; spare\nT7 Z100\n", "tool.tbl")
 
 
 def nodes(text: str, table=TABLE) -> np.ndarray:
@@ -48,22 +47,26 @@ def test_h0_and_a_new_g43_replace_not_add():
 
 
 def test_g43_1_dynamic_and_g43_2_additional_offsets_in_program_units():
-    q = nodes("G21 G90\nG43.1 Z2\nG0 Z0\nG43.2 H1\nG0 Z0\nG43.2 Z0.5\nG0 Z0\nG20\nG43.1 Z1\n"
-              "G0 Z0\nM2\n")
+    q = nodes("G21 G90\nG43.1 Z2\nG0 Z0\nG43.2 H1\nG0 Z0\nG43.2 Z0.5\nG0 Z0\nG20\nG43.1 Z1\nG0 Z0\nM2\n")
     np.testing.assert_allclose(q[:, 2], [2.0, 14.5, 15.0, 25.4])
 
 
 def test_tlo_parameters_and_g10_l1():
-    prog = read_program(b"G21 G90\nG10 L1 P3 Z4\nG43 H3\n#1=#5403\nG0 Z[#1]\nM2\n", "t.ngc",
-                        axes="XYZ", tool_table=TABLE)
+    prog = read_program(
+        b"G21 G90\nG10 L1 P3 Z4\nG43 H3\n#1=#5403\nG0 Z[#1]\nM2\n", "t.ngc", axes="XYZ", tool_table=TABLE
+    )
     np.testing.assert_allclose(prog.items[0].nodes[-1], [0.0, 0.0, 8.0])
     assert 3 not in TABLE  # the caller's table is not edited
 
 
 def test_errors_name_the_block():
-    for text, msg in (("G43 H9\n", "not in the tool table"), ("G43.1\n", "G43.1 without axis"),
-                      ("G43.2\n", "G43.2 without H"), ("G43 H1.5\n", "H must be"),
-                      ("G10 L10 P1 Z0\nG43 H1\n", "G10 L10/L11")):
+    for text, msg in (
+        ("G43 H9\n", "not in the tool table"),
+        ("G43.1\n", "G43.1 without axis"),
+        ("G43.2\n", "G43.2 without H"),
+        ("G43 H1.5\n", "H must be"),
+        ("G10 L10 P1 Z0\nG43 H1\n", "G10 L10/L11"),
+    ):
         with pytest.raises(GCodeError, match=msg) as exc:
             read_program(f"G21 G90\n{text}M2\n".encode(), "e.ngc", axes="XYZ", tool_table=TABLE)
         assert exc.value.location.line >= 2
@@ -89,8 +92,10 @@ def test_cli_tool_table_and_ini_emcio(tmp_path):
     assert res.code == 0 and res.err == "", res.explain()
     assert res.out.decode().strip().splitlines()[-1].endswith(",17.5")
     ini = tmp_path / "m.ini"
-    ini.write_text("[EMC]\nMACHINE = m\n[TRAJ]\nCOORDINATES = XYZ\n[EMCIO]\nTOOL_TABLE = tool.tbl\n"
-                   + "".join(f"[AXIS_{a}]\nMAX_VELOCITY = 100\nMAX_ACCELERATION = 1000\n" for a in "XYZ"))
+    ini.write_text(
+        "[EMC]\nMACHINE = m\n[TRAJ]\nCOORDINATES = XYZ\n[EMCIO]\nTOOL_TABLE = tool.tbl\n"
+        + "".join(f"[AXIS_{a}]\nMAX_VELOCITY = 100\nMAX_ACCELERATION = 1000\n" for a in "XYZ")
+    )
     res = run_inproc("plan", part, "-m", ini, "-q")
     assert res.code == 0 and res.out.decode().strip().splitlines()[-1].endswith(",17.5"), res.explain()
     res = run_inproc("plan", part, "-q")

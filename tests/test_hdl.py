@@ -33,8 +33,7 @@ def _random_segments(n, seed0=500):
     for seed in range(n):
         rng = np.random.default_rng(seed0 + seed)
         path = gentle_curve(int(rng.integers(3, 9)), seed=seed0 + seed)
-        traj = quintic_plan(path, feed_mm_s=float(rng.uniform(5, 300)),
-                            dt_s=float(rng.choice([5e-4, 1e-3, 2e-3])))
+        traj = quintic_plan(path, feed_mm_s=float(rng.uniform(5, 300)), dt_s=float(rng.choice([5e-4, 1e-3, 2e-3])))
         segs += _segments(build_program(traj, [path]))
     return segs
 
@@ -55,8 +54,9 @@ def test_verilog_datapath_bit_exact_ci_subset(tmp_path):
         if os.environ.get("CI"):
             pytest.fail("CI must install verilator (see .ci/run)")
         pytest.skip("no Verilog simulator (apt-get install verilator)")
-    prog, _, _ = build_stream(StreamOptions(part="samples/gcode/lathe-profile.ngc",
-                                            machine_spec="xz-lathe", planner="variable", quiet=True))
+    prog, _, _ = build_stream(
+        StreamOptions(part="samples/gcode/lathe-profile.ngc", machine_spec="xz-lathe", planner="variable", quiet=True)
+    )
     segs = _segments(prog) + _random_segments(12)
     ref = golden_samples(segs, prog.formats)
     assert len(ref) >= 10_000

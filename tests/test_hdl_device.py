@@ -84,8 +84,10 @@ def test_dry_run_frame_file_through_the_verilog_device(tmp_path):
     from cnc_interp.fpga.frames import read_frame_file
 
     part = tmp_path / "p.ngc"
-    part.write_text("G21 G18 G90 G94\nG0 X10 Z0\nF600\nG1 X10 Z-5\nG2 X14 Z-9 R4\nG1 X14 Z-15\n"
-                    "G3 X20 Z-21 K-6\nG1 X22 Z-30\nG0 X30 Z5\nM2\n")
+    part.write_text(
+        "G21 G18 G90 G94\nG0 X10 Z0\nF600\nG1 X10 Z-5\nG2 X14 Z-9 R4\nG1 X14 Z-15\n"
+        "G3 X20 Z-21 K-6\nG1 X22 Z-30\nG0 X30 Z5\nM2\n"
+    )
     out = tmp_path / "p.bin"
     run_stream(StreamOptions(part=str(part), machine_spec="xz-lathe", dry_run=str(out), quiet=True))
     frames = [f.encode() for f in read_frame_file(str(out))]

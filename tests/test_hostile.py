@@ -135,10 +135,10 @@ def test_disk_full_on_a_device_is_exit_1():
 def test_termination_leaves_no_temporary_file(tmp_path, sig):
     # a long enough plan that the signal lands mid-run
     prog = tmp_path / "long.ngc"
-    prog.write_text("G21 G90 F600\n" + "".join(f"G1 X{(i % 2) * 50} Y{i * 0.1:.1f}\n"
-                                               for i in range(400)) + "M2\n")
-    proc = subprocess.Popen([console_script(), "plan", str(prog), "-o", "out.csv", "-q"],
-                            cwd=tmp_path, stderr=subprocess.PIPE)
+    prog.write_text("G21 G90 F600\n" + "".join(f"G1 X{(i % 2) * 50} Y{i * 0.1:.1f}\n" for i in range(400)) + "M2\n")
+    proc = subprocess.Popen(
+        [console_script(), "plan", str(prog), "-o", "out.csv", "-q"], cwd=tmp_path, stderr=subprocess.PIPE
+    )
     time.sleep(2.0)
     proc.send_signal(sig)
     proc.wait(timeout=120)
@@ -146,13 +146,20 @@ def test_termination_leaves_no_temporary_file(tmp_path, sig):
 
 
 def test_reader_closing_early_exits_0():
-    proc = subprocess.Popen(f"'{console_script()}' plan '{PART}' | head -1", shell=True,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            executable="/bin/bash")
+    proc = subprocess.Popen(
+        f"'{console_script()}' plan '{PART}' | head -1",
+        shell=True,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        executable="/bin/bash",
+    )
     out, err = proc.communicate(timeout=300)
     assert out == b"t,s,feed,X,Y,Z\n"
-    status = subprocess.run(["bash", "-c", f"'{console_script()}' plan '{PART}' | head -1 >/dev/null;"
-                             " echo ${PIPESTATUS[0]}"], capture_output=True, timeout=300)
+    status = subprocess.run(
+        ["bash", "-c", f"'{console_script()}' plan '{PART}' | head -1 >/dev/null; echo ${{PIPESTATUS[0]}}"],
+        capture_output=True,
+        timeout=300,
+    )
     assert status.stdout.strip() == b"0", (status.stdout, status.stderr)
     assert b"rror" not in err
 
@@ -190,10 +197,17 @@ def test_units_switch_keeps_the_feed_in_effect():
 
 
 # -- numbers at the boundary ---------------------------------------------------------------------
-@pytest.mark.parametrize("text", [
-    "G1 X[1*10**308]", "G1 X[10**300]", "G1 X1e9 Y1e9 X2e9", "G4 P[10**300]",
-    "G1 X[-10**12]", "G0 Z[10**10]",
-])
+@pytest.mark.parametrize(
+    "text",
+    [
+        "G1 X[1*10**308]",
+        "G1 X[10**300]",
+        "G1 X1e9 Y1e9 X2e9",
+        "G4 P[10**300]",
+        "G1 X[-10**12]",
+        "G0 Z[10**10]",
+    ],
+)
 def test_huge_numbers_in_gcode_are_located_errors(tmp_path, text):
     prog = tmp_path / "big.ngc"
     prog.write_text(f"G21 G90 F600\n{text}\nM2\n")
@@ -202,23 +216,43 @@ def test_huge_numbers_in_gcode_are_located_errors(tmp_path, text):
     assert not (tmp_path / "o.csv").exists()
 
 
-@pytest.mark.parametrize("opt", [["--dt", "1e300"], ["--dt", "100"], ["--dt", "nan"],
-                                 ["--dt", "1e-9"], ["--tol", "nan"], ["--tol", "1e154"],
-                                 ["--tol", "inf"], ["--start", "X=1e300"], ["--start", "X=nan"]])
+@pytest.mark.parametrize(
+    "opt",
+    [
+        ["--dt", "1e300"],
+        ["--dt", "100"],
+        ["--dt", "nan"],
+        ["--dt", "1e-9"],
+        ["--tol", "nan"],
+        ["--tol", "1e154"],
+        ["--tol", "inf"],
+        ["--start", "X=1e300"],
+        ["--start", "X=nan"],
+    ],
+)
 def test_out_of_range_options_are_usage_errors(opt):
     res = run_inproc("plan", PART, "-q", "-o", os.devnull, *opt)
     assert res.code == 2 and "Traceback" not in res.err, res.explain()
     assert len(res.err.strip().splitlines()) == 1
 
 
-MACHINE = ("{top}[axes.X]\nvmax = {v}\namax = 1000\njmax = 1e5\n[axes.Y]\nvmax = 100\namax = 1000\n"
-           "jmax = 1e5\n[axes.Z]\nvmax = 100\namax = 1000\njmax = 1e5\n")
+MACHINE = (
+    "{top}[axes.X]\nvmax = {v}\namax = 1000\njmax = 1e5\n[axes.Y]\nvmax = 100\namax = 1000\n"
+    "jmax = 1e5\n[axes.Z]\nvmax = 100\namax = 1000\njmax = 1e5\n"
+)
 
 
-@pytest.mark.parametrize("top,v,where", [
-    ("", "1e300", ":2:"), ("", "nan", ":2:"), ("", "123456789012345678901234567890", ":2:"),
-    ("tol = 1e300\n", "100", ":1:"), ("dt = 100\n", "100", ":1:"), ("dt = 1e-12\n", "100", ":1:"),
-])
+@pytest.mark.parametrize(
+    "top,v,where",
+    [
+        ("", "1e300", ":2:"),
+        ("", "nan", ":2:"),
+        ("", "123456789012345678901234567890", ":2:"),
+        ("tol = 1e300\n", "100", ":1:"),
+        ("dt = 100\n", "100", ":1:"),
+        ("dt = 1e-12\n", "100", ":1:"),
+    ],
+)
 def test_insane_machine_values_are_located_errors(tmp_path, top, v, where):
     m = tmp_path / "m.toml"
     m.write_text(MACHINE.format(top=top, v=v))
@@ -264,8 +298,11 @@ def test_cr_only_line_ends_and_a_bom_read_as_lines():
     from cnc_interp.gcode import read_program
 
     ref = read_program(b"G21 G90 F600\nG1 X10\nG1 Y10\nM2\n", "a.ngc")
-    for data in (b"G21 G90 F600\rG1 X10\rG1 Y10\rM2\r", b"\xef\xbb\xbfG21 G90 F600\nG1 X10\nG1 Y10\nM2\n",
-                 b"G21 G90 F600\r\nG1 X10\r\nG1 Y10\r\nM2\r\n"):
+    for data in (
+        b"G21 G90 F600\rG1 X10\rG1 Y10\rM2\r",
+        b"\xef\xbb\xbfG21 G90 F600\nG1 X10\nG1 Y10\nM2\n",
+        b"G21 G90 F600\r\nG1 X10\r\nG1 Y10\r\nM2\r\n",
+    ):
         prog = read_program(data, "b.ngc")
         np.testing.assert_array_equal(prog.items[0].nodes, ref.items[0].nodes)
         assert prog.line_count == 4
@@ -284,8 +321,7 @@ def test_nested_loops_share_one_iteration_budget(monkeypatch):
     from cnc_interp.gcode import oword, read_program
 
     monkeypatch.setattr(oword, "LOOP_TOTAL_ITERATION_LIMIT", 5000)
-    text = (b"G21 G90 F600\no1 repeat [100]\no2 repeat [100]\n#1=[#1+1]\no2 endrepeat\n"
-            b"o1 endrepeat\nM2\n")
+    text = b"G21 G90 F600\no1 repeat [100]\no2 repeat [100]\n#1=[#1+1]\no2 endrepeat\no1 endrepeat\nM2\n"
     with pytest.raises(GCodeError, match="in all"):
         read_program(text, "n.ngc")
     read_program(text.replace(b"[100]", b"[50]"), "n.ngc")  # 2,550 iterations pass
@@ -311,9 +347,9 @@ def test_held_time_enters_the_budget():
     from cnc_interp.plan.machine_io import load_machine
 
     m = load_machine("generic-mill")
-    check_sample_budget([], m, 1e-3, "x", available=10 ** 9, held_s=10.0)
+    check_sample_budget([], m, 1e-3, "x", available=10**9, held_s=10.0)
     with pytest.raises(PlanError):
-        check_sample_budget([], m, 1e-3, "x", available=10 ** 9, held_s=1e5)
+        check_sample_budget([], m, 1e-3, "x", available=10**9, held_s=1e5)
 
 
 # -- emulate -----------------------------------------------------------------------------------
@@ -345,13 +381,22 @@ def _with_config(frames, **change):
         fields[2] = change["dt"]
     if "n_samples" in change:
         fields[4] = change["n_samples"]
-    payload = CONFIG.pack(*fields) + cfg.payload[CONFIG.size:]
+    payload = CONFIG.pack(*fields) + cfg.payload[CONFIG.size :]
     return [replace(cfg, payload=payload)] + list(frames[1:])
 
 
-@pytest.mark.parametrize("change", [{"dt": float("nan")}, {"dt": 0.0}, {"dt": -0.001},
-                                    {"dt": float("inf")}, {"axes": b"QQ"}, {"axes": b"XX"},
-                                    {"n_samples": 0xFFFFFFFF}])
+@pytest.mark.parametrize(
+    "change",
+    [
+        {"dt": float("nan")},
+        {"dt": 0.0},
+        {"dt": -0.001},
+        {"dt": float("inf")},
+        {"axes": b"QQ"},
+        {"axes": b"XX"},
+        {"n_samples": 0xFFFFFFFF},
+    ],
+)
 def test_emulate_refuses_insane_config_with_valid_crc(tmp_path, lathe_frames, change):
     f = tmp_path / "bad.bin"
     _write_frames(f, _with_config(lathe_frames, **change))
@@ -410,9 +455,10 @@ def test_batch_baseline_with_a_list_key_is_an_error(tmp_path):
 def test_a_crashed_program_fails_the_batch_without_a_baseline():
     from cnc_interp.batch import compare
 
-    recs = [{"key": "a", "status": "ok", "worst_ratio": 0.9, "cycle_time_s": 1.0, "message": ""},
-            {"key": "b", "status": "crash", "worst_ratio": None, "cycle_time_s": None,
-             "message": "signal 11"}]
+    recs = [
+        {"key": "a", "status": "ok", "worst_ratio": 0.9, "cycle_time_s": 1.0, "message": ""},
+        {"key": "b", "status": "crash", "worst_ratio": None, "cycle_time_s": None, "message": "signal 11"},
+    ]
     assert compare(recs, None, 0.01)["regressions"] == 1
     assert compare(recs[:1], None, 0.01)["regressions"] == 0
     base = {"a": recs[0], "b": dict(recs[1], status="ok")}
@@ -432,10 +478,12 @@ def test_batch_has_a_default_timeout():
 def test_sigterm_to_a_batch_kills_its_workers(tmp_path):
     prog = tmp_path / "slow.ngc"
     # a program that keeps a worker busy for a long time
-    prog.write_text("G21 G90 F600\n" + "".join(f"G1 X{(i % 2) * 50} Y{i * 0.1:.1f}\n"
-                                               for i in range(3000)) + "M2\n")
-    proc = subprocess.Popen([console_script(), "batch", str(prog), "-m", "generic-mill", "-q",
-                             "-j", "1"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    prog.write_text("G21 G90 F600\n" + "".join(f"G1 X{(i % 2) * 50} Y{i * 0.1:.1f}\n" for i in range(3000)) + "M2\n")
+    proc = subprocess.Popen(
+        [console_script(), "batch", str(prog), "-m", "generic-mill", "-q", "-j", "1"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     time.sleep(3.0)
     children = subprocess.run(["pgrep", "-P", str(proc.pid)], capture_output=True, text=True)
     kids = [int(x) for x in children.stdout.split()]
@@ -443,8 +491,9 @@ def test_sigterm_to_a_batch_kills_its_workers(tmp_path):
     proc.wait(timeout=60)
     time.sleep(0.5)
     for pid in kids:
-        assert not os.path.exists(f"/proc/{pid}") or \
-            open(f"/proc/{pid}/stat").read().split()[2] == "Z", f"worker {pid} survived"
+        assert not os.path.exists(f"/proc/{pid}") or open(f"/proc/{pid}/stat").read().split()[2] == "Z", (
+            f"worker {pid} survived"
+        )
 
 
 # -- verify as a proof -------------------------------------------------------------------------
@@ -463,10 +512,8 @@ def _edit_csv(src, dst, fn):
 
 
 def test_verify_needs_every_machine_axis(tmp_path, plan_csv):
-    no_z = _edit_csv(plan_csv, tmp_path / "noz.csv",
-                     lambda ls: [",".join(ln.split(",")[:5]) for ln in ls])
-    only = _edit_csv(plan_csv, tmp_path / "only.csv",
-                     lambda ls: [",".join(ln.split(",")[:3]) for ln in ls])
+    no_z = _edit_csv(plan_csv, tmp_path / "noz.csv", lambda ls: [",".join(ln.split(",")[:5]) for ln in ls])
+    only = _edit_csv(plan_csv, tmp_path / "only.csv", lambda ls: [",".join(ln.split(",")[:3]) for ln in ls])
     for f in (no_z, only):
         assert "no column for machine axis" in one_error_line(run_inproc("verify", f, "-m", "generic-mill"))
 
@@ -494,6 +541,7 @@ def test_verify_fails_on_a_violation_just_past_the_documented_slack(tmp_path, pl
                 f = ln.split(",")
                 out.append(",".join(f[:3] + [repr(float(x) * k) for x in f[3:]]))
             return out
+
         return fn
 
     within = _edit_csv(plan_csv, tmp_path / "in.csv", scale(1.0 + 1e-11))

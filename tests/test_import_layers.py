@@ -65,7 +65,7 @@ def _imports(name: str, is_pkg: bool, path: str):
                 parts = parts[: len(parts) - node.level + 1]
                 base = ".".join(parts + ([node.module] if node.module else []))
             elif node.module and (node.module + ".").startswith("cnc_interp."):
-                base = node.module[len("cnc_interp."):] if node.module != "cnc_interp" else ""
+                base = node.module[len("cnc_interp.") :] if node.module != "cnc_interp" else ""
             else:
                 continue
             for alias in node.names:
@@ -75,7 +75,7 @@ def _imports(name: str, is_pkg: bool, path: str):
         elif isinstance(node, ast.Import):
             for alias in node.names:
                 if alias.name.startswith("cnc_interp."):
-                    yield alias.name[len("cnc_interp."):], node.lineno
+                    yield alias.name[len("cnc_interp.") :], node.lineno
 
 
 def _file_of(mod: str) -> str:
@@ -94,8 +94,9 @@ def test_no_module_imports_from_a_higher_floor():
             upward = FLOORS[dst] > FLOORS[src]
             sideways = FLOORS[dst] == FLOORS[src] == 4 and dst != src
             if upward or sideways:
-                bad.append(f"cnc_interp/{os.path.relpath(path, PKG_DIR)}:{line}: "
-                           f"{src} imports {dst} (cnc_interp.{target})")
+                bad.append(
+                    f"cnc_interp/{os.path.relpath(path, PKG_DIR)}:{line}: {src} imports {dst} (cnc_interp.{target})"
+                )
     assert not bad, "\n".join(bad)
 
 

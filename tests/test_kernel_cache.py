@@ -24,8 +24,13 @@ def _tree(root):
 
 def _caches(root):
     made = {
-        "__pycache__": ["a.k-4.py311.nbi", "a.k-4.py311.1.nbc", "b.f-1.py311.nbi", "c.g-1.py311.nbi",
-                        "a.cpython-311.pyc"],
+        "__pycache__": [
+            "a.k-4.py311.nbi",
+            "a.k-4.py311.1.nbc",
+            "b.f-1.py311.nbi",
+            "c.g-1.py311.nbi",
+            "a.cpython-311.pyc",
+        ],
         "sub/__pycache__": ["d.h-1.py311.nbi", "__init__.x-1.py311.nbi"],
     }
     for folder, names in made.items():
@@ -35,8 +40,12 @@ def _caches(root):
 
 
 def _left(root):
-    return sorted(os.path.relpath(os.path.join(d, f), root) for d, _, fs in os.walk(root)
-                  for f in fs if f.endswith((".nbi", ".nbc")))
+    return sorted(
+        os.path.relpath(os.path.join(d, f), root)
+        for d, _, fs in os.walk(root)
+        for f in fs
+        if f.endswith((".nbi", ".nbc"))
+    )
 
 
 def test_first_run_drops_everything_then_only_what_changed(tmp_path):

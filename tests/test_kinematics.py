@@ -11,12 +11,19 @@ from cnc_interp.plan.machine import Machine
 
 def machine(axes="XYZAC", kind="xyzac-trt", **params):
     n = len(axes)
-    return Machine(name="t", axes=axes, vmax=np.ones(n), amax=np.ones(n), jmax=np.ones(n),
-                   dt_s=0.001, kinematics=kind, kinematics_params=params)
+    return Machine(
+        name="t",
+        axes=axes,
+        vmax=np.ones(n),
+        amax=np.ones(n),
+        jmax=np.ones(n),
+        dt_s=0.001,
+        kinematics=kind,
+        kinematics_params=params,
+    )
 
 
-PARAMS = dict(x_rot_point=10.0, y_rot_point=-20.0, z_rot_point=5.0, y_offset=3.0,
-              z_offset=-7.0, tool_offset=2.0)
+PARAMS = dict(x_rot_point=10.0, y_rot_point=-20.0, z_rot_point=5.0, y_offset=3.0, z_offset=-7.0, tool_offset=2.0)
 
 
 def test_trivial_is_identity():
@@ -32,11 +39,10 @@ def test_trivial_is_identity():
 def test_xyzac_round_trip(params):
     k = make_kinematics(machine(**params))
     rng = np.random.default_rng(7)
-    p = np.column_stack([rng.uniform(-200, 200, (1000, 3)), rng.uniform(-120, 120, 1000),
-                         rng.uniform(-720, 720, 1000)])
+    p = np.column_stack([rng.uniform(-200, 200, (1000, 3)), rng.uniform(-120, 120, 1000), rng.uniform(-720, 720, 1000)])
     q = k.to_joints(p)
     assert_allclose(k.to_program(q), p, rtol=0, atol=1e-9)
-    assert_allclose(q[:, 3:], p[:, 3:], rtol=0, atol=0)     # rotary joints are the angles
+    assert_allclose(q[:, 3:], p[:, 3:], rtol=0, atol=0)  # rotary joints are the angles
     # rotations about a pivot keep distances to it (offsets 0 case)
     if not params:
         assert_allclose(np.linalg.norm(q[:, :3], axis=1), np.linalg.norm(p[:, :3], axis=1), rtol=1e-12)
@@ -66,18 +72,33 @@ def test_xyzac_matches_linuxcnc_inverse_formula():
     a, c = np.radians(p[:, 3]), np.radians(p[:, 4])
     x, y, z = p[:, 0] - rx, p[:, 1] - ry, p[:, 2] - rz
     jx = np.cos(c) * x - np.sin(c) * y + rx
-    jy = (np.sin(c) * np.cos(a) * x + np.cos(c) * np.cos(a) * y - np.sin(a) * z
-          - np.cos(a) * dy + np.sin(a) * dz + dy + ry)
-    jz = (np.sin(c) * np.sin(a) * x + np.cos(c) * np.sin(a) * y + np.cos(a) * z
-          - np.sin(a) * dy - np.cos(a) * dz + dz + rz)
+    jy = (
+        np.sin(c) * np.cos(a) * x
+        + np.cos(c) * np.cos(a) * y
+        - np.sin(a) * z
+        - np.cos(a) * dy
+        + np.sin(a) * dz
+        + dy
+        + ry
+    )
+    jz = (
+        np.sin(c) * np.sin(a) * x
+        + np.cos(c) * np.sin(a) * y
+        + np.cos(a) * z
+        - np.sin(a) * dy
+        - np.cos(a) * dz
+        + dz
+        + rz
+    )
     assert_allclose(k.to_joints(p)[:, :3], np.column_stack([jx, jy, jz]), atol=1e-10)
 
 
 def test_xyzac_jacobian_matches_finite_differences():
     k = make_kinematics(machine(axes="XYZACW", **PARAMS))
     rng = np.random.default_rng(11)
-    p = np.column_stack([rng.uniform(-50, 50, (5, 3)), rng.uniform(-90, 90, 5),
-                         rng.uniform(0, 360, 5), rng.uniform(-5, 5, 5)])
+    p = np.column_stack(
+        [rng.uniform(-50, 50, (5, 3)), rng.uniform(-90, 90, 5), rng.uniform(0, 360, 5), rng.uniform(-5, 5, 5)]
+    )
     jac = k.jacobian(p)
     h = 1e-6
     for j in range(6):
@@ -85,7 +106,7 @@ def test_xyzac_jacobian_matches_finite_differences():
         e[j] = h
         fd = (k.to_joints(p + e) - k.to_joints(p - e)) / (2 * h)
         assert_allclose(jac[:, :, j], fd, atol=1e-6)
-    assert_allclose(k.to_joints(p)[:, 5], p[:, 5])   # W passes through
+    assert_allclose(k.to_joints(p)[:, 5], p[:, 5])  # W passes through
 
 
 def test_xyzac_needs_axes_and_known_params():

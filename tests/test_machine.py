@@ -11,11 +11,9 @@ from numpy.testing import assert_allclose
 from cnc_interp.constants import MM_PER_INCH
 from cnc_interp.plan.machine_io import DEFAULT_JERK_PER_ACCEL_1_S
 from cnc_interp.errors import MachineError
-from cnc_interp.plan.machine_io import (
-    DEFAULT_PRESET, PRESETS, format_presets, load_machine, preset_table)
+from cnc_interp.plan.machine_io import DEFAULT_PRESET, PRESETS, format_presets, load_machine, preset_table
 
-CORPUS_CONFIGS = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "corpus",
-                              "linuxcnc", "configs")
+CORPUS_CONFIGS = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "corpus", "linuxcnc", "configs")
 
 GOOD = """\
 name = "Test mill"
@@ -65,35 +63,39 @@ def test_toml_axis_order_is_machine_order(tmp_path):
 
 
 def test_kinematics_table_form(tmp_path):
-    text = ('[kinematics]\ntype = "xyzac-trt"\nz-offset = 12.5\n' +
-            "".join(f"[axes.{a}]\nvmax=100\namax=1000\njmax=10000\n" for a in "XYZAC"))
+    text = '[kinematics]\ntype = "xyzac-trt"\nz-offset = 12.5\n' + "".join(
+        f"[axes.{a}]\nvmax=100\namax=1000\njmax=10000\n" for a in "XYZAC"
+    )
     m = load_machine(write(tmp_path, text))
     assert m.kinematics == "xyzac-trt"
     assert m.kinematics_params["z_offset"] == 12.5 and m.kinematics_params["y_offset"] == 0.0
 
 
-@pytest.mark.parametrize("text,line,fragment", [
-    # (file text, expected line, message fragment)
-    ("dt = 0.001\n", 0, "no [axes.X]"),
-    (GOOD.replace("amax = 2000\n", "amax = -2000\n"), 13, "must be positive"),
-    (GOOD.replace("jmax = 3000.0", "jmax = 0"), 18, "must be positive"),
-    (GOOD.replace("vmax = 400.0", "vmax = nan"), 12, "must be finite"),
-    (GOOD.replace("vmax = 400.0", "vmax = inf"), 12, "must be finite"),
-    (GOOD.replace("vmax = 400.0", 'vmax = "fast"'), 12, "must be a number"),
-    (GOOD.replace("jmax = 4000.0", "jerk = 4000.0"), 14, "unknown key 'jerk'"),
-    (GOOD.replace("jmax = 4000.0\n", ""), 11, "has no jmax"),
-    (GOOD.replace("tol = 0.005", "tolerance = 0.005"), 4, "unknown key 'tolerance'"),
-    (GOOD.replace('kinematics = "trivial"', 'kinematics = "scara"'), 3, "unknown kinematics 'scara'"),
-    (GOOD.replace("dt = 0.002", "dt = 0"), 2, "dt"),
-    (GOOD.replace("dt = 0.002", "dt = 6"), 2, "seconds"),
-    (GOOD.replace("dt = 0.002", "dt = -1e-3"), 2, "must be positive"),
-    (GOOD.replace("[axes.Y]", "[axes.x]"), 11, "defined twice"),
-    (GOOD.replace("[axes.Y]", "[axes.Q]"), 11, "unknown axis 'Q'"),
-    (GOOD.replace("Z = 50.0", "B = 50.0"), 6, "not an axis"),
-    (GOOD.replace('kinematics = "trivial"', 'kinematics = "xyzac-trt"'), 3, "missing A, C"),
-    (GOOD.replace("[axes.Y]", "[axes.X]"), 11, "TOML"),          # duplicate table: TOML error
-    (GOOD.replace("amax = 2000", "amax = = 2000"), 13, "invalid TOML"),
-])
+@pytest.mark.parametrize(
+    "text,line,fragment",
+    [
+        # (file text, expected line, message fragment)
+        ("dt = 0.001\n", 0, "no [axes.X]"),
+        (GOOD.replace("amax = 2000\n", "amax = -2000\n"), 13, "must be positive"),
+        (GOOD.replace("jmax = 3000.0", "jmax = 0"), 18, "must be positive"),
+        (GOOD.replace("vmax = 400.0", "vmax = nan"), 12, "must be finite"),
+        (GOOD.replace("vmax = 400.0", "vmax = inf"), 12, "must be finite"),
+        (GOOD.replace("vmax = 400.0", 'vmax = "fast"'), 12, "must be a number"),
+        (GOOD.replace("jmax = 4000.0", "jerk = 4000.0"), 14, "unknown key 'jerk'"),
+        (GOOD.replace("jmax = 4000.0\n", ""), 11, "has no jmax"),
+        (GOOD.replace("tol = 0.005", "tolerance = 0.005"), 4, "unknown key 'tolerance'"),
+        (GOOD.replace('kinematics = "trivial"', 'kinematics = "scara"'), 3, "unknown kinematics 'scara'"),
+        (GOOD.replace("dt = 0.002", "dt = 0"), 2, "dt"),
+        (GOOD.replace("dt = 0.002", "dt = 6"), 2, "seconds"),
+        (GOOD.replace("dt = 0.002", "dt = -1e-3"), 2, "must be positive"),
+        (GOOD.replace("[axes.Y]", "[axes.x]"), 11, "defined twice"),
+        (GOOD.replace("[axes.Y]", "[axes.Q]"), 11, "unknown axis 'Q'"),
+        (GOOD.replace("Z = 50.0", "B = 50.0"), 6, "not an axis"),
+        (GOOD.replace('kinematics = "trivial"', 'kinematics = "xyzac-trt"'), 3, "missing A, C"),
+        (GOOD.replace("[axes.Y]", "[axes.X]"), 11, "TOML"),  # duplicate table: TOML error
+        (GOOD.replace("amax = 2000", "amax = = 2000"), 13, "invalid TOML"),
+    ],
+)
 def test_toml_errors_have_locations(tmp_path, text, line, fragment):
     path = write(tmp_path, text)
     with pytest.raises(MachineError) as info:
@@ -126,13 +128,14 @@ def test_presets_valid_and_listed():
     for name in PRESETS:
         assert name in text
     import json
+
     json.dumps(table, allow_nan=False)
 
 
 def test_mikron_preset_is_paper_table1():
     m = load_machine("mikron-ucp710")
     assert m.axes == "XYZAC" and m.dt_s == 0.006 and m.kinematics == "xyzac-trt"
-    assert_allclose(m.vmax, [500, 500, 500, 15 * 6, 20 * 6])          # 30 m/min; rpm -> deg/s
+    assert_allclose(m.vmax, [500, 500, 500, 15 * 6, 20 * 6])  # 30 m/min; rpm -> deg/s
     assert_allclose(m.amax, [2500, 3000, 2100, 0.83 * 360, 0.83 * 360])
     assert_allclose(m.jmax, [5000, 5000, 50000, 5 * 360, 100 * 360])
     assert all(v == 0.0 for v in m.kinematics_params.values())
@@ -151,14 +154,14 @@ def test_corpus_ini_files_load():
 def test_ini_units_inch_to_mm():
     m = load_machine(os.path.join(CORPUS_CONFIGS, "XYZ.ini"))
     assert m.axes == "XYZA" and m.name == "LinuxCNC-Circular-Blend-Tester-XYZ"
-    assert_allclose(m.vmax, [8 * MM_PER_INCH] * 3 + [25.0])        # A stays in deg/s
+    assert_allclose(m.vmax, [8 * MM_PER_INCH] * 3 + [25.0])  # A stays in deg/s
     assert_allclose(m.amax, [30 * MM_PER_INCH] * 3 + [800.0])
     assert_allclose(m.jmax, DEFAULT_JERK_PER_ACCEL_1_S * m.amax)
-    xz = load_machine(os.path.join(CORPUS_CONFIGS, "XZ.ini"))    # old [AXIS_0], [AXIS_2] numbering
+    xz = load_machine(os.path.join(CORPUS_CONFIGS, "XZ.ini"))  # old [AXIS_0], [AXIS_2] numbering
     assert xz.axes == "XZ"
     assert_allclose(xz.vmax, [8 * MM_PER_INCH] * 2)
     mm = load_machine(os.path.join(CORPUS_CONFIGS, "axis_mm.ini"))
-    assert_allclose(mm.vmax, [30.48] * 3)                          # already mm
+    assert_allclose(mm.vmax, [30.48] * 3)  # already mm
     nine = load_machine(os.path.join(CORPUS_CONFIGS, "9axis.ini"))
     assert nine.axes == "XYZABCUVW"
     assert_allclose(nine.vmax, [1.2 * MM_PER_INCH] * 3 + [90.0] * 3 + [1.2 * MM_PER_INCH] * 3)
@@ -192,18 +195,21 @@ MAX_ACCELERATION = 2
 def test_ini_modern_sections_jerk_gantry_radians(tmp_path):
     m = load_machine(write(tmp_path, INI, "t.ini"))
     assert m.axes == "XYZC" and m.dt_s == 0.0005 and m.name == "tiny"
-    assert_allclose(m.jmax[:2], [1000, 1000])                 # X explicit, Y default 10*amax
-    assert_allclose(m.vmax[2], 20)                            # Z from JOINT_3 (gantry: X Y Y Z)
-    assert_allclose(m.vmax[3], math.degrees(1))               # rad/s -> deg/s
+    assert_allclose(m.jmax[:2], [1000, 1000])  # X explicit, Y default 10*amax
+    assert_allclose(m.vmax[2], 20)  # Z from JOINT_3 (gantry: X Y Y Z)
+    assert_allclose(m.vmax[3], math.degrees(1))  # rad/s -> deg/s
 
 
-@pytest.mark.parametrize("old,new,line,fragment", [
-    ("MAX_ACCELERATION = 100\nMAX_JERK", "MAX_ACCELERATION = -100\nMAX_JERK", 11, "positive"),
-    ("MAX_VELOCITY = 1\n", "MAX_VELOCITY = fast\n", 20, "must be a number"),
-    ("LINEAR_UNITS = mm", "LINEAR_UNITS = furlong", 7, "unknown unit"),
-    ("COORDINATES = X Y Y Z C", "COORDINATES = X Y Q", 6, "axis letters"),
-    ("[AXIS_C]\nMAX_VELOCITY = 1\n", "[AXIS_C]\n", 19, "no MAX_VELOCITY"),
-])
+@pytest.mark.parametrize(
+    "old,new,line,fragment",
+    [
+        ("MAX_ACCELERATION = 100\nMAX_JERK", "MAX_ACCELERATION = -100\nMAX_JERK", 11, "positive"),
+        ("MAX_VELOCITY = 1\n", "MAX_VELOCITY = fast\n", 20, "must be a number"),
+        ("LINEAR_UNITS = mm", "LINEAR_UNITS = furlong", 7, "unknown unit"),
+        ("COORDINATES = X Y Y Z C", "COORDINATES = X Y Q", 6, "axis letters"),
+        ("[AXIS_C]\nMAX_VELOCITY = 1\n", "[AXIS_C]\n", 19, "no MAX_VELOCITY"),
+    ],
+)
 def test_ini_errors(tmp_path, old, new, line, fragment):
     assert old in INI
     path = write(tmp_path, INI.replace(old, new), "bad.ini")
@@ -221,8 +227,10 @@ def test_with_dt_and_start():
 
 
 def test_ini_kins_section(tmp_path):
-    base = INI.replace("COORDINATES = X Y Y Z C", "COORDINATES = X Y Z A C").replace("[JOINT_3]", "[AXIS_Z]") + \
-        "[AXIS_A]\nMAX_VELOCITY = 1\nMAX_ACCELERATION = 2\n"
+    base = (
+        INI.replace("COORDINATES = X Y Y Z C", "COORDINATES = X Y Z A C").replace("[JOINT_3]", "[AXIS_Z]")
+        + "[AXIS_A]\nMAX_VELOCITY = 1\nMAX_ACCELERATION = 2\n"
+    )
     m = load_machine(write(tmp_path, base + "[KINS]\nKINEMATICS = xyzac-trt-kins\nJOINTS = 5\n", "k.ini"))
     assert m.kinematics == "xyzac-trt" and m.kinematics_params["z_offset"] == 0.0
     m = load_machine(write(tmp_path, base + "[KINS]\nKINEMATICS = trivkins coordinates=XYZAC\n", "k2.ini"))
@@ -235,9 +243,11 @@ def test_ini_kins_section(tmp_path):
 def test_ini_without_coordinates_uses_axis_sections_or_axes(tmp_path):
     old = INI.replace("COORDINATES = X Y Y Z C\n", "").replace("[JOINT_3]", "[AXIS_Z]")
     m = load_machine(write(tmp_path, old, "old.ini"))
-    assert m.axes == "XYZC"                       # the [AXIS_*] sections, canonical order
-    joints = ("[TRAJ]\nAXES = 2\nLINEAR_UNITS = inch\n[JOINT_0]\nMAX_VELOCITY = 1\nMAX_ACCELERATION = 2\n"
-              "[JOINT_1]\nMAX_VELOCITY = 3\nMAX_ACCELERATION = 4\n")
+    assert m.axes == "XYZC"  # the [AXIS_*] sections, canonical order
+    joints = (
+        "[TRAJ]\nAXES = 2\nLINEAR_UNITS = inch\n[JOINT_0]\nMAX_VELOCITY = 1\nMAX_ACCELERATION = 2\n"
+        "[JOINT_1]\nMAX_VELOCITY = 3\nMAX_ACCELERATION = 4\n"
+    )
     m = load_machine(write(tmp_path, joints, "joints.ini"))
     assert m.axes == "XY" and m.dt_s == 0.001
     assert_allclose(m.vmax, [25.4, 3 * 25.4])

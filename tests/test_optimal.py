@@ -19,11 +19,13 @@ from cnc_interp.plan.vpop import plan_path_vpop
 from ._vpop_paths import circle_fun, hermite_path, line_path, random_curve
 
 DT = 0.001
-MILL = Machine(name="mill", axes="XYZ", vmax=[200, 200, 200], amax=[2000, 2000, 2000],
-               jmax=[50000, 50000, 50000], dt_s=DT)
+MILL = Machine(
+    name="mill", axes="XYZ", vmax=[200, 200, 200], amax=[2000, 2000, 2000], jmax=[50000, 50000, 50000], dt_s=DT
+)
 #: paper 001's Mikron UCP 710 (linear axes) at its 6 ms period: jerk binds
-UCP = Machine(name="ucp710", axes="XYZ", vmax=[500, 500, 500], amax=[2500, 3000, 2100],
-              jmax=[5000, 5000, 50000], dt_s=0.006)
+UCP = Machine(
+    name="ucp710", axes="XYZ", vmax=[500, 500, 500], amax=[2500, 3000, 2100], jmax=[5000, 5000, 50000], dt_s=0.006
+)
 
 
 def check(plan, machine, q_start, q_end, dt):
@@ -42,8 +44,9 @@ def periods(plan):
 
 
 # -- closed form: a straight line against its exact discrete minimum ------------------
-@pytest.mark.parametrize("length,feed,machine", [(100.0, 83.3, MILL), (3.0, 150.0, MILL),
-                                                 (100.0, 83.3, UCP), (12.0, 400.0, UCP)])
+@pytest.mark.parametrize(
+    "length,feed,machine", [(100.0, 83.3, MILL), (3.0, 150.0, MILL), (100.0, 83.3, UCP), (12.0, 400.0, UCP)]
+)
 def test_line_within_a_few_periods_of_the_discrete_minimum(length, feed, machine):
     # at 6 ms the windows of ``refine`` find the minimum within a period or two; at 1 ms
     # lines keep VPOp's plan: its stop is up to three periods slower (windows on every
@@ -52,8 +55,7 @@ def test_line_within_a_few_periods_of_the_discrete_minimum(length, feed, machine
     p = line_path([0, 0, 0], [length, 0, 0], feed)
     plan = plan_path_optimal(p, None, machine, dt)
     check(plan, machine, p.start, p.end, dt)
-    best = line_min_samples(length, min(feed, machine.vmax[0]), machine.amax[0],
-                            machine.jmax[0], dt)
+    best = line_min_samples(length, min(feed, machine.vmax[0]), machine.amax[0], machine.jmax[0], dt)
     slack = 2 if dt >= 0.002 else 3 + int(0.004 * best)
     assert best <= periods(plan) <= best + slack, (periods(plan), best)
 
@@ -81,8 +83,7 @@ def test_trident_like_curve_at_6ms_beats_vpop_by_far():
 @pytest.mark.parametrize("seed", range(4))
 def test_random_curves_hold_limits_and_never_lose_to_vpop(seed):
     rng = np.random.default_rng(100 + seed)
-    p = hermite_path(random_curve(rng, scale=15.0), int(rng.integers(4, 12)),
-                     float(rng.uniform(30, 250)))
+    p = hermite_path(random_curve(rng, scale=15.0), int(rng.integers(4, 12)), float(rng.uniform(30, 250)))
     for machine in (MILL, UCP):
         dt = machine.dt_s
         opt = plan_path_optimal(p, None, machine, dt)
@@ -106,10 +107,16 @@ def test_circle_at_the_acceleration_limit():
 
 
 def test_five_axis_xyzac_trt():
-    m = Machine(name="5ax", axes="XYZAC", vmax=[500, 500, 500, 90, 120],
-                amax=[2500, 3000, 2100, 298.8, 298.8], jmax=[5000, 5000, 50000, 1800, 36000],
-                dt_s=0.006, kinematics="xyzac-trt",
-                kinematics_params={"z_rot_point": -50.0, "y_offset": 2.0})
+    m = Machine(
+        name="5ax",
+        axes="XYZAC",
+        vmax=[500, 500, 500, 90, 120],
+        amax=[2500, 3000, 2100, 298.8, 298.8],
+        jmax=[5000, 5000, 50000, 1800, 36000],
+        dt_s=0.006,
+        kinematics="xyzac-trt",
+        kinematics_params={"z_rot_point": -50.0, "y_offset": 2.0},
+    )
     kin = make_kinematics(m)
 
     def fun(u):
@@ -145,8 +152,7 @@ def test_feed_limit_per_segment():
     coef[1, 1] = [50, 1, 0]
     from cnc_interp.fit.path import Path
 
-    p = Path(axes="XYZ", breaks=np.array([0.0, 1.0, 2.0]), coef=coef, line=[1, 2],
-             feed_mm_s=[100.0, 30.0])
+    p = Path(axes="XYZ", breaks=np.array([0.0, 1.0, 2.0]), coef=coef, line=[1, 2], feed_mm_s=[100.0, 30.0])
     for route in ("profile", "vpop"):
         plan = plan_path_optimal(p, None, MILL, DT, PlanSettings(options={"route": route}))
         check(plan, MILL, p.start, p.end, DT)
@@ -159,8 +165,14 @@ def test_zero_length_and_rotary_only():
     p = line_path([1, 2, 3], [1, 2, 3], 100.0)
     plan = plan_path_optimal(p, None, MILL, DT)
     assert plan.q.shape == (1, 3)
-    m = Machine(name="rot", axes="XYZA", vmax=[100, 100, 100, 90], amax=[1000, 1000, 1000, 300],
-                jmax=[1e4, 1e4, 1e4, 1800], dt_s=DT)
+    m = Machine(
+        name="rot",
+        axes="XYZA",
+        vmax=[100, 100, 100, 90],
+        amax=[1000, 1000, 1000, 300],
+        jmax=[1e4, 1e4, 1e4, 1800],
+        dt_s=DT,
+    )
     p = line_path([5, 5, 5, 0], [5, 5, 5, 120], 60.0, axes="XYZA")
     plan = plan_path_optimal(p, None, m, DT)
     check(plan, m, p.start, p.end, DT)
@@ -170,11 +182,13 @@ def test_zero_length_and_rotary_only():
 @pytest.mark.parametrize("route", ["profile", "vpop"])
 def test_tiny_chunks_give_the_same_bytes_as_one_chunk(route):
     p = hermite_path(circle_fun(4.0, turns=1.5, z_per_turn=-0.5), 18, 180.0)
-    one = list(iter_path_plan_optimal(p, None, MILL, DT, PlanSettings(
-        options={"route": route, "chunk_samples": 10 ** 9})))
+    one = list(
+        iter_path_plan_optimal(p, None, MILL, DT, PlanSettings(options={"route": route, "chunk_samples": 10**9}))
+    )
     # tiny chunks, and VPOp's own stream window as small as it goes
-    tiny = list(iter_path_plan_optimal(p, None, MILL, DT, PlanSettings(
-        options={"route": route, "chunk_samples": 7}), window=1))
+    tiny = list(
+        iter_path_plan_optimal(p, None, MILL, DT, PlanSettings(options={"route": route, "chunk_samples": 7}), window=1)
+    )
     assert len(one) == 1 and len(tiny) > 10
     assert all(c.s.shape[0] == 7 and not c.last for c in tiny[:-1])
     assert one[0].last and tiny[-1].last and tiny[-1].stats["route"] == route
@@ -200,9 +214,13 @@ def test_a_sample_does_not_depend_on_the_path_far_ahead():
     tail = np.zeros((1, 6, 3))
     tail[0, 0] = pa.end
     tail[0, 1] = pa.derivatives_u(pa.breaks[-1:], 1)[1][0] * 0 + [0.0, 200.0, 0.0]
-    pb = Path(axes="XYZ", breaks=np.concatenate((pa.breaks, [pa.breaks[-1] + 1.0])),
-              coef=np.concatenate((pa.coef, tail)), line=np.arange(1, 50),
-              feed_mm_s=np.full(49, 120.0))
+    pb = Path(
+        axes="XYZ",
+        breaks=np.concatenate((pa.breaks, [pa.breaks[-1] + 1.0])),
+        coef=np.concatenate((pa.coef, tail)),
+        line=np.arange(1, 50),
+        feed_mm_s=np.full(49, 120.0),
+    )
     opts = PlanSettings(options={"route": "profile", "compare_s": 0})
     sa = plan_path_optimal(pa, None, MILL, DT, opts)
     sb = plan_path_optimal(pb, None, MILL, DT, opts)
@@ -219,13 +237,16 @@ def test_the_issue_13_a_plus_z_moves_plan_with_both_planners(tmp_path):
     from cnc_interp.pipeline import plan_part
 
     part = tmp_path / "az.ngc"
-    part.write_text("G21 G90\nG0 X4.842 Z20.477 A353.409\nF3000\nG1A339.786Z20.000\n"
-                    "G1A13.622Z20.009\nG1A2.417Z20.472\nG1A0.000Z20.532\nM2\n")
+    part.write_text(
+        "G21 G90\nG0 X4.842 Z20.477 A353.409\nF3000\nG1A339.786Z20.000\n"
+        "G1A13.622Z20.009\nG1A2.417Z20.472\nG1A0.000Z20.532\nM2\n"
+    )
     mach = tmp_path / "xyza.toml"
-    mach.write_text('name = "XYZA"\ndt = 0.001\nkinematics = "trivial"\n'
-                    + "".join(f"[axes.{a}]\nvmax = 200.0\namax = 2000.0\njmax = 50000.0\n"
-                              for a in "XYZ")
-                    + "[axes.A]\nvmax = 180.0\namax = 1800.0\njmax = 45000.0\n")
+    mach.write_text(
+        'name = "XYZA"\ndt = 0.001\nkinematics = "trivial"\n'
+        + "".join(f"[axes.{a}]\nvmax = 200.0\namax = 2000.0\njmax = 50000.0\n" for a in "XYZ")
+        + "[axes.A]\nvmax = 180.0\namax = 1800.0\njmax = 45000.0\n"
+    )
     cycles = {}
     for planner in ("vpop", "optimal"):
         out = plan_part(str(part), str(mach), planner)
@@ -244,14 +265,17 @@ def test_a_profile_that_would_crawl_after_a_sharp_corner_plans(tmp_path, monkeyp
     from cnc_interp.pipeline import plan_part
 
     part = tmp_path / "sb1.ngc"
-    part.write_text("G20 G18 G90 G94 G64\nF999.0\nG0 X2.6260 Y3.8500 Z-0.1392\n"
-                    "G1 X2.6320 Z-0.1428\nX2.6500 Z-0.1441\nX2.6580 Z-0.1467\n"
-                    "X2.6620 Z-0.1500\nG3 X2.6660 Y3.8500 Z-0.1634 I-0.0228 K-0.0141\n"
-                    "G1 X2.6740 Z-0.2157\nX2.6760 Z-0.2128\nX2.6880 Z-0.1638\nM2\n")
+    part.write_text(
+        "G20 G18 G90 G94 G64\nF999.0\nG0 X2.6260 Y3.8500 Z-0.1392\n"
+        "G1 X2.6320 Z-0.1428\nX2.6500 Z-0.1441\nX2.6580 Z-0.1467\n"
+        "X2.6620 Z-0.1500\nG3 X2.6660 Y3.8500 Z-0.1634 I-0.0228 K-0.0141\n"
+        "G1 X2.6740 Z-0.2157\nX2.6760 Z-0.2128\nX2.6880 Z-0.1638\nM2\n"
+    )
     mach = tmp_path / "axis_mm.toml"
-    mach.write_text('name = "axis_mm"\ndt = 0.001\nkinematics = "trivial"\n'
-                    + "".join(f"[axes.{a}]\nvmax = 30.48\namax = 508.0\njmax = 5080.0\n"
-                              for a in "XYZ"))
+    mach.write_text(
+        'name = "axis_mm"\ndt = 0.001\nkinematics = "trivial"\n'
+        + "".join(f"[axes.{a}]\nvmax = 30.48\namax = 508.0\njmax = 5080.0\n" for a in "XYZ")
+    )
     cycles = {}
     for planner in ("vpop", "optimal"):
         out = plan_part(str(part), str(mach), planner)
@@ -294,9 +318,11 @@ def test_safe_scurve_is_the_time_optimal_line_in_continuous_time():
 @pytest.mark.parametrize("seed", range(40))
 def test_random_sweep_slow(seed):
     rng = np.random.default_rng(1000 + seed)
-    p = hermite_path(random_curve(rng, scale=float(rng.uniform(2, 40)),
-                                  n_waves=int(rng.integers(1, 5))),
-                     int(rng.integers(2, 20)), float(rng.uniform(5, 400)))
+    p = hermite_path(
+        random_curve(rng, scale=float(rng.uniform(2, 40)), n_waves=int(rng.integers(1, 5))),
+        int(rng.integers(2, 20)),
+        float(rng.uniform(5, 400)),
+    )
     for machine in (MILL, UCP):
         dt = machine.dt_s * float(rng.choice([0.5, 1.0, 2.0]))
         for route in ("profile", "vpop"):

@@ -13,10 +13,12 @@ from cnc_interp.plan.verify import verify_arrays
 
 from ._vpop_paths import circle_fun, hermite_path, line_path
 
-MILL = Machine(name="mill", axes="XYZ", vmax=[200, 200, 200], amax=[2000, 2000, 2000],
-               jmax=[50000, 50000, 50000], dt_s=0.001)
-UCP = Machine(name="ucp710", axes="XYZ", vmax=[500, 500, 500], amax=[2500, 3000, 2100],
-              jmax=[5000, 5000, 50000], dt_s=0.006)
+MILL = Machine(
+    name="mill", axes="XYZ", vmax=[200, 200, 200], amax=[2000, 2000, 2000], jmax=[50000, 50000, 50000], dt_s=0.001
+)
+UCP = Machine(
+    name="ucp710", axes="XYZ", vmax=[500, 500, 500], amax=[2500, 3000, 2100], jmax=[5000, 5000, 50000], dt_s=0.006
+)
 
 
 def _random_lp(rng, n=120, W=4, per=5):
@@ -49,8 +51,7 @@ def test_banded_lp_matches_highs(seed):
     status, it, lam, s = lp_solve(n, first, coef, b, c, x, 100, 1e-9)
     assert status == OK and it < 60
     m = b.shape[0]
-    A = csr_matrix((coef.ravel(), (np.repeat(np.arange(m), 4),
-                                   (first[:, None] + np.arange(4)).ravel())), shape=(m, n))
+    A = csr_matrix((coef.ravel(), (np.repeat(np.arange(m), 4), (first[:, None] + np.arange(4)).ravel())), shape=(m, n))
     ref = linprog(c, A_ub=A, b_ub=b, bounds=[(None, None)] * n, method="highs")
     assert ref.status == 0
     assert c @ x == pytest.approx(ref.fun, rel=1e-7, abs=1e-7)
@@ -94,7 +95,7 @@ def test_cubic_basis_matches_scipy():
     c = rng.normal(size=n)
     sp = BSpline(t, c, 3)
     for d in range(3):
-        mine = np.array([B[k, d] @ c[first[k]:first[k] + 4] for k in range(x.shape[0])])
+        mine = np.array([B[k, d] @ c[first[k] : first[k] + 4] for k in range(x.shape[0])])
         assert_allclose(mine, sp(x, d), atol=1e-12 * (1 + np.abs(sp(x, d)).max()))
 
 

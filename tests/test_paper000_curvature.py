@@ -20,14 +20,21 @@ def helix_path(radius=5.0, pitch_per_rad=1.0, turns=1.5, n_seg=40):
 
     def d(u, k):
         c, s = np.cos(u), np.sin(u)
-        return [np.stack([radius * c, radius * s, pitch_per_rad * u], -1),
-                np.stack([-radius * s, radius * c, np.full_like(u, pitch_per_rad)], -1),
-                np.stack([-radius * c, -radius * s, np.zeros_like(u)], -1)][k]
+        return [
+            np.stack([radius * c, radius * s, pitch_per_rad * u], -1),
+            np.stack([-radius * s, radius * c, np.full_like(u, pitch_per_rad)], -1),
+            np.stack([-radius * c, -radius * s, np.zeros_like(u)], -1),
+        ][k]
 
     h = np.diff(u)[0]
-    m = np.array([[h**i if True else 0 for i in range(6)],
-                  [i * h ** (i - 1) if i else 0 for i in range(6)],
-                  [i * (i - 1) * h ** (i - 2) if i > 1 else 0 for i in range(6)]], dtype=float)
+    m = np.array(
+        [
+            [h**i if True else 0 for i in range(6)],
+            [i * h ** (i - 1) if i else 0 for i in range(6)],
+            [i * (i - 1) * h ** (i - 2) if i > 1 else 0 for i in range(6)],
+        ],
+        dtype=float,
+    )
     coef = np.zeros((n_seg, 6, 3))
     for k in range(n_seg):
         p0, p1, p2 = (d(u[k : k + 1], i)[0] for i in range(3))
@@ -42,7 +49,7 @@ def test_eq3_on_cubic():
     # p = x^3: Eq. 3 gives (1 + 9x^4) 6 - 3 (3x^2)(6x)^2 = 6 - 270 x^4 = 0
     p = np.array([[0, 0, 0, 1.0, 0, 0]])
     k, x = planar_curvature_peaks(p, np.array([2.0]))
-    x0 = 45 ** -0.25
+    x0 = 45**-0.25
     assert_allclose(x[0], x0, rtol=1e-9)
     assert_allclose(k[0], 6 * x0 / (1 + 9 * x0**4) ** 1.5, rtol=1e-12)
 

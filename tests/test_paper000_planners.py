@@ -21,8 +21,7 @@ PLANNERS = (plan_path_constant, plan_path_variable)
 
 def machine(v=500.0, a=2000.0, j=50000.0, axes="XY"):
     n = len(axes)
-    return Machine(name="test", axes=axes, vmax=np.full(n, v), amax=np.full(n, a),
-                   jmax=np.full(n, j), dt_s=0.001)
+    return Machine(name="test", axes=axes, vmax=np.full(n, v), amax=np.full(n, a), jmax=np.full(n, j), dt_s=0.001)
 
 
 def check_plan(plan, path, m, dt, joint_map=None):
@@ -112,8 +111,10 @@ def test_variable_beats_constant_on_g2_bump():
 
 
 def test_variable_beats_constant_on_mixed_path():
-    path = shapes.chain([("line", 80.0), ("arc", 1.0, math.pi), ("line", 80.0),
-                         ("arc", 20.0, -math.pi / 2), ("line", 40.0)], feed_mm_s=250.0)
+    path = shapes.chain(
+        [("line", 80.0), ("arc", 1.0, math.pi), ("line", 80.0), ("arc", 20.0, -math.pi / 2), ("line", 40.0)],
+        feed_mm_s=250.0,
+    )
     m = machine(v=300.0, a=3000.0, j=60000.0)
     pc = plan_path_constant(path, None, m, 0.001)
     pv = plan_path_variable(path, None, m, 0.001)
@@ -189,8 +190,9 @@ def test_replans_when_the_caps_are_too_optimistic(monkeypatch):
 
 def test_corner_between_lines():
     # a G1 corner of 20 degrees: the junction feed is capped, the output still verifies
-    path = shapes.planar_path([0.0, math.radians(20)], [[0, 0], [10.0, 0]], [10.0, 10.0],
-                              np.zeros((2, 6)), feed_mm_s=100.0)
+    path = shapes.planar_path(
+        [0.0, math.radians(20)], [[0, 0], [10.0, 0]], [10.0, 10.0], np.zeros((2, 6)), feed_mm_s=100.0
+    )
     m = machine()
     for planner in PLANNERS:
         plan = planner(path, None, m, 0.001)
@@ -207,8 +209,14 @@ def test_random_sweep_limits_hold():
             else:
                 pieces.append(("arc", float(rng.uniform(0.3, 30)), float(rng.uniform(-3, 3))))
         path = shapes.chain(pieces, feed_mm_s=float(rng.uniform(10, 400)))
-        m = Machine(name="r", axes="XY", vmax=rng.uniform(50, 600, 2), amax=rng.uniform(200, 5000, 2),
-                    jmax=rng.uniform(2e3, 2e5, 2), dt_s=0.001)
+        m = Machine(
+            name="r",
+            axes="XY",
+            vmax=rng.uniform(50, 600, 2),
+            amax=rng.uniform(200, 5000, 2),
+            jmax=rng.uniform(2e3, 2e5, 2),
+            dt_s=0.001,
+        )
         dt = float(rng.choice([0.0005, 0.001, 0.004]))
         for planner in PLANNERS:
             plan = planner(path, None, m, dt)
@@ -247,8 +255,9 @@ def test_non_finite_path_is_a_plan_error():
     from cnc_interp.errors import PlanError
 
     path = shapes.chain([("line", 10.0)])
-    bad = type(path)(axes=path.axes, breaks=path.breaks, coef=path.coef * np.nan, line=path.line,
-                     feed_mm_s=path.feed_mm_s)
+    bad = type(path)(
+        axes=path.axes, breaks=path.breaks, coef=path.coef * np.nan, line=path.line, feed_mm_s=path.feed_mm_s
+    )
     for planner in PLANNERS:
         with pytest.raises(PlanError):
             planner(bad, None, machine(), 0.001)
@@ -267,9 +276,13 @@ def test_degenerate_cusp_is_refused_not_crawled():
 
     # x = t^2 - t^3 doubles back at t = 2/3 (zero speed): unbounded curvature there
     path = shapes.chain([("line", 1.0)])
-    cusp = type(path)(axes="XY", breaks=np.array([0.0, 1.0]),
-                      coef=np.array([[[0, 0], [0, 0], [1, 1e-9], [-1, 0], [0, 0], [0, 0]]], float),
-                      line=[7], feed_mm_s=[100.0])
+    cusp = type(path)(
+        axes="XY",
+        breaks=np.array([0.0, 1.0]),
+        coef=np.array([[[0, 0], [0, 0], [1, 1e-9], [-1, 0], [0, 0], [0, 0]]], float),
+        line=[7],
+        feed_mm_s=[100.0],
+    )
     m = machine()
     for planner in PLANNERS:
         with pytest.raises(PlanError, match="degenerate.*|line 7"):
@@ -288,6 +301,7 @@ def test_constant_feed_ignores_a_peak_inside_the_start_ramp():
             y = [e, -2 * z / wd * e, (4 * z * z - 2) / wd**2 * e][k]
             xs = [u, np.ones_like(u), np.zeros_like(u)][k]
             return np.stack([xs, y], -1)
+
         return g
 
     x = np.r_[np.linspace(0, 1.0, 41), np.linspace(1.0, 100.0, 21)[1:]]
@@ -304,12 +318,15 @@ CORPUS = __import__("pathlib").Path(__file__).resolve().parents[2] / "shared" / 
 
 
 @pytest.mark.parametrize("planner", ["constant", "variable"])
-@pytest.mark.parametrize("part,preset", [
-    ("samples/gcode/lathe-profile.ngc", "xz-lathe"),
-    ("samples/gcode/nurbs-trident.ngc", "mikron-ucp710"),
-    (str(CORPUS / "nurbs-g5" / "trident-xy.ngc"), "mikron-ucp710"),
-    (str(CORPUS / "performance" / "spiral_lines.ngc"), "generic-mill"),
-])
+@pytest.mark.parametrize(
+    "part,preset",
+    [
+        ("samples/gcode/lathe-profile.ngc", "xz-lathe"),
+        ("samples/gcode/nurbs-trident.ngc", "mikron-ucp710"),
+        (str(CORPUS / "nurbs-g5" / "trident-xy.ngc"), "mikron-ucp710"),
+        (str(CORPUS / "performance" / "spiral_lines.ngc"), "generic-mill"),
+    ],
+)
 @pytest.mark.slow
 def test_golden_runs_verify(part, preset, planner):
     """Whole programs through parse, fit, timeline and verify (plan_part raises on a violation)."""

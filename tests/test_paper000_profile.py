@@ -1,6 +1,5 @@
 """Paper 000's polynomial feed transition, profile data and look-ahead."""
 
-
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose
@@ -28,8 +27,7 @@ def test_peak_constants_closed_form():
 def test_transition_respects_limits_and_distance(v0, v1, a, j):
     T = float(transition_time(v1 - v0, a, j))
     length = float(transition_distance(v0, v1, a, j)) + 1.0
-    prof = build_profiles("t", [0], [0], [0.0], [length], [v0], [v0], [v1], np.array([a]),
-                          np.array([j]))
+    prof = build_profiles("t", [0], [0], [0.0], [length], [v0], [v0], [v1], np.array([a]), np.array([j]))
     # a cruise at v0 then the transition: look at the transition only
     t0 = prof.t_acc[0] + prof.t_cruise[0]
     assert_allclose(prof.t_dec[0], T)
@@ -51,14 +49,23 @@ def test_transition_respects_limits_and_distance(v0, v1, a, j):
 
 
 def test_acc_coef_matches_evaluate():
-    prof = build_profiles("t", [0, 1], [0, 1], [0.0, 50.0], [50.0, 80.0], [0.0, 40.0],
-                          [60.0, 70.0], [40.0, 0.0], np.array([800.0, 900.0]),
-                          np.array([1e4, 2e4]))
+    prof = build_profiles(
+        "t",
+        [0, 1],
+        [0, 1],
+        [0.0, 50.0],
+        [50.0, 80.0],
+        [0.0, 40.0],
+        [60.0, 70.0],
+        [40.0, 0.0],
+        np.array([800.0, 900.0]),
+        np.array([1e4, 2e4]),
+    )
     c = prof.acc_coef()
     for m in range(2):
-        for ph, (t0, T) in enumerate(((prof.t_start[m], prof.t_acc[m]),
-                                      (prof.t_start[m] + prof.t_acc[m] + prof.t_cruise[m],
-                                       prof.t_dec[m]))):
+        for ph, (t0, T) in enumerate(
+            ((prof.t_start[m], prof.t_acc[m]), (prof.t_start[m] + prof.t_acc[m] + prof.t_cruise[m], prof.t_dec[m]))
+        ):
             lt = np.linspace(0, T, 101)[1:-1]
             a_eval = prof.evaluate(t0 + lt)[2]
             a_poly = np.polynomial.polynomial.polyval(lt, c[m, ph])
@@ -73,8 +80,9 @@ def test_profiles_continuous_in_feed_and_acceleration():
     a, j = rng.uniform(300, 3000, n), rng.uniform(3e3, 5e4, n)
     need = transition_distance(w[:-1], c, a, j) + transition_distance(c, w[1:], a, j)
     length = need * rng.uniform(1.0, 3.0, n)
-    prof = build_profiles("t", np.arange(n), np.arange(n), np.r_[0, np.cumsum(length)[:-1]],
-                          length, w[:-1], c, w[1:], a, j)
+    prof = build_profiles(
+        "t", np.arange(n), np.arange(n), np.r_[0, np.cumsum(length)[:-1]], length, w[:-1], c, w[1:], a, j
+    )
     t = np.linspace(0, prof.duration_s, 400001)
     s, v, acc = prof.evaluate(t)
     dt = t[1] - t[0]
@@ -86,8 +94,7 @@ def test_profiles_continuous_in_feed_and_acceleration():
 
 
 def test_stretch_to_period():
-    prof = build_profiles("t", [0], [0], [0.0], [10.0], [0.0], [30.0], [0.0],
-                          np.array([500.0]), np.array([5e3]))
+    prof = build_profiles("t", [0], [0], [0.0], [10.0], [0.0], [30.0], [0.0], np.array([500.0]), np.array([5e3]))
     dt = 0.001
     st = stretch_to_period(prof, dt)
     k = st.duration_s / dt
@@ -111,8 +118,7 @@ def test_lookahead_random_sweep():
         g3 = rng.uniform(0.0, 0.3, (n, nj))
         amax, jmax = rng.uniform(500, 5000, nj), rng.uniform(1e4, 1e5, nj)
         # caps that leave room (as limits.feed_caps does with its shares)
-        vcap = np.minimum(rng.uniform(1, 300, n),
-                          np.sqrt(0.8 * amax / np.maximum(g2, 1e-9)).min(axis=1))
+        vcap = np.minimum(rng.uniform(1, 300, n), np.sqrt(0.8 * amax / np.maximum(g2, 1e-9)).min(axis=1))
         vcap = np.minimum(vcap, np.cbrt(0.5 * jmax / np.maximum(g3, 1e-9)).min(axis=1))
         scale = rng.uniform(0.5, 1.0, n)
         wcap = np.r_[0.0, rng.uniform(0, 400, n - 1), 0.0]
@@ -133,11 +139,12 @@ def test_lookahead_random_sweep():
         pairs = np.r_[np.arange(0, n, 2), n]
         plen = np.add.reduceat(length, pairs[:-1])
         pcap = np.minimum.reduceat(vcap, pairs[:-1])
-        w2, c2, a2, j2 = lookahead(pairs, plen, pcap, g1, g2, g3, amax, jmax, 0.5, scale,
-                                   np.r_[wcap[pairs[:-1]], 0.0])
+        w2, c2, a2, j2 = lookahead(pairs, plen, pcap, g1, g2, g3, amax, jmax, 0.5, scale, np.r_[wcap[pairs[:-1]], 0.0])
         for k in range(pairs.size - 1):
-            per = [tangential_at(c2[k], g1[s], g2[s], g3[s], amax, jmax, 0.5, scale[s])
-                   for s in range(pairs[k], pairs[k + 1])]
+            per = [
+                tangential_at(c2[k], g1[s], g2[s], g3[s], amax, jmax, 0.5, scale[s])
+                for s in range(pairs[k], pairs[k + 1])
+            ]
             assert_allclose([a2[k], j2[k]], np.min(per, axis=0))
         need2 = transition_distance(w2[:-1], c2, a2, j2) + transition_distance(c2, w2[1:], a2, j2)
         assert np.all(need2 <= plen * (1 + 1e-12))
@@ -164,12 +171,25 @@ def test_numba_limits_match_numpy_limits():
 
 
 def test_pos_coef_matches_evaluate():
-    prof = build_profiles("t", [0, 1], [0, 1], [0.0, 50.0], [50.0, 80.0], [0.0, 40.0],
-                          [60.0, 70.0], [40.0, 0.0], np.array([800.0, 900.0]),
-                          np.array([1e4, 2e4]))
+    prof = build_profiles(
+        "t",
+        [0, 1],
+        [0, 1],
+        [0.0, 50.0],
+        [50.0, 80.0],
+        [0.0, 40.0],
+        [60.0, 70.0],
+        [40.0, 0.0],
+        np.array([800.0, 900.0]),
+        np.array([1e4, 2e4]),
+    )
     c = prof.pos_coef()
     t0, s0, v0, dv, T = prof.phases()
     for i in range(t0.size):
         lt = np.linspace(0, T[i], 51)
-        assert_allclose(np.polynomial.polynomial.polyval(lt, c.reshape(-1, 7)[i]),
-                        prof.evaluate(t0[i] + lt)[0], rtol=1e-12, atol=1e-9)
+        assert_allclose(
+            np.polynomial.polynomial.polyval(lt, c.reshape(-1, 7)[i]),
+            prof.evaluate(t0[i] + lt)[0],
+            rtol=1e-12,
+            atol=1e-9,
+        )

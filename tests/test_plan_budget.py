@@ -23,8 +23,12 @@ def test_min_cycle_time_closed_form():
     m = load_machine("generic-mill")  # X: vmax 200, amax 2000, jmax 50000
     paths = _paths(LINE, m)
     d = 100.0
-    expected = max(d / 100.0,  # the feed
-                   d / 200.0, 2 * np.sqrt(d / 2000.0), np.cbrt(32 * d / 50000.0))
+    expected = max(
+        d / 100.0,  # the feed
+        d / 200.0,
+        2 * np.sqrt(d / 2000.0),
+        np.cbrt(32 * d / 50000.0),
+    )
     assert budget.min_cycle_time_s(paths, m) == pytest.approx(expected, rel=1e-9)
     # without the machine only the feed counts
     assert budget.min_cycle_time_s(paths) == pytest.approx(1.0, rel=1e-9)
@@ -38,8 +42,7 @@ def test_min_cycle_time_is_below_the_planned_cycle():
     from cnc_interp.plan.timeline import plan_program
 
     m = load_machine("generic-mill")
-    text = (b"G21 G90 G94\nG0 X5 Y5\nG1 X40 Y5 F3000\nG1 X40 Y30\nG2 X20 Y30 I-10 J0\n"
-            b"G1 X10 Y10 F900\nG0 Z5\nM2\n")
+    text = b"G21 G90 G94\nG0 X5 Y5\nG1 X40 Y5 F3000\nG1 X40 Y30\nG2 X20 Y30 I-10 J0\nG1 X10 Y10 F900\nG0 Z5\nM2\n"
     prog = read_program(text, source="part.ngc", axes=m.axes, start=m.start)
     fitted = fit_program(prog, FitSettings())
     traj = plan_program(fitted, m, PlanSettings(dt_s=m.dt_s))

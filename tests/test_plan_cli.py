@@ -53,10 +53,13 @@ def test_plan_to_file_and_verify(part, tmp_path):
     header, rows = read_csv(out.read_bytes())
     assert header == ["t", "s", "feed", "X", "Y", "Z"]
     assert np.allclose(rows[:, 0], np.arange(rows.shape[0]) * 0.001, rtol=0, atol=1e-12)
-    assert np.array_equal(rows[0, 3:], [0, 0, 0])   # machine start: all zero
+    assert np.array_equal(rows[0, 3:], [0, 0, 0])  # machine start: all zero
     assert np.allclose(rows[-1, 3:], [10, 5, 5], atol=1e-9)
-    v = subprocess.run([sys.executable, "-m", "cnc_interp.cli", "verify", str(out), "-m",
-                        "generic-mill"], capture_output=True, timeout=600)
+    v = subprocess.run(
+        [sys.executable, "-m", "cnc_interp.cli", "verify", str(out), "-m", "generic-mill"],
+        capture_output=True,
+        timeout=600,
+    )
     assert v.returncode == 0, v.stdout.decode() + v.stderr.decode()
     # same input, same bytes
     out2 = tmp_path / "out2.csv"
@@ -138,8 +141,11 @@ def test_fit_method_option_selects_the_fitter(tmp_path):
     r = run([str(part), "--fit-method", "nodes", "--json", "-o", str(tmp_path / "n.csv")])
     assert r.returncode == 0, r.stderr.decode()
     assert json.loads(r.stdout.decode())["fit_method"] == "nodes"
-    r = subprocess.run([sys.executable, "-m", "cnc_interp.cli", "fit", str(part), "--fit-method", "nodes",
-                        "--json"], capture_output=True, timeout=600)
+    r = subprocess.run(
+        [sys.executable, "-m", "cnc_interp.cli", "fit", str(part), "--fit-method", "nodes", "--json"],
+        capture_output=True,
+        timeout=600,
+    )
     assert r.returncode == 0, r.stderr.decode()
     stats = json.loads(r.stdout.decode())
     assert stats["method"] == "nodes" and stats["within_tolerance"]
@@ -150,8 +156,10 @@ def test_fit_method_option_selects_the_fitter(tmp_path):
 
 def test_start_keeps_the_machines_position_on_unnamed_axes(tmp_path):
     m = tmp_path / "m.toml"
-    m.write_text('name = "m"\ndt = 0.001\nstart = { X = 0.0, Y = 0.0, Z = 50.0 }\n'
-                 + "".join(f"[axes.{a}]\nvmax = 200.0\namax = 2000.0\njmax = 50000.0\n" for a in "XYZ"))
+    m.write_text(
+        'name = "m"\ndt = 0.001\nstart = { X = 0.0, Y = 0.0, Z = 50.0 }\n'
+        + "".join(f"[axes.{a}]\nvmax = 200.0\namax = 2000.0\njmax = 50000.0\n" for a in "XYZ")
+    )
     r = run(["-", "-m", str(m), "--start", "Y=3"], stdin=PROGRAM.encode())
     assert r.returncode == 0, r.stderr.decode()
     _, rows = read_csv(r.stdout)

@@ -130,9 +130,16 @@ def _mill_trajectory(cut_mm_s=3.0, rapid_mm_s=200.0):
     q[2000:, 0] = x[-1]
     q[2000:, 2] = z_up
     feed = np.concatenate([[0.0], np.linalg.norm(np.diff(q, axis=0), axis=1) / dt])
-    return Trajectory(axes="XYZ", dt_s=dt, t=np.arange(2200) * dt,
-                      s=np.concatenate([[0.0], np.cumsum(feed[1:] * dt)]), feed=feed, q=q,
-                      line=np.zeros(2200, dtype=np.int64), planner="test")
+    return Trajectory(
+        axes="XYZ",
+        dt_s=dt,
+        t=np.arange(2200) * dt,
+        s=np.concatenate([[0.0], np.cumsum(feed[1:] * dt)]),
+        feed=feed,
+        q=q,
+        line=np.zeros(2200, dtype=np.int64),
+        planner="test",
+    )
 
 
 def test_mill_plot_has_a_z_view_and_a_feed_scale_for_cutting_feeds():

@@ -15,10 +15,10 @@ from numpy.testing import assert_allclose
 
 import cnc_interp as ci
 
-settings.register_profile("ci", max_examples=12, deadline=None, derandomize=True,
-                          suppress_health_check=[HealthCheck.too_slow])
-settings.register_profile("long", max_examples=300, deadline=None,
-                          suppress_health_check=[HealthCheck.too_slow])
+settings.register_profile(
+    "ci", max_examples=12, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow]
+)
+settings.register_profile("long", max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 coord = st.decimals(min_value=-200, max_value=200, places=3, allow_nan=False, allow_infinity=False)
@@ -34,8 +34,7 @@ def _program(points, feed_mm_min: int, inch: bool = False) -> str:
 @given(moves, st.booleans())
 def test_parse_keeps_the_coordinates_written(points, inch):
     prog = ci.read_program(_program(points, 600, inch), machine="generic-mill")
-    nodes = np.concatenate([r.nodes[1:] for r in prog.runs if r.kind != "rapid"]) \
-        if prog.runs else np.zeros((0, 3))
+    nodes = np.concatenate([r.nodes[1:] for r in prog.runs if r.kind != "rapid"]) if prog.runs else np.zeros((0, 3))
     # zero-length moves are dropped: compare the distinct consecutive targets
     want = [np.array([float(v) for v in p]) * (25.4 if inch else 1.0) for p in points]
     dedup = []
@@ -57,8 +56,13 @@ def _wiggle(seed: int, n: int, step_mm: float, turn_deg: float) -> list[tuple[fl
     return [(round(x, 4), round(y, 4), round(zz, 4)) for (x, y), zz in zip(xy, z)]
 
 
-@given(st.integers(0, 10_000), st.integers(3, 60), st.floats(0.05, 5.0), st.floats(1.0, 120.0),
-       st.sampled_from([0.001, 0.005, 0.02]))
+@given(
+    st.integers(0, 10_000),
+    st.integers(3, 60),
+    st.floats(0.05, 5.0),
+    st.floats(1.0, 120.0),
+    st.sampled_from([0.001, 0.005, 0.02]),
+)
 def test_the_fit_stays_within_its_tolerance(seed, n, step_mm, turn_deg, tol_mm):
     pts = _wiggle(seed, n, step_mm, turn_deg)
     text = "G21 G90\nF3000\n" + "".join(f"G1 X{x} Y{y} Z{z}\n" for x, y, z in pts) + "M2\n"
@@ -74,8 +78,7 @@ limit = st.floats(0.5, 2.0)
 
 
 @pytest.mark.parametrize("planner", ["optimal", "vpop", "constant", "variable"])
-@given(st.integers(0, 10_000), st.integers(2, 15), limit, limit, limit,
-       st.sampled_from([0.001, 0.002, 0.006]))
+@given(st.integers(0, 10_000), st.integers(2, 15), limit, limit, limit, st.sampled_from([0.001, 0.002, 0.006]))
 def test_every_planner_keeps_every_limit(planner, seed, n, kv, ka, kj, dt_s):
     base = ci.load_machine("generic-mill")
     from dataclasses import replace

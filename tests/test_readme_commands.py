@@ -15,7 +15,7 @@ README = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))
 
 def readme_rows() -> dict[str, str]:
     text = open(README, encoding="utf-8").read()
-    table = text[text.index("## Commands"):text.index("## Supported G-code")]
+    table = text[text.index("## Commands") : text.index("## Supported G-code")]
     rows = {}
     for m in re.finditer(r"^\| `cnc-interp (\w+)([^`]*)` \|", table, re.M):
         rows[m.group(1)] = m.group(2)

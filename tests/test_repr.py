@@ -19,11 +19,40 @@ def _check(values):
 
 
 def test_special_values():
-    _check([0.0, -0.0, 1.0, -1.0, 0.1, 0.2, 0.3, 1 / 3, 2 / 3, math.pi, -math.e,
-            float("inf"), float("-inf"), float("nan"), 5e-324, -5e-324,
-            2.2250738585072014e-308, 2.225073858507201e-308, 1.7976931348623157e308,
-            9007199254740991.0, 9007199254740992.0, 9007199254740993.0, 123456789012345678.0,
-            4.35, 0.001, 0.016, 786.1510000000001, 1e22, 1e23, 5e-310])
+    _check(
+        [
+            0.0,
+            -0.0,
+            1.0,
+            -1.0,
+            0.1,
+            0.2,
+            0.3,
+            1 / 3,
+            2 / 3,
+            math.pi,
+            -math.e,
+            float("inf"),
+            float("-inf"),
+            float("nan"),
+            5e-324,
+            -5e-324,
+            2.2250738585072014e-308,
+            2.225073858507201e-308,
+            1.7976931348623157e308,
+            9007199254740991.0,
+            9007199254740992.0,
+            9007199254740993.0,
+            123456789012345678.0,
+            4.35,
+            0.001,
+            0.016,
+            786.1510000000001,
+            1e22,
+            1e23,
+            5e-310,
+        ]
+    )
 
 
 def test_the_format_switch_points():
@@ -31,17 +60,24 @@ def test_the_format_switch_points():
     vals = []
     for e in range(-30, 30):
         for m in (1.0, 1.5, 9.999999999999998, 2.5):
-            x = m * 10.0 ** e
+            x = m * 10.0**e
             vals += [x, -x, np.nextafter(x, 0), np.nextafter(x, np.inf)]
-    vals += [1e16, 1e15, 9999999999999998.0, 1e-5, 1e-4, 0.0001, 0.00011, 9.9999e-05,
-             1e100, 1e-100, 1e300, 1e-300]
+    vals += [1e16, 1e15, 9999999999999998.0, 1e-5, 1e-4, 0.0001, 0.00011, 9.9999e-05, 1e100, 1e-100, 1e300, 1e-300]
     _check(vals)
 
 
 def test_integer_valued_floats():
     rng = np.random.default_rng(3)
-    _check(np.concatenate([np.arange(-1000, 1000), rng.integers(-2**62, 2**62, 20000),
-                           2.0 ** np.arange(0, 1024), -(2.0 ** -np.arange(0, 1075))]).astype(float))
+    _check(
+        np.concatenate(
+            [
+                np.arange(-1000, 1000),
+                rng.integers(-(2**62), 2**62, 20000),
+                2.0 ** np.arange(0, 1024),
+                -(2.0 ** -np.arange(0, 1075)),
+            ]
+        ).astype(float)
+    )
 
 
 def test_random_bit_patterns():
@@ -60,9 +96,17 @@ def test_subnormals_and_tiny():
 
 def test_values_a_plan_holds():
     rng = np.random.default_rng(4)
-    _check(np.concatenate([np.arange(200_000) * 0.001, np.arange(50_000) * 0.006,
-                           rng.normal(scale=300, size=100_000), rng.uniform(-1e-6, 1e-6, 50_000),
-                           np.round(rng.normal(scale=50, size=50_000), 4) * 25.4]))
+    _check(
+        np.concatenate(
+            [
+                np.arange(200_000) * 0.001,
+                np.arange(50_000) * 0.006,
+                rng.normal(scale=300, size=100_000),
+                rng.uniform(-1e-6, 1e-6, 50_000),
+                np.round(rng.normal(scale=50, size=50_000), 4) * 25.4,
+            ]
+        )
+    )
 
 
 def test_table_rows_and_repeats():

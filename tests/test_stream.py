@@ -19,22 +19,31 @@ from cnc_interp.plan.timeline import Window
 from ._contract_helpers import SAMPLES, console_script
 
 from .conftest import CORPUS  # noqa: E402
+
 #: the smallest window there is: blocks of 7 samples, one path per job, nothing ahead
-TINY = Window(block_samples=7, job_paths=1, job_samples=1, jobs_ahead=1, chunks_ahead=1,
-              path_window=1)
+TINY = Window(block_samples=7, job_paths=1, job_samples=1, jobs_ahead=1, chunks_ahead=1, path_window=1)
 
 SAMPLE_MACHINES = {"five-axis-xyzac.ngc": "mikron-ucp710", "lathe-profile.ngc": "xz-lathe"}
 CORPUS_PROGRAMS = [
-    "quick-tests/arc-arc-test.ngc", "quick-tests/square_spiral.ngc",
-    "quick-tests/tangent_helix.ngc", "quick-tests/sawtooth.ngc", "quick-tests/long-kink.ngc",
-    "quick-tests/rapid_3d_corners.ngc", "quick-tests/spiral_tight_circular.ngc",
-    "quick-tests/parabolic_varying.ngc", "performance/cap.ngc", "nurbs-g5/trident-xy.ngc",
+    "quick-tests/arc-arc-test.ngc",
+    "quick-tests/square_spiral.ngc",
+    "quick-tests/tangent_helix.ngc",
+    "quick-tests/sawtooth.ngc",
+    "quick-tests/long-kink.ngc",
+    "quick-tests/rapid_3d_corners.ngc",
+    "quick-tests/spiral_tight_circular.ngc",
+    "quick-tests/parabolic_varying.ngc",
+    "performance/cap.ngc",
+    "nurbs-g5/trident-xy.ngc",
 ]
 
 
 def _plan_bytes(part, machine, out, window, threads, planner="vpop") -> bytes:
-    stream_plan(PlanOptions(part=str(part), machine_spec=machine, planner=planner, out=str(out),
-                            quiet=True), window=window, threads=threads)
+    stream_plan(
+        PlanOptions(part=str(part), machine_spec=machine, planner=planner, out=str(out), quiet=True),
+        window=window,
+        threads=threads,
+    )
     with open(out, "rb") as fh:
         return fh.read()
 
@@ -64,8 +73,7 @@ def test_window_size_does_not_change_the_bytes_corpus(tmp_path, rel):
 
 @pytest.mark.parametrize("name", ["mill-contour.ngc", "nurbs-trident.ngc"])
 def test_window_size_does_not_change_the_bytes_optimal(tmp_path, name):
-    _invariant(tmp_path, os.path.join(SAMPLES, name), SAMPLE_MACHINES.get(name, "generic-mill"),
-               "optimal")
+    _invariant(tmp_path, os.path.join(SAMPLES, name), SAMPLE_MACHINES.get(name, "generic-mill"), "optimal")
 
 
 @pytest.mark.parametrize("planner", ["constant", "variable"])
@@ -101,11 +109,9 @@ def _spiral_path(n_moves: int):
     th = np.linspace(0.0, 40 * np.pi, n_moves)
     r = 5.0 + th
     lines = ["G21 G90 G64 F3000", f"G0 X{r[0]:.4f} Y0"]
-    lines += [f"G1 X{r[i] * np.cos(th[i]):.4f} Y{r[i] * np.sin(th[i]):.4f} Z{0.001 * i:.4f}"
-              for i in range(n_moves)]
+    lines += [f"G1 X{r[i] * np.cos(th[i]):.4f} Y{r[i] * np.sin(th[i]):.4f} Z{0.001 * i:.4f}" for i in range(n_moves)]
     prog = read_program("\n".join(lines + ["M2"]).encode(), "spiral", axes=m.axes, start=m.start)
-    paths = [p for p in fit_program(prog, FitSettings.from_options(machine=m)).paths
-             if not p.rapid]
+    paths = [p for p in fit_program(prog, FitSettings.from_options(machine=m)).paths if not p.rapid]
     assert len(paths) == 1
     return paths[0], m
 
@@ -239,9 +245,13 @@ def test_ctrl_c_after_rows_were_written_leaves_no_file(tmp_path):
         pytest.skip("corpus not beside the repository")
     work = tmp_path / "run"
     work.mkdir()
-    proc = subprocess.Popen([console_script(), "plan", part, "-m", "generic-mill", "-o",
-                             "out.csv"], cwd=work, stdin=subprocess.DEVNULL,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(
+        [console_script(), "plan", part, "-m", "generic-mill", "-o", "out.csv"],
+        cwd=work,
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+    )
     try:
         t0 = time.monotonic()
         while proc.poll() is None and time.monotonic() - t0 < 240:

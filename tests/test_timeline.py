@@ -17,13 +17,13 @@ from cnc_interp.plan.verify import verify
 from ._vpop_paths import circle_fun, hermite_path, line_path
 
 DT = 0.001
-MILL = Machine(name="mill", axes="XYZ", vmax=[200, 200, 100], amax=[2000, 2000, 1000],
-               jmax=[20000, 20000, 10000], dt_s=DT)
+MILL = Machine(
+    name="mill", axes="XYZ", vmax=[200, 200, 100], amax=[2000, 2000, 1000], jmax=[20000, 20000, 10000], dt_s=DT
+)
 
 
 def program(start, items):
-    return Program(source="<test>", axes="XYZ", items=(), start=np.asarray(start, float),
-                   line_count=20)
+    return Program(source="<test>", axes="XYZ", items=(), start=np.asarray(start, float), line_count=20)
 
 
 def build():
@@ -127,8 +127,7 @@ def test_low_jerk_limit_holds_across_path_joins(planner):
     from cnc_interp.gcode import read_program
 
     text = "G21 G90 G17\nG0 X20 Y10\nG1 X20 Y10 F2400\nG2 X30 Y0 I5 J-5\nG4 P0.05\nG1 X40 Y5\nM2\n"
-    machine = Machine(name="low jerk", axes="XYZ", vmax=[100.0] * 3, amax=[2000.0] * 3,
-                      jmax=[2000.0] * 3, dt_s=0.001)
+    machine = Machine(name="low jerk", axes="XYZ", vmax=[100.0] * 3, amax=[2000.0] * 3, jmax=[2000.0] * 3, dt_s=0.001)
     fitted = fit_program(read_program(text, "arc.ngc", axes="XYZ"), FitSettings.from_options())
     traj = plan_program(fitted, machine, PlanSettings.from_options(planner=planner, dt_s=0.001))
     report = verify(traj, machine)

@@ -16,8 +16,16 @@ from cnc_interp.plan.verify import verify, verify_arrays
 def traj(q, dt, axes):
     q = np.asarray(q, dtype=float).reshape(len(q), -1)
     k = q.shape[0]
-    return Trajectory(axes=axes, dt_s=dt, t=np.arange(k) * dt, s=np.zeros(k), feed=np.zeros(k),
-                      q=q, line=np.zeros(k, dtype=int), planner="test")
+    return Trajectory(
+        axes=axes,
+        dt_s=dt,
+        t=np.arange(k) * dt,
+        s=np.zeros(k),
+        feed=np.zeros(k),
+        q=q,
+        line=np.zeros(k, dtype=int),
+        planner="test",
+    )
 
 
 def test_cubic_closed_form():
@@ -26,9 +34,9 @@ def test_cubic_closed_form():
     # come from the stop after the last sample (held copies), also closed form.
     dt, c, K = 0.01, 2.0, 50
     t = np.arange(K) * dt
-    q = c * t ** 3
+    q = c * t**3
     r = verify_arrays(q, dt, 1.0, 1.0, 1.0)
-    v_last = c * (3 * (K - 1) ** 2 - 3 * (K - 1) + 1) * dt ** 2
+    v_last = c * (3 * (K - 1) ** 2 - 3 * (K - 1) + 1) * dt**2
     assert_allclose(r.values[0, 0], v_last, rtol=1e-9)
     assert r.where[0, 0] == K - 1
     # acceleration: largest magnitude is the braking step right after the end: a = -v_last/dt
@@ -36,7 +44,7 @@ def test_cubic_closed_form():
     assert r.where[0, 1] == K
     # jerk: the first held sample after the end: (q_K - 3q_{K-1} + 3q_{K-2} - q_{K-3}) / dt^3
     qp = np.concatenate([q, [q[-1]] * 3])
-    jK = (qp[K] - 3 * qp[K - 1] + 3 * qp[K - 2] - qp[K - 3]) / dt ** 3
+    jK = (qp[K] - 3 * qp[K - 1] + 3 * qp[K - 2] - qp[K - 3]) / dt**3
     assert_allclose(r.values[0, 2], abs(jK), rtol=1e-9)
     assert r.where[0, 2] == K
     # interior jerk is 6c exactly: verify a padded-by-design cubic with no end effects
@@ -49,8 +57,8 @@ def test_smooth_rest_to_rest_within_limits_and_exact_ratio():
     D, T, dt = 10.0, 1.0, 1e-3
     t = np.arange(int(round(T / dt)) + 1) * dt
     u = t / T
-    q = D * (10 * u ** 3 - 15 * u ** 4 + 6 * u ** 5)
-    vpk, apk, jpk = 1.875 * D / T, 10 / np.sqrt(3) * D / T ** 2, 60 * D / T ** 3
+    q = D * (10 * u**3 - 15 * u**4 + 6 * u**5)
+    vpk, apk, jpk = 1.875 * D / T, 10 / np.sqrt(3) * D / T**2, 60 * D / T**3
     r = verify_arrays(q, dt, vpk, apk, jpk, axes="X")
     # backward differences average over up to 3 dt: slightly under the continuous peaks
     assert r.ok
@@ -67,7 +75,7 @@ def test_rest_padding_catches_jump_start():
     assert r.ok
     # the held position before q[0] means v jumps 0 -> 1 in one step: a = 1/dt, j = 1/dt^2
     assert_allclose(r.values[0, 1], 1 / dt, rtol=1e-9)
-    assert_allclose(r.values[0, 2], 1 / dt ** 2, rtol=1e-6)
+    assert_allclose(r.values[0, 2], 1 / dt**2, rtol=1e-6)
     strict = verify_arrays(q, dt, 2.0, 10.0, 1e12)
     assert not strict.ok and strict.ratios[0, 1] > 1
     # and a plan that does not start where the held position is: shift is a step in v
@@ -117,7 +125,7 @@ def test_report_format_and_dict():
     assert text.splitlines()[0].split()[0] == "axis" and len(text.splitlines()) == 5
     # vectorised result equals the plain stencil formula
     qp = np.concatenate([np.repeat(q[:1], 3, 0), q, np.repeat(q[-1:], 3, 0)])
-    j = (qp[3:] - 3 * qp[2:-1] + 3 * qp[1:-2] - qp[:-3]) / dt ** 3
+    j = (qp[3:] - 3 * qp[2:-1] + 3 * qp[1:-2] - qp[:-3]) / dt**3
     assert_allclose(r.values[:, 2], np.abs(j).max(axis=0), rtol=1e-6)
 
 

@@ -16,8 +16,9 @@ from cnc_interp.plan.vpop import JointTable, plan_path_vpop
 from ._vpop_paths import circle_fun, hermite_path, line_path, random_curve
 
 DT = 0.001
-MILL = Machine(name="mill", axes="XYZ", vmax=[200, 200, 100], amax=[2000, 2000, 1000],
-               jmax=[20000, 20000, 10000], dt_s=DT)
+MILL = Machine(
+    name="mill", axes="XYZ", vmax=[200, 200, 100], amax=[2000, 2000, 1000], jmax=[20000, 20000, 10000], dt_s=DT
+)
 
 
 def check(plan, machine, q_start, q_end, dt=DT):
@@ -45,8 +46,9 @@ def ruckig_time(length, v, a, j):
     return traj.duration
 
 
-@pytest.mark.parametrize("target,feed", [((100.0, 50.0, 0.0), 150.0), ((3.0, 0.0, 0.0), 150.0),
-                                         ((0.0, 40.0, 30.0), 1000.0)])
+@pytest.mark.parametrize(
+    "target,feed", [((100.0, 50.0, 0.0), 150.0), ((3.0, 0.0, 0.0), 150.0), ((0.0, 40.0, 30.0), 1000.0)]
+)
 def test_straight_line_matches_ruckig(target, feed):
     p = line_path([0, 0, 0], target, feed)
     plan = plan_path_vpop(p, None, MILL, DT)
@@ -68,8 +70,7 @@ def test_feed_limit_per_segment():
     coef[0, 1] = [50, 0, 0]
     coef[1, 0] = [50, 0, 0]
     coef[1, 1] = [50, 0, 0]
-    p = Path(axes="XYZ", breaks=np.array([0.0, 1.0, 2.0]), coef=coef, line=[1, 2],
-             feed_mm_s=[100.0, 30.0])
+    p = Path(axes="XYZ", breaks=np.array([0.0, 1.0, 2.0]), coef=coef, line=[1, 2], feed_mm_s=[100.0, 30.0])
     plan = plan_path_vpop(p, None, MILL, DT)
     check(plan, MILL, p.start, p.end)
     v = np.diff(plan.s) / DT
@@ -112,8 +113,14 @@ def test_exact_mode_gives_the_same_kind_of_plan():
 
 
 def test_rotary_only_move():
-    m = Machine(name="rot", axes="XYZA", vmax=[100, 100, 100, 90], amax=[1000, 1000, 1000, 300],
-                jmax=[1e4, 1e4, 1e4, 1800], dt_s=DT)
+    m = Machine(
+        name="rot",
+        axes="XYZA",
+        vmax=[100, 100, 100, 90],
+        amax=[1000, 1000, 1000, 300],
+        jmax=[1e4, 1e4, 1e4, 1800],
+        dt_s=DT,
+    )
     p = line_path([5, 5, 5, 0], [5, 5, 5, 120], 60.0, axes="XYZA")
     assert p.length == pytest.approx(120.0)  # s is the angle when no linear axis moves
     plan = plan_path_vpop(p, None, m, DT)
@@ -123,10 +130,16 @@ def test_rotary_only_move():
 
 
 def test_five_axis_xyzac_trt():
-    m = Machine(name="5ax", axes="XYZAC", vmax=[500, 500, 500, 90, 120],
-                amax=[2500, 3000, 2100, 298.8, 298.8], jmax=[5000, 5000, 50000, 1800, 36000],
-                dt_s=DT, kinematics="xyzac-trt",
-                kinematics_params={"z_rot_point": -50.0, "y_offset": 2.0})
+    m = Machine(
+        name="5ax",
+        axes="XYZAC",
+        vmax=[500, 500, 500, 90, 120],
+        amax=[2500, 3000, 2100, 298.8, 298.8],
+        jmax=[5000, 5000, 50000, 1800, 36000],
+        dt_s=DT,
+        kinematics="xyzac-trt",
+        kinematics_params={"z_rot_point": -50.0, "y_offset": 2.0},
+    )
     kin = make_kinematics(m)
 
     def fun(u):
@@ -178,26 +191,35 @@ def test_other_periods():
 # -- tiny zig-zags and short segments at high feed ------------------------------------
 #: the generic mill preset's limits (1 kHz) and a low-jerk machine at 6 ms (paper 001's
 #: Mikron UCP 710, linear axes), where one jerk step is 0.001-0.01 mm
-GENERIC = Machine(name="generic", axes="XYZ", vmax=[200, 200, 200], amax=[2000, 2000, 2000],
-                  jmax=[50000, 50000, 50000], dt_s=0.001)
-SLOW_JERK = Machine(name="ucp710", axes="XYZ", vmax=[500, 500, 500], amax=[2500, 3000, 2100],
-                    jmax=[5000, 5000, 50000], dt_s=0.006)
+GENERIC = Machine(
+    name="generic", axes="XYZ", vmax=[200, 200, 200], amax=[2000, 2000, 2000], jmax=[50000, 50000, 50000], dt_s=0.001
+)
+SLOW_JERK = Machine(
+    name="ucp710", axes="XYZ", vmax=[500, 500, 500], amax=[2500, 3000, 2100], jmax=[5000, 5000, 50000], dt_s=0.006
+)
 
 #: the fitted path of `G18 G64 F25000 G1 X-0.2032 Z-0.0254` then `X-0.3556 Z0.0254` (cut
 #: down from the corpus's stellabee1.ngc line 2197) as an earlier fit produced it: X turns
 #: back twice within 0.4 mm. VPOp once failed on it with "no feasible step at s = 0.3555":
 #: its max-step search missed the narrow allowed set after a brake fix.
 ZIGZAG_COEF = [
-    [[0.0, 0.0, 0.0], [-1.0, 0.0, -0.33625847766848127],
-     [1.247576414947627e-16, 0.0, 1.018723452195554],
-     [7.089782303080595e-23, 0.0, 5.789246587682895e-07],
-     [3.262932010012549e-22, 0.0, 2.6643861824358903e-06],
-     [3.055594719845423e-16, 0.0, 2.4950824368077775]],
-    [[-0.2032, 0.0, -0.0254], [-10.098967451927443, 0.0, 1.0000000000000007],
-     [1264.889911020428, 0.0, -7.745216904024738e-14],
-     [-36914.25025723641, 0.0, 2.2603459210224465e-12],
-     [363329.15305678046, 0.0, -2.2247494216395248e-11],
-     [-1430429.283421124, 0.0, 8.758853216741609e-11]]]
+    [
+        [0.0, 0.0, 0.0],
+        [-1.0, 0.0, -0.33625847766848127],
+        [1.247576414947627e-16, 0.0, 1.018723452195554],
+        [7.089782303080595e-23, 0.0, 5.789246587682895e-07],
+        [3.262932010012549e-22, 0.0, 2.6643861824358903e-06],
+        [3.055594719845423e-16, 0.0, 2.4950824368077775],
+    ],
+    [
+        [-0.2032, 0.0, -0.0254],
+        [-10.098967451927443, 0.0, 1.0000000000000007],
+        [1264.889911020428, 0.0, -7.745216904024738e-14],
+        [-36914.25025723641, 0.0, 2.2603459210224465e-12],
+        [363329.15305678046, 0.0, -2.2247494216395248e-11],
+        [-1430429.283421124, 0.0, 8.758853216741609e-11],
+    ],
+]
 
 
 def check_path(plan, machine, p):
@@ -208,10 +230,14 @@ def check_path(plan, machine, p):
 
 @pytest.mark.parametrize("exact", [False, True])
 def test_near_cusp_zigzag_is_planned(exact):
-    p = Path(axes="XYZ", breaks=np.array([0.0, 0.2032, 0.254]), coef=np.array(ZIGZAG_COEF),
-             line=[3, 4], feed_mm_s=[25000 / 60, 25000 / 60])
-    plan = plan_path_vpop(p, None, GENERIC, GENERIC.dt_s,
-                          PlanSettings(options={"vpop_exact": exact}))
+    p = Path(
+        axes="XYZ",
+        breaks=np.array([0.0, 0.2032, 0.254]),
+        coef=np.array(ZIGZAG_COEF),
+        line=[3, 4],
+        feed_mm_s=[25000 / 60, 25000 / 60],
+    )
+    plan = plan_path_vpop(p, None, GENERIC, GENERIC.dt_s, PlanSettings(options={"vpop_exact": exact}))
     check_path(plan, GENERIC, p)
     assert plan.stats["exact"] == exact
     # it must slow down to a crawl at the turns, yet take well under a second
@@ -242,8 +268,7 @@ def _zigzag_program(rng) -> bytes:
     at a feed far above what such short moves can reach."""
     scale = 10 ** rng.uniform(-2.5, 0.5)
     mode = rng.choice(["G64", "G64 P0.001", "G64 P0.01", "G61"])
-    lines = [f"G21 G90 G94 {mode} {rng.choice(['G17', 'G18', 'G19'])}",
-             f"F{rng.choice([3000, 10000, 25000, 60000])}"]
+    lines = [f"G21 G90 G94 {mode} {rng.choice(['G17', 'G18', 'G19'])}", f"F{rng.choice([3000, 10000, 25000, 60000])}"]
     p = np.zeros(3)
     for _ in range(int(rng.integers(2, 7))):
         step = rng.normal(0, scale, 3)
@@ -287,12 +312,12 @@ def test_random_short_curves_and_lines_at_high_feed(machine):
             a = rng.normal(0, 1, 3)
             p = line_path(a, a + rng.normal(0, scale, 3), feed)
         else:
-            p = hermite_path(random_curve(rng, scale=scale), int(rng.integers(1, 5)), feed,
-                             u1=float(rng.uniform(0.5, 4.0)))
+            p = hermite_path(
+                random_curve(rng, scale=scale), int(rng.integers(1, 5)), feed, u1=float(rng.uniform(0.5, 4.0))
+            )
         for exact in (False, True):
             try:
-                plan = plan_path_vpop(p, None, machine, machine.dt_s,
-                                      PlanSettings(options={"vpop_exact": exact}))
+                plan = plan_path_vpop(p, None, machine, machine.dt_s, PlanSettings(options={"vpop_exact": exact}))
                 check_path(plan, machine, p)
             except Exception as exc:
                 raise AssertionError(f"trial {trial}, exact {exact}") from exc

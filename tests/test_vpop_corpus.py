@@ -12,15 +12,16 @@ from cnc_interp.errors import CncInterpError
 from cnc_interp.pipeline import plan_part
 
 from .conftest import CORPUS  # noqa: E402
+
 INI = os.path.join(CORPUS, "configs", "axis_mm.ini")
 SUBSET = [
     "arc-feed/basic_xy.ngc",
     "arc-feed/simple_arc3.ngc",
-    "arc-feed/full_xz.ngc",          # arcs outside the machine's plane set: clear error
+    "arc-feed/full_xz.ngc",  # arcs outside the machine's plane set: clear error
     "examples/g881.ngc",
     "nurbs-g5/nurbs-xy.ngc",
     "nurbs-g5/leto-xy.ngc",
-    "examples/daisy.ngc",            # an A word on an XYZ machine: clear error
+    "examples/daisy.ngc",  # an A word on an XYZ machine: clear error
 ]
 
 pytestmark = pytest.mark.skipif(not os.path.isdir(CORPUS), reason="corpus not available")

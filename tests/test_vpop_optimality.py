@@ -12,21 +12,26 @@ from cnc_interp.plan.vpop import plan_path_vpop
 from ._vpop_paths import circle_fun, hermite_path, line_path, random_curve
 
 DT = 0.001
-MILL = Machine(name="mill", axes="XYZ", vmax=[200, 200, 100], amax=[2000, 2000, 1000],
-               jmax=[20000, 20000, 10000], dt_s=DT)
+MILL = Machine(
+    name="mill", axes="XYZ", vmax=[200, 200, 100], amax=[2000, 2000, 1000], jmax=[20000, 20000, 10000], dt_s=DT
+)
 
 
-@pytest.mark.parametrize("target,feed", [((3.0, 0.0, 0.0), 150.0), ((0.0, 0.0, 6.0), 80.0),
-                                         ((4.0, 3.0, 0.0), 1000.0)])
+@pytest.mark.parametrize("target,feed", [((3.0, 0.0, 0.0), 150.0), ((0.0, 0.0, 6.0), 80.0), ((4.0, 3.0, 0.0), 1000.0)])
 def test_line_within_3_percent_of_the_discrete_minimum(target, feed):
     p = line_path([0, 0, 0], target, feed)
     plan = plan_path_vpop(p, None, MILL, DT)
     steps = plan.s.shape[0] - 1
     d = np.abs(np.asarray(target)) / p.length
     nz = d > 0
-    k_min = line_min_samples(p.length, min(feed, np.min(MILL.vmax[nz] / d[nz])),
-                             np.min(MILL.amax[nz] / d[nz]), np.min(MILL.jmax[nz] / d[nz]), DT,
-                             guess=steps)
+    k_min = line_min_samples(
+        p.length,
+        min(feed, np.min(MILL.vmax[nz] / d[nz])),
+        np.min(MILL.amax[nz] / d[nz]),
+        np.min(MILL.jmax[nz] / d[nz]),
+        DT,
+        guess=steps,
+    )
     # the LP optimum is a true minimum: nothing that passes verify can be faster
     assert steps >= k_min
     assert steps <= 1.03 * k_min + 1, (steps, k_min)
@@ -39,9 +44,14 @@ def test_lp_minimum_of_a_tiny_move_is_known():
     assert line_min_samples(1.01 * e, 200, 2000, 20000, DT) == 2
 
 
-@pytest.mark.parametrize("make", [lambda: hermite_path(circle_fun(8.0), 12, 300.0),
-                                  lambda: hermite_path(random_curve(np.random.default_rng(5)), 8, 150.0),
-                                  lambda: line_path([0, 0, 0], [50, 20, 0], 120.0)])
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda: hermite_path(circle_fun(8.0), 12, 300.0),
+        lambda: hermite_path(random_curve(np.random.default_rng(5)), 8, 150.0),
+        lambda: line_path([0, 0, 0], [50, 20, 0], 120.0),
+    ],
+)
 def test_lower_bound_is_below_the_plan(make):
     p = make()
     plan = plan_path_vpop(p, None, MILL, DT)
@@ -52,8 +62,9 @@ def test_lower_bound_is_below_the_plan(make):
     assert t / lb < 2.0
 
 
-TRIDENT = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "corpus", "linuxcnc",
-                       "nurbs-g5", "trident-xy.ngc")
+TRIDENT = os.path.join(
+    os.path.dirname(__file__), "..", "..", "shared", "corpus", "linuxcnc", "nurbs-g5", "trident-xy.ngc"
+)
 
 
 @pytest.mark.skipif(not os.path.exists(TRIDENT), reason="corpus not available")

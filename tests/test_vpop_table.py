@@ -33,8 +33,7 @@ def test_straight_line_with_uneven_parameter():
     a = np.array([1.0, -2.0, 3.0])
     d = np.array([30.0, 40.0, 0.0])  # |d| = 50
     g = np.array([0.0, 1.0, 0.8, 0.0, 0.0, -0.5])
-    coef = (a[None, None, :] * (np.arange(6) == 0)[None, :, None]
-            + g[None, :, None] * d[None, None, :])
+    coef = a[None, None, :] * (np.arange(6) == 0)[None, :, None] + g[None, :, None] * d[None, None, :]
     p = Path("XYZ", np.array([0.0, 1.0]), coef, line=[1], feed_mm_s=[100.0])
     t = JointTable(p, None)
     _basic(t, p)
@@ -66,8 +65,13 @@ def test_random_quintic_paths_within_tolerance(seed):
     rng = np.random.default_rng(100 + seed)
     n_axes = int(rng.integers(2, 6))
     n_seg = int(rng.integers(1, 30))
-    p = hermite_path(random_curve(rng, n_axes=n_axes, scale=float(rng.uniform(1, 80))), n_seg,
-                     100.0, axes="XYZUV"[:n_axes], u1=float(rng.uniform(0.5, 4.0)))
+    p = hermite_path(
+        random_curve(rng, n_axes=n_axes, scale=float(rng.uniform(1, 80))),
+        n_seg,
+        100.0,
+        axes="XYZUV"[:n_axes],
+        u1=float(rng.uniform(0.5, 4.0)),
+    )
     t = JointTable(p, None)
     _basic(t, p)
     assert_array_equal(t.qend, p.end)  # the exact programmed end, to the bit
@@ -111,8 +115,18 @@ def test_rerun_when_the_length_scale_matters():
 
     rng = np.random.default_rng(3)
     p = hermite_path(random_curve(rng, scale=30.0), 7, 100.0)
-    args = (p.coef, p.breaks, p.s_breaks, p.weights, p.length * (1 + 1e-7), TOL,
-            VPOP_TABLE_MAX_ROUNDS - 1, 20.0, _GL_X, _GL_W)
+    args = (
+        p.coef,
+        p.breaks,
+        p.s_breaks,
+        p.weights,
+        p.length * (1 + 1e-7),
+        TOL,
+        VPOP_TABLE_MAX_ROUNDS - 1,
+        20.0,
+        _GL_X,
+        _GL_W,
+    )
     status, u, S, C, err, qend = K.build_identity(*args, 1)
     assert status == K.OK and err > TOL  # one pass: the stretch shows
     status, u, S, C, err, qend = K.build_identity(*args, VPOP_TABLE_MAX_TRIES)
@@ -142,9 +156,16 @@ def test_kinematics_route_matches_identity_route():
 
 
 def test_xyzac_trt_table_follows_the_joint_path():
-    m = Machine(name="5ax", axes="XYZAC", vmax=[500] * 5, amax=[2500] * 5, jmax=[5000] * 5,
-                dt_s=0.001, kinematics="xyzac-trt",
-                kinematics_params={"z_rot_point": -50.0, "y_offset": 2.0})
+    m = Machine(
+        name="5ax",
+        axes="XYZAC",
+        vmax=[500] * 5,
+        amax=[2500] * 5,
+        jmax=[5000] * 5,
+        dt_s=0.001,
+        kinematics="xyzac-trt",
+        kinematics_params={"z_rot_point": -50.0, "y_offset": 2.0},
+    )
     kin = make_kinematics(m)
 
     def fun(u):
@@ -175,8 +196,7 @@ def test_rotary_only_path():
     _basic(t, p)
     assert t.length == pytest.approx(120.0)
     s = np.linspace(0, 120.0, 101)
-    assert_allclose(_eval_table(t.S, t.C, s), np.stack([np.full_like(s, 5.0)] * 3 + [s], 1),
-                    rtol=0, atol=1e-12)
+    assert_allclose(_eval_table(t.S, t.C, s), np.stack([np.full_like(s, 5.0)] * 3 + [s], 1), rtol=0, atol=1e-12)
 
 
 def test_cusp_is_a_clear_error_not_nan():
@@ -200,8 +220,7 @@ def _bounds_reference(t: JointTable, al, jl, vl):
     h = np.diff(t.S)
     tt = (h[:, None] * np.linspace(0.0, 1.0, 5)[None, :])[..., None]  # (m, 5, 1)
     c = t.C[:, None, :, :]
-    q1 = c[:, :, 1] + tt * (2 * c[:, :, 2] + tt * (3 * c[:, :, 3]
-                                                + tt * (4 * c[:, :, 4] + tt * 5 * c[:, :, 5])))
+    q1 = c[:, :, 1] + tt * (2 * c[:, :, 2] + tt * (3 * c[:, :, 3] + tt * (4 * c[:, :, 4] + tt * 5 * c[:, :, 5])))
     q2 = 2 * c[:, :, 2] + tt * (6 * c[:, :, 3] + tt * (12 * c[:, :, 4] + tt * 20 * c[:, :, 5]))
     q3 = 6 * c[:, :, 3] + tt * (24 * c[:, :, 4] + tt * 60 * c[:, :, 5])
     m2 = 1.25 * np.abs(q2).max(axis=1)

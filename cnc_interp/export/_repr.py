@@ -33,12 +33,12 @@ def _tables():
     pos = np.zeros((_TABLE_SIZE, 2), dtype=np.uint64)
     mask = (1 << 64) - 1
     for i in range(_INV_TABLE_SIZE):
-        p = 5 ** i
+        p = 5**i
         j = p.bit_length() - 1 + _POW5_INV_BITCOUNT
         v = (1 << j) // p + 1
         inv[i, 0], inv[i, 1] = v & mask, v >> 64
     for i in range(_TABLE_SIZE):
-        p = 5 ** i
+        p = 5**i
         j = p.bit_length() - _POW5_BITCOUNT
         v = p >> j if j >= 0 else p << -j
         pos[i, 0], pos[i, 1] = v & mask, v >> 64

@@ -62,8 +62,7 @@ class CsvPlanWriter:
                 if self._pool is None:
                     from concurrent.futures import ThreadPoolExecutor
 
-                    self._pool = ThreadPoolExecutor(max_workers=1,
-                                                    thread_name_prefix="cnc-interp-csv")
+                    self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="cnc-interp-csv")
                 second = self._pool.submit(format_rows, cols[:, mid:hi])
                 self.fh.write(format_rows(cols[:, lo:mid]))
                 self.fh.write(second.result())
@@ -113,8 +112,7 @@ def read_csv(path: str, dt_s: float | None = None):
         raise PlanFileError("not a plan CSV: the header must start with t,s,feed", hloc)
     axes = "".join(names[3:])
     if len(axes) != len(names) - 3 or any(a not in ALL_AXES for a in axes) or len(set(axes)) != len(axes):
-        raise PlanFileError("plan CSV header: the columns after t,s,feed must be distinct "
-                            "axis letters", hloc)
+        raise PlanFileError("plan CSV header: the columns after t,s,feed must be distinct axis letters", hloc)
     ncol = len(names)
     data = _parse_arrow(path, names)
     if data is None:
@@ -122,8 +120,7 @@ def read_csv(path: str, dt_s: float | None = None):
             with open(path, "rb") as fh:
                 body = fh.read().partition(b"\n")[2]
         except OSError as exc:
-            raise PlanFileError(f"cannot read plan: {exc.strerror}",
-                                SourceLocation(file=path)) from None
+            raise PlanFileError(f"cannot read plan: {exc.strerror}", SourceLocation(file=path)) from None
         data = _parse_numbers(body, ncol, path)
     k = data.shape[0]
     if k == 0:
@@ -135,14 +132,20 @@ def read_csv(path: str, dt_s: float | None = None):
         bad = np.abs(t - expect) > CSV_TIME_REL_TOL * max(1.0, abs(float(t[-1])))
         if not dt_s > 0 or bad.any():
             row = int(np.argmax(bad)) if bad.any() else 1
-            raise PlanFileError("plan CSV: t is not sampled at a fixed period",
-                                SourceLocation(path, row + 2, 1))
+            raise PlanFileError("plan CSV: t is not sampled at a fixed period", SourceLocation(path, row + 2, 1))
     elif dt_s is None:
         raise PlanFileError("plan CSV with one sample: the sample period is unknown", hloc)
-    return Trajectory(axes=axes, dt_s=float(dt_s), t=np.ascontiguousarray(t),
-                      s=np.ascontiguousarray(data[:, 1]), feed=np.ascontiguousarray(data[:, 2]),
-                      q=np.ascontiguousarray(data[:, 3:]), line=np.zeros(k, dtype=np.int64),
-                      planner="csv", settings={"source": path})
+    return Trajectory(
+        axes=axes,
+        dt_s=float(dt_s),
+        t=np.ascontiguousarray(t),
+        s=np.ascontiguousarray(data[:, 1]),
+        feed=np.ascontiguousarray(data[:, 2]),
+        q=np.ascontiguousarray(data[:, 3:]),
+        line=np.zeros(k, dtype=np.int64),
+        planner="csv",
+        settings={"source": path},
+    )
 
 
 def _parse_arrow(path: str, names: list[str]) -> np.ndarray | None:
@@ -157,11 +160,16 @@ def _parse_arrow(path: str, names: list[str]) -> np.ndarray | None:
         return None
     try:
         table = pacsv.read_csv(
-            path, read_options=pacsv.ReadOptions(column_names=names, skip_rows=1),
+            path,
+            read_options=pacsv.ReadOptions(column_names=names, skip_rows=1),
             parse_options=pacsv.ParseOptions(newlines_in_values=False),
-            convert_options=pacsv.ConvertOptions(column_types={n: pa.float64() for n in names},
-                                                 strings_can_be_null=False,
-                                                 null_values=[], quoted_strings_can_be_null=False))
+            convert_options=pacsv.ConvertOptions(
+                column_types={n: pa.float64() for n in names},
+                strings_can_be_null=False,
+                null_values=[],
+                quoted_strings_can_be_null=False,
+            ),
+        )
     except (pa.ArrowInvalid, pa.ArrowTypeError, OSError, ValueError):
         return None
     if table.num_columns != len(names) or any(c.null_count for c in table.columns):
@@ -226,8 +234,9 @@ def _parse_numbers(body: bytes, ncol: int, path: str) -> np.ndarray:
             continue
         fields = text.split(",")
         if len(fields) != ncol:
-            raise PlanFileError(f"row has {len(fields)} fields, the header has {ncol}",
-                                SourceLocation(path, i, 1, text))
+            raise PlanFileError(
+                f"row has {len(fields)} fields, the header has {ncol}", SourceLocation(path, i, 1, text)
+            )
         for j, f in enumerate(fields):
             try:
                 float(f)

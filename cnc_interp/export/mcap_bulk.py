@@ -25,8 +25,8 @@ import numpy as np
 
 _MAGIC = b"\x89MCAP0\r\n"
 _MSG_HEAD = struct.Struct("<BQHIQQ")  # opcode, record length, channel, sequence, log, publish
-_MSG_HEAD_BYTES = _MSG_HEAD.size      # 31
-_MSG_FIXED = 22                       # channel(2) + sequence(4) + log(8) + publish(8)
+_MSG_HEAD_BYTES = _MSG_HEAD.size  # 31
+_MSG_FIXED = 22  # channel(2) + sequence(4) + log(8) + publish(8)
 _INDEX_HEAD = struct.Struct("<BQHI")  # opcode, record length, channel, entries length
 _OP_MESSAGE = 0x05
 _OP_MESSAGE_INDEX = 0x07
@@ -76,13 +76,18 @@ class BulkMcapWriter:
         self._to_chunk(schema)
         return schema.id
 
-    def register_channel(self, topic: str, message_encoding: str, schema_id: int,
-                         metadata: dict[str, str] | None = None) -> int:
+    def register_channel(
+        self, topic: str, message_encoding: str, schema_id: int, metadata: dict[str, str] | None = None
+    ) -> int:
         from mcap.records import Channel
 
-        channel = Channel(id=len(self._channels) + 1, topic=topic,
-                          message_encoding=message_encoding, schema_id=schema_id,
-                          metadata=dict(metadata or {}))
+        channel = Channel(
+            id=len(self._channels) + 1,
+            topic=topic,
+            message_encoding=message_encoding,
+            schema_id=schema_id,
+            metadata=dict(metadata or {}),
+        )
         self._channels.append(channel)
         self._to_chunk(channel)
         return channel.id
@@ -93,8 +98,7 @@ class BulkMcapWriter:
         self._flush()
         offset = self._stream.tell()
         Metadata(name=name, metadata=data).write(self._rb)
-        self._metadata_indexes.append(MetadataIndex(offset=offset, length=self._rb.count,
-                                                    name=name))
+        self._metadata_indexes.append(MetadataIndex(offset=offset, length=self._rb.count, name=name))
         self._flush()
 
     def _to_chunk(self, record) -> None:
@@ -110,8 +114,7 @@ class BulkMcapWriter:
         self._stream.write(self._rb.end())
 
     # -- messages in bulk ------------------------------------------------------------------
-    def add_messages(self, channel_ids: Sequence[int], log_times: Sequence[int],
-                     datas: Sequence[bytes]) -> None:
+    def add_messages(self, channel_ids: Sequence[int], log_times: Sequence[int], datas: Sequence[bytes]) -> None:
         """Append messages in file order (publish time = log time, sequence 0)."""
         n = len(datas)
         if n == 0:
@@ -119,8 +122,10 @@ class BulkMcapWriter:
         chans = np.asarray(channel_ids, dtype=np.int64)
         times = np.asarray(log_times, dtype=np.int64)
         pack = _MSG_HEAD.pack
-        recs = [pack(_OP_MESSAGE, _MSG_FIXED + len(d), c, 0, t, t) + d
-                for c, t, d in zip(chans.tolist(), times.tolist(), datas)]
+        recs = [
+            pack(_OP_MESSAGE, _MSG_FIXED + len(d), c, 0, t, t) + d
+            for c, t, d in zip(chans.tolist(), times.tolist(), datas)
+        ]
         sizes = np.fromiter(map(len, recs), dtype=np.int64, count=n)
         ends = np.cumsum(sizes)  # chunk-relative end of each record, before the base size
         self._stats(chans, times)
@@ -176,17 +181,28 @@ class BulkMcapWriter:
         self._chunk_count += 1
         data = b"".join(self._parts)
         compressed = zstandard.compress(data)
-        chunk = Chunk(compression="zstd", data=compressed, message_start_time=self._c_start,
-                      message_end_time=self._c_end, uncompressed_crc=zlib.crc32(data),
-                      uncompressed_size=len(data))
+        chunk = Chunk(
+            compression="zstd",
+            data=compressed,
+            message_start_time=self._c_start,
+            message_end_time=self._c_end,
+            uncompressed_crc=zlib.crc32(data),
+            uncompressed_size=len(data),
+        )
         self._flush()
         chunk_start = self._stream.tell()
         chunk.write(self._rb)
-        index = ChunkIndex(message_start_time=self._c_start, message_end_time=self._c_end,
-                           chunk_start_offset=chunk_start, chunk_length=self._rb.count,
-                           message_index_offsets={}, message_index_length=0,
-                           compression="zstd", compressed_size=len(compressed),
-                           uncompressed_size=len(data))
+        index = ChunkIndex(
+            message_start_time=self._c_start,
+            message_end_time=self._c_end,
+            chunk_start_offset=chunk_start,
+            chunk_length=self._rb.count,
+            message_index_offsets={},
+            message_index_length=0,
+            compression="zstd",
+            compressed_size=len(compressed),
+            uncompressed_size=len(data),
+        )
         self._flush()
         index_start = self._stream.tell()
         written = 0
@@ -216,32 +232,42 @@ class BulkMcapWriter:
         summary_start = self._stream.tell()
         sb = RecordBuilder()
         offsets = []
-        stats = Statistics(attachment_count=0, channel_count=len(self._channels),
-                           channel_message_counts=self._channel_counts,
-                           chunk_count=self._chunk_count, message_count=self._message_count,
-                           message_end_time=self._end_time,
-                           message_start_time=self._start_time,
-                           metadata_count=len(self._metadata_indexes),
-                           schema_count=len(self._schemas))
-        groups = ((Opcode.SCHEMA, self._schemas), (Opcode.CHANNEL, self._channels),
-                  (Opcode.STATISTICS, [stats]), (Opcode.CHUNK_INDEX, self._chunk_indexes),
-                  (Opcode.ATTACHMENT_INDEX, []), (Opcode.METADATA_INDEX, self._metadata_indexes))
+        stats = Statistics(
+            attachment_count=0,
+            channel_count=len(self._channels),
+            channel_message_counts=self._channel_counts,
+            chunk_count=self._chunk_count,
+            message_count=self._message_count,
+            message_end_time=self._end_time,
+            message_start_time=self._start_time,
+            metadata_count=len(self._metadata_indexes),
+            schema_count=len(self._schemas),
+        )
+        groups = (
+            (Opcode.SCHEMA, self._schemas),
+            (Opcode.CHANNEL, self._channels),
+            (Opcode.STATISTICS, [stats]),
+            (Opcode.CHUNK_INDEX, self._chunk_indexes),
+            (Opcode.ATTACHMENT_INDEX, []),
+            (Opcode.METADATA_INDEX, self._metadata_indexes),
+        )
         for opcode, records in groups:
             group_start = sb.count
             for rec in records:
                 rec.write(sb)
-            offsets.append(SummaryOffset(group_opcode=opcode, group_start=summary_start + group_start,
-                                         group_length=sb.count - group_start))
+            offsets.append(
+                SummaryOffset(
+                    group_opcode=opcode, group_start=summary_start + group_start, group_length=sb.count - group_start
+                )
+            )
         summary_offset_start = summary_start + sb.count
         for off in offsets:
             off.write(sb)
         summary = sb.end()
         crc = zlib.crc32(summary)
-        crc = zlib.crc32(struct.pack("<BQQQ", Opcode.FOOTER, 8 + 8 + 4, summary_start,
-                                     summary_offset_start), crc)
+        crc = zlib.crc32(struct.pack("<BQQQ", Opcode.FOOTER, 8 + 8 + 4, summary_start, summary_offset_start), crc)
         self._stream.write(summary)
-        Footer(summary_start=summary_start, summary_offset_start=summary_offset_start,
-               summary_crc=crc).write(self._rb)
+        Footer(summary_start=summary_start, summary_offset_start=summary_offset_start, summary_crc=crc).write(self._rb)
         self._flush()
         self._stream.write(_MAGIC)
 
@@ -282,8 +308,13 @@ def read_channel(fh, summary, channel_id: int) -> tuple[np.ndarray, list[bytes]]
             raise McapReadError("message index points outside its chunk")
         raw = np.frombuffer(data, dtype=np.uint8)
         span = offsets[:, None] + np.arange(_MSG_HEAD_BYTES)
-        heads = raw[span].copy().view(np.dtype([("op", "u1"), ("len", "<u8"), ("ch", "<u2"),
-                                                ("seq", "<u4"), ("log", "<u8"), ("pub", "<u8")]))
+        heads = (
+            raw[span]
+            .copy()
+            .view(
+                np.dtype([("op", "u1"), ("len", "<u8"), ("ch", "<u2"), ("seq", "<u4"), ("log", "<u8"), ("pub", "<u8")])
+            )
+        )
         heads = heads.reshape(-1)
         if (heads["op"] != _OP_MESSAGE).any() or (heads["ch"] != channel_id).any():
             raise McapReadError("message index points at a record of another kind or channel")

@@ -62,12 +62,10 @@ _SEG_FIELDS = ("line", "s_start", "s_end", "t_start", "t_end", "feed_min", "feed
 def input_metadata(name: str, data: bytes) -> dict:
     """The ``input`` metadata record for a part program read as ``data`` from ``name``."""
     lines = data.count(b"\n") + (1 if data and not data.endswith(b"\n") else 0)
-    return {"name": name, "sha256": hashlib.sha256(data).hexdigest(), "lines": lines,
-            "bytes": len(data)}
+    return {"name": name, "sha256": hashlib.sha256(data).hexdigest(), "lines": lines, "bytes": len(data)}
 
 
-def write_mcap(traj, out: str, metadata: Mapping | None = None, machine=None,
-               segments=None, progress=None) -> int:
+def write_mcap(traj, out: str, metadata: Mapping | None = None, machine=None, segments=None, progress=None) -> int:
     """Write ``traj`` as an MCAP file at ``out`` (``-`` = stdout), atomically.
 
     Args:
@@ -95,25 +93,36 @@ def write_mcap(traj, out: str, metadata: Mapping | None = None, machine=None,
         K = traj.n_samples
         for b0 in range(0, K, _BATCH):
             b1 = min(b0 + _BATCH, K)
-            w.write(traj.t[b0:b1], traj.s[b0:b1], traj.feed[b0:b1], traj.q[b0:b1],
-                    traj.line[b0:b1])
+            w.write(traj.t[b0:b1], traj.s[b0:b1], traj.feed[b0:b1], traj.q[b0:b1], traj.line[b0:b1])
             if progress is not None:
                 progress(b1 - b0)
         return w.finish(_planner_record(traj), metadata)
 
 
 def _planner_record(traj) -> dict:
-    return {"name": traj.planner, "status": traj.status, "dt_s": float(traj.dt_s),
-            "axes": traj.axes, "samples": traj.n_samples, "duration_s": traj.duration_s,
-            "settings": _dumps(traj.settings)}
+    return {
+        "name": traj.planner,
+        "status": traj.status,
+        "dt_s": float(traj.dt_s),
+        "axes": traj.axes,
+        "samples": traj.n_samples,
+        "duration_s": traj.duration_s,
+        "settings": _dumps(traj.settings),
+    }
 
 
-def planner_record(planner: str, status: str, dt_s: float, axes: str, samples: int,
-                   settings: dict) -> dict:
+def planner_record(planner: str, status: str, dt_s: float, axes: str, samples: int, settings: dict) -> dict:
     """The ``planner`` metadata record of a streamed plan (known at its end)."""
     duration = float((samples - 1) * dt_s) if samples else 0.0
-    return {"name": planner, "status": status, "dt_s": float(dt_s), "axes": axes,
-            "samples": int(samples), "duration_s": duration, "settings": _dumps(settings)}
+    return {
+        "name": planner,
+        "status": status,
+        "dt_s": float(dt_s),
+        "axes": axes,
+        "samples": int(samples),
+        "duration_s": duration,
+        "settings": _dumps(settings),
+    }
 
 
 class _Tell:
@@ -156,21 +165,24 @@ class McapPlanWriter:
         self.writer = writer = BulkMcapWriter(_Tell(fh), chunk_size=MCAP_CHUNK_BYTES)
         # A fixed library string: no timestamps, nothing host-specific in the header.
         writer.start(profile="", library=f"cnc-interp/{__version__}")
-        sp_schema = writer.register_schema("cnc_interp.Setpoint", "jsonschema",
-                                           _schema_json(_setpoint_schema(axes)).encode())
-        self.sp_chan = writer.register_channel(SETPOINTS_TOPIC, "json", sp_schema,
-                                               {"axes": axes, "units": _units(axes)})
-        seg_schema = writer.register_schema("cnc_interp.Segment", "jsonschema",
-                                            _schema_json(_segment_schema()).encode())
+        sp_schema = writer.register_schema(
+            "cnc_interp.Setpoint", "jsonschema", _schema_json(_setpoint_schema(axes)).encode()
+        )
+        self.sp_chan = writer.register_channel(
+            SETPOINTS_TOPIC, "json", sp_schema, {"axes": axes, "units": _units(axes)}
+        )
+        seg_schema = writer.register_schema(
+            "cnc_interp.Segment", "jsonschema", _schema_json(_segment_schema()).encode()
+        )
         self.seg_chan = writer.register_channel(SEGMENTS_TOPIC, "json", seg_schema, {})
         self.lim_chan = None
         self.lim_axes = ""
         if machine is not None:
             self.lim_axes = "".join(a for a in axes if a in machine.axes)
-            lim_schema = writer.register_schema("cnc_interp.LimitRatios", "jsonschema",
-                                                _schema_json(_limits_schema(self.lim_axes)).encode())
-            self.lim_chan = writer.register_channel(LIMITS_TOPIC, "json", lim_schema,
-                                                    {"axes": self.lim_axes})
+            lim_schema = writer.register_schema(
+                "cnc_interp.LimitRatios", "jsonschema", _schema_json(_limits_schema(self.lim_axes)).encode()
+            )
+            self.lim_chan = writer.register_channel(LIMITS_TOPIC, "json", lim_schema, {"axes": self.lim_axes})
             self.lim_idx = [axes.index(a) for a in self.lim_axes]
             self.limits = machine.limits()[:, [machine.axes.index(a) for a in self.lim_axes]]
         self.sp_fmt = _template(("t", "s", "feed", "line", *axes))
@@ -237,7 +249,7 @@ class McapPlanWriter:
             # the segment starting at local sample a ends where the next begins: at the next
             # change of line, or MCAP_SEGMENT_MAX_SAMPLES samples on
             top = min(n, a + MCAP_SEGMENT_MAX_SAMPLES + 1)
-            change = np.flatnonzero(line[a + 1:top] != line[a])
+            change = np.flatnonzero(line[a + 1 : top] != line[a])
             if change.size:
                 c = a + 1 + int(change[0])
             elif top - a > MCAP_SEGMENT_MAX_SAMPLES:
@@ -263,13 +275,20 @@ class McapPlanWriter:
         i0 = self.seg0 + a
         out_c, out_t, out_k, out_d = [], [], [], []
         if ln != 0:
-            fseg = tsf[a:c + 1, 2]
+            fseg = tsf[a : c + 1, 2]
             fin = fseg[np.isfinite(fseg)]
-            vals = (ln, _num(tsf[a, 1]), _num(tsf[c, 1]), _num(tsf[a, 0]), _num(tsf[c, 0]),
-                    _num(fin.min()) if fin.size else "null",
-                    _num(fin.max()) if fin.size else "null", int(c - a + 1))
+            vals = (
+                ln,
+                _num(tsf[a, 1]),
+                _num(tsf[c, 1]),
+                _num(tsf[a, 0]),
+                _num(tsf[c, 0]),
+                _num(fin.min()) if fin.size else "null",
+                _num(fin.max()) if fin.size else "null",
+                int(c - a + 1),
+            )
             out_c.append(np.array([self.seg_chan]))
-            out_t.append(_time_ns(tsf[a:a + 1, 0]))
+            out_t.append(_time_ns(tsf[a : a + 1, 0]))
             out_k.append(np.array([3 * i0], dtype=np.int64))
             out_d.append([(self.seg_fmt % vals).encode()])
         lim_key = 3 * (self.seg0 + release)
@@ -295,8 +314,9 @@ class McapPlanWriter:
         keys = np.concatenate(keys)
         order = np.argsort(keys, kind="stable")
         flat = [d for part in datas for d in part]
-        self.writer.add_messages(np.concatenate(chans)[order], np.concatenate(times)[order],
-                                 [flat[i] for i in order.tolist()])
+        self.writer.add_messages(
+            np.concatenate(chans)[order], np.concatenate(times)[order], [flat[i] for i in order.tolist()]
+        )
         self.count += len(flat)
 
     def _release_fixed(self, chans, times, keys, datas, k0: int, K: int) -> None:
@@ -341,8 +361,10 @@ def read_mcap(path: str):
             axes, channel_id = _axes_from_summary(summary, loc)
             found = read_channel(fh, summary, channel_id)
             if found is None:  # not indexed the way write_mcap indexes: the generic reader
-                msgs = [(msg.log_time, msg.data) for _, _, msg in
-                        reader.iter_messages(topics=[SETPOINTS_TOPIC], log_time_order=False)]
+                msgs = [
+                    (msg.log_time, msg.data)
+                    for _, _, msg in reader.iter_messages(topics=[SETPOINTS_TOPIC], log_time_order=False)
+                ]
                 found = (np.array([m[0] for m in msgs], dtype=np.uint64), [m[1] for m in msgs])
             # File order, then a stable sort by time (mcap's own time ordering is a Python
             # heap, slower than everything else here).
@@ -373,9 +395,18 @@ def read_mcap(path: str):
         settings = {}
     t = table[:, 0]
     dt_s = _float_or(planner.get("dt_s"), float(t[1] - t[0]) if t.size > 1 else 0.0)
-    return Trajectory(axes=axes, dt_s=dt_s, t=t, s=table[:, 1], feed=table[:, 2],
-                      q=table[:, 3:], line=line, planner=planner.get("name", "unknown"),
-                      settings=settings, status=planner.get("status", "ok"))
+    return Trajectory(
+        axes=axes,
+        dt_s=dt_s,
+        t=t,
+        s=table[:, 1],
+        feed=table[:, 2],
+        q=table[:, 3:],
+        line=line,
+        planner=planner.get("name", "unknown"),
+        settings=settings,
+        status=planner.get("status", "ok"),
+    )
 
 
 def read_mcap_machine(path: str):
@@ -387,8 +418,7 @@ def read_mcap_machine(path: str):
 
     try:
         with open(path, "rb") as fh:
-            rec = next((dict(m.metadata) for m in make_reader(fh).iter_metadata()
-                        if m.name == "machine"), None)
+            rec = next((dict(m.metadata) for m in make_reader(fh).iter_metadata() if m.name == "machine"), None)
     except Exception:  # noqa: BLE001 - unreadable: read_mcap reports it properly
         return None
     if not rec or "axes" not in rec:
@@ -396,10 +426,16 @@ def read_mcap_machine(path: str):
     axes = rec["axes"]
     try:
         limits = [[float(rec[f"{a}.{lim}"]) for a in axes] for lim in ("vmax", "amax", "jmax")]
-        return Machine(name=rec.get("name", "machine"), axes=axes, vmax=limits[0],
-                       amax=limits[1], jmax=limits[2], dt_s=float(rec.get("dt_s", "nan")),
-                       kinematics=rec.get("kinematics", "trivial"),
-                       source=f"{path} (recorded machine)")
+        return Machine(
+            name=rec.get("name", "machine"),
+            axes=axes,
+            vmax=limits[0],
+            amax=limits[1],
+            jmax=limits[2],
+            dt_s=float(rec.get("dt_s", "nan")),
+            kinematics=rec.get("kinematics", "trivial"),
+            source=f"{path} (recorded machine)",
+        )
     except (KeyError, ValueError, MachineError):  # incomplete or insane: not a usable machine
         return None
 
@@ -453,7 +489,7 @@ def _ratio_rows(qh: np.ndarray, dt_s: float, limits: np.ndarray) -> np.ndarray:
     K = qh.shape[0] - 3
     table = np.empty((K, 3 * n + 1))
     for kind in range(3):
-        table[:, kind * n:(kind + 1) * n] = r[kind]
+        table[:, kind * n : (kind + 1) * n] = r[kind]
     with np.errstate(invalid="ignore"):
         table[:, -1] = np.abs(r).max(axis=(0, 2)) if n else 0.0
     return table
@@ -476,11 +512,18 @@ def _fixed_segments(traj, segments) -> tuple[np.ndarray, list[bytes]]:
     fmt = _template(_SEG_FIELDS)
     msgs = []
     for i0, i1, ln in zip(starts.tolist(), ends.tolist(), lines.tolist()):
-        fseg = feed[i0:i1 + 1]
+        fseg = feed[i0 : i1 + 1]
         fin = fseg[np.isfinite(fseg)]
-        vals = (int(ln), _num(s[i0]), _num(s[i1]), _num(t[i0]), _num(t[i1]),
-                _num(fin.min()) if fin.size else "null", _num(fin.max()) if fin.size else "null",
-                int(i1 - i0 + 1))
+        vals = (
+            int(ln),
+            _num(s[i0]),
+            _num(s[i1]),
+            _num(t[i0]),
+            _num(t[i1]),
+            _num(fin.min()) if fin.size else "null",
+            _num(fin.max()) if fin.size else "null",
+            int(i1 - i0 + 1),
+        )
         msgs.append((fmt % vals).encode())
     return np.asarray(starts, dtype=np.int64), msgs
 
@@ -498,8 +541,7 @@ def _unit(axis: str) -> str:
 
 
 def _units(axes: str) -> str:
-    return _dumps({"t": "s", "s": "mm", "feed": "mm/s", "line": "",
-                   **{a: _unit(a) for a in axes}})
+    return _dumps({"t": "s", "s": "mm", "feed": "mm/s", "line": "", **{a: _unit(a) for a in axes}})
 
 
 def _number(desc: str, nullable: bool = False) -> dict:
@@ -509,42 +551,47 @@ def _number(desc: str, nullable: bool = False) -> dict:
 
 
 def _setpoint_schema(axes: str) -> dict:
-    props = {"t": _number("time since the start of the plan, s"),
-             "s": _number("path length travelled since the start, mm"),
-             "feed": _number("path speed, mm/s (backward difference of s)"),
-             "line": {"type": "integer", "description": "source line executing (0 = none)"}}
+    props = {
+        "t": _number("time since the start of the plan, s"),
+        "s": _number("path length travelled since the start, mm"),
+        "feed": _number("path speed, mm/s (backward difference of s)"),
+        "line": {"type": "integer", "description": "source line executing (0 = none)"},
+    }
     for a in axes:
         props[a] = _number(f"axis {a} setpoint, {_unit(a)}", nullable=True)
-    return {"title": "cnc_interp.Setpoint", "type": "object", "properties": props,
-            "required": list(props)}
+    return {"title": "cnc_interp.Setpoint", "type": "object", "properties": props, "required": list(props)}
 
 
 def _segment_schema() -> dict:
-    props = {"line": {"type": "integer", "description": "source line of the segment"},
-             "s_start": _number("path length where the segment starts, mm"),
-             "s_end": _number("path length where the segment ends, mm"),
-             "t_start": _number("time the tool enters the segment, s"),
-             "t_end": _number("time the tool leaves the segment, s"),
-             "feed_min": _number("lowest planned feed on the segment, mm/s", nullable=True),
-             "feed_max": _number("highest planned feed on the segment, mm/s", nullable=True),
-             "samples": {"type": "integer", "description": "samples on the segment"}}
-    return {"title": "cnc_interp.Segment", "type": "object", "properties": props,
-            "required": list(props)}
+    props = {
+        "line": {"type": "integer", "description": "source line of the segment"},
+        "s_start": _number("path length where the segment starts, mm"),
+        "s_end": _number("path length where the segment ends, mm"),
+        "t_start": _number("time the tool enters the segment, s"),
+        "t_end": _number("time the tool leaves the segment, s"),
+        "feed_min": _number("lowest planned feed on the segment, mm/s", nullable=True),
+        "feed_max": _number("highest planned feed on the segment, mm/s", nullable=True),
+        "samples": {"type": "integer", "description": "samples on the segment"},
+    }
+    return {"title": "cnc_interp.Segment", "type": "object", "properties": props, "required": list(props)}
 
 
 def _limits_schema(axes: str) -> dict:
     def group(kind, lim):
-        return {"type": "object", "description": f"signed {kind} / {lim} per axis",
-                "properties": {a: _number(f"axis {a} {kind} / {lim}", nullable=True)
-                               for a in axes},
-                "required": list(axes)}
+        return {
+            "type": "object",
+            "description": f"signed {kind} / {lim} per axis",
+            "properties": {a: _number(f"axis {a} {kind} / {lim}", nullable=True) for a in axes},
+            "required": list(axes),
+        }
 
-    props = {"v": group("velocity", "vmax"), "a": group("acceleration", "amax"),
-             "j": group("jerk", "jmax"),
-             "worst": _number("largest |ratio| of the sample (> 1 = limit exceeded)",
-                              nullable=True)}
-    return {"title": "cnc_interp.LimitRatios", "type": "object", "properties": props,
-            "required": list(props)}
+    props = {
+        "v": group("velocity", "vmax"),
+        "a": group("acceleration", "amax"),
+        "j": group("jerk", "jmax"),
+        "worst": _number("largest |ratio| of the sample (> 1 = limit exceeded)", nullable=True),
+    }
+    return {"title": "cnc_interp.LimitRatios", "type": "object", "properties": props, "required": list(props)}
 
 
 def _metadata_records(planner: dict, metadata, machine, mcap_version) -> list[tuple[str, dict]]:
@@ -552,23 +599,25 @@ def _metadata_records(planner: dict, metadata, machine, mcap_version) -> list[tu
 
     records: dict[str, dict] = {}
     if machine is not None:
-        rec = {"name": machine.name, "axes": machine.axes, "kinematics": machine.kinematics,
-               "dt_s": float(machine.dt_s), "source": machine.source,
-               "kinematics_params": machine.kinematics_params,
-               "start": np.asarray(machine.start, dtype=float).tolist()}
+        rec = {
+            "name": machine.name,
+            "axes": machine.axes,
+            "kinematics": machine.kinematics,
+            "dt_s": float(machine.dt_s),
+            "source": machine.source,
+            "kinematics_params": machine.kinematics_params,
+            "start": np.asarray(machine.start, dtype=float).tolist(),
+        }
         for i, a in enumerate(machine.axes):
-            for lim, arr in (("vmax", machine.vmax), ("amax", machine.amax),
-                             ("jmax", machine.jmax)):
+            for lim, arr in (("vmax", machine.vmax), ("amax", machine.amax), ("jmax", machine.jmax)):
                 rec[f"{a}.{lim}"] = float(arr[i])
         records["machine"] = rec
     records["planner"] = dict(planner)
-    records["tool"] = {"name": "cnc-interp", "version": __version__,
-                       "mcap_library": f"mcap-python/{mcap_version}"}
+    records["tool"] = {"name": "cnc-interp", "version": __version__, "mcap_library": f"mcap-python/{mcap_version}"}
     for name, rec in (metadata or {}).items():
         # The caller's keys add to (and override) the ones built here.
         records.setdefault(str(name), {}).update(rec)
-    return [(name, {str(k): _meta_value(v) for k, v in sorted(rec.items())})
-            for name, rec in sorted(records.items())]
+    return [(name, {str(k): _meta_value(v) for k, v in sorted(rec.items())}) for name, rec in sorted(records.items())]
 
 
 def _meta_value(v) -> str:
@@ -626,4 +675,3 @@ def _float_or(text, default: float) -> float:
         return float(text)
     except (TypeError, ValueError):
         return default
-

@@ -73,8 +73,9 @@ def plot_trajectory(traj, machine, out: str, title: str = "") -> str:
     if fmt not in supported:
         from ..errors import SourceLocation, UsageError
 
-        raise UsageError(f"cannot write a .{fmt} image; use one of "
-                         f"{', '.join(sorted(supported))}", SourceLocation(file=out))
+        raise UsageError(
+            f"cannot write a .{fmt} image; use one of {', '.join(sorted(supported))}", SourceLocation(file=out)
+        )
     with plt.rc_context(_STYLE):
         fig = _figure(plt, traj, machine, title)
         try:
@@ -87,8 +88,15 @@ def plot_trajectory(traj, machine, out: str, title: str = "") -> str:
 
 
 _DPI = 110
-_STYLE = {"font.size": 9, "axes.grid": True, "grid.alpha": 0.3, "axes.titlesize": 10,
-          "axes.labelsize": 9, "legend.fontsize": 8, "svg.hashsalt": "cnc-interp"}
+_STYLE = {
+    "font.size": 9,
+    "axes.grid": True,
+    "grid.alpha": 0.3,
+    "axes.titlesize": 10,
+    "axes.labelsize": 9,
+    "legend.fontsize": 8,
+    "svg.hashsalt": "cnc-interp",
+}
 
 
 def _metadata(fmt: str) -> dict | None:
@@ -106,8 +114,18 @@ def _figure(plt, traj, machine, title):
 
     n_right = 4 if machine is not None else 2
     fig = plt.figure(figsize=(14, 7.5) if machine is not None else (13, 5.5))
-    gs = GridSpec(n_right, 2, figure=fig, width_ratios=(1.0, 1.15), wspace=0.3, hspace=0.12,
-                  left=0.06, right=0.98, top=0.9, bottom=0.08)
+    gs = GridSpec(
+        n_right,
+        2,
+        figure=fig,
+        width_ratios=(1.0, 1.15),
+        wspace=0.3,
+        hspace=0.12,
+        left=0.06,
+        right=0.98,
+        top=0.9,
+        bottom=0.08,
+    )
     z_axis = _z_view_axis(traj)
     ax_path = fig.add_subplot(gs[:-1, 0] if z_axis is not None else gs[:, 0])
     _draw_path(fig, ax_path, traj)
@@ -121,7 +139,7 @@ def _figure(plt, traj, machine, title):
     _scale_to_cutting_feeds(ax_feed, traj.feed)
     if z_axis is not None:
         ax_z = fig.add_subplot(gs[-1, 0])
-        t_z, z_lo, z_hi = _envelope(traj.t, traj.q[:, z_axis:z_axis + 1])
+        t_z, z_lo, z_hi = _envelope(traj.t, traj.q[:, z_axis : z_axis + 1])
         ax_z.fill_between(t_z, z_lo[:, 0], z_hi[:, 0], color="tab:green", lw=0.6)
         ax_z.set_xlim(ax_feed.get_xlim())
         ax_z.set_ylabel(f"{traj.axes[z_axis]} (mm)")
@@ -134,8 +152,7 @@ def _figure(plt, traj, machine, title):
     axes_right[-1].set_xlabel("time (s)")
 
     who = "CSV plan" if traj.planner == "csv" else f"{traj.planner} planner"
-    sub = f"{who}, {traj.n_samples:,} samples at dt = {traj.dt_s * 1e3:g} ms, " \
-          f"cycle time {traj.duration_s:.3f} s"
+    sub = f"{who}, {traj.n_samples:,} samples at dt = {traj.dt_s * 1e3:g} ms, cycle time {traj.duration_s:.3f} s"
     if machine is not None:
         sub += f", machine: {machine.name}"
     if traj.status != "ok":
@@ -155,8 +172,16 @@ def _scale_to_cutting_feeds(ax, feed: np.ndarray) -> None:
     if typical > 0 and float(f.max()) > PLOT_RAPID_FACTOR * typical:
         ax.set_yscale("symlog", linthresh=PLOT_FEED_LINEAR_BELOW, linscale=0.5)
         ax.set_ylim(0.0, float(f.max()) * 1.5)
-        ax.text(0.995, 0.94, "log scale above 1 mm/s", transform=ax.transAxes, ha="right",
-                va="top", fontsize=8, bbox={"facecolor": "white", "alpha": 0.75, "lw": 0})
+        ax.text(
+            0.995,
+            0.94,
+            "log scale above 1 mm/s",
+            transform=ax.transAxes,
+            ha="right",
+            va="top",
+            fontsize=8,
+            bbox={"facecolor": "white", "alpha": 0.75, "lw": 0},
+        )
 
 
 def _z_view_axis(traj) -> int | None:
@@ -223,8 +248,7 @@ def _draw_path(fig, ax, traj) -> None:
         ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel(f"{traj.axes[i]} ({_unit(traj.axes[i])})")
     ax.set_ylabel(f"{traj.axes[j]} ({_unit(traj.axes[j])})" if j != i else "")
-    ax.set_title(f"tool path in {traj.axes[i]}{traj.axes[j] if j != i else ''}, "
-                 "coloured by feed")
+    ax.set_title(f"tool path in {traj.axes[i]}{traj.axes[j] if j != i else ''}, coloured by feed")
     cb = fig.colorbar(lc, ax=ax, fraction=0.046, pad=0.02)
     cb.set_label("feed (mm/s)")
 
@@ -248,18 +272,24 @@ def _draw_ratios(fig, gs, traj, machine, share):
             if t_e.size == traj.n_samples:
                 ax.plot(t_e, hi[:, c], lw=0.8, color=colors[c], label=a)
             else:
-                ax.fill_between(t_e, lo[:, c], hi[:, c], color=colors[c], lw=0.4,
-                                alpha=0.55, label=a)
+                ax.fill_between(t_e, lo[:, c], hi[:, c], color=colors[c], lw=0.4, alpha=0.55, label=a)
         for bound in (-1.0, 1.0):
             ax.axhline(bound, color="red", ls="--", lw=0.9)
         worst = float(np.nanmax(np.abs(ratios[kind]))) if ratios[kind].size else 0.0
         top = max(1.4, min(worst * 1.3, 10.0))  # headroom for the legend and the label
         ax.set_ylim(-top, top)
         ax.set_ylabel(label)
-        ax.text(0.995, 0.94, f"worst |{label.split(' ')[0]}|/limit = {worst:.3f}",
-                transform=ax.transAxes, ha="right", va="top", fontsize=8,
-                color="red" if worst > 1.0 else "black",
-                bbox={"facecolor": "white", "alpha": 0.75, "lw": 0})
+        ax.text(
+            0.995,
+            0.94,
+            f"worst |{label.split(' ')[0]}|/limit = {worst:.3f}",
+            transform=ax.transAxes,
+            ha="right",
+            va="top",
+            fontsize=8,
+            color="red" if worst > 1.0 else "black",
+            bbox={"facecolor": "white", "alpha": 0.75, "lw": 0},
+        )
         if kind == 0:
             ax.legend(loc="upper left", ncol=len(axes), framealpha=0.8)
         out.append(ax)

@@ -41,10 +41,17 @@ class ProgressBar:
     (seconds, monotonic).
     """
 
-    def __init__(self, total: int | float | None, label: str = "", enabled: bool = True,
-                 stream: TextIO | None = None, unit: str = "", delay_s: float = PROGRESS_DELAY_S,
-                 refresh_s: float = PROGRESS_REFRESH_S,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(
+        self,
+        total: int | float | None,
+        label: str = "",
+        enabled: bool = True,
+        stream: TextIO | None = None,
+        unit: str = "",
+        delay_s: float = PROGRESS_DELAY_S,
+        refresh_s: float = PROGRESS_REFRESH_S,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
         self.total = total if total is None or total > 0 else None
         self.label = label
         self.unit = f" {unit}" if unit else ""
@@ -79,8 +86,7 @@ class ProgressBar:
         frac = min(max(self.done / self.total, 0.0), 1.0)
         eta = elapsed * (1.0 - frac) / frac if frac > 0 else float("nan")
         eta_txt = f"ETA {_duration(eta)}" if eta == eta else "ETA ?"
-        tail = (f" {frac * 100:3.0f}% {_count(self.done)}/{_count(self.total)}{self.unit} "
-                f"{eta_txt}")
+        tail = f" {frac * 100:3.0f}% {_count(self.done)}/{_count(self.total)}{self.unit} {eta_txt}"
         width = min(_terminal_width(), PROGRESS_MAX_WIDTH) - 1
         bar_w = max(width - len(label) - len(tail) - 2, 5)
         filled = int(round(frac * bar_w))
@@ -106,8 +112,14 @@ class ProgressBar:
 
 
 @contextmanager
-def progress(total: int | float | None, label: str = "", enabled: bool = True,
-             stream: TextIO | None = None, unit: str = "", **kwargs) -> Iterator[ProgressBar]:
+def progress(
+    total: int | float | None,
+    label: str = "",
+    enabled: bool = True,
+    stream: TextIO | None = None,
+    unit: str = "",
+    **kwargs,
+) -> Iterator[ProgressBar]:
     """Context manager yielding a ``tick(n)`` callable (a ``ProgressBar``); see module doc."""
     bar = ProgressBar(total, label, enabled=enabled, stream=stream, unit=unit, **kwargs)
     try:

@@ -29,7 +29,7 @@ def limit_ratios(q: np.ndarray, dt_s: float, limits: np.ndarray) -> np.ndarray:
         x[:3] = q[0, i]
         x[3:] = q[:, i]
         for m in range(3):
-            x = np.diff(x)                  # m+1-th difference; its last K values end at 0..K-1
+            x = np.diff(x)  # m+1-th difference; its last K values end at 0..K-1
             d = x[-K:] / dt_s ** (m + 1)
             if lim[m, i] > 0:
                 out[m, :, i] = d / lim[m, i]

@@ -45,8 +45,7 @@ def verify_file(path: str, machine_spec: str | None):
 
         machine = read_mcap_machine(path)
     if machine is None:
-        raise UsageError("verify needs a machine (-m MACHINE); this plan records none",
-                         SourceLocation(file=str(path)))
+        raise UsageError("verify needs a machine (-m MACHINE); this plan records none", SourceLocation(file=str(path)))
     traj = read_plan(path)
     check_plan(traj, machine, str(path))
     return verify(traj, machine)
@@ -61,9 +60,12 @@ def check_plan(traj, machine, path: str) -> None:
     loc = SourceLocation(file=path)
     missing = [a for a in machine.axes if a not in traj.axes]
     if missing:
-        raise UsageError(f"the plan has no column for machine axis {', '.join(missing)} "
-                         f"(machine {machine.axes}, plan {traj.axes or 'none'}); it cannot be "
-                         "verified", loc)
+        raise UsageError(
+            f"the plan has no column for machine axis {', '.join(missing)} "
+            f"(machine {machine.axes}, plan {traj.axes or 'none'}); it cannot be "
+            "verified",
+            loc,
+        )
     for name in ("t", "s", "feed"):
         col = np.asarray(getattr(traj, name), dtype=float)
         bad = ~np.isfinite(col)
@@ -76,8 +78,8 @@ def check_plan(traj, machine, path: str) -> None:
     tol = TIME_BASE_REL_TOL * max(1.0, abs(float(t[-1]))) + TIME_BASE_ABS_TOL_S
     off = np.abs(t - (t[0] + np.arange(t.size) * dt_data))
     if not dt_data > 0 or (off > tol).any():
-        raise UsageError(f"t is not sampled at a fixed period (sample {int(np.argmax(off > tol))})",
-                         loc)
+        raise UsageError(f"t is not sampled at a fixed period (sample {int(np.argmax(off > tol))})", loc)
     if not abs(traj.dt_s - dt_data) <= tol / max(1, t.size - 1) + TIME_BASE_REL_TOL * dt_data:
-        raise UsageError(f"the recorded sample period dt_s = {traj.dt_s!r} s disagrees with the "
-                         f"samples' period {dt_data!r} s", loc)
+        raise UsageError(
+            f"the recorded sample period dt_s = {traj.dt_s!r} s disagrees with the samples' period {dt_data!r} s", loc
+        )

@@ -96,8 +96,9 @@ def arc_length_tables(coef, breaks, seg_off, w, glx, glw, rel_tol, max_sub):
     sub_off = np.zeros(n_p + 1, dtype=np.int64)
     for p in range(n_p):
         a, b = seg_off[p], seg_off[p + 1]
-        sub_u, sub_s, seg, starts = arc_length_table(coef[a:b], breaks[a + p:b + p + 1], w[p],
-                                                     glx, glw, rel_tol, max_sub)
+        sub_u, sub_s, seg, starts = arc_length_table(
+            coef[a:b], breaks[a + p : b + p + 1], w[p], glx, glw, rel_tol, max_sub
+        )
         us.append(sub_u)
         ss.append(sub_s)
         segs.append(seg)
@@ -111,10 +112,10 @@ def arc_length_tables(coef, breaks, seg_off, w, glx, glw, rel_tol, max_sub):
     for p in range(n_p):
         o = sub_off[p] + p
         m = us[p].shape[0]
-        all_u[o:o + m] = us[p]
-        all_s[o:o + m] = ss[p]
-        all_seg[sub_off[p]:sub_off[p + 1]] = segs[p]
-        all_sb[seg_off[p] + p:seg_off[p + 1] + p + 1] = sbs[p]
+        all_u[o : o + m] = us[p]
+        all_s[o : o + m] = ss[p]
+        all_seg[sub_off[p] : sub_off[p + 1]] = segs[p]
+        all_sb[seg_off[p] + p : seg_off[p + 1] + p + 1] = sbs[p]
     return all_u, all_s, all_seg, all_sb, sub_off
 
 

@@ -18,8 +18,21 @@ from ._project import line_samples, march_distances, median
 
 
 @njit(cache=True)
-def polyline_path_deviation(breaks, coef, nodes, tol_mm, lin, samples_per_span, min_samples,
-                            max_samples, local_frac, window, far_window, n_coarse, iters):
+def polyline_path_deviation(
+    breaks,
+    coef,
+    nodes,
+    tol_mm,
+    lin,
+    samples_per_span,
+    min_samples,
+    max_samples,
+    local_frac,
+    window,
+    far_window,
+    n_coarse,
+    iters,
+):
     """(max distance mm, max distance / tolerance) of the moves through ``nodes`` (n, d)
     to the pieces (breaks (S+1,), coef (S, 6, d)) over the axes ``lin`` (d,) bool;
     ``tol_mm`` (n,) the tolerance of the move ending at each node. As
@@ -49,8 +62,7 @@ def polyline_path_deviation(breaks, coef, nodes, tol_mm, lin, samples_per_span, 
             cm[:, :, j] = coef[:, :, a]
             pm[:, j] = pts[:, a]
             j += 1
-    dist = march_distances(cm, h, pm, tol, local_frac, window * spacing, far_window * spacing,
-                           n_coarse, iters)
+    dist = march_distances(cm, h, pm, tol, local_frac, window * spacing, far_window * spacing, n_coarse, iters)
     dmax = dist[0]
     rmax = dist[0] / max(tol[0], 1e-300)
     for i in range(1, K):

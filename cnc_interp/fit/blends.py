@@ -111,18 +111,16 @@ def unit_blends(theta: float, rs: np.ndarray, samples: int = _SAMPLES):
     tin = np.array([1.0, 0.0])
     tout = np.array([np.cos(theta), np.sin(theta)])
     z = np.zeros((R, 2))
-    c = hermite(np.tile(-tin, (R, 1)), np.tile(tin, (R, 1)), z, np.tile(tout, (R, 1)),
-                np.tile(tout, (R, 1)), z, rs)
+    c = hermite(np.tile(-tin, (R, 1)), np.tile(tin, (R, 1)), z, np.tile(tout, (R, 1)), np.tile(tout, (R, 1)), z, rs)
     # q^(k)(r τ) = Σ_i c_i i!/(i-k)! r^(i-k) τ^(i-k): one product with the powers of τ
     tau = np.linspace(0.0, 1.0, samples)
     powers = tau[:, None] ** np.arange(6)[None, :]  # (S, 6)
     rp = rs[:, None] ** np.arange(6)[None, :]  # (R, 6)
 
     def deriv(k):
-        fac = np.array([float(np.prod(np.arange(i - k + 1, i + 1))) if i >= k else 0.0
-                        for i in range(6)])
+        fac = np.array([float(np.prod(np.arange(i - k + 1, i + 1))) if i >= k else 0.0 for i in range(6)])
         ck = np.zeros_like(c)  # (R, 6, 2): coefficients of the k-th derivative in τ^(i-k)
-        ck[:, :6 - k] = (c[:, k:] * fac[k:, None] * rp[:, :6 - k, None])
+        ck[:, : 6 - k] = c[:, k:] * fac[k:, None] * rp[:, : 6 - k, None]
         return np.matmul(powers, ck)  # (S, 6) @ (R, 6, 2) -> (R, S, 2)
 
     p, d1, d2, d3 = deriv(0), deriv(1), deriv(2), deriv(3)
@@ -178,8 +176,14 @@ def choose_shapes(theta: np.ndarray, tol: np.ndarray, d_max: np.ndarray):
     return r, d, dev
 
 
-def plan_blends(nodes_s: np.ndarray, lin: np.ndarray, tol: np.ndarray, cand: np.ndarray,
-                forced: np.ndarray | None = None, tol_rot_scaled: float = np.inf):
+def plan_blends(
+    nodes_s: np.ndarray,
+    lin: np.ndarray,
+    tol: np.ndarray,
+    cand: np.ndarray,
+    forced: np.ndarray | None = None,
+    tol_rot_scaled: float = np.inf,
+):
     """Shapes and sizes of the blends at candidate corners.
 
     nodes_s (n, d) in the scaled metric, lin (d,) linear axes, tol (n,) tolerance of the
@@ -195,7 +199,7 @@ def plan_blends(nodes_s: np.ndarray, lin: np.ndarray, tol: np.ndarray, cand: np.
     ok = np.zeros(n, dtype=bool)
     dist = np.zeros(n)
     shape = np.zeros(n)
-    j = np.nonzero(cand[1:n - 1])[0] + 1
+    j = np.nonzero(cand[1 : n - 1])[0] + 1
     if j.size == 0:
         return ok, dist, shape
     chords = np.diff(nodes_s, axis=0)
@@ -210,7 +214,7 @@ def plan_blends(nodes_s: np.ndarray, lin: np.ndarray, tol: np.ndarray, cand: np.
         li, lo = t_in[:, lin], t_out[:, lin]
         ni, no = np.linalg.norm(li, axis=1), np.linalg.norm(lo, axis=1)
         cos_lin = (li * lo).sum(axis=1) / np.maximum(ni * no, 1e-300)
-        good &= (np.degrees(np.arccos(np.clip(cos_lin, -1.0, 1.0))) <= FIT_BLEND_MAX_TURN_DEG)
+        good &= np.degrees(np.arccos(np.clip(cos_lin, -1.0, 1.0))) <= FIT_BLEND_MAX_TURN_DEG
         good &= np.minimum(ni, no) >= FIT_BLEND_MIN_LIN_SPEED
     tol_c = np.minimum(tol[j], tol[j + 1])
     if (~lin).any():
@@ -234,8 +238,15 @@ def plan_blends(nodes_s: np.ndarray, lin: np.ndarray, tol: np.ndarray, cand: np.
     return ok, dist, shape
 
 
-def blend_piece(p_a: np.ndarray, p_b: np.ndarray, t_in: np.ndarray, t_out: np.ndarray,
-                d: np.ndarray, r: np.ndarray, scale: np.ndarray):
+def blend_piece(
+    p_a: np.ndarray,
+    p_b: np.ndarray,
+    t_in: np.ndarray,
+    t_out: np.ndarray,
+    d: np.ndarray,
+    r: np.ndarray,
+    scale: np.ndarray,
+):
     """Coefficients (K, 6, n) in machine units and parameter lengths h (K,) of K blends of
     shapes r (K,) from p_a to p_b (K, n) (machine units, at distances d (K,) before / after
     the corners along the moves); t_in/t_out (K, n) unit directions in the scaled metric.

@@ -116,8 +116,9 @@ def prepare_run(run: Run, settings) -> PreparedRun:
     rot_only = (lin_len <= FIT_LINEAR_ZERO_MM) & (~lin).any()
     if not (~lin).any():
         rot_only = np.zeros(len(d), dtype=bool)
-    return PreparedRun(run.axes, nodes_k, line_k, feed_k, tol_k, tuple(sorted(curves, key=lambda c: c.first)),
-                       lin, scale, rot_only)
+    return PreparedRun(
+        run.axes, nodes_k, line_k, feed_k, tol_k, tuple(sorted(curves, key=lambda c: c.first)), lin, scale, rot_only
+    )
 
 
 def _distinct_nodes(scaled: np.ndarray, threshold: float) -> np.ndarray:
@@ -157,7 +158,7 @@ def corner_turns(pr: PreparedRun, evals: dict | None = None):
         (t0, _), (t1, _) = end_states(curve_eval(cp.curve, evals), pr.scale)
         d_out[cp.first] = t0
         d_in[cp.last] = t1
-        inside[cp.first + 1:cp.last] = True
+        inside[cp.first + 1 : cp.last] = True
     turn = np.degrees(turn_angles(d_in, d_out))
     if (~pr.lin).any() and pr.lin.any():
         # the tool's own path (linear axes) must not turn sharply either, however much
@@ -208,8 +209,7 @@ def split_run(pr: PreparedRun, settings, evals: dict | None = None) -> list[SubR
     return subs
 
 
-def add_blends(pr: PreparedRun, settings, evals: dict | None = None,
-               force: np.ndarray | None = None) -> PreparedRun:
+def add_blends(pr: PreparedRun, settings, evals: dict | None = None, force: np.ndarray | None = None) -> PreparedRun:
     """``pr`` with its sharp corners blended (``blends.py``): a node at each blend's
     start and end is inserted on the two moves (taking that move's line, feed and
     tolerance), and ``blends`` lists them. A corner is a candidate when it turns more
@@ -228,7 +228,7 @@ def add_blends(pr: PreparedRun, settings, evals: dict | None = None,
     j = np.arange(1, n - 1)
     cand[j] &= (pr.tol_mm[j] > 0) & (pr.tol_mm[j + 1] > 0) & (pr.rot_only[j - 1] == pr.rot_only[j])
     for cp in pr.curves:  # the moves into and out of a corner must be straight
-        cand[cp.first:cp.last + 1] = False
+        cand[cp.first : cp.last + 1] = False
     # forced nodes that cannot be blended are stops
     no_blend = np.zeros(n, dtype=bool) if force is None else force.copy()
     if not cand.any():
@@ -259,7 +259,7 @@ def add_blends(pr: PreparedRun, settings, evals: dict | None = None,
     take = np.empty(total, dtype=np.int64)  # row of line / feed / tol it takes
     src[new_index] = np.arange(n)
     take[new_index] = np.arange(n)
-    at_end = np.full(n, -1, dtype=np.int64)    # row of the blend-at-m's end point
+    at_end = np.full(n, -1, dtype=np.int64)  # row of the blend-at-m's end point
     at_start = np.full(n, -1, dtype=np.int64)  # row of the blend-at-m's start point
     m = np.nonzero(has_end)[0]
     at_end[m] = new_index[m] + 1
@@ -282,16 +282,28 @@ def add_blends(pr: PreparedRun, settings, evals: dict | None = None,
     t_out = chords[corners] / clen[corners, None]
     coef, h = blend_piece(nodes[ia], nodes[ib], t_in, t_out, dist[corners], shape[corners], pr.scale)
     feed = np.minimum(pr.feed_mm_s[corners], pr.feed_mm_s[corners + 1])
-    blends = [Blend(int(ia[k]), float(h[k]), coef[k], int(pr.line[c]), float(feed[k]), t_in[k], t_out[k])
-              for k, c in enumerate(corners.tolist())]
-    curves = tuple(CurvePiece(int(new_index[cp.first]), int(new_index[cp.last]), cp.curve)
-                   for cp in pr.curves)
+    blends = [
+        Blend(int(ia[k]), float(h[k]), coef[k], int(pr.line[c]), float(feed[k]), t_in[k], t_out[k])
+        for k, c in enumerate(corners.tolist())
+    ]
+    curves = tuple(CurvePiece(int(new_index[cp.first]), int(new_index[cp.last]), cp.curve) for cp in pr.curves)
     rot_only = pr.rot_only[take[1:] - 1]
     orig = np.full(nodes.shape[0], -1, dtype=np.int64)
     orig[new_index] = np.arange(n)
-    return PreparedRun(pr.axes, nodes, pr.line[take], pr.feed_mm_s[take], pr.tol_mm[take], curves,
-                       pr.lin, pr.scale, rot_only, tuple(blends), orig,
-                       new_index[np.nonzero(no_blend)[0]])
+    return PreparedRun(
+        pr.axes,
+        nodes,
+        pr.line[take],
+        pr.feed_mm_s[take],
+        pr.tol_mm[take],
+        curves,
+        pr.lin,
+        pr.scale,
+        rot_only,
+        tuple(blends),
+        orig,
+        new_index[np.nonzero(no_blend)[0]],
+    )
 
 
 def fit_tolerance(tol_mm: np.ndarray) -> np.ndarray:

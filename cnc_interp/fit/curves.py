@@ -186,7 +186,7 @@ def end_states(ev: CurveEval, scale: np.ndarray):
 
 _MIN_SPEED = 1e-3  # |dP/du| below this (u ≈ arc length) counts as a stop of the parameter
 _MIN_PIECE_SPEED = 0.25  # least |dq/dτ| inside a unit-speed piece
-_DIR_STEP = 1e-7   # relative parameter step for the direction of travel there
+_DIR_STEP = 1e-7  # relative parameter step for the direction of travel there
 
 
 def _polyval(coef: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -260,8 +260,17 @@ def _retarget(v, a, T, K):
     return sp * T, at * T + sp**2 * K
 
 
-def fit_curve(curve, scale: np.ndarray, lin: np.ndarray, tol_mm: float, tol_deg: float,
-              line: int, feed: float, start=None, end=None) -> PieceFit:
+def fit_curve(
+    curve,
+    scale: np.ndarray,
+    lin: np.ndarray,
+    tol_mm: float,
+    tol_deg: float,
+    line: int,
+    feed: float,
+    start=None,
+    end=None,
+) -> PieceFit:
     """Quintic pieces of one exact curve within ``tol_mm`` (linear, Euclidean) / ``tol_deg``.
 
     ``scale`` (d,) maps machine units to the fitter's metric (1 on linear axes);
@@ -275,7 +284,7 @@ def fit_curve(curve, scale: np.ndarray, lin: np.ndarray, tol_mm: float, tol_deg:
     g = param_scale(ev, scale)
     tl = tol_mm * FIT_TOL_SAFETY
     tr = tol_deg * FIT_TOL_SAFETY
-    tfr = (np.arange(1, CURVE_CHECK_POINTS + 1) / (CURVE_CHECK_POINTS + 1))
+    tfr = np.arange(1, CURVE_CHECK_POINTS + 1) / (CURVE_CHECK_POINTS + 1)
     max_mm = max_deg = 0.0
     ok = True
     for _ in range(CURVE_MAX_DEPTH + 1):
@@ -291,8 +300,7 @@ def fit_curve(curve, scale: np.ndarray, lin: np.ndarray, tol_mm: float, tol_deg:
         # unit-speed (arc-length-like) pieces: q(τ) ≈ P(w(τ)), with w(τ) the quintic
         # Hermite of the arc-length reparametrisation's w, w', w'' at both ends
         coef = hermite(Ps[:-1], v0, a0, Ps[1:], v1, a1, h, dp)
-        wcoef = hermite(wa[:, None], wd1[:-1, None], wd2[:-1, None], wz[:, None], wd1[1:, None],
-                        wd2[1:, None], h)
+        wcoef = hermite(wa[:, None], wd1[:-1, None], wd2[:-1, None], wz[:, None], wd1[1:, None], wd2[1:, None], h)
         tt = tfr[None, :] * h[:, None]
         q = _polyval(coef, tt)
         wc = np.clip(_polyval(wcoef, tt)[..., 0], ev.w0, ev.w1)
@@ -317,8 +325,7 @@ def fit_curve(curve, scale: np.ndarray, lin: np.ndarray, tol_mm: float, tol_deg:
     coef[0, 0] = curve_start(curve)
     breaks = np.concatenate(([0.0], np.cumsum(h)))
     n = h.size
-    return PieceFit(breaks, coef, np.full(n, line, dtype=np.int64), np.full(n, feed),
-                    max_mm, max_deg, ok, 0)
+    return PieceFit(breaks, coef, np.full(n, line, dtype=np.int64), np.full(n, feed), max_mm, max_deg, ok, 0)
 
 
 def curve_start(curve) -> np.ndarray:

@@ -48,18 +48,28 @@ PATH_DEV_WINDOW = 8
 PATH_DEV_FAR_WINDOW = 256
 
 
-def distance_to_pieces(breaks: np.ndarray, coef: np.ndarray, points: np.ndarray,
-                       mask: np.ndarray, tol: np.ndarray | None = None,
-                       spacing: float | None = None) -> np.ndarray:
+def distance_to_pieces(
+    breaks: np.ndarray,
+    coef: np.ndarray,
+    points: np.ndarray,
+    mask: np.ndarray,
+    tol: np.ndarray | None = None,
+    spacing: float | None = None,
+) -> np.ndarray:
     """Distance (K,) over the axes ``mask`` (n,) from points (K, n), in path order, to the
     piecewise quintic (breaks (S+1,), coef (S, 6, n), local parameter t = u - breaks[k]);
     see ``project_onto_pieces``."""
     return project_onto_pieces(breaks, coef, points, mask, tol, spacing)[0]
 
 
-def project_onto_pieces(breaks: np.ndarray, coef: np.ndarray, points: np.ndarray,
-                        mask: np.ndarray, tol: np.ndarray | None = None,
-                        spacing: float | None = None):
+def project_onto_pieces(
+    breaks: np.ndarray,
+    coef: np.ndarray,
+    points: np.ndarray,
+    mask: np.ndarray,
+    tol: np.ndarray | None = None,
+    spacing: float | None = None,
+):
     """Distance (K,) over the axes ``mask`` from points (K, n), in path order, to the pieces,
     and the foot points: their piece (K,) and local parameter (K,).
 
@@ -82,11 +92,17 @@ def project_onto_pieces(breaks: np.ndarray, coef: np.ndarray, points: np.ndarray
     near = far = np.inf
     if spacing is not None:
         near, far = PATH_DEV_WINDOW * spacing, PATH_DEV_FAR_WINDOW * spacing
-    return march_feet(np.ascontiguousarray(coef[:, :, mask], dtype=float),
-                      np.ascontiguousarray(np.diff(breaks), dtype=float),
-                      np.ascontiguousarray(points[:, mask], dtype=float),
-                      np.ascontiguousarray(tol, dtype=float), PATH_DEV_LOCAL_FRAC,
-                      float(near), float(far), PATH_DEV_FIT_SAMPLES, PATH_DEV_NEWTON_ITERS)
+    return march_feet(
+        np.ascontiguousarray(coef[:, :, mask], dtype=float),
+        np.ascontiguousarray(np.diff(breaks), dtype=float),
+        np.ascontiguousarray(points[:, mask], dtype=float),
+        np.ascontiguousarray(tol, dtype=float),
+        PATH_DEV_LOCAL_FRAC,
+        float(near),
+        float(far),
+        PATH_DEV_FIT_SAMPLES,
+        PATH_DEV_NEWTON_ITERS,
+    )
 
 
 def programmed_samples(nodes: np.ndarray, tol_mm: np.ndarray, curves, i0: int, spacing: float):
@@ -107,16 +123,21 @@ def programmed_samples(nodes: np.ndarray, tol_mm: np.ndarray, curves, i0: int, s
         a, b = cp.first - i0, cp.last - i0
         in_curve[a:b] = True
         ev = CurveEval(cp.curve)
-        clen = float(np.linalg.norm(np.diff(nodes[a:b + 1], axis=0), axis=1).sum())
-        k = int(np.clip(np.ceil(clen / spacing), PATH_DEV_MIN_SAMPLES * (b - a),
-                        PATH_DEV_MAX_SAMPLES * (b - a)))
+        clen = float(np.linalg.norm(np.diff(nodes[a : b + 1], axis=0), axis=1).sum())
+        k = int(np.clip(np.ceil(clen / spacing), PATH_DEV_MIN_SAMPLES * (b - a), PATH_DEV_MAX_SAMPLES * (b - a)))
         w = np.linspace(ev.w0, ev.w1, k + 1)
         pts.append(ev.points(w))
         tols.append(np.full(k + 1, float(tol_mm[b])))
         keys.append(a + np.linspace(0.0, 0.5, k + 1))
     # the moves (a numba kernel: this runs on every fitted sub-run)
-    lp, lt, lk = line_samples(np.ascontiguousarray(nodes, dtype=float), np.ascontiguousarray(tol_mm, dtype=float),
-                              in_curve, float(spacing), PATH_DEV_MIN_SAMPLES, PATH_DEV_MAX_SAMPLES)
+    lp, lt, lk = line_samples(
+        np.ascontiguousarray(nodes, dtype=float),
+        np.ascontiguousarray(tol_mm, dtype=float),
+        in_curve,
+        float(spacing),
+        PATH_DEV_MIN_SAMPLES,
+        PATH_DEV_MAX_SAMPLES,
+    )
     if not pts:
         return lp, lt  # already in path order
     pts.append(lp)
@@ -126,18 +147,27 @@ def programmed_samples(nodes: np.ndarray, tol_mm: np.ndarray, curves, i0: int, s
     return np.concatenate(pts)[order], np.concatenate(tols)[order]
 
 
-def polyline_deviation(breaks: np.ndarray, coef: np.ndarray, nodes: np.ndarray,
-                       tol_mm: np.ndarray, lin: np.ndarray):
+def polyline_deviation(breaks: np.ndarray, coef: np.ndarray, nodes: np.ndarray, tol_mm: np.ndarray, lin: np.ndarray):
     """``path_deviation`` for a sub-run of G1 moves only (no curves), in one compiled call
     (``_linedev``): the same samples, search and result, without the Python glue that
     dominates on programs of many short paths."""
     from ._linedev import polyline_path_deviation
 
     return polyline_path_deviation(
-        np.ascontiguousarray(breaks, dtype=float), np.ascontiguousarray(coef, dtype=float),
-        nodes, tol_mm, lin, PATH_DEV_SAMPLES_PER_SPAN, PATH_DEV_MIN_SAMPLES,
-        PATH_DEV_MAX_SAMPLES, PATH_DEV_LOCAL_FRAC, PATH_DEV_WINDOW, PATH_DEV_FAR_WINDOW,
-        PATH_DEV_FIT_SAMPLES, PATH_DEV_NEWTON_ITERS)
+        np.ascontiguousarray(breaks, dtype=float),
+        np.ascontiguousarray(coef, dtype=float),
+        nodes,
+        tol_mm,
+        lin,
+        PATH_DEV_SAMPLES_PER_SPAN,
+        PATH_DEV_MIN_SAMPLES,
+        PATH_DEV_MAX_SAMPLES,
+        PATH_DEV_LOCAL_FRAC,
+        PATH_DEV_WINDOW,
+        PATH_DEV_FAR_WINDOW,
+        PATH_DEV_FIT_SAMPLES,
+        PATH_DEV_NEWTON_ITERS,
+    )
 
 
 def _sample_spacing(breaks: np.ndarray) -> float:
@@ -148,8 +178,9 @@ def _sample_spacing(breaks: np.ndarray) -> float:
     return max(median(np.diff(breaks)), 1e-9) / PATH_DEV_SAMPLES_PER_SPAN
 
 
-def path_deviation(breaks: np.ndarray, coef: np.ndarray, nodes: np.ndarray, tol_mm: np.ndarray,
-                   lin: np.ndarray, curves=(), i0: int = 0):
+def path_deviation(
+    breaks: np.ndarray, coef: np.ndarray, nodes: np.ndarray, tol_mm: np.ndarray, lin: np.ndarray, curves=(), i0: int = 0
+):
     """Worst distance of the programmed path (nodes (n, d) with ``curves``) to the fitted
     pieces, over the linear axes ``lin``: (max distance mm, max distance / tolerance)."""
     if not lin.any() or nodes.shape[0] < 2:
@@ -163,9 +194,18 @@ def path_deviation(breaks: np.ndarray, coef: np.ndarray, nodes: np.ndarray, tol_
     return float(dist.max()), float(ratio.max())
 
 
-def rotary_path_deviation(breaks: np.ndarray, coef: np.ndarray, nodes: np.ndarray,
-                          tol_mm: np.ndarray, tol_deg: float, lin: np.ndarray, moving: np.ndarray,
-                          curves=(), i0: int = 0, tol_ref: float | None = None) -> float:
+def rotary_path_deviation(
+    breaks: np.ndarray,
+    coef: np.ndarray,
+    nodes: np.ndarray,
+    tol_mm: np.ndarray,
+    tol_deg: float,
+    lin: np.ndarray,
+    moving: np.ndarray,
+    curves=(),
+    i0: int = 0,
+    tol_ref: float | None = None,
+) -> float:
     """Worst deviation of the programmed path from the fit where rotary axes move, over
     the tolerance (<= 1 is within); ``moving`` (d,) marks the axes that move.
 
@@ -194,8 +234,7 @@ def rotary_path_deviation(breaks: np.ndarray, coef: np.ndarray, nodes: np.ndarra
     # ``tol_ref``, that of the whole sub-run a part of it is measured for) over tol_deg
     ref = float(np.max(tol)) if tol_ref is None else float(tol_ref)
     s_path = np.where(rot, ref / float(tol_deg), 1.0)
-    _, kf, tf = project_onto_pieces(breaks, coef * s_path, pts * s_path, np.ones_like(lin), tol,
-                                    spacing)
+    _, kf, tf = project_onto_pieces(breaks, coef * s_path, pts * s_path, np.ones_like(lin), tol, spacing)
     c = coef[kf]  # (K, 6, d)
     q = c[:, 5]
     for i in range(4, -1, -1):

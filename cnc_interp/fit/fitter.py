@@ -82,8 +82,16 @@ class _Raw:
                 origin = planar.origin.copy()
                 origin[0] += delta[[h, v]]
                 planar = replace(planar, origin=origin)
-        return Path(axes=self.axes, breaks=self.breaks, coef=coef, line=self.line,
-                    feed_mm_s=self.feed, weights=self.weights, rapid=self.rapid, planar=planar)
+        return Path(
+            axes=self.axes,
+            breaks=self.breaks,
+            coef=coef,
+            line=self.line,
+            feed_mm_s=self.feed,
+            weights=self.weights,
+            rapid=self.rapid,
+            planar=planar,
+        )
 
 
 #: paths built per compiled call while streaming a run (any value gives the same paths)
@@ -97,8 +105,13 @@ def fit_program(program: Program, settings: FitSettings | None = None) -> FitRes
     return FitResult(program=program, items=items, stats=stats)
 
 
-def iter_fit(items, settings: FitSettings | None = None, stats: dict | None = None,
-             batch: int = FIT_STREAM_BATCH, source: str | None = None):
+def iter_fit(
+    items,
+    settings: FitSettings | None = None,
+    stats: dict | None = None,
+    batch: int = FIT_STREAM_BATCH,
+    source: str | None = None,
+):
     """Fit a program's items lazily, in order: each run's paths as soon as they are
     fitted (``batch`` at a time), dwells and stops passed through. ``stats`` (a dict) is
     filled with ``fit_program``'s statistics, complete when the iteration ends. The paths
@@ -112,10 +125,19 @@ def iter_fit(items, settings: FitSettings | None = None, stats: dict | None = No
     quantum = QuantumDetector()
     runs_info = []
     prev_end = None
-    totals = dict(nodes_in=0, segments_out=0, feed_paths=0, rapid_moves=0,
-                  max_node_dev_mm=0.0, max_node_dev_deg=0.0, max_path_dev_mm=0.0,
-                  max_path_dev_ratio=0.0, max_path_dev_rot_ratio=0.0, within_tolerance=True,
-                  max_tol_mm=0.0)
+    totals = dict(
+        nodes_in=0,
+        segments_out=0,
+        feed_paths=0,
+        rapid_moves=0,
+        max_node_dev_mm=0.0,
+        max_node_dev_deg=0.0,
+        max_path_dev_mm=0.0,
+        max_path_dev_ratio=0.0,
+        max_path_dev_rot_ratio=0.0,
+        within_tolerance=True,
+        max_tol_mm=0.0,
+    )
     for idx, it in enumerate(items):
         if isinstance(it, Run):
             # half the printed quantum of the moves so far widens the tolerance (quantum.py)
@@ -129,7 +151,7 @@ def iter_fit(items, settings: FitSettings | None = None, stats: dict | None = No
                 raise fit_outside_error(info, source)
             n_raws = len(raws_all)
             for b0 in range(0, n_raws, batch):
-                paths, prev_end = _build_paths(raws_all[b0:b0 + batch], prev_end)
+                paths, prev_end = _build_paths(raws_all[b0 : b0 + batch], prev_end)
                 yield from paths
             if it.kind == "rapid":
                 totals["rapid_moves"] += n_raws
@@ -141,8 +163,7 @@ def iter_fit(items, settings: FitSettings | None = None, stats: dict | None = No
                 totals["max_node_dev_deg"] = max(totals["max_node_dev_deg"], info["max_node_dev_deg"])
                 totals["max_path_dev_mm"] = max(totals["max_path_dev_mm"], info["max_path_dev_mm"])
                 totals["max_path_dev_ratio"] = max(totals["max_path_dev_ratio"], info["max_path_dev_ratio"])
-                totals["max_path_dev_rot_ratio"] = max(totals["max_path_dev_rot_ratio"],
-                                                       info["max_path_dev_rot_ratio"])
+                totals["max_path_dev_rot_ratio"] = max(totals["max_path_dev_rot_ratio"], info["max_path_dev_rot_ratio"])
                 totals["within_tolerance"] &= info["within_tolerance"]
                 totals["max_tol_mm"] = max(totals["max_tol_mm"], info.get("max_tol_mm", 0.0))
         elif isinstance(it, (Dwell, Stop)):
@@ -192,8 +213,13 @@ def _build_paths(raws: list[_Raw], start: np.ndarray | None):
     nseg = np.array([r.coef.shape[0] for r in raws], dtype=np.int64)
     seg_off = np.zeros(n_p + 1, dtype=np.int64)
     np.cumsum(nseg, out=seg_off[1:])
-    valid = all(r.axes == axes and r.coef.ndim == 3 and r.coef.shape[1:] == (6, n_ax)
-                and r.breaks.shape == (r.coef.shape[0] + 1,) for r in raws) and bool(nseg.min() >= 1)
+    valid = all(
+        r.axes == axes
+        and r.coef.ndim == 3
+        and r.coef.shape[1:] == (6, n_ax)
+        and r.breaks.shape == (r.coef.shape[0] + 1,)
+        for r in raws
+    ) and bool(nseg.min() >= 1)
     if valid:
         breaks = np.concatenate([r.breaks for r in raws]).astype(float, copy=False)
         steps = np.diff(breaks) > 0
@@ -212,10 +238,12 @@ def _build_paths(raws: list[_Raw], start: np.ndarray | None):
     feed = np.concatenate([np.asarray(r.feed, dtype=float).reshape(-1) for r in raws])
     weights = np.array([r.weights for r in raws], dtype=float).reshape(n_p, n_ax)
     has_start = start is not None
-    ends, delta = chain_ends(coef, breaks, seg_off,
-                             np.asarray(start, dtype=float) if has_start else np.zeros(n_ax), has_start)
+    ends, delta = chain_ends(
+        coef, breaks, seg_off, np.asarray(start, dtype=float) if has_start else np.zeros(n_ax), has_start
+    )
     sub_u, sub_s, sub_seg, s_breaks, sub_off = arc_length_tables(
-        coef, breaks, seg_off, weights, _GL_X, _GL_W, ARC_LENGTH_REL_TOL, ARC_LENGTH_MAX_SUB)
+        coef, breaks, seg_off, weights, _GL_X, _GL_W, ARC_LENGTH_REL_TOL, ARC_LENGTH_MAX_SUB
+    )
     out = []
     so = seg_off.tolist()
     uo = sub_off.tolist()
@@ -228,9 +256,22 @@ def _build_paths(raws: list[_Raw], start: np.ndarray | None):
             origin = planar.origin.copy()
             origin[0] += delta[p, [h, v]]
             planar = replace(planar, origin=origin)
-        out.append(Path._from_parts(axes, breaks[a + p:b + p + 1], coef[a:b], line[a:b], feed[a:b],
-                                    weights[p], r.rapid, planar, sub_u[ua + p:ub + p + 1],
-                                    sub_s[ua + p:ub + p + 1], sub_seg[ua:ub], s_breaks[a + p:b + p + 1]))
+        out.append(
+            Path._from_parts(
+                axes,
+                breaks[a + p : b + p + 1],
+                coef[a:b],
+                line[a:b],
+                feed[a:b],
+                weights[p],
+                r.rapid,
+                planar,
+                sub_u[ua + p : ub + p + 1],
+                sub_s[ua + p : ub + p + 1],
+                sub_seg[ua:ub],
+                s_breaks[a + p : b + p + 1],
+            )
+        )
     return out, ends[-1]
 
 
@@ -240,11 +281,21 @@ def _weights(lin: np.ndarray, rotary: bool) -> np.ndarray:
 
 
 def _run_info(run: Run) -> dict:
-    return dict(kind=run.kind, first_line=int(run.line[0]) if run.n_nodes else 0,
-                last_line=int(run.line[-1]) if run.n_nodes else 0, nodes_in=0, segments_out=0,
-                paths=0, methods=[], max_node_dev_mm=0.0, max_node_dev_deg=0.0,
-                max_path_dev_mm=0.0, max_path_dev_ratio=0.0, max_path_dev_rot_ratio=0.0,
-                within_tolerance=True)
+    return dict(
+        kind=run.kind,
+        first_line=int(run.line[0]) if run.n_nodes else 0,
+        last_line=int(run.line[-1]) if run.n_nodes else 0,
+        nodes_in=0,
+        segments_out=0,
+        paths=0,
+        methods=[],
+        max_node_dev_mm=0.0,
+        max_node_dev_deg=0.0,
+        max_path_dev_mm=0.0,
+        max_path_dev_ratio=0.0,
+        max_path_dev_rot_ratio=0.0,
+        within_tolerance=True,
+    )
 
 
 def _fit_run_raw(run: Run, settings: FitSettings):
@@ -290,10 +341,17 @@ def _fit_run_raw(run: Run, settings: FitSettings):
         n_seg += int(m.raw.coef.shape[0])
     if info.get("repaired"):
         info["repair_stops"] = int(prb.stops.size)
-    info.update(max_node_dev_mm=dmm_max, max_node_dev_deg=ddeg_max, max_path_dev_mm=pdev_max,
-                max_path_dev_ratio=pratio_max, max_path_dev_rot_ratio=rratio_max,
-                within_tolerance=ok_all, segments_out=n_seg,
-                paths=len(raws), methods=sorted(methods))
+    info.update(
+        max_node_dev_mm=dmm_max,
+        max_node_dev_deg=ddeg_max,
+        max_path_dev_mm=pdev_max,
+        max_path_dev_ratio=pratio_max,
+        max_path_dev_rot_ratio=rratio_max,
+        within_tolerance=ok_all,
+        segments_out=n_seg,
+        paths=len(raws),
+        methods=sorted(methods),
+    )
     return raws, info
 
 
@@ -337,18 +395,19 @@ def _fit_run_once(pr: PreparedRun, settings: FitSettings, evals: dict, info: dic
                 # each node, are within any tolerance (slower, but never outside the part)
                 w = rot_all if sub.rotary else lin_all
                 for j in range(a, b):
-                    results.append(_Measured(j, j + 1, _single_move_raw(pr, j, j + 1, w),
-                                             "line-fallback", 0.0, 0.0, 0.0, 0.0, 0.0, True))
-                info["fallback_lines"] = info.get("fallback_lines", []) + [int(pr.line[a + 1]),
-                                                                           int(pr.line[b])]
+                    results.append(
+                        _Measured(
+                            j, j + 1, _single_move_raw(pr, j, j + 1, w), "line-fallback", 0.0, 0.0, 0.0, 0.0, 0.0, True
+                        )
+                    )
+                info["fallback_lines"] = info.get("fallback_lines", []) + [int(pr.line[a + 1]), int(pr.line[b])]
                 continue
         results.append(m)
     more = np.unique(np.concatenate(more)) if more else np.zeros(0, dtype=np.int64)
     return results, more
 
 
-def _repair_nodes(pr: PreparedRun, sub: SubRun, m: "_Measured", settings: FitSettings,
-                  every: bool) -> np.ndarray:
+def _repair_nodes(pr: PreparedRun, sub: SubRun, m: "_Measured", settings: FitSettings, every: bool) -> np.ndarray:
     """Programmed nodes of a failing sub-run to blend (or stop at) in the next round: in
     every polyline section the measurement finds outside (all of them if none alone is),
     ``FIT_REPAIR_SPLITS`` nodes spread over it, or with ``every`` all its nodes."""
@@ -374,18 +433,20 @@ def _repair_nodes(pr: PreparedRun, sub: SubRun, m: "_Measured", settings: FitSet
 def _section_ok(pr: PreparedRun, sub: SubRun, raw: _Raw, sec, settings: FitSettings) -> bool:
     """The measurement of one polyline section against its own fitted segments."""
     _, i, j, k0, k1 = sec
-    breaks = raw.breaks[k0:k1 + 1] - raw.breaks[k0]
+    breaks = raw.breaks[k0 : k1 + 1] - raw.breaks[k0]
     coef = raw.coef[k0:k1]
-    nodes = pr.nodes[i:j + 1]
-    tol = fit_tolerance(pr.tol_mm[i:j + 1])
+    nodes = pr.nodes[i : j + 1]
+    tol = fit_tolerance(pr.tol_mm[i : j + 1])
     measured = pr.lin if not sub.rotary else np.zeros_like(pr.lin)
     _, ratio = polyline_deviation(breaks, coef, nodes, tol, measured)
     moving = np.ptp(nodes, axis=0) > 0
     if (moving & ~pr.lin).any():
         # in the sub-run's rotary scale (its largest tolerance), as the whole measurement
-        tol_ref = float(np.max(fit_tolerance(pr.tol_mm[sub.i0:sub.i1 + 1])))
-        ratio = max(ratio, rotary_path_deviation(breaks, coef, nodes, tol, settings.fit_tol_deg,
-                                                 pr.lin, moving, tol_ref=tol_ref))
+        tol_ref = float(np.max(fit_tolerance(pr.tol_mm[sub.i0 : sub.i1 + 1])))
+        ratio = max(
+            ratio,
+            rotary_path_deviation(breaks, coef, nodes, tol, settings.fit_tol_deg, pr.lin, moving, tol_ref=tol_ref),
+        )
     return ratio <= 1.0 + PATH_DEV_SLACK
 
 
@@ -405,26 +466,26 @@ class _Measured:
     ok: bool
 
 
-def _fit_measured(pr: PreparedRun, sub: SubRun, settings: FitSettings, evals: dict,
-                  tol_share: float = 1.0) -> _Measured:
+def _fit_measured(
+    pr: PreparedRun, sub: SubRun, settings: FitSettings, evals: dict, tol_share: float = 1.0
+) -> _Measured:
     """Fit a sub-run (to ``tol_share`` of its tolerance) and measure the programmed path
     (moves and exact curves) against the fit everywhere."""
     a, b = sub.i0, sub.i1
     raw, meth, dmm, ddeg, ok = _fit_sub(pr, sub, settings, evals, tol_share)
     measured = pr.lin if not sub.rotary else np.zeros_like(pr.lin)  # rotary-only: no linear axis
-    tol_sub = fit_tolerance(pr.tol_mm[a:b + 1])
+    tol_sub = fit_tolerance(pr.tol_mm[a : b + 1])
     if sub.curves:
-        pdev, pratio = path_deviation(raw.breaks, raw.coef, pr.nodes[a:b + 1], tol_sub,
-                                      measured, sub.curves, a)
+        pdev, pratio = path_deviation(raw.breaks, raw.coef, pr.nodes[a : b + 1], tol_sub, measured, sub.curves, a)
     else:
-        pdev, pratio = polyline_deviation(raw.breaks, raw.coef, pr.nodes[a:b + 1], tol_sub,
-                                          measured)
+        pdev, pratio = polyline_deviation(raw.breaks, raw.coef, pr.nodes[a : b + 1], tol_sub, measured)
     # where rotary axes move: position and orientation at one point of the fit
-    moving = np.ptp(pr.nodes[a:b + 1], axis=0) > 0
+    moving = np.ptp(pr.nodes[a : b + 1], axis=0) > 0
     rratio = 0.0
     if (moving & ~pr.lin).any():
-        rratio = rotary_path_deviation(raw.breaks, raw.coef, pr.nodes[a:b + 1], tol_sub,
-                                       settings.fit_tol_deg, pr.lin, moving, sub.curves, a)
+        rratio = rotary_path_deviation(
+            raw.breaks, raw.coef, pr.nodes[a : b + 1], tol_sub, settings.fit_tol_deg, pr.lin, moving, sub.curves, a
+        )
     sub_ok = bool(ok) and max(pratio, rratio) <= 1.0 + PATH_DEV_SLACK
     return _Measured(a, b, raw, meth, dmm, ddeg, pdev, pratio, rratio, sub_ok)
 
@@ -439,7 +500,7 @@ def _single_move_raw(pr: PreparedRun, a: int, b: int, weights: np.ndarray) -> _R
     coef[0, 0] = p0
     coef[0, 1] = d / length
     # (line/feed/weights may be views: _build_paths copies them into the Path)
-    return _Raw(pr.axes, np.array([0.0, length]), coef, pr.line[b:b + 1], pr.feed_mm_s[b:b + 1], weights)
+    return _Raw(pr.axes, np.array([0.0, length]), coef, pr.line[b : b + 1], pr.feed_mm_s[b : b + 1], weights)
 
 
 def _rapid_raws(run: Run, lin: np.ndarray) -> list[_Raw]:
@@ -453,19 +514,17 @@ def _rapid_raws(run: Run, lin: np.ndarray) -> list[_Raw]:
         if not length > 0:
             continue
         pf = straight_piece(nodes[j - 1], nodes[j], length, int(run.line[j]), np.inf)
-        out.append(_Raw(run.axes, pf.breaks, pf.coef, pf.line, pf.feed_mm_s,
-                        _weights(lin, rotary), rapid=True))
+        out.append(_Raw(run.axes, pf.breaks, pf.coef, pf.line, pf.feed_mm_s, _weights(lin, rotary), rapid=True))
     return out
 
 
-def _fit_sub(pr: PreparedRun, sub: SubRun, settings: FitSettings, evals: dict | None = None,
-             tol_share: float = 1.0):
+def _fit_sub(pr: PreparedRun, sub: SubRun, settings: FitSettings, evals: dict | None = None, tol_share: float = 1.0):
     """Fit one sub-run: (raw path, method name, max dev mm, max dev deg, ok); the fitters
     aim at ``tol_share`` of the tolerance (a repair's retry)."""
     a, b = sub.i0, sub.i1
-    nodes = pr.nodes[a:b + 1]
-    line = pr.line[a:b + 1]
-    feed = pr.feed_mm_s[a:b + 1]
+    nodes = pr.nodes[a : b + 1]
+    line = pr.line[a : b + 1]
+    feed = pr.feed_mm_s[a : b + 1]
     weights = _weights(pr.lin, sub.rotary)
     metric = weights > 0
     if sub.kind == "straight" or (b - a == 1 and not sub.curves):
@@ -475,11 +534,15 @@ def _fit_sub(pr: PreparedRun, sub: SubRun, settings: FitSettings, evals: dict | 
         dev = _line_dev(nodes, pr.lin)
         raw = _Raw(pr.axes, breaks, coef, seg_line, seg_feed, weights)
         return raw, "line", dev, 0.0, True
-    tol = fit_tolerance(pr.tol_mm[a:b + 1])
+    tol = fit_tolerance(pr.tol_mm[a : b + 1])
     tol_fit = tol * tol_share
     moving = np.ptp(nodes, axis=0) > 0
-    if (not sub.curves and settings.method in ("auto", "planar") and int(moving.sum()) == 2
-            and bool(np.all(pr.lin[moving]))):
+    if (
+        not sub.curves
+        and settings.method in ("auto", "planar")
+        and int(moving.sum()) == 2
+        and bool(np.all(pr.lin[moving]))
+    ):
         from .planar import breaks_of, fit_planar
 
         plane = tuple(int(i) for i in np.nonzero(moving)[0])
@@ -494,9 +557,14 @@ def _fit_sub(pr: PreparedRun, sub: SubRun, settings: FitSettings, evals: dict | 
     for pf in pieces:
         breaks.append(pf.breaks[1:] + off)
         off += pf.breaks[-1]
-    raw = _Raw(pr.axes, np.concatenate(breaks), np.concatenate([p.coef for p in pieces]),
-               np.concatenate([p.line for p in pieces]), np.concatenate([p.feed_mm_s for p in pieces]),
-               weights)
+    raw = _Raw(
+        pr.axes,
+        np.concatenate(breaks),
+        np.concatenate([p.coef for p in pieces]),
+        np.concatenate([p.line for p in pieces]),
+        np.concatenate([p.feed_mm_s for p in pieces]),
+        weights,
+    )
     seg0 = np.concatenate(([0], np.cumsum([p.coef.shape[0] for p in pieces])))
     raw.sections = [(kind, i, j, int(seg0[k]), int(seg0[k + 1])) for k, (kind, i, j) in enumerate(spans)]
     return raw, ("curves+nodes" if sub.curves else "nodes"), dmm, ddeg, ok
@@ -526,7 +594,7 @@ def _straight_chain(nodes: np.ndarray, line: np.ndarray, feed: np.ndarray, scale
     coef[0, 0] = nodes[0]
     coef[:, 1] = step
     starts = np.concatenate(([0], ends[:-1]))
-    seg_feed = np.array([f[a + 1:b + 1].min() for a, b in zip(starts, ends)])
+    seg_feed = np.array([f[a + 1 : b + 1].min() for a, b in zip(starts, ends)])
     return u, coef, np.asarray(line)[ends], seg_feed
 
 
@@ -543,9 +611,15 @@ def _line_dev(nodes: np.ndarray, lin: np.ndarray) -> float:
     return float(np.linalg.norm(p - (p[0] + t[:, None] * d), axis=1).max())
 
 
-def _fit_sections(pr: PreparedRun, sub: SubRun, tol: np.ndarray, metric: np.ndarray,
-                  settings: FitSettings, evals: dict | None = None,
-                  tol_fit: np.ndarray | None = None):
+def _fit_sections(
+    pr: PreparedRun,
+    sub: SubRun,
+    tol: np.ndarray,
+    metric: np.ndarray,
+    settings: FitSettings,
+    evals: dict | None = None,
+    tol_fit: np.ndarray | None = None,
+):
     """Curves, corner blends and the polylines between them, joined G2 (see module
     docstring): a polyline next to a curve or blend takes its exact tangent and
     curvature vector at the junction, two curves meet at their averaged tangent and
@@ -562,8 +636,10 @@ def _fit_sections(pr: PreparedRun, sub: SubRun, tol: np.ndarray, metric: np.ndar
     scale = np.where(pr.lin, 1.0, tol_ref / settings.fit_tol_deg)
     if tol_fit is not None:  # a repair's retry aims below the tolerance
         tol = tol_fit
-    items = sorted([(cp.first, cp.last, "curve", cp) for cp in sub.curves]
-                   + [(bl.i, bl.i + 2, "blend", bl) for bl in sub.blends], key=lambda x: x[0])
+    items = sorted(
+        [(cp.first, cp.last, "curve", cp) for cp in sub.curves] + [(bl.i, bl.i + 2, "blend", bl) for bl in sub.blends],
+        key=lambda x: x[0],
+    )
     secs = []  # ("poly", i, j), ("curve", CurvePiece) or ("blend", Blend)
     pos = a
     for first, last, kind, obj in items:
@@ -615,30 +691,47 @@ def _fit_sections(pr: PreparedRun, sub: SubRun, tol: np.ndarray, metric: np.ndar
         if s_[0] == "curve":
             cp = s_[1]
             t_c = float(tol[cp.last - a])
-            pf = fit_curve(evs[k], scale, pr.lin, t_c, settings.fit_tol_deg, cp.curve.line,
-                           float(pr.feed_mm_s[cp.last]),
-                           start=start_of[k], end=end_of[k])
+            pf = fit_curve(
+                evs[k],
+                scale,
+                pr.lin,
+                t_c,
+                settings.fit_tol_deg,
+                cp.curve.line,
+                float(pr.feed_mm_s[cp.last]),
+                start=start_of[k],
+                end=end_of[k],
+            )
         elif s_[0] == "blend":
             bl = s_[1]
-            pf = PieceFit(np.array([0.0, bl.h]), bl.coef[None], np.array([bl.line]),
-                          np.array([bl.feed_mm_s]), 0.0, 0.0, True, 3)
+            pf = PieceFit(
+                np.array([0.0, bl.h]), bl.coef[None], np.array([bl.line]), np.array([bl.feed_mm_s]), 0.0, 0.0, True, 3
+            )
         else:
             i, j = s_[1], s_[2]
-            free_or_blend = (
-                (start_of[k] is None or secs[k - 1][0] == "blend")
-                and (end_of[k] is None or secs[k + 1][0] == "blend"))
+            free_or_blend = (start_of[k] is None or secs[k - 1][0] == "blend") and (
+                end_of[k] is None or secs[k + 1][0] == "blend"
+            )
             if j == i + 1 and free_or_blend:
                 # a move between blends (or a blend and the path's end): the move itself,
                 # G2 with the blends (their ends lie on it, tangent, with zero curvature)
                 length = float(np.linalg.norm((pr.nodes[j] - pr.nodes[i]) * pr.scale))
-                pf = straight_piece(pr.nodes[i], pr.nodes[j], length, int(pr.line[j]),
-                                    float(pr.feed_mm_s[j]))
+                pf = straight_piece(pr.nodes[i], pr.nodes[j], length, int(pr.line[j]), float(pr.feed_mm_s[j]))
             else:
                 st = EndState(*start_of[k]) if start_of[k] is not None else None
                 en = EndState(*end_of[k]) if end_of[k] is not None else None
-                pf = fit_polyline(pr.nodes[i:j + 1], tol[i - a:j - a + 1], settings.fit_tol_deg,
-                                  pr.lin, metric, pr.line[i:j + 1], pr.feed_mm_s[i:j + 1], tol_ref,
-                                  st, en)
+                pf = fit_polyline(
+                    pr.nodes[i : j + 1],
+                    tol[i - a : j - a + 1],
+                    settings.fit_tol_deg,
+                    pr.lin,
+                    metric,
+                    pr.line[i : j + 1],
+                    pr.feed_mm_s[i : j + 1],
+                    tol_ref,
+                    st,
+                    en,
+                )
         pieces.append(pf)
         dmm = max(dmm, pf.max_dev_mm)
         ddeg = max(ddeg, pf.max_dev_deg)

@@ -30,6 +30,7 @@ where the speed is positive. Each knot span becomes the quintic Hermite piece of
 q, q', q'' at its two knots (exact for a quintic; neighbours share the very same
 end values), in coordinates relative to the first node.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -110,14 +111,21 @@ def straight_piece(p0: np.ndarray, p1: np.ndarray, length: float, line: int, fee
     coef = np.zeros((1, 6, p0.shape[0]))
     coef[0, 0] = p0
     coef[0, 1] = (p1 - p0) / length
-    return PieceFit(np.array([0.0, length]), coef, np.array([line]), np.array([feed]),
-                    0.0, 0.0, True, 2)
+    return PieceFit(np.array([0.0, length]), coef, np.array([line]), np.array([feed]), 0.0, 0.0, True, 2)
 
 
-def fit_polyline(nodes: np.ndarray, tol_mm: np.ndarray, tol_deg: float, lin: np.ndarray,
-                 metric: np.ndarray, line: np.ndarray, feed: np.ndarray,
-                 tol_ref_mm: float, start: EndState | None = None,
-                 end: EndState | None = None) -> PieceFit:
+def fit_polyline(
+    nodes: np.ndarray,
+    tol_mm: np.ndarray,
+    tol_deg: float,
+    lin: np.ndarray,
+    metric: np.ndarray,
+    line: np.ndarray,
+    feed: np.ndarray,
+    tol_ref_mm: float,
+    start: EndState | None = None,
+    end: EndState | None = None,
+) -> PieceFit:
     """Fit one section of nodes (n, d) without corners or duplicate nodes.
 
     ``tol_mm`` (n,) per node (tolerance of the move ending there; node 0 that of
@@ -167,10 +175,10 @@ def fit_polyline(nodes: np.ndarray, tol_mm: np.ndarray, tol_deg: float, lin: np.
     u_data0 = np.concatenate((u, xc_ch))
     y_data0 = np.concatenate((y, ref_ch))
     w_data0 = np.concatenate((w, w_ch))
-    span_f = (np.arange(1, FIT_SPAN_CHECKS + 1) / (FIT_SPAN_CHECKS + 1))
+    span_f = np.arange(1, FIT_SPAN_CHECKS + 1) / (FIT_SPAN_CHECKS + 1)
 
     step = FIT_INITIAL_NODES_PER_SPAN
-    interior = u[step:n - 1:step].copy()
+    interior = u[step : n - 1 : step].copy()
     if interior.size and total - interior[-1] < 0.5 * (interior[-1] - (interior[-2] if interior.size > 1 else 0.0)):
         interior = interior[:-1]
     # a knot (a segment boundary) wherever the programmed feed changes: every segment
@@ -184,34 +192,66 @@ def fit_polyline(nodes: np.ndarray, tol_mm: np.ndarray, tol_deg: float, lin: np.
     d2s = start.d2 if start is not None else zero
     d1e = end.d1 if end is not None else zero
     d2e = end.d2 if end is not None else zero
+
     def f64(a, dtype=float):
         # contiguous and writeable: a read-only view (a frozen Path's arrays) would be a
         # separate numba specialization, compiled again on a first run
         a = np.ascontiguousarray(a, dtype=dtype)
         return a if a.flags.writeable else a.copy()
+
     # where rotary axes move, at most one segment per move (knots chasing the soft speed
     # check of the tool's own path, whose share of the motion jumps from move to move,
     # multiplied the segments several times over)
     rotary_moves = bool(np.any(np.ptp(nodes[:, ~lin], axis=0) > 0)) if (~lin).any() else False
     # the knot-insertion rounds (compiled; see bs.refine)
     t, m, c, ok = bs.refine(
-        f64(u), f64(y), f64(tol), f64(chords), f64(clen), f64(lin_ratio), f64(interior), float(total),
-        f64(d1s, dtype=float), f64(d2s, dtype=float), f64(d1e, dtype=float), f64(d2e, dtype=float),
-        0 if start is None else 1, 0 if end is None else 1, f64(xc0), f64(ref0), f64(tol_c0),
-        f64(exp_lin0), f64(u_data0), f64(y_data0), f64(w_data0), f64(span_f), float(tol_ref_mm),
-        float(tol_rot), f64(lin, dtype=np.bool_), f64(metric, dtype=np.bool_), FIT_BETWEEN_NODES_SAFETY,
-        FIT_SMOOTHING, _RIDGE, FIT_MIN_SPEED_RATIO, FIT_STOP_SPEED_RATIO, FIT_MAX_ROUNDS,
-        FIT_SOFT_STALE_ROUNDS, FIT_MIN_SPAN_REL * total, n - 2 if rotary_moves else -1)
+        f64(u),
+        f64(y),
+        f64(tol),
+        f64(chords),
+        f64(clen),
+        f64(lin_ratio),
+        f64(interior),
+        float(total),
+        f64(d1s, dtype=float),
+        f64(d2s, dtype=float),
+        f64(d1e, dtype=float),
+        f64(d2e, dtype=float),
+        0 if start is None else 1,
+        0 if end is None else 1,
+        f64(xc0),
+        f64(ref0),
+        f64(tol_c0),
+        f64(exp_lin0),
+        f64(u_data0),
+        f64(y_data0),
+        f64(w_data0),
+        f64(span_f),
+        float(tol_ref_mm),
+        float(tol_rot),
+        f64(lin, dtype=np.bool_),
+        f64(metric, dtype=np.bool_),
+        FIT_BETWEEN_NODES_SAFETY,
+        FIT_SMOOTHING,
+        _RIDGE,
+        FIT_MIN_SPEED_RATIO,
+        FIT_STOP_SPEED_RATIO,
+        FIT_MAX_ROUNDS,
+        FIT_SOFT_STALE_ROUNDS,
+        FIT_MIN_SPAN_REL * total,
+        n - 2 if rotary_moves else -1,
+    )
     val = np.empty((n, d))
     der = np.empty((n, d))
     bs.evaluate(t, m, c, u, val, der)
     dev = val - y
     max_mm = float(np.sqrt((dev[:, lin] ** 2).sum(axis=1)).max()) if lin.any() else 0.0
     max_deg = float(np.abs(dev[:, ~lin] / scale[~lin]).max()) if (~lin).any() else 0.0
-    ends = (None if start is None else (start.d1 / scale, start.d2 / scale),
-            None if end is None else (end.d1 / scale, end.d2 / scale))
-    return _to_pieces(t, c / scale, u, line, feed, nodes[0], nodes[-1], max_mm, max_deg, ok,
-                      ends)
+    ends = (
+        None if start is None else (start.d1 / scale, start.d2 / scale),
+        None if end is None else (end.d1 / scale, end.d2 / scale),
+    )
+    return _to_pieces(t, c / scale, u, line, feed, nodes[0], nodes[-1], max_mm, max_deg, ok, ends)
 
 
 def _to_pieces(t, c, u, line, feed, p0, p_end, max_mm, max_deg, ok, ends=(None, None)) -> PieceFit:
@@ -263,9 +303,12 @@ def segment_sources(x: np.ndarray, u: np.ndarray, line: np.ndarray, feed: np.nda
     moves each segment [x_k, x_k+1] overlaps; u (n,) node parameters."""
     from ._bspline import segment_sources_kernel
 
-    return segment_sources_kernel(np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(u, dtype=float),
-                                  np.ascontiguousarray(line, dtype=np.int64),
-                                  np.ascontiguousarray(feed, dtype=float))
+    return segment_sources_kernel(
+        np.ascontiguousarray(x, dtype=float),
+        np.ascontiguousarray(u, dtype=float),
+        np.ascontiguousarray(line, dtype=np.int64),
+        np.ascontiguousarray(feed, dtype=float),
+    )
 
 
 def range_min(a: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:

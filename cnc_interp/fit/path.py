@@ -161,26 +161,50 @@ class Path:
         return half * (sp @ _GL_W)
 
     @classmethod
-    def _from_parts(cls, axes: str, breaks: np.ndarray, coef: np.ndarray, line: np.ndarray,
-                    feed_mm_s: np.ndarray, weights: np.ndarray, rapid: bool,
-                    planar: PlanarSegments | None, sub_u: np.ndarray, sub_s: np.ndarray,
-                    sub_seg: np.ndarray, s_breaks: np.ndarray) -> "Path":
+    def _from_parts(
+        cls,
+        axes: str,
+        breaks: np.ndarray,
+        coef: np.ndarray,
+        line: np.ndarray,
+        feed_mm_s: np.ndarray,
+        weights: np.ndarray,
+        rapid: bool,
+        planar: PlanarSegments | None,
+        sub_u: np.ndarray,
+        sub_s: np.ndarray,
+        sub_seg: np.ndarray,
+        s_breaks: np.ndarray,
+    ) -> "Path":
         """A Path whose arrays are already validated and converted (float breaks/coef/
         feed/weights, int64 line, shapes as ``__post_init__`` makes them) and whose
         arc-length table was computed by ``_arclen.arc_length_table`` — the fit stage
         builds the tables of a whole run in one compiled call (``arc_length_tables``)."""
         p = object.__new__(cls)
         # plain instance attributes, as __init__ stores them (one update, not 13 setattrs)
-        p.__dict__.update(axes=axes, breaks=breaks, coef=coef, line=line, feed_mm_s=feed_mm_s,
-                          weights=weights, rapid=rapid, planar=planar, _sub_u=sub_u, _sub_s=sub_s,
-                          _sub_seg=sub_seg, s_breaks=s_breaks, length=float(sub_s[-1]))
+        p.__dict__.update(
+            axes=axes,
+            breaks=breaks,
+            coef=coef,
+            line=line,
+            feed_mm_s=feed_mm_s,
+            weights=weights,
+            rapid=rapid,
+            planar=planar,
+            _sub_u=sub_u,
+            _sub_s=sub_s,
+            _sub_seg=sub_seg,
+            s_breaks=s_breaks,
+            length=float(sub_s[-1]),
+        )
         return p
 
     def _build_arc_length(self) -> None:
         from ._arclen import arc_length_table
 
         sub_u, sub_s, seg, starts = arc_length_table(
-            self.coef, self.breaks, self.weights, _GL_X, _GL_W, ARC_LENGTH_REL_TOL, ARC_LENGTH_MAX_SUB)
+            self.coef, self.breaks, self.weights, _GL_X, _GL_W, ARC_LENGTH_REL_TOL, ARC_LENGTH_MAX_SUB
+        )
         object.__setattr__(self, "_sub_u", sub_u)
         object.__setattr__(self, "_sub_s", sub_s)
         object.__setattr__(self, "_sub_seg", seg)
@@ -257,10 +281,7 @@ class Path:
             dot2 = (q_uu * q_uu * w).sum(axis=1)[:, None] + (q_u * q_uuu * w).sum(axis=1)[:, None]
             sig_uu = dot2 / sig - dot1**2 / sig**3
             out[3] = (
-                q_uuu / sig**3
-                - 3.0 * q_uu * sig_u / sig**4
-                - q_u * sig_uu / sig**4
-                + 3.0 * q_u * sig_u**2 / sig**5
+                q_uuu / sig**3 - 3.0 * q_uu * sig_u / sig**4 - q_u * sig_uu / sig**4 + 3.0 * q_u * sig_u**2 / sig**5
             )
         return out
 

@@ -51,7 +51,7 @@ def _move_displacements(run: Run, lin: np.ndarray) -> tuple[np.ndarray, np.ndarr
     d = np.diff(nodes, axis=0)
     straight = np.ones(d.shape[0], dtype=bool)
     for cp in run.curves:  # moves inside a curve are samples of it
-        straight[cp.first:cp.last] = False
+        straight[cp.first : cp.last] = False
     d = d[straight]
     dl, dr = d[:, lin].ravel(), d[:, ~lin].ravel()
     return dl[dl != 0], dr[dr != 0]
@@ -69,8 +69,11 @@ def _on_grid(delta: np.ndarray, q: float) -> bool:
 
 def _candidates(units: tuple[tuple[float, str], ...]) -> list[tuple[int, float, str]]:
     """Every grid 10^-D x unit considered, coarsest decimals first: (D, quantum, label)."""
-    return [(dec, factor * 10.0 ** -dec, f"{10.0 ** -dec:.{dec}f} {name}")
-            for dec in range(FIT_QUANTUM_MAX_DECIMALS + 1) for factor, name in units]
+    return [
+        (dec, factor * 10.0**-dec, f"{10.0**-dec:.{dec}f} {name}")
+        for dec in range(FIT_QUANTUM_MAX_DECIMALS + 1)
+        for factor, name in units
+    ]
 
 
 class QuantumDetector:
@@ -127,8 +130,7 @@ class QuantumDetector:
 
     def result(self) -> dict:
         """``coordinate_quantum``'s dict for the moves added so far."""
-        out = dict(detected_mm=0.0, detected_deg=0.0, label_mm="", label_deg="",
-                   quantum_mm=0.0, quantum_deg=0.0)
+        out = dict(detected_mm=0.0, detected_deg=0.0, label_mm="", label_deg="", quantum_mm=0.0, quantum_deg=0.0)
         if self.n_moves < FIT_QUANTUM_MIN_MOVES:
             return out
         q, label = self._best(self._lin_seen, self._lin, self._lin_ok)

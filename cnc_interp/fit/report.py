@@ -69,8 +69,12 @@ def continuity_residuals(path: Path) -> dict:
     qr, tr, cr = derivs(path.coef[k + 1], np.zeros(k.size))
     dc = np.abs(cl - cr).max(axis=1)
     mag = np.maximum(1.0, np.abs(cr).max(axis=1))
-    return dict(position_mm=float(np.abs(ql - qr).max()), tangent=float(np.abs(tl - tr).max()),
-                curvature_1_mm=float(dc.max()), curvature_rel=float((dc / mag).max()))
+    return dict(
+        position_mm=float(np.abs(ql - qr).max()),
+        tangent=float(np.abs(tl - tr).max()),
+        curvature_1_mm=float(dc.max()),
+        curvature_rel=float((dc / mag).max()),
+    )
 
 
 def fit_statistics(result: FitResult) -> dict:
@@ -129,8 +133,10 @@ def _tolerance_line(stats: dict) -> str:
         if q.get("quantum_deg"):
             add.append(f"{0.5 * q['quantum_deg']:.6g} deg")
         labels = ", ".join(x for x in (q.get("label_mm"), q.get("label_deg")) if x)
-        text += (f"; + ½ quantum {' / '.join(add)} (coordinates printed to {labels})"
-                 f" = {stats.get('fit_tol_mm', tol):g} mm, {stats.get('fit_tol_deg', 0.0):g} deg")
+        text += (
+            f"; + ½ quantum {' / '.join(add)} (coordinates printed to {labels})"
+            f" = {stats.get('fit_tol_mm', tol):g} mm, {stats.get('fit_tol_deg', 0.0):g} deg"
+        )
     elif q.get("detected_mm") or q.get("detected_deg"):
         labels = ", ".join(x for x in (q.get("label_mm"), q.get("label_deg")) if x)
         text += f"; coordinates printed to {labels}, taken as exact"
@@ -149,28 +155,71 @@ def segments_document(result: FitResult) -> dict:
             segs = []
             pl = it.planar
             for k in range(it.n_seg):
-                seg = {"line": int(it.line[k]), "u0": float(it.breaks[k]), "u1": float(it.breaks[k + 1]),
-                       "feed_mm_s": _num(it.feed_mm_s[k]),
-                       "coef": it.coef[k].T.tolist()}
+                seg = {
+                    "line": int(it.line[k]),
+                    "u0": float(it.breaks[k]),
+                    "u1": float(it.breaks[k + 1]),
+                    "feed_mm_s": _num(it.feed_mm_s[k]),
+                    "coef": it.coef[k].T.tolist(),
+                }
                 if pl is not None:
-                    seg["planar"] = {"plane": it.axes[pl.plane[0]] + it.axes[pl.plane[1]],
-                                     "theta_rad": float(pl.theta[k]), "origin": pl.origin[k].tolist(),
-                                     "x_end": float(pl.x_end[k]), "p": pl.p[k].tolist()}
+                    seg["planar"] = {
+                        "plane": it.axes[pl.plane[0]] + it.axes[pl.plane[1]],
+                        "theta_rad": float(pl.theta[k]),
+                        "origin": pl.origin[k].tolist(),
+                        "x_end": float(pl.x_end[k]),
+                        "p": pl.p[k].tolist(),
+                    }
                 segs.append(seg)
-            items.append({"type": "path", "rapid": bool(it.rapid), "weights": it.weights.tolist(),
-                          "length_mm": float(it.length), "segments": segs})
+            items.append(
+                {
+                    "type": "path",
+                    "rapid": bool(it.rapid),
+                    "weights": it.weights.tolist(),
+                    "length_mm": float(it.length),
+                    "segments": segs,
+                }
+            )
         elif isinstance(it, Dwell):
-            items.append({"type": "dwell", "line": int(it.line), "seconds": float(it.seconds),
-                          "position": np.asarray(it.position, dtype=float).tolist()})
+            items.append(
+                {
+                    "type": "dwell",
+                    "line": int(it.line),
+                    "seconds": float(it.seconds),
+                    "position": np.asarray(it.position, dtype=float).tolist(),
+                }
+            )
         elif isinstance(it, Stop):
-            items.append({"type": "stop", "line": int(it.line), "code": it.code,
-                          "position": np.asarray(it.position, dtype=float).tolist()})
+            items.append(
+                {
+                    "type": "stop",
+                    "line": int(it.line),
+                    "code": it.code,
+                    "position": np.asarray(it.position, dtype=float).tolist(),
+                }
+            )
     st = result.stats
-    return {"format": "cnc-interp-segments", "version": 1, "source": prog.source, "axes": prog.axes,
-            "units": {"linear": "mm", "rotary": "deg", "feed": "mm/s"},
-            "settings": {k: st.get(k) for k in ("tol_mm", "tol_deg", "corner_deg", "tol_mode", "method",
-                                                "tol_cap_mm", "fit_tol_mm", "fit_tol_deg")},
-            "items": items}
+    return {
+        "format": "cnc-interp-segments",
+        "version": 1,
+        "source": prog.source,
+        "axes": prog.axes,
+        "units": {"linear": "mm", "rotary": "deg", "feed": "mm/s"},
+        "settings": {
+            k: st.get(k)
+            for k in (
+                "tol_mm",
+                "tol_deg",
+                "corner_deg",
+                "tol_mode",
+                "method",
+                "tol_cap_mm",
+                "fit_tol_mm",
+                "fit_tol_deg",
+            )
+        },
+        "items": items,
+    }
 
 
 def write_segments_json(result: FitResult, path: str) -> None:

@@ -49,8 +49,7 @@ def require_within_tolerance(result: FitResult) -> FitResult:
     raise fit_outside_error(run, result.program.source, st)
 
 
-def fit_outside_error(run_info: dict[str, Any], source: str,
-                      stats: dict[str, Any] | None = None) -> "FitError":
+def fit_outside_error(run_info: dict[str, Any], source: str, stats: dict[str, Any] | None = None) -> "FitError":
     """The ``FitError`` (exit 1) for a run whose fit misses its tolerance (``run_info``:
     the fit's per-run statistics; ``stats``: the program's, for its worst ratios)."""
     from ..errors import FitError, SourceLocation
@@ -62,4 +61,5 @@ def fit_outside_error(run_info: dict[str, Any], source: str,
         f"the fitted path misses the tolerance on {span} (path deviation "
         f"{st.get('max_path_dev_ratio', 0.0):.3f}, rotary {st.get('max_path_dev_rot_ratio', 0.0):.3f} "
         f"of the tolerance) and could not be repaired; please report it",
-        SourceLocation(file=source, line=int(lines[0])))
+        SourceLocation(file=source, line=int(lines[0])),
+    )

@@ -79,8 +79,14 @@ class FitSettings:
             raise UsageError(f"fit method must be one of {METHODS}, got {self.method!r}")
 
     @classmethod
-    def from_options(cls, tol_mm: float | None = None, corner_deg: float | None = None,
-                     machine=None, method: str | None = None, **extra) -> "FitSettings":
+    def from_options(
+        cls,
+        tol_mm: float | None = None,
+        corner_deg: float | None = None,
+        machine=None,
+        method: str | None = None,
+        **extra,
+    ) -> "FitSettings":
         """Settings from CLI options; the machine's ``tol_mm`` is used when ``--tol`` is absent,
         ``"nodes"`` when ``--fit-method`` is.
 

@@ -41,12 +41,16 @@ def emulate_frames(frames, source: str = "<frames>"):
     core = DeviceCore(buffer_bytes=1 << 62)
     for i, f in enumerate(frames):
         if f.type in CONTROL_TYPES:  # a host request, never part of a program's stream
-            raise UsageError(f"frame {i + 1} (seq {f.seq}) is a {f.type.name} frame; a frame file holds "
-                             "a program's frames only", SourceLocation(file=source))
+            raise UsageError(
+                f"frame {i + 1} (seq {f.seq}) is a {f.type.name} frame; a frame file holds a program's frames only",
+                SourceLocation(file=source),
+            )
         if not core.handle(f):
             flags = ErrorFlag(core.status().errors)
-            raise UsageError(f"frame {i + 1} (seq {f.seq}, {f.type.name}) rejected by the device model: "
-                             f"{flags!r}", SourceLocation(file=source))
+            raise UsageError(
+                f"frame {i + 1} (seq {f.seq}, {f.type.name}) rejected by the device model: {flags!r}",
+                SourceLocation(file=source),
+            )
     if core.state != DONE:
         raise UsageError("the frame file ends before its STOP frame (truncated?)", SourceLocation(file=source))
     return core
@@ -66,8 +70,7 @@ def trajectory_from_device(core, planner: str = "fpga-emulate"):
     step = move_lengths(q, dp.axes) if K else np.zeros(0)
     s = np.concatenate(([0.0], np.cumsum(step))) if K else np.zeros(0)
     feed = np.concatenate(([0.0], step / dt)) if K else np.zeros(0)
-    return Trajectory(axes=dp.axes, dt_s=dt, t=np.arange(K) * dt, s=s, feed=feed, q=q,
-                      line=out.line, planner=planner)
+    return Trajectory(axes=dp.axes, dt_s=dt, t=np.arange(K) * dt, s=s, feed=feed, q=q, line=out.line, planner=planner)
 
 
 def emulate_file(frames_path: str, out: str) -> None:
@@ -102,8 +105,9 @@ def plan_for_stream(opts: StreamOptions, formats=None, with_machine: bool = Fals
     real = machine.with_dt(dt_s)
     name, data = read_part(opts.part)
     margined = with_margin(real, device_margin(real, formats or FpgaFormats(), name))
-    res = run(data, margined, planner=opts.planner, dt_s=dt_s, tol_mm=opts.tol_mm,
-              fit_method=opts.fit_method, name=name)
+    res = run(
+        data, margined, planner=opts.planner, dt_s=dt_s, tol_mm=opts.tol_mm, fit_method=opts.fit_method, name=name
+    )
     return (res.fit, res.trajectory, real) if with_machine else (res.fit, res.trajectory)
 
 
@@ -126,21 +130,25 @@ def build_stream_full(opts: StreamOptions):
     prog = build_program(traj, fit.paths, source=source, limits=machine.limits()[:, idx])
     if not prog.stats["verify_ok"]:
         # a device must never be sent a stream that breaks the machine's limits
-        raise PlanError(f"refusing to stream: the device's setpoints would exceed the "
-                        f"{prog.stats['verify_worst']} limit (ratio {prog.stats['verify_ratio']:.12g})",
-                        SourceLocation(file=source))
+        raise PlanError(
+            f"refusing to stream: the device's setpoints would exceed the "
+            f"{prog.stats['verify_worst']} limit (ratio {prog.stats['verify_ratio']:.12g})",
+            SourceLocation(file=source),
+        )
     frames, infos = program_frames(prog)
     return prog, frames, infos, traj, machine
 
 
 def summary_line(prog, frames) -> str:
     st = prog.stats
-    return (f"fpga: {len(frames)} frames, {sum(map(len, frames))} bytes, {st['segments']} segments "
-            f"({st['profile_pieces']} profile pieces), {st['setpoint_samples']} of {prog.n_samples} "
-            f"samples as setpoint blocks; worst deviation from the float plan "
-            f"{st['max_dev_mm'] * 1e3:.4f} µm, segment-end drift {st['max_segment_end_drift_mm'] * 1e3:.2e} µm; "
-            f"{st.get('repaired_segments', 0)} segments re-sent as setpoints for the limits, "
-            f"device verify ratio {st.get('verify_ratio', float('nan')):.9f}")
+    return (
+        f"fpga: {len(frames)} frames, {sum(map(len, frames))} bytes, {st['segments']} segments "
+        f"({st['profile_pieces']} profile pieces), {st['setpoint_samples']} of {prog.n_samples} "
+        f"samples as setpoint blocks; worst deviation from the float plan "
+        f"{st['max_dev_mm'] * 1e3:.4f} µm, segment-end drift {st['max_segment_end_drift_mm'] * 1e3:.2e} µm; "
+        f"{st.get('repaired_segments', 0)} segments re-sent as setpoints for the limits, "
+        f"device verify ratio {st.get('verify_ratio', float('nan')):.9f}"
+    )
 
 
 def run_stream(opts: StreamOptions, backend=None) -> None:
@@ -165,10 +173,13 @@ def run_stream(opts: StreamOptions, backend=None) -> None:
     source = "<stdin>" if opts.part == "-" else opts.part
     rep = link.send(frames, infos, resume_from=opts.resume_from, source=source)
     fin = rep.final
-    _say(opts.quiet, f"usb: sent frames {rep.first_seq}..{len(frames)} ({rep.bytes_sent} bytes); "
-                     f"retries {rep.retries}, timeouts {rep.timeouts}, stalls {rep.stalls}, "
-                     f"CRC rejects {rep.crc_rejects}; device accepted {fin.bytes_accepted} bytes, "
-                     f"{fin.samples_done} samples")
+    _say(
+        opts.quiet,
+        f"usb: sent frames {rep.first_seq}..{len(frames)} ({rep.bytes_sent} bytes); "
+        f"retries {rep.retries}, timeouts {rep.timeouts}, stalls {rep.stalls}, "
+        f"CRC rejects {rep.crc_rejects}; device accepted {fin.bytes_accepted} bytes, "
+        f"{fin.samples_done} samples",
+    )
 
 
 # -- sending a frame file ------------------------------------------------------------------------
@@ -193,8 +204,7 @@ def frame_infos(frames) -> list:
     return infos
 
 
-def send_frame_file(frames_path: str, device: str | None = None, resume_from: int | None = None,
-                    backend=None):
+def send_frame_file(frames_path: str, device: str | None = None, resume_from: int | None = None, backend=None):
     """Send a ``--dry-run`` frame file to the device as it is; returns the ``LinkReport``."""
     from .frames import read_frame_file
     from .usb_link import UsbLink

@@ -58,8 +58,13 @@ class DeviceCore:
     device executing samples while the host waits), ``None`` = everything.
     """
 
-    def __init__(self, buffer_bytes: int = FPGA_DEVICE_BUFFER, drain_per_poll: int | None = None,
-                 clocked: bool = False, samples_per_poll: int = 0):
+    def __init__(
+        self,
+        buffer_bytes: int = FPGA_DEVICE_BUFFER,
+        drain_per_poll: int | None = None,
+        clocked: bool = False,
+        samples_per_poll: int = 0,
+    ):
         self.buffer_bytes = buffer_bytes
         self.drain_per_poll = drain_per_poll
         self.clocked = clocked
@@ -172,8 +177,9 @@ class DeviceCore:
             self.advance(self.samples_per_poll)
         self.drain()
         done = self.samples_out if self.clocked else self._received()
-        st = Status(self.free_bytes, self.last_seq, self.errors, self.state, done, self.bytes_accepted,
-                    poll_id, self.program_id)
+        st = Status(
+            self.free_bytes, self.last_seq, self.errors, self.state, done, self.bytes_accepted, poll_id, self.program_id
+        )
         self.errors = 0
         return st
 

@@ -56,8 +56,13 @@ class FaultPlan:
 class SimBackend(usb.backend.IBackend):
     """An emulated USB device with one bulk OUT (0x01) and one bulk IN (0x81) endpoint."""
 
-    def __init__(self, core: DeviceCore | None = None, faults: FaultPlan | None = None,
-                 vid: int = FPGA_USB_VID, pid: int = FPGA_USB_PID):
+    def __init__(
+        self,
+        core: DeviceCore | None = None,
+        faults: FaultPlan | None = None,
+        vid: int = FPGA_USB_VID,
+        pid: int = FPGA_USB_PID,
+    ):
         self.core = core or DeviceCore()
         self.faults = faults or FaultPlan()
         self.rng = random.Random(self.faults.seed)
@@ -88,26 +93,67 @@ class SimBackend(usb.backend.IBackend):
 
     def get_device_descriptor(self, dev):
         return SimpleNamespace(
-            bLength=18, bDescriptorType=1, bcdUSB=0x0200, bDeviceClass=0xFF, bDeviceSubClass=0,
-            bDeviceProtocol=0, bMaxPacketSize0=64, idVendor=self.vid, idProduct=self.pid,
-            bcdDevice=0x0100, iManufacturer=0, iProduct=0, iSerialNumber=0, bNumConfigurations=1,
-            address=1, bus=1, port_number=1, port_numbers=(1,), speed=3)
+            bLength=18,
+            bDescriptorType=1,
+            bcdUSB=0x0200,
+            bDeviceClass=0xFF,
+            bDeviceSubClass=0,
+            bDeviceProtocol=0,
+            bMaxPacketSize0=64,
+            idVendor=self.vid,
+            idProduct=self.pid,
+            bcdDevice=0x0100,
+            iManufacturer=0,
+            iProduct=0,
+            iSerialNumber=0,
+            bNumConfigurations=1,
+            address=1,
+            bus=1,
+            port_number=1,
+            port_numbers=(1,),
+            speed=3,
+        )
 
     def get_configuration_descriptor(self, dev, config):
-        return SimpleNamespace(bLength=9, bDescriptorType=2, wTotalLength=32, bNumInterfaces=1,
-                               bConfigurationValue=1, iConfiguration=0, bmAttributes=0x80,
-                               bMaxPower=50, extra_descriptors=[])
+        return SimpleNamespace(
+            bLength=9,
+            bDescriptorType=2,
+            wTotalLength=32,
+            bNumInterfaces=1,
+            bConfigurationValue=1,
+            iConfiguration=0,
+            bmAttributes=0x80,
+            bMaxPower=50,
+            extra_descriptors=[],
+        )
 
     def get_interface_descriptor(self, dev, intf, alt, config):
-        return SimpleNamespace(bLength=9, bDescriptorType=4, bInterfaceNumber=0, bAlternateSetting=0,
-                               bNumEndpoints=2, bInterfaceClass=0xFF, bInterfaceSubClass=0,
-                               bInterfaceProtocol=0, iInterface=0, extra_descriptors=[])
+        return SimpleNamespace(
+            bLength=9,
+            bDescriptorType=4,
+            bInterfaceNumber=0,
+            bAlternateSetting=0,
+            bNumEndpoints=2,
+            bInterfaceClass=0xFF,
+            bInterfaceSubClass=0,
+            bInterfaceProtocol=0,
+            iInterface=0,
+            extra_descriptors=[],
+        )
 
     def get_endpoint_descriptor(self, dev, ep, intf, alt, config):
         addr = EP_OUT if ep == 0 else EP_IN
-        return SimpleNamespace(bLength=7, bDescriptorType=5, bEndpointAddress=addr, bmAttributes=2,
-                               wMaxPacketSize=512, bInterval=0, bRefresh=0, bSynchAddress=0,
-                               extra_descriptors=[])
+        return SimpleNamespace(
+            bLength=7,
+            bDescriptorType=5,
+            bEndpointAddress=addr,
+            bmAttributes=2,
+            wMaxPacketSize=512,
+            bInterval=0,
+            bRefresh=0,
+            bSynchAddress=0,
+            extra_descriptors=[],
+        )
 
     # -- handles -------------------------------------------------------------------------------
     def open_device(self, dev):
@@ -178,7 +224,7 @@ class SimBackend(usb.backend.IBackend):
             data = data[: self.rng.randint(1, len(data) - 1)]
         if kind == "corrupt" and data:
             i = self.rng.randrange(len(data))
-            data = data[:i] + bytes([data[i] ^ (1 << self.rng.randrange(8))]) + data[i + 1:]
+            data = data[:i] + bytes([data[i] ^ (1 << self.rng.randrange(8))]) + data[i + 1 :]
         taken = self.core.receive(data)
         if taken == 0 and data:
             # no room at all: a real device NAKs until the host times out
@@ -190,8 +236,7 @@ class SimBackend(usb.backend.IBackend):
         self.reads += 1
         self._check()
         kind = self.faults.at_read.get(self.reads)
-        if kind is None and self.faults.read_timeout_rate > 0 \
-                and self.rng.random() < self.faults.read_timeout_rate:
+        if kind is None and self.faults.read_timeout_rate > 0 and self.rng.random() < self.faults.read_timeout_rate:
             kind = "read_timeout"
         if kind == "disconnect":
             self.connected = False

@@ -104,7 +104,8 @@ class FixedFormat:
             raise FixedPointOverflow(
                 f"{what} = {math.ldexp(float(worst), -self.frac):.6g} overflows "
                 f"Q{self.word - self.frac}.{self.frac} ({self.word} bits){_where(where)}",
-                _loc(where))
+                _loc(where),
+            )
 
     def to_float(self, ints) -> np.ndarray:
         """Integers of this format back to floats (exact up to float64 rounding)."""
@@ -159,8 +160,12 @@ class FpgaFormats:
     mult_word: int = FPGA_MULT_WORD
 
     def __post_init__(self) -> None:
-        if not (2 <= self.coef_word <= 64 and 2 <= self.horner_word <= 128
-                and 2 <= self.int_word <= 200 and 2 <= self.mult_word <= 128):
+        if not (
+            2 <= self.coef_word <= 64
+            and 2 <= self.horner_word <= 128
+            and 2 <= self.int_word <= 200
+            and 2 <= self.mult_word <= 128
+        ):
             raise ValueError(f"bad fixed-point widths {self.as_tuple()}")
         if max(self.trig.word, self.param.word, self.horner_word) > self.mult_word:
             raise ValueError("trig, param and Horner words must fit the multiplier operand")
@@ -181,14 +186,30 @@ class FpgaFormats:
         return FixedFormat(self.mult_word, 0)
 
     def as_tuple(self) -> tuple[int, ...]:
-        return (self.pos.word, self.pos.frac, self.trig.word, self.trig.frac,
-                self.param.word, self.param.frac, self.coef_word, self.horner_word,
-                self.int_word, self.mult_word)
+        return (
+            self.pos.word,
+            self.pos.frac,
+            self.trig.word,
+            self.trig.frac,
+            self.param.word,
+            self.param.frac,
+            self.coef_word,
+            self.horner_word,
+            self.int_word,
+            self.mult_word,
+        )
 
     @classmethod
     def from_tuple(cls, t) -> "FpgaFormats":
-        return cls(FixedFormat(t[0], t[1]), FixedFormat(t[2], t[3]), FixedFormat(t[4], t[5]),
-                   int(t[6]), int(t[7]), int(t[8]), int(t[9]))
+        return cls(
+            FixedFormat(t[0], t[1]),
+            FixedFormat(t[2], t[3]),
+            FixedFormat(t[4], t[5]),
+            int(t[6]),
+            int(t[7]),
+            int(t[8]),
+            int(t[9]),
+        )
 
 
 # -- integer primitives -------------------------------------------------------------
@@ -240,8 +261,9 @@ def exponent_range(out_frac: int) -> tuple[int, int]:
     return (max(EXP_MIN, out_frac - SHIFT_LEFT_MAX), min(EXP_MAX, out_frac + SHIFT_RIGHT_MAX))
 
 
-def quantize_block(coefs, word: int, what: str, where: Where | None = None,
-                   out_frac: int | None = None) -> tuple[int, list[int]]:
+def quantize_block(
+    coefs, word: int, what: str, where: Where | None = None, out_frac: int | None = None
+) -> tuple[int, list[int]]:
     """(exponent, mantissas) of a coefficient vector with one shared exponent.
 
     ``out_frac``: fraction bits of the value the polynomial is rounded to; the exponent is
@@ -254,8 +276,16 @@ def quantize_block(coefs, word: int, what: str, where: Where | None = None,
     return e, [int(v) for v in np.asarray(mant, dtype=object).reshape(-1)]
 
 
-def horner(mant, exp: int, var, var_frac: int, out_frac: int, acc: FixedFormat,
-           what: str = "Horner accumulator", where: Where | None = None):
+def horner(
+    mant,
+    exp: int,
+    var,
+    var_frac: int,
+    out_frac: int,
+    acc: FixedFormat,
+    what: str = "Horner accumulator",
+    where: Where | None = None,
+):
     """Evaluate sum_i mant[i] 2**-exp var**i exactly as the hardware does.
 
     ``var`` (ints, fraction ``var_frac``, in [0, 1]); each step is

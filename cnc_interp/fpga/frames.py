@@ -121,8 +121,16 @@ class Status:
     program_id: int = 0
 
     def pack(self) -> bytes:
-        return STATUS.pack(self.free_bytes, self.last_seq, self.errors, self.state,
-                           self.samples_done, self.bytes_accepted, self.poll_id, self.program_id)
+        return STATUS.pack(
+            self.free_bytes,
+            self.last_seq,
+            self.errors,
+            self.state,
+            self.samples_done,
+            self.bytes_accepted,
+            self.poll_id,
+            self.program_id,
+        )
 
 
 def encode_frame(ftype: int, seq: int, payload: bytes) -> bytes:
@@ -136,9 +144,9 @@ def encode_frame(ftype: int, seq: int, payload: bytes) -> bytes:
 
 def parse_header(buf: bytes | bytearray | memoryview, off: int = 0) -> tuple[int, int, int] | None:
     """(type, seq, payload length) of a valid header at ``off``, else None (bad header)."""
-    raw = bytes(buf[off:off + HEADER_SIZE])
-    magic, ver, ftype, _flags, seq, length = HEADER.unpack(raw[:HEADER.size])
-    if magic != MAGIC or struct.unpack("<I", raw[HEADER.size:])[0] != zlib.crc32(raw[:HEADER.size]):
+    raw = bytes(buf[off : off + HEADER_SIZE])
+    magic, ver, ftype, _flags, seq, length = HEADER.unpack(raw[: HEADER.size])
+    if magic != MAGIC or struct.unpack("<I", raw[HEADER.size :])[0] != zlib.crc32(raw[: HEADER.size]):
         return None
     if ver != VERSION or length > MAX_PAYLOAD:
         return None
@@ -156,7 +164,7 @@ def decode_frame(data: bytes) -> Frame:
     end = HEADER_SIZE + length
     if len(data) < end + TRAILER_SIZE:
         raise FrameError("frame truncated")
-    if struct.unpack("<I", data[end:end + 4])[0] != zlib.crc32(data[:end]):
+    if struct.unpack("<I", data[end : end + 4])[0] != zlib.crc32(data[:end]):
         raise FrameError("frame CRC mismatch")
     try:
         t = FrameType(ftype)
@@ -243,12 +251,25 @@ def program_frames(prog: FpgaProgram, prefill_samples: int | None = None) -> tup
     n_items = 0
     for item in prog.items:
         if isinstance(item, FixedSegment):
-            seg = SEGMENT.pack(item.index, item.line, item.start_sample, item.plane[0], item.plane[1],
-                               item.cos, item.sin, item.origin[0], item.origin[1], item.x_exp, item.x_mant,
-                               item.p_exp, *item.p_mant, len(item.pieces))
+            seg = SEGMENT.pack(
+                item.index,
+                item.line,
+                item.start_sample,
+                item.plane[0],
+                item.plane[1],
+                item.cos,
+                item.sin,
+                item.origin[0],
+                item.origin[1],
+                item.x_exp,
+                item.x_mant,
+                item.p_exp,
+                *item.p_mant,
+                len(item.pieces),
+            )
             add(FrameType.SEGMENT, seg, "segment", item.index, item.line)
             for first in range(0, len(item.pieces), per_profile):
-                chunk = item.pieces[first:first + per_profile]
+                chunk = item.pieces[first : first + per_profile]
                 pay = PROFILE_HEAD.pack(item.index, first, len(chunk))
                 pay += b"".join(PIECE.pack(p.n_samples, p.dtau, p.exp, *p.mant) for p in chunk)
                 add(FrameType.PROFILE, pay, "profile", item.index, item.line)
@@ -256,14 +277,21 @@ def program_frames(prog: FpgaProgram, prefill_samples: int | None = None) -> tup
         else:
             q = np.asarray(item.q, dtype="<i8")
             for r in range(0, q.shape[0], per_block):
-                blk = q[r:r + per_block]
+                blk = q[r : r + per_block]
                 pay = SETPOINTS_HEAD.pack(item.start_sample + r, blk.shape[0], n_axes, item.line)
                 add(FrameType.SETPOINTS, pay + blk.tobytes(), "setpoints", -1, item.line)
                 n_items += 1
     add(FrameType.STOP, STOP.pack(prog.n_samples, n_items), "stop")
     program_id = zlib.crc32(b"".join(frames[1:]))
-    cfg = CONFIG.pack(n_axes, prog.axes.encode("ascii"), prog.dt_s, int(round(prog.dt_s * 1e9)),
-                      prog.n_samples, len(prog.items), *prog.formats.as_tuple())
+    cfg = CONFIG.pack(
+        n_axes,
+        prog.axes.encode("ascii"),
+        prog.dt_s,
+        int(round(prog.dt_s * 1e9)),
+        prog.n_samples,
+        len(prog.items),
+        *prog.formats.as_tuple(),
+    )
     cfg += struct.pack(f"<{n_axes}qI", *prog.start, program_id)
     cfg += prog.source.encode("utf-8")[:255]
     frames[0] = encode_frame(FrameType.CONFIG, 1, cfg)
@@ -286,22 +314,19 @@ def decode_config(payload: bytes) -> Config:
     try:
         n_axes, axes, dt_s, _dt_ns, n_samples, n_items, *fm = CONFIG.unpack_from(payload)
         *start, program_id = struct.unpack_from(f"<{n_axes}qI", payload, CONFIG.size)
-        src = payload[CONFIG.size + 8 * n_axes + 4:].decode("utf-8", "replace")
+        src = payload[CONFIG.size + 8 * n_axes + 4 :].decode("utf-8", "replace")
         letters = axes.rstrip(b"\0").decode("ascii")
     except (struct.error, UnicodeDecodeError, ValueError) as exc:
         raise FrameError(f"bad CONFIG payload: {exc}") from None
     # valid CRCs do not make the values sane: a device must refuse them like bad bytes
-    if (not letters or len(letters) != n_axes or len(set(letters)) != n_axes
-            or any(a not in ALL_AXES for a in letters)):
+    if not letters or len(letters) != n_axes or len(set(letters)) != n_axes or any(a not in ALL_AXES for a in letters):
         raise FrameError(f"bad CONFIG payload: axes {letters!r} (letters from {ALL_AXES}, each once)")
     if not (CONFIG_DT_MIN_S <= dt_s <= CONFIG_DT_MAX_S):  # also refuses NaN
-        raise FrameError(f"bad CONFIG payload: dt {dt_s!r} s outside "
-                         f"[{CONFIG_DT_MIN_S:g}, {CONFIG_DT_MAX_S:g}]")
+        raise FrameError(f"bad CONFIG payload: dt {dt_s!r} s outside [{CONFIG_DT_MIN_S:g}, {CONFIG_DT_MAX_S:g}]")
     if n_samples > MAX_PROGRAM_SAMPLES:
         raise FrameError(f"bad CONFIG payload: {n_samples} samples (at most {MAX_PROGRAM_SAMPLES})")
     try:
-        return Config(letters, dt_s, n_samples, n_items,
-                      FpgaFormats.from_tuple(fm), tuple(start), src, program_id)
+        return Config(letters, dt_s, n_samples, n_items, FpgaFormats.from_tuple(fm), tuple(start), src, program_id)
     except (struct.error, UnicodeDecodeError, ValueError) as exc:
         raise FrameError(f"bad CONFIG payload: {exc}") from None
 
@@ -312,9 +337,20 @@ def decode_segment(payload: bytes) -> tuple[FixedSegment, int]:
         v = SEGMENT.unpack(payload)
     except struct.error as exc:
         raise FrameError(f"bad SEGMENT payload: {exc}") from None
-    seg = FixedSegment(index=v[0], line=v[1], start_sample=v[2], plane=(v[3], v[4]), cos=v[5],
-                       sin=v[6], origin=(v[7], v[8]), x_exp=v[9], x_mant=v[10], p_exp=v[11],
-                       p_mant=tuple(v[12:18]), pieces=())
+    seg = FixedSegment(
+        index=v[0],
+        line=v[1],
+        start_sample=v[2],
+        plane=(v[3], v[4]),
+        cos=v[5],
+        sin=v[6],
+        origin=(v[7], v[8]),
+        x_exp=v[9],
+        x_mant=v[10],
+        p_exp=v[11],
+        p_mant=tuple(v[12:18]),
+        pieces=(),
+    )
     return seg, v[18]
 
 
@@ -384,9 +420,8 @@ def read_frame_file(path: str) -> list[Frame]:
             raise UsageError(f"bad frame header at byte {off}", SourceLocation(file=path))
         total = HEADER_SIZE + hdr[2] + TRAILER_SIZE
         try:
-            out.append(decode_frame(data[off:off + total]))
+            out.append(decode_frame(data[off : off + total]))
         except FrameError as exc:
-            raise UsageError(f"{exc} at byte {off} (frame {len(out) + 1})",
-                              SourceLocation(file=path)) from None
+            raise UsageError(f"{exc} at byte {off} (frame {len(out) + 1})", SourceLocation(file=path)) from None
         off += total
     return out

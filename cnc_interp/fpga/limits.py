@@ -38,7 +38,8 @@ FPGA_LIMIT_MARGIN_MAX = 1e-2
 def rounding_budget(limits: np.ndarray, dt_s: float, lsb: float) -> float:
     """Largest ratio (over axes and v/a/j) that rounding to ``lsb`` can add: limits (3, n)."""
     worst = np.array([lsb, 2.0 * lsb, 4.0 * lsb])[:, None] / (
-        np.asarray(limits, dtype=float) * np.array([dt_s, dt_s ** 2, dt_s ** 3])[:, None])
+        np.asarray(limits, dtype=float) * np.array([dt_s, dt_s**2, dt_s**3])[:, None]
+    )
     return float(worst.max())
 
 
@@ -47,9 +48,12 @@ def device_margin(machine, fmts, source: str = "<input>") -> float:
     q = rounding_budget(machine.limits(), machine.dt_s, fmts.pos.lsb)
     delta = FPGA_LIMIT_MARGIN + FPGA_MARGIN_QUANTA * q
     if delta > FPGA_LIMIT_MARGIN_MAX:
-        raise PlanError(f"dt = {machine.dt_s:g} s is too short for the device's position LSB "
-                        f"({fmts.pos.lsb:.3g} mm): rounding alone would use {100 * q:.2g} % of a "
-                        f"limit; use a longer --dt", SourceLocation(file=source))
+        raise PlanError(
+            f"dt = {machine.dt_s:g} s is too short for the device's position LSB "
+            f"({fmts.pos.lsb:.3g} mm): rounding alone would use {100 * q:.2g} % of a "
+            f"limit; use a longer --dt",
+            SourceLocation(file=source),
+        )
     return delta
 
 

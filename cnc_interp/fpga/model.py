@@ -128,8 +128,16 @@ class FpgaProgram:
 
 
 # -- datapath pieces ---------------------------------------------------------------
-def horner_rows(mant: np.ndarray, exp: np.ndarray, var: np.ndarray, var_frac: int,
-                out_frac: int, acc: FixedFormat, what: str, where: Where | None = None):
+def horner_rows(
+    mant: np.ndarray,
+    exp: np.ndarray,
+    var: np.ndarray,
+    var_frac: int,
+    out_frac: int,
+    acc: FixedFormat,
+    what: str,
+    where: Where | None = None,
+):
     """Row-wise Horner: mant (K, 6) ints, exp (K,), var (K,) -> (K,) ints (see ``fixed.horner``)."""
     a = mant[:, -1].copy()
     for i in range(mant.shape[1] - 2, -1, -1):
@@ -154,8 +162,7 @@ def profile_xi(pieces, fmts: FpgaFormats, where: Where | None = None) -> np.ndar
     tau = obj(j) * dtau
     mant = np.array([p.mant for p in pieces], dtype=object)[rep]
     exp = np.array([p.exp for p in pieces], dtype=np.int64)[rep]
-    xi = horner_rows(mant, exp, tau, fmts.param.frac, fmts.param.frac, fmts.horner,
-                     "profile accumulator", where)
+    xi = horner_rows(mant, exp, tau, fmts.param.frac, fmts.param.frac, fmts.horner, "profile accumulator", where)
     fmts.param.check(xi, "profile output ξ", where)
     return xi
 
@@ -205,8 +212,7 @@ def run_segment(seg: FixedSegment, fmts: FpgaFormats, file: str = "<input>") -> 
 
     z1 = horner(list(seg.p_mant), seg.p_exp, one, fx, fp, fmts.horner)
     x1 = x_star(one, seg, fmts)
-    end = (seg.origin[0] + round_shift(c * x1 - s * z1, ft),
-           seg.origin[1] + round_shift(s * x1 + c * z1, ft))
+    end = (seg.origin[0] + round_shift(c * x1 - s * z1, ft), seg.origin[1] + round_shift(s * x1 + c * z1, ft))
     return SegmentRun(out, end, xi, x, z)
 
 
@@ -249,8 +255,7 @@ class DatapathState:
         else:
             run = run_segment(item, self.formats, self.file)
             if self._last_end is not None and self._last_plane == item.plane:
-                self.segment_end_gap.append((item.origin[0] - self._last_end[0],
-                                             item.origin[1] - self._last_end[1]))
+                self.segment_end_gap.append((item.origin[0] - self._last_end[0], item.origin[1] - self._last_end[1]))
             self._last_end, self._last_plane = run.end, item.plane
             q = np.empty((n, len(self.axes)), dtype=np.int64)
             q[:] = np.array(self.pos, dtype=np.int64)

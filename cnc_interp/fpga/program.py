@@ -114,8 +114,7 @@ def planar_form(path):
         p = _chord_quintics(coef[:, :, [h, v]], du, theta, length)
         if p is None:
             return None
-    return PlanarSegments(plane=plane, theta=theta, origin=coef[:, 0, :][:, [h, v]].copy(),
-                          x_end=length, p=p)
+    return PlanarSegments(plane=plane, theta=theta, origin=coef[:, 0, :][:, [h, v]].copy(), x_end=length, p=p)
 
 
 #: points per segment at which a curve's chord-frame quintic is fitted and checked
@@ -214,9 +213,15 @@ def planar_path(path):
     from ..fit.path import Path
 
     breaks = path.breaks[0] + np.concatenate(([0.0], np.cumsum([p[1] for p in pieces])))
-    refined = Path(axes=path.axes, breaks=breaks, coef=np.stack([p[0] for p in pieces]),
-                   line=[p[2] for p in pieces], feed_mm_s=[p[3] for p in pieces],
-                   weights=path.weights, rapid=path.rapid)
+    refined = Path(
+        axes=path.axes,
+        breaks=breaks,
+        coef=np.stack([p[0] for p in pieces]),
+        line=[p[2] for p in pieces],
+        feed_mm_s=[p[3] for p in pieces],
+        weights=path.weights,
+        rapid=path.rapid,
+    )
     pl = planar_form(refined)
     return (refined, pl) if pl is not None else None
 
@@ -260,8 +265,15 @@ def _budget_ok(e: np.ndarray, carry: np.ndarray, budget: np.ndarray | None) -> b
     return True
 
 
-def _fit_piece(xi: np.ndarray, scale: np.ndarray, fmts: FpgaFormats, tol: float, where: Where,
-               budget: np.ndarray | None = None, carry: np.ndarray | None = None):
+def _fit_piece(
+    xi: np.ndarray,
+    scale: np.ndarray,
+    fmts: FpgaFormats,
+    tol: float,
+    where: Where,
+    budget: np.ndarray | None = None,
+    carry: np.ndarray | None = None,
+):
     """Fit one profile piece to ξ samples: (piece, max error along the path in mm, errors (n,))
     or (None, err, None) when the piece must be split (too far from the samples, or its
     error changes too fast for the limits' budget after the ``carry`` errors before it)."""
@@ -298,8 +310,15 @@ def _fit_piece(xi: np.ndarray, scale: np.ndarray, fmts: FpgaFormats, tol: float,
     return piece, err, e
 
 
-def fit_profile(xi: np.ndarray, scale: np.ndarray, fmts: FpgaFormats, tol_mm: float, where: Where,
-                budget: np.ndarray | None = None, carry: np.ndarray | None = None):
+def fit_profile(
+    xi: np.ndarray,
+    scale: np.ndarray,
+    fmts: FpgaFormats,
+    tol_mm: float,
+    where: Where,
+    budget: np.ndarray | None = None,
+    carry: np.ndarray | None = None,
+):
     """Piecewise quintic ξ(τ) through the samples: (pieces, worst error along the path in mm,
     the last three errors (mm) to carry into the next segment).
 
@@ -319,8 +338,7 @@ def fit_profile(xi: np.ndarray, scale: np.ndarray, fmts: FpgaFormats, tol_mm: fl
     while i < m:
         length = min(m - i, max(2 * length, _DEG + 1))
         while True:
-            piece, err, e = _fit_piece(xi[i:i + length], scale[i:i + length], fmts, tol_mm, where,
-                                       budget, carry)
+            piece, err, e = _fit_piece(xi[i : i + length], scale[i : i + length], fmts, tol_mm, where, budget, carry)
             if piece is not None:
                 break
             length = max(1, length // 2)
@@ -336,14 +354,22 @@ def _setpoint_block(q: np.ndarray, start: int, line: int, pos: FixedFormat, file
     lim = float(1 << min(pos.word - 1, 62))
     if not np.all(np.isfinite(scaled)) or np.any(np.abs(scaled) >= lim):
         pos.quantize(q, "setpoint", Where(-1, line, file))  # raises with the message
-        raise FixedPointOverflow(f"setpoint exceeds the int64 range of the position format at "
-                                 f"source line {line}", SourceLocation(file=file, line=line))
+        raise FixedPointOverflow(
+            f"setpoint exceeds the int64 range of the position format at source line {line}",
+            SourceLocation(file=file, line=line),
+        )
     return SetpointBlock(start, int(line), scaled.astype(np.int64))
 
 
-def build_program(traj, paths=(), formats: FpgaFormats | None = None, source: str = "<input>",
-                  start=None, profile_tol_mm: float = FPGA_PROFILE_TOL_MM,
-                  limits: np.ndarray | None = None) -> FpgaProgram:
+def build_program(
+    traj,
+    paths=(),
+    formats: FpgaFormats | None = None,
+    source: str = "<input>",
+    start=None,
+    profile_tol_mm: float = FPGA_PROFILE_TOL_MM,
+    limits: np.ndarray | None = None,
+) -> FpgaProgram:
     """Quantize a planned ``Trajectory`` (and the ``Path``s it was planned from) for the FPGA.
 
     ``paths``: the program's paths in order (rapids included), as in
@@ -369,8 +395,7 @@ def build_program(traj, paths=(), formats: FpgaFormats | None = None, source: st
     budget = None
     if limits is not None:
         dt = float(traj.dt_s)
-        budget = (0.5 * FPGA_LIMIT_MARGIN * np.asarray(limits, float)
-                  * np.array([dt, dt ** 2, dt ** 3])[:, None])
+        budget = 0.5 * FPGA_LIMIT_MARGIN * np.asarray(limits, float) * np.array([dt, dt**2, dt**3])[:, None]
     fallback: list[str] = []
     seg_counter = 0
     profile_err = 0.0
@@ -412,24 +437,32 @@ def build_program(traj, paths=(), formats: FpgaFormats | None = None, source: st
             xk = x[idx]
             xi = xk / x_end
             scale = x_end * np.sqrt(1.0 + _poly_d1(np.repeat(pl.p[k][None, :], idx.size, 0), xk) ** 2)
-            pieces, err, carry = fit_profile(xi, scale, fmts, profile_tol_mm, where,
-                                             budget_path, carry)
+            pieces, err, carry = fit_profile(xi, scale, fmts, profile_tol_mm, where, budget_path, carry)
             profile_err = max(profile_err, err)
             n_pieces += len(pieces)
             pn = pl.p[k] * x_end ** np.arange(6)
             p_exp, p_mant = quantize_block(pn, fmts.coef_word, "path coefficient", where, pos.frac)
-            x_exp, x_mant = quantize_block([x_end], fmts.mult_word, "segment x_end", where,
-                                           pos.frac - fmts.param.frac)
+            x_exp, x_mant = quantize_block([x_end], fmts.mult_word, "segment x_end", where, pos.frac - fmts.param.frac)
             th = float(pl.theta[k])
             cos_i = int(fmts.trig.quantize(np.cos(th), "cos θ", where))
             sin_i = int(fmts.trig.quantize(np.sin(th), "sin θ", where))
             org = pos.quantize(pl.origin[k], "segment origin", where)
-            items.append(FixedSegment(
-                index=gid, line=line, plane=(int(pl.plane[0]), int(pl.plane[1])),
-                cos=cos_i, sin=sin_i, origin=(int(org[0]), int(org[1])),
-                x_exp=x_exp, x_mant=x_mant[0],
-                p_exp=p_exp, p_mant=tuple(p_mant), start_sample=a + int(idx[0]),
-                pieces=tuple(pieces)))
+            items.append(
+                FixedSegment(
+                    index=gid,
+                    line=line,
+                    plane=(int(pl.plane[0]), int(pl.plane[1])),
+                    cos=cos_i,
+                    sin=sin_i,
+                    origin=(int(org[0]), int(org[1])),
+                    x_exp=x_exp,
+                    x_mant=x_mant[0],
+                    p_exp=p_exp,
+                    p_mant=tuple(p_mant),
+                    start_sample=a + int(idx[0]),
+                    pieces=tuple(pieces),
+                )
+            )
         planar_mask[a:b] = True
         cursor = b
         seg_counter += n_seg_path
@@ -440,15 +473,26 @@ def build_program(traj, paths=(), formats: FpgaFormats | None = None, source: st
         items, repaired = _repair_limits(items, q, traj, fmts, start_i, source, np.asarray(limits, float))
         for it in items:
             if isinstance(it, SetpointBlock):
-                planar_mask[it.start_sample:it.start_sample + it.n_samples] = False
-    prog = FpgaProgram(axes=traj.axes, dt_s=float(traj.dt_s), formats=fmts, start=start_i,
-                       n_samples=K, items=tuple(items), source=source)
+                planar_mask[it.start_sample : it.start_sample + it.n_samples] = False
+    prog = FpgaProgram(
+        axes=traj.axes,
+        dt_s=float(traj.dt_s),
+        formats=fmts,
+        start=start_i,
+        n_samples=K,
+        items=tuple(items),
+        source=source,
+    )
     stats = deviation_stats(prog, q, planar_mask, limits)
-    stats.update(segments=sum(isinstance(i, FixedSegment) for i in items),
-                 repaired_segments=repaired,
-                 profile_pieces=n_pieces, profile_fit_err_mm=profile_err,
-                 setpoint_samples=int(K - planar_mask.sum()), planar_samples=int(planar_mask.sum()),
-                 fallback_paths=fallback)
+    stats.update(
+        segments=sum(isinstance(i, FixedSegment) for i in items),
+        repaired_segments=repaired,
+        profile_pieces=n_pieces,
+        profile_fit_err_mm=profile_err,
+        setpoint_samples=int(K - planar_mask.sum()),
+        planar_samples=int(planar_mask.sum()),
+        fallback_paths=fallback,
+    )
     return FpgaProgram(**{**prog.__dict__, "stats": stats})
 
 
@@ -459,8 +503,15 @@ def _repair_limits(items, q, traj, fmts, start_i, source, limits):
     items = list(items)
     repaired = 0
     while True:
-        prog = FpgaProgram(axes=traj.axes, dt_s=float(traj.dt_s), formats=fmts, start=start_i,
-                           n_samples=q.shape[0], items=tuple(items), source=source)
+        prog = FpgaProgram(
+            axes=traj.axes,
+            dt_s=float(traj.dt_s),
+            formats=fmts,
+            start=start_i,
+            n_samples=q.shape[0],
+            items=tuple(items),
+            source=source,
+        )
         qe = to_mm(run_program(prog).q, fmts)
         bad = excess_samples(qe, float(traj.dt_s), limits)
         if bad.size == 0:
@@ -473,19 +524,22 @@ def _repair_limits(items, q, traj, fmts, start_i, source, limits):
         for k in hit:
             seg = items[k]
             a = seg.start_sample
-            items[k] = _setpoint_block(q[a:a + seg.n_samples], a, seg.line, fmts.pos, source)
+            items[k] = _setpoint_block(q[a : a + seg.n_samples], a, seg.line, fmts.pos, source)
         repaired += len(hit)
 
 
-def deviation_stats(prog: FpgaProgram, q_plan: np.ndarray, planar_mask: np.ndarray | None = None,
-                    limits: np.ndarray | None = None) -> dict:
+def deviation_stats(
+    prog: FpgaProgram, q_plan: np.ndarray, planar_mask: np.ndarray | None = None, limits: np.ndarray | None = None
+) -> dict:
     """Run the golden model and compare with the float plan: worst deviations and end drift (mm);
     with ``limits`` (3, n_axes) also verify's worst ratio of the device's setpoints."""
     out = run_program(prog)
     qe = to_mm(out.q, prog.formats)
     dev = np.abs(qe - q_plan)
-    stats = {"max_dev_mm": float(dev.max()) if dev.size else 0.0,
-             "max_dev_euclid_mm": float(np.sqrt((dev ** 2).sum(axis=1)).max()) if dev.size else 0.0}
+    stats = {
+        "max_dev_mm": float(dev.max()) if dev.size else 0.0,
+        "max_dev_euclid_mm": float(np.sqrt((dev**2).sum(axis=1)).max()) if dev.size else 0.0,
+    }
     if planar_mask is not None and planar_mask.any():
         stats["max_dev_planar_mm"] = float(dev[planar_mask].max())
     gaps = np.array(out.segment_end_gap, dtype=float).reshape(-1, 2)
@@ -495,6 +549,5 @@ def deviation_stats(prog: FpgaProgram, q_plan: np.ndarray, planar_mask: np.ndarr
 
         rep = verify_arrays(qe, prog.dt_s, *np.asarray(limits, float), axes=prog.axes)
         axis, kind, ratio, idx = rep.worst()
-        stats.update(verify_ok=bool(rep.ok), verify_ratio=float(ratio),
-                     verify_worst=f"{axis} {kind} at sample {idx}")
+        stats.update(verify_ok=bool(rep.ok), verify_ratio=float(ratio), verify_worst=f"{axis} {kind} at sample {idx}")
     return stats

@@ -23,8 +23,22 @@ import os
 from .model import FixedSegment, FpgaProgram, run_segment
 
 VECTOR_WORD_BITS = 128
-SEGMENT_WORDS = ("cos", "sin", "origin_h", "origin_v", "x_exp", "x_mant", "p_exp",
-                 "p_mant0", "p_mant1", "p_mant2", "p_mant3", "p_mant4", "p_mant5", "n_pieces")
+SEGMENT_WORDS = (
+    "cos",
+    "sin",
+    "origin_h",
+    "origin_v",
+    "x_exp",
+    "x_mant",
+    "p_exp",
+    "p_mant0",
+    "p_mant1",
+    "p_mant2",
+    "p_mant3",
+    "p_mant4",
+    "p_mant5",
+    "n_pieces",
+)
 PIECE_WORDS = ("n_samples", "dtau", "exp", "mant0", "mant1", "mant2", "mant3", "mant4", "mant5")
 SAMPLE_WORDS = ("xi", "x_star", "z_star", "q_h", "q_v")
 
@@ -52,8 +66,20 @@ def export_test_vectors(prog: FpgaProgram, out_dir: str, max_segments: int | Non
         segs = segs[:max_segments]
     seg_lines, piece_lines, sample_lines = [], [], []
     for seg in segs:
-        seg_lines += [hex_word(v) for v in (seg.cos, seg.sin, seg.origin[0], seg.origin[1], seg.x_exp,
-                                            seg.x_mant, seg.p_exp, *seg.p_mant, len(seg.pieces))]
+        seg_lines += [
+            hex_word(v)
+            for v in (
+                seg.cos,
+                seg.sin,
+                seg.origin[0],
+                seg.origin[1],
+                seg.x_exp,
+                seg.x_mant,
+                seg.p_exp,
+                *seg.p_mant,
+                len(seg.pieces),
+            )
+        ]
         for p in seg.pieces:
             piece_lines += [hex_word(v) for v in (p.n_samples, p.dtau, p.exp, *p.mant)]
         run = run_segment(seg, prog.formats, prog.source)
@@ -68,15 +94,19 @@ def export_test_vectors(prog: FpgaProgram, out_dir: str, max_segments: int | Non
         "segments": len(segs),
         "pieces": sum(len(s.pieces) for s in segs),
         "samples": sum(s.n_samples for s in segs),
-        "formats": {"pos": [f.pos.word, f.pos.frac], "trig": [f.trig.word, f.trig.frac],
-                    "param": [f.param.word, f.param.frac], "coef_word": f.coef_word,
-                    "horner_word": f.horner_word, "int_word": f.int_word,
-                    "mult_word": f.mult_word},
+        "formats": {
+            "pos": [f.pos.word, f.pos.frac],
+            "trig": [f.trig.word, f.trig.frac],
+            "param": [f.param.word, f.param.frac],
+            "coef_word": f.coef_word,
+            "horner_word": f.horner_word,
+            "int_word": f.int_word,
+            "mult_word": f.mult_word,
+        },
         "rounding": "round half up: add 2^(shift-1), arithmetic shift right",
         "integrators": "reset to the segment origin at each segment start (resynchronisation)",
     }
-    for name, lines in (("segments.hex", seg_lines), ("pieces.hex", piece_lines),
-                        ("expected.hex", sample_lines)):
+    for name, lines in (("segments.hex", seg_lines), ("pieces.hex", piece_lines), ("expected.hex", sample_lines)):
         with atomic_write(os.path.join(out_dir, name)) as fh:
             fh.write(("\n".join(lines) + "\n").encode("ascii") if lines else b"")
     with atomic_write(os.path.join(out_dir, "layout.json")) as fh:
@@ -100,17 +130,30 @@ def replay_vectors(out_dir: str, formats) -> list[tuple[int, int, int, int, int]
     out = []
     pi = 0
     for k in range(0, len(sw), len(SEGMENT_WORDS)):
-        c, s, oh, ov, x_exp, x_mant, p_exp, *rest = sw[k:k + len(SEGMENT_WORDS)]
+        c, s, oh, ov, x_exp, x_mant, p_exp, *rest = sw[k : k + len(SEGMENT_WORDS)]
         p_mant, n_pieces = tuple(rest[:6]), rest[6]
         pieces = []
         for _ in range(n_pieces):
-            n, dtau, exp, *mant = pw[pi:pi + len(PIECE_WORDS)]
+            n, dtau, exp, *mant = pw[pi : pi + len(PIECE_WORDS)]
             pieces.append(ProfilePiece(n, dtau, exp, tuple(mant)))
             pi += len(PIECE_WORDS)
-        seg = FixedSegment(index=k // len(SEGMENT_WORDS), line=0, plane=(0, 1), cos=c, sin=s,
-                           origin=(oh, ov), x_exp=x_exp, x_mant=x_mant, p_exp=p_exp, p_mant=p_mant,
-                           start_sample=0, pieces=tuple(pieces))
+        seg = FixedSegment(
+            index=k // len(SEGMENT_WORDS),
+            line=0,
+            plane=(0, 1),
+            cos=c,
+            sin=s,
+            origin=(oh, ov),
+            x_exp=x_exp,
+            x_mant=x_mant,
+            p_exp=p_exp,
+            p_mant=p_mant,
+            start_sample=0,
+            pieces=tuple(pieces),
+        )
         run = run_segment(seg, formats)
-        out += [(int(run.xi[j]), int(run.x[j]), int(run.z[j]), int(run.q[j, 0]), int(run.q[j, 1]))
-                for j in range(run.xi.shape[0])]
+        out += [
+            (int(run.xi[j]), int(run.x[j]), int(run.z[j]), int(run.q[j, 0]), int(run.q[j, 1]))
+            for j in range(run.xi.shape[0])
+        ]
     return out

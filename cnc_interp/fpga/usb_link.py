@@ -78,13 +78,11 @@ class LinkReport:
 
 
 def _is_disconnect(exc) -> bool:
-    return getattr(exc, "errno", None) == errno.ENODEV or \
-        getattr(exc, "backend_error_code", None) in _NO_DEVICE_CODES
+    return getattr(exc, "errno", None) == errno.ENODEV or getattr(exc, "backend_error_code", None) in _NO_DEVICE_CODES
 
 
 def _is_stall(exc) -> bool:
-    return getattr(exc, "errno", None) == errno.EPIPE or \
-        getattr(exc, "backend_error_code", None) in _PIPE_CODES
+    return getattr(exc, "errno", None) == errno.EPIPE or getattr(exc, "backend_error_code", None) in _PIPE_CODES
 
 
 class _Disconnected(Exception):
@@ -94,8 +92,15 @@ class _Disconnected(Exception):
 class UsbLink:
     """An opened controller: bulk OUT for frames, bulk IN for status frames."""
 
-    def __init__(self, dev, ep_out, ep_in, timeout_ms: int = FPGA_USB_TIMEOUT_MS,
-                 retries: int = FPGA_USB_RETRIES, stall_polls: int = FPGA_USB_STALL_POLLS):
+    def __init__(
+        self,
+        dev,
+        ep_out,
+        ep_in,
+        timeout_ms: int = FPGA_USB_TIMEOUT_MS,
+        retries: int = FPGA_USB_RETRIES,
+        stall_polls: int = FPGA_USB_STALL_POLLS,
+    ):
         self.dev, self.ep_out, self.ep_in = dev, ep_out, ep_in
         self.timeout_ms, self.retries, self.stall_polls = timeout_ms, retries, stall_polls
         self.report = LinkReport()
@@ -120,8 +125,9 @@ class UsbLink:
         except usb.core.USBError as exc:
             raise DeviceError(f"USB enumeration failed: {exc}") from None
         if dev is None:
-            raise DeviceError(f"no USB device {vid:04x}:{pid:04x} found (is the controller plugged in, "
-                              "and may this user open it?)")
+            raise DeviceError(
+                f"no USB device {vid:04x}:{pid:04x} found (is the controller plugged in, and may this user open it?)"
+            )
         try:
             dev.set_configuration()
             intf = dev.get_active_configuration()[(0, 0)]
@@ -130,7 +136,8 @@ class UsbLink:
 
         def ep(direction):
             return usb.util.find_descriptor(
-                intf, custom_match=lambda e: usb.util.endpoint_direction(e.bEndpointAddress) == direction)
+                intf, custom_match=lambda e: usb.util.endpoint_direction(e.bEndpointAddress) == direction
+            )
 
         ep_out, ep_in = ep(usb.util.ENDPOINT_OUT), ep(usb.util.ENDPOINT_IN)
         if ep_out is None or ep_in is None:
@@ -179,9 +186,11 @@ class UsbLink:
                 if st.errors:
                     self.report.device_errors += 1
                 if st.state == 6:  # UNDERRUN: the sample clock ran out of samples
-                    raise DeviceError(f"the device ran out of samples at sample {st.samples_done} "
-                                      "(underrun: the link is slower than the motion); its output "
-                                      "holds there")
+                    raise DeviceError(
+                        f"the device ran out of samples at sample {st.samples_done} "
+                        "(underrun: the link is slower than the motion); its output "
+                        "holds there"
+                    )
                 if st.state == 7:
                     raise DeviceError(f"the device aborted the program at sample {st.samples_done}")
                 return st
@@ -206,8 +215,10 @@ class UsbLink:
             st = self.status()
             idle = idle + 1 if (st.free_bytes, st.samples_done) == prev else 0
             if idle >= self.stall_polls:
-                raise DeviceError(f"the device buffer stays full ({st.free_bytes} bytes free, "
-                                  f"{need} needed) and it reports no progress")
+                raise DeviceError(
+                    f"the device buffer stays full ({st.free_bytes} bytes free, "
+                    f"{need} needed) and it reports no progress"
+                )
         return st
 
     def _write_all(self, data: bytes, count: bool = True) -> bool:
@@ -238,8 +249,9 @@ class UsbLink:
         return True
 
     # -- the stream ------------------------------------------------------------------------------
-    def send(self, frames: list[bytes], infos: list[FrameInfo], resume_from: int | None = None,
-             source: str = "<input>") -> LinkReport:
+    def send(
+        self, frames: list[bytes], infos: list[FrameInfo], resume_from: int | None = None, source: str = "<input>"
+    ) -> LinkReport:
         """Send every frame (or those after ``resume_from``) exactly once to the device."""
         rep = self.report
         acked = resume_from or 0
@@ -257,7 +269,8 @@ class UsbLink:
                         raise DeviceError(
                             f"frame {seq} ({_describe(infos[i], source)}) was not accepted after "
                             f"{attempts} attempts (last device error flags: {ErrorFlag(st.errors)!r})",
-                            _loc(infos[i], source))
+                            _loc(infos[i], source),
+                        )
                     if ok_last:
                         st = self._wait_room(len(data), st)
                     ok = ok_last = self._write_all(data)
@@ -275,35 +288,45 @@ class UsbLink:
                     if ok and st.errors & (ErrorFlag.CRC | ErrorFlag.SEQ_GAP):
                         rep.crc_rejects += 1
                     if ok and st.errors & (ErrorFlag.BAD_FRAME | ErrorFlag.OVERRUN):
-                        raise DeviceError(f"the device rejected frame {seq} "
-                                          f"({_describe(infos[i], source)}): {ErrorFlag(st.errors)!r}",
-                                          _loc(infos[i], source))
+                        raise DeviceError(
+                            f"the device rejected frame {seq} "
+                            f"({_describe(infos[i], source)}): {ErrorFlag(st.errors)!r}",
+                            _loc(infos[i], source),
+                        )
                 acked = seq
                 rep.frames_sent += 1
             rep.final = st
         except _Disconnected:
-            raise DeviceError(_disconnect_message(acked, infos, source),
-                              _loc(infos[acked - 1], source) if acked else SourceLocation(file=source)) \
-                from None
+            raise DeviceError(
+                _disconnect_message(acked, infos, source),
+                _loc(infos[acked - 1], source) if acked else SourceLocation(file=source),
+            ) from None
         return rep
 
-    def _first_seq(self, st: Status, n_frames: int, resume_from: int | None,
-                   infos: list[FrameInfo], source: str) -> int:
+    def _first_seq(
+        self, st: Status, n_frames: int, resume_from: int | None, infos: list[FrameInfo], source: str
+    ) -> int:
         if resume_from is None:
             if st.last_seq and st.state not in (0, 3, 7):
-                raise DeviceError(f"the device holds a partly sent program (up to frame {st.last_seq}); "
-                                  f"resume with --resume-from {st.last_seq} or power-cycle it")
+                raise DeviceError(
+                    f"the device holds a partly sent program (up to frame {st.last_seq}); "
+                    f"resume with --resume-from {st.last_seq} or power-cycle it"
+                )
             return 0
         if resume_from < 0 or resume_from > n_frames:
             raise UsageError(f"--resume-from {resume_from} is outside 0..{n_frames} (frames of this program)")
         if st.last_seq < resume_from:
-            raise DeviceError(f"cannot resume from frame {resume_from}: the device acknowledges only "
-                              f"up to frame {st.last_seq} (use --resume-from {st.last_seq})")
+            raise DeviceError(
+                f"cannot resume from frame {resume_from}: the device acknowledges only "
+                f"up to frame {st.last_seq} (use --resume-from {st.last_seq})"
+            )
         other = self.program_id is not None and st.program_id != self.program_id
         if st.last_seq > n_frames or (st.last_seq > 0 and other):
-            raise DeviceError(f"the device holds another program (id {st.program_id:08x}, frame "
-                              f"{st.last_seq}) than this one (id {self.program_id or 0:08x}, {n_frames} "
-                              "frames): resume with the same part, machine and planning options")
+            raise DeviceError(
+                f"the device holds another program (id {st.program_id:08x}, frame "
+                f"{st.last_seq}) than this one (id {self.program_id or 0:08x}, {n_frames} "
+                "frames): resume with the same part, machine and planning options"
+            )
         return st.last_seq
 
 
@@ -333,6 +356,8 @@ def _loc(info: FrameInfo, source: str) -> SourceLocation:
 def _disconnect_message(acked: int, infos: list[FrameInfo], source: str) -> str:
     if acked == 0:
         return "the USB device disconnected before it acknowledged any frame; reconnect it and run again"
-    return (f"the USB device disconnected; the last acknowledged frame is {acked} of {len(infos)} "
-            f"({_describe(infos[acked - 1], source)}); reconnect it and run the same command with "
-            f"--resume-from {acked}")
+    return (
+        f"the USB device disconnected; the last acknowledged frame is {acked} of {len(infos)} "
+        f"({_describe(infos[acked - 1], source)}); reconnect it and run the same command with "
+        f"--resume-from {acked}"
+    )

@@ -19,8 +19,14 @@ from .program import Arc, CurvePiece, Dwell, Nurbs, Program, Run, Stop
 __all__ = ["read_program", "Program", "Run", "Arc", "Nurbs", "CurvePiece", "Dwell", "Stop"]
 
 
-def read_program(data: bytes | str, source: str, axes: str | None = None,
-                 start: np.ndarray | None = None, params=None, tool_table=None) -> Program:
+def read_program(
+    data: bytes | str,
+    source: str,
+    axes: str | None = None,
+    start: np.ndarray | None = None,
+    params=None,
+    tool_table=None,
+) -> Program:
     """Interpret a whole part program.
 
     Args:
@@ -40,6 +46,7 @@ def read_program(data: bytes | str, source: str, axes: str | None = None,
     """
     from .blocks import iter_blocks
     from .interp import Interpreter
+
     if axes is not None:
         axes = axes.upper()
         bad = [a for a in axes if a not in ALL_AXES]
@@ -104,14 +111,12 @@ def _check_ranges(program: Program) -> None:
             bad = ~(np.abs(item.nodes) <= MAX_COORDINATE).all(axis=1)
             if bad.any():
                 i = int(np.argmax(bad))
-                fail(f"position out of range (|coordinate| > {MAX_COORDINATE:g} mm or deg)",
-                     item.line[i])
+                fail(f"position out of range (|coordinate| > {MAX_COORDINATE:g} mm or deg)", item.line[i])
             f = item.feed_mm_s
             badf = ~((f > 0) & ((f <= MAX_COORDINATE) | (np.isinf(f) & (item.kind == "rapid"))))
             if badf[1:].any():
                 i = int(np.argmax(badf[1:])) + 1
-                fail(f"feed rate out of range (0 < F, at most {MAX_COORDINATE * 60:g} per minute)",
-                     item.line[i])
+                fail(f"feed rate out of range (0 < F, at most {MAX_COORDINATE * 60:g} per minute)", item.line[i])
         elif isinstance(item, Dwell):
             if not (0 <= item.seconds <= MAX_DWELL_S):
                 fail(f"dwell time out of range (0 to {MAX_DWELL_S:g} s)", item.line)

@@ -60,9 +60,9 @@ def radius_tolerances(inch: bool) -> tuple[float, float]:
     return ARC_RADIUS_TOL_MM, ARC_RADIUS_TOL_MAX_MM
 
 
-def centre_from_ijk(ccw: bool, s1: float, s2: float, e1: float, e2: float,
-                    c1: float, c2: float, turns: int,
-                    inch: bool = False) -> tuple[float, float, float]:
+def centre_from_ijk(
+    ccw: bool, s1: float, s2: float, e1: float, e2: float, c1: float, c2: float, turns: int, inch: bool = False
+) -> tuple[float, float, float]:
     """Check an I/J/K arc with centre (c1, c2): returns (radius_start, radius_end, sweep_rad).
 
     Raises ``GeometryError`` when a radius is ~0 or the end point does not lie on the
@@ -80,28 +80,28 @@ def centre_from_ijk(ccw: bool, s1: float, s2: float, e1: float, e2: float,
         raise GeometryError(
             f"arc end point is not on the circle: radius to start {r1:.6f} mm, to end {r2:.6f} mm "
             f"(differ by {err:.3g} mm; allowed {tol:g} mm, or {ARC_RADIUS_TOL_REL:.1%} of the "
-            f"radius up to {tol_max:g} mm)")
+            f"radius up to {tol_max:g} mm)"
+        )
     return r1, r2, _sweep(ccw, s1, s2, e1, e2, c1, c2, turns)
 
 
-def centre_from_r(ccw: bool, s1: float, s2: float, e1: float, e2: float, radius: float,
-                  turns: int) -> tuple[float, float, float, float, float]:
+def centre_from_r(
+    ccw: bool, s1: float, s2: float, e1: float, e2: float, radius: float, turns: int
+) -> tuple[float, float, float, float, float]:
     """Centre of an R-format arc: returns (c1, c2, r_start, r_end, sweep_rad).
 
     Positive R gives the arc of at most 180 degrees, negative R the longer one
     (RS274NGC). Start and end must differ and be at most 2|R| apart.
     """
     if s1 == e1 and s2 == e2:
-        raise GeometryError("R-format arc with the end point equal to the start point "
-                            "(a full circle needs I/J/K)")
+        raise GeometryError("R-format arc with the end point equal to the start point (a full circle needs I/J/K)")
     ar = abs(radius)
     if ar < ARC_MIN_RADIUS_MM:
         raise GeometryError(f"zero-radius arc (R {radius:g})")
     m1, m2 = (s1 + e1) / 2.0, (s2 + e2) / 2.0
     half = math.hypot(e1 - m1, e2 - m2)
     if half - ar > ARC_R_REACH_TOL_MM:
-        raise GeometryError(f"arc radius {ar:.6g} mm is too small to reach the end point "
-                            f"({2 * half:.6g} mm away)")
+        raise GeometryError(f"arc radius {ar:.6g} mm is too small to reach the end point ({2 * half:.6g} mm away)")
     if half / ar > 1.0 - 1e-12:
         half = ar
     chord_dir = math.atan2(e2 - s2, e1 - s1)
@@ -184,7 +184,7 @@ def fill_arc_nodes(nodes: np.ndarray, layout: tuple[int, ...], pieces: list) -> 
     a0 = np.arctan2(start[rows_m, col_b] - c2, start[rows_m, col_a] - c1)
 
     total = int(counts.sum())
-    seg = np.repeat(rows_m, counts)                                  # arc of each new row
+    seg = np.repeat(rows_m, counts)  # arc of each new row
     k = np.arange(1, total + 1) - np.repeat(np.cumsum(counts) - counts, counts)  # 1..n
     frac = k / counts[seg]
     vals = start[seg] + (end - start)[seg] * frac[:, None]
@@ -194,5 +194,5 @@ def fill_arc_nodes(nodes: np.ndarray, layout: tuple[int, ...], pieces: list) -> 
     vals[idx, col_a[seg]] = c1[seg] + r * np.cos(ang)
     vals[idx, col_b[seg]] = c2[seg] + r * np.sin(ang)
     last = k == counts[seg]
-    vals[last] = end[seg[last]]                                       # exact end points
+    vals[last] = end[seg[last]]  # exact end points
     nodes[firsts[seg] + k] = vals

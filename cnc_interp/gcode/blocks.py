@@ -64,9 +64,7 @@ class Block(NamedTuple):
 _new = tuple.__new__
 
 
-def iter_blocks(
-    data: bytes | str, source: str, params: ParamStore, *, block_delete: bool = True
-) -> Iterator[Block]:
+def iter_blocks(data: bytes | str, source: str, params: ParamStore, *, block_delete: bool = True) -> Iterator[Block]:
     """Blocks of the program ``data`` (bytes are decoded as latin-1).
 
     ``source`` names the file in error locations. Raises GCodeError (with file,
@@ -147,9 +145,7 @@ class _Chunk:
 
         from .fastpath import tokenize_chunk
 
-        slow, offs, self._tuples, lines = tokenize_chunk(
-            src.b, src.text, src.line_starts, src.special, l0, l1
-        )
+        slow, offs, self._tuples, lines = tokenize_chunk(src.b, src.text, src.line_starts, src.special, l0, l1)
         n = l1 - l0
         has = (offs[1:] > offs[:-1]) & ~slow
         idx = np.flatnonzero(has)
@@ -226,10 +222,7 @@ def _run(data, source: str, params: ParamStore, block_delete: bool) -> Iterator[
             if lc.const:
                 words = list(lc.words)
             else:
-                words = [
-                    (w, v if v.__class__ is float else evaluate(v, params, where), c)
-                    for w, v, c in lc.words
-                ]
+                words = [(w, v if v.__class__ is float else evaluate(v, params, where), c) for w, v, c in lc.words]
             if lc.assigns:
                 todo = [(ex.target(t, c, where), evaluate(v, params, where), c) for t, v, c in lc.assigns]
                 for key, value, c in todo:

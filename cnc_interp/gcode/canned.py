@@ -61,8 +61,7 @@ def expand_cycle(ip, code: int, words: dict, line: int, col: int) -> None:
         raise CycleError("canned cycle with zero or missing feed rate (F)")
     for r in ("A", "B", "C", "U", "V", "W"):
         if r in words:
-            raise CycleError(f"{r} word in a canned cycle (only {aa_letter}{bb_letter}{cc_letter} "
-                             "may move)", r)
+            raise CycleError(f"{r} word in a canned cycle (only {aa_letter}{bb_letter}{cc_letter} may move)", r)
     if "R" in words:
         r_num = words["R"][1]
     elif same:
@@ -79,8 +78,7 @@ def expand_cycle(ip, code: int, words: dict, line: int, col: int) -> None:
     if "L" in words:
         lv = words["L"][1]
         if lv != int(lv) or lv < 1 or lv > LOOP_ITERATION_LIMIT:
-            raise CycleError(f"cycle repeat L must be a whole number from 1 to "
-                             f"{LOOP_ITERATION_LIMIT}, got {lv:g}", "L")
+            raise CycleError(f"cycle repeat L must be a whole number from 1 to {LOOP_ITERATION_LIMIT}, got {lv:g}", "L")
         reps = int(lv)
     p_s = None
     if code in (82, 89):

@@ -53,14 +53,22 @@ Where = Callable[[int], SourceLocation]
 
 PRECEDENCE = {
     "**": 6,
-    "*": 5, "/": 5, "mod": 5,
-    "+": 4, "-": 4,
-    "eq": 3, "ne": 3, "gt": 3, "ge": 3, "lt": 3, "le": 3,
-    "and": 2, "or": 2, "xor": 2,
+    "*": 5,
+    "/": 5,
+    "mod": 5,
+    "+": 4,
+    "-": 4,
+    "eq": 3,
+    "ne": 3,
+    "gt": 3,
+    "ge": 3,
+    "lt": 3,
+    "le": 3,
+    "and": 2,
+    "or": 2,
+    "xor": 2,
 }
-FUNCTIONS = frozenset(
-    ("abs", "acos", "asin", "atan", "cos", "exp", "fix", "fup", "ln", "round", "sin", "sqrt", "tan")
-)
+FUNCTIONS = frozenset(("abs", "acos", "asin", "atan", "cos", "exp", "fix", "fup", "ln", "round", "sin", "sqrt", "tan"))
 
 _NUM = re.compile(r"[0-9]+\.?[0-9]*|\.[0-9]+")
 _IDENT = re.compile(r"[a-z_]+")

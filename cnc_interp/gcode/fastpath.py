@@ -149,4 +149,3 @@ def _numbers(a):
 _LETTERS = b"ABCDFGHIJKLMNPQRSTUVWXYZabcdfghijklmnpqrstuvwxyz"
 #: letters and line breaks become blanks, leaving only the numbers for np.fromstring
 _TO_SPACE = bytes.maketrans(_LETTERS + b"\n\t\r", b" " * (len(_LETTERS) + 3))
-

@@ -22,7 +22,7 @@ from operator import itemgetter
 
 import numpy as np
 
-from ..constants import (ALL_AXES, CURVE_CHORD_TOL_MM, CURVE_MAX_NODES, LINEAR_AXES, MM_PER_INCH, SECONDS_PER_MINUTE)
+from ..constants import ALL_AXES, CURVE_CHORD_TOL_MM, CURVE_MAX_NODES, LINEAR_AXES, MM_PER_INCH, SECONDS_PER_MINUTE
 from ..errors import GCodeError, SourceLocation, UnsupportedError
 from .arcs import GeometryError, arc_length_mm, centre_from_ijk, centre_from_r, segment_count
 from .canned import SUPPORTED as CYCLE_CODES, CycleError, expand_cycle
@@ -47,47 +47,115 @@ VALID_LETTERS = frozenset("ABCDFGHIJKLMNPQRSTUVWXYZ")
 
 #: G code (x10) -> modal group (0 = non-modal)
 G_GROUP = {
-    0: 1, 10: 1, 20: 1, 30: 1, 50: 1, 51: 1, 52: 1, 53: 1, 730: 1, 800: 1, 810: 1, 820: 1,
-    830: 1, 850: 1, 890: 1,
-    170: 2, 180: 2, 190: 2,
-    900: 3, 910: 3, 901: 4, 911: 4, 930: 5, 940: 5, 200: 6, 210: 6, 400: 7,
-    430: 8, 431: 8, 432: 8, 490: 8, 980: 10, 990: 10,
-    540: 12, 550: 12, 560: 12, 570: 12, 580: 12, 590: 12, 591: 12, 592: 12, 593: 12,
-    610: 13, 611: 13, 640: 13, 960: 14, 970: 14, 80: 15,
-    40: 0, 100: 0, 280: 0, 281: 0, 300: 0, 301: 0, 530: 0, 920: 0, 921: 0, 922: 0, 923: 0,
+    0: 1,
+    10: 1,
+    20: 1,
+    30: 1,
+    50: 1,
+    51: 1,
+    52: 1,
+    53: 1,
+    730: 1,
+    800: 1,
+    810: 1,
+    820: 1,
+    830: 1,
+    850: 1,
+    890: 1,
+    170: 2,
+    180: 2,
+    190: 2,
+    900: 3,
+    910: 3,
+    901: 4,
+    911: 4,
+    930: 5,
+    940: 5,
+    200: 6,
+    210: 6,
+    400: 7,
+    430: 8,
+    431: 8,
+    432: 8,
+    490: 8,
+    980: 10,
+    990: 10,
+    540: 12,
+    550: 12,
+    560: 12,
+    570: 12,
+    580: 12,
+    590: 12,
+    591: 12,
+    592: 12,
+    593: 12,
+    610: 13,
+    611: 13,
+    640: 13,
+    960: 14,
+    970: 14,
+    80: 15,
+    40: 0,
+    100: 0,
+    280: 0,
+    281: 0,
+    300: 0,
+    301: 0,
+    530: 0,
+    920: 0,
+    921: 0,
+    922: 0,
+    923: 0,
 }
 G_UNSUPPORTED = {
     70: "G7 lathe diameter mode",
-    330: "G33 spindle-synchronized motion", 331: "G33.1 rigid tapping",
-    380: "G38 probing", 382: "G38.2 probing", 383: "G38.3 probing", 384: "G38.4 probing",
+    330: "G33 spindle-synchronized motion",
+    331: "G33.1 rigid tapping",
+    380: "G38 probing",
+    382: "G38.2 probing",
+    383: "G38.3 probing",
+    384: "G38.4 probing",
     385: "G38.5 probing",
-    410: "G41 cutter radius compensation", 420: "G42 cutter radius compensation",
+    410: "G41 cutter radius compensation",
+    420: "G42 cutter radius compensation",
     411: "G41.1 dynamic cutter radius compensation",
     421: "G42.1 dynamic cutter radius compensation",
     520: "G52 local coordinate offset",
-    700: "G70 lathe finishing cycle", 710: "G71 lathe roughing cycle",
+    700: "G70 lathe finishing cycle",
+    710: "G71 lathe roughing cycle",
     711: "G71.1 lathe roughing cycle",
-    720: "G72 lathe roughing cycle", 721: "G72.1 lathe roughing cycle",
-    740: "G74 left-hand tapping cycle (spindle synchronized)", 760: "G76 threading cycle",
-    840: "G84 tapping cycle (spindle synchronized)", 860: "G86 boring cycle (spindle stop)",
-    870: "G87 back boring cycle", 880: "G88 boring cycle (manual retract)",
-    950: "G95 feed per revolution", 171: "G17.1 UV plane", 181: "G18.1 WU plane",
-    191: "G19.1 VW plane", 650: "G65 macro call", 680: "G68 coordinate rotation",
+    720: "G72 lathe roughing cycle",
+    721: "G72.1 lathe roughing cycle",
+    740: "G74 left-hand tapping cycle (spindle synchronized)",
+    760: "G76 threading cycle",
+    840: "G84 tapping cycle (spindle synchronized)",
+    860: "G86 boring cycle (spindle stop)",
+    870: "G87 back boring cycle",
+    880: "G88 boring cycle (manual retract)",
+    950: "G95 feed per revolution",
+    171: "G17.1 UV plane",
+    181: "G18.1 WU plane",
+    191: "G19.1 VW plane",
+    650: "G65 macro call",
+    680: "G68 coordinate rotation",
     690: "G69 coordinate rotation",
 }
 #: M codes that do not affect motion (spindle, coolant, overrides, digital/analog I/O)
 M_NOOP = frozenset({3, 4, 5, 7, 8, 9, 19, 48, 49, 50, 51, 52, 53, 61, 62, 63, 64, 65, 67, 68})
 M_STOPS = {0: "M0", 1: "M1", 2: "M2", 30: "M30", 60: "M60"}
 M_GROUP = {0: 4, 1: 4, 2: 4, 30: 4, 60: 4, 6: 6, 61: 6, 3: 7, 4: 7, 5: 7, 19: 7}
-M_UNSUPPORTED = {66: "M66 wait on input", 70: "M70 save modal state",
-                 71: "M71 invalidate modal state",
-                 72: "M72 restore modal state", 73: "M73 save and autorestore modal state",
-                 98: "M98 subprogram call (use O-word sub/call)",
-                 99: "M99 subprogram return (use O-word endsub)"}
+M_UNSUPPORTED = {
+    66: "M66 wait on input",
+    70: "M70 save modal state",
+    71: "M71 invalidate modal state",
+    72: "M72 restore modal state",
+    73: "M73 save and autorestore modal state",
+    98: "M98 subprogram call (use O-word sub/call)",
+    99: "M99 subprogram return (use O-word endsub)",
+}
 #: letter -> axis index (>= 0) or a negative tag for the fast path (N, F, S, G, arc words)
 _FAST_KIND = {a: i for i, a in enumerate(ALL_AXES)}
-_FAST_KIND.update({"N": -1, "F": -2, "S": -3, "G": -4, "I": -5, "J": -5, "K": -5, "R": -5,
-                   "P": -5})
+_FAST_KIND.update({"N": -1, "F": -2, "S": -3, "G": -4, "I": -5, "J": -5, "K": -5, "R": -5, "P": -5})
 _PER_MIN = 1.0 / SECONDS_PER_MINUTE
 #: G value -> motion code handled by the fast path
 _FAST_G = {0.0: 0, 1.0: 10, 2.0: 20, 3.0: 30}
@@ -186,19 +254,21 @@ class Interpreter:
         self.units9 = [len_unit if lin else 1.0 for lin in IS_LINEAR9]
 
     def _refresh_layout(self) -> None:
-        self.getter = itemgetter(*self.active) if len(self.active) > 1 else (
-            lambda p, _i=self.active[0]: (p[_i],))
+        self.getter = itemgetter(*self.active) if len(self.active) > 1 else (lambda p, _i=self.active[0]: (p[_i],))
 
     def _activate(self, i: int, col: int) -> None:
         if i in self.active:
             return
         if self.fixed_axes:
             a = ALL_AXES[i]
-            raise self.error(f"axis {a} is not on this machine (axes "
-                             f"{''.join(ALL_AXES[k] for k in self.out_order)}); use a machine "
-                             f"with an {a} axis: -m with a preset that has one (cnc-interp "
-                             f"machines), or a machine file with an [axes.{a}] table (vmax, "
-                             "amax, jmax)", col)
+            raise self.error(
+                f"axis {a} is not on this machine (axes "
+                f"{''.join(ALL_AXES[k] for k in self.out_order)}); use a machine "
+                f"with an {a} axis: -m with a preset that has one (cnc-interp "
+                f"machines), or a machine file with an [axes.{a}] table (vmax, "
+                "amax, jmax)",
+                col,
+            )
         self.active = tuple(sorted(self.active + (i,)))
         if self.rb is not None:
             self.rb.widen(self.active, self.pos)
@@ -338,8 +408,7 @@ class Interpreter:
         if len(self.zero_length_lines) < 1000:
             self.zero_length_lines.append(line)
 
-    def _curve(self, curve, pts9: np.ndarray, end9: list[float], line: int, col: int,
-               feed: float) -> None:
+    def _curve(self, curve, pts9: np.ndarray, end9: list[float], line: int, col: int, feed: float) -> None:
         rb = self.rb
         if rb is None or rb.kind != "feed":
             rb = self._start_run("feed", line, col)
@@ -362,8 +431,7 @@ class Interpreter:
 
     def _dwell(self, seconds: float, line: int) -> None:
         self._close_run("dwell")
-        self.items.append(("dwell", Dwell(line=line, seconds=float(seconds), position=None),
-                           list(self.pos)))
+        self.items.append(("dwell", Dwell(line=line, seconds=float(seconds), position=None), list(self.pos)))
 
     def _stop(self, code: str, line: int, reason: str) -> None:
         self._close_run(reason)
@@ -450,8 +518,7 @@ class Interpreter:
                             kind = "feed"
                             if self.f_word <= 0.0:
                                 self.blk = blk
-                                raise self.error("feed move with zero or missing feed rate (F)",
-                                                 gcol)
+                                raise self.error("feed move with zero or missing feed rate (F)", gcol)
                             if feed_scale is None:
                                 feed = self._feed_value(pos, new, None, gcol)
                             else:
@@ -497,8 +564,10 @@ class Interpreter:
         self.block_count += nblocks
         self.blk = None
         if self.nurbs_cp is not None:
-            raise GCodeError("G5.2 NURBS block never ended (missing G5.3)",
-                             SourceLocation(self.source, self.nurbs_line, self.nurbs_col, "G5.2"))
+            raise GCodeError(
+                "G5.2 NURBS block never ended (missing G5.3)",
+                SourceLocation(self.source, self.nurbs_line, self.nurbs_col, "G5.2"),
+            )
         self._close_run("end")
 
     def _fast_arc(self, blk, words, gcode: int, gcol: int, fw) -> bool:
@@ -528,8 +597,7 @@ class Interpreter:
 
     def _fast_state(self):
         """(fast path allowed, offsets, units, incremental, letter-kind lookup, feed scale)."""
-        ok = (not self.feed_inverse_time and not self.exact_stop and self.nurbs_cp is None
-              and not self.rot_deg)
+        ok = not self.feed_inverse_time and not self.exact_stop and self.nurbs_cp is None and not self.rot_deg
         # letters of inactive axes send the block to the general path (it activates or rejects)
         kinds = dict(_FAST_KIND)
         for i, a in enumerate(ALL_AXES):
@@ -588,8 +656,7 @@ class Interpreter:
                 if grp == 1 and prev == 800:
                     groups[1] = (code, w[2])
                     continue
-                raise self.error(f"{_gcode_name(prev)} and {_gcode_name(code)} are in the same "
-                                 "modal group", w[2])
+                raise self.error(f"{_gcode_name(prev)} and {_gcode_name(code)} are in the same modal group", w[2])
             groups[grp] = (code, w[2])
         # --- classify M codes ---
         mgroups: dict[int, tuple[int, int]] = {}
@@ -601,14 +668,12 @@ class Interpreter:
             if code in M_UNSUPPORTED:
                 raise self.error(f"{M_UNSUPPORTED[code]} is not supported", w[2], unsupported=True)
             if 100 <= code <= 199:
-                raise self.error(f"user-defined M-code M{code} is not supported", w[2],
-                                 unsupported=True)
+                raise self.error(f"user-defined M-code M{code} is not supported", w[2], unsupported=True)
             if code not in M_NOOP and code not in M_STOPS and code != 6:
                 raise self.error(f"unknown M-code M{code}", w[2])
             grp = M_GROUP.get(code, 100 + code)
             if grp in mgroups:
-                raise self.error(f"M{mgroups[grp][0]} and M{code} are in the same modal group",
-                                 w[2])
+                raise self.error(f"M{mgroups[grp][0]} and M{code} are in the same modal group", w[2])
             mgroups[grp] = (code, w[2])
 
         g0 = groups.get(0)
@@ -695,11 +760,9 @@ class Interpreter:
 
         # axis-word bookkeeping (RS274NGC enhance_block rules)
         if covets and mcode is not None and mcode != 800:
-            raise self.error(f"{_gcode_name(g0code)} and {_gcode_name(mcode)} both use the axis "
-                             "words", g0[1])
+            raise self.error(f"{_gcode_name(g0code)} and {_gcode_name(mcode)} both use the axis words", g0[1])
         if g80 and axis_words and not covets and mcode == 800:
-            raise self.error("axis words with G80 (cycle cancel) and no motion",
-                             axis_words[0][1][2])
+            raise self.error("axis words with G80 (cycle cancel) and no motion", axis_words[0][1][2])
         for L, w in axis_words:
             self._activate(AXIS_INDEX[L], w[2])
 
@@ -718,9 +781,10 @@ class Interpreter:
                     self._nurbs_end(line, groups[1][1])
                     self.motion = 800
                 else:
-                    raise GCodeError("G5.2 NURBS block never ended (missing G5.3)",
-                                     SourceLocation(self.source, self.nurbs_line, self.nurbs_col,
-                                                    "G5.2"))
+                    raise GCodeError(
+                        "G5.2 NURBS block never ended (missing G5.3)",
+                        SourceLocation(self.source, self.nurbs_line, self.nurbs_col, "G5.2"),
+                    )
             elif mcode == 53:
                 raise self.error("G5.3 without an open G5.2 NURBS block", groups[1][1])
             elif mcode == 800:
@@ -732,8 +796,7 @@ class Interpreter:
                 self._motion(mcode, groups[1][1], d, axis_words, line, g53)
         elif axis_words and not covets:
             if self.motion == 800:
-                raise self.error("axis words without a motion mode (G0, G1, ...)",
-                                 axis_words[0][1][2])
+                raise self.error("axis words without a motion mode (G0, G1, ...)", axis_words[0][1][2])
             self._motion(self.motion, 0, d, axis_words, line, g53)
 
         # 13. stops
@@ -741,9 +804,10 @@ class Interpreter:
             code = mgroups[4][0]
             if code in (2, 30):
                 if self.nurbs_cp is not None:
-                    raise GCodeError("G5.2 NURBS block never ended (missing G5.3)",
-                                     SourceLocation(self.source, self.nurbs_line, self.nurbs_col,
-                                                    "G5.2"))
+                    raise GCodeError(
+                        "G5.2 NURBS block never ended (missing G5.3)",
+                        SourceLocation(self.source, self.nurbs_line, self.nurbs_col, "G5.2"),
+                    )
                 self._stop(M_STOPS[code], line, "end")
                 return True
             self._stop(M_STOPS[code], line, "stop")
@@ -751,8 +815,7 @@ class Interpreter:
 
     def _check_unused_words(self, d, groups, mgroups, mcode, g0code, covets, axis_words):
         """LinuxCNC rejects a parameter word no code of the block uses (e.g. I with G1)."""
-        motion = mcode if mcode is not None else (
-            self.motion if axis_words and not covets else None)
+        motion = mcode if mcode is not None else (self.motion if axis_words and not covets else None)
         if motion == 800:
             motion = None
         cycle = motion is not None and motion // 10 in CYCLE_CODES
@@ -763,8 +826,12 @@ class Interpreter:
             "J": motion in (20, 30, 50, 51),
             "K": motion in (20, 30),
             "R": motion in (20, 30) or cycle or g0code == 100,
-            "P": (g0code in (40, 100) or path == 640 or motion in (20, 30, 50, 52, 820, 890)
-                  or bool(ms & {62, 63, 64, 65})),
+            "P": (
+                g0code in (40, 100)
+                or path == 640
+                or motion in (20, 30, 50, 52, 820, 890)
+                or bool(ms & {62, 63, 64, 65})
+            ),
             "Q": path == 640 or motion in (830, 730, 50) or bool(ms & {67, 68}),
             "L": g0code == 100 or cycle or motion == 52,
             "H": 8 in groups,
@@ -898,15 +965,19 @@ class Interpreter:
         if tool == 0:
             return [0.0] * 9
         if tool in self.tools_touched:
-            raise self.error(f"tool {tool} was changed by G10 L10/L11; such tool table edits "
-                             "are not supported", col, unsupported=True)
+            raise self.error(
+                f"tool {tool} was changed by G10 L10/L11; such tool table edits are not supported",
+                col,
+                unsupported=True,
+            )
         self._load_tool_table()
         if self.tool_table is None:
             if not self.warnings:
                 self.warnings.append(
                     f"{self.source}:{self.blk.line}:{max(col, 1)}: warning: G43 H{tool} with no "
                     "tool table (--tool-table FILE): tool lengths are taken as 0, so the "
-                    "program's geometry and timing are as written")
+                    "program's geometry and timing are as written"
+                )
             return [0.0] * 9
         offs = self.tool_table.get(tool)
         if offs is None:
@@ -934,8 +1005,7 @@ class Interpreter:
         u = self.units9
         if lv == 20.0:
             if rw is not None:
-                raise self.error("R (rotation) with G10 L20 is not supported", rw[2],
-                                 unsupported=True)
+                raise self.error("R (rotation) with G10 L20 is not supported", rw[2], unsupported=True)
             q = self._to_prog_mm(self.pos)
             for L, w in axis_words:
                 q[AXIS_INDEX[L]] = w[1] * u[AXIS_INDEX[L]]
@@ -999,22 +1069,23 @@ class Interpreter:
                 new[i] = w[1] * u[i] + self.off[i]
         return new
 
-    def _motion(self, code: int, col: int, d: dict, axis_words: list, line: int,
-                g53: bool) -> None:
+    def _motion(self, code: int, col: int, d: dict, axis_words: list, line: int, g53: bool) -> None:
         if col == 0:
             col = axis_words[0][1][2] if axis_words else 0
         if g53 and code not in (0, 10):
             raise self.error("G53 needs G0 or G1", col)
         if self.rot_deg and code not in (0, 10, 20, 30):
-            raise self.error(f"{_gcode_name(code)} with a rotated coordinate system (G10 L2 R) "
-                             "is not supported", col, unsupported=True)
+            raise self.error(
+                f"{_gcode_name(code)} with a rotated coordinate system (G10 L2 R) is not supported",
+                col,
+                unsupported=True,
+            )
         if code in (0, 10):
             self.motion = code
             if axis_words:
                 if code == 10 and self.feed_inverse_time and self.f_block <= 0:
                     raise self.error("G93 inverse time feed move without F", col)
-                self.straight("feed" if code == 10 else "rapid",
-                              self._target(axis_words, machine=g53), line, col)
+                self.straight("feed" if code == 10 else "rapid", self._target(axis_words, machine=g53), line, col)
             return
         if code in (20, 30):
             self._arc(code, col, d, axis_words, line)
@@ -1048,16 +1119,18 @@ class Interpreter:
     def _arc(self, code: int, col: int, d: dict, axis_words: list, line: int) -> None:
         self._feed_check(col)
         if self.rot_deg and self.plane != 170:
-            raise self.error("arcs outside the XY plane with a rotated coordinate system "
-                             "(G10 L2 R) are not supported", col, unsupported=True)
+            raise self.error(
+                "arcs outside the XY plane with a rotated coordinate system (G10 L2 R) are not supported",
+                col,
+                unsupported=True,
+            )
         plane = PLANES[self.plane]
         a, b, _ = plane
         for k in (a, b):
             self._activate(k, col)
         fl, sl, bad = PLANE_IJK[self.plane]
         if bad in d:
-            raise self.error(f"{bad} word in an arc in the {PLANE_NAME[self.plane]} plane",
-                             d[bad][2])
+            raise self.error(f"{bad} word in an arc in the {PLANE_NAME[self.plane]} plane", d[bad][2])
         start = self.pos
         end = self._target(axis_words)
         turns = 1
@@ -1065,8 +1138,7 @@ class Interpreter:
         if pw is not None:
             p = pw[1]
             if p != int(p) or p < 1 or p > ARC_MAX_TURNS:
-                raise self.error(f"arc turn count P must be a whole number from 1 to "
-                                 f"{ARC_MAX_TURNS}", pw[2])
+                raise self.error(f"arc turn count P must be a whole number from 1 to {ARC_MAX_TURNS}", pw[2])
             turns = int(p)
         ccw = code == 30
         ua, ub = self.units9[a], self.units9[b]
@@ -1077,17 +1149,16 @@ class Interpreter:
                     raise self.error("arc with both R and I/J/K", rw[2])
                 if not any(ALL_AXES[k] in d for k in (a, b)):
                     raise self.error("R-format arc without an end point in the plane", col)
-                c1, c2, r1, r2, sweep = centre_from_r(ccw, start[a], start[b], end[a], end[b],
-                                                      rw[1] * self.len_unit, turns)
+                c1, c2, r1, r2, sweep = centre_from_r(
+                    ccw, start[a], start[b], end[a], end[b], rw[1] * self.len_unit, turns
+                )
             else:
                 if fl not in d and sl not in d:
-                    raise self.error("arc without R or centre offsets "
-                                     f"{fl}/{sl}", col)
+                    raise self.error(f"arc without R or centre offsets {fl}/{sl}", col)
                 if self.arc_abs:
                     for ltr in (fl, sl):
                         if ltr not in d:
-                            raise self.error(f"{ltr} word missing in absolute-centre arc (G90.1)",
-                                             col)
+                            raise self.error(f"{ltr} word missing in absolute-centre arc (G90.1)", col)
                     if self.rot_deg:
                         q = self._to_prog_mm(start)
                         q[a], q[b] = d[fl][1] * ua, d[sl][1] * ub
@@ -1104,14 +1175,17 @@ class Interpreter:
                         o1, o2 = c * o1 - s_ * o2, s_ * o1 + c * o2
                     c1 = start[a] + o1
                     c2 = start[b] + o2
-                r1, r2, sweep = centre_from_ijk(ccw, start[a], start[b], end[a], end[b], c1, c2,
-                                                turns, inch=self.len_unit != 1.0)
+                r1, r2, sweep = centre_from_ijk(
+                    ccw, start[a], start[b], end[a], end[b], c1, c2, turns, inch=self.len_unit != 1.0
+                )
         except GeometryError as exc:
             raise self.error(str(exc), col) from None
         n = segment_count(max(r1, r2), sweep)
         if n > CURVE_MAX_NODES:
-            raise self.error(f"arc too large: it needs {n} nodes at {CURVE_CHORD_TOL_MM} mm chord "
-                             f"error (limit {CURVE_MAX_NODES})", col)
+            raise self.error(
+                f"arc too large: it needs {n} nodes at {CURVE_CHORD_TOL_MM} mm chord error (limit {CURVE_MAX_NODES})",
+                col,
+            )
         if self.feed_inverse_time:
             length = arc_length_mm(start, end, plane, r1, r2, sweep)
             feed = length * self.f_block / SECONDS_PER_MINUTE
@@ -1138,8 +1212,7 @@ class Interpreter:
     def _bezier(self, code: int, col: int, d: dict, axis_words: list, line: int) -> None:
         self._feed_check(col)
         if self.plane != 170:
-            raise self.error(f"{_gcode_name(code)} splines must be in the XY plane (G17)", col,
-                             unsupported=True)
+            raise self.error(f"{_gcode_name(code)} splines must be in the XY plane (G17)", col, unsupported=True)
         for L, w in axis_words:
             if L not in "XY":
                 raise self.error(f"{_gcode_name(code)} splines may only move X and Y", w[2])
@@ -1219,13 +1292,15 @@ class Interpreter:
             return
         for L, w in axis_words:
             if L not in (la, lb):
-                raise self.error(f"{L} word in a G5.2 NURBS block (only {la} and {lb} in the "
-                                 f"{PLANE_NAME[self.plane]} plane)", w[2], unsupported=True)
+                raise self.error(
+                    f"{L} word in a G5.2 NURBS block (only {la} and {lb} in the {PLANE_NAME[self.plane]} plane)",
+                    w[2],
+                    unsupported=True,
+                )
         if la not in d or lb not in d:
             raise self.error(f"a NURBS control point needs both {la} and {lb}", col)
         if pw is None or pw[1] <= 0:
-            raise self.error("every NURBS control point needs a positive weight P",
-                             pw[2] if pw else col)
+            raise self.error("every NURBS control point needs a positive weight P", pw[2] if pw else col)
         cp = self._target(axis_words)
         base = self.nurbs_cp[0]
         pt = list(base)
@@ -1251,8 +1326,7 @@ class Interpreter:
         if np.all(cps == cps[0]):
             self._zero_length(self.nurbs_line)
             return
-        self._curve(curve, pts, end, self.nurbs_line, self.nurbs_col,
-                    self._curve_feed(pts, start))
+        self._curve(curve, pts, end, self.nurbs_line, self.nurbs_col, self._curve_feed(pts, start))
 
     # -- result -------------------------------------------------------------------
     def program(self, line_count: int) -> Program:
@@ -1267,18 +1341,24 @@ class Interpreter:
             if kind == "run":
                 items.append(finish_run(obj, order, axes, extra))
             elif kind == "dwell":
-                items.append(Dwell(line=obj.line, seconds=obj.seconds,
-                                   position=np.array(extra, dtype=float)[sel]))
+                items.append(Dwell(line=obj.line, seconds=obj.seconds, position=np.array(extra, dtype=float)[sel]))
             else:
-                items.append(Stop(line=obj.line, code=obj.code,
-                                  position=np.array(extra, dtype=float)[sel]))
-        meta = {"zero_length_moves": self.zero_length_moves,
-                "warnings": list(self.warnings),
-                "zero_length_lines": list(self.zero_length_lines),
-                "final_position": [float(v) for v in np.array(self.pos)[sel]]}
-        return Program(source=self.source, axes=axes, items=tuple(items),
-                       start=np.array(self.start9, dtype=float)[sel], line_count=line_count,
-                       block_count=self.block_count, metadata=meta)
+                items.append(Stop(line=obj.line, code=obj.code, position=np.array(extra, dtype=float)[sel]))
+        meta = {
+            "zero_length_moves": self.zero_length_moves,
+            "warnings": list(self.warnings),
+            "zero_length_lines": list(self.zero_length_lines),
+            "final_position": [float(v) for v in np.array(self.pos)[sel]],
+        }
+        return Program(
+            source=self.source,
+            axes=axes,
+            items=tuple(items),
+            start=np.array(self.start9, dtype=float)[sel],
+            line_count=line_count,
+            block_count=self.block_count,
+            metadata=meta,
+        )
 
 
 def _move_length(s, e) -> float:
@@ -1301,4 +1381,4 @@ def _word_text(blk, col: int) -> str:
         return text.strip()
     cols = sorted(c for _, _, c in blk.words if c > col)
     end = cols[0] - 1 if cols else len(text)
-    return text[col - 1:end].strip()
+    return text[col - 1 : end].strip()

@@ -34,10 +34,21 @@ WORD_LETTERS = frozenset("abcdfghijklmpqrstuvwxyz")
 
 #: O-word keyword -> (least, most) number of [bracketed] arguments
 O_KEYWORDS = {
-    "sub": (0, 0), "endsub": (0, 1), "call": (0, PARAM_LOCAL_COUNT), "return": (0, 1),
-    "if": (1, 1), "elseif": (1, 1), "else": (0, 0), "endif": (0, 0),
-    "while": (1, 1), "endwhile": (0, 0), "do": (0, 0),
-    "repeat": (1, 1), "endrepeat": (0, 0), "break": (0, 0), "continue": (0, 0),
+    "sub": (0, 0),
+    "endsub": (0, 1),
+    "call": (0, PARAM_LOCAL_COUNT),
+    "return": (0, 1),
+    "if": (1, 1),
+    "elseif": (1, 1),
+    "else": (0, 0),
+    "endif": (0, 0),
+    "while": (1, 1),
+    "endwhile": (0, 0),
+    "do": (0, 0),
+    "repeat": (1, 1),
+    "endrepeat": (0, 0),
+    "break": (0, 0),
+    "continue": (0, 0),
 }
 
 _COMMENT_CHARS = re.compile(r"[();]")

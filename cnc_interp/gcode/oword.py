@@ -139,8 +139,7 @@ class Structure:
                     raise err(i, f"{key} {kw} outside a {key} loop")
         if stack:
             kind, key, i = stack[-1][0], stack[-1][1], stack[-1][2]
-            closer = {"sub": "endsub", "if": "endif", "while": "endwhile", "do": "while",
-                      "repeat": "endrepeat"}[kind]
+            closer = {"sub": "endsub", "if": "endif", "while": "endwhile", "do": "while", "repeat": "endrepeat"}[kind]
             raise err(i, f"{key} {kind} without {key} {closer}")
 
     def _loop(self, head: int, end: int, kind: str) -> None:
@@ -196,8 +195,7 @@ class Executor:
         if n > LOOP_ITERATION_LIMIT:
             where = self.where_at(i)
             raise GCodeError(
-                f"{lc.okey} loop ran more than {LOOP_ITERATION_LIMIT} iterations "
-                "(LOOP_ITERATION_LIMIT; endless loop?)",
+                f"{lc.okey} loop ran more than {LOOP_ITERATION_LIMIT} iterations (LOOP_ITERATION_LIMIT; endless loop?)",
                 where(lc.ocol),
             )
         self.loops[head] = n

@@ -39,9 +39,7 @@ class ParamStore:
         if key.__class__ is int:
             if 0 < key <= PARAM_NUMBERED_MAX:  # type: ignore[operator]
                 return self.numbered[key]  # type: ignore[index]
-            raise GCodeError(
-                f"parameter number #{key} out of range 1..{PARAM_NUMBERED_MAX}", loc
-            )
+            raise GCodeError(f"parameter number #{key} out of range 1..{PARAM_NUMBERED_MAX}", loc)
         d = self.globals if key[0] == "_" else self.locals  # type: ignore[index]
         try:
             return d[key]  # type: ignore[index]
@@ -54,9 +52,7 @@ class ParamStore:
             if 0 < key <= PARAM_NUMBERED_MAX:  # type: ignore[operator]
                 self.numbered[key] = float(value)  # type: ignore[index]
                 return
-            raise GCodeError(
-                f"parameter number #{key} out of range 1..{PARAM_NUMBERED_MAX}", loc
-            )
+            raise GCodeError(f"parameter number #{key} out of range 1..{PARAM_NUMBERED_MAX}", loc)
         if not key:
             raise GCodeError("empty parameter name #<>", loc)
         if key[0] == "_":  # type: ignore[index]

@@ -22,11 +22,11 @@ from .program import Arc, CurvePiece, Nurbs, Run
 class RunBuilder:
     """One run being built. ``start9`` is the 9-axis position before its first move."""
 
-    __slots__ = ("kind", "layout", "start9", "nodes", "line", "col", "feed", "tol", "naive",
-                 "curves")
+    __slots__ = ("kind", "layout", "start9", "nodes", "line", "col", "feed", "tol", "naive", "curves")
 
-    def __init__(self, kind: str, layout: tuple[int, ...], pos9: list[float], line: int, col: int,
-                 tol: float, naive: float):
+    def __init__(
+        self, kind: str, layout: tuple[int, ...], pos9: list[float], line: int, col: int, tol: float, naive: float
+    ):
         self.kind = kind
         self.layout = layout
         self.start9 = list(pos9)
@@ -56,8 +56,7 @@ class RunBuilder:
         self.nodes.frombytes(out.tobytes())
         self.layout = new_layout
 
-    def reserve(self, k: int, line: int, col: int, feed: float, tol: float,
-                naive: float) -> tuple[int, int]:
+    def reserve(self, k: int, line: int, col: int, feed: float, tol: float, naive: float) -> tuple[int, int]:
         """Append ``k`` node slots (zeros, filled by ``finish_run``); returns (first, last)."""
         first = self.n - 1
         self.nodes.frombytes(bytes(8 * k * len(self.layout)))
@@ -68,8 +67,7 @@ class RunBuilder:
         self.naive.extend(array("d", (naive,)) * k)
         return first, self.n - 1
 
-    def add_many(self, pts: np.ndarray, line: int, col: int, feed: float, tol: float,
-                 naive: float) -> tuple[int, int]:
+    def add_many(self, pts: np.ndarray, line: int, col: int, feed: float, tol: float, naive: float) -> tuple[int, int]:
         """Append sampled nodes (K, 9) or (K, len(layout)); returns the piece's (first, last)."""
         k = pts.shape[0]
         first = self.n - 1
@@ -110,23 +108,45 @@ def finish_run(rb: RunBuilder, axes_idx: tuple[int, ...], axes: str, end_reason:
     for first, last, c in rb.curves:
         if c.__class__ is tuple:  # an arc recorded by the interpreter: make the exact Arc
             line, s9, e9, plane, c1, c2, r1, r2, sweep = c
-            cur = Arc(line=line, start=np.array([s9[i] for i in sel]),
-                      end=np.array([e9[i] for i in sel]),
-                      plane=tuple(where.get(p, -1) for p in plane), center=np.array((c1, c2)),
-                      radius=0.5 * (r1 + r2), sweep_rad=float(sweep))
+            cur = Arc(
+                line=line,
+                start=np.array([s9[i] for i in sel]),
+                end=np.array([e9[i] for i in sel]),
+                plane=tuple(where.get(p, -1) for p in plane),
+                center=np.array((c1, c2)),
+                radius=0.5 * (r1 + r2),
+                sweep_rad=float(sweep),
+            )
         elif isinstance(c, Arc):
             plane = tuple(where.get(p, -1) for p in c.plane)
-            cur = Arc(line=c.line, start=c.start[sel].copy(), end=c.end[sel].copy(), plane=plane,
-                      center=c.center, radius=c.radius, sweep_rad=c.sweep_rad)
+            cur = Arc(
+                line=c.line,
+                start=c.start[sel].copy(),
+                end=c.end[sel].copy(),
+                plane=plane,
+                center=c.center,
+                radius=c.radius,
+                sweep_rad=c.sweep_rad,
+            )
         else:
             assert isinstance(c, Nurbs)
-            cur = Nurbs(line=c.line, control=np.ascontiguousarray(c.control[:, sel]),
-                        weights=c.weights, knots=c.knots, order=c.order)
+            cur = Nurbs(
+                line=c.line,
+                control=np.ascontiguousarray(c.control[:, sel]),
+                weights=c.weights,
+                knots=c.knots,
+                order=c.order,
+            )
         curves.append(CurvePiece(first=first, last=last, curve=cur))
-    return Run(kind=rb.kind, axes=axes, nodes=nodes,
-               line=np.frombuffer(rb.line, dtype=np.int64),
-               col=np.frombuffer(rb.col, dtype=np.int64),
-               feed_mm_s=feed,
-               tol_mm=np.frombuffer(rb.tol, dtype=float),
-               naive_tol_mm=np.frombuffer(rb.naive, dtype=float),
-               curves=tuple(curves), end_reason=end_reason)
+    return Run(
+        kind=rb.kind,
+        axes=axes,
+        nodes=nodes,
+        line=np.frombuffer(rb.line, dtype=np.int64),
+        col=np.frombuffer(rb.col, dtype=np.int64),
+        feed_mm_s=feed,
+        tol_mm=np.frombuffer(rb.tol, dtype=float),
+        naive_tol_mm=np.frombuffer(rb.naive, dtype=float),
+        curves=tuple(curves),
+        end_reason=end_reason,
+    )

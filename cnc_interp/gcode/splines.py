@@ -49,16 +49,25 @@ def make_nurbs(line: int, control9: np.ndarray, weights: np.ndarray, order: int)
         raise GeometryError(f"NURBS block has {m} control points, fewer than its order L={order}")
     if np.any(weights <= 0) or not np.all(np.isfinite(weights)):
         raise GeometryError("NURBS weights P must be positive")
-    return Nurbs(line=line, control=np.asarray(control9, dtype=float),
-                 weights=np.asarray(weights, dtype=float),
-                 knots=clamped_uniform_knots(m, order), order=order)
+    return Nurbs(
+        line=line,
+        control=np.asarray(control9, dtype=float),
+        weights=np.asarray(weights, dtype=float),
+        knots=clamped_uniform_knots(m, order),
+        order=order,
+    )
 
 
 def bezier(line: int, control9: np.ndarray) -> Nurbs:
     """A Bézier curve (G5 cubic: 4 points, G5.1 quadratic: 3 points) as a NURBS."""
     m = control9.shape[0]
-    return Nurbs(line=line, control=np.asarray(control9, dtype=float), weights=np.ones(m),
-                 knots=np.array([0.0] * m + [1.0] * m), order=m)
+    return Nurbs(
+        line=line,
+        control=np.asarray(control9, dtype=float),
+        weights=np.ones(m),
+        knots=np.array([0.0] * m + [1.0] * m),
+        order=m,
+    )
 
 
 def sample_nurbs(curve: Nurbs) -> np.ndarray:
@@ -71,11 +80,13 @@ def sample_nurbs(curve: Nurbs) -> np.ndarray:
     knots = curve.knots
     k = curve.order - 1
     u0, u1 = float(knots[k]), float(knots[-k - 1])
-    spans = np.unique(knots[k:len(knots) - k])
+    spans = np.unique(knots[k : len(knots) - k])
     if spans.size * SPLINE_MIN_SEGMENTS_PER_SPAN > CURVE_MAX_NODES:
         raise GeometryError(f"spline too large: more than {CURVE_MAX_NODES} nodes")
-    u = np.concatenate([np.linspace(a, b, SPLINE_MIN_SEGMENTS_PER_SPAN + 1)[:-1]
-                        for a, b in zip(spans[:-1], spans[1:])] + [np.array([u1])])
+    u = np.concatenate(
+        [np.linspace(a, b, SPLINE_MIN_SEGMENTS_PER_SPAN + 1)[:-1] for a, b in zip(spans[:-1], spans[1:])]
+        + [np.array([u1])]
+    )
     if u.size < 2:
         u = np.array([u0, u1])
     pts = curve.points(u)
@@ -87,8 +98,9 @@ def sample_nurbs(curve: Nurbs) -> np.ndarray:
         if not bad.any():
             break
         if u.size + int(bad.sum()) > CURVE_MAX_NODES:
-            raise GeometryError(f"spline too large: more than {CURVE_MAX_NODES} nodes at "
-                                f"{CURVE_CHORD_TOL_MM} mm chord error")
+            raise GeometryError(
+                f"spline too large: more than {CURVE_MAX_NODES} nodes at {CURVE_CHORD_TOL_MM} mm chord error"
+            )
         u = np.insert(u, np.nonzero(bad)[0] + 1, um[bad])
         pts = curve.points(u)
     pts = pts[1:].copy()

@@ -46,8 +46,9 @@ class _Channel:
             # an item heavier than the budget (a long run) is handed over only when the
             # consumer asks for it: the interpreter does not start on the next run while
             # one waits and another is being fitted
-            while not self.stop and ((self.items and self.weight + weight > self.budget)
-                                     or (weight > self.budget and not self.asking)):
+            while not self.stop and (
+                (self.items and self.weight + weight > self.budget) or (weight > self.budget and not self.asking)
+            ):
                 self.cond.wait(0.1)
             if self.stop:
                 return False
@@ -87,8 +88,15 @@ class ProgramStream:
     """Iterate over it for the items; after the end, ``program`` holds a ``Program`` with
     the counts and metadata (its ``items`` empty: they were handed out)."""
 
-    def __init__(self, data: bytes | str, source: str, axes: str, start=None,
-                 tool_table=None, nodes_ahead: int = STREAM_NODES_AHEAD):
+    def __init__(
+        self,
+        data: bytes | str,
+        source: str,
+        axes: str,
+        start=None,
+        tool_table=None,
+        nodes_ahead: int = STREAM_NODES_AHEAD,
+    ):
         from . import _LiveParams, _count_lines
         from .interp import Interpreter
 
@@ -134,11 +142,9 @@ class ProgramStream:
         if kind == "run":
             item = finish_run(obj, self._order, self._axes, extra)
         elif kind == "dwell":
-            item = Dwell(line=obj.line, seconds=obj.seconds,
-                         position=np.array(extra, dtype=float)[self._sel])
+            item = Dwell(line=obj.line, seconds=obj.seconds, position=np.array(extra, dtype=float)[self._sel])
         else:
-            item = Stop(line=obj.line, code=obj.code,
-                        position=np.array(extra, dtype=float)[self._sel])
+            item = Stop(line=obj.line, code=obj.code, position=np.array(extra, dtype=float)[self._sel])
         _check_ranges(Program(self.source, self._axes, (item,), np.zeros(len(self._axes)), 0))
         return item
 
@@ -165,8 +171,7 @@ class ProgramStream:
                 if interp.items and not self._drain():
                     raise _Stopped()
                 rb = interp.rb
-                if rb is not None and rb.n > self.channel.budget and \
-                        not self.channel.wait_for_ask():
+                if rb is not None and rb.n > self.channel.budget and not self.channel.wait_for_ask():
                     raise _Stopped()
 
     def _run(self) -> None:

@@ -108,8 +108,8 @@ def format_summary(summary: dict) -> str:
     for a, (lo, hi) in s["bounds"].items():
         unit = "deg" if a in "ABC" else "mm"
         lines.append(f"    {a}  {lo:12.4f} .. {hi:12.4f} {unit}")
-    lines.append(f"  length     feed {s['feed_length_mm']:.3f} mm, "
-                 f"rapid {s['rapid_length_mm']:.3f} mm")
-    lines.append(f"  time       {_fmt_time(s['time_estimate_s'])} at programmed feed "
-                 "(feed moves and dwells; rapids excluded)")
+    lines.append(f"  length     feed {s['feed_length_mm']:.3f} mm, rapid {s['rapid_length_mm']:.3f} mm")
+    lines.append(
+        f"  time       {_fmt_time(s['time_estimate_s'])} at programmed feed (feed moves and dwells; rapids excluded)"
+    )
     return "\n".join(lines)

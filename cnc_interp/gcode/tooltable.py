@@ -46,8 +46,7 @@ def read_tool_table(path: str) -> ToolTable:
     with os.fdopen(fd, "rb") as fh:
         st = os.fstat(fh.fileno())
         if not stat.S_ISREG(st.st_mode) or st.st_size > TOOL_TABLE_MAX_BYTES:
-            raise MachineError("tool table must be a regular file of at most "
-                               f"{TOOL_TABLE_MAX_BYTES} bytes", loc)
+            raise MachineError(f"tool table must be a regular file of at most {TOOL_TABLE_MAX_BYTES} bytes", loc)
         raw = fh.read(TOOL_TABLE_MAX_BYTES + 1)
     text = raw.decode("latin-1")
     return parse_tool_table(text, path)
@@ -64,26 +63,31 @@ def parse_tool_table(text: str, source: str = "<tool table>") -> ToolTable:
         pos = 0
         words: dict[str, float] = {}
         for m in _WORD.finditer(body):
-            gap = body[pos:m.start()].strip()
+            gap = body[pos : m.start()].strip()
             if gap:
-                raise MachineError("tool table: not a word (letter and number)",
-                                   SourceLocation(source, n, pos + 1, line.strip()))
+                raise MachineError(
+                    "tool table: not a word (letter and number)", SourceLocation(source, n, pos + 1, line.strip())
+                )
             letter = m.group(1).upper()
             if letter != "T" and letter not in ALL_AXES and letter not in _OTHER_WORDS:
-                raise MachineError(f"tool table: unknown word {letter}",
-                                   SourceLocation(source, n, m.start() + 1, line.strip()))
+                raise MachineError(
+                    f"tool table: unknown word {letter}", SourceLocation(source, n, m.start() + 1, line.strip())
+                )
             v = float(m.group(2))
             if not math.isfinite(v) or abs(v) > TOOL_OFFSET_MAX:
-                raise MachineError(f"tool table: {letter} out of range",
-                                   SourceLocation(source, n, m.start() + 1, line.strip()))
+                raise MachineError(
+                    f"tool table: {letter} out of range", SourceLocation(source, n, m.start() + 1, line.strip())
+                )
             words[letter] = v
             pos = m.end()
         if body[pos:].strip():
-            raise MachineError("tool table: not a word (letter and number)",
-                               SourceLocation(source, n, pos + 1, line.strip()))
+            raise MachineError(
+                "tool table: not a word (letter and number)", SourceLocation(source, n, pos + 1, line.strip())
+            )
         tool = words.get("T")
         if tool is None or tool != int(tool) or tool < 0:
-            raise MachineError("tool table: each line needs T and a tool number",
-                               SourceLocation(source, n, 1, line.strip()))
+            raise MachineError(
+                "tool table: each line needs T and a tool number", SourceLocation(source, n, 1, line.strip())
+            )
         table[int(tool)] = tuple(words.get(a, 0.0) for a in ALL_AXES)
     return table

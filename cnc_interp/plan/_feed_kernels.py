@@ -103,8 +103,7 @@ def cubic_basis(knots, n_coef, x, first, B):
 
 
 @njit(cache=True)
-def lp_rows(first, B, q1, q2, q3, moving, wmax, w_hat, inner, amax, jmax, scale,
-            row_first, row_coef, row_b):
+def lp_rows(first, B, q1, q2, q3, moving, wmax, w_hat, inner, amax, jmax, scale, row_first, row_coef, row_b):
     """Fill the LP rows (in x_j = c_j / scale[j]) for the collocation points; returns
     their count.
 
@@ -142,8 +141,7 @@ def lp_rows(first, B, q1, q2, q3, moving, wmax, w_hat, inner, amax, jmax, scale,
                 gt = 1.0 / (3.0 * wh)
                 for j in range(4):
                     sj = scale[f + j]
-                    e = sj * gj * (q3[k, i] * B[k, 0, j] + 1.5 * q2[k, i] * B[k, 1, j]
-                                   + 0.5 * q1[k, i] * B[k, 2, j])
+                    e = sj * gj * (q3[k, i] * B[k, 0, j] + 1.5 * q2[k, i] * B[k, 1, j] + 0.5 * q1[k, i] * B[k, 2, j])
                     t = sj * gt * B[k, 0, j]
                     row_coef[r, j] = e + t
                     row_coef[r + 1, j] = -e + t

@@ -386,8 +386,17 @@ def _refine(coef, breaks, w, ua0, ub0, seg0, tol, scale, max_depth, glx, glw):
                 Q[p, r, ax] = out[p, 7 + r * n + ax]
                 if p < m:
                     qc[p, r, ax] = out[p, 7 + 3 * n + r * n + ax]
-    return (out[:m, 0].copy(), out[:m, 1].copy(), oi[:m, 0].copy(), oi[:m, 1].copy(),
-            out[:m, 2].copy(), out[:m, 4:7].copy(), out[:m, 3].copy(), Q, qc)
+    return (
+        out[:m, 0].copy(),
+        out[:m, 1].copy(),
+        oi[:m, 0].copy(),
+        oi[:m, 1].copy(),
+        out[:m, 2].copy(),
+        out[:m, 4:7].copy(),
+        out[:m, 3].copy(),
+        Q,
+        qc,
+    )
 
 
 @njit(cache=True)
@@ -412,8 +421,7 @@ def _finish(length, ds, off, Q, qc):
 
 
 @njit(cache=True)
-def build_identity(coef, breaks, s_breaks, w, length, tol, max_depth, max_piece, glx, glw,
-                   max_tries):
+def build_identity(coef, breaks, s_breaks, w, length, tol, max_depth, max_piece, glx, glw, max_tries):
     """The whole table of one path in joint = program coordinates.
 
     Returns (status, u, S, C, max_err, qend): status ``OK``, ``NO_LENGTH`` (no piece
@@ -437,8 +445,9 @@ def build_identity(coef, breaks, s_breaks, w, length, tol, max_depth, max_piece,
     qend = np.empty((1, 1, coef.shape[2]))
     _pos(coef, n_seg - 1, breaks[n_seg] - breaks[n_seg - 1], qend, np.int64(0), np.int64(0))
     for attempt in range(max_tries):
-        ua, ub, seg, dep, ds, off, e_loc, Q, qc = _refine(coef, breaks, w, ua0, ub0, seg0,
-                                                          tol_in, sc_in, max_depth, glx, glw)
+        ua, ub, seg, dep, ds, off, e_loc, Q, qc = _refine(
+            coef, breaks, w, ua0, ub0, seg0, tol_in, sc_in, max_depth, glx, glw
+        )
         total = 0.0
         for p in range(ds.shape[0]):
             total += ds[p]

@@ -136,8 +136,7 @@ def _feed_cap(s, dt, L, FB, FV, seg):
 
 
 @njit(cache=True, nogil=True)
-def track(ns, nt, nv, na, n_nodes, ref_final, S, C, QEND, vl, al, jl, dt, L, FB, FV,
-          sh, qh, k, tol, stats):
+def track(ns, nt, nv, na, n_nodes, ref_final, S, C, QEND, vl, al, jl, dt, L, FB, FV, sh, qh, k, tol, stats):
     """Samples k, k+1, ... following the reference until it runs out, the path ends at
     rest, or no position is allowed.
 
@@ -179,11 +178,11 @@ def track(ns, nt, nv, na, n_nodes, ref_final, S, C, QEND, vl, al, jl, dt, L, FB,
             if not _bounds(qh, k, vl, al, jl, lo, hi):
                 return STUCK, k
             # below the target first (the reference asked for too much), else above it
-            ok, xm, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, x, x, True,
-                                   hint, q, qs, tol, wk, False, 0.0, 0.0, True)
+            ok, xm, hint = _search(
+                S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, x, x, True, hint, q, qs, tol, wk, False, 0.0, 0.0, True
+            )
             if not ok:
-                ok, xm, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, x, b, x, False,
-                                       hint, q, qs, tol, wk)
+                ok, xm, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, x, b, x, False, hint, q, qs, tol, wk)
                 if not ok:
                     return STUCK, k
             x = xm

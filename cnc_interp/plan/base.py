@@ -82,6 +82,11 @@ def collect_path_plan(chunks) -> PathPlan:
     end = parts[-1]
     if len(parts) == 1:
         return end
-    return PathPlan(s=np.concatenate([c.s for c in parts]),
-                    q=np.concatenate([c.q for c in parts], axis=0), status=end.status,
-                    profiles=end.profiles, stats=end.stats, last=True)
+    return PathPlan(
+        s=np.concatenate([c.s for c in parts]),
+        q=np.concatenate([c.q for c in parts], axis=0),
+        status=end.status,
+        profiles=end.profiles,
+        stats=end.stats,
+        last=True,
+    )

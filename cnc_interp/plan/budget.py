@@ -58,8 +58,9 @@ def path_min_times_s(paths, machine=None) -> np.ndarray:
         for k in range(4, -1, -1):
             end = end * h + last[:, k]
         d = np.abs(end - start)
-        t_axis = np.maximum.reduce([d / machine.vmax, 2.0 * np.sqrt(d / machine.amax),
-                                    np.cbrt(32.0 * d / machine.jmax)])
+        t_axis = np.maximum.reduce(
+            [d / machine.vmax, 2.0 * np.sqrt(d / machine.amax), np.cbrt(32.0 * d / machine.jmax)]
+        )
         t[real] = np.maximum(t[real], t_axis.max(axis=1))
     return t
 
@@ -107,8 +108,9 @@ def held_time_s(items) -> float:
     return float(sum(it.seconds for it in items if isinstance(it, Dwell)))
 
 
-def check_sample_budget(paths, machine, dt_s: float, source: str,
-                        available: int | None = None, held_s: float = 0.0) -> None:
+def check_sample_budget(
+    paths, machine, dt_s: float, source: str, available: int | None = None, held_s: float = 0.0
+) -> None:
     """Raise ``PlanError`` (exit 1: the plan cannot be made) when even the shortest
     possible plan of ``paths`` on ``machine`` at ``dt_s``, plus ``held_s`` seconds of
     dwells (``held_time_s``), needs more memory than is available (``available`` bytes;
@@ -123,7 +125,9 @@ def check_sample_budget(paths, machine, dt_s: float, source: str,
     raise PlanError(
         f"planning at dt = {dt_s:g} s needs at least {n_min:.3g} samples (about "
         f"{need / 1e9:.3g} GB of memory) but {available / 1e9:.3g} GB are available; "
-        f"use a larger --dt", SourceLocation(source))
+        f"use a larger --dt",
+        SourceLocation(source),
+    )
 
 
 class WindowBudget:
@@ -171,4 +175,6 @@ class WindowBudget:
         raise PlanError(
             f"planning at dt = {self.dt_s:g} s needs at least {n_min:.3g} samples of one path "
             f"in memory (about {need / 1e9:.3g} GB of memory) but {self.available / 1e9:.3g} GB are "
-            f"available; use a larger --dt", SourceLocation(self.source))
+            f"available; use a larger --dt",
+            SourceLocation(self.source),
+        )

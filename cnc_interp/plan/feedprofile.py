@@ -110,7 +110,7 @@ def spline_values(knots, coef, x, nu: int = 0):
 def _discrete_start_curve(x, jp, dt):
     """w of the sampled max-jerk start along a line, at distance x: s_k = c k(k+1)(k+2)/6,
     v_k = c k(k+1)/(2 dt), c = jp dt³ (k from s by Newton, interpolated)."""
-    c = jp * dt ** 3
+    c = jp * dt**3
     k = np.maximum(np.cbrt(6.0 * np.maximum(x, 0.0) / c) - 1.0, 0.0)
     for _ in range(3):
         f = c * k * (k + 1) * (k + 2) / 6.0 - x
@@ -156,11 +156,10 @@ class FeedProfileBuilder:
         self.jt1 = self._tangent_jerk(q1e[1])
         # no knot interval shorter than the first sampled step from rest (J_t dt³, with
         # the tangent's path jerk of the nearer end: a knot depends on local data only)
-        self.hmin0 = self.jt0 * self.dt ** 3
-        self.hmin1 = self.jt1 * self.dt ** 3
+        self.hmin0 = self.jt0 * self.dt**3
+        self.hmin1 = self.jt1 * self.dt**3
         # window length in intervals: FEED_WINDOW_S of motion, four braking times
-        t_brake = float(np.max(np.minimum(self.vmax, np.max(self.feed_values))
-                               / self.amax + self.amax / self.jmax))
+        t_brake = float(np.max(np.minimum(self.vmax, np.max(self.feed_values)) / self.amax + self.amax / self.jmax))
         # window: a committed part of FEED_COMMIT_S of motion, then two braking times for
         # the terminal rest to stay out of it
         self.commit = max(8, int(np.ceil(FEED_COMMIT_S / FEED_KNOT_TIME_S)))
@@ -186,8 +185,7 @@ class FeedProfileBuilder:
         return q1, q2, q3
 
     def feed_at(self, x):
-        i = np.clip(np.searchsorted(self.feed_breaks, x, side="right") - 1, 0,
-                    self.feed_values.shape[0] - 1)
+        i = np.clip(np.searchsorted(self.feed_breaks, x, side="right") - 1, 0, self.feed_values.shape[0] - 1)
         return self.feed_values[i]
 
     def _tangent_jerk(self, q1row):
@@ -207,10 +205,8 @@ class FeedProfileBuilder:
         q1, q2, q3 = self.derivs(x)
         with np.errstate(divide="ignore", invalid="ignore"):
             wa = np.min(np.where(np.abs(q2) > 0, self.amax / np.abs(q2), np.inf), axis=1)
-            wj = np.min(np.where(np.abs(q3) > 0, (self.jmax / np.abs(q3)) ** (2.0 / 3.0), np.inf),
-                        axis=1)
-        w = np.minimum.reduce([self.wmax_at(x, q1), FEED_EST_ACC_FACTOR ** 2 * wa,
-                               FEED_EST_JERK_FACTOR ** 2 * wj])
+            wj = np.min(np.where(np.abs(q3) > 0, (self.jmax / np.abs(q3)) ** (2.0 / 3.0), np.inf), axis=1)
+        w = np.minimum.reduce([self.wmax_at(x, q1), FEED_EST_ACC_FACTOR**2 * wa, FEED_EST_JERK_FACTOR**2 * wj])
         ws = _discrete_start_curve(x, self.jt0, self.dt)
         we = _discrete_start_curve(self.L - x, self.jt1, self.dt)
         return np.minimum(w, np.minimum(ws, we)), q1
@@ -238,7 +234,7 @@ class FeedProfileBuilder:
             at = np.min(np.where(g > 1e-12, self.amax / g, np.inf), axis=1)
             jt = np.min(np.where(g > 1e-12, self.jmax / g, np.inf), axis=1)
         A = FEED_EST_ACC_FACTOR * float(np.max(np.where(np.isfinite(at), at, 0.0)))
-        J = FEED_EST_JERK_FACTOR ** 2 * float(np.max(np.where(np.isfinite(jt), jt, 0.0)))
+        J = FEED_EST_JERK_FACTOR**2 * float(np.max(np.where(np.isfinite(jt), jt, 0.0)))
         if not (A > 0.0 and J > 0.0):
             return w
         if carry is not None:
@@ -249,7 +245,7 @@ class FeedProfileBuilder:
         w = np.minimum(w, np.minimum.accumulate(w - a2 * x) + a2 * x)
         w = np.minimum(w, (np.minimum.accumulate((w + a2 * x)[::-1]) - a2 * x[::-1])[::-1])
         c = 2.1213203435596424 * np.sqrt(J)
-        u = w ** 0.75
+        u = w**0.75
         u = np.minimum(u, np.minimum.accumulate(u - c * x) + c * x)
         u = np.minimum(u, (np.minimum.accumulate((u + c * x)[::-1]) - c * x[::-1])[::-1])
         w = np.minimum(w, np.maximum(u, 0.0) ** (4.0 / 3.0))
@@ -275,7 +271,7 @@ class FeedProfileBuilder:
         p0 = self._piece
         p1 = min(p0 + FEED_KNOT_BLOCK, m)
         a, b = float(S[p0]), float(S[p1])
-        pts = [S[p0:p1 + 1], 0.5 * (S[p0:p1] + S[p0 + 1:p1 + 1]), np.linspace(a, b, 9)]
+        pts = [S[p0 : p1 + 1], 0.5 * (S[p0:p1] + S[p0 + 1 : p1 + 1]), np.linspace(a, b, 9)]
         end = min(L / 2, 1.0)
         geo = end * 2.0 ** -np.arange(1, 40)
         pts.append(geo[(geo > a) & (geo < b)])
@@ -284,9 +280,10 @@ class FeedProfileBuilder:
         # the next block's table points: the envelope looks that far ahead (slow points
         # just after this block lower the estimate before them)
         p2 = min(p1 + FEED_KNOT_BLOCK, m)
-        ahead = np.concatenate((S[p1 + 1:p2 + 1], 0.5 * (S[p1:p2] + S[p1 + 1:p2 + 1])))
+        ahead = np.concatenate((S[p1 + 1 : p2 + 1], 0.5 * (S[p1:p2] + S[p1 + 1 : p2 + 1])))
         ahead.sort()
         wa_raw, qa = self._raw_estimate(ahead) if ahead.size else (np.zeros(0), None)
+
         def enveloped_spacing(probe):
             w_raw, q1 = self._raw_estimate(probe)
             xs = np.concatenate((probe, ahead))
@@ -301,8 +298,7 @@ class FeedProfileBuilder:
             need = np.ceil(gap / (0.25 * np.minimum(h[:-1], h[1:]))).astype(np.int64)
             if not np.any(need > 1):
                 break
-            extra = [probe[i] + gap[i] * np.arange(1, need[i]) / need[i]
-                     for i in np.flatnonzero(need > 1)]
+            extra = [probe[i] + gap[i] * np.arange(1, need[i]) / need[i] for i in np.flatnonzero(need > 1)]
             probe = np.unique(np.concatenate([probe] + extra))
         else:
             w, h = enveloped_spacing(probe)
@@ -310,8 +306,7 @@ class FeedProfileBuilder:
         self._ex = np.concatenate((self._ex, probe))
         self._ew = np.concatenate((self._ew, w))
         dens = 1.0 / h
-        cum = self._cum + np.concatenate(
-            ([0.0], np.cumsum(0.5 * (dens[1:] + dens[:-1]) * np.diff(probe))))
+        cum = self._cum + np.concatenate(([0.0], np.cumsum(0.5 * (dens[1:] + dens[:-1]) * np.diff(probe))))
         lo = np.floor(self._cum) + 1.0
         marks = np.arange(lo, np.floor(cum[-1]) + 1.0)
         if marks.size:
@@ -362,9 +357,8 @@ class FeedProfileBuilder:
             commit = min(self.commit, max(b1 - b0 - self.brake, 1))
             bc = b0 + commit
             n_keep = bc - b0 + 3
-            yield FeedPiece(tk[: n_keep + 4].copy(), coef[:n_keep].copy(), self._br[b0],
-                            self._br[bc], it)
-            fixed = coef[commit: commit + 3].copy()
+            yield FeedPiece(tk[: n_keep + 4].copy(), coef[:n_keep].copy(), self._br[b0], self._br[bc], it)
+            fixed = coef[commit : commit + 3].copy()
             prev = (tk, coef, self._br[max(b1 - self.brake, bc)])
             b0 = bc
             # forget the estimate's probes before the next window (bounded memory)
@@ -372,7 +366,7 @@ class FeedProfileBuilder:
             self._ex, self._ew = self._ex[i:], self._ew[i:]
 
     def _collocation(self, b0, b1):
-        br = np.asarray(self._br[b0:b1 + 1])
+        br = np.asarray(self._br[b0 : b1 + 1])
         u = np.arange(FEED_COLLOCATION) / FEED_COLLOCATION
         x = (br[:-1, None] + np.diff(br)[:, None] * u[None, :]).ravel()
         x = np.concatenate((x, br[-1:]))
@@ -431,7 +425,7 @@ class FeedProfileBuilder:
         if at_end:
             free[-1] = False
         # variables scaled by the estimate at each basis function's Greville abscissa
-        grev = (tk[1:nc + 1] + tk[2:nc + 2] + tk[3:nc + 3]) / 3.0
+        grev = (tk[1 : nc + 1] + tk[2 : nc + 2] + tk[3 : nc + 3]) / 3.0
         scale = np.minimum(self.estimate(grev), self.wmax_at(grev, self.derivs(grev)[0]))
         scale = np.ascontiguousarray(np.maximum(scale, 1e-9 * W0))
         inner = (x > 0.0) & (x < self.L)
@@ -451,13 +445,26 @@ class FeedProfileBuilder:
         best = None
         iters = 0
         for ccp in range(FEED_CCP_MAX):
-            r = K.lp_rows(first, B, q1, q2, q3, self.moving, wmax, w_hat, inner, self.amax,
-                          self.jmax, scale, row_first, row_coef, row_b)
-            rf, rc, rb = self._end_rows(r, row_first, row_coef, row_b, tk, nc, scale, b0, b1,
-                                        at_end)
+            r = K.lp_rows(
+                first,
+                B,
+                q1,
+                q2,
+                q3,
+                self.moving,
+                wmax,
+                w_hat,
+                inner,
+                self.amax,
+                self.jmax,
+                scale,
+                row_first,
+                row_coef,
+                row_b,
+            )
+            rf, rc, rb = self._end_rows(r, row_first, row_coef, row_b, tk, nc, scale, b0, b1, at_end)
             wts = cell * np.maximum(w_hat, FEED_WEIGHT_FLOOR * w_est) ** -1.5
-            c = np.bincount(cols.ravel(), weights=-(wts[:, None] * B[:, 0, :]
-                                                    * scale[cols]).ravel(), minlength=nc)
+            c = np.bincount(cols.ravel(), weights=-(wts[:, None] * B[:, 0, :] * scale[cols]).ravel(), minlength=nc)
             c[~free] = 0.0
             c /= max(np.max(np.abs(c)), 1e-300)
             status, it, xv_new = self._lp(rf, rc, rb, c, xv, free, cfix, scale, screen=ccp > 0)
@@ -503,8 +510,7 @@ class FeedProfileBuilder:
             fc = np.ascontiguousarray(rc[active])
             fb = np.ascontiguousarray(rb[active])
             x_try = x.copy()
-            status, it, _, _ = lp_solve(nc, fr, fc, fb, np.ascontiguousarray(c), x_try,
-                                        FEED_LP_MAX_ITER, FEED_LP_TOL)
+            status, it, _, _ = lp_solve(nc, fr, fc, fb, np.ascontiguousarray(c), x_try, FEED_LP_MAX_ITER, FEED_LP_TOL)
             iters += it
             if status != LP_OK:
                 return status, iters, x_try
@@ -525,8 +531,7 @@ class FeedProfileBuilder:
             eb.append(1.0)
         if at_end:  # w'(L) = -3 c_{n-2} / (L - t[n-1]) >= -2 J_t dt
             ef.append(nc - 4)
-            ec.append([0.0, 0.0, 3.0 * scale[nc - 2] / (self.L - tk[nc - 1])
-                       / (2.0 * self.jt1 * self.dt), 0.0])
+            ec.append([0.0, 0.0, 3.0 * scale[nc - 2] / (self.L - tk[nc - 1]) / (2.0 * self.jt1 * self.dt), 0.0])
             eb.append(1.0)
         else:  # the window ends at rest at its last breakpoint: w = 0, w' >= -2 J_t dt
             xe = np.array([self._br[b1]])
@@ -534,10 +539,9 @@ class FeedProfileBuilder:
             Be = np.empty((1, 3, 4))
             K.cubic_basis(tk, nc, xe, fe, Be)
             jt = self._tangent_jerk(self.derivs(xe)[0][0])
-            sc = scale[fe[0]: fe[0] + 4]
+            sc = scale[fe[0] : fe[0] + 4]
             ef += [int(fe[0])] * 3
-            ec += [list(Be[0, 0] * sc), list(-Be[0, 0] * sc),
-                   list(-Be[0, 1] * sc / (2.0 * jt * self.dt))]
+            ec += [list(Be[0, 0] * sc), list(-Be[0, 0] * sc), list(-Be[0, 1] * sc / (2.0 * jt * self.dt))]
             eb += [0.0, 0.0, 1.0]
         # every coefficient >= 0: then w >= 0 everywhere (convex hull), not only at
         # collocation points (a profile dipping below zero between them would stop)

@@ -48,10 +48,17 @@ from ..errors import MachineError
 #: kinematics name -> (axes it needs, {parameter: default})
 KINEMATICS: dict[str, tuple[str, dict[str, float]]] = {
     "trivial": ("", {}),
-    "xyzac-trt": ("XYZAC", {
-        "x_rot_point": 0.0, "y_rot_point": 0.0, "z_rot_point": 0.0,
-        "y_offset": 0.0, "z_offset": 0.0, "tool_offset": 0.0,
-    }),
+    "xyzac-trt": (
+        "XYZAC",
+        {
+            "x_rot_point": 0.0,
+            "y_rot_point": 0.0,
+            "z_rot_point": 0.0,
+            "y_offset": 0.0,
+            "z_offset": 0.0,
+            "tool_offset": 0.0,
+        },
+    ),
 }
 
 
@@ -116,8 +123,9 @@ class XyzacTrt(Kinematics):
         super().__init__(axes, normalise_params(self.name, params or {}))
         missing = [a for a in "XYZAC" if a not in axes]
         if missing:
-            raise MachineError(f"kinematics 'xyzac-trt' needs axes X, Y, Z, A, C; "
-                               f"the machine lacks {', '.join(missing)}")
+            raise MachineError(
+                f"kinematics 'xyzac-trt' needs axes X, Y, Z, A, C; the machine lacks {', '.join(missing)}"
+            )
         self._ix = [axes.index(a) for a in "XYZAC"]
         pr = self.params
         self._r = np.array([pr["x_rot_point"], pr["y_rot_point"], pr["z_rot_point"]])

@@ -78,14 +78,13 @@ class Machine:
             bad = ~((arr > 0) & (arr <= hi))
             if bad.any():
                 k = int(np.argmax(bad))
-                raise MachineError(f"axis {self.axes[k]} {name} = {arr[k]:g} is out of range "
-                                   f"(0, {hi:g}]", loc)
+                raise MachineError(f"axis {self.axes[k]} {name} = {arr[k]:g} is out of range (0, {hi:g}]", loc)
         if not DT_MIN_S <= self.dt_s <= DT_MAX_S:
-            raise MachineError(f"sample period dt = {self.dt_s:g} s is out of range "
-                               f"[{DT_MIN_S:g}, {DT_MAX_S:g}] s", loc)
+            raise MachineError(
+                f"sample period dt = {self.dt_s:g} s is out of range [{DT_MIN_S:g}, {DT_MAX_S:g}] s", loc
+            )
         if self.tol_mm is not None and not 0 <= self.tol_mm <= TOL_MAX_MM:
-            raise MachineError(f"tol = {self.tol_mm:g} mm is out of range [0, {TOL_MAX_MM:g}] mm",
-                               loc)
+            raise MachineError(f"tol = {self.tol_mm:g} mm is out of range [0, {TOL_MAX_MM:g}] mm", loc)
         if not (np.abs(self.start) <= START_MAX).all():
             raise MachineError(f"start position out of range (|coordinate| > {START_MAX:g})", loc)
 
@@ -126,8 +125,7 @@ class Machine:
             "tol_mm": None if self.tol_mm is None else float(self.tol_mm),
             "start": {a: float(v) for a, v in zip(self.axes, self.start)},
             "limits": {
-                a: {"vmax": float(v), "amax": float(acc), "jmax": float(j),
-                    "unit": "deg" if a in ROTARY_AXES else "mm"}
+                a: {"vmax": float(v), "amax": float(acc), "jmax": float(j), "unit": "deg" if a in ROTARY_AXES else "mm"}
                 for a, v, acc, j in zip(self.axes, self.vmax, self.amax, self.jmax)
             },
         }

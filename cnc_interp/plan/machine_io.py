@@ -49,8 +49,7 @@ from .presets import DEFAULT_PRESET, PRESETS
 #: default jerk (per axis, as a multiple of amax per second) when a LinuxCNC INI has none
 DEFAULT_JERK_PER_ACCEL_1_S = 10.0
 
-__all__ = ["load_machine", "machine_from_data", "preset_table", "format_presets",
-           "DEFAULT_PRESET", "PRESETS"]
+__all__ = ["load_machine", "machine_from_data", "preset_table", "format_presets", "DEFAULT_PRESET", "PRESETS"]
 
 _TOP_KEYS = ("name", "dt", "kinematics", "tol", "start", "axes", "description")
 _AXIS_KEYS = ("vmax", "amax", "jmax")
@@ -69,13 +68,15 @@ def load_machine(spec: str) -> Machine:
     if not os.path.exists(spec):
         if os.path.splitext(spec)[1] or os.sep in spec:
             raise MachineError("machine file not found", SourceLocation(file=spec))
-        raise MachineError(f"no machine file or preset named '{spec}' "
-                           f"(presets: {', '.join(sorted(PRESETS))})", SourceLocation(file=spec))
+        raise MachineError(
+            f"no machine file or preset named '{spec}' (presets: {', '.join(sorted(PRESETS))})",
+            SourceLocation(file=spec),
+        )
     raw = _read_machine_file(spec)
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
-        line = raw[:exc.start].count(b"\n") + 1
+        line = raw[: exc.start].count(b"\n") + 1
         raise MachineError("machine file is not UTF-8 text", SourceLocation(file=spec, line=line)) from None
     ext = os.path.splitext(spec)[1].lower()
     if ext == ".ini" or (ext != ".toml" and _looks_like_ini(text)):
@@ -131,10 +132,10 @@ def _load_toml(text: str, path: str) -> Machine:
         if m:
             line = line or int(m.group(1))
             col = col or int(m.group(2))
-            msg = msg[:m.start()]
+            msg = msg[: m.start()]
         elif re.search(r"\(at end of document\)\s*$", msg):
             line = line or text.count("\n") + 1
-            msg = msg[:msg.rfind("(at end")].rstrip()
+            msg = msg[: msg.rfind("(at end")].rstrip()
         line = line or 0
         src = _line_text(text, line)
         raise MachineError(f"invalid TOML: {msg}", SourceLocation(path, line, col or 1, src)) from None
@@ -154,7 +155,7 @@ class _TomlLocator:
         for i, line in enumerate(self.lines):
             m = self._HEADER.match(line)
             if m:
-                parts = tuple(p.strip().strip('"\'') for p in m.group(1).split("."))
+                parts = tuple(p.strip().strip("\"'") for p in m.group(1).split("."))
                 self.tables.append((i, parts))
 
     def __call__(self, table: tuple[str, ...] = (), key: str | None = None) -> SourceLocation:
@@ -203,8 +204,7 @@ def _stem(path: str) -> str:
 
 
 # --- validation shared by TOML files and presets ----------------------------
-def _number(value, what: str, loc: SourceLocation, positive: bool = True,
-            most: float | None = None) -> float:
+def _number(value, what: str, loc: SourceLocation, positive: bool = True, most: float | None = None) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise MachineError(f"{what} must be a number, not {type(value).__name__}", loc)
     try:
@@ -227,8 +227,7 @@ def machine_from_data(data: dict, source: str, locate, default_name: str = "mach
     """
     unknown = [k for k in data if k not in _TOP_KEYS]
     if unknown:
-        raise MachineError(f"unknown key '{unknown[0]}' (allowed: {', '.join(_TOP_KEYS)})",
-                           locate((), unknown[0]))
+        raise MachineError(f"unknown key '{unknown[0]}' (allowed: {', '.join(_TOP_KEYS)})", locate((), unknown[0]))
     name = data.get("name", default_name)
     if not isinstance(name, str):
         raise MachineError("name must be a string", locate((), "name"))
@@ -239,8 +238,7 @@ def machine_from_data(data: dict, source: str, locate, default_name: str = "mach
         if dt_s < DT_MIN_S:
             raise MachineError(f"dt = {dt_s} s is shorter than {DT_MIN_S:g} s", locate((), "dt"))
         if dt_s > _MAX_DT_S:
-            raise MachineError(f"dt = {dt_s} s is longer than {_MAX_DT_S} s (dt is in seconds)",
-                               locate((), "dt"))
+            raise MachineError(f"dt = {dt_s} s is longer than {_MAX_DT_S} s (dt is in seconds)", locate((), "dt"))
 
     kind, params = "trivial", {}
     kin = data.get("kinematics", "trivial")
@@ -252,8 +250,7 @@ def machine_from_data(data: dict, source: str, locate, default_name: str = "mach
         kind = params.pop("type", None)
         kin_loc = locate(("kinematics",), "type")
         if not isinstance(kind, str):
-            raise MachineError("[kinematics] needs type = \"trivial\" or \"xyzac-trt\"",
-                               locate(("kinematics",), None))
+            raise MachineError('[kinematics] needs type = "trivial" or "xyzac-trt"', locate(("kinematics",), None))
     else:
         raise MachineError("kinematics must be a name or a table", locate((), "kinematics"))
     if kind not in KINEMATICS:
@@ -275,45 +272,47 @@ def machine_from_data(data: dict, source: str, locate, default_name: str = "mach
         letter = raw_letter.upper()
         where = ("axes", raw_letter)
         if len(letter) != 1 or letter not in ALL_AXES:
-            raise MachineError(f"unknown axis '{raw_letter}' (axes are {', '.join(ALL_AXES)})",
-                               locate(where, None))
+            raise MachineError(f"unknown axis '{raw_letter}' (axes are {', '.join(ALL_AXES)})", locate(where, None))
         if letter in letters:
             raise MachineError(f"axis {letter} is defined twice", locate(where, None))
         if not isinstance(table, dict):
-            raise MachineError(f"axis {letter} must be a table with vmax, amax, jmax",
-                               locate(("axes",), raw_letter))
+            raise MachineError(f"axis {letter} must be a table with vmax, amax, jmax", locate(("axes",), raw_letter))
         for key in table:
             if key not in _AXIS_KEYS:
-                raise MachineError(f"unknown key '{key}' in axis {letter} (allowed: vmax, amax, jmax)",
-                                   locate(where, key))
+                raise MachineError(
+                    f"unknown key '{key}' in axis {letter} (allowed: vmax, amax, jmax)", locate(where, key)
+                )
         unit = "deg" if letter in ROTARY_AXES else "mm"
         for key in _AXIS_KEYS:
             if key not in table:
-                raise MachineError(f"axis {letter} has no {key} ({_LIMIT_NAMES[key]} limit)",
-                                   locate(where, None))
+                raise MachineError(f"axis {letter} has no {key} ({_LIMIT_NAMES[key]} limit)", locate(where, None))
             power = "/s" if key == "vmax" else "/s^2" if key == "amax" else "/s^3"
-            limits[key].append(_number(table[key], f"axis {letter} {key} ({unit}{power})",
-                                       locate(where, key), most=LIMIT_MAX[key]))
+            limits[key].append(
+                _number(table[key], f"axis {letter} {key} ({unit}{power})", locate(where, key), most=LIMIT_MAX[key])
+            )
         letters.append(letter)
     axes = "".join(letters)
     if kind == "xyzac-trt":
         missing = [a for a in "XYZAC" if a not in axes]
         if missing:
-            raise MachineError(f"kinematics 'xyzac-trt' needs axes X, Y, Z, A, C; missing "
-                               f"{', '.join(missing)}", kin_loc)
+            raise MachineError(
+                f"kinematics 'xyzac-trt' needs axes X, Y, Z, A, C; missing {', '.join(missing)}", kin_loc
+            )
 
     start = np.zeros(len(axes))
     if "start" in data:
         st = data["start"]
         if not isinstance(st, dict):
-            raise MachineError("start must be a table of axis positions, e.g. start = {Z = 50}",
-                               locate((), "start"))
+            raise MachineError("start must be a table of axis positions, e.g. start = {Z = 50}", locate((), "start"))
         for key, value in st.items():
             if key.upper() not in axes:
-                raise MachineError(f"start position for '{key}', which is not an axis of this machine "
-                                   f"({axes})", locate(("start",), key))
-            start[axes.index(key.upper())] = _number(value, f"start {key}", locate(("start",), key),
-                                                     positive=False, most=START_MAX)
+                raise MachineError(
+                    f"start position for '{key}', which is not an axis of this machine ({axes})",
+                    locate(("start",), key),
+                )
+            start[axes.index(key.upper())] = _number(
+                value, f"start {key}", locate(("start",), key), positive=False, most=START_MAX
+            )
 
     tol_mm = None
     if "tol" in data:
@@ -321,9 +320,19 @@ def machine_from_data(data: dict, source: str, locate, default_name: str = "mach
     if "description" in data and not isinstance(data["description"], str):
         raise MachineError("description must be a string", locate((), "description"))
 
-    return Machine(name=name, axes=axes, vmax=limits["vmax"], amax=limits["amax"],
-                   jmax=limits["jmax"], dt_s=dt_s, kinematics=kind, kinematics_params=params,
-                   start=start, tol_mm=tol_mm, source=source)
+    return Machine(
+        name=name,
+        axes=axes,
+        vmax=limits["vmax"],
+        amax=limits["amax"],
+        jmax=limits["jmax"],
+        dt_s=dt_s,
+        kinematics=kind,
+        kinematics_params=params,
+        start=start,
+        tol_mm=tol_mm,
+        source=source,
+    )
 
 
 # --- LinuxCNC INI ------------------------------------------------------------
@@ -377,11 +386,25 @@ class _Ini:
         return v
 
 
-_LINEAR_UNITS = {"mm": 1.0, "metric": 1.0, "millimeter": 1.0, "millimetre": 1.0,
-                 "inch": MM_PER_INCH, "in": MM_PER_INCH, "imperial": MM_PER_INCH}
-_ANGULAR_UNITS = {"degree": 1.0, "deg": 1.0, "degrees": 1.0,
-                  "radian": 180.0 / math.pi, "rad": 180.0 / math.pi, "radians": 180.0 / math.pi,
-                  "grad": 0.9, "gon": 0.9}
+_LINEAR_UNITS = {
+    "mm": 1.0,
+    "metric": 1.0,
+    "millimeter": 1.0,
+    "millimetre": 1.0,
+    "inch": MM_PER_INCH,
+    "in": MM_PER_INCH,
+    "imperial": MM_PER_INCH,
+}
+_ANGULAR_UNITS = {
+    "degree": 1.0,
+    "deg": 1.0,
+    "degrees": 1.0,
+    "radian": 180.0 / math.pi,
+    "rad": 180.0 / math.pi,
+    "radians": 180.0 / math.pi,
+    "grad": 0.9,
+    "gon": 0.9,
+}
 
 
 def _units(ini: _Ini, key: str, table: dict[str, float]) -> float:
@@ -395,8 +418,7 @@ def _units(ini: _Ini, key: str, table: dict[str, float]) -> float:
     try:  # old form: machine units per mm (or per degree)
         per = float(word)
     except ValueError:
-        raise MachineError(f"[TRAJ] {key}: unknown unit '{value}' "
-                           f"(known: {', '.join(table)})", ini.loc(line)) from None
+        raise MachineError(f"[TRAJ] {key}: unknown unit '{value}' (known: {', '.join(table)})", ini.loc(line)) from None
     if not math.isfinite(per) or per <= 0:
         raise MachineError(f"[TRAJ] {key} must be positive", ini.loc(line))
     return 1.0 / per
@@ -413,8 +435,7 @@ def _load_ini(text: str, path: str) -> Machine:
         letters = "".join(letters.split())
         bad = [c for c in letters if c not in ALL_AXES]
         if bad or not letters:
-            raise MachineError(f"[TRAJ] COORDINATES: '{value}' is not a list of axis letters",
-                               ini.loc(line))
+            raise MachineError(f"[TRAJ] COORDINATES: '{value}' is not a list of axis letters", ini.loc(line))
         joint_letters = letters
     else:
         # no COORDINATES: the axes with an [AXIS_n] / [AXIS_L] section, in canonical order
@@ -427,10 +448,11 @@ def _load_ini(text: str, path: str) -> Machine:
         joint_letters = "".join(a for a in ALL_AXES if a in present)
         n_axes = ini.number("TRAJ", "AXES")
         if not joint_letters and n_axes is not None and float(n_axes).is_integer() and n_axes <= 9:
-            joint_letters = ALL_AXES[:int(n_axes)]  # old configs: AXES = n means the first n letters
+            joint_letters = ALL_AXES[: int(n_axes)]  # old configs: AXES = n means the first n letters
         if not joint_letters:
-            raise MachineError("[TRAJ] has no COORDINATES and no [AXIS_n] sections define axes",
-                               ini.loc(ini.sections["TRAJ"][0]))
+            raise MachineError(
+                "[TRAJ] has no COORDINATES and no [AXIS_n] sections define axes", ini.loc(ini.sections["TRAJ"][0])
+            )
     axes = "".join(dict.fromkeys(joint_letters))  # a gantry's second joint is the same axis
 
     lin = _units(ini, "LINEAR_UNITS", _LINEAR_UNITS)
@@ -438,12 +460,13 @@ def _load_ini(text: str, path: str) -> Machine:
 
     vmax, amax, jmax = [], [], []
     for letter in axes:
-        candidates = [f"AXIS_{letter}", f"AXIS_{ALL_AXES.index(letter)}",
-                      f"JOINT_{joint_letters.index(letter)}"]
+        candidates = [f"AXIS_{letter}", f"AXIS_{ALL_AXES.index(letter)}", f"JOINT_{joint_letters.index(letter)}"]
         section = next((s for s in candidates if s in ini.sections), None)
         if section is None:
-            raise MachineError(f"axis {letter} has no [{candidates[0]}] (or [{candidates[1]}], "
-                               f"[{candidates[2]}]) section", ini.loc(ini.sections["TRAJ"][0]))
+            raise MachineError(
+                f"axis {letter} has no [{candidates[0]}] (or [{candidates[1]}], [{candidates[2]}]) section",
+                ini.loc(ini.sections["TRAJ"][0]),
+            )
         scale = ang if letter in ROTARY_AXES else lin
         v = ini.number(section, "MAX_VELOCITY")
         a = ini.number(section, "MAX_ACCELERATION")
@@ -460,8 +483,7 @@ def _load_ini(text: str, path: str) -> Machine:
     dt_s = period * 1e-9 if period is not None else DEFAULT_DT_S
     if dt_s > _MAX_DT_S:
         item = ini.get("EMCMOT", "SERVO_PERIOD")
-        raise MachineError("[EMCMOT] SERVO_PERIOD is in nanoseconds; this is longer than 1 s",
-                           ini.loc(item[1]))
+        raise MachineError("[EMCMOT] SERVO_PERIOD is in nanoseconds; this is longer than 1 s", ini.loc(item[1]))
     name_item = ini.get("EMC", "MACHINE")
     name = name_item[0] if name_item else _stem(path)
     kind = _ini_kinematics(ini, axes)
@@ -469,9 +491,18 @@ def _load_ini(text: str, path: str) -> Machine:
     tool_table = None
     if table is not None and table[0].strip():  # relative to the INI file, as LinuxCNC reads it
         tool_table = os.path.join(os.path.dirname(os.path.abspath(path)), table[0].strip())
-    return Machine(name=name, axes=axes, vmax=vmax, amax=amax, jmax=jmax, dt_s=dt_s,
-                   kinematics=kind, kinematics_params=normalise_params(kind, {}), source=path,
-                   tool_table=tool_table)
+    return Machine(
+        name=name,
+        axes=axes,
+        vmax=vmax,
+        amax=amax,
+        jmax=jmax,
+        dt_s=dt_s,
+        kinematics=kind,
+        kinematics_params=normalise_params(kind, {}),
+        source=path,
+        tool_table=tool_table,
+    )
 
 
 #: LinuxCNC kinematics module -> ours (pivot offsets are HAL pins, not INI keys: 0 here)
@@ -485,8 +516,9 @@ def _ini_kinematics(ini: _Ini, axes: str) -> str:
     value, line = item
     module = value.split()[0] if value.split() else "trivkins"
     if module not in _INI_KINS:
-        raise MachineError(f"[KINS] KINEMATICS: '{module}' is not supported "
-                           f"(supported: {', '.join(_INI_KINS)})", ini.loc(line))
+        raise MachineError(
+            f"[KINS] KINEMATICS: '{module}' is not supported (supported: {', '.join(_INI_KINS)})", ini.loc(line)
+        )
     kind = _INI_KINS[module]
     if kind == "xyzac-trt" and any(a not in axes for a in "XYZAC"):
         raise MachineError("xyzac-trt-kins needs axes X, Y, Z, A, C", ini.loc(line))
@@ -500,9 +532,18 @@ def preset_table() -> list[dict]:
     for key in sorted(PRESETS):
         m = _preset(key)
         d = m.to_dict()
-        rows.append({"preset": key, "description": PRESETS[key][0], "name": m.name,
-                     "axes": m.axes, "dt_s": m.dt_s, "kinematics": m.kinematics,
-                     "default": key == DEFAULT_PRESET, "limits": d["limits"]})
+        rows.append(
+            {
+                "preset": key,
+                "description": PRESETS[key][0],
+                "name": m.name,
+                "axes": m.axes,
+                "dt_s": m.dt_s,
+                "kinematics": m.kinematics,
+                "default": key == DEFAULT_PRESET,
+                "limits": d["limits"],
+            }
+        )
     return rows
 
 
@@ -516,7 +557,8 @@ def format_presets(table: list[dict]) -> str:
         out.append(f"  {'axis':>4} {'vmax':>10} {'amax':>10} {'jmax':>10}  unit")
         for axis, lim in row["limits"].items():
             u = lim["unit"]
-            out.append(f"  {axis:>4} {lim['vmax']:>10.6g} {lim['amax']:>10.6g} {lim['jmax']:>10.6g}"
-                       f"  {u}/s, {u}/s^2, {u}/s^3")
+            out.append(
+                f"  {axis:>4} {lim['vmax']:>10.6g} {lim['amax']:>10.6g} {lim['jmax']:>10.6g}  {u}/s, {u}/s^2, {u}/s^3"
+            )
         out.append("")
     return "\n".join(out).rstrip()

@@ -86,10 +86,12 @@ def _step_limits(machine, dt, table):
     margin = VPOP_ROUNDING_ULPS * np.finfo(float).eps * q_scale
     vl = np.ascontiguousarray(machine.vmax * dt * shrink - 2.0 * margin, dtype=float)
     al = np.ascontiguousarray(machine.amax * dt * dt * shrink - 4.0 * margin, dtype=float)
-    jl = np.ascontiguousarray(machine.jmax * dt ** 3 * shrink - 8.0 * margin, dtype=float)
-    if np.any(jl <= 0.5 * machine.jmax * dt ** 3):
-        raise PlanError(f"the jerk limits are too small for dt = {dt:g} s at positions of "
-                        f"{q_scale:g} mm/deg: float64 cannot resolve them")
+    jl = np.ascontiguousarray(machine.jmax * dt**3 * shrink - 8.0 * margin, dtype=float)
+    if np.any(jl <= 0.5 * machine.jmax * dt**3):
+        raise PlanError(
+            f"the jerk limits are too small for dt = {dt:g} s at positions of "
+            f"{q_scale:g} mm/deg: float64 cannot resolve them"
+        )
     return vl, al, jl
 
 
@@ -118,15 +120,24 @@ class _Path:
         fb = np.ascontiguousarray(path.s_breaks, dtype=float).copy()
         fb[-1] = self.L
         self.FB = fb
-        self.FV = np.ascontiguousarray(np.where(np.isfinite(path.feed_mm_s) & (path.feed_mm_s > 0),
-                                                path.feed_mm_s * (1.0 - VPOP_LIMIT_SHRINK), 1e300))
+        self.FV = np.ascontiguousarray(
+            np.where(
+                np.isfinite(path.feed_mm_s) & (path.feed_mm_s > 0), path.feed_mm_s * (1.0 - VPOP_LIMIT_SHRINK), 1e300
+            )
+        )
         dq = np.abs(table.qend - table.qstart)
         ramp = float(np.max(machine.vmax / machine.amax + machine.amax / machine.jmax))
         self.ramp_s = 2.0 * ramp
-        self.rough_s = (float(np.max(dq / machine.vmax)) + self.L / float(np.min(self.FV))
-                        + self.ramp_s)
-        self.stats = {"lp_iterations": 0, "knots": 0, "clamped": 0, "retries": 0,
-                      "handover": -1, "refined_periods": 0, "table_pieces": int(table.C.shape[0])}
+        self.rough_s = float(np.max(dq / machine.vmax)) + self.L / float(np.min(self.FV)) + self.ramp_s
+        self.stats = {
+            "lp_iterations": 0,
+            "knots": 0,
+            "clamped": 0,
+            "retries": 0,
+            "handover": -1,
+            "refined_periods": 0,
+            "table_pieces": int(table.C.shape[0]),
+        }
         self._vrun = None
         self._prep = None
 
@@ -134,8 +145,7 @@ class _Path:
         from .vpop import VpopRun
 
         if self._vrun is None:
-            self._vrun = VpopRun(self.table, self.path, self.machine, self.dt, self.settings,
-                                 self.joint_map)
+            self._vrun = VpopRun(self.table, self.path, self.machine, self.dt, self.settings, self.joint_map)
         return self._vrun
 
     def prepared(self):
@@ -143,8 +153,7 @@ class _Path:
         from .vpop import _Prepared
 
         if self._prep is None:
-            self._prep = _Prepared(self.path, self.joint_map, self.machine, self.dt,
-                                   self.settings, table=self.table)
+            self._prep = _Prepared(self.path, self.joint_map, self.machine, self.dt, self.settings, table=self.table)
         return self._prep
 
 
@@ -205,7 +214,7 @@ class _Nodes:
         for part in self.parts:
             knots, coef, s0, s1 = part
             nc = coef.shape[0]
-            g = (knots[1:nc + 1] + knots[2:nc + 2] + knots[3:nc + 3]) / 3.0
+            g = (knots[1 : nc + 1] + knots[2 : nc + 2] + knots[3 : nc + 3]) / 3.0
             u = np.where(g < s_bad, (g - s_bad) / (s_bad - lo), (g - s_bad) / (hi - s_bad))
             phi = np.where(np.abs(u) < 1.0, 0.5 * (1.0 + np.cos(np.pi * u)), 0.0)
             if np.any(phi > 0):
@@ -254,10 +263,33 @@ def _sampled(ctx):
             ctx.stats["sample_budget"] = True
             status, final, retries_here, final_handover = TK.STUCK, True, len(OPT_RETRY_DEPTHS), True
         else:
-            status, k = (TK.NEED_REF, k) if nodes.s.size < 2 else TK.track(
-            nodes.s, nodes.t, nodes.v, nodes.a, nodes.s.shape[0], final, ctx.table.S, ctx.Cm,
-                ctx.table.qend, ctx.vl, ctx.al, ctx.jl, dt, L, ctx.FB, ctx.FV, sh, qh, k,
-                ctx.tol, stats)
+            status, k = (
+                (TK.NEED_REF, k)
+                if nodes.s.size < 2
+                else TK.track(
+                    nodes.s,
+                    nodes.t,
+                    nodes.v,
+                    nodes.a,
+                    nodes.s.shape[0],
+                    final,
+                    ctx.table.S,
+                    ctx.Cm,
+                    ctx.table.qend,
+                    ctx.vl,
+                    ctx.al,
+                    ctx.jl,
+                    dt,
+                    L,
+                    ctx.FB,
+                    ctx.FV,
+                    sh,
+                    qh,
+                    k,
+                    ctx.tol,
+                    stats,
+                )
+            )
         if status == TK.NEED_REF:
             try:
                 piece = next(pieces)
@@ -286,12 +318,12 @@ def _sampled(ctx):
             # emit what no retry can change, then compact the buffer
             upto = base + k - hold
             if upto > emitted:
-                yield sh[emitted - base: upto - base].copy(), qh[emitted - base: upto - base].copy()
+                yield sh[emitted - base : upto - base].copy(), qh[emitted - base : upto - base].copy()
                 emitted = upto
             keep_from = emitted - 3 - base
             if keep_from > 0:
-                sh[: k - keep_from] = sh[keep_from: k]
-                qh[: k - keep_from] = qh[keep_from: k]
+                sh[: k - keep_from] = sh[keep_from:k]
+                qh[: k - keep_from] = qh[keep_from:k]
                 base += keep_from
                 k -= keep_from
                 nodes.drop_before(float(sh[0]))
@@ -300,13 +332,12 @@ def _sampled(ctx):
                 qh = np.concatenate((qh, np.zeros((qh.shape[0], n))))
             continue
         # STUCK at buffer index k
-        t_here, _ = TK.ref_t_of_s(nodes.s, nodes.t, nodes.v, nodes.a, nodes.s.shape[0],
-                                  sh[k - 1], 0)
+        t_here, _ = TK.ref_t_of_s(nodes.s, nodes.t, nodes.v, nodes.a, nodes.s.shape[0], sh[k - 1], 0)
         near_end = final and nodes.t[-1] - t_here <= OPT_TAIL_S
         if not near_end and retries_here < len(OPT_RETRY_DEPTHS):
             s_bad = float(sh[k - 1])
             i = min(int(np.searchsorted(nodes.s, s_bad)), nodes.v.shape[0] - 1)
-            v_here = max(float(np.max(nodes.v[max(i - 8, 0): i + 8])), 1e-9)
+            v_here = max(float(np.max(nodes.v[max(i - 8, 0) : i + 8])), 1e-9)
             reach = max(OPT_RETRY_SPAN_S * v_here, 20.0 * dt * v_here, 1e-6)
             s_floor = float(sh[emitted - base]) if emitted > base else float(sh[0])
             if nodes.dip(s_bad, OPT_RETRY_DEPTHS[retries_here], reach, s_floor):
@@ -381,20 +412,19 @@ def _refined(ctx, blocks, targeted: bool = False):
         if la >= N - 1:
             break
         b = min(la + W, N - 1)
-        if b - la >= 3 and (not targeted or _dip_or_end(sh, la, b, W, done)) and \
-                ref.loose(sh, qh, la, b):
+        if b - la >= 3 and (not targeted or _dip_or_end(sh, la, b, W, done)) and ref.loose(sh, qh, la, b):
             sh, qh, d = ref.window(sh, qh, la, b, max(1, (b - la) // 2))
             ctx.stats["refined_periods"] += d
         a += REFINE_STRIDE
         upto = min(a, base + sh.shape[0])
         if upto > emitted:
-            yield sh[emitted - base: upto - base].copy(), qh[emitted - base: upto - base].copy()
+            yield sh[emitted - base : upto - base].copy(), qh[emitted - base : upto - base].copy()
             emitted = upto
             cut = emitted - 3 - base  # keep three samples before the next window
             if cut > 0:
                 sh, qh, base = sh[cut:], qh[cut:], base + cut
     if emitted < base + sh.shape[0]:
-        yield sh[emitted - base:].copy(), qh[emitted - base:].copy()
+        yield sh[emitted - base :].copy(), qh[emitted - base :].copy()
     ctx.stats["refine_solves"] = ctx.stats.get("refine_solves", 0) + ref.solves
     ctx.stats["refine_newton"] = ctx.stats.get("refine_newton", 0) + int(ref.counts[0])
     ctx.stats["refine_evals"] = ctx.stats.get("refine_evals", 0) + int(ref.counts[1])
@@ -405,8 +435,8 @@ def _dip_or_end(sh, la, b, W, done) -> bool:
     step below OPT_DIP times the largest step within W samples around)?"""
     if la <= 2 or (done and b >= sh.shape[0] - 2):
         return True
-    steps = np.diff(sh[max(la - W, 1) - 1: min(b + W, sh.shape[0])])
-    inner = np.diff(sh[la - 1: b])
+    steps = np.diff(sh[max(la - W, 1) - 1 : min(b + W, sh.shape[0])])
+    inner = np.diff(sh[la - 1 : b])
     return bool(inner.size and np.min(inner) < OPT_DIP * np.max(steps))
 
 
@@ -426,8 +456,7 @@ def _rechunk(blocks, chunk: int):
         yield np.concatenate(buf_s), np.concatenate(buf_q)
 
 
-def iter_path_plan_optimal(path, joint_map, machine, dt_s: float, settings=None,
-                           window: int | None = None):
+def iter_path_plan_optimal(path, joint_map, machine, dt_s: float, settings=None, window: int | None = None):
     """The plan of one path as a stream of ``PathPlan`` chunks (``plan.base``'s contract):
     chunks of ``chunk_samples`` (settings option, default ``OPT_CHUNK``) samples as soon
     as no later stage can change them; only the last (``last=True``) carries the stats.
@@ -484,8 +513,10 @@ def _iter(path, joint_map, machine, dt_s, settings, stats, window):
             yield s, q
     except _Fallback as why:
         if produced:
-            raise PlanError(f"bug: the optimal planner gave up on the path ending at line "
-                            f"{int(path.line[-1])} after emitting samples ({why})") from None
+            raise PlanError(
+                f"bug: the optimal planner gave up on the path ending at line "
+                f"{int(path.line[-1])} after emitting samples ({why})"
+            ) from None
         ctx.stats["fallback"] = str(why)
         if targeted:
             passes = int(_option(settings, "refine_passes", 0))
@@ -519,7 +550,7 @@ def _better_of(ctx, stage, vpop_passes, targeted):
 
 
 def _route(ctx) -> str:
-    """"profile" where curvature or jerk limit the speed on a good part of a path that
+    """ "profile" where curvature or jerk limit the speed on a good part of a path that
     lasts long enough to gain from it, else "vpop" (see OPT_ROUTE_*)."""
     if ctx.rough_s < OPT_ROUTE_TINY_S:
         return "vpop"  # travel at the feed and ramps: far below the threshold anyway
@@ -559,8 +590,7 @@ def _vpop_stage(ctx, window):
 
     handed = False
     try:
-        for c in iter_prepared(ctx.prepared(), ctx.joint_map, ctx.machine, ctx.settings,
-                               window, safe_fallback=False):
+        for c in iter_prepared(ctx.prepared(), ctx.joint_map, ctx.machine, ctx.settings, window, safe_fallback=False):
             if c.last and c.stats:
                 ctx.stats["exact"] = bool(c.stats.get("exact", False))
             handed = True
@@ -600,7 +630,7 @@ def _final_chunk(sh, qh, k: int, L: float, first: int, qend):
     last = k - 1
     while last > 0 and sh[last - 1] == L:
         last -= 1
-    out_s = sh[first: last + 1].copy()
-    out_q = qh[first: last + 1].copy()
+    out_s = sh[first : last + 1].copy()
+    out_q = qh[first : last + 1].copy()
     out_q[-1] = qend
     return out_s, out_q

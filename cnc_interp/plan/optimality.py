@@ -33,10 +33,10 @@ def _line_feasible(length: float, k: int, v: float, a: float, j: float, dt: floa
     # padded sequence: 3 x 0, s_0=0, s_1..s_{k-1}, s_k=L, 3 x L  (length n + 8)
     m = n + 8
     full = np.zeros(m)
-    full[k + 3:] = length
+    full[k + 3 :] = length
     if n == 0:  # nothing to choose: check the fixed sequence
         x = full
-        for lim in (v * dt, a * dt * dt, j * dt ** 3):
+        for lim in (v * dt, a * dt * dt, j * dt**3):
             x = np.diff(x)
             if np.abs(x).max() > lim:
                 return False
@@ -47,7 +47,7 @@ def _line_feasible(length: float, k: int, v: float, a: float, j: float, dt: floa
 
     E = csr_matrix((np.ones(n), (rows, np.arange(n))), shape=(m, n))
     A_list, b_list = [], []
-    for order, lim in ((1, v * dt), (2, a * dt * dt), (3, j * dt ** 3)):
+    for order, lim in ((1, v * dt), (2, a * dt * dt), (3, j * dt**3)):
         coeffs = [math.comb(order, i) * (-1) ** (order - i) for i in range(order + 1)]
         D = diags([float(c) for c in coeffs], list(range(order + 1)), shape=(m - order, m))
         DE = D @ E
@@ -60,8 +60,7 @@ def _line_feasible(length: float, k: int, v: float, a: float, j: float, dt: floa
     return res.status == 0
 
 
-def line_min_samples(length: float, v: float, a: float, j: float, dt: float,
-                     guess: int | None = None) -> int:
+def line_min_samples(length: float, v: float, a: float, j: float, dt: float, guess: int | None = None) -> int:
     """Least number of steps K (duration K·dt) of a rest-to-rest 1-D move of ``length``
     under |v| <= v, |a| <= a, |j| <= j as backward differences (rest padding included)."""
     if length <= 0:

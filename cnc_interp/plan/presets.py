@@ -28,8 +28,7 @@ PRESETS: dict[str, tuple[str, dict]] = {
         },
     ),
     "mikron-ucp710": (
-        "Mikron UCP 710 5-axis, paper 001 Table 1 (Siemens 840D, 6 ms); "
-        "xyzac-trt, pivot offsets 0 (not published)",
+        "Mikron UCP 710 5-axis, paper 001 Table 1 (Siemens 840D, 6 ms); xyzac-trt, pivot offsets 0 (not published)",
         {
             "name": "Mikron UCP 710",
             "dt": 0.006,
@@ -38,12 +37,9 @@ PRESETS: dict[str, tuple[str, dict]] = {
             "kinematics": "xyzac-trt",
             "axes": {
                 # 30 m/min; 2.5 / 3 / 2.1 m/s^2; 5 / 5 / 50 m/s^3
-                "X": {"vmax": 30 * _MM_PER_M / SECONDS_PER_MINUTE, "amax": 2.5 * _MM_PER_M,
-                      "jmax": 5 * _MM_PER_M},
-                "Y": {"vmax": 30 * _MM_PER_M / SECONDS_PER_MINUTE, "amax": 3.0 * _MM_PER_M,
-                      "jmax": 5 * _MM_PER_M},
-                "Z": {"vmax": 30 * _MM_PER_M / SECONDS_PER_MINUTE, "amax": 2.1 * _MM_PER_M,
-                      "jmax": 50 * _MM_PER_M},
+                "X": {"vmax": 30 * _MM_PER_M / SECONDS_PER_MINUTE, "amax": 2.5 * _MM_PER_M, "jmax": 5 * _MM_PER_M},
+                "Y": {"vmax": 30 * _MM_PER_M / SECONDS_PER_MINUTE, "amax": 3.0 * _MM_PER_M, "jmax": 5 * _MM_PER_M},
+                "Z": {"vmax": 30 * _MM_PER_M / SECONDS_PER_MINUTE, "amax": 2.1 * _MM_PER_M, "jmax": 50 * _MM_PER_M},
                 # 15 / 20 rpm; 0.83 rev/s^2; 5 / 100 rev/s^3
                 "A": {"vmax": _rpm(15), "amax": 0.83 * _DEG_PER_REV, "jmax": 5 * _DEG_PER_REV},
                 "C": {"vmax": _rpm(20), "amax": 0.83 * _DEG_PER_REV, "jmax": 100 * _DEG_PER_REV},

@@ -31,7 +31,6 @@ REFINE_MAX_CUT = 0.5
 REFINE_SKIP = 0.99
 
 
-
 class Refiner:
     """The exact-check and window-solve machinery for one path's table."""
 
@@ -69,7 +68,7 @@ class Refiner:
         r = np.max(np.abs(d3[:, mv]) / self.jl[mv], axis=1)
         r = np.maximum(r, np.max(np.abs(d2[1:, mv]) / self.al[mv], axis=1))
         r = np.maximum(r, np.max(np.abs(d1[2:, mv]) / self.vl[mv], axis=1))
-        steps = np.diff(sh[max(a - 1, 0):b])
+        steps = np.diff(sh[max(a - 1, 0) : b])
         m = min(r.shape[0], steps.shape[0])
         r = np.maximum(r[-m:], steps[-m:] / self.fdt)
         return bool(np.any(r < REFINE_SKIP))
@@ -82,14 +81,15 @@ class Refiner:
         post = np.array([sh[min(b + i, N - 1)] for i in range(3)])
         M = b - a
         dropped = 0
-        cur = sh[a - 1: b + 1].copy()
+        cur = sh[a - 1 : b + 1].copy()
         while dropped < max_cut and M - 1 >= 2:
             Mn = M - 1
             tn = np.linspace(0.0, 1.0, Mn + 2)
             tt = np.linspace(0.0, 1.0, cur.shape[0])
             x0 = np.interp(tn, tt, cur)[1:-1]
-            st, x, z = RK.solve_window(self.S, self.C, self.QE, pre, post, x0, self.moving,
-                                       self.lim, self.fdt, REFINE_NEWTON, self.counts)
+            st, x, z = RK.solve_window(
+                self.S, self.C, self.QE, pre, post, x0, self.moving, self.lim, self.fdt, REFINE_NEWTON, self.counts
+            )
             self.solves += 1
             if st != RK.FEASIBLE:
                 break
@@ -99,10 +99,9 @@ class Refiner:
             qb = np.empty((full.shape[0], self.n))
             qb[:a] = qh[:a]
             hi = min(a + Mn + 3, full.shape[0])
-            if not RK.exact_ok(self.S, self.C, self.QE, full, a, hi, self.vl, self.al, self.jl,
-                               qb):
+            if not RK.exact_ok(self.S, self.C, self.QE, full, a, hi, self.vl, self.al, self.jl, qb):
                 break
-            qn = np.concatenate((qh[:a], qb[a: a + Mn], qh[b:]))
+            qn = np.concatenate((qh[:a], qb[a : a + Mn], qh[b:]))
             sh, qh = cand, qn
             cur = np.concatenate(([sh[a - 1]], x, [sh[a + Mn]]))
             M = Mn

@@ -51,8 +51,7 @@ def _bounds(table):
     h = np.diff(S)[:, None]
     t = (h * u[None, :])[..., None]  # (m, k, 1)
     c = C[:, None, :, :]  # (m, 1, 6, n)
-    q1 = c[:, :, 1] + t * (2 * c[:, :, 2] + t * (3 * c[:, :, 3] + t * (4 * c[:, :, 4]
-                                                                     + t * 5 * c[:, :, 5])))
+    q1 = c[:, :, 1] + t * (2 * c[:, :, 2] + t * (3 * c[:, :, 3] + t * (4 * c[:, :, 4] + t * 5 * c[:, :, 5])))
     q2 = 2 * c[:, :, 2] + t * (6 * c[:, :, 3] + t * (12 * c[:, :, 4] + t * 20 * c[:, :, 5]))
     q3 = 6 * c[:, :, 3] + t * (24 * c[:, :, 4] + t * 60 * c[:, :, 5])
     return [SAFE_BOUND_MARGIN * np.max(np.abs(x), axis=1) for x in (q1, q2, q3)]
@@ -171,8 +170,7 @@ def plan_path_safe(path, joint_map, machine, dt_s: float, settings=None) -> Path
             v, a, j = _path_limits(G1, G2, G3, V, A, J)
             v = min(v, feed * share)
             if not (v > 0 and a > 0 and j > 0 and math.isfinite(a) and math.isfinite(j)):
-                raise PlanError(f"bug: no safe limits for the path ending at line "
-                                f"{int(path.line[-1])}")
+                raise PlanError(f"bug: no safe limits for the path ending at line {int(path.line[-1])}")
             s0, s1 = float(S[p0]), (L if p1 == g1.shape[0] else float(S[p1]))
             phases = scurve(s1 - s0, v, a, j)
             T = sum(d for d, _ in phases)
@@ -186,9 +184,8 @@ def plan_path_safe(path, joint_map, machine, dt_s: float, settings=None) -> Path
         s = np.maximum.accumulate(np.concatenate(parts_s))
         q = _eval_table(table.S, table.C, s)
         q[-1] = table.qend
-        rep = verify_arrays(q, dt, vl / dt, al / dt ** 2, jl / dt ** 3)
+        rep = verify_arrays(q, dt, vl / dt, al / dt**2, jl / dt**3)
         if rep.ok:
             return PathPlan(s=s, q=q, stats={"samples": int(s.shape[0]), "planner": "safe"})
         share *= 0.5
-    raise PlanError(f"bug: the safe planner failed on the path ending at line "
-                    f"{int(path.line[-1])}")
+    raise PlanError(f"bug: the safe planner failed on the path ending at line {int(path.line[-1])}")

@@ -45,9 +45,14 @@ class PlanSettings:
             raise UsageError(f"sample period must be a positive number of seconds, got {self.dt_s!r}")
 
     @classmethod
-    def from_options(cls, planner: str = DEFAULT_PLANNER, dt_s: float | None = None,
-                     tol_mm: float | None = None, machine: "Machine | None" = None,
-                     **options: Any) -> "PlanSettings":
+    def from_options(
+        cls,
+        planner: str = DEFAULT_PLANNER,
+        dt_s: float | None = None,
+        tol_mm: float | None = None,
+        machine: "Machine | None" = None,
+        **options: Any,
+    ) -> "PlanSettings":
         """Settings from CLI options: ``--dt`` wins over the machine's period, then the default."""
         if dt_s is None:
             dt_s = float(machine.dt_s) if machine is not None and machine.dt_s else DEFAULT_DT_S

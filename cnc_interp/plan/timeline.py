@@ -74,8 +74,9 @@ class Window:
     def whole(cls) -> "Window":
         """Everything at once (what ``plan_program`` uses)."""
         big = 1 << 62
-        return cls(block_samples=big, job_paths=big, job_samples=big, jobs_ahead=big,
-                   chunks_ahead=big, path_window=None)
+        return cls(
+            block_samples=big, job_paths=big, job_samples=big, jobs_ahead=big, chunks_ahead=big, path_window=None
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -104,8 +105,7 @@ class TimelineInfo:
 
     samples: int = 0
     status: str = "ok"
-    stats: dict = field(default_factory=lambda: {"paths": 0, "rapids": 0, "dwells": 0,
-                                                 "stops": 0})
+    stats: dict = field(default_factory=lambda: {"paths": 0, "rapids": 0, "dwells": 0, "stops": 0})
     profiles: list = field(default_factory=list)
     path_length_mm: float = 0.0
     plan_cpu_s: float = 0.0  # CPU time of the planning (all threads)
@@ -114,7 +114,6 @@ class TimelineInfo:
 def _plan_threads() -> int:
     """Threads planning paths at once: CNC_INTERP_THREADS, else the CPUs (at most PLAN_MAX_THREADS)."""
     import os
-
 
     env = os.environ.get("CNC_INTERP_THREADS")
     if env and env.isdigit() and int(env) > 0:
@@ -132,8 +131,7 @@ def _joint_rapid(path, kin):
     coef[0, 1] = ends[1] - ends[0]
     if not np.any(coef[0, 1]):
         return path  # no joint moves: VPOp plans the (zero-length) item as it is
-    return Path(path.axes, np.array([0.0, 1.0]), coef, line=path.line[-1:],
-                feed_mm_s=np.array([np.inf]), rapid=True)
+    return Path(path.axes, np.array([0.0, 1.0]), coef, line=path.line[-1:], feed_mm_s=np.array([np.inf]), rapid=True)
 
 
 def _count_planner_stats(stats: dict, path_stats) -> None:
@@ -179,8 +177,9 @@ class _Workers:
         self.jobs: queue.Queue = queue.Queue()
         self.stop = threading.Event()
         self.plan_chunks = plan_chunks
-        self.threads = [threading.Thread(target=self._loop, daemon=True,
-                                         name=f"cnc-interp-plan-{i}") for i in range(count)]
+        self.threads = [
+            threading.Thread(target=self._loop, daemon=True, name=f"cnc-interp-plan-{i}") for i in range(count)
+        ]
         for t in self.threads:
             t.start()
 
@@ -332,9 +331,18 @@ class _Blocks:
         return block
 
 
-def iter_timeline(items, machine, settings, start, window: Window | None = None,
-                  info: TimelineInfo | None = None, progress=None, keep_profiles: bool = False,
-                  source: str = "", threads: int | None = None):
+def iter_timeline(
+    items,
+    machine,
+    settings,
+    start,
+    window: Window | None = None,
+    info: TimelineInfo | None = None,
+    progress=None,
+    keep_profiles: bool = False,
+    source: str = "",
+    threads: int | None = None,
+):
     """Plan fitted ``items`` (an iterable, consumed lazily) onto one sample clock.
 
     Args:
@@ -378,8 +386,7 @@ def iter_timeline(items, machine, settings, start, window: Window | None = None,
         every path without kinematics when VPOp is the planner): the same samples."""
         from .vpop import plan_many_vpop
 
-        sel = [i for i, p in enumerate(paths)
-               if p.rapid or (settings.planner == "vpop" and joint_map is None)]
+        sel = [i for i, p in enumerate(paths) if p.rapid or (settings.planner == "vpop" and joint_map is None)]
         out = [None] * len(paths)
         if sel:
             got = plan_many_vpop([paths[i] for i in sel], machine, dt, settings)
@@ -412,12 +419,10 @@ def iter_timeline(items, machine, settings, start, window: Window | None = None,
                 if joint_map is not None and item.rapid:
                     item = _joint_rapid(item, kin)
                 if item.axes != machine.axes:
-                    raise PlanError(f"bug: path axes {item.axes} differ from machine axes "
-                                    f"{machine.axes}")
+                    raise PlanError(f"bug: path axes {item.axes} differ from machine axes {machine.axes}")
                 job.append(item)
                 est += budget.rough_samples(item)
-                if len(job) >= min(limit[0], window.job_paths) or \
-                        est >= min(limit[1], window.job_samples):
+                if len(job) >= min(limit[0], window.job_paths) or est >= min(limit[1], window.job_samples):
                     yield "job", job
                     job, est = [], 0.0
                     limit = [2 * limit[0], 2.0 * max(limit[1], 64.0)]
@@ -432,8 +437,7 @@ def iter_timeline(items, machine, settings, start, window: Window | None = None,
             yield "job", job
 
     workers = threads if threads is not None else _plan_threads()
-    pool = (_Workers(workers, plan_chunks, info, plan_many) if workers > 1
-            else _Inline(plan_chunks, info, plan_many))
+    pool = _Workers(workers, plan_chunks, info, plan_many) if workers > 1 else _Inline(plan_chunks, info, plan_many)
     ahead: deque = deque()
     source_units = units()
     in_flight = 0
@@ -464,8 +468,9 @@ def iter_timeline(items, machine, settings, start, window: Window | None = None,
 
     def hold(count: int, line: int):
         if count > 0:
-            yield from blocks.add(np.full(count, s_off), np.repeat(q_now[None, :], count, axis=0),
-                                  np.full(count, line, dtype=np.int64))
+            yield from blocks.add(
+                np.full(count, s_off), np.repeat(q_now[None, :], count, axis=0), np.full(count, line, dtype=np.int64)
+            )
 
     try:
         yield from blocks.add(np.zeros(1), q_now[None, :].copy(), np.zeros(1, dtype=np.int64))
@@ -498,8 +503,10 @@ def iter_timeline(items, machine, settings, start, window: Window | None = None,
                 if first:
                     q0 = q[0]
                     if not np.all(np.abs(q0 - q_now) <= _JOIN_TOL * np.maximum(1.0, np.abs(q_now))):
-                        raise PlanError(f"bug: path at line {int(item.line[0])} starts at "
-                                        f"{q0.tolist()}, the machine is at {q_now.tolist()}")
+                        raise PlanError(
+                            f"bug: path at line {int(item.line[0])} starts at "
+                            f"{q0.tolist()}, the machine is at {q_now.tolist()}"
+                        )
                     s, q = s[1:], q[1:]
                     if s.shape[0] or not chunk.last:
                         moving = True
@@ -538,8 +545,7 @@ def iter_timeline(items, machine, settings, start, window: Window | None = None,
         pool.close()
 
 
-def plan_program(fit_result, machine, settings, progress=None, window: Window | None = None
-                 ) -> Trajectory:
+def plan_program(fit_result, machine, settings, progress=None, window: Window | None = None) -> Trajectory:
     """Plan every item of ``fit_result`` on one timeline, in memory (see module docstring).
 
     Args:
@@ -553,9 +559,19 @@ def plan_program(fit_result, machine, settings, progress=None, window: Window | 
         ``Trajectory`` on the machine's axes, from rest at the start to rest at the end.
     """
     info = TimelineInfo()
-    blocks = list(iter_timeline(fit_result.items, machine, settings, fit_result.program.start,
-                                window=window or Window.whole(), info=info, progress=progress,
-                                keep_profiles=True, source=fit_result.program.source))
+    blocks = list(
+        iter_timeline(
+            fit_result.items,
+            machine,
+            settings,
+            fit_result.program.start,
+            window=window or Window.whole(),
+            info=info,
+            progress=progress,
+            keep_profiles=True,
+            source=fit_result.program.source,
+        )
+    )
     return trajectory_of(blocks, machine, settings, info)
 
 
@@ -584,9 +600,19 @@ def trajectory_of(blocks, machine, settings, info: TimelineInfo) -> Trajectory:
     k = q.shape[0]
     settings_dict = settings.to_dict() if hasattr(settings, "to_dict") else dict(settings)
     settings_dict["stats"] = dict(info.stats)
-    return Trajectory(axes=machine.axes, dt_s=dt, t=np.arange(k) * dt, s=s,
-                      feed=feed_of(s, None, dt), q=q, line=line, planner=settings.planner,
-                      settings=settings_dict, status=info.status, profiles=info.profiles or None)
+    return Trajectory(
+        axes=machine.axes,
+        dt_s=dt,
+        t=np.arange(k) * dt,
+        s=s,
+        feed=feed_of(s, None, dt),
+        q=q,
+        line=line,
+        planner=settings.planner,
+        settings=settings_dict,
+        status=info.status,
+        profiles=info.profiles or None,
+    )
 
 
 class Prefetch:
@@ -599,8 +625,7 @@ class Prefetch:
         self.q: queue.Queue = queue.Queue(maxsize=max(1, ahead))
         self.cpu_s = 0.0
         self.stop = threading.Event()
-        self.thread = threading.Thread(target=self._run, args=(iterable,), daemon=True,
-                                       name="cnc-interp-fit")
+        self.thread = threading.Thread(target=self._run, args=(iterable,), daemon=True, name="cnc-interp-fit")
         self.thread.start()
 
     def _put(self, value) -> bool:

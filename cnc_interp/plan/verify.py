@@ -79,6 +79,7 @@ class VerifyReport:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able form (no NaN: a NaN ratio becomes ``None``)."""
+
         def num(x: float) -> float | None:
             x = float(x)
             return x if np.isfinite(x) else None
@@ -86,17 +87,26 @@ class VerifyReport:
         per_axis = {}
         for i, a in enumerate(self.axes):
             per_axis[a] = {
-                kind: {"ratio": num(self.ratios[i, k]), "worst": num(self.values[i, k]),
-                       "limit": num(self.limits[i, k]), "sample": int(self.where[i, k]),
-                       "t_s": float(self.where[i, k] * self.dt_s)}
+                kind: {
+                    "ratio": num(self.ratios[i, k]),
+                    "worst": num(self.values[i, k]),
+                    "limit": num(self.limits[i, k]),
+                    "sample": int(self.where[i, k]),
+                    "t_s": float(self.where[i, k] * self.dt_s),
+                }
                 for k, kind in enumerate(_KINDS)
             }
         axis, kind, ratio, idx = self.worst()
-        return {"ok": bool(self.ok), "nan_found": bool(self.nan_found),
-                "worst_ratio": num(self.worst_ratio) if not self.nan_found else None,
-                "worst": {"axis": axis, "limit": kind, "ratio": num(ratio), "sample": idx},
-                "dt_s": float(self.dt_s), "n_samples": int(self.n_samples),
-                "slack": VERIFY_RATIO_SLACK, "axes": per_axis}
+        return {
+            "ok": bool(self.ok),
+            "nan_found": bool(self.nan_found),
+            "worst_ratio": num(self.worst_ratio) if not self.nan_found else None,
+            "worst": {"axis": axis, "limit": kind, "ratio": num(ratio), "sample": idx},
+            "dt_s": float(self.dt_s),
+            "n_samples": int(self.n_samples),
+            "slack": VERIFY_RATIO_SLACK,
+            "axes": per_axis,
+        }
 
     def format(self) -> str:
         """Human-readable table: one row per axis, worst ratio per limit."""
@@ -107,16 +117,19 @@ class VerifyReport:
             if np.isfinite(self.ratios[i]).all() and not self.ratios[i].any():
                 lines.append(f"{a:>4}  {cells}   (does not move)")
                 continue
-            lines.append(f"{a:>4}  {cells}   {_KINDS[k]} t={self.where[i, k] * self.dt_s:.6g} s"
-                         f" (sample {self.where[i, k]})")
+            lines.append(
+                f"{a:>4}  {cells}   {_KINDS[k]} t={self.where[i, k] * self.dt_s:.6g} s (sample {self.where[i, k]})"
+            )
         if self.nan_found:
             lines.append("FAIL: the setpoints contain NaN or inf")
         else:
             axis, kind, ratio, idx = self.worst()
             verdict = "ok" if self.ok else "FAIL: limit exceeded"
-            lines.append(f"{verdict}: worst {ratio:.12f} ({axis} {kind}, sample {idx}); "
-                         f"{self.n_samples} samples at dt = {self.dt_s:g} s; a ratio passes up "
-                         f"to 1 + {VERIFY_RATIO_SLACK:g} (float rounding)")
+            lines.append(
+                f"{verdict}: worst {ratio:.12f} ({axis} {kind}, sample {idx}); "
+                f"{self.n_samples} samples at dt = {self.dt_s:g} s; a ratio passes up "
+                f"to 1 + {VERIFY_RATIO_SLACK:g} (float rounding)"
+            )
         return "\n".join(lines)
 
 
@@ -136,17 +149,17 @@ def _axis_extremes(col: np.ndarray, pad: int) -> tuple[np.ndarray, np.ndarray]:
     return vals, where
 
 
-def verify_arrays(q: np.ndarray, dt_s: float, vmax: ArrayLike, amax: ArrayLike, jmax: ArrayLike,
-                  axes: str | None = None) -> VerifyReport:
+def verify_arrays(
+    q: np.ndarray, dt_s: float, vmax: ArrayLike, amax: ArrayLike, jmax: ArrayLike, axes: str | None = None
+) -> VerifyReport:
     """Verify setpoints ``q`` (K, n) at period ``dt_s`` against per-axis limits (n,) each."""
     q = np.asarray(q, dtype=float)
     if q.ndim == 1:
         q = q[:, None]
     k, n = q.shape
-    limits = np.stack([np.broadcast_to(np.asarray(x, dtype=float), (n,))
-                       for x in (vmax, amax, jmax)], axis=1)  # (n, 3)
+    limits = np.stack([np.broadcast_to(np.asarray(x, dtype=float), (n,)) for x in (vmax, amax, jmax)], axis=1)  # (n, 3)
     axes = axes if axes is not None else "".join(f"{i}" for i in range(n))
-    scale = np.array([dt_s, dt_s ** 2, dt_s ** 3])
+    scale = np.array([dt_s, dt_s**2, dt_s**3])
     values = np.zeros((n, 3))
     where = np.zeros((n, 3), dtype=np.int64)
     nan_found = False
@@ -165,8 +178,17 @@ def verify_arrays(q: np.ndarray, dt_s: float, vmax: ArrayLike, amax: ArrayLike, 
     with np.errstate(invalid="ignore", divide="ignore"):
         ratios = values / limits
     ok = (not nan_found) and bool(np.all(ratios <= 1.0 + VERIFY_RATIO_SLACK))
-    return VerifyReport(axes=axes, dt_s=float(dt_s), n_samples=int(k), ratios=ratios,
-                        values=values, limits=limits, where=where, ok=ok, nan_found=nan_found)
+    return VerifyReport(
+        axes=axes,
+        dt_s=float(dt_s),
+        n_samples=int(k),
+        ratios=ratios,
+        values=values,
+        limits=limits,
+        where=where,
+        ok=ok,
+        nan_found=nan_found,
+    )
 
 
 def verify(traj: "Trajectory", machine: "Machine") -> VerifyReport:
@@ -175,11 +197,12 @@ def verify(traj: "Trajectory", machine: "Machine") -> VerifyReport:
 
     for a in traj.axes:
         if a not in machine.axes:
-            raise MachineError(f"the plan has axis {a}, which machine '{machine.name}' "
-                               f"({machine.axes}) does not have", SourceLocation(machine.source or "<machine>"))
+            raise MachineError(
+                f"the plan has axis {a}, which machine '{machine.name}' ({machine.axes}) does not have",
+                SourceLocation(machine.source or "<machine>"),
+            )
     idx = np.array([machine.axes.index(a) for a in traj.axes], dtype=int)
-    return verify_arrays(traj.q, traj.dt_s, machine.vmax[idx], machine.amax[idx],
-                         machine.jmax[idx], axes=traj.axes)
+    return verify_arrays(traj.q, traj.dt_s, machine.vmax[idx], machine.amax[idx], machine.jmax[idx], axes=traj.axes)
 
 
 class StreamVerifier:
@@ -196,9 +219,10 @@ class StreamVerifier:
         n = len(axes)
         self.axes = axes
         self.dt_s = float(dt_s)
-        self.limits = np.stack([np.broadcast_to(np.asarray(x, dtype=float), (n,))
-                                for x in (vmax, amax, jmax)], axis=1)  # (n, 3)
-        self.scale = np.array([dt_s, dt_s ** 2, dt_s ** 3])
+        self.limits = np.stack(
+            [np.broadcast_to(np.asarray(x, dtype=float), (n,)) for x in (vmax, amax, jmax)], axis=1
+        )  # (n, 3)
+        self.scale = np.array([dt_s, dt_s**2, dt_s**3])
         self.best = np.zeros((n, 3))  # worst |d^m q| so far (stored values, not scaled)
         self.where = np.zeros((n, 3), dtype=np.int64)
         self.first_bad = np.full(n, -1, dtype=np.int64)  # first non-finite sample per axis
@@ -258,8 +282,7 @@ class StreamVerifier:
         return ratios
 
     def ok_so_far(self) -> bool:
-        return bool((self.first_bad < 0).all()) and bool(np.all(self.ratios()
-                                                                <= 1.0 + VERIFY_RATIO_SLACK))
+        return bool((self.first_bad < 0).all()) and bool(np.all(self.ratios() <= 1.0 + VERIFY_RATIO_SLACK))
 
     def report(self) -> VerifyReport:
         """The report of everything added, with the rest padding after the last sample."""
@@ -278,6 +301,14 @@ class StreamVerifier:
             ratios = values / self.limits
         ok = (not nan_found) and bool(np.all(ratios <= 1.0 + VERIFY_RATIO_SLACK))
         self.tail = None  # the padding is added once
-        return VerifyReport(axes=self.axes, dt_s=self.dt_s, n_samples=int(self.k), ratios=ratios,
-                            values=values, limits=self.limits, where=where, ok=ok,
-                            nan_found=nan_found)
+        return VerifyReport(
+            axes=self.axes,
+            dt_s=self.dt_s,
+            n_samples=int(self.k),
+            ratios=ratios,
+            values=values,
+            limits=self.limits,
+            where=where,
+            ok=ok,
+            nan_found=nan_found,
+        )

@@ -36,8 +36,7 @@ def descriptors() -> bytes:
     intf = struct.pack("<BBBBBBBBB", 9, 4, 0, 0, 2, 0xFF, 0, 0, 1)
 
     def eps(mps):
-        return (struct.pack("<BBBBHB", 7, 5, 0x81, 2, mps, 0)
-                + struct.pack("<BBBBHB", 7, 5, 0x02, 2, mps, 0))
+        return struct.pack("<BBBBHB", 7, 5, 0x81, 2, mps, 0) + struct.pack("<BBBBHB", 7, 5, 0x02, 2, mps, 0)
 
     body = struct.pack("<II", 3, 3) + intf + eps(64) + intf + eps(512)
     return struct.pack("<III", FS_MAGIC_V2, 12 + len(body), HAS_FS | HAS_HS) + body
@@ -92,11 +91,15 @@ def main() -> int:
                 continue
             raise
         q = core.datapath.output().q if core.datapath is not None else None
-        state = {"last_seq": core.last_seq, "bytes_accepted": core.bytes_accepted,
-                 "state": core.state, "applied": len(core.applied),
-                 "in_order": core.applied == list(range(1, len(core.applied) + 1)),
-                 "samples": 0 if q is None else int(q.shape[0]),
-                 "q_sha256": "" if q is None else hashlib.sha256(q.astype("<i8").tobytes()).hexdigest()}
+        state = {
+            "last_seq": core.last_seq,
+            "bytes_accepted": core.bytes_accepted,
+            "state": core.state,
+            "applied": len(core.applied),
+            "in_order": core.applied == list(range(1, len(core.applied) + 1)),
+            "samples": 0 if q is None else int(q.shape[0]),
+            "q_sha256": "" if q is None else hashlib.sha256(q.astype("<i8").tobytes()).hexdigest(),
+        }
         tmp = state_path + ".tmp"
         with open(tmp, "w") as fh:
             json.dump(state, fh)

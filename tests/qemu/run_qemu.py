@@ -26,9 +26,26 @@ import sys
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(os.path.dirname(HERE))
-MODULES = ["virtio_ring", "virtio", "virtio_pci_modern_dev", "virtio_pci_legacy_dev", "virtio_pci",
-           "netfs", "fscache", "9pnet", "9pnet_virtio", "9p", "usb-common", "usbcore", "udc-core",
-           "dummy_hcd", "configfs", "libcomposite", "usb_f_fs", "virtio-rng"]
+MODULES = [
+    "virtio_ring",
+    "virtio",
+    "virtio_pci_modern_dev",
+    "virtio_pci_legacy_dev",
+    "virtio_pci",
+    "netfs",
+    "fscache",
+    "9pnet",
+    "9pnet_virtio",
+    "9p",
+    "usb-common",
+    "usbcore",
+    "udc-core",
+    "dummy_hcd",
+    "configfs",
+    "libcomposite",
+    "usb_f_fs",
+    "virtio-rng",
+]
 
 
 def _skip(msg: str) -> int:
@@ -41,10 +58,14 @@ def _kernel(work: str) -> tuple[str, str] | None:
     root = os.path.join(work, "kernel")
     found = glob.glob(os.path.join(root, "boot", "vmlinuz-*"))
     if not found:
-        out = subprocess.run(["apt-cache", "search", "--names-only", r"^linux-image-6\.1\.0-[0-9]+-amd64-unsigned$"],
-                             capture_output=True, text=True).stdout.split()
-        names = sorted({w for w in out if w.startswith("linux-image-")},
-                       key=lambda n: int(re.findall(r"6\.1\.0-(\d+)", n)[0]))
+        out = subprocess.run(
+            ["apt-cache", "search", "--names-only", r"^linux-image-6\.1\.0-[0-9]+-amd64-unsigned$"],
+            capture_output=True,
+            text=True,
+        ).stdout.split()
+        names = sorted(
+            {w for w in out if w.startswith("linux-image-")}, key=lambda n: int(re.findall(r"6\.1\.0-(\d+)", n)[0])
+        )
         if not names:
             return None
         r = subprocess.run(["apt-get", "download", names[-1]], cwd=work, capture_output=True, text=True)
@@ -63,8 +84,7 @@ def _cpio_newc(entries: list[tuple[str, int, bytes]]) -> bytes:
     ino = 1
     for name, mode, data in entries + [("TRAILER!!!", 0, b"")]:
         nb = name.encode() + b"\0"
-        hdr = "070701" + "".join(f"{v:08x}" for v in (ino, mode, 0, 0, 1, 0, len(data), 0, 0, 0, 0,
-                                                       len(nb), 0))
+        hdr = "070701" + "".join(f"{v:08x}" for v in (ino, mode, 0, 0, 1, 0, len(data), 0, 0, 0, 0, len(nb), 0))
         out += hdr.encode() + nb
         out += b"\0" * (-len(out) % 4)
         out += data
@@ -81,8 +101,9 @@ def _initramfs(work: str, modules_dir: str, args: str) -> str:
     with open(os.path.join(HERE, "init.sh"), "rb") as fh:
         entries.append(("init", 0o100755, fh.read()))
     for m in MODULES:
-        path = (glob.glob(os.path.join(modules_dir, "**", m + ".ko"), recursive=True)
-                or glob.glob(os.path.join(modules_dir, "**", m.replace("-", "_") + ".ko"), recursive=True))
+        path = glob.glob(os.path.join(modules_dir, "**", m + ".ko"), recursive=True) or glob.glob(
+            os.path.join(modules_dir, "**", m.replace("-", "_") + ".ko"), recursive=True
+        )
         if not path:
             raise FileNotFoundError(f"kernel module {m} not found")
         with open(path[0], "rb") as fh:
@@ -112,13 +133,31 @@ def main() -> int:
     frames = os.path.abspath(a.frames)
     initrd = _initramfs(a.work, mods, f"{REPO}/tests/qemu/guest.sh {frames} {REPO}")
     # -cpu max: numpy needs x86-64-v2 (SSE4.2, POPCNT), which the default qemu64 model lacks
-    cmd = ["qemu-system-x86_64", "-accel", "tcg", "-cpu", "max", "-m", "1024", "-smp", "2", "-kernel", vmlinuz,
-           "-initrd", initrd, "-append", "console=ttyS0 panic=-1 quiet", "-nographic", "-no-reboot",
-           "-device", "virtio-rng-pci",
-           "-virtfs", "local,path=/,mount_tag=hostroot,security_model=none,readonly=on,multidevs=remap"]
+    cmd = [
+        "qemu-system-x86_64",
+        "-accel",
+        "tcg",
+        "-cpu",
+        "max",
+        "-m",
+        "1024",
+        "-smp",
+        "2",
+        "-kernel",
+        vmlinuz,
+        "-initrd",
+        initrd,
+        "-append",
+        "console=ttyS0 panic=-1 quiet",
+        "-nographic",
+        "-no-reboot",
+        "-device",
+        "virtio-rng-pci",
+        "-virtfs",
+        "local,path=/,mount_tag=hostroot,security_model=none,readonly=on,multidevs=remap",
+    ]
     try:
-        p = subprocess.run(cmd, capture_output=True, text=True, timeout=a.timeout,
-                           stdin=subprocess.DEVNULL)
+        p = subprocess.run(cmd, capture_output=True, text=True, timeout=a.timeout, stdin=subprocess.DEVNULL)
         text = p.stdout + p.stderr
     except subprocess.TimeoutExpired as exc:
         text = (exc.stdout or b"").decode(errors="replace") if isinstance(exc.stdout, bytes) else (exc.stdout or "")
@@ -127,7 +166,7 @@ def main() -> int:
         return 1
     lines = [ln.strip() for ln in text.splitlines() if "QEMU-USB-" in ln]
     for ln in lines:
-        print(ln[ln.index("QEMU-USB-"):])
+        print(ln[ln.index("QEMU-USB-") :])
     if not any(ln.endswith("QEMU-USB-RESULT: done") for ln in lines):
         print(text[-4000:])
         return 1

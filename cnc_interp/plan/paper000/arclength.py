@@ -81,8 +81,19 @@ def u_of_s(path, s: np.ndarray) -> np.ndarray:
     s = np.clip(np.asarray(s, dtype=float).reshape(-1), 0.0, path.length)
     n_sub = sub_seg.size
     idx = np.clip(np.searchsorted(sub_s, s, side="right") - 1, 0, n_sub - 1)
-    return _u_of_s(s, idx, sub_u, sub_s, sub_seg, path.breaks, path.coef,
-                   np.asarray(path.weights, dtype=float), _GL_X, _GL_W, ARC_LENGTH_NEWTON_ITERS)
+    return _u_of_s(
+        s,
+        idx,
+        sub_u,
+        sub_s,
+        sub_seg,
+        path.breaks,
+        path.coef,
+        np.asarray(path.weights, dtype=float),
+        _GL_X,
+        _GL_W,
+        ARC_LENGTH_NEWTON_ITERS,
+    )
 
 
 def positions(path, s: np.ndarray) -> np.ndarray:

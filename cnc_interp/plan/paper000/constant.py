@@ -95,6 +95,7 @@ def plan_path_constant(path, joint_map, machine, dt_s: float, settings=None) -> 
     piece per corner-free section (a single piece, start feed 0, cruise V, end feed 0,
     on a path without corners).
     """
+
     def pieces(vcap, wcap, geom, path):
         return constant_pieces(vcap, wcap, geom, path, machine)
 

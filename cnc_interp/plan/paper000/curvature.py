@@ -54,8 +54,9 @@ def _peval(c: np.ndarray, x: np.ndarray) -> np.ndarray:
     return acc
 
 
-def planar_curvature_peaks(p: np.ndarray, x_end: np.ndarray, n_grid: int = 64,
-                           n_bisect: int = 60) -> tuple[np.ndarray, np.ndarray]:
+def planar_curvature_peaks(
+    p: np.ndarray, x_end: np.ndarray, n_grid: int = 64, n_bisect: int = 60
+) -> tuple[np.ndarray, np.ndarray]:
     """Peak curvature of each planar quintic segment from the roots of Eq. 3.
 
     Args:
@@ -99,8 +100,7 @@ def planar_curvature_peaks(p: np.ndarray, x_end: np.ndarray, n_grid: int = 64,
             flo = np.where(same, fm, flo)
             hi = np.where(same, hi, mid)
         root = 0.5 * (lo + hi)
-        kr = np.abs(_peval(pr2, root[:, None])[:, 0]) / (
-            1.0 + _peval(pr1, root[:, None])[:, 0] ** 2) ** 1.5
+        kr = np.abs(_peval(pr2, root[:, None])[:, 0]) / (1.0 + _peval(pr1, root[:, None])[:, 0] ** 2) ** 1.5
         order = np.lexsort((kr, rows))  # per row, the largest root value last
         last = np.r_[rows[order][1:] != rows[order][:-1], True]
         r_rows, r_k, r_x = rows[order][last], kr[order][last], root[order][last]
@@ -116,8 +116,9 @@ def _dcoefs(coef: np.ndarray, order: int) -> list[np.ndarray]:
     return [np.ascontiguousarray(_pder(c, d)) for d in range(order + 1)]
 
 
-def _local_derivs(coef: np.ndarray, seg: np.ndarray, t: np.ndarray, order: int,
-                  dc: list[np.ndarray] | None = None) -> np.ndarray:
+def _local_derivs(
+    coef: np.ndarray, seg: np.ndarray, t: np.ndarray, order: int, dc: list[np.ndarray] | None = None
+) -> np.ndarray:
     """u-derivatives (order+1, K, n) of segment ``seg`` (K,) at local parameter t (K,)."""
     if dc is None:
         dc = _dcoefs(coef, order)
@@ -168,8 +169,12 @@ def general_curvature_peaks(path, n_grid: int = 64) -> np.ndarray:
         lo = np.where(left, lo, x1)
         xn = np.where(left, hi - _GOLD * (hi - lo), lo + _GOLD * (hi - lo))
         fn = kappa(segs, xn)
-        x1, x2, f1, f2 = (np.where(left, xn, x2), np.where(left, x1, xn),
-                          np.where(left, fn, f2), np.where(left, f1, fn))
+        x1, x2, f1, f2 = (
+            np.where(left, xn, x2),
+            np.where(left, x1, xn),
+            np.where(left, fn, f2),
+            np.where(left, f1, fn),
+        )
     return np.maximum(best, np.maximum(f1, f2))
 
 
@@ -215,8 +220,7 @@ def _chain_to_s(qd: np.ndarray, pd: np.ndarray, w: np.ndarray) -> np.ndarray:
     qu, quu, quuu = qd[1], qd[2], qd[3]
     q1 = qu / sig
     q2 = quu / sig**2 - qu * sig_u / sig**3
-    q3 = (quuu / sig**3 - 3.0 * quu * sig_u / sig**4 - qu * sig_uu / sig**4
-          + 3.0 * qu * sig_u**2 / sig**5)
+    q3 = quuu / sig**3 - 3.0 * quu * sig_u / sig**4 - qu * sig_uu / sig**4 + 3.0 * qu * sig_u**2 / sig**5
     return np.stack([qd[0], q1, q2, q3])
 
 
@@ -260,7 +264,7 @@ def segment_geometry(path, joint_map=None, n_samples: int = P000_GEOM_SAMPLES) -
     d = np.nan_to_num(d, nan=0.0)
     ad = np.abs(d[1:]).reshape(3, n_seg, n_samples, n)
     g = ad.max(axis=2) * P000_GEOM_MARGIN
-    first = d[:, ::n_samples]          # (4, n_seg, n) at t = 0 of each segment
+    first = d[:, ::n_samples]  # (4, n_seg, n) at t = 0 of each segment
     last = d[:, n_samples - 1 :: n_samples]  # at t = h of each segment
     jump1 = np.zeros((n_seg + 1, n))
     jump2 = np.zeros((n_seg + 1, n))
@@ -272,5 +276,13 @@ def segment_geometry(path, joint_map=None, n_samples: int = P000_GEOM_SAMPLES) -
         moving_linear = (g[0] > 1e-9) & lin[None, :]
     else:
         moving_linear = g[0] > 1e-9
-    return Geometry(length=length, kappa=curvature_peaks(path), g1=g[0], g2=g[1], g3=g[2],
-                    jump1=jump1, jump2=jump2, moving_linear=moving_linear)
+    return Geometry(
+        length=length,
+        kappa=curvature_peaks(path),
+        g1=g[0],
+        g2=g[1],
+        g3=g[2],
+        jump1=jump1,
+        jump2=jump2,
+        moving_linear=moving_linear,
+    )

@@ -65,9 +65,11 @@ def option(settings, key: str, default: float) -> float:
 
 def shares(settings) -> tuple[float, float, float]:
     """(curv_accel_share, curv_jerk_share, cross_jerk_share) from settings or the defaults."""
-    return (option(settings, "curv_accel_share", P000_CURV_ACCEL_SHARE),
-            option(settings, "curv_jerk_share", P000_CURV_JERK_SHARE),
-            option(settings, "cross_jerk_share", P000_CROSS_JERK_SHARE))
+    return (
+        option(settings, "curv_accel_share", P000_CURV_ACCEL_SHARE),
+        option(settings, "curv_jerk_share", P000_CURV_JERK_SHARE),
+        option(settings, "cross_jerk_share", P000_CROSS_JERK_SHARE),
+    )
 
 
 def _safe_div(num, den):
@@ -97,8 +99,7 @@ def tangential_limits(geom, machine, v: np.ndarray, settings=None) -> tuple[np.n
     amax, jmax = machine.amax[None, :], machine.jmax[None, :]
     a_room = np.maximum(amax - geom.g2 * v**2, 0.0)
     j_room = np.maximum(jmax - geom.g3 * v**3, 0.0)
-    a_t = np.minimum(_safe_div(a_room, geom.g1),
-                     _safe_div(sx * j_room, 3.0 * geom.g2 * v)).min(axis=1)
+    a_t = np.minimum(_safe_div(a_room, geom.g1), _safe_div(sx * j_room, 3.0 * geom.g2 * v)).min(axis=1)
     a0 = _safe_div(amax, geom.g1).min(axis=1)  # a_t at v = 0: an upper bound of a_t
     a_t = np.where(np.isfinite(a_t), a_t, float(machine.amax.min()))
     a0 = np.where(np.isfinite(a0), a0, a_t)

@@ -104,8 +104,9 @@ def _reach(v_known, length, cap, g1, g2, g3, amax, jmax, sx, scale, lo, hi):
 
 @njit(cache=True)
 def _pair(w0, c, w1, g1, g2, g3, amax, jmax, sx, scale, lo, hi):
-    return (_dist(w0, c, g1, g2, g3, amax, jmax, sx, scale, lo, hi)
-            + _dist(c, w1, g1, g2, g3, amax, jmax, sx, scale, lo, hi))
+    return _dist(w0, c, g1, g2, g3, amax, jmax, sx, scale, lo, hi) + _dist(
+        c, w1, g1, g2, g3, amax, jmax, sx, scale, lo, hi
+    )
 
 
 @njit(cache=True)
@@ -123,11 +124,11 @@ def lookahead(first, length, vcap, g1, g2, g3, amax, jmax, sx, scale, wcap):
     for k in range(1, m):
         w[k] = min(w[k], vcap[k - 1], vcap[k])
     for k in range(m - 1, -1, -1):
-        w[k] = min(w[k], _reach(w[k + 1], length[k], w[k], g1, g2, g3, amax, jmax, sx, scale,
-                                first[k], first[k + 1]))
+        w[k] = min(w[k], _reach(w[k + 1], length[k], w[k], g1, g2, g3, amax, jmax, sx, scale, first[k], first[k + 1]))
     for k in range(m):
-        w[k + 1] = min(w[k + 1], _reach(w[k], length[k], w[k + 1], g1, g2, g3, amax, jmax, sx,
-                                        scale, first[k], first[k + 1]))
+        w[k + 1] = min(
+            w[k + 1], _reach(w[k], length[k], w[k + 1], g1, g2, g3, amax, jmax, sx, scale, first[k], first[k + 1])
+        )
     c = np.empty(m)
     a_c = np.empty(m)
     j_c = np.empty(m)
@@ -140,8 +141,7 @@ def lookahead(first, length, vcap, g1, g2, g3, amax, jmax, sx, scale, wcap):
         else:
             for _ in range(P000_BISECT_ITERS):
                 mid = 0.5 * (a + b)
-                if _pair(w[k], mid, w[k + 1], g1, g2, g3, amax, jmax, sx, scale, lo,
-                         hi) <= length[k]:
+                if _pair(w[k], mid, w[k + 1], g1, g2, g3, amax, jmax, sx, scale, lo, hi) <= length[k]:
                     a = mid
                 else:
                     b = mid

@@ -121,8 +121,9 @@ class SegmentProfiles:
         a(t) = sum_i c_i t^i = dv (30 t^2/T^3 - 60 t^3/T^4 + 30 t^4/T^5); zero for T = 0.
         """
         out = np.zeros((self.n_pieces, 2, 5))
-        for ph, (dv, T) in enumerate(((self.v_cruise - self.v_start, self.t_acc),
-                                      (self.v_end - self.v_cruise, self.t_dec))):
+        for ph, (dv, T) in enumerate(
+            ((self.v_cruise - self.v_start, self.t_acc), (self.v_end - self.v_cruise, self.t_dec))
+        ):
             ok = T > 0
             Ts = np.where(ok, T, 1.0)
             out[:, ph, 2] = np.where(ok, 30.0 * dv / Ts**3, 0.0)
@@ -155,13 +156,12 @@ class SegmentProfiles:
         m = self.n_pieces
         d_acc = 0.5 * (self.v_start + self.v_cruise) * self.t_acc
         d_cru = self.v_cruise * self.t_cruise
-        t0 = np.stack([self.t_start, self.t_start + self.t_acc,
-                       self.t_start + self.t_acc + self.t_cruise], axis=1).reshape(3 * m)
-        s0 = np.stack([self.s_start, self.s_start + d_acc, self.s_start + d_acc + d_cru],
-                      axis=1).reshape(3 * m)
+        t0 = np.stack(
+            [self.t_start, self.t_start + self.t_acc, self.t_start + self.t_acc + self.t_cruise], axis=1
+        ).reshape(3 * m)
+        s0 = np.stack([self.s_start, self.s_start + d_acc, self.s_start + d_acc + d_cru], axis=1).reshape(3 * m)
         v0 = np.stack([self.v_start, self.v_cruise, self.v_cruise], axis=1).reshape(3 * m)
-        dv = np.stack([self.v_cruise - self.v_start, np.zeros(m), self.v_end - self.v_cruise],
-                      axis=1).reshape(3 * m)
+        dv = np.stack([self.v_cruise - self.v_start, np.zeros(m), self.v_end - self.v_cruise], axis=1).reshape(3 * m)
         T = np.stack([self.t_acc, self.t_cruise, self.t_dec], axis=1).reshape(3 * m)
         return t0, s0, v0, dv, T
 
@@ -180,8 +180,7 @@ class SegmentProfiles:
         return s, v, a
 
 
-def build_profiles(planner: str, seg_first, seg_last, s_start, length, w0, c, w1,
-                   a_t, j_t) -> SegmentProfiles:
+def build_profiles(planner: str, seg_first, seg_last, s_start, length, w0, c, w1, a_t, j_t) -> SegmentProfiles:
     """Profiles of pieces with junction feeds w0 -> cruise c -> w1 under limits (a_t, j_t).
 
     Every piece must be feasible (transition distances <= length); the cruise time
@@ -196,13 +195,20 @@ def build_profiles(planner: str, seg_first, seg_last, s_start, length, w0, c, w1
     t_cru = np.where(c > 0, rest / np.where(c > 0, c, 1.0), 0.0)
     dur = t_acc + t_cru + t_dec
     t_start = np.concatenate(([0.0], np.cumsum(dur)[:-1]))
-    return SegmentProfiles(planner=planner, seg_first=np.asarray(seg_first, dtype=np.int64),
-                           seg_last=np.asarray(seg_last, dtype=np.int64),
-                           s_start=np.asarray(s_start, dtype=float),
-                           length=np.asarray(length, dtype=float), t_start=t_start,
-                           v_start=np.asarray(w0, dtype=float), v_cruise=np.asarray(c, dtype=float),
-                           v_end=np.asarray(w1, dtype=float), t_acc=t_acc, t_cruise=t_cru,
-                           t_dec=t_dec)
+    return SegmentProfiles(
+        planner=planner,
+        seg_first=np.asarray(seg_first, dtype=np.int64),
+        seg_last=np.asarray(seg_last, dtype=np.int64),
+        s_start=np.asarray(s_start, dtype=float),
+        length=np.asarray(length, dtype=float),
+        t_start=t_start,
+        v_start=np.asarray(w0, dtype=float),
+        v_cruise=np.asarray(c, dtype=float),
+        v_end=np.asarray(w1, dtype=float),
+        t_acc=t_acc,
+        t_cruise=t_cru,
+        t_dec=t_dec,
+    )
 
 
 def stretch_to_period(prof: SegmentProfiles, dt_s: float) -> SegmentProfiles:
@@ -222,11 +228,21 @@ def stretch_to_period(prof: SegmentProfiles, dt_s: float) -> SegmentProfiles:
     t_acc, t_cru, t_dec = prof.t_acc * f, prof.t_cruise * f, prof.t_dec * f
     dur = t_acc + t_cru + t_dec
     t_start = np.concatenate(([0.0], np.cumsum(dur)[:-1]))
-    return SegmentProfiles(planner=prof.planner, seg_first=prof.seg_first, seg_last=prof.seg_last,
-                           s_start=prof.s_start, length=prof.length, t_start=t_start,
-                           v_start=prof.v_start / f, v_cruise=prof.v_cruise / f,
-                           v_end=prof.v_end / f, t_acc=t_acc, t_cruise=t_cru, t_dec=t_dec,
-                           shape=prof.shape)
+    return SegmentProfiles(
+        planner=prof.planner,
+        seg_first=prof.seg_first,
+        seg_last=prof.seg_last,
+        s_start=prof.s_start,
+        length=prof.length,
+        t_start=t_start,
+        v_start=prof.v_start / f,
+        v_cruise=prof.v_cruise / f,
+        v_end=prof.v_end / f,
+        t_acc=t_acc,
+        t_cruise=t_cru,
+        t_dec=t_dec,
+        shape=prof.shape,
+    )
 
 
 def n_periods(prof: SegmentProfiles, dt_s: float) -> int:

@@ -34,9 +34,14 @@ def planar_path(theta, origin, x_end, p, feed_mm_s=np.inf, axes: str = "XY", lin
     breaks = np.concatenate(([0.0], np.cumsum(x_end)))
     feed = np.broadcast_to(np.asarray(feed_mm_s, dtype=float), (n,))
     planar = PlanarSegments(plane=(0, 1), theta=theta, origin=origin, x_end=x_end, p=p)
-    return Path(axes=axes, breaks=breaks, coef=coef,
-                line=np.arange(1, n + 1) if line is None else line,
-                feed_mm_s=feed, planar=planar)
+    return Path(
+        axes=axes,
+        breaks=breaks,
+        coef=coef,
+        line=np.arange(1, n + 1) if line is None else line,
+        feed_mm_s=feed,
+        planar=planar,
+    )
 
 
 def arc_quintic(radius: float, angle_rad: float) -> tuple[float, np.ndarray]:
@@ -45,7 +50,7 @@ def arc_quintic(radius: float, angle_rad: float) -> tuple[float, np.ndarray]:
     c = 2.0 * radius * math.sin(half)
     sgn = 1.0 if angle_rad > 0 else -1.0
     # a left turn starts below the chord and bends up: p'(0) = -tan(half), p'' > 0
-    d1 = -sgn * math.tan(half)          # p'(0); p'(c) = -d1
+    d1 = -sgn * math.tan(half)  # p'(0); p'(c) = -d1
     d2 = sgn / (radius * math.cos(half) ** 3)  # p''(0) = p''(c)
     rows = []
     rhs = []
@@ -92,8 +97,13 @@ def chain(pieces, start=(0.0, 0.0), heading_rad: float = 0.0, feed_mm_s=np.inf, 
 
 def circle(radius: float, turns: float = 1.0, n_per_turn: int = 12, feed_mm_s=np.inf):
     """A full circle (or several turns) of ``radius`` starting at (radius, 0) heading +Y."""
-    return chain([("arc", radius, 2 * math.pi * turns)], start=(radius, 0.0),
-                 heading_rad=math.pi / 2, feed_mm_s=feed_mm_s, n_arc=n_per_turn)
+    return chain(
+        [("arc", radius, 2 * math.pi * turns)],
+        start=(radius, 0.0),
+        heading_rad=math.pi / 2,
+        feed_mm_s=feed_mm_s,
+        n_arc=n_per_turn,
+    )
 
 
 def hermite_path(u_nodes, d0, d1, d2, axes: str, feed_mm_s=np.inf):
@@ -117,17 +127,21 @@ def hermite_path(u_nodes, d0, d1, d2, axes: str, feed_mm_s=np.inf):
     r1 = e1 - (p1 + p2 * hh)
     r2 = e2 - p2
     # rows: t^3, t^4, t^5 and their first two derivatives at t = h
-    m = np.stack([np.stack([h**3, h**4, h**5], -1),
-                  np.stack([3 * h**2, 4 * h**3, 5 * h**4], -1),
-                  np.stack([6 * h, 12 * h**2, 20 * h**3], -1)], 1)  # (n_seg, 3, 3)
+    m = np.stack(
+        [
+            np.stack([h**3, h**4, h**5], -1),
+            np.stack([3 * h**2, 4 * h**3, 5 * h**4], -1),
+            np.stack([6 * h, 12 * h**2, 20 * h**3], -1),
+        ],
+        1,
+    )  # (n_seg, 3, 3)
     rhs = np.stack([r0, r1, r2], 1)  # (n_seg, 3, n)
     coef[:, 3:] = np.linalg.solve(m, rhs)
     feed = np.broadcast_to(np.asarray(feed_mm_s, dtype=float), (n_seg,))
     return Path(axes=axes, breaks=u, coef=coef, line=np.arange(1, n_seg + 1), feed_mm_s=feed)
 
 
-def bump(height: float = 3.0, width: float = 2.0, half_span: float = 60.0, n_seg: int = 120,
-         feed_mm_s=np.inf):
+def bump(height: float = 3.0, width: float = 2.0, half_span: float = 60.0, n_seg: int = 120, feed_mm_s=np.inf):
     """G2 path y = height exp(-(x/width)^2) on |x| <= half_span: long straights, one tight bump.
 
     Peak curvature 2 height / width^2 at x = 0.
@@ -140,6 +154,7 @@ def bump(height: float = 3.0, width: float = 2.0, half_span: float = 60.0, n_seg
             y = [e, -2 * u / width**2 * e, (4 * u * u / width**4 - 2 / width**2) * e][k]
             xs = [u, np.ones_like(u), np.zeros_like(u)][k]
             return np.stack([xs, y], -1)
+
         return g
 
     return hermite_path(x, f(0), f(1), f(2), "XY", feed_mm_s=feed_mm_s)

@@ -50,14 +50,18 @@ def _band(settings) -> float:
 def rest_plan(path, joint_map, planner: str) -> PathPlan:
     """The plan of a path with (numerically) zero length: one sample at its start."""
     s = np.zeros(1)
-    return PathPlan(s=s, q=joint_positions(path, joint_map, s), status="ok", profiles=None,
-                    stats={"planner": planner, "replans": 0, "n_seg": int(path.n_seg)})
+    return PathPlan(
+        s=s,
+        q=joint_positions(path, joint_map, s),
+        status="ok",
+        profiles=None,
+        stats={"planner": planner, "replans": 0, "n_seg": int(path.n_seg)},
+    )
 
 
 def check_axes(q_probe: np.ndarray, machine) -> None:
     if q_probe.shape[-1] != machine.n_axes:
-        raise PlanError(f"path has {q_probe.shape[-1]} joints but machine "
-                        f"'{machine.name}' has {machine.n_axes} axes")
+        raise PlanError(f"path has {q_probe.shape[-1]} joints but machine '{machine.name}' has {machine.n_axes} axes")
 
 
 def plan_path_variable(path, joint_map, machine, dt_s: float, settings=None) -> PathPlan:
@@ -112,10 +116,10 @@ def plan_grouped(path, joint_map, machine, dt_s: float, settings, pieces, planne
         last = np.r_[first[1:] - 1, n - 1]
         glen = np.add.reduceat(geom.length, first)
         gw = np.r_[wcap[first], 0.0]
-        w, c, a_t, j_t = lookahead(np.r_[first, n], glen, gcap, geom.g1, geom.g2, geom.g3,
-                                   machine.amax, machine.jmax, sx, ft, gw)
-        prof = build_profiles(planner, first, last, path.s_breaks[first], glen,
-                              w[:-1], c, w[1:], a_t, j_t)
+        w, c, a_t, j_t = lookahead(
+            np.r_[first, n], glen, gcap, geom.g1, geom.g2, geom.g3, machine.amax, machine.jmax, sx, ft, gw
+        )
+        prof = build_profiles(planner, first, last, path.s_breaks[first], glen, w[:-1], c, w[1:], a_t, j_t)
         prof = stretch_to_period(prof, dt_s)
         if prof.duration_s / dt_s > P000_MAX_SAMPLES:
             k = int(np.argmin(vcap))
@@ -123,7 +127,8 @@ def plan_grouped(path, joint_map, machine, dt_s: float, settings, pieces, planne
                 f"{planner} feed plan would take {prof.duration_s:.3g} s: the feed must drop to "
                 f"{vcap[k]:.3g} mm/s on the segment ending at line {int(path.line[k])} "
                 f"(curvature {geom.kappa[k]:.3g} 1/mm over {geom.length[k]:.3g} mm); "
-                f"the path is degenerate there")
+                f"the path is degenerate there"
+            )
         s, q = sample_profile(path, joint_map, prof, dt_s)
         r = sample_ratios(q, dt_s, machine)
         if r.max(initial=0.0) <= limit:
@@ -133,13 +138,20 @@ def plan_grouped(path, joint_map, machine, dt_s: float, settings, pieces, planne
         fv[bad] *= P000_REPLAN_FEED_FACTOR
         ft[bad] *= P000_REPLAN_FEED_FACTOR**2
     else:
-        raise PlanError(f"{planner} feed plan still exceeds a limit after {P000_MAX_REPLANS} "
-                        f"replans (worst ratio {r.max():.6g})")
+        raise PlanError(
+            f"{planner} feed plan still exceeds a limit after {P000_MAX_REPLANS} replans (worst ratio {r.max():.6g})"
+        )
     worst = worst_ratio(q, dt_s, machine)
     if worst > limit:
         raise PlanError(f"{planner} feed plan fails verify (worst ratio {worst:.6g})")
-    stats = {"planner": planner, "replans": it, "n_seg": int(n), "n_pieces": int(prof.n_pieces),
-             "duration_s": float((s.size - 1) * dt_s), "worst_ratio": worst,
-             "max_feed_mm_s": float(prof.v_cruise.max(initial=0.0)),
-             "min_cruise_mm_s": float(prof.v_cruise.min())}
+    stats = {
+        "planner": planner,
+        "replans": it,
+        "n_seg": int(n),
+        "n_pieces": int(prof.n_pieces),
+        "duration_s": float((s.size - 1) * dt_s),
+        "worst_ratio": worst,
+        "max_feed_mm_s": float(prof.v_cruise.max(initial=0.0)),
+        "min_cruise_mm_s": float(prof.v_cruise.min()),
+    }
     return PathPlan(s=s, q=q, status="ok", profiles=prof, stats=stats)
