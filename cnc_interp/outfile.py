@@ -239,6 +239,16 @@ def watch_interrupts() -> None:
     if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "sigwait"):
         return
     signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    # the interrupt may land in a callback (an import lock's weakref, a __del__), where
+    # Python can only print it as "Exception ignored" with a traceback; the watcher ends the
+    # process anyway, so that report is noise on the user's terminal
+    default_hook = sys.unraisablehook
+
+    def quiet_interrupt(unraisable) -> None:
+        if not (_INTERRUPTED.is_set() and issubclass(unraisable.exc_type, KeyboardInterrupt)):
+            default_hook(unraisable)
+
+    sys.unraisablehook = quiet_interrupt
 
     def watch() -> None:
         import _thread

@@ -169,7 +169,8 @@ def _build_mapped(path, joint_map, tol: float, max_depth: int):
     K = _kernels()
     tol_in, sc_in = tol, 1.0
     for _ in range(VPOP_TABLE_MAX_TRIES):
-        ua, ub, seg, dep, ds, off, qc, e_loc = _refine_mapped(path, joint_map, tol_in, sc_in, max_depth)
+        ua, ub, seg, dep, ds, off, qc, e_loc = _refine_mapped(path, joint_map, tol_in, sc_in,
+                                                              max_depth)
         if ds.size == 0 or not ds.sum() > 0:
             _no_length(path)
         scale = path.length / ds.sum()
@@ -191,9 +192,8 @@ def _build_mapped(path, joint_map, tol: float, max_depth: int):
 
 
 def _no_length(path):
-    raise PlanError(
-        f"bug: the path ending at line {int(path.line[-1])} has length {path.length:g} but no measurable arc length"
-    )
+    raise PlanError(f"bug: the path ending at line {int(path.line[-1])} has length "
+                    f"{path.length:g} but no measurable arc length")
 
 
 class JointTable:
@@ -219,18 +219,9 @@ class JointTable:
         if identity:  # one compiled call (per-path overhead matters: CAM has 1e5 paths)
             K = _kernels()
             status, u, S, C, max_err, qend = K.build_identity(
-                path.coef,
-                path.breaks,
-                path.s_breaks,
-                path.weights,
-                float(path.length),
-                float(tol),
-                max_depth,
-                float(VPOP_TABLE_MAX_PIECE),
-                _GL_X,
-                _GL_W,
-                VPOP_TABLE_MAX_TRIES,
-            )
+                path.coef, path.breaks, path.s_breaks, path.weights, float(path.length),
+                float(tol), max_depth, float(VPOP_TABLE_MAX_PIECE), _GL_X, _GL_W,
+                VPOP_TABLE_MAX_TRIES)
             if status == K.NO_LENGTH:
                 _no_length(path)
             finite = status != K.NOT_FINITE
@@ -240,10 +231,8 @@ class JointTable:
             max_err = float(err.max()) if err.size else 0.0
             finite = bool(np.all(np.isfinite(C)))
         if not finite:
-            raise PlanError(
-                f"bug: the arc-length table of the path ending at line "
-                f"{int(path.line[-1])} is not finite (a point of zero speed?)"
-            )
+            raise PlanError(f"bug: the arc-length table of the path ending at line "
+                            f"{int(path.line[-1])} is not finite (a point of zero speed?)")
         self.u = u
         self.S = S
         self.C = C
@@ -252,12 +241,14 @@ class JointTable:
         self.max_err = float(max_err)
         self.length = float(path.length)
 
+
     def curvature_bounds(self, al: np.ndarray, jl: np.ndarray):
         """Per piece: max_i |q_ss,i|/al_i, max_i |q_sss,i|/jl_i and max_i 3|q_ss,i|/jl_i,
         sampled at five points of the piece with a 25% margin (step units)."""
         al = np.ascontiguousarray(al, dtype=float)
         jl = np.ascontiguousarray(jl, dtype=float)
         return _kernels().curvature_bounds(self.S, self.C, al, jl)
+
 
     def speed_bounds(self, vl: np.ndarray, path, feed_step: np.ndarray) -> np.ndarray:
         """Per piece: the largest of max_i |q_s,i|/vl_i (sampled, 2% margin) and
@@ -307,9 +298,7 @@ def _machine_consts(machine, dt: float) -> dict:
         jl0=np.ascontiguousarray(machine.jmax * dt**3 * shrink, dtype=float),
         jl_floor=np.ascontiguousarray(0.5 * machine.jmax * dt**3, dtype=float),
         vmax=np.ascontiguousarray(machine.vmax, dtype=float),
-        ramp=ramp,
-        brake_cap=8 * int(ramp / dt) + 4096,
-    )
+        ramp=ramp, brake_cap=8 * int(ramp / dt) + 4096)
 
 
 def _fast(settings) -> bool:
@@ -336,37 +325,18 @@ class _Prepared:
         self.trivial = False
         identity = joint_map is None or getattr(joint_map, "is_identity", False)
         if identity and table is None:
-            r = D.prepare_identity(
-                path.coef,
-                path.breaks,
-                path.s_breaks,
-                path.weights,
-                float(path.length),
-                path.feed_mm_s,
-                mc["vl0"],
-                mc["al0"],
-                mc["jl0"],
-                mc["jl_floor"],
-                mc["vmax"],
-                mc["ramp"],
-                dt,
-                mc["brake_cap"],
-                VPOP_LOOKBACK_BRAKE_RUNS,
-                mc["shrink"],
-                float(VPOP_TABLE_TOL),
-                VPOP_TABLE_MAX_ROUNDS - 1,
-                float(VPOP_TABLE_MAX_PIECE),
-                _GL_X,
-                _GL_W,
-                VPOP_TABLE_MAX_TRIES,
-                float(VPOP_ROUNDING_ULPS),
-                float(VPOP_BRAKE_JERK_FRACTION),
-                float(VPOP_AIM_GAP_JERK_STEPS),
-                float(VPOP_MIN_LENGTH),
-            )
+            r = D.prepare_identity(path.coef, path.breaks, path.s_breaks, path.weights,
+                                   float(path.length), path.feed_mm_s, mc["vl0"], mc["al0"],
+                                   mc["jl0"], mc["jl_floor"], mc["vmax"], mc["ramp"], dt,
+                                   mc["brake_cap"], VPOP_LOOKBACK_BRAKE_RUNS, mc["shrink"],
+                                   float(VPOP_TABLE_TOL), VPOP_TABLE_MAX_ROUNDS - 1,
+                                   float(VPOP_TABLE_MAX_PIECE), _GL_X, _GL_W, VPOP_TABLE_MAX_TRIES,
+                                   float(VPOP_ROUNDING_ULPS), float(VPOP_BRAKE_JERK_FRACTION),
+                                   float(VPOP_AIM_GAP_JERK_STEPS), float(VPOP_MIN_LENGTH))
             status = r[0]
             if status == D.PREP_NOT_FINITE_PATH:
-                raise PlanError(f"bug: the fitted path ending at line {int(path.line[-1])} is not finite")
+                raise PlanError(f"bug: the fitted path ending at line {int(path.line[-1])} is "
+                                "not finite")
             if status == D.PREP_TRIVIAL:
                 self.trivial = True
                 self.q0 = _positions(path, path.breaks[:1], None)
@@ -374,39 +344,15 @@ class _Prepared:
             if status == D.PREP_NO_LENGTH:
                 _no_length(path)
             if status == D.PREP_TABLE_NOT_FINITE:
-                raise PlanError(
-                    f"bug: the arc-length table of the path ending at line "
-                    f"{int(path.line[-1])} is not finite (a point of zero speed?)"
-                )
+                raise PlanError(f"bug: the arc-length table of the path ending at line "
+                                f"{int(path.line[-1])} is not finite (a point of zero speed?)")
             if status == D.PREP_JERK_TOO_SMALL:
-                raise PlanError(
-                    f"the jerk limits are too small for dt = {dt:g} s at positions "
-                    f"of {r[-1]:g} mm/deg: float64 cannot resolve them"
-                )
-            (
-                _,
-                self.S,
-                self.C_axis_major,
-                self.qend,
-                self.qstart,
-                self.vl,
-                self.al,
-                self.jl,
-                self.js,
-                self.FB,
-                self.FV,
-                self.K2,
-                self.K3,
-                self.K23,
-                self.KV,
-                self.tol,
-                self.gap_tol,
-                self.est,
-                self.max_steps,
-                self.floor_h,
-                self.pieces,
-                self.max_err,
-            ) = r
+                raise PlanError(f"the jerk limits are too small for dt = {dt:g} s at positions "
+                                f"of {r[-1]:g} mm/deg: float64 cannot resolve them")
+            (_, self.S, self.C_axis_major, self.qend, self.qstart, self.vl, self.al, self.jl,
+             self.js, self.FB, self.FV, self.K2, self.K3, self.K23, self.KV, self.tol,
+             self.gap_tol, self.est, self.max_steps, self.floor_h, self.pieces,
+             self.max_err) = r
             self.L = float(path.length)
             return
         self._prepare_mapped(path, joint_map, machine, dt, mc, table)
@@ -433,16 +379,15 @@ class _Prepared:
         al = np.ascontiguousarray(mc["al0"] - 4.0 * margin)
         jl = np.ascontiguousarray(mc["jl0"] - 8.0 * margin)
         if np.any(jl <= mc["jl_floor"]):
-            raise PlanError(
-                f"the jerk limits are too small for dt = {dt:g} s at positions of "
-                f"{q_scale:g} mm/deg: float64 cannot resolve them"
-            )
+            raise PlanError(f"the jerk limits are too small for dt = {dt:g} s at positions of "
+                            f"{q_scale:g} mm/deg: float64 cannot resolve them")
         self.vl, self.al, self.jl = vl, al, jl
         L = table.length
         self.L = L
         FB = np.ascontiguousarray(path.s_breaks, dtype=float).copy()
         FB[-1] = L
-        FV = np.where(np.isfinite(path.feed_mm_s) & (path.feed_mm_s > 0), path.feed_mm_s * mc["shrink"], 1e300)
+        FV = np.where(np.isfinite(path.feed_mm_s) & (path.feed_mm_s > 0),
+                      path.feed_mm_s * mc["shrink"], 1e300)
         self.FB, self.FV = FB, np.ascontiguousarray(FV, dtype=float)
         # rough duration: travel at the slowest of feed and axis speeds, plus ramps
         dq = np.abs(table.qend - table.qstart)
@@ -453,7 +398,8 @@ class _Prepared:
         self.floor_h = VPOP_LOOKBACK_BRAKE_RUNS * self.brake_cap
         self.tol = max(4.0 * np.spacing(max(L, 1.0)), 1e-7 * float(np.min(jl)))
         self.js = np.ascontiguousarray(jl * VPOP_BRAKE_JERK_FRACTION)
-        self.K2, self.K3, self.K23 = (core.range_max_table(x) for x in table.curvature_bounds(al, jl))
+        self.K2, self.K3, self.K23 = (core.range_max_table(x)
+                                      for x in table.curvature_bounds(al, jl))
         self.KV = core.range_max_table(table.speed_bounds(vl, path, self.FV * dt))
         self.gap_tol = VPOP_AIM_GAP_JERK_STEPS * float(np.min(jl))
         self.S = table.S
@@ -478,99 +424,30 @@ class _Loop:
         self.D = D
         self.p = prep
         room = prep.brake_cap + 8
-        (
-            self.sh,
-            self.qh,
-            self.st,
-            self.cs,
-            self.cq,
-            self.bs,
-            self.bq,
-            self.stats,
-            self.ds,
-            self.ck_st,
-            self.ck_cs,
-            self.ck_cq,
-            self.ck_sh,
-            self.ck_qh,
-            self.max_cap,
-        ) = D.new_loop(
-            prep.n,
-            prep.qstart,
-            prep.est,
-            prep.brake_cap,
-            prep.floor_h,
-            room,
-            0 if window is None else max(1, int(window)),
-            VPOP_CHECKPOINT_SAMPLES,
-        )
+        (self.sh, self.qh, self.st, self.cs, self.cq, self.bs, self.bq, self.stats, self.ds,
+         self.ck_st, self.ck_cs, self.ck_cq, self.ck_sh, self.ck_qh, self.max_cap) = D.new_loop(
+            prep.n, prep.qstart, prep.est, prep.brake_cap, prep.floor_h, room,
+            0 if window is None else max(1, int(window)), VPOP_CHECKPOINT_SAMPLES)
         self.ds[D.DS_NEXT_CK] = VPOP_CHECKPOINT_SAMPLES
         self.ds[D.DS_FAST] = 1 if prep.fast else 0
-        D.checkpoint(
-            self.sh,
-            self.qh,
-            self.st,
-            self.cs,
-            self.cq,
-            self.ds,
-            self.ck_st,
-            self.ck_cs,
-            self.ck_cq,
-            self.ck_sh,
-            self.ck_qh,
-            True,
-        )
+        D.checkpoint(self.sh, self.qh, self.st, self.cs, self.cq, self.ds, self.ck_st,
+                     self.ck_cs, self.ck_cq, self.ck_sh, self.ck_qh, True)
 
     def run(self) -> int:
         D, p = self.D, self.p
         res, self.sh, self.qh = D.drive(
-            p.S,
-            p.C_axis_major,
-            p.qend,
-            p.vl,
-            p.al,
-            p.jl,
-            p.js,
-            p.dt,
-            p.L,
-            p.FB,
-            p.FV,
-            p.tol,
-            p.max_steps,
-            p.K2,
-            p.K3,
-            p.K23,
-            p.KV,
-            p.gap_tol,
-            p.floor_h,
-            VPOP_EASY_FRACTION,
-            VPOP_CHAIN_SEQUENTIAL,
-            VPOP_CHECKPOINT_SAMPLES,
-            self.sh,
-            self.qh,
-            self.st,
-            self.cs,
-            self.cq,
-            self.bs,
-            self.bq,
-            self.stats,
-            self.ds,
-            self.ck_st,
-            self.ck_cs,
-            self.ck_cq,
-            self.ck_sh,
-            self.ck_qh,
-            self.max_cap,
-        )
+            p.S, p.C_axis_major, p.qend, p.vl, p.al, p.jl, p.js, p.dt, p.L, p.FB, p.FV, p.tol,
+            p.max_steps, p.K2, p.K3, p.K23, p.KV, p.gap_tol, p.floor_h, VPOP_EASY_FRACTION,
+            VPOP_CHAIN_SEQUENTIAL, VPOP_CHECKPOINT_SAMPLES, self.sh, self.qh, self.st, self.cs,
+            self.cq, self.bs, self.bq, self.stats, self.ds, self.ck_st, self.ck_cs, self.ck_cq,
+            self.ck_sh, self.ck_qh, self.max_cap)
         if res == D.FAILED:
             core = _core()
             status = int(self.ds[D.DS_STATUS])
             k = int(self.st[core.ST_K])
             what = {core.STUCK: "made no progress", core.INFEASIBLE: "found no feasible step"}[status]
-            raise VpopFailed(
-                f"VPOp {what} on the path ending at line {int(p.path.line[-1])} "
-                f"(s = {self.sh[max(k - 1, 0)]:.6g} of {p.L:.6g})"
-            )
+            raise VpopFailed(f"VPOp {what} on the path ending at line {int(p.path.line[-1])} "
+                             f"(s = {self.sh[max(k - 1, 0)]:.6g} of {p.L:.6g})")
         return res
 
     def take(self, upto: int) -> tuple[np.ndarray, np.ndarray]:
@@ -583,20 +460,13 @@ class _Loop:
 
 
 def _final_stats(samples: int, st, exact: bool, pieces: int, max_err: float) -> dict:
-    return {
-        "samples": int(samples),
-        "backtracks": int(st[0]),
-        "brake_runs": int(st[1]),
-        "brake_steps": int(st[2]),
-        "max_steps": int(st[3]),
-        "aim_runs": int(st[4]),
-        "exact": bool(exact),
-        "table_pieces": int(pieces),
-        "table_err": float(max_err),
-    }
+    return {"samples": int(samples), "backtracks": int(st[0]), "brake_runs": int(st[1]),
+            "brake_steps": int(st[2]), "max_steps": int(st[3]), "aim_runs": int(st[4]),
+            "exact": bool(exact), "table_pieces": int(pieces), "table_err": float(max_err)}
 
 
-def iter_path_plan_vpop(path, joint_map, machine, dt_s: float, settings=None, window: int | None = VPOP_STREAM_WINDOW):
+def iter_path_plan_vpop(path, joint_map, machine, dt_s: float, settings=None,
+                        window: int | None = VPOP_STREAM_WINDOW):
     """VPOp on one path as a stream of ``PathPlan`` chunks (see ``plan.base``).
 
     Samples are handed out as soon as no later step can change them: the backtracking
@@ -614,7 +484,8 @@ def iter_path_plan_vpop(path, joint_map, machine, dt_s: float, settings=None, wi
     yield from iter_prepared(prep, joint_map, machine, settings, window)
 
 
-def iter_prepared(prep: "_Prepared", joint_map, machine, settings, window: int | None, safe_fallback: bool = True):
+def iter_prepared(prep: "_Prepared", joint_map, machine, settings, window: int | None,
+                  safe_fallback: bool = True):
     """``iter_path_plan_vpop`` on a prepared path (``_Prepared``); without
     ``safe_fallback`` a failure raises ``VpopFailed`` (the caller chooses the fallback)."""
     path = prep.path
@@ -642,7 +513,8 @@ def iter_prepared(prep: "_Prepared", joint_map, machine, settings, window: int |
     last = D.end_index(loop.sh, ds[D.DS_BASE], ds[D.DS_HANDED], ds[D.DS_END], prep.L)
     s, q = loop.take(int(last) + 1)
     q[-1] = prep.qend
-    yield PathPlan(s=s, q=q, stats=_final_stats(last + 1, loop.stats, ds[D.DS_FAST] == 0, prep.pieces, prep.max_err))
+    yield PathPlan(s=s, q=q, stats=_final_stats(last + 1, loop.stats, ds[D.DS_FAST] == 0,
+                                                prep.pieces, prep.max_err))
 
 
 def _safe_fallback(path, joint_map, machine, dt, settings, why: str) -> PathPlan:
@@ -679,8 +551,7 @@ class VpopRun:
         core, p = self.core, self.p
         room = p.brake_cap + 8
         (_, _, st, cs, cq, bs, bq, stats, ds, ck_st, ck_cs, ck_cq, ck_sh, ck_qh, _) = D.new_loop(
-            p.n, p.qstart, 1, p.brake_cap, p.floor_h, room, 0, VPOP_CHECKPOINT_SAMPLES
-        )
+            p.n, p.qstart, 1, p.brake_cap, p.floor_h, room, 0, VPOP_CHECKPOINT_SAMPLES)
         st[core.ST_K] = k0
         st[core.ST_B] = b0
         ds[D.DS_NEXT_CK] = k0 + VPOP_CHECKPOINT_SAMPLES
@@ -693,44 +564,10 @@ class VpopRun:
             qh = np.concatenate((qh, np.zeros((grow - qh.shape[0], p.n))))
         D.checkpoint(sh, qh, st, cs, cq, ds, ck_st, ck_cs, ck_cq, ck_sh, ck_qh, True)
         res, sh, qh = D.drive(
-            p.S,
-            p.C_axis_major,
-            p.qend,
-            p.vl,
-            p.al,
-            p.jl,
-            p.js,
-            p.dt,
-            p.L,
-            p.FB,
-            p.FV,
-            p.tol,
-            p.max_steps,
-            p.K2,
-            p.K3,
-            p.K23,
-            p.KV,
-            p.gap_tol,
-            p.floor_h,
-            VPOP_EASY_FRACTION,
-            VPOP_CHAIN_SEQUENTIAL,
-            VPOP_CHECKPOINT_SAMPLES,
-            sh,
-            qh,
-            st,
-            cs,
-            cq,
-            bs,
-            bq,
-            stats,
-            ds,
-            ck_st,
-            ck_cs,
-            ck_cq,
-            ck_sh,
-            ck_qh,
-            0,
-        )
+            p.S, p.C_axis_major, p.qend, p.vl, p.al, p.jl, p.js, p.dt, p.L, p.FB, p.FV, p.tol,
+            p.max_steps, p.K2, p.K3, p.K23, p.KV, p.gap_tol, p.floor_h, VPOP_EASY_FRACTION,
+            VPOP_CHAIN_SEQUENTIAL, VPOP_CHECKPOINT_SAMPLES, sh, qh, st, cs, cq, bs, bq, stats,
+            ds, ck_st, ck_cs, ck_cq, ck_sh, ck_qh, 0)
         self.fast = ds[D.DS_FAST] != 0
         self.stats = stats
         if res == D.FAILED:
@@ -738,7 +575,8 @@ class VpopRun:
         return core.OK, int(ds[D.DS_END]), sh, qh
 
 
-def plan_many_vpop(paths, machine, dt_s: float, settings=None, long_samples: int = VPOP_BATCH_MAX_SAMPLES):
+def plan_many_vpop(paths, machine, dt_s: float, settings=None,
+                   long_samples: int = VPOP_BATCH_MAX_SAMPLES):
     """VPOp on consecutive paths whose joints are the program axes (no kinematics, or
     rapids), in one compiled call: the same samples as ``iter_path_plan_vpop`` for each.
     Returns one ``PathPlan`` per path, or ``None`` for a path left to
@@ -760,39 +598,13 @@ def plan_many_vpop(paths, machine, dt_s: float, settings=None, long_samples: int
     lengths = np.array([p.length for p in paths], dtype=float)
     feed = np.concatenate([p.feed_mm_s for p in paths])
     done, off, s_all, q_all, pstats, perr = D.plan_identity_batch(
-        coef,
-        breaks,
-        s_breaks,
-        weights,
-        lengths,
-        feed,
-        seg_off,
-        mc["vl0"],
-        mc["al0"],
-        mc["jl0"],
-        mc["jl_floor"],
-        mc["vmax"],
-        mc["ramp"],
-        dt,
-        mc["brake_cap"],
-        VPOP_LOOKBACK_BRAKE_RUNS,
-        mc["shrink"],
-        float(VPOP_TABLE_TOL),
-        VPOP_TABLE_MAX_ROUNDS - 1,
-        float(VPOP_TABLE_MAX_PIECE),
-        _GL_X,
-        _GL_W,
-        VPOP_TABLE_MAX_TRIES,
-        float(VPOP_ROUNDING_ULPS),
-        float(VPOP_BRAKE_JERK_FRACTION),
-        float(VPOP_AIM_GAP_JERK_STEPS),
-        float(VPOP_MIN_LENGTH),
-        VPOP_EASY_FRACTION,
-        VPOP_CHAIN_SEQUENTIAL,
-        VPOP_CHECKPOINT_SAMPLES,
-        _fast(settings),
-        int(long_samples),
-    )
+        coef, breaks, s_breaks, weights, lengths, feed, seg_off, mc["vl0"], mc["al0"],
+        mc["jl0"], mc["jl_floor"], mc["vmax"], mc["ramp"], dt, mc["brake_cap"],
+        VPOP_LOOKBACK_BRAKE_RUNS, mc["shrink"], float(VPOP_TABLE_TOL), VPOP_TABLE_MAX_ROUNDS - 1,
+        float(VPOP_TABLE_MAX_PIECE), _GL_X, _GL_W, VPOP_TABLE_MAX_TRIES, float(VPOP_ROUNDING_ULPS),
+        float(VPOP_BRAKE_JERK_FRACTION), float(VPOP_AIM_GAP_JERK_STEPS), float(VPOP_MIN_LENGTH),
+        VPOP_EASY_FRACTION, VPOP_CHAIN_SEQUENTIAL, VPOP_CHECKPOINT_SAMPLES, _fast(settings),
+        int(long_samples))
     out = []
     offs = off.tolist()
     for i, ok in enumerate(done.tolist()):
@@ -804,9 +616,8 @@ def plan_many_vpop(paths, machine, dt_s: float, settings=None, long_samples: int
         if st[6] < 0:
             out.append(PathPlan(s=s_all[a:b], q=q_all[a:b], stats={"samples": 1}))
             continue
-        out.append(
-            PathPlan(s=s_all[a:b], q=q_all[a:b], stats=_final_stats(b - a, st, bool(st[5]), int(st[6]), float(perr[i])))
-        )
+        out.append(PathPlan(s=s_all[a:b], q=q_all[a:b],
+                            stats=_final_stats(b - a, st, bool(st[5]), int(st[6]), float(perr[i]))))
     return out
 
 
@@ -819,4 +630,5 @@ def plan_path_vpop(path, joint_map, machine, dt_s: float, settings=None) -> Path
     after, and every backward-difference limit holds. The same samples as the chunks
     of ``iter_path_plan_vpop``.
     """
-    return collect_path_plan(iter_path_plan_vpop(path, joint_map, machine, dt_s, settings, window=None))
+    return collect_path_plan(iter_path_plan_vpop(path, joint_map, machine, dt_s, settings,
+                                                 window=None))

@@ -200,31 +200,8 @@ def _lin_interval(q, qs, qprev, lo, hi, x, a, b):
 
 
 @njit(cache=True)
-def _search(
-    S,
-    C,
-    QEND,
-    qh,
-    k,
-    vl,
-    al,
-    jl,
-    lo,
-    hi,
-    a,
-    b,
-    guess,
-    want_max,
-    hint,
-    q,
-    qs,
-    tol,
-    wk,
-    guess_bad=False,
-    L0=0.0,
-    H0=0.0,
-    a_is_prev=False,
-):
+def _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, a, b, guess, want_max, hint, q, qs, tol, wk,
+            guess_bad=False, L0=0.0, H0=0.0, a_is_prev=False):
     """Largest (want_max) or smallest feasible s' in [a, b] of the allowed set's component
     found by linearisation. Returns (found, s', hint); ``q`` holds q(s') when found.
 
@@ -380,19 +357,20 @@ def _stop_distance(v, a, J, A):
         if t2 < 0.0:
             t2 = 0.0
     t1 = (a + ap) / J
-    d = v * t1 + a * t1 * t1 / 2.0 - J * t1**3 / 6.0
+    d = v * t1 + a * t1 * t1 / 2.0 - J * t1 ** 3 / 6.0
     v1 = v + a * t1 - J * t1 * t1 / 2.0
     d += v1 * t2 - ap * t2 * t2 / 2.0
     v2 = v1 - ap * t2
     t3 = ap / J
-    d += v2 * t3 - ap * t3 * t3 / 2.0 + J * t3**3 / 6.0
+    d += v2 * t3 - ap * t3 * t3 / 2.0 + J * t3 ** 3 / 6.0
     return d
 
 
 # inlined into its two callers (_brake_step and _step's fallback): 15-20% off a brake
 # run; inlining _search or _step too adds minutes of compile time for a few per cent
-@njit(cache=True, inline="always")
-def _brake_value(S, C, QEND, qh, k, vl, al, jl, js_lim, lo, hi, s0, d1, b, guess, hint, q, qs, tol, wk, qs0_known):
+@njit(cache=True, inline='always')
+def _brake_value(S, C, QEND, qh, k, vl, al, jl, js_lim, lo, hi, s0, d1, b, guess, hint, q, qs,
+                 tol, wk, qs0_known):
     """The brake policy's sample k (see ``_step``), given the bounds ``lo``/``hi`` of
     ``_bounds``. Returns (ok, s', hint); q, qs hold q(s'), dq/ds(s'). With ``qs0_known``
     wk[2] already holds dq/ds(s0) (a brake run carries it from the step before)."""
@@ -415,90 +393,21 @@ def _brake_value(S, C, QEND, qh, k, vl, al, jl, js_lim, lo, hi, s0, d1, b, guess
     # which side of the allowed interval is the target on? (linearised at the target)
     L, H = _lin_interval(q, qs, qh[k - 1], lo, hi, target, s0, b)
     if target < L or L > H:
-        okl, xl, hint = _search(
-            S,
-            C,
-            QEND,
-            qh,
-            k,
-            vl,
-            al,
-            jl,
-            lo,
-            hi,
-            s0,
-            b,
-            target,
-            np.bool_(False),
-            hint,
-            q,
-            qs,
-            tol,
-            wk,
-            np.bool_(True),
-            L,
-            H,
-            np.bool_(True),
-        )
+        okl, xl, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, target, np.bool_(False),
+                                hint, q, qs, tol, wk, np.bool_(True), L, H, np.bool_(True))
         if okl and xl >= target:
             return True, xl, hint
         if not okl:
             return False, s0, hint
-    oku, xu, hint = _search(
-        S,
-        C,
-        QEND,
-        qh,
-        k,
-        vl,
-        al,
-        jl,
-        lo,
-        hi,
-        s0,
-        b,
-        target,
-        np.bool_(True),
-        hint,
-        q,
-        qs,
-        tol,
-        wk,
-        np.bool_(True),
-        L,
-        H,
-        np.bool_(False),
-    )
+    oku, xu, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, target, np.bool_(True),
+                            hint, q, qs, tol, wk, np.bool_(True), L, H, np.bool_(False))
     if not oku:
         return False, s0, hint
     if xu <= target:
         return True, xu, hint
     # the linear model misled: the target lies inside; fall back to the lower end
-    okl, xl, hint = _search(
-        S,
-        C,
-        QEND,
-        qh,
-        k,
-        vl,
-        al,
-        jl,
-        lo,
-        hi,
-        s0,
-        b,
-        guess,
-        np.bool_(False),
-        hint,
-        q,
-        qs,
-        tol,
-        wk,
-        np.bool_(False),
-        np.float64(0.0),
-        np.float64(0.0),
-        np.bool_(True),
-    )
+    okl, xl, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, np.bool_(False),
+                            hint, q, qs, tol, wk, np.bool_(False), np.float64(0.0), np.float64(0.0), np.bool_(True))
     if not okl:
         return False, s0, hint
     if xl >= target:
@@ -519,45 +428,21 @@ def _path_state(sh, k):
 
 
 # inlined into the brake run's loop (its hot call) and into _step: 3-4% of a brake run
-@njit(cache=True, inline="always")
-def _brake_step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, hint, q, qs, lo, hi, tol, wk, qs0_known):
+@njit(cache=True, inline='always')
+def _brake_step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, hint, q, qs,
+                lo, hi, tol, wk, qs0_known):
     """``_step`` in mode 1 (brake)."""
     if not _bounds(qh, k, vl, al, jl, lo, hi):
         return False, sh[k - 1], hint
     s0, d1, d2 = _path_state(sh, k)
     b = _cap(s0, dt, L, FB, FV)
-    return _brake_value(
-        S, C, QEND, qh, k, vl, al, jl, js_lim, lo, hi, s0, d1, b, s0 + d1 + d2, hint, q, qs, tol, wk, qs0_known
-    )
+    return _brake_value(S, C, QEND, qh, k, vl, al, jl, js_lim, lo, hi, s0, d1, b, s0 + d1 + d2,
+                        hint, q, qs, tol, wk, qs0_known)
 
 
 @njit(cache=True)
-def _step(
-    S,
-    C,
-    QEND,
-    sh,
-    qh,
-    k,
-    vl,
-    al,
-    jl,
-    js_lim,
-    dt,
-    L,
-    FB,
-    FV,
-    mode,
-    hint,
-    q,
-    qs,
-    lo,
-    hi,
-    tol,
-    wk,
-    qs0_known,
-    aim_jerk=1.0,
-):
+def _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, mode, hint, q, qs,
+          lo, hi, tol, wk, qs0_known, aim_jerk=1.0):
     """Choose sample k. mode 0: max; 1: brake; 2: aim at rest exactly at L.
 
     Returns (ok, s', hint); on success q, qs hold q(s'), dq/ds(s'). ``wk`` (3, n) is
@@ -565,129 +450,35 @@ def _step(
     finds no sample k either, so "max failed at k" always means "braking from k fails"
     (what the dichotomy in ``plan_core`` relies on)."""
     if mode == 1:
-        return _brake_step(
-            S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, hint, q, qs, lo, hi, tol, wk, qs0_known
-        )
+        return _brake_step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, hint, q, qs,
+                           lo, hi, tol, wk, qs0_known)
     if not _bounds(qh, k, vl, al, jl, lo, hi):
         return False, sh[k - 1], hint
     s0, d1, d2 = _path_state(sh, k)
     b = _cap(s0, dt, L, FB, FV)
     guess = s0 + d1 + d2
     if mode == 0:
-        ok, x, hint = _search(
-            S,
-            C,
-            QEND,
-            qh,
-            k,
-            vl,
-            al,
-            jl,
-            lo,
-            hi,
-            s0,
-            b,
-            guess,
-            np.bool_(True),
-            hint,
-            q,
-            qs,
-            tol,
-            wk,
-            np.bool_(False),
-            np.float64(0.0),
-            np.float64(0.0),
-            np.bool_(False),
-        )
+        ok, x, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, np.bool_(True), hint,
+                              q, qs, tol, wk, np.bool_(False), np.float64(0.0), np.float64(0.0), np.bool_(False))
         if ok:
             return ok, x, hint
         # the linearised search can miss a narrow allowed set (near a sharp turn the
         # joint positions are far from linear in s); the brake value is a feasible seed
-        okb, xb, hint = _brake_value(
-            S, C, QEND, qh, k, vl, al, jl, js_lim, lo, hi, s0, d1, b, guess, hint, q, qs, tol, wk, qs0_known
-        )
+        okb, xb, hint = _brake_value(S, C, QEND, qh, k, vl, al, jl, js_lim, lo, hi, s0, d1, b,
+                                     guess, hint, q, qs, tol, wk, qs0_known)
         if not okb:
             return False, s0, hint
-        return _search(
-            S,
-            C,
-            QEND,
-            qh,
-            k,
-            vl,
-            al,
-            jl,
-            lo,
-            hi,
-            s0,
-            b,
-            xb,
-            np.bool_(True),
-            hint,
-            q,
-            qs,
-            tol,
-            wk,
-            np.bool_(False),
-            np.float64(0.0),
-            np.float64(0.0),
-            np.bool_(False),
-        )
+        return _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, xb, np.bool_(True), hint, q, qs, tol,
+                       wk, np.bool_(False), np.float64(0.0), np.float64(0.0), np.bool_(False))
     hint = _eval(S, C, QEND, s0, hint, q, qs)
     jd, ad = _path_limits(qs, jl, al)
     # aim: the largest step whose continuous stop distance still fits before L
-    okl, xl, hint = _search(
-        S,
-        C,
-        QEND,
-        qh,
-        k,
-        vl,
-        al,
-        jl,
-        lo,
-        hi,
-        s0,
-        b,
-        guess,
-        np.bool_(False),
-        hint,
-        q,
-        qs,
-        tol,
-        wk,
-        np.bool_(False),
-        np.float64(0.0),
-        np.float64(0.0),
-        np.bool_(False),
-    )
+    okl, xl, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, np.bool_(False),
+                            hint, q, qs, tol, wk, np.bool_(False), np.float64(0.0), np.float64(0.0), np.bool_(False))
     if not okl:
         return False, s0, hint
-    oku, xu, hint = _search(
-        S,
-        C,
-        QEND,
-        qh,
-        k,
-        vl,
-        al,
-        jl,
-        lo,
-        hi,
-        s0,
-        b,
-        guess,
-        np.bool_(True),
-        hint,
-        q,
-        qs,
-        tol,
-        wk,
-        np.bool_(False),
-        np.float64(0.0),
-        np.float64(0.0),
-        np.bool_(False),
-    )
+    oku, xu, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, np.bool_(True), hint,
+                            q, qs, tol, wk, np.bool_(False), np.float64(0.0), np.float64(0.0), np.bool_(False))
     jd = jd * aim_jerk
     x = xl
     if xu >= L and L - s0 <= jd:
@@ -811,43 +602,12 @@ def _easy(S, K2, K3, K23, KV, bs, kk, al, js_lim, L, easy_frac, qs0, hint):
         return False
     k3 = _window_max(K3, p0, p1)
     k23 = _window_max(K23, p0, p1)
-    return k3 * d1**3 + k23 * d1 * ab <= easy_frac
+    return k3 * d1 ** 3 + k23 * d1 * ab <= easy_frac
 
 
 @njit(cache=True)
-def _brake_run(
-    S,
-    C,
-    QEND,
-    sh,
-    qh,
-    j,
-    vl,
-    al,
-    jl,
-    js_lim,
-    dt,
-    L,
-    FB,
-    FV,
-    bs,
-    bq,
-    max_steps,
-    q,
-    qs,
-    lo,
-    hi,
-    tol,
-    stats,
-    mode,
-    K2,
-    K3,
-    K23,
-    KV,
-    easy_frac,
-    horizon,
-    wk,
-):
+def _brake_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq, max_steps,
+               q, qs, lo, hi, tol, stats, mode, K2, K3, K23, KV, easy_frac, horizon, wk):
     """Does the brake (mode 1) or aim (mode 2) policy from step j (samples < j fixed) reach
     rest? Uses scratch bs/bq, which start with copies of samples j-3..j-1 at 0..2.
 
@@ -867,36 +627,11 @@ def _brake_run(
     cap = bs.shape[0]
     while True:
         if mode == 1:
-            ok, x, hint = _brake_step(
-                S, C, QEND, bs, bq, kk, vl, al, jl, js_lim, dt, L, FB, FV, hint, q, qs, lo, hi, tol, wk, kk > 3
-            )
+            ok, x, hint = _brake_step(S, C, QEND, bs, bq, kk, vl, al, jl, js_lim, dt, L, FB, FV,
+                                      hint, q, qs, lo, hi, tol, wk, kk > 3)
         else:
-            ok, x, hint = _step(
-                S,
-                C,
-                QEND,
-                bs,
-                bq,
-                kk,
-                vl,
-                al,
-                jl,
-                js_lim,
-                dt,
-                L,
-                FB,
-                FV,
-                mode,
-                hint,
-                q,
-                qs,
-                lo,
-                hi,
-                tol,
-                wk,
-                kk > 3,
-                np.float64(1.0),
-            )
+            ok, x, hint = _step(S, C, QEND, bs, bq, kk, vl, al, jl, js_lim, dt, L, FB, FV, mode,
+                                hint, q, qs, lo, hi, tol, wk, kk > 3, np.float64(1.0))
         if not ok:
             return False, kk, 0
         bs[kk] = x
@@ -907,13 +642,11 @@ def _brake_run(
         kk += 1
         if bs[kk - 1] == bs[kk - 2] and bs[kk - 2] == bs[kk - 3]:
             return True, kk, _BIG
-        if easy_frac > 0.0 and mode == 1 and _easy(S, K2, K3, K23, KV, bs, kk, al, js_lim, L, easy_frac, wk[2], hint):
+        if easy_frac > 0.0 and mode == 1 and _easy(S, K2, K3, K23, KV, bs, kk, al, js_lim,
+                                                   L, easy_frac, wk[2], hint):
             return True, kk, _BIG
-        if (
-            horizon > 0
-            and j + kk - 3 >= horizon
-            and _easy(S, K2, K3, K23, KV, bs, kk, al, js_lim, L, np.float64(0.6), wk[2], hint)
-        ):
+        if horizon > 0 and j + kk - 3 >= horizon and \
+                _easy(S, K2, K3, K23, KV, bs, kk, al, js_lim, L, np.float64(0.6), wk[2], hint):
             return True, kk, j + kk - 3
         if kk >= cap or kk >= max_steps:
             return False, kk, 0
@@ -931,38 +664,8 @@ def _stays_at_rest(sh, j, x, L):
 
 
 @njit(cache=True)
-def _rest_value(
-    S,
-    C,
-    QEND,
-    sh,
-    qh,
-    j,
-    vl,
-    al,
-    jl,
-    js_lim,
-    dt,
-    L,
-    FB,
-    FV,
-    bs,
-    bq,
-    max_steps,
-    q,
-    qs,
-    lo,
-    hi,
-    tol,
-    stats,
-    K2,
-    K3,
-    K23,
-    KV,
-    easy_frac,
-    hint,
-    wk,
-):
+def _rest_value(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq, max_steps,
+                q, qs, lo, hi, tol, stats, K2, K3, K23, KV, easy_frac, hint, wk):
     """Sample j when the machine is at rest before it, the brake policy would stay put
     and the max step's continuation cannot stop (e.g. a path shorter than what one
     step from rest and the stop after it allow): the largest value in (s0, max] found
@@ -973,32 +676,8 @@ def _rest_value(
     sh[j]/qh[j] set, or ok False when float resolution leaves none."""
     n = qh.shape[1]
     s0 = sh[j - 1]
-    ok, xm, hint = _step(
-        S,
-        C,
-        QEND,
-        sh,
-        qh,
-        j,
-        vl,
-        al,
-        jl,
-        js_lim,
-        dt,
-        L,
-        FB,
-        FV,
-        np.int64(0),
-        hint,
-        q,
-        qs,
-        lo,
-        hi,
-        tol,
-        wk,
-        np.bool_(False),
-        np.float64(1.0),
-    )
+    ok, xm, hint = _step(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, np.int64(0),
+                         hint, q, qs, lo, hi, tol, wk, np.bool_(False), np.float64(1.0))
     if not ok or not xm > s0:
         return False, s0, 0, hint
     good = s0
@@ -1011,39 +690,9 @@ def _rest_value(
             sh[j] = x
             for i in range(n):
                 qh[j, i] = q[i]
-            r = _brake_run(
-                S,
-                C,
-                QEND,
-                sh,
-                qh,
-                j + 1,
-                vl,
-                al,
-                jl,
-                js_lim,
-                dt,
-                L,
-                FB,
-                FV,
-                bs,
-                bq,
-                max_steps,
-                q,
-                qs,
-                lo,
-                hi,
-                tol,
-                stats,
-                np.int64(1),
-                K2,
-                K3,
-                K23,
-                KV,
-                easy_frac,
-                np.int64(0),
-                wk,
-            )
+            r = _brake_run(S, C, QEND, sh, qh, j + 1, vl, al, jl, js_lim, dt, L, FB, FV,
+                           bs, bq, max_steps, q, qs, lo, hi, tol, stats, np.int64(1), K2, K3, K23, KV,
+                           easy_frac, np.int64(0), wk)
             stats[1] += 1
             passed = r[0]
         else:
@@ -1069,103 +718,20 @@ def _rest_value(
 
 
 @njit(cache=True)
-def _brake_fix(
-    S,
-    C,
-    QEND,
-    sh,
-    qh,
-    j,
-    vl,
-    al,
-    jl,
-    js_lim,
-    dt,
-    L,
-    FB,
-    FV,
-    bs,
-    bq,
-    max_steps,
-    q,
-    qs,
-    lo,
-    hi,
-    tol,
-    stats,
-    K2,
-    K3,
-    K23,
-    KV,
-    easy_frac,
-    hint,
-    wk,
-):
+def _brake_fix(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq, max_steps,
+               q, qs, lo, hi, tol, stats, K2, K3, K23, KV, easy_frac, hint, wk):
     """Fix sample j at the brake value (at rest where that would stay put: ``_rest_value``).
     Returns (status OK / INFEASIBLE / STUCK, the certificate of a rest value or -1, hint)."""
     n = qh.shape[1]
-    ok, x, hint = _step(
-        S,
-        C,
-        QEND,
-        sh,
-        qh,
-        j,
-        vl,
-        al,
-        jl,
-        js_lim,
-        dt,
-        L,
-        FB,
-        FV,
-        np.int64(1),
-        hint,
-        q,
-        qs,
-        lo,
-        hi,
-        tol,
-        wk,
-        np.bool_(False),
-        np.float64(1.0),
-    )
+    ok, x, hint = _step(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, np.int64(1),
+                        hint, q, qs, lo, hi, tol, wk, np.bool_(False), np.float64(1.0))
     if not ok:
         return INFEASIBLE, -1, hint
     c = -1
     if _stays_at_rest(sh, j, x, L):
-        ok, x, c, hint = _rest_value(
-            S,
-            C,
-            QEND,
-            sh,
-            qh,
-            j,
-            vl,
-            al,
-            jl,
-            js_lim,
-            dt,
-            L,
-            FB,
-            FV,
-            bs,
-            bq,
-            max_steps,
-            q,
-            qs,
-            lo,
-            hi,
-            tol,
-            stats,
-            K2,
-            K3,
-            K23,
-            KV,
-            easy_frac,
-            hint,
-            wk,
-        )
+        ok, x, c, hint = _rest_value(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L,
+                                     FB, FV, bs, bq, max_steps, q, qs, lo, hi, tol,
+                                     stats, K2, K3, K23, KV, easy_frac, hint, wk)
         if not ok:
             return STUCK, -1, hint
     sh[j] = x
@@ -1185,75 +751,14 @@ def _horizon(k, j, fast):
 
 
 @njit(cache=True)
-def _certified_run(
-    S,
-    C,
-    QEND,
-    sh,
-    qh,
-    j,
-    vl,
-    al,
-    jl,
-    js_lim,
-    dt,
-    L,
-    FB,
-    FV,
-    bs,
-    bq,
-    max_steps,
-    q,
-    qs,
-    lo,
-    hi,
-    tol,
-    stats,
-    K2,
-    K3,
-    K23,
-    KV,
-    easy_frac,
-    horizon,
-    wk,
-    cs,
-    cq,
-):
+def _certified_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq,
+                   max_steps, q, qs, lo, hi, tol, stats, K2, K3, K23, KV, easy_frac, horizon,
+                   wk, cs, cq):
     """A brake run from j; when it succeeds it is kept in cs/cq as the certificate the
     chain after a fix at j bisects along. Returns (ok, certified-up-to, its length)."""
-    r = _brake_run(
-        S,
-        C,
-        QEND,
-        sh,
-        qh,
-        j,
-        vl,
-        al,
-        jl,
-        js_lim,
-        dt,
-        L,
-        FB,
-        FV,
-        bs,
-        bq,
-        max_steps,
-        q,
-        qs,
-        lo,
-        hi,
-        tol,
-        stats,
-        np.int64(1),
-        K2,
-        K3,
-        K23,
-        KV,
-        easy_frac,
-        horizon,
-        wk,
-    )
+    r = _brake_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq,
+                   max_steps, q, qs, lo, hi, tol, stats, np.int64(1), K2, K3, K23, KV, easy_frac,
+                   horizon, wk)
     stats[1] += 1
     if not r[0]:
         return False, 0, 0
@@ -1276,41 +781,9 @@ def _put_cert(sh, qh, cs, cq, j, t0, t1):
 
 
 @njit(cache=True)
-def _max_then_brake(
-    S,
-    C,
-    QEND,
-    vl,
-    al,
-    jl,
-    js_lim,
-    dt,
-    L,
-    FB,
-    FV,
-    sh,
-    qh,
-    t,
-    x,
-    bs,
-    bq,
-    max_steps,
-    q,
-    qs,
-    lo,
-    hi,
-    tol,
-    stats,
-    K2,
-    K3,
-    K23,
-    KV,
-    easy_frac,
-    fast,
-    last_k,
-    last_j,
-    wk,
-):
+def _max_then_brake(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, t, x, bs, bq,
+                    max_steps, q, qs, lo, hi, tol, stats, K2, K3, K23, KV, easy_frac, fast,
+                    last_k, last_j, wk):
     """Sample t = x (q holds q(x)), then a brake run from t+1 with the chain's horizon:
     the run's (ok, scratch end, certified-up-to)."""
     n = qh.shape[1]
@@ -1318,192 +791,35 @@ def _max_then_brake(
     for i in range(n):
         qh[t, i] = q[i]
     hz = (t + 1 + 2 * (last_k - last_j) + 8) if fast else 0
-    r = _brake_run(
-        S,
-        C,
-        QEND,
-        sh,
-        qh,
-        t + 1,
-        vl,
-        al,
-        jl,
-        js_lim,
-        dt,
-        L,
-        FB,
-        FV,
-        bs,
-        bq,
-        max_steps,
-        q,
-        qs,
-        lo,
-        hi,
-        tol,
-        stats,
-        np.int64(1),
-        K2,
-        K3,
-        K23,
-        KV,
-        easy_frac,
-        hz,
-        wk,
-    )
+    r = _brake_run(S, C, QEND, sh, qh, t + 1, vl, al, jl, js_lim, dt, L, FB, FV,
+                   bs, bq, max_steps, q, qs, lo, hi, tol, stats, np.int64(1), K2, K3, K23, KV,
+                   easy_frac, hz, wk)
     stats[1] += 1
     return r
 
 
 @njit(cache=True)
-def _chain_test(
-    S,
-    C,
-    QEND,
-    vl,
-    al,
-    jl,
-    js_lim,
-    dt,
-    L,
-    FB,
-    FV,
-    sh,
-    qh,
-    j,
-    t,
-    cs,
-    cq,
-    bs,
-    bq,
-    max_steps,
-    q,
-    qs,
-    lo,
-    hi,
-    tol,
-    stats,
-    K2,
-    K3,
-    K23,
-    KV,
-    easy_frac,
-    fast,
-    last_k,
-    last_j,
-    wk,
-    hint,
-):
+def _chain_test(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, j, t, cs, cq, bs, bq,
+                max_steps, q, qs, lo, hi, tol, stats, K2, K3, K23, KV, easy_frac, fast,
+                last_k, last_j, wk, hint):
     """Samples j+1..t-1 from the certificate, the max step at t, then a brake run from
     t+1: (passed, certified-up-to, hint)."""
     _put_cert(sh, qh, cs, cq, j, j + 1, t)
-    ok, x, hint = _step(
-        S,
-        C,
-        QEND,
-        sh,
-        qh,
-        t,
-        vl,
-        al,
-        jl,
-        js_lim,
-        dt,
-        L,
-        FB,
-        FV,
-        np.int64(0),
-        hint,
-        q,
-        qs,
-        lo,
-        hi,
-        tol,
-        wk,
-        np.bool_(False),
-        np.float64(1.0),
-    )
+    ok, x, hint = _step(S, C, QEND, sh, qh, t, vl, al, jl, js_lim, dt, L, FB, FV, np.int64(0),
+                        hint, q, qs, lo, hi, tol, wk, np.bool_(False), np.float64(1.0))
     stats[3] += 1
     if not ok:
         return False, 0, hint
-    r = _max_then_brake(
-        S,
-        C,
-        QEND,
-        vl,
-        al,
-        jl,
-        js_lim,
-        dt,
-        L,
-        FB,
-        FV,
-        sh,
-        qh,
-        t,
-        x,
-        bs,
-        bq,
-        max_steps,
-        q,
-        qs,
-        lo,
-        hi,
-        tol,
-        stats,
-        K2,
-        K3,
-        K23,
-        KV,
-        easy_frac,
-        fast,
-        last_k,
-        last_j,
-        wk,
-    )
+    r = _max_then_brake(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, t, x, bs, bq,
+                        max_steps, q, qs, lo, hi, tol, stats, K2, K3, K23, KV, easy_frac, fast,
+                        last_k, last_j, wk)
     return r[0], r[2], hint
 
 
 @njit(cache=True)
-def _chain_search(
-    S,
-    C,
-    QEND,
-    vl,
-    al,
-    jl,
-    js_lim,
-    dt,
-    L,
-    FB,
-    FV,
-    sh,
-    qh,
-    j,
-    m,
-    cs,
-    cq,
-    bs,
-    bq,
-    max_steps,
-    q,
-    qs,
-    lo,
-    hi,
-    tol,
-    stats,
-    K2,
-    K3,
-    K23,
-    KV,
-    easy_frac,
-    fast,
-    last_k,
-    last_j,
-    wk,
-    hint,
-    chain_seq,
-):
+def _chain_search(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, j, m, cs, cq, bs, bq,
+                  max_steps, q, qs, lo, hi, tol, stats, K2, K3, K23, KV, easy_frac, fast,
+                  last_k, last_j, wk, hint, chain_seq):
     """After a brake fix at j with its brake run kept in cs/cq (samples j..j+m-1): the first
     t in (j, j+m) where the max step followed by braking reaches rest, the samples between
     following the certificate. Sequentially that is one brake run per step of the chain;
@@ -1515,50 +831,16 @@ def _chain_search(
     Returns (P, certified-up-to of P's run, hint); P = -1 when no t passes, with the
     samples up to j+m-1 then set to the certificate. On success sh/qh hold j..P."""
     n = qh.shape[1]
-    lo_t = j  # known: fails (or is the fix itself)
-    hi_t = j + m  # no test there yet: a virtual pass
+    lo_t = j          # known: fails (or is the fix itself)
+    hi_t = j + m      # no test there yet: a virtual pass
     best = -1
     best_cert = 0
     t = j + 1
     while hi_t - lo_t > 1:
-        passed, cert, hint = _chain_test(
-            S,
-            C,
-            QEND,
-            vl,
-            al,
-            jl,
-            js_lim,
-            dt,
-            L,
-            FB,
-            FV,
-            sh,
-            qh,
-            j,
-            t,
-            cs,
-            cq,
-            bs,
-            bq,
-            max_steps,
-            q,
-            qs,
-            lo,
-            hi,
-            tol,
-            stats,
-            K2,
-            K3,
-            K23,
-            KV,
-            easy_frac,
-            fast,
-            last_k,
-            last_j,
-            wk,
-            hint,
-        )
+        passed, cert, hint = _chain_test(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh,
+                                         j, t, cs, cq, bs, bq, max_steps, q, qs, lo, hi, tol,
+                                         stats, K2, K3, K23, KV, easy_frac, fast, last_k,
+                                         last_j, wk, hint)
         if passed:
             hi_t = t
             best = t
@@ -1573,44 +855,10 @@ def _chain_search(
         d = 2
         while best - d > j + chain_seq:
             t = best - d
-            passed, cert, hint = _chain_test(
-                S,
-                C,
-                QEND,
-                vl,
-                al,
-                jl,
-                js_lim,
-                dt,
-                L,
-                FB,
-                FV,
-                sh,
-                qh,
-                j,
-                t,
-                cs,
-                cq,
-                bs,
-                bq,
-                max_steps,
-                q,
-                qs,
-                lo,
-                hi,
-                tol,
-                stats,
-                K2,
-                K3,
-                K23,
-                KV,
-                easy_frac,
-                fast,
-                last_k,
-                last_j,
-                wk,
-                hint,
-            )
+            passed, cert, hint = _chain_test(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh,
+                                             qh, j, t, cs, cq, bs, bq, max_steps, q, qs, lo,
+                                             hi, tol, stats, K2, K3, K23, KV, easy_frac, fast,
+                                             last_k, last_j, wk, hint)
             if passed:
                 best = t
                 best_cert = cert
@@ -1621,32 +869,8 @@ def _chain_search(
         _put_cert(sh, qh, cs, cq, j, j + 1, j + m)
         return -1, 0, hint
     _put_cert(sh, qh, cs, cq, j, j + 1, best)
-    ok, x, hint = _step(
-        S,
-        C,
-        QEND,
-        sh,
-        qh,
-        best,
-        vl,
-        al,
-        jl,
-        js_lim,
-        dt,
-        L,
-        FB,
-        FV,
-        np.int64(0),
-        hint,
-        q,
-        qs,
-        lo,
-        hi,
-        tol,
-        wk,
-        np.bool_(False),
-        np.float64(1.0),
-    )
+    ok, x, hint = _step(S, C, QEND, sh, qh, best, vl, al, jl, js_lim, dt, L, FB, FV, np.int64(0),
+                        hint, q, qs, lo, hi, tol, wk, np.bool_(False), np.float64(1.0))
     sh[best] = x
     for i in range(n):
         qh[best, i] = q[i]
@@ -1686,40 +910,9 @@ def _save(st, k, b, chain, c_at, c_len, cert, last_k, last_j, hint):
 
 
 @njit(cache=True, nogil=True)
-def plan_core(
-    S,
-    C,
-    QEND,
-    vl,
-    al,
-    jl,
-    js_lim,
-    dt,
-    L,
-    FB,
-    FV,
-    sh,
-    qh,
-    st,
-    cs,
-    cq,
-    tol,
-    max_steps,
-    bs,
-    bq,
-    stats,
-    K2,
-    K3,
-    K23,
-    KV,
-    easy_frac,
-    gap_tol,
-    fast,
-    chain_seq,
-    floor_h,
-    stop_k,
-    k_base,
-):
+def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, st, cs, cq, tol, max_steps,
+              bs, bq, stats, K2, K3, K23, KV, easy_frac, gap_tol, fast, chain_seq, floor_h,
+              stop_k, k_base):
     """Run VPOp from the state ``st`` (samples < st[ST_K] fixed; see ``ST_*``).
 
     Fills ``sh`` (K,), ``qh`` (K, n) and returns the status; the state is saved in ``st``
@@ -1771,45 +964,10 @@ def plan_core(
             return YIELD
         if chain and c_at == k - 1 and c_len >= 3 and k + c_len + 1 < cap:
             # the chain after a fix, along the fix's own brake run, by bisection
-            P, pc, hint = _chain_search(
-                S,
-                C,
-                QEND,
-                vl,
-                al,
-                jl,
-                js_lim,
-                dt,
-                L,
-                FB,
-                FV,
-                sh,
-                qh,
-                k - 1,
-                c_len,
-                cs,
-                cq,
-                bs,
-                bq,
-                max_steps,
-                q,
-                qs,
-                lo,
-                hi,
-                tol,
-                stats,
-                K2,
-                K3,
-                K23,
-                KV,
-                easy_frac,
-                fast,
-                last_k,
-                last_j,
-                wk,
-                hint,
-                chain_seq,
-            )
+            P, pc, hint = _chain_search(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh,
+                                        k - 1, c_len, cs, cq, bs, bq, max_steps, q, qs, lo, hi,
+                                        tol, stats, K2, K3, K23, KV, easy_frac, fast, last_k,
+                                        last_j, wk, hint, chain_seq)
             c_at = -1
             if P >= 0:
                 cert = pc
@@ -1821,72 +979,16 @@ def plan_core(
                 b = k + c_len - 2
                 k = k + c_len - 1
             continue
-        ok, x, hint = _step(
-            S,
-            C,
-            QEND,
-            sh,
-            qh,
-            k,
-            vl,
-            al,
-            jl,
-            js_lim,
-            dt,
-            L,
-            FB,
-            FV,
-            np.int64(0),
-            hint,
-            q,
-            qs,
-            lo,
-            hi,
-            tol,
-            wk,
-            np.bool_(False),
-            np.float64(1.0),
-        )
+        ok, x, hint = _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, np.int64(0),
+                            hint, q, qs, lo, hi, tol, wk, np.bool_(False), np.float64(1.0))
         stats[3] += 1
         if ok and chain and k + 1 < cap:
             # right after a brake fix the next failure is usually imminent: test the max
             # step at once (the same test the dichotomy would run first) instead of
             # re-running max steps up to the failure
-            r = _max_then_brake(
-                S,
-                C,
-                QEND,
-                vl,
-                al,
-                jl,
-                js_lim,
-                dt,
-                L,
-                FB,
-                FV,
-                sh,
-                qh,
-                k,
-                x,
-                bs,
-                bq,
-                max_steps,
-                q,
-                qs,
-                lo,
-                hi,
-                tol,
-                stats,
-                K2,
-                K3,
-                K23,
-                KV,
-                easy_frac,
-                fast,
-                last_k,
-                last_j,
-                wk,
-            )
+            r = _max_then_brake(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k, x,
+                                bs, bq, max_steps, q, qs, lo, hi, tol, stats, K2, K3, K23, KV,
+                                easy_frac, fast, last_k, last_j, wk)
             if r[0]:
                 cert = r[2]
                 chain = np.bool_(False)
@@ -1894,76 +996,17 @@ def plan_core(
                 continue
             if k + 1 >= cert:
                 hz = (k + 2 * (last_k - last_j) + 8) if fast else 0
-                ok, cert, c_len = _certified_run(
-                    S,
-                    C,
-                    QEND,
-                    sh,
-                    qh,
-                    k,
-                    vl,
-                    al,
-                    jl,
-                    js_lim,
-                    dt,
-                    L,
-                    FB,
-                    FV,
-                    bs,
-                    bq,
-                    max_steps,
-                    q,
-                    qs,
-                    lo,
-                    hi,
-                    tol,
-                    stats,
-                    K2,
-                    K3,
-                    K23,
-                    KV,
-                    easy_frac,
-                    hz,
-                    wk,
-                    cs,
-                    cq,
-                )
+                ok, cert, c_len = _certified_run(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt,
+                                                 L, FB, FV, bs, bq, max_steps, q, qs, lo, hi,
+                                                 tol, stats, K2, K3, K23, KV, easy_frac, hz, wk,
+                                                 cs, cq)
                 if not ok:
                     _save(st, k, b, chain, c_at, c_len, cert, last_k, last_j, hint)
                     return INFEASIBLE
                 c_at = k
-            stf, c, hint = _brake_fix(
-                S,
-                C,
-                QEND,
-                sh,
-                qh,
-                k,
-                vl,
-                al,
-                jl,
-                js_lim,
-                dt,
-                L,
-                FB,
-                FV,
-                bs,
-                bq,
-                max_steps,
-                q,
-                qs,
-                lo,
-                hi,
-                tol,
-                stats,
-                K2,
-                K3,
-                K23,
-                KV,
-                easy_frac,
-                hint,
-                wk,
-            )
+            stf, c, hint = _brake_fix(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV,
+                                      bs, bq, max_steps, q, qs, lo, hi, tol, stats, K2, K3, K23,
+                                      KV, easy_frac, hint, wk)
             if stf != OK:
                 _save(st, k, b, chain, c_at, c_len, cert, last_k, last_j, hint)
                 return stf
@@ -1997,40 +1040,10 @@ def plan_core(
             lo_j = base
             while hi_j - lo_j > 1:
                 mid = (lo_j + hi_j) // 2
-                ok, cc, cl = _certified_run(
-                    S,
-                    C,
-                    QEND,
-                    sh,
-                    qh,
-                    mid,
-                    vl,
-                    al,
-                    jl,
-                    js_lim,
-                    dt,
-                    L,
-                    FB,
-                    FV,
-                    bs,
-                    bq,
-                    max_steps,
-                    q,
-                    qs,
-                    lo,
-                    hi,
-                    tol,
-                    stats,
-                    K2,
-                    K3,
-                    K23,
-                    KV,
-                    easy_frac,
-                    _horizon(k, mid, fast),
-                    wk,
-                    cs,
-                    cq,
-                )
+                ok, cc, cl = _certified_run(S, C, QEND, sh, qh, mid, vl, al, jl, js_lim, dt, L,
+                                            FB, FV, bs, bq, max_steps, q, qs, lo, hi, tol, stats,
+                                            K2, K3, K23, KV, easy_frac, _horizon(k, mid, fast),
+                                            wk, cs, cq)
                 if ok:
                     lo_j = mid
                     tested = True
@@ -2040,40 +1053,10 @@ def plan_core(
                 else:
                     hi_j = mid
             if not tested:
-                ok, cc, cl = _certified_run(
-                    S,
-                    C,
-                    QEND,
-                    sh,
-                    qh,
-                    base,
-                    vl,
-                    al,
-                    jl,
-                    js_lim,
-                    dt,
-                    L,
-                    FB,
-                    FV,
-                    bs,
-                    bq,
-                    max_steps,
-                    q,
-                    qs,
-                    lo,
-                    hi,
-                    tol,
-                    stats,
-                    K2,
-                    K3,
-                    K23,
-                    KV,
-                    easy_frac,
-                    _horizon(k, base, fast),
-                    wk,
-                    cs,
-                    cq,
-                )
+                ok, cc, cl = _certified_run(S, C, QEND, sh, qh, base, vl, al, jl, js_lim, dt, L,
+                                            FB, FV, bs, bq, max_steps, q, qs, lo, hi, tol, stats,
+                                            K2, K3, K23, KV, easy_frac, _horizon(k, base, fast),
+                                            wk, cs, cq)
                 if ok:
                     tested = True
                     cert = cc
@@ -2085,40 +1068,10 @@ def plan_core(
         if not tested and (j + 1 >= cert or (floor_h > 0 and j <= k - floor_h)):
             # fast mode: the brake chain has run past what its last run certified; or the
             # look-back floor, not a brake fix, is all that is left below (never assumed)
-            ok, cert, c_len = _certified_run(
-                S,
-                C,
-                QEND,
-                sh,
-                qh,
-                j,
-                vl,
-                al,
-                jl,
-                js_lim,
-                dt,
-                L,
-                FB,
-                FV,
-                bs,
-                bq,
-                max_steps,
-                q,
-                qs,
-                lo,
-                hi,
-                tol,
-                stats,
-                K2,
-                K3,
-                K23,
-                KV,
-                easy_frac,
-                _horizon(k, j, fast),
-                wk,
-                cs,
-                cq,
-            )
+            ok, cert, c_len = _certified_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB,
+                                             FV, bs, bq, max_steps, q, qs, lo, hi, tol, stats, K2,
+                                             K3, K23, KV, easy_frac, _horizon(k, j, fast), wk,
+                                             cs, cq)
             if not ok:
                 _save(st, k, b, chain, c_at, c_len, cert, last_k, last_j, hint)
                 return INFEASIBLE
@@ -2130,39 +1083,9 @@ def plan_core(
                 jj = j - back
                 if jj <= b:
                     break
-                r = _brake_run(
-                    S,
-                    C,
-                    QEND,
-                    sh,
-                    qh,
-                    jj,
-                    vl,
-                    al,
-                    jl,
-                    js_lim,
-                    dt,
-                    L,
-                    FB,
-                    FV,
-                    bs,
-                    bq,
-                    max_steps,
-                    q,
-                    qs,
-                    lo,
-                    hi,
-                    tol,
-                    stats,
-                    np.int64(2),
-                    K2,
-                    K3,
-                    K23,
-                    KV,
-                    np.float64(0.0),
-                    np.int64(0),
-                    wk,
-                )
+                r = _brake_run(S, C, QEND, sh, qh, jj, vl, al, jl, js_lim, dt, L, FB, FV,
+                               bs, bq, max_steps, q, qs, lo, hi, tol, stats, np.int64(2), K2, K3, K23, KV,
+                               np.float64(0.0), np.int64(0), wk)
                 kk = r[1]
                 if r[0] and L - bs[kk - 1] <= gap_tol:
                     need = jj + kk - 3
@@ -2177,38 +1100,9 @@ def plan_core(
                     break
             if done:
                 continue
-        stf, c, hint = _brake_fix(
-            S,
-            C,
-            QEND,
-            sh,
-            qh,
-            j,
-            vl,
-            al,
-            jl,
-            js_lim,
-            dt,
-            L,
-            FB,
-            FV,
-            bs,
-            bq,
-            max_steps,
-            q,
-            qs,
-            lo,
-            hi,
-            tol,
-            stats,
-            K2,
-            K3,
-            K23,
-            KV,
-            easy_frac,
-            hint,
-            wk,
-        )
+        stf, c, hint = _brake_fix(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs,
+                                  bq, max_steps, q, qs, lo, hi, tol, stats, K2, K3, K23, KV,
+                                  easy_frac, hint, wk)
         if stf != OK:
             _save(st, j, b, chain, c_at, c_len, cert, last_k, last_j, hint)
             return stf

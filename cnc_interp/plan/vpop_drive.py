@@ -101,34 +101,10 @@ def start_point(coef):
 
 
 @njit(cache=True)
-def prepare_identity(
-    coef,
-    breaks,
-    s_breaks,
-    w,
-    length,
-    feed,
-    vl0,
-    al0,
-    jl0,
-    jl_floor,
-    vmax,
-    ramp,
-    dt,
-    brake_cap,
-    lookback,
-    shrink,
-    table_tol,
-    max_depth,
-    max_piece,
-    glx,
-    glw,
-    max_tries,
-    rounding_ulps,
-    brake_jerk_fraction,
-    aim_gap_steps,
-    min_length,
-):
+def prepare_identity(coef, breaks, s_breaks, w, length, feed, vl0, al0, jl0, jl_floor, vmax,
+                     ramp, dt, brake_cap, lookback, shrink, table_tol, max_depth, max_piece,
+                     glx, glw, max_tries, rounding_ulps, brake_jerk_fraction, aim_gap_steps,
+                     min_length):
     """``vpop._Prepared`` for identity kinematics. Returns (status, S, C axis-major,
     qend, qstart, vl, al, jl, js, FB, FV, K2, K3, K23, KV, tol, gap_tol, est, max_steps,
     floor_h, pieces, max_err); on a status other than ``PREP_OK`` the arrays are empty
@@ -143,39 +119,20 @@ def prepare_identity(
             finite = False
             break
     if not finite:
-        return (PREP_NOT_FINITE_PATH, e1, e3, en, en, en, en, en, en, e1, e1, e1, e1, e1, e1, 0.0, 0.0, 0, 0, 0, 0, 0.0)
+        return (PREP_NOT_FINITE_PATH, e1, e3, en, en, en, en, en, en, e1, e1, e1, e1, e1, e1,
+                0.0, 0.0, 0, 0, 0, 0, 0.0)
     if length <= min_length:
-        return (PREP_TRIVIAL, e1, e3, en, en, en, en, en, en, e1, e1, e1, e1, e1, e1, 0.0, 0.0, 0, 0, 0, 0, 0.0)
-    status, u, S, C, max_err, qend = build_identity(
-        coef, breaks, s_breaks, w, length, table_tol, max_depth, max_piece, glx, glw, max_tries
-    )
+        return (PREP_TRIVIAL, e1, e3, en, en, en, en, en, en, e1, e1, e1, e1, e1, e1,
+                0.0, 0.0, 0, 0, 0, 0, 0.0)
+    status, u, S, C, max_err, qend = build_identity(coef, breaks, s_breaks, w, length,
+                                                    table_tol, max_depth, max_piece, glx, glw,
+                                                    max_tries)
     if status == NO_LENGTH:
-        return (PREP_NO_LENGTH, e1, e3, en, en, en, en, en, en, e1, e1, e1, e1, e1, e1, 0.0, 0.0, 0, 0, 0, 0, 0.0)
+        return (PREP_NO_LENGTH, e1, e3, en, en, en, en, en, en, e1, e1, e1, e1, e1, e1,
+                0.0, 0.0, 0, 0, 0, 0, 0.0)
     if status != TABLE_OK:
-        return (
-            PREP_TABLE_NOT_FINITE,
-            e1,
-            e3,
-            en,
-            en,
-            en,
-            en,
-            en,
-            en,
-            e1,
-            e1,
-            e1,
-            e1,
-            e1,
-            e1,
-            0.0,
-            0.0,
-            0,
-            0,
-            0,
-            0,
-            0.0,
-        )
+        return (PREP_TABLE_NOT_FINITE, e1, e3, en, en, en, en, en, en, e1, e1, e1, e1, e1, e1,
+                0.0, 0.0, 0, 0, 0, 0, 0.0)
     m = C.shape[0]
     qstart = C[0, 0].copy()
     big = 0.0
@@ -191,30 +148,8 @@ def prepare_identity(
     jl = jl0 - 8.0 * margin
     for ax in range(n):
         if jl[ax] <= jl_floor[ax]:
-            return (
-                PREP_JERK_TOO_SMALL,
-                e1,
-                e3,
-                en,
-                en,
-                en,
-                en,
-                en,
-                en,
-                e1,
-                e1,
-                e1,
-                e1,
-                e1,
-                e1,
-                0.0,
-                0.0,
-                0,
-                0,
-                0,
-                0,
-                q_scale,
-            )
+            return (PREP_JERK_TOO_SMALL, e1, e3, en, en, en, en, en, en, e1, e1, e1, e1, e1,
+                    e1, 0.0, 0.0, 0, 0, 0, 0, q_scale)
     L = length
     n_seg = feed.shape[0]
     FB = s_breaks.copy()
@@ -258,30 +193,9 @@ def prepare_identity(
         for ax in range(n):
             for i in range(6):
                 Cam[p, ax, i] = C[p, i, ax]
-    return (
-        PREP_OK,
-        S,
-        Cam,
-        qend,
-        qstart,
-        vl,
-        al,
-        jl,
-        js,
-        FB,
-        FV,
-        range_max_packed(k2),
-        range_max_packed(k3),
-        range_max_packed(k23),
-        range_max_packed(kv),
-        tol,
-        gap_tol,
-        est,
-        max_steps,
-        floor_h,
-        m,
-        max_err,
-    )
+    return (PREP_OK, S, Cam, qend, qstart, vl, al, jl, js, FB, FV, range_max_packed(k2),
+            range_max_packed(k3), range_max_packed(k23), range_max_packed(kv), tol, gap_tol,
+            est, max_steps, floor_h, m, max_err)
 
 
 # -- the driver ---------------------------------------------------------------------------
@@ -337,45 +251,9 @@ def _restore(sh, qh, st, cs, cq, stats, ds, ck_st, ck_cs, ck_cq, ck_sh, ck_qh):
 
 
 @njit(cache=True, nogil=True)
-def drive(
-    S,
-    C,
-    QEND,
-    vl,
-    al,
-    jl,
-    js,
-    dt,
-    L,
-    FB,
-    FV,
-    tol,
-    max_steps,
-    K2,
-    K3,
-    K23,
-    KV,
-    gap_tol,
-    floor_h,
-    easy_fraction,
-    chain_seq,
-    checkpoint_every,
-    sh,
-    qh,
-    st,
-    cs,
-    cq,
-    bs,
-    bq,
-    stats,
-    ds,
-    ck_st,
-    ck_cs,
-    ck_cq,
-    ck_sh,
-    ck_qh,
-    max_cap,
-):
+def drive(S, C, QEND, vl, al, jl, js, dt, L, FB, FV, tol, max_steps, K2, K3, K23, KV, gap_tol,
+          floor_h, easy_fraction, chain_seq, checkpoint_every, sh, qh, st, cs, cq, bs, bq, stats,
+          ds, ck_st, ck_cs, ck_cq, ck_sh, ck_qh, max_cap):
     """Run the step loop until the path is done (``DONE``, ds[DS_END] = global end index),
     the window is full of final samples (``HAND_OUT``: samples ds[DS_HANDED] ..
     ds[DS_CK_LO] - 1 are final; hand them out, set ds[DS_HANDED], call again) or the loop
@@ -387,40 +265,9 @@ def drive(
         base = ds[DS_BASE]
         fast = ds[DS_FAST] != 0
         easy = easy_fraction if fast else 0.0
-        status = core.plan_core(
-            S,
-            C,
-            QEND,
-            vl,
-            al,
-            jl,
-            js,
-            dt,
-            L,
-            FB,
-            FV,
-            sh,
-            qh,
-            st,
-            cs,
-            cq,
-            tol,
-            max_steps,
-            bs,
-            bq,
-            stats,
-            K2,
-            K3,
-            K23,
-            KV,
-            easy,
-            gap_tol,
-            fast,
-            chain_seq,
-            floor_h,
-            ds[DS_NEXT_CK] - base,
-            base,
-        )
+        status = core.plan_core(S, C, QEND, vl, al, jl, js, dt, L, FB, FV, sh, qh, st, cs, cq,
+                                tol, max_steps, bs, bq, stats, K2, K3, K23, KV, easy, gap_tol,
+                                fast, chain_seq, floor_h, ds[DS_NEXT_CK] - base, base)
         if status == core.OK:
             ds[DS_END] = st[core.ST_K] + base
             return DONE, sh, qh
@@ -503,40 +350,11 @@ def new_loop(n, qstart, est, brake_cap, floor_h, room, window, checkpoint_every)
 
 
 @njit(cache=True, nogil=True)
-def plan_identity_batch(
-    coef,
-    breaks,
-    s_breaks,
-    weights,
-    lengths,
-    feed,
-    seg_off,
-    vl0,
-    al0,
-    jl0,
-    jl_floor,
-    vmax,
-    ramp,
-    dt,
-    brake_cap,
-    lookback,
-    shrink,
-    table_tol,
-    max_depth,
-    max_piece,
-    glx,
-    glw,
-    max_tries,
-    rounding_ulps,
-    brake_jerk_fraction,
-    aim_gap_steps,
-    min_length,
-    easy_fraction,
-    chain_seq,
-    checkpoint_every,
-    fast0,
-    long_samples,
-):
+def plan_identity_batch(coef, breaks, s_breaks, weights, lengths, feed, seg_off, vl0, al0, jl0,
+                        jl_floor, vmax, ramp, dt, brake_cap, lookback, shrink, table_tol,
+                        max_depth, max_piece, glx, glw, max_tries, rounding_ulps,
+                        brake_jerk_fraction, aim_gap_steps, min_length, easy_fraction,
+                        chain_seq, checkpoint_every, fast0, long_samples):
     """Plan paths p = 0..P-1 (segments seg_off[p]..seg_off[p+1]-1 of the concatenated
     ``coef``/``feed``; breaks and s_breaks concatenated with one extra entry per path)
     one after the other, each exactly as ``vpop.iter_path_plan_vpop`` would with no window.
@@ -560,36 +378,12 @@ def plan_identity_batch(
         a = seg_off[p]
         b = seg_off[p + 1]
         cf = coef[a:b]
-        br = breaks[a + p : b + p + 1]
-        sb = s_breaks[a + p : b + p + 1]
-        r = prepare_identity(
-            cf,
-            br,
-            sb,
-            weights[p],
-            lengths[p],
-            feed[a:b],
-            vl0,
-            al0,
-            jl0,
-            jl_floor,
-            vmax,
-            ramp,
-            dt,
-            brake_cap,
-            lookback,
-            shrink,
-            table_tol,
-            max_depth,
-            max_piece,
-            glx,
-            glw,
-            max_tries,
-            rounding_ulps,
-            brake_jerk_fraction,
-            aim_gap_steps,
-            min_length,
-        )
+        br = breaks[a + p:b + p + 1]
+        sb = s_breaks[a + p:b + p + 1]
+        r = prepare_identity(cf, br, sb, weights[p], lengths[p], feed[a:b], vl0, al0, jl0,
+                             jl_floor, vmax, ramp, dt, brake_cap, lookback, shrink, table_tol,
+                             max_depth, max_piece, glx, glw, max_tries, rounding_ulps,
+                             brake_jerk_fraction, aim_gap_steps, min_length)
         status = r[0]
         if status == PREP_TRIVIAL:
             q0 = start_point(cf)
@@ -612,76 +406,18 @@ def plan_identity_batch(
         if status != PREP_OK or r[17] > long_samples:
             off[p + 1] = total
             continue
-        (
-            _,
-            S,
-            C,
-            QEND,
-            qstart,
-            vl,
-            al,
-            jl,
-            js,
-            FB,
-            FV,
-            K2,
-            K3,
-            K23,
-            KV,
-            tol,
-            gap_tol,
-            est,
-            max_steps,
-            floor_h,
-            pieces,
-            max_err,
-        ) = r
+        (_, S, C, QEND, qstart, vl, al, jl, js, FB, FV, K2, K3, K23, KV, tol, gap_tol, est,
+         max_steps, floor_h, pieces, max_err) = r
         L = lengths[p]
-        sh, qh, st, cs, cq, bs, bq, stats, ds, ck_st, ck_cs, ck_cq, ck_sh, ck_qh, max_cap = new_loop(
-            n, qstart, est, brake_cap, floor_h, room, np.int64(0), checkpoint_every
-        )
+        sh, qh, st, cs, cq, bs, bq, stats, ds, ck_st, ck_cs, ck_cq, ck_sh, ck_qh, max_cap = \
+            new_loop(n, qstart, est, brake_cap, floor_h, room, np.int64(0), checkpoint_every)
         ds[DS_NEXT_CK] = checkpoint_every
         ds[DS_FAST] = 1 if fast0 else 0
         checkpoint(sh, qh, st, cs, cq, ds, ck_st, ck_cs, ck_cq, ck_sh, ck_qh, np.bool_(True))
-        res, sh, qh = drive(
-            S,
-            C,
-            QEND,
-            vl,
-            al,
-            jl,
-            js,
-            dt,
-            L,
-            FB,
-            FV,
-            tol,
-            max_steps,
-            K2,
-            K3,
-            K23,
-            KV,
-            gap_tol,
-            floor_h,
-            easy_fraction,
-            chain_seq,
-            checkpoint_every,
-            sh,
-            qh,
-            st,
-            cs,
-            cq,
-            bs,
-            bq,
-            stats,
-            ds,
-            ck_st,
-            ck_cs,
-            ck_cq,
-            ck_sh,
-            ck_qh,
-            max_cap,
-        )
+        res, sh, qh = drive(S, C, QEND, vl, al, jl, js, dt, L, FB, FV, tol, max_steps, K2, K3,
+                            K23, KV, gap_tol, floor_h, easy_fraction, chain_seq,
+                            checkpoint_every, sh, qh, st, cs, cq, bs, bq, stats, ds, ck_st,
+                            ck_cs, ck_cq, ck_sh, ck_qh, max_cap)
         if res != DONE:
             off[p + 1] = total
             continue
@@ -695,8 +431,8 @@ def plan_identity_batch(
             q2[:total] = q_all[:total]
             s_all = s2
             q_all = q2
-        s_all[total : total + m] = sh[:m]
-        q_all[total : total + m] = qh[:m]
+        s_all[total:total + m] = sh[:m]
+        q_all[total:total + m] = qh[:m]
         q_all[total + m - 1] = QEND
         total += m
         off[p + 1] = total
