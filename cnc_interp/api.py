@@ -174,7 +174,7 @@ def _plan(
     tol_mm: float | None,
     progress: Progress | None,
 ) -> "tuple[Trajectory, PlanSettings]":
-    from .errors import PlanError, SourceLocation
+    from .errors import PlanError
     from .plan.budget import check_sample_budget, held_time_s
     from .plan.settings import PlanSettings
     from .plan.timeline import plan_program
@@ -187,9 +187,7 @@ def _plan(
         traj: Trajectory = plan_program(fitted, machine, settings, progress=progress)
         return traj, settings
     except PlanError as exc:
-        if exc.location.line == 0 and exc.location.file == SourceLocation().file:
-            raise PlanError(exc.message, SourceLocation(file=source)) from None  # name the part
-        raise
+        raise exc.in_file(source) from None  # name the part program
 
 
 def verify(traj: "Trajectory", machine: "Machine | str") -> "VerifyReport":

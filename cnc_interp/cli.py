@@ -36,6 +36,18 @@ class _Finite(click.FloatRange):
         return v
 
 
+def _planner_option(f):
+    # plan and batch (stream quantizes paper 000's plan by default: its own option)
+    return click.option(
+        "--planner",
+        type=click.Choice(PLANNERS),
+        default=DEFAULT_PLANNER,
+        show_default=True,
+        help="optimal (near-time-optimal: feed-profile LP, exact sampler), VPOp "
+        "(paper 001), or paper 000's constant / variable feedrate planner.",
+    )(f)
+
+
 def _dt_option(f):
     # the same range a machine file accepts (plan/machine.py)
     return click.option(
@@ -183,14 +195,7 @@ def fit(part, machine_spec, tool_table, tol_mm, corner_deg, fit_method, out, as_
 @click.argument("part", type=click.Path(allow_dash=True, dir_okay=False))
 @_machine_option()
 @_tool_table_option
-@click.option(
-    "--planner",
-    type=click.Choice(PLANNERS),
-    default=DEFAULT_PLANNER,
-    show_default=True,
-    help="optimal (near-time-optimal: feed-profile LP, exact sampler), VPOp "
-    "(paper 001), or paper 000's constant / variable feedrate planner.",
-)
+@_planner_option
 @_dt_option
 @_tol_option
 @_fit_method_option
@@ -345,14 +350,7 @@ def stream(part, machine_spec, planner, dt_s, tol_mm, fit_method, device, dry_ru
 @main.command()
 @click.argument("paths", nargs=-1, required=True, type=click.Path(exists=True))
 @_machine_option(required=True)
-@click.option(
-    "--planner",
-    type=click.Choice(PLANNERS),
-    default=DEFAULT_PLANNER,
-    show_default=True,
-    help="optimal (near-time-optimal: feed-profile LP, exact sampler), VPOp "
-    "(paper 001), or paper 000's constant / variable feedrate planner.",
-)
+@_planner_option
 @_dt_option
 @_tol_option
 @_fit_method_option

@@ -50,6 +50,12 @@ class CncInterpError(Exception):
     def __str__(self) -> str:  # pragma: no cover - convenience
         return self.format()
 
+    def in_file(self, name: str) -> "CncInterpError":
+        """This error, or where it names no place (a planner's), the same one naming ``name``."""
+        if self.location.line or self.location.file != SourceLocation().file:
+            return self
+        return type(self)(self.message, SourceLocation(file=name))
+
 
 _CONTROL = {c: f"\\x{c:02x}" for c in (*range(0x20), 0x7F)}
 

@@ -15,7 +15,6 @@ from .plan.settings import DEFAULT_PLANNER
 
 
 def _loc(name: str):
-    from .errors import SourceLocation
 
     return SourceLocation(file=name)
 
@@ -333,9 +332,7 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
                 sink.abort()
                 raise
     except PlanError as exc:
-        if exc.location.line == 0 and exc.location.file == SourceLocation().file:
-            raise PlanError(exc.message, _loc(name)) from None  # name the part program
-        raise
+        raise exc.in_file(name) from None  # name the part program
     finally:
         blocks.close()
         fitted.close()

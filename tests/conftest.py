@@ -1,4 +1,4 @@
-"""Shared test set-up: where the samples and the corpus are, one CLI runner, program files.
+"""Shared test set-up: where the samples and the corpus are, and one CLI runner.
 
 Module constants (importable as ``from conftest import CORPUS``, since pytest puts this
 folder on ``sys.path``) for parametrisation at collection time; fixtures for the rest.
@@ -36,18 +36,3 @@ def cli():
         return runner.invoke(main, [str(a) for a in args], **kwargs)
 
     return invoke
-
-
-@pytest.fixture
-def gcode_file(tmp_path):
-    """Write a part program: ``gcode_file("G1 X1 F600", name="p.ngc")`` -> its path. A
-    program without ``M2``/``M30`` gets one."""
-
-    def make(text: str, name: str = "part.ngc"):
-        if "M2" not in text.upper() and "M30" not in text.upper():
-            text = text.rstrip("\n") + "\nM2\n"
-        path = tmp_path / name
-        path.write_text(text if text.endswith("\n") else text + "\n")
-        return path
-
-    return make

@@ -114,6 +114,13 @@ def straight_piece(p0: np.ndarray, p1: np.ndarray, length: float, line: int, fee
     return PieceFit(np.array([0.0, length]), coef, np.array([line]), np.array([feed]), 0.0, 0.0, True, 2)
 
 
+def _kernel_array(a, dtype=float) -> np.ndarray:
+    """``a`` contiguous and writeable: a read-only view (a frozen Path's arrays) would be a
+    separate numba specialization of the kernel, compiled again on a first run."""
+    a = np.ascontiguousarray(a, dtype=dtype)
+    return a if a.flags.writeable else a.copy()
+
+
 def fit_polyline(
     nodes: np.ndarray,
     tol_mm: np.ndarray,
@@ -192,12 +199,7 @@ def fit_polyline(
     d2s = start.d2 if start is not None else zero
     d1e = end.d1 if end is not None else zero
     d2e = end.d2 if end is not None else zero
-
-    def f64(a, dtype=float):
-        # contiguous and writeable: a read-only view (a frozen Path's arrays) would be a
-        # separate numba specialization, compiled again on a first run
-        a = np.ascontiguousarray(a, dtype=dtype)
-        return a if a.flags.writeable else a.copy()
+    f64 = _kernel_array
 
     # where rotary axes move, at most one segment per move (knots chasing the soft speed
     # check of the tool's own path, whose share of the motion jumps from move to move,
