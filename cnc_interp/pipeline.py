@@ -277,7 +277,6 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
     t_start = time.perf_counter()
     out = opts.out or "-"
     _few_malloc_arenas()
-    _warm_kernels()
     machine = load_machine(opts.machine_spec if opts.machine_spec is not None else DEFAULT_PRESET)
     start = opts.start
     if isinstance(start, str):
@@ -285,6 +284,7 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
     machine = machine.with_start(start)
     settings = PlanSettings.from_options(planner=opts.planner, dt_s=opts.dt_s, tol_mm=opts.tol_mm, machine=machine)
     machine = machine.with_dt(settings.dt_s)
+    _warm_kernels(settings.planner)
     dt = float(settings.dt_s)
     name, data = read_part(opts.part)
     input_meta = _input_meta(name, data)
@@ -384,13 +384,21 @@ def _few_malloc_arenas() -> None:
         pass
 
 
-def _warm_kernels() -> None:
+def _warm_kernels(planner: str) -> None:
     """Load the planner's and the CSV formatter's compiled kernels in a thread while the
-    program is read: loading them takes about a second, and the first rows wait for it."""
+    program is read: loading them takes about a second, and the first rows wait for it.
+    On a first run of VPOp, two child processes compile its kernels meanwhile
+    (``_precompile``); the thread waits for them and then loads what they cached."""
     import threading
+
+    from .plan import precompile as _precompile
+
+    children = planner == "vpop" and _precompile.start()
 
     def load():
         try:
+            if children:
+                _precompile.wait()
             from .export._repr import format_table
             from .plan import vpop_drive
 

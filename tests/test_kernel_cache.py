@@ -81,8 +81,10 @@ def test_unwritable_cache_folder_is_left_alone(tmp_path, monkeypatch):
     assert len(_left(root)) == 6
 
 
-def test_first_compile_notice_only_on_a_terminal_and_only_when_kernels_are_missing(tmp_path):
+def test_first_compile_notice_only_on_a_terminal_and_only_when_kernels_are_missing(tmp_path, monkeypatch):
     import io
+
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
 
     from cnc_interp._kernel_cache import PLAN_KERNEL_MODULES, announce_first_compile, missing_kernels
 
@@ -104,3 +106,26 @@ def test_first_compile_notice_only_on_a_terminal_and_only_when_kernels_are_missi
     tty2 = Tty()
     assert missing_kernels(str(root)) == [] and not announce_first_compile(tty2, root=str(root))
     assert tty2.getvalue() == ""
+
+
+def test_numba_cache_dir_is_where_the_kernels_are_looked_for(tmp_path, monkeypatch):
+    # numba's own rule (``_UserProvidedCacheLocator``): <NUMBA_CACHE_DIR>/<folder>_<sha1 of
+    # the folder's path>; a cache there counts, one in the package's __pycache__ does not
+    import hashlib
+
+    from cnc_interp._kernel_cache import PLAN_KERNEL_MODULES, missing_kernels
+
+    root = tmp_path / "pkg"
+    cache = tmp_path / "cache"
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(cache))
+    for mod in PLAN_KERNEL_MODULES:
+        *pkg, name = mod.split(".")
+        src = str(root.joinpath(*pkg))
+        d = cache / f"{pkg[-1]}_{hashlib.sha1(src.encode()).hexdigest()}"
+        d.mkdir(parents=True, exist_ok=True)
+        (d / f"{name}.kernel-1.py311.nbi").write_bytes(b"")
+        pyc = root.joinpath(*pkg, "__pycache__")
+        pyc.mkdir(parents=True, exist_ok=True)
+    assert missing_kernels(str(root)) == []
+    monkeypatch.delenv("NUMBA_CACHE_DIR")
+    assert missing_kernels(str(root)) == list(PLAN_KERNEL_MODULES)

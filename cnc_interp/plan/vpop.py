@@ -312,7 +312,10 @@ class _Prepared:
     (``vpop_drive.prepare_identity``); other kinematics: the table through the joint map."""
 
     def __init__(self, path, joint_map, machine, dt_s: float, settings, table=None):
+        from . import precompile as _precompile
         from . import vpop_drive as D
+
+        _precompile.wait()  # a first run's compiling children (else at once)
 
         if path.rapid:
             joint_map = None
@@ -582,10 +585,12 @@ def plan_many_vpop(paths, machine, dt_s: float, settings=None,
     Returns one ``PathPlan`` per path, or ``None`` for a path left to
     ``iter_path_plan_vpop`` (a long one, which should stream, or one whose preparation
     fails, so that the right error is raised there)."""
+    from . import precompile as _precompile
     from . import vpop_drive as D
 
     if not paths:
         return []
+    _precompile.wait()  # a first run's compiling children (else at once)
     dt = float(dt_s)
     mc = _machine_consts(machine, dt)
     n_seg = np.array([p.n_seg for p in paths], dtype=np.int64)

@@ -1,0 +1,157 @@
+"""First run: compile VPOp's kernels in two child processes while this one parses and fits.
+
+Numba compiles on one core and holds the GIL while it does, so a warm-up *thread* cannot
+share the work with the fit's own compile; processes can. The planner's kernels fall into
+two independent trees below ``vpop_drive.plan_identity_batch`` (the call that plans a run
+of short paths): the preparation (``prepare_identity``: arc-length table, bounds) and the
+step loop (``drive``). On a cold cache each child compiles one tree on a tiny rapid move,
+numba writes it to its on-disk cache, and the plan's first planner call waits for both
+(``wait``) and then only compiles ``plan_identity_batch`` itself, loading the rest.
+
+Measured on the project's 2-core machine, cold cache, quick-start plan of
+``mill-contour.ngc``: 65 CPU-s of compiling in one process (about 65 s wall) against about
+40 s wall with the two children (the preparation tree is ~17 CPU-s, the step loop ~30,
+the fit's kernels and ``plan_identity_batch`` ~28 in this process).
+
+A child that fails or is killed costs nothing but time: whatever it did not cache, this
+process compiles on its first call, as it would without children.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import threading
+
+#: the children's jobs: the preparation tree and the step-loop tree of VPOp's kernels
+JOBS = ("prepare", "loop")
+
+#: how long the planner waits for the children before compiling by itself (s): a child
+#: normally ends within a minute; one that hangs must not hang the plan
+PRECOMPILE_WAIT_S = 600.0
+
+_children: list[subprocess.Popen] = []
+_lock = threading.Lock()
+
+
+def start(root: str | None = None) -> bool:
+    """Start the children when VPOp's kernels are not cached yet (a first run, or the
+    first after an update changed them); returns whether it started them."""
+    from .._kernel_cache import missing_kernels
+
+    root = root or os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    if not any(m.startswith("plan.") for m in missing_kernels(root)):
+        return False
+    with _lock:
+        if _children:
+            return True
+        for job in JOBS:
+            try:
+                proc = subprocess.Popen(
+                    _command(job),
+                    stdin=subprocess.DEVNULL,
+                    stdout=subprocess.DEVNULL,
+                    stderr=subprocess.DEVNULL,
+                    close_fds=True,
+                )
+            except OSError:  # no process to spare: this process compiles everything
+                break
+            _children.append(proc)
+        started = bool(_children)
+    if started:
+        import atexit
+
+        atexit.register(stop)
+    return started
+
+
+def _command(job: str) -> list[str]:
+    return [sys.executable, "-m", __name__, job]
+
+
+def wait(timeout_s: float = PRECOMPILE_WAIT_S) -> None:
+    """Block until the children have finished (at once when none was started)."""
+    with _lock:
+        procs = list(_children)
+    for proc in procs:
+        try:
+            proc.wait(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+    with _lock:
+        for proc in procs:
+            if proc in _children:
+                _children.remove(proc)
+
+
+def stop() -> None:
+    """Kill children still compiling (the plan ended early: an error, Ctrl-C)."""
+    with _lock:
+        procs = list(_children)
+        _children.clear()
+    for proc in procs:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+def _tiny_path():
+    """A 1 mm rapid move of the default machine, fitted: the smallest real input."""
+    from ..fit.fitter import fit_run
+    from ..gcode import read_program
+    from .machine_io import DEFAULT_PRESET, load_machine
+
+    m = load_machine(DEFAULT_PRESET)
+    prog = read_program(b"G21 G90\nG0 X1\n", "precompile", axes=m.axes, start=m.start)
+    return fit_run(prog.runs[0])[0], m
+
+
+def _job_prepare() -> None:
+    """The preparation tree (``vpop_drive.prepare_identity``)."""
+    from . import vpop
+
+    path, m = _tiny_path()
+    vpop._Prepared(path, None, m, m.dt_s, None)
+
+
+def _job_loop() -> None:
+    """The step-loop tree (``vpop_drive.drive``), reached through the joint-map route of
+    the preparation (Python and small kernels) so that ``prepare_identity`` is left to the
+    other child."""
+    from . import vpop
+    from .kinematics import Kinematics
+
+    class _MappedIdentity(Kinematics):
+        """The identity, presented as a joint map: VPOp prepares it in Python."""
+
+        @property
+        def is_identity(self) -> bool:
+            return False
+
+    path, m = _tiny_path()
+    joint_map = _MappedIdentity(m.axes)
+    table = vpop.JointTable(path, joint_map)
+    prep = vpop._Prepared(path, joint_map, m, m.dt_s, None, table=table)
+    for _ in vpop.iter_prepared(prep, joint_map, m, None, None):
+        pass
+
+
+def main(argv: list[str]) -> int:
+    import signal
+
+    # the parent may block SIGINT (``outfile.watch_interrupts``) and the mask is inherited:
+    # Ctrl-C on the terminal must end the children too
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+    jobs = {"prepare": _job_prepare, "loop": _job_loop}
+    if len(argv) != 1 or argv[0] not in jobs:
+        sys.stderr.write(f"usage: python -m {__name__} {{{','.join(JOBS)}}}\n")
+        return 2
+    jobs[argv[0]]()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

@@ -1,0 +1,77 @@
+"""First run: VPOp's kernels compiled by two child processes (``plan.precompile``)."""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+
+import pytest
+
+from cnc_interp.plan import precompile
+
+
+@pytest.fixture
+def sleeping_children(monkeypatch):
+    """Children that sleep instead of compiling, on a cache that looks cold."""
+    monkeypatch.setattr(precompile, "_command", lambda job: [sys.executable, "-c", "import time; time.sleep(60)"])
+    monkeypatch.setattr("cnc_interp._kernel_cache.missing_kernels", lambda root: ["plan.vpop_core"])
+    yield
+    precompile.stop()
+
+
+def test_no_children_when_the_planner_kernels_are_cached(monkeypatch):
+    monkeypatch.setattr("cnc_interp._kernel_cache.missing_kernels", lambda root: ["fit._arclen"])
+    assert not precompile.start()
+    assert precompile._children == []
+    t0 = time.perf_counter()
+    precompile.wait()  # nothing to wait for
+    assert time.perf_counter() - t0 < 0.1
+
+
+def test_one_child_per_job_and_stop_kills_them(sleeping_children):
+    assert precompile.start()
+    assert precompile.start()  # a second call starts no more
+    procs = list(precompile._children)
+    assert len(procs) == len(precompile.JOBS) and all(p.poll() is None for p in procs)
+    precompile.stop()
+    assert all(p.poll() is not None for p in procs) and precompile._children == []
+
+
+def test_wait_gives_up_on_a_child_that_hangs(sleeping_children):
+    assert precompile.start()
+    procs = list(precompile._children)
+    t0 = time.perf_counter()
+    precompile.wait(timeout_s=0.2)
+    assert time.perf_counter() - t0 < 5
+    assert all(p.poll() is not None for p in procs) and precompile._children == []
+
+
+def test_unknown_job_is_a_usage_error(capsys):
+    assert precompile.main(["everything"]) == 2
+    assert "usage" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_children_leave_only_plan_identity_batch_to_compile(tmp_path, monkeypatch):
+    """On an empty cache, after the children, this process loads the preparation and the
+    step loop from the cache and compiles neither (a signature that differs from the real
+    call's would make it compile them again: the work would be done twice)."""
+    import subprocess
+
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    code = (
+        "from cnc_interp.plan import precompile, vpop_drive as D\n"
+        "from cnc_interp import api\n"
+        "assert precompile.start()\n"
+        "precompile.wait()\n"
+        "m = api.load_machine('generic-mill')\n"
+        "api.run('samples/gcode/mill-contour.ngc', machine=m)\n"
+        "for f in (D.drive, D.prepare_identity):\n"
+        "    assert sum(f.stats.cache_hits.values()) == 1, (f, f.stats)\n"
+        "    assert sum(f.stats.cache_misses.values()) == 0, (f, f.stats)\n"
+        "assert sum(D.plan_identity_batch.stats.cache_misses.values()) == 1\n"
+    )
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    r = subprocess.run([sys.executable, "-c", code], cwd=root, env=env, capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stderr[-3000:]
