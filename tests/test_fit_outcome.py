@@ -78,17 +78,16 @@ def test_a_fit_outside_its_tolerance_fails_with_exit_1_naming_the_line(tmp_path,
     import cnc_interp.fit.fitter as fitter
     from cnc_interp.cli import main
 
-    real = fitter._fit_run_raw
+    real = fitter._iter_run_raws
 
-    def outside(run, settings):
+    def outside(run, settings, info):
         # every path of the pipeline (fit_program and the streaming iter_fit) fits runs here
-        raws, info = real(run, settings)
+        yield from real(run, settings, info)
         if run.kind != "rapid":
             info["within_tolerance"] = False
             info["outside_lines"] = [4, 6]
-        return raws, info
 
-    monkeypatch.setattr(fitter, "_fit_run_raw", outside)
+    monkeypatch.setattr(fitter, "_iter_run_raws", outside)
     f = tmp_path / "r.ngc"
     f.write_text(ROT9)
     for cmd in (

@@ -7,10 +7,87 @@ The spline is clamped, degree 5, so it is C4 in the parameter at simple knots.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
 K = 5  # degree
+
+
+class FitNodes(NamedTuple):
+    """One section's nodes in the scaled space (n nodes, d axes): parameters ``u`` (n,),
+    positions ``y`` (n, d), tolerances ``tol`` (n,), ``chords`` (n-1, d) and their lengths
+    ``clen`` (n-1,), ``lin_ratio`` (n-1,) the share of each chord on the metric's axes."""
+
+    u: np.ndarray
+    y: np.ndarray
+    tol: np.ndarray
+    chords: np.ndarray
+    clen: np.ndarray
+    lin_ratio: np.ndarray
+
+
+class EndStates(NamedTuple):
+    """Imposed first and second derivatives at the start and end (d,), each used when its
+    mode is 1 (0: free)."""
+
+    d1s: np.ndarray
+    d2s: np.ndarray
+    d1e: np.ndarray
+    d2e: np.ndarray
+    start_mode: int
+    end_mode: int
+
+
+class CheckPoints(NamedTuple):
+    """Check points (P of them): parameters ``xc`` (P,), reference positions ``ref`` (P, d),
+    allowed deviation ``tol`` (P,), expected chord speed of all axes ``exp_speed`` (P,)
+    and of the metric's axes ``exp_lin_speed`` (P,)."""
+
+    xc: np.ndarray
+    ref: np.ndarray
+    tol: np.ndarray
+    exp_speed: np.ndarray
+    exp_lin_speed: np.ndarray
+
+
+class FitData(NamedTuple):
+    """Round-invariant least-squares data and checks: the node and chord check points
+    (``xc``, ``ref``, ``tol_c``, ``exp_lin``), data points (``u_data``, ``y_data``,
+    weights ``w_data``) and ``span_f``, the fractions of each knot span that get points
+    on the programmed moves."""
+
+    xc: np.ndarray
+    ref: np.ndarray
+    tol_c: np.ndarray
+    exp_lin: np.ndarray
+    u_data: np.ndarray
+    y_data: np.ndarray
+    w_data: np.ndarray
+    span_f: np.ndarray
+
+
+class RefineParams(NamedTuple):
+    """The fitter's settings for one section (see ``nodes.py``'s constants): the reference
+    tolerance (mm) of the data weights, the rotary tolerance (scaled), the axis masks
+    ``lin`` / ``metric`` (d,), safety on the tolerance between nodes, smoothing and ridge
+    weights, soft and hard speed ratios, round limits, least knot span and most interior
+    knots (-1: no limit)."""
+
+    tol_ref: float
+    tol_rot: float
+    lin: np.ndarray
+    metric: np.ndarray
+    between_safety: float
+    smoothing: float
+    ridge: float
+    min_ratio: float
+    stop_ratio: float
+    max_rounds: int
+    stale_rounds: int
+    min_span: float
+    max_interior: int
 
 
 @njit(cache=True)
@@ -250,8 +327,7 @@ def _d1_coef(t, c, i, a):
 
 
 @njit(cache=True)
-def check(t, m, c, xc, ref, tol_lin, tol_rot, lin, metric, exp_speed, exp_lin_speed, min_ratio, bad_span,
-          n_hard, hard_ratio):
+def check(t, m, c, pts, tol_rot, lin, metric, min_ratio, bad_span, n_hard, hard_ratio):
     """Mark spans whose check points deviate or slow down too much.
 
     Returns (max linear error, max rotary error, hard failures, soft failures): any
@@ -260,11 +336,10 @@ def check(t, m, c, xc, ref, tol_lin, tol_rot, lin, metric, exp_speed, exp_lin_sp
     speed below ``hard_ratio`` of the expected one are hard; speeds between
     ``hard_ratio`` and ``min_ratio`` of the expected one are soft.
 
-    xc (P,) check parameters, ref (P, d) reference positions, tol_lin (P,) allowed linear
-    deviation, tol_rot scalar allowed rotary deviation (scaled units), exp_speed (P,) and
-    exp_lin_speed (P,) the chord speeds expected there (all axes / the arc-length
-    metric's axes ``metric``).
+    pts: the check points (``CheckPoints``), tol_rot scalar allowed rotary deviation
+    (scaled units), ``metric`` the arc-length metric's axes.
     """
+    xc, ref, tol_lin, exp_speed, exp_lin_speed = pts
     P = xc.shape[0]
     d = c.shape[1]
     val = np.empty((P, d))
@@ -347,23 +422,23 @@ def segment_sources_kernel(x, u, line, feed):
 
 
 @njit(cache=True)
-def refine(u, y, tol, chords, clen, lin_ratio, interior, total, d1s, d2s, d1e, d2e, start_mode,
-           end_mode, xc0, ref0, tol_c0, exp_lin0, u_data0, y_data0, w_data0, span_f, tol_ref,
-           tol_rot, lin, metric, between_safety, smoothing, ridge, min_ratio, stop_ratio,
-           max_rounds, stale_rounds, min_span, max_interior):
+def refine(nodes, interior, total, ends, data, prm):
     """The knot-insertion rounds of ``nodes.fit_polyline`` (see its module docstring),
     compiled: one call instead of a Python loop with dozens of array operations per
     round. Returns (t, m, c, ok): the knot vector, coefficient count, coefficients
     (m, d) in the scaled space, and whether the last round passed (or only soft checks
     failed).
 
-    Round-invariant inputs: node parameters u (n,), scaled nodes y (n, d), node
-    tolerances tol (n,), chords (n-1, d), clen (n-1,), lin_ratio (n-1,); the initial
-    interior knots; the end states (mode 1 imposes d1/d2); the node and chord check
-    points (xc0, ref0, tol_c0, exp_lin0) and data (u_data0, y_data0, w_data0); span_f
-    the fractions of a knot span that get points on the programmed moves; no more than
-    ``max_interior`` interior knots (-1: no limit) are inserted.
+    Round-invariant inputs: the nodes (``FitNodes``), the initial ``interior`` knots and
+    the ``total`` parameter length, the end states (``EndStates``), the check points and
+    data (``FitData``) and the settings (``RefineParams``; no more than ``max_interior``
+    interior knots are inserted).
     """
+    u, y, tol, chords, clen, lin_ratio = nodes
+    d1s, d2s, d1e, d2e, start_mode, end_mode = ends
+    xc0, ref0, tol_c0, exp_lin0, u_data0, y_data0, w_data0, span_f = data
+    (tol_ref, tol_rot, lin, metric, between_safety, smoothing, ridge, min_ratio, stop_ratio,
+     max_rounds, stale_rounds, min_span, max_interior) = prm
     n, d = y.shape
     ns = span_f.shape[0]
     stale = 0
@@ -445,8 +520,8 @@ def refine(u, y, tol, chords, clen, lin_ratio, interior, total, d1s, d2s, d1e, d
                 q += 1
         solve_lsq(t, m, u_data, y_data, w_data, prior, fixed, c, smoothing, ridge)
         bad = np.zeros(m + 1, dtype=np.bool_)
-        worst_lin, worst_rot, hard, soft = check(t, m, c, xc, ref, tol_c, tol_rot, lin, metric,
-                                                 exp_all, exp_lin, min_ratio, bad, n, stop_ratio)
+        worst_lin, worst_rot, hard, soft = check(t, m, c, CheckPoints(xc, ref, tol_c, exp_all, exp_lin),
+                                                 tol_rot, lin, metric, min_ratio, bad, n, stop_ratio)
         if hard == 0:
             # chord points are a heuristic against bulges: stop refining for them once
             # a few rounds no longer help (the nodes are within tolerance)

@@ -43,7 +43,7 @@ stopping, measured with VPOp on a dense-corner CAM program).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -102,6 +102,36 @@ class Blend:
     feed_mm_s: float
     t_in: np.ndarray
     t_out: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class BlendTable:
+    """The blended corners of a prepared run as arrays, in path order (K blends, n axes):
+    ``i`` (K,), ``h`` (K,), ``coef`` (K, 6, n), ``line`` (K,), ``feed_mm_s`` (K,),
+    ``t_in`` / ``t_out`` (K, n), each as in ``Blend``. ``table[k]`` is the k-th ``Blend``
+    and ``table[a:b]`` a table of those blends: a run of 10⁵ corners holds 7 arrays, not
+    10⁵ objects (stellabee1: 111k blends, 64 MB of objects)."""
+
+    i: np.ndarray
+    h: np.ndarray
+    coef: np.ndarray
+    line: np.ndarray
+    feed_mm_s: np.ndarray
+    t_in: np.ndarray
+    t_out: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.i.shape[0])
+
+    def __getitem__(self, k):
+        if isinstance(k, slice):
+            return BlendTable(*(getattr(self, f.name)[k] for f in fields(self)))
+        i, h, line, feed = int(self.i[k]), float(self.h[k]), int(self.line[k]), float(self.feed_mm_s[k])
+        return Blend(i, h, self.coef[k], line, feed, self.t_in[k], self.t_out[k])
+
+    def __iter__(self):
+        for k in range(len(self)):
+            yield self[k]
 
 
 def unit_blends(theta: float, rs: np.ndarray, samples: int = _SAMPLES):

@@ -23,6 +23,7 @@ import numpy as np
 
 from ..constants import FIT_COLLINEAR_DEG, FIT_EXACT_CURVE_TOL_MM, LINEAR_AXES
 from ..gcode.program import CurvePiece, Run
+from .blends import BlendTable
 from .nodes import turn_angles
 
 
@@ -40,7 +41,7 @@ class PreparedRun:
     nodes (N', n), line/feed_mm_s (N',) of the move ending at each node (node 0
     repeats node 1), tol_mm (N',) resolved tolerance (0 = G61), curves re-indexed,
     lin (n,) linear axes, scale (n,) metric scale, rot_only (N'-1,) per move;
-    blends: the blended corners (``add_blends``); orig_index (N',): each row's node
+    blends: the blended corners (``add_blends``, a ``blends.BlendTable``); orig_index (N',): each row's node
     before blend points were inserted (-1 for an inserted point); stops: nodes where
     the path must stop (a repair's corner that cannot be blended).
     """
@@ -54,7 +55,7 @@ class PreparedRun:
     lin: np.ndarray
     scale: np.ndarray
     rot_only: np.ndarray
-    blends: tuple = ()
+    blends: tuple | BlendTable = ()
     orig_index: np.ndarray | None = None
     stops: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
@@ -77,7 +78,7 @@ class SubRun:
     kind: str
     rotary: bool
     curves: tuple[CurvePiece, ...]
-    blends: tuple = ()
+    blends: tuple | BlendTable = ()
 
 
 def prepare_run(run: Run, settings) -> PreparedRun:
@@ -183,7 +184,7 @@ def split_run(pr: PreparedRun, settings, evals: dict | None = None) -> list[SubR
     cut[j] = (turn[j] > settings.corner_deg) | (g61 & (turn[j] > FIT_COLLINEAR_DEG))
     cut[j] |= pr.rot_only[j - 1] != pr.rot_only[j]
     cut &= ~inside
-    corner = np.array([bl.i + 1 for bl in pr.blends], dtype=np.int64)
+    corner = np.asarray(pr.blends.i, dtype=np.int64) + 1 if len(pr.blends) else np.zeros(0, dtype=np.int64)
     cut[corner] = False
     stops = pr.stops[(pr.stops > 0) & (pr.stops < n - 1)]
     cut[stops[~inside[stops]]] = True
@@ -194,19 +195,44 @@ def split_run(pr: PreparedRun, settings, evals: dict | None = None) -> list[SubR
     by_sub: dict[int, list] = {}
     for c, o in zip(pr.curves, owner):
         by_sub.setdefault(int(o), []).append(c)
+    # blends are in path order: each sub-run's are a range of the table
     bl_owner = np.searchsorted(edges, corner, side="right") - 1
-    bl_sub: dict[int, list] = {}
-    for bl, o in zip(pr.blends, bl_owner):
-        bl_sub.setdefault(int(o), []).append(bl)
+    n_sub = edges.size - 1
+    bl_lo = np.searchsorted(bl_owner, np.arange(n_sub), side="left").tolist()
+    bl_hi = np.searchsorted(bl_owner, np.arange(n_sub), side="right").tolist()
     zero = pr.tol_mm == 0
     n_zero = np.concatenate(([0], np.cumsum(zero)))
     subs = []
     for k, (a, b) in enumerate(zip(edges[:-1].tolist(), edges[1:].tolist())):
         cs = tuple(by_sub.get(k, ()))
-        bs = tuple(bl_sub.get(k, ()))
+        bs = pr.blends[bl_lo[k] : bl_hi[k]] if bl_hi[k] > bl_lo[k] else ()
         exact = not cs and not bs and (n_zero[b + 1] - n_zero[a + 1]) == b - a
         subs.append(SubRun(a, b, "straight" if exact else "fit", bool(pr.rot_only[a]), cs, bs))
     return subs
+
+
+def slice_run(pr: PreparedRun, first: int, last: int) -> PreparedRun:
+    """Nodes ``first..last`` of ``pr`` (without blends; curves inside re-indexed; stops
+    inside kept) as a prepared run of their own: a sub-run's repair works on it alone."""
+    sl = slice(first, last + 1)
+    curves = tuple(
+        CurvePiece(cp.first - first, cp.last - first, cp.curve)
+        for cp in pr.curves
+        if first <= cp.first and cp.last <= last
+    )
+    stops = pr.stops[(pr.stops > first) & (pr.stops < last)] - first
+    return PreparedRun(
+        pr.axes,
+        pr.nodes[sl],
+        pr.line[sl],
+        pr.feed_mm_s[sl],
+        pr.tol_mm[sl],
+        curves,
+        pr.lin,
+        pr.scale,
+        pr.rot_only[first:last],
+        stops=stops,
+    )
 
 
 def add_blends(pr: PreparedRun, settings, evals: dict | None = None, force: np.ndarray | None = None) -> PreparedRun:
@@ -215,7 +241,7 @@ def add_blends(pr: PreparedRun, settings, evals: dict | None = None, force: np.n
     tolerance), and ``blends`` lists them. A corner is a candidate when it turns more
     than ``corner_deg`` (or ``force`` (n,) marks it), both its moves are straight (no
     exact curve) and within one metric, and neither is under G61."""
-    from .blends import Blend, blend_piece, plan_blends
+    from .blends import blend_piece, plan_blends
 
     n = pr.nodes.shape[0]
     if n < 3:
@@ -282,10 +308,7 @@ def add_blends(pr: PreparedRun, settings, evals: dict | None = None, force: np.n
     t_out = chords[corners] / clen[corners, None]
     coef, h = blend_piece(nodes[ia], nodes[ib], t_in, t_out, dist[corners], shape[corners], pr.scale)
     feed = np.minimum(pr.feed_mm_s[corners], pr.feed_mm_s[corners + 1])
-    blends = [
-        Blend(int(ia[k]), float(h[k]), coef[k], int(pr.line[c]), float(feed[k]), t_in[k], t_out[k])
-        for k, c in enumerate(corners.tolist())
-    ]
+    blends = BlendTable(ia.astype(np.int64), h, coef, pr.line[corners], feed, t_in, t_out)
     curves = tuple(CurvePiece(int(new_index[cp.first]), int(new_index[cp.last]), cp.curve) for cp in pr.curves)
     rot_only = pr.rot_only[take[1:] - 1]
     orig = np.full(nodes.shape[0], -1, dtype=np.int64)
@@ -300,7 +323,7 @@ def add_blends(pr: PreparedRun, settings, evals: dict | None = None, force: np.n
         pr.lin,
         pr.scale,
         rot_only,
-        tuple(blends),
+        blends,
         orig,
         new_index[np.nonzero(no_blend)[0]],
     )

@@ -32,7 +32,7 @@ import numpy as np
 from ..constants import ARC_LENGTH_MAX_SUB, ARC_LENGTH_REL_TOL
 from ..gcode.program import Dwell, Program, Run, Stop
 from .deviation import path_deviation, polyline_deviation, rotary_path_deviation
-from .corners import PreparedRun, SubRun, add_blends, fit_tolerance, prepare_run, split_run
+from .corners import PreparedRun, SubRun, add_blends, fit_tolerance, prepare_run, slice_run, split_run
 from .nodes import EndState, fit_polyline, straight_piece
 from .path import Path, PlanarSegments
 from .result import FitResult, fit_outside_error
@@ -144,14 +144,26 @@ def iter_fit(
             quantum.add_run(it)
             q = quantum.result()
             run_settings = replace(settings, quantum_mm=q["quantum_mm"], quantum_deg=q["quantum_deg"])
-            raws_all, info = _fit_run_raw(it, run_settings)
+            info = _run_info(it)
             info["item"] = idx
+            # a run's paths are built and handed on ``batch`` at a time as its sub-runs are
+            # fitted (stellabee1 is one run of 258k nodes: holding all its fits costs 250 MB)
+            pending: list[_Raw] = []
+            n_raws = 0
+            for raw in _iter_run_raws(it, run_settings, info):
+                pending.append(raw)
+                n_raws += 1
+                if len(pending) >= batch:
+                    if source is not None and not info["within_tolerance"]:
+                        raise fit_outside_error(info, source)
+                    paths, prev_end = _build_paths(pending, prev_end)
+                    pending = []
+                    yield from paths
             runs_info.append(info)
             if source is not None and not info["within_tolerance"]:
                 raise fit_outside_error(info, source)
-            n_raws = len(raws_all)
-            for b0 in range(0, n_raws, batch):
-                paths, prev_end = _build_paths(raws_all[b0 : b0 + batch], prev_end)
+            if pending:
+                paths, prev_end = _build_paths(pending, prev_end)
                 yield from paths
             if it.kind == "rapid":
                 totals["rapid_moves"] += n_raws
@@ -299,60 +311,76 @@ def _run_info(run: Run) -> dict:
 
 
 def _fit_run_raw(run: Run, settings: FitSettings):
-    lin = np.array([a in "XYZUVW" for a in run.axes], dtype=bool)
+    """Fit one run: (its raw paths in order, its statistics ``_run_info``)."""
     info = _run_info(run)
+    raws = list(_iter_run_raws(run, settings, info))
+    return raws, info
+
+
+def _iter_run_raws(run: Run, settings: FitSettings, info: dict):
+    """The raw paths of one run in order, each sub-run's as soon as it is fitted; ``info``
+    (``_run_info``) holds the statistics of what was yielded so far."""
+    lin = np.array([a in "XYZUVW" for a in run.axes], dtype=bool)
     if run.kind == "rapid":
-        return _rapid_raws(run, lin), info
+        raws = _rapid_raws(run, lin)
+        info["paths"] = len(raws)
+        yield from raws
+        return
     pr = prepare_run(run, settings)
     evals: dict = {}  # CurveEval per curve, shared by the corner split and the fit
     info["nodes_in"] = int(run.n_nodes)
     info["max_tol_mm"] = float(pr.tol_mm.max()) if pr.tol_mm.size else 0.0
-    # fit; where the measurement finds a stretch outside its tolerance, repair it
-    # locally: blends (or, where a corner cannot be blended, stops) at nodes inside the
-    # failing sections, then refit; the last round forces every node there
-    force = np.zeros(pr.nodes.shape[0], dtype=bool)
-    for attempt in range(FIT_REPAIR_ROUNDS + 1):
-        prb = pr
-        if settings.blend_corners and settings.method == "nodes":
-            prb = add_blends(pr, settings, evals, force=force if force.any() else None)
-        elif force.any():
-            prb = replace(pr, stops=np.nonzero(force)[0])
-        results, more = _fit_run_once(prb, settings, evals, info, attempt)
+    blend = settings.blend_corners and settings.method == "nodes"
+    prb = add_blends(pr, settings, evals) if blend else pr
+    methods: set[str] = set()
+    for sub in split_run(prb, settings, evals):
+        results, where = _fit_sub_repaired(pr, prb, sub, settings, evals, info, blend)
+        for m in results:
+            methods.add(m.method)
+            info["max_node_dev_mm"] = max(info["max_node_dev_mm"], m.dev_mm)
+            info["max_node_dev_deg"] = max(info["max_node_dev_deg"], m.dev_deg)
+            info["max_path_dev_mm"] = max(info["max_path_dev_mm"], m.path_dev_mm)
+            info["max_path_dev_ratio"] = max(info["max_path_dev_ratio"], m.path_ratio)
+            info["max_path_dev_rot_ratio"] = max(info["max_path_dev_rot_ratio"], m.rot_ratio)
+            if not m.ok:
+                if "outside_lines" not in info:
+                    info["outside_lines"] = [int(where.line[m.i0 + 1]), int(where.line[m.i1])]
+                info["within_tolerance"] = False
+            info["segments_out"] += int(m.raw.coef.shape[0])
+            info["paths"] += 1
+            info["methods"] = sorted(methods)
+            yield m.raw
+
+
+def _fit_sub_repaired(
+    pr: PreparedRun, prb: PreparedRun, sub: SubRun, settings: FitSettings, evals: dict, info: dict, blend: bool
+) -> tuple[list, PreparedRun]:
+    """Fit one sub-run of ``prb`` (``pr`` with its corners blended); where the measurement
+    finds it outside its tolerance, repair it on its own programmed nodes: blends (or,
+    where a corner cannot be blended, stops) at nodes inside its failing sections, then
+    refit, over ``FIT_REPAIR_ROUNDS`` rounds, the last forcing every node there.
+    Returns (measured fits in path order, the prepared run their indices refer to)."""
+    results, more = _fit_run_once(prb, [sub], settings, evals, info, 0)
+    if not more.size:
+        return results, prb
+    # the sub-run's ends are cuts: programmed nodes, never inserted blend points
+    first, last = int(prb.orig_index[sub.i0]), int(prb.orig_index[sub.i1])
+    local = slice_run(pr, first, last)
+    force = np.zeros(local.nodes.shape[0], dtype=bool)
+    force[_original_index(pr, prb, more) - first] = True
+    lb = local
+    for attempt in range(1, FIT_REPAIR_ROUNDS + 1):
+        info["repaired"] = info.get("repaired", 0) + 1
+        if blend:
+            lb = add_blends(local, settings, evals, force=force)
+        else:
+            lb = replace(local, stops=np.nonzero(force)[0])
+        results, more = _fit_run_once(lb, split_run(lb, settings, evals), settings, evals, info, attempt)
         if not more.size:
             break
-        info["repaired"] = info.get("repaired", 0) + 1
-        force[_original_index(pr, prb, more)] = True
-    raws = []
-    methods = set()
-    dmm_max = ddeg_max = pdev_max = pratio_max = rratio_max = 0.0
-    ok_all = True
-    n_seg = 0
-    for m in results:
-        raws.append(m.raw)
-        methods.add(m.method)
-        dmm_max = max(dmm_max, m.dev_mm)
-        ddeg_max = max(ddeg_max, m.dev_deg)
-        pdev_max = max(pdev_max, m.path_dev_mm)
-        pratio_max = max(pratio_max, m.path_ratio)
-        rratio_max = max(rratio_max, m.rot_ratio)
-        if not m.ok and "outside_lines" not in info:
-            info["outside_lines"] = [int(prb.line[m.i0 + 1]), int(prb.line[m.i1])]
-        ok_all &= m.ok
-        n_seg += int(m.raw.coef.shape[0])
-    if info.get("repaired"):
-        info["repair_stops"] = int(prb.stops.size)
-    info.update(
-        max_node_dev_mm=dmm_max,
-        max_node_dev_deg=ddeg_max,
-        max_path_dev_mm=pdev_max,
-        max_path_dev_ratio=pratio_max,
-        max_path_dev_rot_ratio=rratio_max,
-        within_tolerance=ok_all,
-        segments_out=n_seg,
-        paths=len(raws),
-        methods=sorted(methods),
-    )
-    return raws, info
+        force[_original_index(local, lb, more)] = True
+    info["repair_stops"] = info.get("repair_stops", 0) + int(lb.stops.size)
+    return results, lb
 
 
 def _original_index(pr: PreparedRun, prb: PreparedRun, idx: np.ndarray) -> np.ndarray:
@@ -361,15 +389,15 @@ def _original_index(pr: PreparedRun, prb: PreparedRun, idx: np.ndarray) -> np.nd
     return prb.orig_index[idx]
 
 
-def _fit_run_once(pr: PreparedRun, settings: FitSettings, evals: dict, info: dict, attempt: int):
-    """Fit every sub-run of a prepared run (repair round ``attempt``): (measured fits in path
-    order, nodes of ``pr`` where the next round should put blends or stops; empty when all
-    are within). In the last round a sub-run still outside becomes its exact moves."""
+def _fit_run_once(pr: PreparedRun, subs: list[SubRun], settings: FitSettings, evals: dict, info: dict, attempt: int):
+    """Fit sub-runs ``subs`` of a prepared run (repair round ``attempt``): (measured fits in
+    path order, nodes of ``pr`` where the next round should put blends or stops; empty when
+    all are within). In the last round a sub-run still outside becomes its exact moves."""
     last = attempt == FIT_REPAIR_ROUNDS
     results = []
     more = []
     lin_all, rot_all = _weights(pr.lin, False), _weights(pr.lin, True)
-    for sub in split_run(pr, settings, evals):
+    for sub in subs:
         a, b = sub.i0, sub.i1
         if b - a == 1 and not sub.curves:
             # a single move: the exact line through its two nodes. Node and path deviation
