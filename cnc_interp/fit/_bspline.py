@@ -212,7 +212,7 @@ def solve_lsq(t, m, u, y, w, prior, fixed, c, lam, ridge):
             for b in range(4):
                 if b != a:
                     prod *= g[i + a] - g[i + b]
-            dd[a] = span ** 3 / prod
+            dd[a] = span**3 / prod
         for a in range(d):
             tgt[a] = 0.0
         for a in range(4):
@@ -374,11 +374,9 @@ def check(t, m, c, pts, tol_rot, lin, metric, min_ratio, bad_span, n_hard, hard_
         else:
             # chord points: one Euclidean allowance in the scaled metric (it holds the sagitta)
             dev_ok = e_all <= tol_lin[j]
-        speed_ok = np.sqrt(sp_all) >= min_ratio * exp_speed[j] and \
-            np.sqrt(sp_lin) >= min_ratio * exp_lin_speed[j]
+        speed_ok = np.sqrt(sp_all) >= min_ratio * exp_speed[j] and np.sqrt(sp_lin) >= min_ratio * exp_lin_speed[j]
         # a near-stop is never accepted; a mere slow-down (a rounded corner) may remain
-        stop = np.sqrt(sp_all) < hard_ratio * exp_speed[j] or \
-            np.sqrt(sp_lin) < hard_ratio * exp_lin_speed[j]
+        stop = np.sqrt(sp_all) < hard_ratio * exp_speed[j] or np.sqrt(sp_lin) < hard_ratio * exp_lin_speed[j]
         if not (dev_ok and speed_ok):
             bad_span[find_span(t, m, xc[j])] = True
             # every check point lies on the programmed path: a deviation is a failure
@@ -437,8 +435,21 @@ def refine(nodes, interior, total, ends, data, prm):
     u, y, tol, chords, clen, lin_ratio = nodes
     d1s, d2s, d1e, d2e, start_mode, end_mode = ends
     xc0, ref0, tol_c0, exp_lin0, u_data0, y_data0, w_data0, span_f = data
-    (tol_ref, tol_rot, lin, metric, between_safety, smoothing, ridge, min_ratio, stop_ratio,
-     max_rounds, stale_rounds, min_span, max_interior) = prm
+    (
+        tol_ref,
+        tol_rot,
+        lin,
+        metric,
+        between_safety,
+        smoothing,
+        ridge,
+        min_ratio,
+        stop_ratio,
+        max_rounds,
+        stale_rounds,
+        min_span,
+        max_interior,
+    ) = prm
     n, d = y.shape
     ns = span_f.shape[0]
     stale = 0
@@ -455,8 +466,8 @@ def refine(nodes, interior, total, ends, data, prm):
         m = ni + 6
         t = np.empty(ni + 12)
         t[:6] = 0.0
-        t[6:6 + ni] = interior
-        t[6 + ni:] = total
+        t[6 : 6 + ni] = interior
+        t[6 + ni :] = total
         c = np.zeros((m, d))
         end_coefs(t, m, c, y[0], y[n - 1], d1s, d2s, d1e, d2e, start_mode, end_mode)
         fixed = np.zeros(m, dtype=np.bool_)
@@ -465,7 +476,7 @@ def refine(nodes, interior, total, ends, data, prm):
         if start_mode == 1:
             fixed[:3] = True
         if end_mode == 1:
-            fixed[m - 3:] = True
+            fixed[m - 3 :] = True
         # Greville abscissae and the chordal prior of the ridge term
         prior = np.empty((m, d))
         g = np.empty(m)
@@ -520,8 +531,9 @@ def refine(nodes, interior, total, ends, data, prm):
                 q += 1
         solve_lsq(t, m, u_data, y_data, w_data, prior, fixed, c, smoothing, ridge)
         bad = np.zeros(m + 1, dtype=np.bool_)
-        worst_lin, worst_rot, hard, soft = check(t, m, c, CheckPoints(xc, ref, tol_c, exp_all, exp_lin),
-                                                 tol_rot, lin, metric, min_ratio, bad, n, stop_ratio)
+        worst_lin, worst_rot, hard, soft = check(
+            t, m, c, CheckPoints(xc, ref, tol_c, exp_all, exp_lin), tol_rot, lin, metric, min_ratio, bad, n, stop_ratio
+        )
         if hard == 0:
             # chord points are a heuristic against bulges: stop refining for them once
             # a few rounds no longer help (the nodes are within tolerance)

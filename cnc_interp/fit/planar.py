@@ -46,6 +46,7 @@ and convert exactly (coefficient-wise) into a ``Path``.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -93,6 +94,65 @@ PLANAR_LONG_CHORD_RATIO = 4.0
 #: planar fit: most resumptions with extra nodes on a chord that could not be fitted before
 #: falling back to the N-axis fitter
 PLANAR_MAX_RETRIES = 256
+
+
+class PlanarNodes(NamedTuple):
+    """The nodes of one planar fit (n): horizontal and vertical coordinates ``H``, ``V``
+    (n,) in the plane, tolerances ``tol`` (n,), chord angles ``alpha`` (n-1,) and
+    cumulative chord lengths ``S`` (n,) (``_chord_frames``)."""
+
+    H: np.ndarray
+    V: np.ndarray
+    tol: np.ndarray
+    alpha: np.ndarray
+    S: np.ndarray
+
+
+class PlanarParams(NamedTuple):
+    """The planar method's settings (the module's constants, angles in rad)."""
+
+    w_end: float
+    w_win: float
+    max_incl: float
+    keep: float
+    band: float
+    mu: float
+    per_x: int
+    max_checks: int
+
+
+class PlanarOut(NamedTuple):
+    """The segments' output rows (n-1 each): frame angle, first and last node, and the
+    six polynomial coefficients in the segment's frame."""
+
+    theta: np.ndarray
+    start: np.ndarray
+    end: np.ndarray
+    b: np.ndarray
+
+
+class PlanarState(NamedTuple):
+    """Where a fit starts: node ``s``, segments ``k`` already in the output, and the state
+    the next segment inherits (constrained, tangent angle, curvature, deviation so far)."""
+
+    s: int
+    k: int
+    constrained: bool
+    phi: float
+    kappa: float
+    max_dev: float
+
+
+_PARAMS = PlanarParams(
+    PLANAR_END_WEIGHT,
+    PLANAR_END_WINDOW,
+    PLANAR_MAX_INCLINATION_PI * np.pi,
+    PLANAR_KEEP_INCLINATION_PI * np.pi,
+    PLANAR_GROUP_INCLINATION_PI * np.pi,
+    PLANAR_SMOOTHING,
+    PLANAR_CHECKS_PER_SEGMENT,
+    FIT_MAX_CHORD_CHECKS,
+)
 
 _PI = math.pi
 
@@ -404,7 +464,7 @@ def _local_frame(H, V, S, e, h):
     if not speed2 > 0.0:
         return False, 0.0, 0.0
     # curvature of (H, V)(t): (H' V'' - V' H'') / |(H', V')|^3 (any parameter)
-    kappa = (a1 * 2.0 * b2 - b1 * 2.0 * a2) / speed2 ** 1.5
+    kappa = (a1 * 2.0 * b2 - b1 * 2.0 * a2) / speed2**1.5
     return True, math.atan2(b1, a1), kappa
 
 
@@ -426,8 +486,7 @@ def _end_est(e, th, H, V, S, h, max_incl):
 
 
 @njit(cache=True)
-def _try(xs, zs, tol, constrained, rho1, rho2, mu, b, e, th, H, V, S, max_incl, w_end, w_win,
-         per_x, max_checks, work):
+def _try(xs, zs, tol, constrained, rho1, rho2, b, e, th, nd, prm, work):
     """Fit and test the segment ending at node e (its rotated nodes xs, zs): True when
     every node and every point along every chord (the programmed moves; the tolerance
     bounds the distance to the programmed path everywhere) is within its tolerance. Stops at
@@ -435,7 +494,10 @@ def _try(xs, zs, tol, constrained, rho1, rho2, mu, b, e, th, H, V, S, max_incl, 
     segment's end (where a too long segment fails first); the vertical residual
     bounds the distance, so the Newton projection runs only where it exceeds the
     tolerance. The end is pulled towards the slope and curvature of the nodes within
-    ``w_win`` times the segment's length around node e (``_end_est``)."""
+    ``w_win`` times the segment's length around node e (``_end_est``). ``nd`` the nodes
+    (``PlanarNodes``), ``prm`` the settings (``PlanarParams``)."""
+    H, V, S = nd.H, nd.V, nd.S
+    w_end, w_win, max_incl, _, _, mu, per_x, max_checks = prm
     r = xs.shape[0]
     X = xs[r - 1]
     has, d1, d2 = _end_est(e, th, H, V, S, w_win * X, max_incl)
@@ -476,9 +538,7 @@ def _rotate(H, V, s, r, n_rot, c, sn, xs_all, zs_all):
 
 
 @njit(cache=True)
-def planar_fit_kernel(H, V, tol, alpha, S, w_end, w_win, max_incl, keep, band, mu,
-                      out_theta, out_start, out_end, out_b, per_x, max_checks, next_brk,
-                      s0=0, k0=0, constrained0=False, phi0=0.0, kappa0=0.0, max_dev0=0.0):
+def planar_fit_kernel(nd, prm, out, next_brk, state):
     """Segment and fit nodes (H, V) (n,); returns (n_seg, status, max_dev, s,
     constrained, phi_abs, kappa): on status 2, the failing segment's first node s and the
     state it inherits, from which a call with s0..kappa0 (and out_* rows < n_seg kept)
@@ -490,7 +550,15 @@ def planar_fit_kernel(H, V, tol, alpha, S, w_end, w_win, max_incl, keep, band, m
     out_* are preallocated with n-1 rows; segment k covers nodes out_start[k]..out_end[k].
     ``next_brk`` (n,): for every node the next node at which a segment must end (a
     change of the programmed feed: no segment straddles one), n - 1 if none.
+
+    nd: the nodes and their chord frames (``PlanarNodes``); prm: the settings
+    (``PlanarParams``); out: the output rows (``PlanarOut``); state: where to start
+    (``PlanarState``: all zero for a fresh fit).
     """
+    H, V, tol, alpha = nd.H, nd.V, nd.tol, nd.alpha
+    max_incl, keep, band = prm.max_incl, prm.keep, prm.band
+    out_theta, out_start, out_end, out_b = out
+    s0, k0, constrained0, phi0, kappa0, max_dev0 = state
     n = H.shape[0]
     s = s0
     k = k0
@@ -545,7 +613,7 @@ def planar_fit_kernel(H, V, tol, alpha, S, w_end, w_win, max_incl, keep, band, m
         # Eq. (2) for the nodes s..s+n_rot-1 (rotated on demand: a group can hold many
         # more nodes than the segment that starts it)
         n_rot = 0
-        tl = tol[s:g_end + 1]
+        tl = tol[s : g_end + 1]
         # gallop: largest e with a passing fit, e in [s+1, g_end]; b keeps the fit of
         # the largest passing e tried (the same fit the accepted segment gets)
         lo = s + 1
@@ -558,8 +626,7 @@ def planar_fit_kernel(H, V, tol, alpha, S, w_end, w_win, max_incl, keep, band, m
                 break
             r = e - s + 1
             n_rot = _rotate(H, V, s, r, n_rot, c, sn, xs_all, zs_all)
-            if _try(xs_all[:r], zs_all[:r], tl[:r], constrained, rho1, rho2, mu, bt,
-                    e, th, H, V, S, max_incl, w_end, w_win, per_x, max_checks, work):
+            if _try(xs_all[:r], zs_all[:r], tl[:r], constrained, rho1, rho2, bt, e, th, nd, prm, work):
                 lo = e
                 lo_fit = True
                 b[:] = bt
@@ -574,8 +641,7 @@ def planar_fit_kernel(H, V, tol, alpha, S, w_end, w_win, max_incl, keep, band, m
             mid = (lo + hi) // 2
             r = mid - s + 1
             n_rot = _rotate(H, V, s, r, n_rot, c, sn, xs_all, zs_all)
-            if _try(xs_all[:r], zs_all[:r], tl[:r], constrained, rho1, rho2, mu, bt,
-                    mid, th, H, V, S, max_incl, w_end, w_win, per_x, max_checks, work):
+            if _try(xs_all[:r], zs_all[:r], tl[:r], constrained, rho1, rho2, bt, mid, th, nd, prm, work):
                 lo = mid
                 lo_fit = True
                 b[:] = bt
@@ -586,8 +652,7 @@ def planar_fit_kernel(H, V, tol, alpha, S, w_end, w_win, max_incl, keep, band, m
         n_rot = _rotate(H, V, s, r, n_rot, c, sn, xs_all, zs_all)
         if not lo_fit:
             # a single chord (never tried yet)
-            if not _try(xs_all[:r], zs_all[:r], tl[:r], constrained, rho1, rho2, mu, bt,
-                        e, th, H, V, S, max_incl, w_end, w_win, per_x, max_checks, work):
+            if not _try(xs_all[:r], zs_all[:r], tl[:r], constrained, rho1, rho2, bt, e, th, nd, prm, work):
                 return k, 2, max_dev, s, constrained, phi_abs, kappa
             b[:] = bt
         X = xs_all[r - 1]
@@ -637,8 +702,15 @@ def node_curvatures(H, V):
     return kap
 
 
-def fit_planar(nodes: np.ndarray, plane: tuple[int, int], tol_mm: np.ndarray, axes: str,
-               line: np.ndarray, feed: np.ndarray, weights: np.ndarray | None = None):
+def fit_planar(
+    nodes: np.ndarray,
+    plane: tuple[int, int],
+    tol_mm: np.ndarray,
+    axes: str,
+    line: np.ndarray,
+    feed: np.ndarray,
+    weights: np.ndarray | None = None,
+):
     """Fit a 2-axis polyline (n, n_axes) in ``plane`` = (h, v) axis indices.
 
     Returns ``(planar, coef, line, feed_mm_s, max_dev_mm)`` (build the ``Path`` with
@@ -650,10 +722,11 @@ def fit_planar(nodes: np.ndarray, plane: tuple[int, int], tol_mm: np.ndarray, ax
     segments room for short transitions; the tolerance holds along every move.
     """
     h, v = plane
-    nodes, line, feed, tol_mm = densify_chords(nodes, plane, line, feed,
-                                               np.asarray(tol_mm, dtype=float) * FIT_TOL_SAFETY)
+    nodes, line, feed, tol_mm = densify_chords(
+        nodes, plane, line, feed, np.asarray(tol_mm, dtype=float) * FIT_TOL_SAFETY
+    )
     tol_mm = tol_mm / FIT_TOL_SAFETY
-    state = (0, 0, False, 0.0, 0.0, 0.0)
+    state = (0, 0, False, 0.0, 0.0, 0.0)  # PlanarState of a fresh fit
     kept = None
     last_fail = -1
     for attempt in range(PLANAR_MAX_RETRIES + 1):
@@ -670,10 +743,12 @@ def fit_planar(nodes: np.ndarray, plane: tuple[int, int], tol_mm: np.ndarray, ax
             k0 = kept[0].size
             out_theta[:k0], out_start[:k0], out_end[:k0], out_b[:k0] = kept
         k, status, max_dev, s_fail, cons, phi_abs, kappa = planar_fit_kernel(
-            H, V, tol, alpha, S, PLANAR_END_WEIGHT, PLANAR_END_WINDOW, PLANAR_MAX_INCLINATION_PI * np.pi,
-            PLANAR_KEEP_INCLINATION_PI * np.pi, PLANAR_GROUP_INCLINATION_PI * np.pi,
-            PLANAR_SMOOTHING, out_theta, out_start, out_end, out_b, PLANAR_CHECKS_PER_SEGMENT,
-            FIT_MAX_CHORD_CHECKS, feed_breaks(feed), *state)
+            PlanarNodes(H, V, tol, alpha, S),
+            _PARAMS,
+            PlanarOut(out_theta, out_start, out_end, out_b),
+            feed_breaks(feed),
+            PlanarState(*state),
+        )
         if status != 2 or attempt == PLANAR_MAX_RETRIES or s_fail == last_fail:
             break
         # the chord after node s_fail cannot follow the curvature it inherits: nodes on it
@@ -692,8 +767,7 @@ def fit_planar(nodes: np.ndarray, plane: tuple[int, int], tol_mm: np.ndarray, ax
     origin[:, 1] = V[st]
     c, s_ = np.cos(theta), np.sin(theta)
     x_end = (H[en] - H[st]) * c + (V[en] - V[st]) * s_
-    planar = PlanarSegments(plane=(h, v), theta=theta, origin=origin, x_end=x_end,
-                            p=out_b[:k].copy())
+    planar = PlanarSegments(plane=(h, v), theta=theta, origin=origin, x_end=x_end, p=out_b[:k].copy())
 
     breaks = np.concatenate(([0.0], np.cumsum(x_end)))
     u = _node_params(H, V, st, en, c, s_, breaks)
@@ -743,8 +817,7 @@ def _node_params(H, V, st, en, c, s, breaks):
     return u
 
 
-def densify_chords(nodes: np.ndarray, plane: tuple[int, int], line: np.ndarray, feed: np.ndarray,
-                   tol_mm: np.ndarray):
+def densify_chords(nodes: np.ndarray, plane: tuple[int, int], line: np.ndarray, feed: np.ndarray, tol_mm: np.ndarray):
     """Extra nodes on the programmed moves where the fit needs room for a short transition.
 
     At each end of a chord a first distance l is chosen: the neighbouring chord's length
@@ -759,14 +832,16 @@ def densify_chords(nodes: np.ndarray, plane: tuple[int, int], line: np.ndarray, 
     n = nodes.shape[0]
     if n < 2:
         return nodes, line, feed, tol_mm
-    src, frac = _densify_plan(np.ascontiguousarray(nodes[:, plane[0]], dtype=float),
-                              np.ascontiguousarray(nodes[:, plane[1]], dtype=float),
-                              np.ascontiguousarray(tol_mm, dtype=float), PLANAR_LONG_CHORD_RATIO)
+    src, frac = _densify_plan(
+        np.ascontiguousarray(nodes[:, plane[0]], dtype=float),
+        np.ascontiguousarray(nodes[:, plane[1]], dtype=float),
+        np.ascontiguousarray(tol_mm, dtype=float),
+        PLANAR_LONG_CHORD_RATIO,
+    )
     if src.size == n:
         return nodes, line, feed, tol_mm
     out, take = _densify_nodes(np.ascontiguousarray(nodes, dtype=float), src, frac)
-    return (out, np.asarray(line)[take], np.asarray(feed, dtype=float)[take],
-            np.asarray(tol_mm, dtype=float)[take])
+    return (out, np.asarray(line)[take], np.asarray(feed, dtype=float)[take], np.asarray(tol_mm, dtype=float)[take])
 
 
 @njit(cache=True)
@@ -832,7 +907,7 @@ def _densify_plan(H, V, tol_mm, long_ratio):
         ell = first[j, 0]
         for i in range(_n_geometric(ell, L)):
             src[m] = j
-            frac[m] = ell * 2.0 ** i / L
+            frac[m] = ell * 2.0**i / L
             m += 1
         src[m] = j
         frac[m] = 0.5
@@ -840,7 +915,7 @@ def _densify_plan(H, V, tol_mm, long_ratio):
         ell = first[j, 1]
         for i in range(_n_geometric(ell, L) - 1, -1, -1):
             src[m] = j
-            frac[m] = 1.0 - ell * 2.0 ** i / L
+            frac[m] = 1.0 - ell * 2.0**i / L
             m += 1
     src[m] = n - 1
     return src, frac
@@ -855,7 +930,7 @@ def _n_geometric(ell, L):
     x = ell
     while x / L < 0.5:
         c += 1
-        x = ell * 2.0 ** c
+        x = ell * 2.0**c
     return c
 
 
@@ -866,23 +941,40 @@ def _insert_after(nodes, line, feed, tol_mm, j):
     m = f.size
 
     def ins(a, b):
-        return np.concatenate((a[:j + 1], b, a[j + 1:]))
+        return np.concatenate((a[: j + 1], b, a[j + 1 :]))
 
     line = np.asarray(line)
     feed = np.asarray(feed, dtype=float)
     tol_mm = np.asarray(tol_mm, dtype=float)
-    return (ins(nodes, new), ins(line, np.full(m, line[j + 1])), ins(feed, np.full(m, feed[j + 1])),
-            ins(tol_mm, np.full(m, tol_mm[j + 1])))
+    return (
+        ins(nodes, new),
+        ins(line, np.full(m, line[j + 1])),
+        ins(feed, np.full(m, feed[j + 1])),
+        ins(tol_mm, np.full(m, tol_mm[j + 1])),
+    )
 
 
-def planar_to_path(planar: PlanarSegments, fixed: np.ndarray, axes: str, line: np.ndarray,
-                   feed_mm_s: np.ndarray, weights: np.ndarray | None = None) -> Path:
+def planar_to_path(
+    planar: PlanarSegments,
+    fixed: np.ndarray,
+    axes: str,
+    line: np.ndarray,
+    feed_mm_s: np.ndarray,
+    weights: np.ndarray | None = None,
+) -> Path:
     """Exact coefficient-wise conversion of planar segments into a ``Path``.
 
     ``fixed`` (n_axes,) gives the constant value of every axis outside the plane.
     """
-    return Path(axes=axes, breaks=breaks_of(planar), coef=planar_coef(planar, fixed, len(axes)),
-                line=line, feed_mm_s=feed_mm_s, weights=weights, planar=planar)
+    return Path(
+        axes=axes,
+        breaks=breaks_of(planar),
+        coef=planar_coef(planar, fixed, len(axes)),
+        line=line,
+        feed_mm_s=feed_mm_s,
+        weights=weights,
+        planar=planar,
+    )
 
 
 def breaks_of(planar: PlanarSegments) -> np.ndarray:
