@@ -37,7 +37,7 @@ _LAZY = {
     "FitError": "errors",
     "PlanError": "errors",
     "UsageError": "errors",
-    "Machine": "plan.machine",
+    "Machine": "machine.model",
     "Program": "gcode.program",
     "FitResult": "fit.result",
     "Trajectory": "plan.trajectory",

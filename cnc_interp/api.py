@@ -29,7 +29,7 @@ if TYPE_CHECKING:  # the stages are imported when called: ``import cnc_interp`` 
     from .fit.result import FitResult
     from .gcode.tooltable import ToolTable
     from .gcode.program import Program
-    from .plan.machine import Machine
+    from .machine.model import Machine
     from .plan.settings import PlanSettings
     from .plan.trajectory import Trajectory
     from .plan.verify import VerifyReport
@@ -58,8 +58,8 @@ def load_machine(spec: "str | os.PathLike[str] | Machine") -> "Machine":
     """A machine from a preset name (``cnc-interp machines`` lists them), a TOML file or a
     LinuxCNC INI file; a ``Machine`` is returned as it is. Raises ``MachineError`` (with the
     file's line) on a bad machine file."""
-    from .plan.machine import Machine
-    from .plan.machine_io import load_machine as _load
+    from .machine.model import Machine
+    from .machine.load import load_machine as _load
 
     if isinstance(spec, Machine):
         return spec

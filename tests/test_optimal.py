@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from numpy.testing import assert_array_equal
 
-from cnc_interp.plan.kinematics import make_kinematics
-from cnc_interp.plan.machine import Machine
+from cnc_interp.machine.kinematics import make_kinematics
+from cnc_interp.machine.model import Machine
 from cnc_interp.plan.optimal import iter_path_plan_optimal, plan_path_optimal
 from cnc_interp.plan.optimality import line_min_samples
 from cnc_interp.plan.safe import plan_path_safe

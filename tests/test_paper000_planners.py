@@ -9,7 +9,7 @@ from numpy.testing import assert_allclose
 from cnc_interp.constants import VERIFY_RATIO_SLACK
 from cnc_interp.plan.paper000.limits import P000_CURV_JERK_SHARE
 from cnc_interp.plan.paper000.limits import P000_CURV_ACCEL_SHARE
-from cnc_interp.plan.machine import Machine
+from cnc_interp.machine.model import Machine
 from cnc_interp.plan.paper000 import shapes
 from cnc_interp.plan.paper000.constant import constant_feed, plan_path_constant
 from cnc_interp.plan.paper000.curvature import segment_geometry

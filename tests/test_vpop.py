@@ -7,8 +7,8 @@ from numpy.testing import assert_allclose, assert_array_equal
 from cnc_interp.constants import VERIFY_RATIO_SLACK
 from cnc_interp.plan.vpop import VPOP_TABLE_TOL
 from cnc_interp.fit.path import Path
-from cnc_interp.plan.kinematics import make_kinematics
-from cnc_interp.plan.machine import Machine
+from cnc_interp.machine.kinematics import make_kinematics
+from cnc_interp.machine.model import Machine
 from cnc_interp.plan.settings import PlanSettings
 from cnc_interp.plan.verify import verify_arrays
 from cnc_interp.plan.vpop import JointTable, plan_path_vpop

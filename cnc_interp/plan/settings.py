@@ -10,7 +10,7 @@ from ..constants import DEFAULT_DT_S
 from ..errors import UsageError
 
 if TYPE_CHECKING:
-    from .machine import Machine
+    from ..machine.model import Machine
 
 #: the planner of ``plan`` and ``batch`` when none is named (``stream`` has its own).
 #: VPOp, not ``optimal``: optimal's cycles are 1.3 % shorter over the corpus, but it plans
