@@ -99,6 +99,8 @@ PLANES = {G17: (0, 1, 2), G18: (2, 0, 1), G19: (1, 2, 0)}
 #: plane code -> centre-offset letters of (first, second) axes, and the letter not allowed
 PLANE_IJK = {G17: ("I", "J", "K"), G18: ("K", "I", "J"), G19: ("J", "K", "I")}
 PLANE_NAME = {G17: "XY (G17)", G18: "XZ (G18)", G19: "YZ (G19)"}
+#: the non-modal codes whose values are the block's axis words (no motion goes with them)
+AXIS_WORD_CODES = (G10, G28, G30, G92)
 #: the canned cycles: a repeat of one keeps its sticky state (initial level)
 CYCLE_MOTIONS = frozenset({G81, G82, G83, G73, G85, G89})
 VALID_LETTERS = frozenset("ABCDFGHIJKLMNPQRSTUVWXYZ")
@@ -589,7 +591,7 @@ class Interpreter:
         g0code = g0[0] if g0 else None
         axis_words = [(L, w) for L, w in d.items() if L in AXIS_INDEX]
         # G10, G28, G30, G92 and G43.1/G43.2 take their values from the axis words
-        covets = g0code in (G10, G28, G30, G92) or groups.get(8, (0,))[0] in (G43_1, G43_2)
+        covets = g0code in AXIS_WORD_CODES or groups.get(8, (0,))[0] in (G43_1, G43_2)
         mcode = groups[1][0] if 1 in groups else None
         self._check_unused_words(d, groups, mgroups, mcode, g0code, covets, axis_words)
 
@@ -753,7 +755,9 @@ class Interpreter:
         """Who uses the axis words (RS274NGC's enhance_block rules); the axes they name
         become active."""
         if covets and mcode is not None and mcode != G80:
-            raise self.error(f"{gcode_name(g0[0])} and {gcode_name(mcode)} both use the axis words", g0[1])
+            # the code that claims them: G10/G28/G30/G92 (group 0), else G43.1/G43.2 (group 8)
+            owner = g0 if g0 is not None and g0[0] in AXIS_WORD_CODES else groups[8]
+            raise self.error(f"{gcode_name(owner[0])} and {gcode_name(mcode)} both use the axis words", owner[1])
         if g80 and axis_words and not covets and mcode == G80:
             raise self.error("axis words with G80 (cycle cancel) and no motion", axis_words[0][1][2])
         for L, w in axis_words:
