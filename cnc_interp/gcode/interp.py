@@ -99,8 +99,25 @@ PLANES = {G17: (0, 1, 2), G18: (2, 0, 1), G19: (1, 2, 0)}
 #: plane code -> centre-offset letters of (first, second) axes, and the letter not allowed
 PLANE_IJK = {G17: ("I", "J", "K"), G18: ("K", "I", "J"), G19: ("J", "K", "I")}
 PLANE_NAME = {G17: "XY (G17)", G18: "XZ (G18)", G19: "YZ (G19)"}
+# Sets of codes compared on every general block: built once here (``code in (G2, G3)``
+# would build its tuple of names at every comparison; literals were folded to constants).
 #: the non-modal codes whose values are the block's axis words (no motion goes with them)
-AXIS_WORD_CODES = (G10, G28, G30, G92)
+AXIS_WORD_CODES = frozenset({G10, G28, G30, G92})
+#: tool length codes whose values are the block's axis words
+TOOL_LENGTH_AXIS_CODES = frozenset({G43_1, G43_2})
+STRAIGHT = frozenset({G0, G1})
+ARCS = frozenset({G2, G3})
+SPLINES = frozenset({G5, G5_1})
+#: the motions a rotated coordinate system (G10 L2 R) supports
+ROTATABLE = frozenset({G0, G1, G2, G3})
+#: motion codes that may come without axis words (a G5.2 block may open with P alone)
+AXISLESS_MOTIONS = frozenset({G0, G1, G5_2})
+EXACT_PATH = frozenset({G61, G61_1})
+#: which motion codes use which parameter word (``_check_unused_words``)
+USES_IJ = frozenset({G2, G3, G5, G5_1})
+USES_P = frozenset({G2, G3, G5, G5_2, G82, G89})
+USES_Q = frozenset({G83, G73, G5})
+NON_MODAL_USES_P = frozenset({G4, G10})
 #: the canned cycles: a repeat of one keeps its sticky state (initial level)
 CYCLE_MOTIONS = frozenset({G81, G82, G83, G73, G85, G89})
 VALID_LETTERS = frozenset("ABCDFGHIJKLMNPQRSTUVWXYZ")
@@ -591,7 +608,7 @@ class Interpreter:
         g0code = g0[0] if g0 else None
         axis_words = [(L, w) for L, w in d.items() if L in AXIS_INDEX]
         # G10, G28, G30, G92 and G43.1/G43.2 take their values from the axis words
-        covets = g0code in AXIS_WORD_CODES or groups.get(8, (0,))[0] in (G43_1, G43_2)
+        covets = g0code in AXIS_WORD_CODES or groups.get(8, (0,))[0] in TOOL_LENGTH_AXIS_CODES
         mcode = groups[1][0] if 1 in groups else None
         self._check_unused_words(d, groups, mgroups, mcode, g0code, covets, axis_words)
 
@@ -728,7 +745,7 @@ class Interpreter:
     def _step_path_control(self, code: int, d: dict) -> None:
         """G61, G61.1 exact path (G61.1 also stops at every block end); G64 [P tol] [Q tol]."""
         self.exact_stop = code == G61_1
-        if code in (G61, G61_1):
+        if code in EXACT_PATH:
             self.tol, self.naive = 0.0, NAN
             return
         self.tol, self.naive = NAN, NAN
@@ -779,8 +796,8 @@ class Interpreter:
         elif mcode == G80:
             self.motion = G80
         else:
-            full_circle = mcode in (G2, G3) and any(k in d for k in "IJK")
-            if not axis_words and mcode not in (G0, G1, G5_2) and not full_circle:
+            full_circle = mcode in ARCS and any(k in d for k in "IJK")
+            if not axis_words and mcode not in AXISLESS_MOTIONS and not full_circle:
                 raise self.error(f"{gcode_name(mcode)} without any axis word", col)
             self._motion(mcode, col, d, axis_words, line, g53)
 
@@ -816,12 +833,12 @@ class Interpreter:
         path = groups.get(13, (None,))[0]
         ms = {c for c, _ in mgroups.values()}
         use = {
-            "I": motion in (G2, G3, G5, G5_1),
-            "J": motion in (G2, G3, G5, G5_1),
-            "K": motion in (G2, G3),
-            "R": motion in (G2, G3) or cycle or g0code == G10,
-            "P": (g0code in (G4, G10) or path == G64 or motion in (G2, G3, G5, G5_2, G82, G89) or bool(ms & M_USE_P)),
-            "Q": path == G64 or motion in (G83, G73, G5) or bool(ms & M_USE_QE),
+            "I": motion in USES_IJ,
+            "J": motion in USES_IJ,
+            "K": motion in ARCS,
+            "R": motion in ARCS or cycle or g0code == G10,
+            "P": (g0code in NON_MODAL_USES_P or path == G64 or motion in USES_P or bool(ms & M_USE_P)),
+            "Q": path == G64 or motion in USES_Q or bool(ms & M_USE_QE),
             "L": g0code == G10 or cycle or motion == G5_2,
             "H": 8 in groups,
             "D": False,
@@ -1061,26 +1078,26 @@ class Interpreter:
     def _motion(self, code: int, col: int, d: dict, axis_words: list, line: int, g53: bool) -> None:
         if col == 0:
             col = axis_words[0][1][2] if axis_words else 0
-        if g53 and code not in (G0, G1):
+        if g53 and code not in STRAIGHT:
             raise self.error("G53 needs G0 or G1", col)
-        if self.rot_deg and code not in (G0, G1, G2, G3):
+        if self.rot_deg and code not in ROTATABLE:
             raise self.error(
                 f"{gcode_name(code)} with a rotated coordinate system (G10 L2 R) is not supported",
                 col,
                 unsupported=True,
             )
-        if code in (G0, G1):
+        if code in STRAIGHT:
             self.motion = code
             if axis_words:
                 if code == G1 and self.feed_inverse_time and self.f_block <= 0:
                     raise self.error("G93 inverse time feed move without F", col)
                 self.straight("feed" if code == G1 else "rapid", self._target(axis_words, machine=g53), line, col)
             return
-        if code in (G2, G3):
+        if code in ARCS:
             self._arc(code, col, d, axis_words, line)
             self.motion = code
             return
-        if code in (G5, G5_1):
+        if code in SPLINES:
             self._bezier(code, col, d, axis_words, line)
             self.motion = code
             return
