@@ -21,7 +21,7 @@ import numpy as np
 
 from cnc_interp.export.csv_io import read_csv, write_csv
 from cnc_interp.export.mcap_io import read_mcap, write_mcap
-from cnc_interp.plan.machine import Machine
+from cnc_interp.machine.model import Machine
 from cnc_interp.plan.trajectory import Trajectory
 
 
@@ -57,7 +57,7 @@ def main() -> None:
         traj = read_csv(arg)
         machine = None
         if len(sys.argv) > 2:
-            from cnc_interp.plan.machine_io import load_machine
+            from cnc_interp.machine.load import load_machine
 
             machine = load_machine(sys.argv[2])
         name = f"{os.path.basename(arg)}, {traj.n_samples:,} samples, axes {traj.axes}"

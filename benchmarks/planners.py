@@ -43,7 +43,7 @@ def run_one(spec: str, dt_s: float | None, tol_mm: float | None, feed_mm_min: fl
     from cnc_interp.fit.settings import FitSettings
     from cnc_interp.gcode import read_program
     from cnc_interp.pipeline import fit_loaded
-    from cnc_interp.plan.machine_io import load_machine
+    from cnc_interp.machine.load import load_machine
     from cnc_interp.plan.settings import PlanSettings
     from cnc_interp.plan.timeline import plan_program
     from cnc_interp.plan.verify import verify

@@ -27,8 +27,8 @@ def fitted_paths(rel: str, machine_spec: str):
     from cnc_interp.fit.settings import FitSettings
     from cnc_interp.gcode import read_program
     from cnc_interp.pipeline import fit_loaded
-    from cnc_interp.plan.kinematics import make_kinematics
-    from cnc_interp.plan.machine_io import load_machine
+    from cnc_interp.machine.kinematics import make_kinematics
+    from cnc_interp.machine.load import load_machine
 
     m = load_machine(machine_spec)
     with open(os.path.join(CORPUS, rel), "rb") as f:

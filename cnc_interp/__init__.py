@@ -37,12 +37,18 @@ _LAZY = {
     "FitError": "errors",
     "PlanError": "errors",
     "UsageError": "errors",
-    "Machine": "plan.machine",
+    "Machine": "machine.model",
     "Program": "gcode.program",
     "FitResult": "fit.result",
     "Trajectory": "plan.trajectory",
     "VerifyReport": "plan.verify",
     "PLANNER_NAMES": "plan.planners",
+    # typed settings the API takes (``fit(settings=...)``, ``plan(settings=...)``)
+    "FitSettings": "fit.settings",
+    "PlanSettings": "plan.settings",
+    "OptimalOptions": "plan.settings",
+    "VpopOptions": "plan.settings",
+    "Paper000Options": "plan.settings",
 }
 
 #: the stage packages that are also calls (``_stage_call``): ``fit(program)``, ``plan(...)``

@@ -27,9 +27,10 @@ if TYPE_CHECKING:  # the stages are imported when called: ``import cnc_interp`` 
     import numpy as np
 
     from .fit.result import FitResult
+    from .fit.settings import FitSettings
     from .gcode.tooltable import ToolTable
     from .gcode.program import Program
-    from .plan.machine import Machine
+    from .machine.model import Machine
     from .plan.settings import PlanSettings
     from .plan.trajectory import Trajectory
     from .plan.verify import VerifyReport
@@ -58,8 +59,8 @@ def load_machine(spec: "str | os.PathLike[str] | Machine") -> "Machine":
     """A machine from a preset name (``cnc-interp machines`` lists them), a TOML file or a
     LinuxCNC INI file; a ``Machine`` is returned as it is. Raises ``MachineError`` (with the
     file's line) on a bad machine file."""
-    from .plan.machine import Machine
-    from .plan.machine_io import load_machine as _load
+    from .machine.model import Machine
+    from .machine.load import load_machine as _load
 
     if isinstance(spec, Machine):
         return spec
@@ -112,6 +113,7 @@ def fit(
     machine: "Machine | str | None" = None,
     method: str | None = None,
     corner_deg: float | None = None,
+    settings: "FitSettings | None" = None,
 ) -> "FitResult":
     """Fit the program's moves with quintic segments within the path tolerance.
 
@@ -122,6 +124,8 @@ def fit(
         machine: whose ``tol`` applies (default: the machine the program was read for).
         method: ``"nodes"`` (default) or ``"auto"`` (``--fit-method``).
         corner_deg: corners sharper than this stop (default: the fit's).
+        settings: a ``FitSettings`` built by the caller, used as it is (then ``tol_mm``,
+            ``method`` and ``corner_deg`` must be left out: ``UsageError``).
     Returns:
         ``FitResult`` (items in program order, statistics). Raises ``FitError`` (exit 1)
         naming the lines whose fit misses its tolerance.
@@ -130,8 +134,13 @@ def fit(
     from .fit.result import require_within_tolerance
     from .fit.settings import FitSettings
 
-    m = load_machine(machine) if machine is not None else _MACHINE_OF.get(id(program))
-    settings = FitSettings.from_options(tol_mm=tol_mm, corner_deg=corner_deg, machine=m, method=method)
+    if settings is None:
+        m = load_machine(machine) if machine is not None else _MACHINE_OF.get(id(program))
+        settings = FitSettings.from_options(tol_mm=tol_mm, corner_deg=corner_deg, machine=m, method=method)
+    elif tol_mm is not None or method is not None or corner_deg is not None:
+        from .errors import UsageError
+
+        raise UsageError("fit: give either settings or tol_mm/method/corner_deg, not both")
     result: FitResult = require_within_tolerance(fit_program(program, settings))
     return result
 
@@ -143,43 +152,64 @@ Progress = Callable[[float], None]
 def plan(
     fitted: "FitResult",
     machine: "Machine | str",
-    planner: str = DEFAULT_PLANNER,
+    planner: str | None = None,
     dt_s: float | None = None,
     tol_mm: float | None = None,
     progress: Progress | None = None,
+    *,
+    settings: "PlanSettings | None" = None,
 ) -> "Trajectory":
     """Plan the fitted program's feed under ``machine``'s limits, sampled every ``dt_s``.
 
     Args:
         fitted: from ``fit``.
         machine: limits, kinematics and (by default) the sample period.
-        planner: one of ``planners`` (``cnc-interp plan --planner``).
+        planner: one of ``planners`` (``cnc-interp plan --planner``; default
+            ``DEFAULT_PLANNER``).
         dt_s: sample period, s (default: the machine's).
         tol_mm: the tolerance recorded with the plan (default: the machine's).
         progress: optional ``progress(mm)`` told the path length planned since its last call.
+        settings: a ``PlanSettings`` built by the caller (planner, period, the planners'
+            knobs: ``OptimalOptions``, ``VpopOptions``, ``Paper000Options``), used as it
+            is (then ``planner``, ``dt_s`` and ``tol_mm`` must be left out: ``UsageError``).
     Returns:
         ``Trajectory`` from rest to rest. Raises ``PlanError`` (exit 1) when the plan cannot
         be made (e.g. more samples than memory holds). It is not verified: ``verify`` is
         the independent check.
     """
-    traj, _ = _plan(fitted, load_machine(machine), planner, dt_s, tol_mm, progress)
+    m = load_machine(machine)
+    traj, _ = _plan(fitted, m, _plan_settings(m, planner, dt_s, tol_mm, settings), progress)
     return traj
+
+
+def _plan_settings(
+    machine: "Machine",
+    planner: str | None,
+    dt_s: float | None,
+    tol_mm: float | None,
+    settings: "PlanSettings | None",
+) -> "PlanSettings":
+    """The caller's ``settings``, or settings from the arguments and the machine."""
+    from .errors import UsageError
+    from .plan.settings import PlanSettings
+
+    if settings is None:
+        return PlanSettings.from_options(planner=planner or DEFAULT_PLANNER, dt_s=dt_s, tol_mm=tol_mm, machine=machine)
+    if planner is not None or dt_s is not None or tol_mm is not None:
+        raise UsageError("plan: give either settings or planner/dt_s/tol_mm, not both")
+    return settings
 
 
 def _plan(
     fitted: "FitResult",
     machine: "Machine",
-    planner: str,
-    dt_s: float | None,
-    tol_mm: float | None,
+    settings: "PlanSettings",
     progress: Progress | None,
 ) -> "tuple[Trajectory, PlanSettings]":
     from .errors import PlanError
     from .plan.budget import check_sample_budget, held_time_s
-    from .plan.settings import PlanSettings
     from .plan.timeline import plan_program
 
-    settings = PlanSettings.from_options(planner=planner, dt_s=dt_s, tol_mm=tol_mm, machine=machine)
     machine = machine.with_dt(settings.dt_s)
     source = fitted.program.source
     check_sample_budget(fitted.paths, machine, settings.dt_s, source, held_s=held_time_s(fitted.items))
@@ -245,10 +275,12 @@ def run(
     source: "str | bytes | os.PathLike[str]",
     machine: "Machine | str",
     *,
-    planner: str = DEFAULT_PLANNER,
+    planner: str | None = None,
     dt_s: float | None = None,
     tol_mm: float | None = None,
     fit_method: str | None = None,
+    fit_settings: "FitSettings | None" = None,
+    plan_settings: "PlanSettings | None" = None,
     start: "np.ndarray | None" = None,
     tool_table: "str | ToolTable | None" = None,
     name: str | None = None,
@@ -259,7 +291,10 @@ def run(
 
     With ``check`` (the default) a plan that violates a limit raises ``PlanError``
     (exit 1: a bug of the planner, never an expected outcome); without it the report
-    says so. Other arguments as the stages take them.
+    says so. ``fit_settings`` and ``plan_settings`` are ``fit``'s and ``plan``'s
+    ``settings`` (``tol_mm`` then goes to neither; ``fit_method``, ``planner`` and
+    ``dt_s`` must be left out of the stage given settings). Other arguments as the
+    stages take them.
     """
     import time
 
@@ -269,9 +304,14 @@ def run(
     m = load_machine(machine).with_start(start)
     program = read_program(source, m, name=name, tool_table=tool_table)
     t1 = time.perf_counter()
-    fitted = fit(program, tol_mm, machine=m, method=fit_method)
+    if fit_settings is None:
+        fitted = fit(program, tol_mm, machine=m, method=fit_method)
+    else:
+        fitted = fit(program, method=fit_method, settings=fit_settings)
     t2 = time.perf_counter()
-    traj, settings = _plan(fitted, m, planner, dt_s, tol_mm, progress)
+    plan_tol_mm = tol_mm if plan_settings is None else None
+    settings = _plan_settings(m, planner, dt_s, plan_tol_mm, plan_settings)
+    traj, settings = _plan(fitted, m, settings, progress)
     m = m.with_dt(settings.dt_s)
     t3 = time.perf_counter()
     report = verify(traj, m)

@@ -407,7 +407,7 @@ def write_report(report: dict, path: str) -> None:
 def build_report(opts: BatchOptions) -> dict:
     """Run the batch and return the report dict (no printing, no exit code)."""
     from . import __version__
-    from .plan.machine_io import load_machine
+    from .machine.load import load_machine
 
     machine = load_machine(opts.machine_spec)
     slowdown = parse_slowdown(opts.max_slowdown)

@@ -49,7 +49,7 @@ def _planner_option(f):
 
 
 def _dt_option(f):
-    # the same range a machine file accepts (plan/machine.py)
+    # the same range a machine file accepts (machine/model.py)
     return click.option(
         "--dt",
         "dt_s",
@@ -246,7 +246,7 @@ def plan(part, machine_spec, tool_table, planner, dt_s, tol_mm, fit_method, star
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable list.")
 def machines(as_json: bool) -> None:
     """List the built-in machine presets and their limits."""
-    from .plan.machine_io import format_presets, preset_table
+    from .machine.load import format_presets, preset_table
 
     table = preset_table()
     if as_json:

@@ -23,7 +23,7 @@ def load_machine_spec(spec: str | None):
     """Machine from a TOML/INI file or preset name; ``None`` gives ``None``."""
     if spec is None:
         return None
-    from .plan.machine_io import load_machine
+    from .machine.load import load_machine
 
     return load_machine(spec)
 
@@ -44,7 +44,7 @@ def load_program_for(
 
     machine = load_machine_spec(machine_spec)
     if machine is None and require_machine:
-        from .plan.machine_io import load_machine, DEFAULT_PRESET
+        from .machine.load import load_machine, DEFAULT_PRESET
 
         machine = load_machine(DEFAULT_PRESET)
     name, data = read_part(part)
@@ -171,7 +171,7 @@ class PlanOutcome:
 def parse_start(spec: str | None, axes: str, base: np.ndarray | None = None) -> np.ndarray | None:
     """``--start "X=1,Y=2"`` -> (n,) position on ``axes``; the axes it does not name keep
     ``base`` (the machine's start position; 0 without one). ``None`` passes."""
-    from .plan.machine import START_MAX
+    from .machine.model import START_MAX
 
     if spec is None:
         return None
@@ -209,7 +209,7 @@ def plan_part(
     Raises ``PlanError`` (exit 1) when the plan violates a limit: that is a bug.
     """
     from .api import run
-    from .plan.machine_io import DEFAULT_PRESET, load_machine
+    from .machine.load import DEFAULT_PRESET, load_machine
 
     machine = load_machine(machine_spec if machine_spec is not None else DEFAULT_PRESET)
     if isinstance(start, str):
@@ -270,7 +270,7 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
     from .fit.fitter import iter_fit
     from .fit.settings import FitSettings
     from .gcode.stream import ProgramStream
-    from .plan.machine_io import DEFAULT_PRESET, load_machine
+    from .machine.load import DEFAULT_PRESET, load_machine
     from .plan.settings import PlanSettings
     from .plan.timeline import Prefetch, TimelineInfo, iter_timeline
 
@@ -404,7 +404,7 @@ def _warm_kernels(planner: str) -> None:
 
             format_table(np.zeros((1, 1)))
             vpop_drive.plan_identity_batch  # noqa: B018 - the import loads the module
-            from .plan.machine_io import DEFAULT_PRESET, load_machine
+            from .machine.load import DEFAULT_PRESET, load_machine
             from .plan.vpop import plan_many_vpop
             from .fit import fit_run
             from .gcode import read_program

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cnc_interp.plan.machine import Machine
+from cnc_interp.machine.model import Machine
 from cnc_interp.plan.trajectory import Trajectory
 
 

@@ -3,6 +3,7 @@ contract, errors as the CLI reports them, and the examples/ scripts."""
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import subprocess
 import sys
@@ -74,6 +75,42 @@ def test_run_returns_every_stage_and_plan_keeps_its_limits():
     assert_allclose(q[0], res.program.start, atol=1e-12)  # rest at the program's start
     assert res.report.worst_ratio <= 1 + 1e-9
     assert set(res.timings_s) == {"parse", "fit", "plan", "verify"}
+
+
+def test_plan_and_fit_take_typed_settings():
+    m = ci.load_machine("generic-mill")
+    program = ci.read_program(os.path.join(SAMPLES, "mill-contour.ngc"), machine=m)
+    fitted = ci.fit(program, 0.01)
+    # settings built by the caller give what the keyword arguments give
+    same = ci.fit(program, settings=ci.FitSettings.from_options(tol_mm=0.01, machine=m))
+    assert [p.coef.tobytes() for p in same.paths] == [p.coef.tobytes() for p in fitted.paths]
+    a = ci.plan(fitted, m, planner="variable", dt_s=0.002)
+    b = ci.plan(fitted, m, settings=ci.PlanSettings(planner="variable", dt_s=0.002))
+    assert a.dt_s == b.dt_s == 0.002 and np.array_equal(a.q, b.q) and a.settings == b.settings
+    # a planner knob reaches the planner: on a machine where the curvature binds, a lower
+    # centripetal share is a slower plan
+    low = dataclasses.replace(m, amax=m.amax / 50, jmax=m.jmax / 50)
+    knob = ci.Paper000Options(curv_accel_share=0.2)
+    slow = ci.plan(fitted, low, settings=ci.PlanSettings(planner="variable", paper000=knob))
+    assert slow.duration_s > 1.1 * ci.plan(fitted, low, planner="variable").duration_s
+    assert slow.settings["options"] == {"curv_accel_share": 0.2}
+    # both ways at once is ambiguous
+    with pytest.raises(ci.UsageError):
+        ci.plan(fitted, m, planner="vpop", settings=ci.PlanSettings())
+    with pytest.raises(ci.UsageError):
+        ci.fit(program, 0.01, settings=ci.FitSettings())
+
+
+def test_plan_settings_record_their_knobs_by_the_flat_names():
+    # the form stored with every plan (MCAP metadata): no knob set -> no option recorded
+    assert ci.PlanSettings().to_dict() == {"planner": "vpop", "dt_s": 0.001, "tol_mm": None, "options": {}}
+    s = ci.PlanSettings(
+        planner="optimal", optimal=ci.OptimalOptions(route="vpop", compare_s=0.0), vpop=ci.VpopOptions(exact=True)
+    )
+    assert s.to_dict()["options"] == {"route": "vpop", "compare_s": 0.0, "vpop_exact": True}
+    for bad in ({"route": "fastest"}, {"refine_passes": -1}, {"compare_s": float("nan")}, {"chunk_samples": 2.5}):
+        with pytest.raises(ci.UsageError):
+            ci.OptimalOptions(**bad)
 
 
 def test_write_chooses_the_format_by_extension(tmp_path):

@@ -116,7 +116,7 @@ def test_parse_fit_and_batch_count_nodes_and_segments_alike(tmp_path):
     """One definition of node and segment across the commands (issue 16): rapids' end
     points are not nodes, and every command counts the same feed nodes and fitted segments."""
     from cnc_interp.pipeline import process_program
-    from cnc_interp.plan.machine_io import load_machine
+    from cnc_interp.machine.load import load_machine
 
     part = tmp_path / "p.ngc"
     part.write_text(

@@ -88,7 +88,7 @@ def plans(tmp_path_factory):
 
 
 def _machine(spec: str):
-    from cnc_interp.plan.machine_io import load_machine
+    from cnc_interp.machine.load import load_machine
 
     return load_machine(spec)
 
@@ -102,7 +102,7 @@ def _program(part: str, machine):
 
 def _to_joints(machine, p: np.ndarray) -> np.ndarray:
     """Program (workpiece) coordinates (m, n) -> joint setpoints as the CSV holds them."""
-    from cnc_interp.plan.kinematics import make_kinematics
+    from cnc_interp.machine.kinematics import make_kinematics
 
     kin = make_kinematics(machine)
     p = np.atleast_2d(np.asarray(p, dtype=float))

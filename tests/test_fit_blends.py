@@ -106,7 +106,7 @@ def test_square_is_one_g2_path_within_tolerance_and_faster_than_stops():
     assert distance_to_path(p, _dense_polyline(sq), samples_per_seg=400, candidates=8).max() <= 0.05 * (1 + 1e-9)
     assert res.stats["within_tolerance"] and res.stats["max_path_dev_ratio"] <= 1 + 1e-6
 
-    from cnc_interp.plan.machine_io import load_machine
+    from cnc_interp.machine.load import load_machine
     from cnc_interp.plan.settings import PlanSettings
     from cnc_interp.plan.timeline import plan_program
     from cnc_interp.plan.verify import verify

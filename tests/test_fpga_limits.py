@@ -10,7 +10,7 @@ from cnc_interp.fpga.fixed import FpgaFormats
 from cnc_interp.fpga.limits import device_margin, excess_samples, rounding_budget, with_margin
 from cnc_interp.fpga.model import run_program, to_mm
 from cnc_interp.fpga.program import build_program
-from cnc_interp.plan.machine_io import load_machine
+from cnc_interp.machine.load import load_machine
 from cnc_interp.plan.verify import verify_arrays
 
 from .fpga_cases import gentle_curve, quintic_plan

@@ -72,6 +72,18 @@ def test_errors_name_the_block():
         assert exc.value.location.line >= 2
 
 
+def test_g43_1_with_a_motion_code_is_one_error_line():
+    # G43.1/G43.2 take their offsets from the axis words, so a motion in the same block has
+    # none: an error naming both codes at G43.x's column (it was a TypeError traceback)
+    for text, owner, col in (("G43.1 Z1 G1 X1\n", "G43.1", 1), ("G1 X2 G43.2 Z1\n", "G43.2", 7)):
+        with pytest.raises(GCodeError, match=f"{owner} and G1 both use the axis words") as exc:
+            read_program(f"G21 G90\n{text}M2\n".encode(), "e.ngc", axes="XYZ", tool_table=TABLE)
+        assert (exc.value.location.line, exc.value.location.col) == (2, col)
+    # a group-0 code that takes the axis words is named first, as before
+    with pytest.raises(GCodeError, match="G92 and G1 both use the axis words"):
+        read_program(b"G21 G90\nG92 G43.1 G1 Z1\nM2\n", "e.ngc", axes="XYZ", tool_table=TABLE)
+
+
 def test_no_table_applies_zero_with_one_warning():
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")

@@ -344,7 +344,7 @@ def test_dwells_count_in_the_memory_check(tmp_path):
 def test_held_time_enters_the_budget():
     from cnc_interp.errors import PlanError
     from cnc_interp.plan.budget import check_sample_budget
-    from cnc_interp.plan.machine_io import load_machine
+    from cnc_interp.machine.load import load_machine
 
     m = load_machine("generic-mill")
     check_sample_budget([], m, 1e-3, "x", available=10**9, held_s=10.0)
@@ -558,7 +558,7 @@ def test_verify_mcap_dt_comes_from_the_data(tmp_path):
     from cnc_interp.export.mcap_io import read_mcap, write_mcap
     from cnc_interp.export.verify_file import check_plan
     from cnc_interp.errors import UsageError
-    from cnc_interp.plan.machine_io import load_machine
+    from cnc_interp.machine.load import load_machine
 
     m = load_machine("generic-mill")
     out = tmp_path / "p.mcap"

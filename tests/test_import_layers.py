@@ -1,9 +1,10 @@
 """The package's floors: a module imports only from its own floor or below.
 
     base    cnc_interp (root), errors, constants, outfile, _kernel_cache, _stage_call
+    machine Machine, its readers (TOML, INI, presets) and kinematics: every stage's input
     gcode   G-code -> Program
     fit     Program -> Paths
-    plan    Paths + Machine -> Trajectory (and the Machine itself, for now)
+    plan    Paths + Machine -> Trajectory
     export | fpga   (siblings: neither imports the other)
     top     api, pipeline, batch, batch_workers, cli, fpga.commands
 
@@ -20,7 +21,9 @@ import cnc_interp
 
 PKG_DIR = os.path.dirname(cnc_interp.__file__)
 
-FLOORS = {"base": 0, "gcode": 1, "fit": 2, "plan": 3, "export": 4, "fpga": 4, "top": 5}
+FLOORS = {"base": 0, "machine": 1, "gcode": 2, "fit": 3, "plan": 4, "export": 5, "fpga": 5, "top": 6}
+#: the floor of siblings that must not import each other
+SIBLINGS = 5
 TOP = {"api", "pipeline", "batch", "batch_workers", "cli", "fpga.commands"}
 BASE = {"", "errors", "constants", "outfile", "_kernel_cache", "_stage_call"}
 #: deliberate upward edges, each with its reason
@@ -92,7 +95,7 @@ def test_no_module_imports_from_a_higher_floor():
             if (name, target) in ALLOWED or target == name:
                 continue
             upward = FLOORS[dst] > FLOORS[src]
-            sideways = FLOORS[dst] == FLOORS[src] == 4 and dst != src
+            sideways = FLOORS[dst] == FLOORS[src] == SIBLINGS and dst != src
             if upward or sideways:
                 bad.append(
                     f"cnc_interp/{os.path.relpath(path, PKG_DIR)}:{line}: {src} imports {dst} (cnc_interp.{target})"
@@ -106,3 +109,15 @@ def test_the_check_sees_an_upward_import(tmp_path):
     fake.write_text("def f():\n    from ..plan.timeline import plan_program\n")
     found = list(_imports("gcode.bad", False, str(fake)))
     assert ("plan.timeline", 2) in found and FLOORS[_floor("plan.timeline")] > FLOORS["gcode"]
+
+
+def test_the_machine_floor_is_below_every_stage(tmp_path):
+    # Machine's package may import only base; a stage importing it is no upward edge
+    fake = tmp_path / "bad.py"
+    fake.write_text("from ..gcode.program import Program\nfrom ..errors import MachineError\n")
+    found = dict(_imports("machine.bad", False, str(fake)))
+    assert FLOORS[_floor("gcode.program")] > FLOORS[_floor("machine.bad")]
+    assert FLOORS[_floor("errors")] < FLOORS[_floor("machine.bad")]
+    assert set(found) == {"gcode.program", "errors"}
+    for stage in ("gcode", "fit", "plan", "export", "fpga", "top"):
+        assert FLOORS[stage] > FLOORS["machine"]

@@ -5,8 +5,8 @@ import pytest
 from numpy.testing import assert_allclose
 
 from cnc_interp.errors import MachineError
-from cnc_interp.plan.kinematics import make_kinematics
-from cnc_interp.plan.machine import Machine
+from cnc_interp.machine.kinematics import make_kinematics
+from cnc_interp.machine.model import Machine
 
 
 def machine(axes="XYZAC", kind="xyzac-trt", **params):

@@ -8,12 +8,21 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from cnc_interp.constants import MM_PER_INCH
-from cnc_interp.plan.machine_io import DEFAULT_JERK_PER_ACCEL_1_S
-from cnc_interp.errors import MachineError
-from cnc_interp.plan.machine_io import DEFAULT_PRESET, PRESETS, format_presets, load_machine, preset_table
+from .conftest import CORPUS
 
-CORPUS_CONFIGS = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "corpus", "linuxcnc", "configs")
+from cnc_interp.constants import MM_PER_INCH
+from cnc_interp.errors import MachineError
+from cnc_interp.machine.load import (
+    DEFAULT_JERK_PER_ACCEL_1_S,
+    DEFAULT_PRESET,
+    PRESETS,
+    format_presets,
+    load_machine,
+    preset_table,
+)
+
+#: LinuxCNC's sample configurations in the corpus (conftest's path, or CNC_CORPUS)
+CORPUS_CONFIGS = os.path.join(CORPUS, "configs")
 
 GOOD = """\
 name = "Test mill"

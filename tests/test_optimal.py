@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 from numpy.testing import assert_array_equal
 
-from cnc_interp.plan.kinematics import make_kinematics
-from cnc_interp.plan.machine import Machine
+from cnc_interp.machine.kinematics import make_kinematics
+from cnc_interp.machine.model import Machine
 from cnc_interp.plan.optimal import iter_path_plan_optimal, plan_path_optimal
 from cnc_interp.plan.optimality import line_min_samples
 from cnc_interp.plan.safe import plan_path_safe
-from cnc_interp.plan.settings import PlanSettings
+from cnc_interp.plan.settings import OptimalOptions, PlanSettings
 from cnc_interp.plan.verify import verify_arrays
 from cnc_interp.plan.vpop import plan_path_vpop
 
@@ -130,7 +130,7 @@ def test_five_axis_xyzac_trt():
 
     p = hermite_path(fun, 8, 200.0, axes="XYZAC", u1=1.5)
     for route in ("profile", "vpop"):
-        plan = plan_path_optimal(p, kin, m, m.dt_s, PlanSettings(options={"route": route}))
+        plan = plan_path_optimal(p, kin, m, m.dt_s, PlanSettings(optimal=OptimalOptions(route=route)))
         check(plan, m, kin.to_joints(p.start[None])[0], kin.to_joints(p.end[None])[0], m.dt_s)
     vp = plan_path_vpop(p, kin, m, m.dt_s)
     opt = plan_path_optimal(p, kin, m, m.dt_s)
@@ -141,7 +141,7 @@ def test_five_axis_xyzac_trt():
 def test_other_periods(dt):
     p = hermite_path(circle_fun(20.0, turns=0.5), 6, 300.0)
     for route in ("profile", "vpop"):
-        plan = plan_path_optimal(p, None, MILL, dt, PlanSettings(options={"route": route}))
+        plan = plan_path_optimal(p, None, MILL, dt, PlanSettings(optimal=OptimalOptions(route=route)))
         check(plan, MILL, p.start, p.end, dt)
 
 
@@ -154,7 +154,7 @@ def test_feed_limit_per_segment():
 
     p = Path(axes="XYZ", breaks=np.array([0.0, 1.0, 2.0]), coef=coef, line=[1, 2], feed_mm_s=[100.0, 30.0])
     for route in ("profile", "vpop"):
-        plan = plan_path_optimal(p, None, MILL, DT, PlanSettings(options={"route": route}))
+        plan = plan_path_optimal(p, None, MILL, DT, PlanSettings(optimal=OptimalOptions(route=route)))
         check(plan, MILL, p.start, p.end, DT)
         v = np.diff(plan.s) / DT
         assert v.max() <= 100.0 * (1 + 1e-9)
@@ -182,13 +182,11 @@ def test_zero_length_and_rotary_only():
 @pytest.mark.parametrize("route", ["profile", "vpop"])
 def test_tiny_chunks_give_the_same_bytes_as_one_chunk(route):
     p = hermite_path(circle_fun(4.0, turns=1.5, z_per_turn=-0.5), 18, 180.0)
-    one = list(
-        iter_path_plan_optimal(p, None, MILL, DT, PlanSettings(options={"route": route, "chunk_samples": 10**9}))
-    )
+    whole = PlanSettings(optimal=OptimalOptions(route=route, chunk_samples=10**9))
+    one = list(iter_path_plan_optimal(p, None, MILL, DT, whole))
     # tiny chunks, and VPOp's own stream window as small as it goes
-    tiny = list(
-        iter_path_plan_optimal(p, None, MILL, DT, PlanSettings(options={"route": route, "chunk_samples": 7}), window=1)
-    )
+    small = PlanSettings(optimal=OptimalOptions(route=route, chunk_samples=7))
+    tiny = list(iter_path_plan_optimal(p, None, MILL, DT, small, window=1))
     assert len(one) == 1 and len(tiny) > 10
     assert all(c.s.shape[0] == 7 and not c.last for c in tiny[:-1])
     assert one[0].last and tiny[-1].last and tiny[-1].stats["route"] == route
@@ -197,7 +195,7 @@ def test_tiny_chunks_give_the_same_bytes_as_one_chunk(route):
     s2 = np.concatenate([c.s for c in tiny])
     q2 = np.concatenate([c.q for c in tiny])
     assert s1.tobytes() == s2.tobytes() and q1.tobytes() == q2.tobytes()
-    plan = plan_path_optimal(p, None, MILL, DT, PlanSettings(options={"route": route}))
+    plan = plan_path_optimal(p, None, MILL, DT, PlanSettings(optimal=OptimalOptions(route=route)))
     assert plan.s.tobytes() == s1.tobytes() and plan.q.tobytes() == q1.tobytes()
 
 
@@ -221,7 +219,7 @@ def test_a_sample_does_not_depend_on_the_path_far_ahead():
         line=np.arange(1, 50),
         feed_mm_s=np.full(49, 120.0),
     )
-    opts = PlanSettings(options={"route": "profile", "compare_s": 0})
+    opts = PlanSettings(optimal=OptimalOptions(route="profile", compare_s=0))
     sa = plan_path_optimal(pa, None, MILL, DT, opts)
     sb = plan_path_optimal(pb, None, MILL, DT, opts)
     n = 400
@@ -326,5 +324,5 @@ def test_random_sweep_slow(seed):
     for machine in (MILL, UCP):
         dt = machine.dt_s * float(rng.choice([0.5, 1.0, 2.0]))
         for route in ("profile", "vpop"):
-            plan = plan_path_optimal(p, None, machine, dt, PlanSettings(options={"route": route}))
+            plan = plan_path_optimal(p, None, machine, dt, PlanSettings(optimal=OptimalOptions(route=route)))
             check(plan, machine, p.start, p.end, dt)

@@ -7,7 +7,7 @@ from numpy.testing import assert_allclose
 
 from cnc_interp.plan import _feed_kernels as FK
 from cnc_interp.plan._ipm import OK, _band_cholesky, _band_solve, lp_solve
-from cnc_interp.plan.machine import Machine
+from cnc_interp.machine.model import Machine
 from cnc_interp.plan.safe import scurve
 from cnc_interp.plan.verify import verify_arrays
 

@@ -9,12 +9,13 @@ from numpy.testing import assert_allclose
 from cnc_interp.constants import VERIFY_RATIO_SLACK
 from cnc_interp.plan.paper000.limits import P000_CURV_JERK_SHARE
 from cnc_interp.plan.paper000.limits import P000_CURV_ACCEL_SHARE
-from cnc_interp.plan.machine import Machine
+from cnc_interp.machine.model import Machine
 from cnc_interp.plan.paper000 import shapes
 from cnc_interp.plan.paper000.constant import constant_feed, plan_path_constant
 from cnc_interp.plan.paper000.curvature import segment_geometry
 from cnc_interp.plan.paper000.variable import plan_path_variable
 from cnc_interp.plan.verify import verify_arrays
+from cnc_interp.plan.settings import Paper000Options, PlanSettings
 
 PLANNERS = (plan_path_constant, plan_path_variable)
 
@@ -48,7 +49,7 @@ def test_circle_constant_feed_is_sqrt_a_over_kappa(share):
     r, dt = 10.0, 0.001
     m = machine(v=1000.0, a=2000.0, j=1e8)  # acceleration binds
     path = shapes.circle(r, turns=3, n_per_turn=36)
-    settings = None if share is None else {"curv_accel_share": share}
+    settings = None if share is None else PlanSettings(paper000=Paper000Options(curv_accel_share=share))
     a_m = (P000_CURV_ACCEL_SHARE if share is None else share) * 2000.0
     expect = math.sqrt(a_m / (1.0 / r))  # Eq. 6: V = sqrt(A_m / kappa)
     geom = segment_geometry(path)
@@ -133,7 +134,7 @@ def test_variable_beats_constant_on_mixed_path():
 def test_per_segment_profiles_merge_band_zero():
     path = shapes.circle(4.0, n_per_turn=24)
     m = machine()
-    plan = plan_path_variable(path, None, m, 0.001, {"merge_band": 0.0})
+    plan = plan_path_variable(path, None, m, 0.001, PlanSettings(paper000=Paper000Options(merge_band=0.0)))
     check_plan(plan, path, m, 0.001)
     assert plan.profiles.n_pieces == path.n_seg
     merged = plan_path_variable(path, None, m, 0.001)
@@ -240,15 +241,25 @@ def test_registry_entries():
 
 
 def test_plan_settings_options_are_read():
-    from cnc_interp.plan.settings import PlanSettings
-
     path = shapes.circle(10.0, turns=3, n_per_turn=36)
     m = machine(v=1000.0, a=2000.0, j=1e8)
-    ps = PlanSettings(planner="constant", dt_s=0.001, options={"curv_accel_share": 0.95})
+    ps = PlanSettings(planner="constant", dt_s=0.001, paper000=Paper000Options(curv_accel_share=0.95))
     a = plan_path_constant(path, None, m, 0.001, ps)
-    b = plan_path_constant(path, None, m, 0.001, {"curv_accel_share": 0.95})
-    assert np.array_equal(a.q, b.q)
+    b = plan_path_constant(path, None, m, 0.001, PlanSettings(planner="constant", dt_s=0.001))
     assert_allclose(a.profiles.v_cruise[0], math.sqrt(0.95 * 2000 * 10.0), rtol=2e-3)
+    assert_allclose(b.profiles.v_cruise[0], math.sqrt(P000_CURV_ACCEL_SHARE * 2000 * 10.0), rtol=2e-3)
+    # recorded with the plan by the flat name it always had
+    assert ps.to_dict()["options"] == {"curv_accel_share": 0.95}
+
+
+@pytest.mark.parametrize(
+    "knobs", [{"curv_accel_share": 0.0}, {"curv_jerk_share": 1.5}, {"merge_band": -0.1}, {"cross_jerk_share": "x"}]
+)
+def test_paper000_knobs_out_of_range_are_usage_errors(knobs):
+    from cnc_interp.errors import UsageError
+
+    with pytest.raises(UsageError):
+        Paper000Options(**knobs)
 
 
 def test_non_finite_path_is_a_plan_error():

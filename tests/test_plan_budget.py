@@ -9,7 +9,7 @@ from cnc_interp.errors import PlanError
 from cnc_interp.fit import FitSettings, fit_program
 from cnc_interp.gcode import read_program
 from cnc_interp.plan import budget
-from cnc_interp.plan.machine_io import load_machine
+from cnc_interp.machine.load import load_machine
 
 LINE = b"G21 G90 G94\nG1 X100 F6000\nM2\n"  # 100 mm at 100 mm/s
 

@@ -103,7 +103,7 @@ def test_stream_equals_the_in_memory_plan(tmp_path, planner):
 def _spiral_path(n_moves: int):
     from cnc_interp.fit import FitSettings, fit_program
     from cnc_interp.gcode import read_program
-    from cnc_interp.plan.machine_io import load_machine
+    from cnc_interp.machine.load import load_machine
 
     m = load_machine("generic-mill")
     th = np.linspace(0.0, 40 * np.pi, n_moves)
@@ -188,7 +188,7 @@ def test_parse_and_fit_streams_equal_the_whole_program(name):
     from cnc_interp.fit.path import Path
     from cnc_interp.gcode import read_program
     from cnc_interp.gcode.stream import iter_program
-    from cnc_interp.plan.machine_io import load_machine
+    from cnc_interp.machine.load import load_machine
 
     m = load_machine("generic-mill")
     data = open(os.path.join(SAMPLES, name), "rb").read()

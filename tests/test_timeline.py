@@ -9,7 +9,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 from cnc_interp.errors import PlanError
 from cnc_interp.fit.result import FitResult
 from cnc_interp.gcode.program import Dwell, Program, Stop
-from cnc_interp.plan.machine import Machine
+from cnc_interp.machine.model import Machine
 from cnc_interp.plan.settings import PlanSettings
 from cnc_interp.plan.timeline import plan_program
 from cnc_interp.plan.verify import verify

@@ -8,7 +8,7 @@ from numpy.testing import assert_allclose
 
 from cnc_interp.constants import VERIFY_RATIO_SLACK
 from cnc_interp.errors import MachineError
-from cnc_interp.plan.machine import Machine
+from cnc_interp.machine.model import Machine
 from cnc_interp.plan.trajectory import Trajectory
 from cnc_interp.plan.verify import verify, verify_arrays
 

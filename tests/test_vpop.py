@@ -7,9 +7,9 @@ from numpy.testing import assert_allclose, assert_array_equal
 from cnc_interp.constants import VERIFY_RATIO_SLACK
 from cnc_interp.plan.vpop import VPOP_TABLE_TOL
 from cnc_interp.fit.path import Path
-from cnc_interp.plan.kinematics import make_kinematics
-from cnc_interp.plan.machine import Machine
-from cnc_interp.plan.settings import PlanSettings
+from cnc_interp.machine.kinematics import make_kinematics
+from cnc_interp.machine.model import Machine
+from cnc_interp.plan.settings import PlanSettings, VpopOptions
 from cnc_interp.plan.verify import verify_arrays
 from cnc_interp.plan.vpop import JointTable, plan_path_vpop
 
@@ -104,7 +104,7 @@ def test_exact_mode_gives_the_same_kind_of_plan():
     rng = np.random.default_rng(3)
     p = hermite_path(random_curve(rng, scale=10.0), 6, 120.0)
     fast = plan_path_vpop(p, None, MILL, DT)
-    exact = plan_path_vpop(p, None, MILL, DT, PlanSettings(options={"vpop_exact": True}))
+    exact = plan_path_vpop(p, None, MILL, DT, PlanSettings(vpop=VpopOptions(exact=True)))
     check(exact, MILL, p.start, p.end)
     assert exact.stats["exact"]
     # the shortcuts only end brake runs early (exact mode asks every brake run to reach
@@ -237,7 +237,7 @@ def test_near_cusp_zigzag_is_planned(exact):
         line=[3, 4],
         feed_mm_s=[25000 / 60, 25000 / 60],
     )
-    plan = plan_path_vpop(p, None, GENERIC, GENERIC.dt_s, PlanSettings(options={"vpop_exact": exact}))
+    plan = plan_path_vpop(p, None, GENERIC, GENERIC.dt_s, PlanSettings(vpop=VpopOptions(exact=exact)))
     check_path(plan, GENERIC, p)
     assert plan.stats["exact"] == exact
     # it must slow down to a crawl at the turns, yet take well under a second
@@ -259,7 +259,7 @@ def test_line_of_a_few_jerk_steps(jerk_steps):
     a = np.array([-0.0208, -0.0004, -0.0165])
     p = line_path(a, a + jerk_steps * jstep * d, 1000.0)
     for exact in (False, True):
-        plan = plan_path_vpop(p, None, m, m.dt_s, PlanSettings(options={"vpop_exact": exact}))
+        plan = plan_path_vpop(p, None, m, m.dt_s, PlanSettings(vpop=VpopOptions(exact=exact)))
         check_path(plan, m, p)
 
 
@@ -317,7 +317,7 @@ def test_random_short_curves_and_lines_at_high_feed(machine):
             )
         for exact in (False, True):
             try:
-                plan = plan_path_vpop(p, None, machine, machine.dt_s, PlanSettings(options={"vpop_exact": exact}))
+                plan = plan_path_vpop(p, None, machine, machine.dt_s, PlanSettings(vpop=VpopOptions(exact=exact)))
                 check_path(plan, machine, p)
             except Exception as exc:
                 raise AssertionError(f"trial {trial}, exact {exact}") from exc

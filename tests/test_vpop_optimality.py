@@ -5,7 +5,7 @@ import os
 import numpy as np
 import pytest
 
-from cnc_interp.plan.machine import Machine
+from cnc_interp.machine.model import Machine
 from cnc_interp.plan.optimality import line_min_samples, path_lower_bound
 from cnc_interp.plan.vpop import plan_path_vpop
 

@@ -9,8 +9,8 @@ from cnc_interp.plan.vpop import VPOP_TABLE_MAX_ROUNDS
 from cnc_interp.plan.vpop import VPOP_TABLE_TOL
 from cnc_interp.errors import PlanError
 from cnc_interp.fit.path import Path
-from cnc_interp.plan.kinematics import Kinematics, make_kinematics
-from cnc_interp.plan.machine import Machine
+from cnc_interp.machine.kinematics import Kinematics, make_kinematics
+from cnc_interp.machine.model import Machine
 from cnc_interp.plan.vpop import _GL_W, _GL_X, JointTable, _eval_table
 
 from ._vpop_paths import circle_fun, hermite_path, line_path, random_curve

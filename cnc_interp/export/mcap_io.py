@@ -414,7 +414,7 @@ def read_mcap_machine(path: str):
     from mcap.reader import make_reader
 
     from ..errors import MachineError
-    from ..plan.machine import Machine
+    from ..machine.model import Machine
 
     try:
         with open(path, "rb") as fh:

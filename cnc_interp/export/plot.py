@@ -43,7 +43,7 @@ def plot_file(path: str, machine_spec: str | None, out: str | None = None) -> st
 
     machine = None
     if machine_spec:
-        from ..plan.machine_io import load_machine
+        from ..machine.load import load_machine
 
         machine = load_machine(machine_spec)
     traj = read_plan(path)

@@ -34,7 +34,7 @@ def verify_file(path: str, machine_spec: str | None):
     checkable (``check_plan``). Raises ``MachineError`` for a bad machine, ``UsageError`` for
     an unreadable plan or one that cannot be checked against the machine.
     """
-    from ..plan.machine_io import load_machine
+    from ..machine.load import load_machine
     from ..plan.verify import verify
 
     machine = None

@@ -97,7 +97,7 @@ def plan_for_stream(opts: StreamOptions, formats=None, with_machine: bool = Fals
     from .limits import device_margin, with_margin
 
     from ..api import read_part, run
-    from ..plan.machine_io import DEFAULT_PRESET, load_machine
+    from ..machine.load import DEFAULT_PRESET, load_machine
     from ..plan.settings import PlanSettings
 
     machine = load_machine(opts.machine_spec if opts.machine_spec is not None else DEFAULT_PRESET)

@@ -25,13 +25,14 @@ The moves run as exact path (tolerance 0), as LinuxCNC switches to G61 inside cy
 from __future__ import annotations
 
 from ..constants import LOOP_ITERATION_LIMIT
+from .codes import G17, G18, G19
 
 
 #: G73/G83 peck: rapid back down to this far above the previous depth (LinuxCNC: 0.010 in)
 PECK_CLEARANCE_MM = 0.254
 
-#: plane code (G17 = 170, ...) -> (aa, bb, cc) indices into ALL_AXES
-CYCLE_AXES = {170: (0, 1, 2), 180: (2, 0, 1), 190: (1, 2, 0)}
+#: plane code -> (aa, bb, cc) indices into ALL_AXES
+CYCLE_AXES = {G17: (0, 1, 2), G18: (2, 0, 1), G19: (1, 2, 0)}
 SUPPORTED = (81, 82, 83, 73, 85, 89)
 
 
@@ -54,7 +55,7 @@ def expand_cycle(ip, code: int, words: dict, line: int, col: int) -> None:
     aa_i, bb_i, cc_i = CYCLE_AXES[ip.plane]
     cc_letter = "XYZ"[cc_i]
     aa_letter, bb_letter = "XYZ"[aa_i], "XYZ"[bb_i]
-    same = ip.motion == code * 10
+    same = ip.motion == code * 10  # the motion mode is stored as ten times the G number
     if ip.feed_inverse_time:
         raise CycleError("canned cycles cannot run in G93 inverse time mode")
     if ip.f_word <= 0.0:

@@ -26,6 +26,62 @@ from ..constants import ALL_AXES, CURVE_CHORD_TOL_MM, CURVE_MAX_NODES, LINEAR_AX
 from ..errors import GCodeError, SourceLocation, UnsupportedError
 from .arcs import GeometryError, arc_length_mm, centre_from_ijk, centre_from_r, segment_count
 from .canned import SUPPORTED as CYCLE_CODES, CycleError, expand_cycle
+from .codes import (
+    COORDINATE_SYSTEM,
+    G0,
+    G1,
+    G2,
+    G3,
+    G4,
+    G5,
+    G5_1,
+    G5_2,
+    G5_3,
+    G10,
+    G17,
+    G18,
+    G19,
+    G20,
+    G28,
+    G28_1,
+    G30,
+    G30_1,
+    G43,
+    G43_1,
+    G43_2,
+    G49,
+    G53,
+    G61,
+    G61_1,
+    G64,
+    G73,
+    G80,
+    G81,
+    G82,
+    G83,
+    G85,
+    G89,
+    G90_1,
+    G91,
+    G92,
+    G92_1,
+    G92_2,
+    G92_3,
+    G93,
+    G99,
+    G_GROUP,
+    G_UNSUPPORTED,
+    M2,
+    M6,
+    M30,
+    M_GROUP,
+    M_NOOP,
+    M_STOPS,
+    M_UNSUPPORTED,
+    M_USE_P,
+    M_USE_QE,
+    gcode_name,
+)
 from .program import Dwell, Program, Stop
 from .runs import RunBuilder, finish_run
 from .splines import bezier, make_nurbs, sample_nurbs
@@ -39,130 +95,39 @@ NAN = math.nan
 AXIS_INDEX = {a: i for i, a in enumerate(ALL_AXES)}
 IS_LINEAR9 = tuple(a in LINEAR_AXES for a in ALL_AXES)
 #: plane code -> (first, second, normal) axis indices (LinuxCNC: G18 is Z-X)
-PLANES = {170: (0, 1, 2), 180: (2, 0, 1), 190: (1, 2, 0)}
+PLANES = {G17: (0, 1, 2), G18: (2, 0, 1), G19: (1, 2, 0)}
 #: plane code -> centre-offset letters of (first, second) axes, and the letter not allowed
-PLANE_IJK = {170: ("I", "J", "K"), 180: ("K", "I", "J"), 190: ("J", "K", "I")}
-PLANE_NAME = {170: "XY (G17)", 180: "XZ (G18)", 190: "YZ (G19)"}
+PLANE_IJK = {G17: ("I", "J", "K"), G18: ("K", "I", "J"), G19: ("J", "K", "I")}
+PLANE_NAME = {G17: "XY (G17)", G18: "XZ (G18)", G19: "YZ (G19)"}
+# Sets of codes compared on every general block: built once here (``code in (G2, G3)``
+# would build its tuple of names at every comparison; literals were folded to constants).
+#: the non-modal codes whose values are the block's axis words (no motion goes with them)
+AXIS_WORD_CODES = frozenset({G10, G28, G30, G92})
+#: tool length codes whose values are the block's axis words
+TOOL_LENGTH_AXIS_CODES = frozenset({G43_1, G43_2})
+STRAIGHT = frozenset({G0, G1})
+ARCS = frozenset({G2, G3})
+SPLINES = frozenset({G5, G5_1})
+#: the motions a rotated coordinate system (G10 L2 R) supports
+ROTATABLE = frozenset({G0, G1, G2, G3})
+#: motion codes that may come without axis words (a G5.2 block may open with P alone)
+AXISLESS_MOTIONS = frozenset({G0, G1, G5_2})
+EXACT_PATH = frozenset({G61, G61_1})
+#: which motion codes use which parameter word (``_check_unused_words``)
+USES_IJ = frozenset({G2, G3, G5, G5_1})
+USES_P = frozenset({G2, G3, G5, G5_2, G82, G89})
+USES_Q = frozenset({G83, G73, G5})
+NON_MODAL_USES_P = frozenset({G4, G10})
+#: the canned cycles: a repeat of one keeps its sticky state (initial level)
+CYCLE_MOTIONS = frozenset({G81, G82, G83, G73, G85, G89})
 VALID_LETTERS = frozenset("ABCDFGHIJKLMNPQRSTUVWXYZ")
 
-#: G code (x10) -> modal group (0 = non-modal)
-G_GROUP = {
-    0: 1,
-    10: 1,
-    20: 1,
-    30: 1,
-    50: 1,
-    51: 1,
-    52: 1,
-    53: 1,
-    730: 1,
-    800: 1,
-    810: 1,
-    820: 1,
-    830: 1,
-    850: 1,
-    890: 1,
-    170: 2,
-    180: 2,
-    190: 2,
-    900: 3,
-    910: 3,
-    901: 4,
-    911: 4,
-    930: 5,
-    940: 5,
-    200: 6,
-    210: 6,
-    400: 7,
-    430: 8,
-    431: 8,
-    432: 8,
-    490: 8,
-    980: 10,
-    990: 10,
-    540: 12,
-    550: 12,
-    560: 12,
-    570: 12,
-    580: 12,
-    590: 12,
-    591: 12,
-    592: 12,
-    593: 12,
-    610: 13,
-    611: 13,
-    640: 13,
-    960: 14,
-    970: 14,
-    80: 15,
-    40: 0,
-    100: 0,
-    280: 0,
-    281: 0,
-    300: 0,
-    301: 0,
-    530: 0,
-    920: 0,
-    921: 0,
-    922: 0,
-    923: 0,
-}
-G_UNSUPPORTED = {
-    70: "G7 lathe diameter mode",
-    330: "G33 spindle-synchronized motion",
-    331: "G33.1 rigid tapping",
-    380: "G38 probing",
-    382: "G38.2 probing",
-    383: "G38.3 probing",
-    384: "G38.4 probing",
-    385: "G38.5 probing",
-    410: "G41 cutter radius compensation",
-    420: "G42 cutter radius compensation",
-    411: "G41.1 dynamic cutter radius compensation",
-    421: "G42.1 dynamic cutter radius compensation",
-    520: "G52 local coordinate offset",
-    700: "G70 lathe finishing cycle",
-    710: "G71 lathe roughing cycle",
-    711: "G71.1 lathe roughing cycle",
-    720: "G72 lathe roughing cycle",
-    721: "G72.1 lathe roughing cycle",
-    740: "G74 left-hand tapping cycle (spindle synchronized)",
-    760: "G76 threading cycle",
-    840: "G84 tapping cycle (spindle synchronized)",
-    860: "G86 boring cycle (spindle stop)",
-    870: "G87 back boring cycle",
-    880: "G88 boring cycle (manual retract)",
-    950: "G95 feed per revolution",
-    171: "G17.1 UV plane",
-    181: "G18.1 WU plane",
-    191: "G19.1 VW plane",
-    650: "G65 macro call",
-    680: "G68 coordinate rotation",
-    690: "G69 coordinate rotation",
-}
-#: M codes that do not affect motion (spindle, coolant, overrides, digital/analog I/O)
-M_NOOP = frozenset({3, 4, 5, 7, 8, 9, 19, 48, 49, 50, 51, 52, 53, 61, 62, 63, 64, 65, 67, 68})
-M_STOPS = {0: "M0", 1: "M1", 2: "M2", 30: "M30", 60: "M60"}
-M_GROUP = {0: 4, 1: 4, 2: 4, 30: 4, 60: 4, 6: 6, 61: 6, 3: 7, 4: 7, 5: 7, 19: 7}
-M_UNSUPPORTED = {
-    66: "M66 wait on input",
-    70: "M70 save modal state",
-    71: "M71 invalidate modal state",
-    72: "M72 restore modal state",
-    73: "M73 save and autorestore modal state",
-    98: "M98 subprogram call (use O-word sub/call)",
-    99: "M99 subprogram return (use O-word endsub)",
-}
 #: letter -> axis index (>= 0) or a negative tag for the fast path (N, F, S, G, arc words)
 _FAST_KIND = {a: i for i, a in enumerate(ALL_AXES)}
 _FAST_KIND.update({"N": -1, "F": -2, "S": -3, "G": -4, "I": -5, "J": -5, "K": -5, "R": -5, "P": -5})
 _PER_MIN = 1.0 / SECONDS_PER_MINUTE
 #: G value -> motion code handled by the fast path
-_FAST_G = {0.0: 0, 1.0: 10, 2.0: 20, 3.0: 30}
-
-
-def _gcode_name(code10: int) -> str:
-    return f"G{code10 // 10}" if code10 % 10 == 0 else f"G{code10 // 10}.{code10 % 10}"
+_FAST_G = {0.0: G0, 1.0: G1, 2.0: G2, 3.0: G3}
 
 
 class Interpreter:
@@ -185,8 +150,8 @@ class Interpreter:
         self.units9 = [1.0] * 9
         self.distance_incremental = False
         self.arc_abs = False
-        self.plane = 170
-        self.motion = 800  # LinuxCNC starts with no motion mode (G80)
+        self.plane = G17
+        self.motion = G80  # LinuxCNC starts with no motion mode (G80)
         self.feed_inverse_time = False
         self.f_word = 0.0
         self.f_block = 0.0  # F given in the current block (G93 needs one per move)
@@ -495,7 +460,7 @@ class Interpreter:
                         explicit = False
                     else:
                         explicit = True
-                    if gcode == 20 or gcode == 30:
+                    if gcode == G2 or gcode == G3:
                         # a plain G2/G3 block: skip the general classification
                         if self._fast_arc(blk, words, gcode, gcol, fw):
                             rb = None
@@ -503,7 +468,7 @@ class Interpreter:
                             continue
                     elif arcw:
                         pass  # I/J/K/R/P with G0/G1: the general path reports it
-                    elif gcode == 10 or gcode == 0:
+                    elif gcode == G1 or gcode == G0:
                         if explicit and self.motion != gcode:
                             self.motion = gcode
                             self.cycle_il = None
@@ -514,7 +479,7 @@ class Interpreter:
                             self.f_word = fw[1]
                         if new is None:
                             continue
-                        if gcode == 10:
+                        if gcode == G1:
                             kind = "feed"
                             if self.f_word <= 0.0:
                                 self.blk = blk
@@ -626,13 +591,64 @@ class Interpreter:
         return gw, mw, d
 
     # -- general blocks ---------------------------------------------------------
+    # One method per step of RS274NGC's order of execution within a block (LinuxCNC's
+    # "G-code order of execution" table), called in that order by ``_general``. The
+    # comment, spindle, coolant, override and I/O steps do not move the machine and have
+    # no method; units (16) are taken before F (4), since ``_switch_units`` converts the F
+    # in effect.
     def _general(self, blk, gw, mw, d) -> bool:
         """Execute one block in RS274NGC order; True when the program ends (M2/M30)."""
         line = blk.line
         for L, w in d.items():
             if L not in VALID_LETTERS:
                 raise self.error(f"unknown word letter {L}", w[2])
-        # --- classify G codes ---
+        groups, g80 = self._g_groups(gw)
+        mgroups = self._m_groups(mw)
+        g0 = groups.get(0)
+        g0code = g0[0] if g0 else None
+        axis_words = [(L, w) for L, w in d.items() if L in AXIS_INDEX]
+        # G10, G28, G30, G92 and G43.1/G43.2 take their values from the axis words
+        covets = g0code in AXIS_WORD_CODES or groups.get(8, (0,))[0] in TOOL_LENGTH_AXIS_CODES
+        mcode = groups[1][0] if 1 in groups else None
+        self._check_unused_words(d, groups, mgroups, mcode, g0code, covets, axis_words)
+
+        # the numbers are the steps of LinuxCNC's "order of execution" table
+        if 5 in groups:  # 3. feed mode
+            self._step_feed_mode(groups[5][0])
+        if 6 in groups:  # 16. units, taken before F and the coordinates ('G20 F10' is 10 in/min)
+            self._step_units(groups[6][0])
+        self._step_feed_rate(d.get("F"))  # 4.
+        tw = d.get("T")
+        if tw is not None:  # 6.
+            self._step_select_tool(tw)
+        if 6 in mgroups and mgroups[6][0] == M6:  # 8.
+            self._step_change_tool(line)
+        if g0code == G4:  # 14.
+            self._step_dwell(d, g0[1], line)
+        if 2 in groups:  # 15.
+            self._step_plane(groups[2])
+        if 8 in groups:  # 18. tool length (17, G40, changes nothing that moves)
+            self._tool_length(groups[8][0], groups[8][1], d, axis_words)
+        if 12 in groups:  # 19.
+            self._load_coordinate_system(COORDINATE_SYSTEM[groups[12][0]])
+        if 13 in groups:  # 20.
+            self._step_path_control(groups[13][0], d)
+        self._step_distance_modes(groups)  # 21., 22.
+        self._step_axis_words(groups, g80, g0, mcode, covets, axis_words)
+        g53 = False
+        if g0code is not None and g0code != G4:  # 23. non-modal codes
+            g53 = self._group0(g0code, g0[1], d, axis_words, line)
+        if mcode is not None:  # 24. motion
+            self._step_motion_code(mcode, groups[1][1], d, axis_words, line, g53)
+        elif axis_words and not covets:
+            self._step_modal_motion(d, axis_words, line, g53)
+        if 4 in mgroups:  # 25.
+            return self._step_stop(mgroups[4][0], line)
+        return False
+
+    def _g_groups(self, gw) -> tuple[dict[int, tuple[int, int]], bool]:
+        """The block's G-codes by modal group ({group: (code, col)}) and whether G80 is
+        among them; an unknown or unsupported code, or two of one group, is an error."""
         groups: dict[int, tuple[int, int]] = {}
         g80 = False
         for w in gw or ():
@@ -644,8 +660,8 @@ class Interpreter:
                 raise self.error(f"{G_UNSUPPORTED[code]} is not supported", w[2], unsupported=True)
             grp = G_GROUP.get(code)
             if grp is None:
-                raise self.error(f"unknown G-code {_gcode_name(code)}", w[2])
-            if code == 800:
+                raise self.error(f"unknown G-code {gcode_name(code)}", w[2])
+            if code == G80:
                 g80 = True
                 if 1 in groups:
                     continue
@@ -653,12 +669,16 @@ class Interpreter:
                 continue
             if grp in groups:
                 prev = groups[grp][0]
-                if grp == 1 and prev == 800:
+                if grp == 1 and prev == G80:
                     groups[1] = (code, w[2])
                     continue
-                raise self.error(f"{_gcode_name(prev)} and {_gcode_name(code)} are in the same modal group", w[2])
+                raise self.error(f"{gcode_name(prev)} and {gcode_name(code)} are in the same modal group", w[2])
             groups[grp] = (code, w[2])
-        # --- classify M codes ---
+        return groups, g80
+
+    def _m_groups(self, mw) -> dict[int, tuple[int, int]]:
+        """The block's M-codes by modal group ({group: (code, col)}); an unknown or
+        unsupported code, or two of one group, is an error."""
         mgroups: dict[int, tuple[int, int]] = {}
         for w in mw or ():
             v = w[1]
@@ -669,174 +689,160 @@ class Interpreter:
                 raise self.error(f"{M_UNSUPPORTED[code]} is not supported", w[2], unsupported=True)
             if 100 <= code <= 199:
                 raise self.error(f"user-defined M-code M{code} is not supported", w[2], unsupported=True)
-            if code not in M_NOOP and code not in M_STOPS and code != 6:
+            if code not in M_NOOP and code not in M_STOPS and code != M6:
                 raise self.error(f"unknown M-code M{code}", w[2])
             grp = M_GROUP.get(code, 100 + code)
             if grp in mgroups:
                 raise self.error(f"M{mgroups[grp][0]} and M{code} are in the same modal group", w[2])
             mgroups[grp] = (code, w[2])
+        return mgroups
 
-        g0 = groups.get(0)
-        g0code = g0[0] if g0 else None
-        axis_words = [(L, w) for L, w in d.items() if L in AXIS_INDEX]
-        # G43.1/G43.2 take their offsets from the axis words, like G10 and G92
-        covets = g0code in (100, 280, 300, 920) or groups.get(8, (0,))[0] in (431, 432)
-        mcode = groups[1][0] if 1 in groups else None
+    def _step_feed_mode(self, code: int) -> None:
+        """G93 inverse time, G94 units per minute."""
+        self.feed_inverse_time = code == G93
 
-        self._check_unused_words(d, groups, mgroups, mcode, g0code, covets, axis_words)
+    def _step_units(self, code: int) -> None:
+        """G20 inch, G21 mm (taken before F: ``_switch_units`` converts the F in effect)."""
+        self._switch_units(MM_PER_INCH if code == G20 else 1.0)
 
-        # 1. feed mode
-        if 5 in groups:
-            self.feed_inverse_time = groups[5][0] == 930
-        # units before F and the coordinates (so 'G20 F10' is 10 in/min)
-        if 6 in groups:
-            self._switch_units(MM_PER_INCH if groups[6][0] == 200 else 1.0)
-        # 2. F
-        fw = d.get("F")
+    def _step_feed_rate(self, fw) -> None:
+        """F: the feed in effect, and the block's own F (inverse time needs one per move)."""
         self.f_block = 0.0
         if fw is not None:
             if fw[1] < 0:
                 raise self.error("negative feed rate", fw[2])
             self.f_word = fw[1]
             self.f_block = fw[1]
-        # 3. S, T
-        tw = d.get("T")
-        if tw is not None:
-            if tw[1] < 0 or tw[1] != int(tw[1]):
-                raise self.error("tool number T must be a non-negative integer", tw[2])
-            self.tool_selected = int(tw[1])
-        # 4. M6 tool change
-        if 6 in mgroups and mgroups[6][0] == 6:
-            self.tool = self.tool_selected
-            self._pset(5400, self.tool)
-            self._stop("M6", line, "tool-change")
-        # 5. dwell
-        if g0code == 40:
-            pw = d.get("P")
-            if pw is None:
-                raise self.error("G4 dwell without P (seconds)", g0[1])
-            if pw[1] < 0:
-                raise self.error("negative dwell time P", pw[2])
-            self._dwell(pw[1], line)
-        # 6. plane
-        if 2 in groups:
-            newp = groups[2][0]
-            if self.nurbs_cp is not None and newp != self.plane:
-                raise self.error("plane change inside a G5.2 NURBS block", groups[2][1])
-            self.plane = newp
-        # 7. cutter comp G40 (nothing moves); tool length G43/G43.1/G43.2/G49: the offset
-        # changes the program-to-machine map, so it applies from the next move on
-        if 8 in groups:
-            self._tool_length(groups[8][0], groups[8][1], d, axis_words)
-        # 8. coordinate system
-        if 12 in groups:
-            code = groups[12][0]
-            cs = {540: 1, 550: 2, 560: 3, 570: 4, 580: 5, 590: 6, 591: 7, 592: 8, 593: 9}[code]
-            self._load_coordinate_system(cs)
-        # 9. path control
-        if 13 in groups:
-            code = groups[13][0]
-            self.exact_stop = code == 611
-            if code in (610, 611):  # exact path; G61.1 also stops at every block end
-                self.tol, self.naive = 0.0, NAN
-            else:
-                self.tol, self.naive = NAN, NAN
-                pw, qw = d.get("P"), d.get("Q")
-                if pw is not None:
-                    if pw[1] < 0:
-                        raise self.error("negative G64 P tolerance", pw[2])
-                    self.tol = pw[1] * self.len_unit if pw[1] > 0 else NAN
-                if qw is not None:
-                    if qw[1] < 0:
-                        raise self.error("negative G64 Q tolerance", qw[2])
-                    self.naive = qw[1] * self.len_unit
-        # 10. distance modes, retract mode
-        if 3 in groups:
-            self.distance_incremental = groups[3][0] == 910
-        if 4 in groups:
-            self.arc_abs = groups[4][0] == 901
-        if 10 in groups:
-            self.retract_r_plane = groups[10][0] == 990
 
-        # axis-word bookkeeping (RS274NGC enhance_block rules)
-        if covets and mcode is not None and mcode != 800:
-            raise self.error(f"{_gcode_name(g0code)} and {_gcode_name(mcode)} both use the axis words", g0[1])
-        if g80 and axis_words and not covets and mcode == 800:
+    def _step_select_tool(self, tw) -> None:
+        """T: the tool the next M6 loads."""
+        if tw[1] < 0 or tw[1] != int(tw[1]):
+            raise self.error("tool number T must be a non-negative integer", tw[2])
+        self.tool_selected = int(tw[1])
+
+    def _step_change_tool(self, line: int) -> None:
+        """M6: the selected tool goes in the spindle (#5400); the machine stops for it."""
+        self.tool = self.tool_selected
+        self._pset(5400, self.tool)
+        self._stop("M6", line, "tool-change")
+
+    def _step_dwell(self, d: dict, col: int, line: int) -> None:
+        """G4 P seconds."""
+        pw = d.get("P")
+        if pw is None:
+            raise self.error("G4 dwell without P (seconds)", col)
+        if pw[1] < 0:
+            raise self.error("negative dwell time P", pw[2])
+        self._dwell(pw[1], line)
+
+    def _step_plane(self, code_col: tuple[int, int]) -> None:
+        """G17, G18, G19 (not inside a G5.2 NURBS block)."""
+        newp, col = code_col
+        if self.nurbs_cp is not None and newp != self.plane:
+            raise self.error("plane change inside a G5.2 NURBS block", col)
+        self.plane = newp
+
+    def _step_path_control(self, code: int, d: dict) -> None:
+        """G61, G61.1 exact path (G61.1 also stops at every block end); G64 [P tol] [Q tol]."""
+        self.exact_stop = code == G61_1
+        if code in EXACT_PATH:
+            self.tol, self.naive = 0.0, NAN
+            return
+        self.tol, self.naive = NAN, NAN
+        pw, qw = d.get("P"), d.get("Q")
+        if pw is not None:
+            if pw[1] < 0:
+                raise self.error("negative G64 P tolerance", pw[2])
+            self.tol = pw[1] * self.len_unit if pw[1] > 0 else NAN
+        if qw is not None:
+            if qw[1] < 0:
+                raise self.error("negative G64 Q tolerance", qw[2])
+            self.naive = qw[1] * self.len_unit
+
+    def _step_distance_modes(self, groups: dict) -> None:
+        """G90/G91 distance mode, G90.1/G91.1 arc centre mode, G98/G99 cycle return."""
+        if 3 in groups:
+            self.distance_incremental = groups[3][0] == G91
+        if 4 in groups:
+            self.arc_abs = groups[4][0] == G90_1
+        if 10 in groups:
+            self.retract_r_plane = groups[10][0] == G99
+
+    def _step_axis_words(self, groups, g80: bool, g0, mcode, covets: bool, axis_words: list) -> None:
+        """Who uses the axis words (RS274NGC's enhance_block rules); the axes they name
+        become active."""
+        if covets and mcode is not None and mcode != G80:
+            # the code that claims them: G10/G28/G30/G92 (group 0), else G43.1/G43.2 (group 8)
+            owner = g0 if g0 is not None and g0[0] in AXIS_WORD_CODES else groups[8]
+            raise self.error(f"{gcode_name(owner[0])} and {gcode_name(mcode)} both use the axis words", owner[1])
+        if g80 and axis_words and not covets and mcode == G80:
             raise self.error("axis words with G80 (cycle cancel) and no motion", axis_words[0][1][2])
         for L, w in axis_words:
             self._activate(AXIS_INDEX[L], w[2])
 
-        # 11. non-modal group 0
-        g53 = False
-        if g0code is not None and g0code != 40:
-            g53 = self._group0(g0code, g0[1], d, axis_words, line)
-
-        # 12. motion
-        if mcode is not None:
-            if mcode != self.motion or mcode == 800:
-                if mcode not in (810, 820, 830, 730, 850, 890):
-                    self.cycle_il = None
-            if self.nurbs_cp is not None and mcode != 52:
-                if mcode == 53:
-                    self._nurbs_end(line, groups[1][1])
-                    self.motion = 800
-                else:
-                    raise GCodeError(
-                        "G5.2 NURBS block never ended (missing G5.3)",
-                        SourceLocation(self.source, self.nurbs_line, self.nurbs_col, "G5.2"),
-                    )
-            elif mcode == 53:
-                raise self.error("G5.3 without an open G5.2 NURBS block", groups[1][1])
-            elif mcode == 800:
-                self.motion = 800
+    def _step_motion_code(self, mcode: int, col: int, d: dict, axis_words: list, line: int, g53: bool) -> None:
+        """The block's own motion code: G0-G3, G5-G5.3, the canned cycles, G80."""
+        if mcode != self.motion or mcode == G80:
+            if mcode not in CYCLE_MOTIONS:
+                self.cycle_il = None
+        if self.nurbs_cp is not None and mcode != G5_2:
+            if mcode == G5_3:
+                self._nurbs_end(line, col)
+                self.motion = G80
             else:
-                full_circle = mcode in (20, 30) and any(k in d for k in "IJK")
-                if not axis_words and mcode not in (0, 10, 52) and not full_circle:
-                    raise self.error(f"{_gcode_name(mcode)} without any axis word", groups[1][1])
-                self._motion(mcode, groups[1][1], d, axis_words, line, g53)
-        elif axis_words and not covets:
-            if self.motion == 800:
-                raise self.error("axis words without a motion mode (G0, G1, ...)", axis_words[0][1][2])
-            self._motion(self.motion, 0, d, axis_words, line, g53)
+                raise self._nurbs_unended()
+        elif mcode == G5_3:
+            raise self.error("G5.3 without an open G5.2 NURBS block", col)
+        elif mcode == G80:
+            self.motion = G80
+        else:
+            full_circle = mcode in ARCS and any(k in d for k in "IJK")
+            if not axis_words and mcode not in AXISLESS_MOTIONS and not full_circle:
+                raise self.error(f"{gcode_name(mcode)} without any axis word", col)
+            self._motion(mcode, col, d, axis_words, line, g53)
 
-        # 13. stops
-        if 4 in mgroups:
-            code = mgroups[4][0]
-            if code in (2, 30):
-                if self.nurbs_cp is not None:
-                    raise GCodeError(
-                        "G5.2 NURBS block never ended (missing G5.3)",
-                        SourceLocation(self.source, self.nurbs_line, self.nurbs_col, "G5.2"),
-                    )
-                self._stop(M_STOPS[code], line, "end")
-                return True
-            self._stop(M_STOPS[code], line, "stop")
+    def _step_modal_motion(self, d: dict, axis_words: list, line: int, g53: bool) -> None:
+        """Axis words alone: the motion mode in effect moves to them."""
+        if self.motion == G80:
+            raise self.error("axis words without a motion mode (G0, G1, ...)", axis_words[0][1][2])
+        self._motion(self.motion, 0, d, axis_words, line, g53)
+
+    def _step_stop(self, code: int, line: int) -> bool:
+        """M0, M1, M60 pause; M2, M30 end the program (True)."""
+        if code in (M2, M30):
+            if self.nurbs_cp is not None:
+                raise self._nurbs_unended()
+            self._stop(M_STOPS[code], line, "end")
+            return True
+        self._stop(M_STOPS[code], line, "stop")
         return False
+
+    def _nurbs_unended(self) -> GCodeError:
+        """The error for a G5.2 block that a non-NURBS code or the program end cuts short."""
+        return GCodeError(
+            "G5.2 NURBS block never ended (missing G5.3)",
+            SourceLocation(self.source, self.nurbs_line, self.nurbs_col, "G5.2"),
+        )
 
     def _check_unused_words(self, d, groups, mgroups, mcode, g0code, covets, axis_words):
         """LinuxCNC rejects a parameter word no code of the block uses (e.g. I with G1)."""
         motion = mcode if mcode is not None else (self.motion if axis_words and not covets else None)
-        if motion == 800:
+        if motion == G80:
             motion = None
         cycle = motion is not None and motion // 10 in CYCLE_CODES
         path = groups.get(13, (None,))[0]
         ms = {c for c, _ in mgroups.values()}
         use = {
-            "I": motion in (20, 30, 50, 51),
-            "J": motion in (20, 30, 50, 51),
-            "K": motion in (20, 30),
-            "R": motion in (20, 30) or cycle or g0code == 100,
-            "P": (
-                g0code in (40, 100)
-                or path == 640
-                or motion in (20, 30, 50, 52, 820, 890)
-                or bool(ms & {62, 63, 64, 65})
-            ),
-            "Q": path == 640 or motion in (830, 730, 50) or bool(ms & {67, 68}),
-            "L": g0code == 100 or cycle or motion == 52,
+            "I": motion in USES_IJ,
+            "J": motion in USES_IJ,
+            "K": motion in ARCS,
+            "R": motion in ARCS or cycle or g0code == G10,
+            "P": (g0code in NON_MODAL_USES_P or path == G64 or motion in USES_P or bool(ms & M_USE_P)),
+            "Q": path == G64 or motion in USES_Q or bool(ms & M_USE_QE),
+            "L": g0code == G10 or cycle or motion == G5_2,
             "H": 8 in groups,
             "D": False,
-            "E": bool(ms & {67, 68}),
+            "E": bool(ms & M_USE_QE),
         }
         for L, w in d.items():
             if not use.get(L, True):
@@ -845,13 +851,13 @@ class Interpreter:
     # -- group 0 ------------------------------------------------------------------
     def _group0(self, code: int, col: int, d: dict, axis_words: list, line: int) -> bool:
         u = self.units9
-        if code == 530:
+        if code == G53:
             if self.distance_incremental:
                 raise self.error("G53 in incremental distance mode (G91)", col)
             return True
-        if code == 100:
+        if code == G10:
             self._g10(col, d, axis_words)
-        elif code == 920:
+        elif code == G92:
             if not axis_words:
                 raise self.error("G92 without axis words", col)
             q = self._to_prog_mm(self.pos)
@@ -863,19 +869,19 @@ class Interpreter:
             self._pset(5210, 1.0)
             for k in range(9):
                 self._pset(5211 + k, self.g92[k] / u[k])
-        elif code in (921, 922):
+        elif code in (G92_1, G92_2):
             self.g92 = [0.0] * 9
             self._update_off()
             self._pset(5210, 0.0)
-            if code == 921:
+            if code == G92_1:
                 for k in range(9):
                     self._pset(5211 + k, 0.0)
-        elif code == 923:
+        elif code == G92_3:
             self.g92 = [self._pget(5211 + k) * u[k] for k in range(9)]
             self._update_off()
             self._pset(5210, 1.0)
-        elif code in (280, 300):
-            base = 5161 if code == 280 else 5181
+        elif code in (G28, G30):
+            base = 5161 if code == G28 else 5181
             if axis_words:
                 inter = self._target(axis_words)
                 self.straight("rapid", inter, line, col)
@@ -889,8 +895,8 @@ class Interpreter:
                     if home[k] != self.pos[k]:
                         self._activate(k, col)
             self.straight("rapid", home, line, col)
-        elif code in (281, 301):
-            base = 5161 if code == 281 else 5181
+        elif code in (G28_1, G30_1):
+            base = 5161 if code == G28_1 else 5181
             for k in range(9):
                 self._pset(base + k, self.pos[k] / u[k])
         return False
@@ -929,9 +935,9 @@ class Interpreter:
 
     def _tool_length(self, code: int, col: int, d: dict, axis_words: list) -> None:
         """G43 [H], G43.1 axes, G43.2 H|axes, G49 (LinuxCNC semantics)."""
-        if code == 490:
+        if code == G49:
             tlo = [0.0] * 9
-        elif code == 431:
+        elif code == G43_1:
             if not axis_words:
                 raise self.error("G43.1 without axis words (the offsets)", col)
             tlo = [0.0] * 9
@@ -940,12 +946,12 @@ class Interpreter:
                 tlo[i] = w[1] * self.units9[i]
         else:
             hw = d.get("H")
-            if code == 432 and hw is None and not axis_words:
+            if code == G43_2 and hw is None and not axis_words:
                 raise self.error("G43.2 without H or axis words", col)
-            if code == 432 and hw is not None and axis_words:
+            if code == G43_2 and hw is not None and axis_words:
                 raise self.error("G43.2 takes H or axis words, not both", col)
-            tlo = [0.0] * 9 if code == 430 else list(self.tlo)
-            if hw is not None or code == 430:
+            tlo = [0.0] * 9 if code == G43 else list(self.tlo)
+            if hw is not None or code == G43:
                 tool = self.tool if hw is None else hw[1]  # G43 alone: the tool in the spindle
                 hcol = hw[2] if hw is not None else col
                 if tool < 0 or tool != int(tool):
@@ -1072,30 +1078,30 @@ class Interpreter:
     def _motion(self, code: int, col: int, d: dict, axis_words: list, line: int, g53: bool) -> None:
         if col == 0:
             col = axis_words[0][1][2] if axis_words else 0
-        if g53 and code not in (0, 10):
+        if g53 and code not in STRAIGHT:
             raise self.error("G53 needs G0 or G1", col)
-        if self.rot_deg and code not in (0, 10, 20, 30):
+        if self.rot_deg and code not in ROTATABLE:
             raise self.error(
-                f"{_gcode_name(code)} with a rotated coordinate system (G10 L2 R) is not supported",
+                f"{gcode_name(code)} with a rotated coordinate system (G10 L2 R) is not supported",
                 col,
                 unsupported=True,
             )
-        if code in (0, 10):
+        if code in STRAIGHT:
             self.motion = code
             if axis_words:
-                if code == 10 and self.feed_inverse_time and self.f_block <= 0:
+                if code == G1 and self.feed_inverse_time and self.f_block <= 0:
                     raise self.error("G93 inverse time feed move without F", col)
-                self.straight("feed" if code == 10 else "rapid", self._target(axis_words, machine=g53), line, col)
+                self.straight("feed" if code == G1 else "rapid", self._target(axis_words, machine=g53), line, col)
             return
-        if code in (20, 30):
+        if code in ARCS:
             self._arc(code, col, d, axis_words, line)
             self.motion = code
             return
-        if code in (50, 51):
+        if code in SPLINES:
             self._bezier(code, col, d, axis_words, line)
             self.motion = code
             return
-        if code == 52:
+        if code == G5_2:
             self._nurbs_point(col, d, axis_words, line)
             return
         if code // 10 in CYCLE_CODES:
@@ -1107,7 +1113,7 @@ class Interpreter:
                 raise self.error(str(exc), wcol) from None
             self.motion = code
             return
-        raise self.error(f"{_gcode_name(code)} is not supported", col, unsupported=True)
+        raise self.error(f"{gcode_name(code)} is not supported", col, unsupported=True)
 
     def _feed_check(self, col: int) -> None:
         if self.feed_inverse_time:
@@ -1118,7 +1124,7 @@ class Interpreter:
 
     def _arc(self, code: int, col: int, d: dict, axis_words: list, line: int) -> None:
         self._feed_check(col)
-        if self.rot_deg and self.plane != 170:
+        if self.rot_deg and self.plane != G17:
             raise self.error(
                 "arcs outside the XY plane with a rotated coordinate system (G10 L2 R) are not supported",
                 col,
@@ -1140,7 +1146,7 @@ class Interpreter:
             if p != int(p) or p < 1 or p > ARC_MAX_TURNS:
                 raise self.error(f"arc turn count P must be a whole number from 1 to {ARC_MAX_TURNS}", pw[2])
             turns = int(p)
-        ccw = code == 30
+        ccw = code == G3
         ua, ub = self.units9[a], self.units9[b]
         rw = d.get("R")
         try:
@@ -1211,18 +1217,18 @@ class Interpreter:
 
     def _bezier(self, code: int, col: int, d: dict, axis_words: list, line: int) -> None:
         self._feed_check(col)
-        if self.plane != 170:
-            raise self.error(f"{_gcode_name(code)} splines must be in the XY plane (G17)", col, unsupported=True)
+        if self.plane != G17:
+            raise self.error(f"{gcode_name(code)} splines must be in the XY plane (G17)", col, unsupported=True)
         for L, w in axis_words:
             if L not in "XY":
-                raise self.error(f"{_gcode_name(code)} splines may only move X and Y", w[2])
+                raise self.error(f"{gcode_name(code)} splines may only move X and Y", w[2])
         self._activate(0, col)
         self._activate(1, col)
         start = self.pos
         end = self._target(axis_words)
         u = self.len_unit
         iw, jw = d.get("I"), d.get("J")
-        if code == 51:
+        if code == G5_1:
             if iw is None or jw is None:
                 raise self.error("G5.1 needs both I and J", col)
             p1 = list(start)
@@ -1235,7 +1241,7 @@ class Interpreter:
             if pw is None or qw is None:
                 raise self.error("G5 needs both P and Q", col)
             if iw is None and jw is None:
-                if self.g5_tangent is None or self.motion != 50:
+                if self.g5_tangent is None or self.motion != G5:
                     raise self.error("G5 without I and J must follow another G5", col)
                 di, dj = self.g5_tangent
             elif iw is None or jw is None:
@@ -1279,7 +1285,7 @@ class Interpreter:
             self.nurbs_order = 3
             self.nurbs_line = line
             self.nurbs_col = col
-            self.motion = 52
+            self.motion = G5_2
         if lw is not None:
             lv = lw[1]
             if lv != int(lv) or lv < 1:

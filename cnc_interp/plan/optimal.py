@@ -32,6 +32,7 @@ import numpy as np
 from ..constants import VPOP_LIMIT_SHRINK, VPOP_MIN_LENGTH, VPOP_ROUNDING_ULPS
 from ..errors import PlanError
 from .base import PathPlan, collect_path_plan
+from .settings import OptimalOptions
 
 #: depths of the successive dips of w around a place where the sampler got stuck
 OPT_RETRY_DEPTHS = (0.04, 0.1, 0.2, 0.4)
@@ -68,7 +69,7 @@ OPT_ROUTE_TINY_S = 0.1
 #: takes, like VPOp's own stream window); longer paths stream the profile's plan. (On fitted
 #: CAM contours whose q_sss jumps from segment to segment the continuous profile can be
 #: ~0.3 % slower than VPOp, which samples them; the comparison keeps the better.) The
-#: ``compare_s`` option overrides it: 0 makes every sample depend on the path up to one
+#: ``OptimalOptions.compare_s`` overrides it: 0 makes every sample depend on the path up to one
 #: profile window ahead only, as a streaming pipeline wants.
 OPT_COMPARE_SAMPLES = 1 << 18
 #: samples per chunk of ``iter_path_plan_optimal`` (the plan does not depend on it)
@@ -95,9 +96,14 @@ def _step_limits(machine, dt, table):
     return vl, al, jl
 
 
-def _option(settings, key, default):
-    get = getattr(settings, "get", None)
-    return get(key, default) if get is not None else default
+def _options(settings) -> OptimalOptions:
+    """The planner's knobs (``PlanSettings.optimal``; ``None``: the defaults)."""
+    return OptimalOptions() if settings is None else settings.optimal
+
+
+def _or(value, default):
+    """``value`` unless it is ``None`` (a knob left at its default)."""
+    return default if value is None else value
 
 
 class _Path:
@@ -458,7 +464,7 @@ def _rechunk(blocks, chunk: int):
 
 def iter_path_plan_optimal(path, joint_map, machine, dt_s: float, settings=None, window: int | None = None):
     """The plan of one path as a stream of ``PathPlan`` chunks (``plan.base``'s contract):
-    chunks of ``chunk_samples`` (settings option, default ``OPT_CHUNK``) samples as soon
+    chunks of ``settings.optimal.chunk_samples`` (default ``OPT_CHUNK``) samples as soon
     as no later stage can change them; only the last (``last=True``) carries the stats.
     Their concatenation is the one-shot plan whatever ``window`` (VPOp's own stream
     buffer on paths VPOp plans; ``None``: whole) and chunk size."""
@@ -485,7 +491,8 @@ def _iter(path, joint_map, machine, dt_s, settings, stats, window):
     dt = float(dt_s)
     if not (np.isfinite(path.length) and np.all(np.isfinite(path.coef))):
         raise PlanError(f"bug: the fitted path ending at line {int(path.line[-1])} is not finite")
-    chunk = max(1, int(_option(settings, "chunk_samples", OPT_CHUNK)))
+    opts = _options(settings)
+    chunk = max(1, int(_or(opts.chunk_samples, OPT_CHUNK)))
     if path.length <= VPOP_MIN_LENGTH:
         stats["samples_total"] = 1
         yield np.zeros(1), _positions(path, path.breaks[:1], joint_map)
@@ -493,17 +500,17 @@ def _iter(path, joint_map, machine, dt_s, settings, stats, window):
     ctx = _Path(path, joint_map, machine, dt, settings)
     ctx.window = window
     targeted = dt < OPT_FULL_REFINE_DT
-    route = _option(settings, "route", None) or _route(ctx)
+    route = opts.route or _route(ctx)
     ctx.stats["route"] = route
     # refinement: every window at coarse periods; at fine ones only the profile's dips
     # and ends, once (VPOp's plans there are within a few periods per path of the
     # discrete optimum, and windows on every short path would cost more than planning)
     default_passes = OPT_REFINE_PASSES if not targeted else (1 if route == "profile" else 0)
-    passes = int(_option(settings, "refine_passes", default_passes))
+    passes = int(_or(opts.refine_passes, default_passes))
     stage = _sampled(ctx) if route == "profile" else _vpop_stage(ctx, window)
     for _ in range(passes):
         stage = _refined(ctx, stage, targeted)
-    limit_s = float(_option(settings, "compare_s", OPT_COMPARE_SAMPLES * dt))
+    limit_s = float(_or(opts.compare_s, OPT_COMPARE_SAMPLES * dt))
     if route == "profile" and ctx.rough_s <= limit_s:
         stage = _better_of(ctx, stage, passes if not targeted else 0, targeted)
     produced = 0
@@ -519,7 +526,7 @@ def _iter(path, joint_map, machine, dt_s, settings, stats, window):
             ) from None
         ctx.stats["fallback"] = str(why)
         if targeted:
-            passes = int(_option(settings, "refine_passes", 0))
+            passes = int(_or(opts.refine_passes, 0))
         stage = _vpop_stage(ctx, window)
         for _ in range(passes):
             stage = _refined(ctx, stage, targeted)

@@ -163,7 +163,7 @@ def program_lower_bound(outcome, n_grid: int = 2000) -> float:
     (``api.PlanResult`` or ``pipeline.PlanOutcome``).
     """
     from ..gcode.program import Dwell
-    from .kinematics import make_kinematics
+    from ..machine.kinematics import make_kinematics
 
     machine = outcome.machine
     fitted = outcome.fit

@@ -1,22 +1,111 @@
-"""``PlanSettings``: which planner runs and at which sample period."""
+"""``PlanSettings``: which planner runs, at which sample period, with which knobs
+(``OptimalOptions``, ``VpopOptions``, ``Paper000Options``: typed, checked on construction)."""
 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import TYPE_CHECKING, Any
 
 from ..constants import DEFAULT_DT_S
 from ..errors import UsageError
 
 if TYPE_CHECKING:
-    from .machine import Machine
+    from ..machine.model import Machine
 
 #: the planner of ``plan`` and ``batch`` when none is named (``stream`` has its own).
 #: VPOp, not ``optimal``: optimal's cycles are 1.3 % shorter over the corpus, but it plans
 #: 5.6x slower there and took more than 15 min on stellabee1 (VPOp ~1 min): a default
 #: must not make the user wait that long (issue 13's note)
 DEFAULT_PLANNER = "vpop"
+
+
+@dataclass(frozen=True)
+class OptimalOptions:
+    """Knobs of the ``optimal`` planner (``plan.optimal``); ``None`` keeps its default.
+
+    Attributes:
+        route: ``"profile"`` (the feed-profile LP) or ``"vpop"`` for every path;
+            ``None``: the planner chooses per path (``OPT_ROUTE_*``).
+        refine_passes: passes of the window refinement over the sampled plan (default
+            ``OPT_REFINE_PASSES`` at coarse periods, fewer at fine ones).
+        compare_s: a profile-routed path whose rough duration is at most this long, s, is
+            also planned by VPOp and the shorter plan kept (default
+            ``OPT_COMPARE_SAMPLES`` periods); 0 never compares (every sample then depends
+            on at most one profile window ahead).
+        chunk_samples: samples per streamed chunk (default ``OPT_CHUNK``; the plan does
+            not depend on it).
+    """
+
+    route: str | None = None
+    refine_passes: int | None = None
+    compare_s: float | None = None
+    chunk_samples: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.route not in (None, *OPTIMAL_ROUTES):
+            raise UsageError(f"optimal route must be one of {OPTIMAL_ROUTES}, got {self.route!r}")
+        for name in ("refine_passes", "chunk_samples"):
+            v = getattr(self, name)
+            if v is not None and not (isinstance(v, int) and not isinstance(v, bool) and v >= 0):
+                raise UsageError(f"{name} must be a whole number >= 0, got {v!r}")
+        c = self.compare_s
+        if c is not None and not (_is_number(c) and math.isfinite(c) and c >= 0):
+            raise UsageError(f"compare_s must be a number of seconds >= 0, got {c!r}")
+
+
+@dataclass(frozen=True)
+class VpopOptions:
+    """Knobs of the ``vpop`` planner (``plan.vpop``).
+
+    Attributes:
+        exact: exact mode: every brake run of the step loop must reach rest (more
+            conservative, a few samples slower). The default, fast mode, ends a brake
+            run early once the state is easy and re-plans exactly from the last
+            checkpoint where that fails (``plan.vpop``).
+    """
+
+    exact: bool = False
+
+
+@dataclass(frozen=True)
+class Paper000Options:
+    """Knobs of paper 000's ``constant`` and ``variable`` planners (``plan.paper000``);
+    ``None`` keeps the default named in brackets.
+
+    Attributes:
+        curv_accel_share: share of each axis's amax the centripetal term may use at
+            cruise (``P000_CURV_ACCEL_SHARE``, 0.8), in (0, 1].
+        curv_jerk_share: share of each axis's jmax the path-geometry jerk term may use
+            (``P000_CURV_JERK_SHARE``, 0.5), in (0, 1].
+        cross_jerk_share: share of the jerk left that the cross term may use
+            (``P000_CROSS_JERK_SHARE``, 0.5), in (0, 1].
+        merge_band: ``variable``: consecutive segments whose feed caps lie within this
+            relative band share one profile piece (``P000_MERGE_BAND``, 0.1; 0 = one
+            piece per segment), >= 0.
+    """
+
+    curv_accel_share: float | None = None
+    curv_jerk_share: float | None = None
+    cross_jerk_share: float | None = None
+    merge_band: float | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("curv_accel_share", "curv_jerk_share", "cross_jerk_share", "merge_band"):
+            v = getattr(self, name)
+            if v is None:
+                continue
+            ok = _is_number(v) and math.isfinite(v) and (v >= 0 if name == "merge_band" else 0 < v <= 1)
+            if not ok:
+                raise UsageError(f"{name} out of range: {v!r}")
+
+
+#: ``optimal``'s routes (``OptimalOptions.route``)
+OPTIMAL_ROUTES = ("profile", "vpop")
+
+
+def _is_number(v: object) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
 
 
 @dataclass(frozen=True)
@@ -28,13 +117,17 @@ class PlanSettings:
             001), ``"constant"`` or ``"variable"`` (paper 000).
         dt_s: sample period, s.
         tol_mm: fit tolerance the plan was made for (informational), mm.
-        options: planner-specific extras (plain JSON-able values), read with ``get``.
+        optimal: the ``optimal`` planner's knobs.
+        vpop: the ``vpop`` planner's knobs (also VPOp inside ``optimal``).
+        paper000: the ``constant`` and ``variable`` planners' knobs.
     """
 
     planner: str = DEFAULT_PLANNER
     dt_s: float = DEFAULT_DT_S
     tol_mm: float | None = None
-    options: dict[str, Any] = field(default_factory=dict)
+    optimal: OptimalOptions = field(default_factory=OptimalOptions)
+    vpop: VpopOptions = field(default_factory=VpopOptions)
+    paper000: Paper000Options = field(default_factory=Paper000Options)
 
     def __post_init__(self) -> None:
         from .planners import PLANNER_NAMES
@@ -51,19 +144,38 @@ class PlanSettings:
         dt_s: float | None = None,
         tol_mm: float | None = None,
         machine: "Machine | None" = None,
-        **options: Any,
+        *,
+        optimal: OptimalOptions | None = None,
+        vpop: VpopOptions | None = None,
+        paper000: Paper000Options | None = None,
     ) -> "PlanSettings":
         """Settings from CLI options: ``--dt`` wins over the machine's period, then the default."""
         if dt_s is None:
             dt_s = float(machine.dt_s) if machine is not None and machine.dt_s else DEFAULT_DT_S
         if tol_mm is None and machine is not None and machine.tol_mm:
             tol_mm = float(machine.tol_mm)
-        return cls(planner=planner, dt_s=float(dt_s), tol_mm=tol_mm, options=dict(options))
+        return cls(
+            planner=planner,
+            dt_s=float(dt_s),
+            tol_mm=tol_mm,
+            optimal=optimal or OptimalOptions(),
+            vpop=vpop or VpopOptions(),
+            paper000=paper000 or Paper000Options(),
+        )
 
-    def get(self, key: str, default: Any = None) -> Any:
-        """A planner option (paper-000 planners read their extras this way)."""
-        return self.options.get(key, default)
+    def options(self) -> dict[str, Any]:
+        """The planner knobs that differ from their defaults, by their flat names
+        (``route``, ``vpop_exact``, ``curv_accel_share``, ...): what ``to_dict`` records."""
+        out: dict[str, Any] = {}
+        for group, prefix in ((self.optimal, ""), (self.vpop, "vpop_"), (self.paper000, "")):
+            default = type(group)()
+            for f in fields(group):
+                v = getattr(group, f.name)
+                if v != getattr(default, f.name):
+                    out[prefix + f.name] = v
+        return out
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain JSON-able form (stored in ``Trajectory.settings``)."""
-        return asdict(self)
+        """Plain JSON-able form (stored in ``Trajectory.settings`` and MCAP metadata):
+        planner, dt_s, tol_mm and ``options``, the knobs that differ from their defaults."""
+        return {"planner": self.planner, "dt_s": self.dt_s, "tol_mm": self.tol_mm, "options": self.options()}

@@ -362,7 +362,7 @@ def iter_timeline(
     from ..fit.path import Path
     from ..gcode.program import Dwell, Stop
     from .budget import WindowBudget
-    from .kinematics import make_kinematics
+    from ..machine.kinematics import make_kinematics
     from .planners import get_path_iterator
     from .vpop import iter_path_plan_vpop
 

@@ -29,7 +29,7 @@ from numpy.typing import ArrayLike
 from ..constants import VERIFY_RATIO_SLACK, VERIFY_REST_PADDING
 
 if TYPE_CHECKING:
-    from .machine import Machine
+    from ..machine.model import Machine
     from .trajectory import Trajectory
 
 _KINDS = ("velocity", "acceleration", "jerk")

@@ -302,8 +302,8 @@ def _machine_consts(machine, dt: float) -> dict:
 
 
 def _fast(settings) -> bool:
-    get = getattr(settings, "get", lambda *_: None)
-    return bool(get("vpop_exact") is not True)
+    """Fast mode unless ``settings.vpop.exact`` (``PlanSettings``; ``None``: defaults)."""
+    return settings is None or not settings.vpop.exact
 
 
 class _Prepared:

@@ -40,6 +40,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..settings import Paper000Options
+
 
 #: share of each axis's amax the centripetal term q''·v² may use at cruise (Eq. 6's A_m);
 #: the rest is left to the tangential acceleration of the feed transitions
@@ -52,23 +54,23 @@ P000_CURV_JERK_SHARE = 0.5
 P000_CROSS_JERK_SHARE = 0.5
 
 
-def option(settings, key: str, default: float) -> float:
-    """A numeric planner option from a dict, a ``PlanSettings`` (``get``) or attributes."""
-    if settings is None:
-        return default
-    if hasattr(settings, "get"):
-        val = settings.get(key, None)
-    else:
-        val = getattr(settings, key, None)
-    return default if val is None else float(val)
+def knobs(settings) -> Paper000Options:
+    """The paper-000 planners' knobs (``PlanSettings.paper000``; ``None``: the defaults)."""
+    return Paper000Options() if settings is None else settings.paper000
+
+
+def option(value: float | None, default: float) -> float:
+    """A knob's value, or ``default`` where it is left at ``None``."""
+    return default if value is None else float(value)
 
 
 def shares(settings) -> tuple[float, float, float]:
     """(curv_accel_share, curv_jerk_share, cross_jerk_share) from settings or the defaults."""
+    k = knobs(settings)
     return (
-        option(settings, "curv_accel_share", P000_CURV_ACCEL_SHARE),
-        option(settings, "curv_jerk_share", P000_CURV_JERK_SHARE),
-        option(settings, "cross_jerk_share", P000_CROSS_JERK_SHARE),
+        option(k.curv_accel_share, P000_CURV_ACCEL_SHARE),
+        option(k.curv_jerk_share, P000_CURV_JERK_SHARE),
+        option(k.cross_jerk_share, P000_CROSS_JERK_SHARE),
     )
 
 

@@ -21,7 +21,7 @@ from ...errors import PlanError
 from ..base import PathPlan
 from .common import joint_positions, sample_profile, sample_ratios, worst_ratio
 from .curvature import segment_geometry
-from .limits import feed_caps, junction_caps, option, shares
+from .limits import feed_caps, junction_caps, knobs, option, shares
 from .profile import build_profiles, stretch_to_period
 
 
@@ -44,7 +44,7 @@ P000_MAX_SAMPLES = 20_000_000
 
 
 def _band(settings) -> float:
-    return option(settings, "merge_band", P000_MERGE_BAND)
+    return option(knobs(settings).merge_band, P000_MERGE_BAND)
 
 
 def rest_plan(path, joint_map, planner: str) -> PathPlan:
@@ -72,8 +72,9 @@ def plan_path_variable(path, joint_map, machine, dt_s: float, settings=None) -> 
         joint_map: kinematics, (K, n) program positions -> (K, n) joint positions, or None.
         machine: ``Machine`` (per-joint vmax, amax, jmax).
         dt_s: sample period, s.
-        settings: optional dict / object with ``curv_accel_share``, ``curv_jerk_share``,
-            ``cross_jerk_share`` (see ``limits``) and ``merge_band``.
+        settings: ``PlanSettings`` (its ``paper000`` knobs: ``curv_accel_share``,
+            ``curv_jerk_share``, ``cross_jerk_share``, see ``limits``, and ``merge_band``)
+            or ``None`` for the defaults.
     Returns:
         ``PathPlan`` with ``profiles`` a ``SegmentProfiles`` (pieces of whole segments).
     """

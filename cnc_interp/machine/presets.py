@@ -1,10 +1,12 @@
 """Built-in machine presets (``cnc-interp machines``), in mm, deg and s.
 
-Each preset is the plain data a TOML machine file would hold; ``machine_io``
+Each preset is the plain data a TOML machine file would hold; ``load``
 validates it through the same code path as a file.
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 from ..constants import SECONDS_PER_MINUTE
 
@@ -17,7 +19,7 @@ def _rpm(x: float) -> float:
 
 
 #: name -> (one-line description, TOML-shaped data)
-PRESETS: dict[str, tuple[str, dict]] = {
+PRESETS: dict[str, tuple[str, dict[str, Any]]] = {
     "generic-mill": (
         "typical small 3-axis vertical machining centre, 1 kHz servo",
         {

@@ -41,9 +41,14 @@ from __future__ import annotations
 
 import math
 
+from typing import TYPE_CHECKING, Any
+
 import numpy as np
 
 from ..errors import MachineError
+
+if TYPE_CHECKING:
+    from .model import Machine
 
 #: kinematics name -> (axes it needs, {parameter: default})
 KINEMATICS: dict[str, tuple[str, dict[str, float]]] = {
@@ -62,7 +67,7 @@ KINEMATICS: dict[str, tuple[str, dict[str, float]]] = {
 }
 
 
-def normalise_params(kind: str, params: dict) -> dict[str, float]:
+def normalise_params(kind: str, params: dict[str, Any]) -> dict[str, float]:
     """Check a kinematics' parameters: known names (``-`` read as ``_``), finite numbers.
 
     Returns the full parameter dict with defaults filled in; raises ``MachineError``
@@ -88,7 +93,7 @@ class Kinematics:
 
     name = "trivial"
 
-    def __init__(self, axes: str, params: dict | None = None):
+    def __init__(self, axes: str, params: dict[str, Any] | None = None):
         self.axes = axes
         self.params = dict(params or {})
 
@@ -119,7 +124,7 @@ class XyzacTrt(Kinematics):
 
     name = "xyzac-trt"
 
-    def __init__(self, axes: str, params: dict | None = None):
+    def __init__(self, axes: str, params: dict[str, Any] | None = None):
         super().__init__(axes, normalise_params(self.name, params or {}))
         missing = [a for a in "XYZAC" if a not in axes]
         if missing:
@@ -135,7 +140,7 @@ class XyzacTrt(Kinematics):
     def is_identity(self) -> bool:
         return False
 
-    def _angles(self, arr: np.ndarray):
+    def _angles(self, arr: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         ia, ic = self._ix[3], self._ix[4]
         a = np.deg2rad(arr[:, ia])
         c = np.deg2rad(arr[:, ic])
@@ -201,7 +206,7 @@ class XyzacTrt(Kinematics):
 _CLASSES = {"trivial": Kinematics, "xyzac-trt": XyzacTrt}
 
 
-def make_kinematics(machine) -> Kinematics:
+def make_kinematics(machine: Machine) -> Kinematics:
     """The ``Kinematics`` of a ``Machine`` (by ``machine.kinematics`` and its params)."""
     kind = machine.kinematics
     if kind not in _CLASSES:

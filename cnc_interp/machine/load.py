@@ -37,12 +37,15 @@ import os
 import re
 import stat
 
+from collections.abc import Callable
+from typing import Any
+
 import numpy as np
 
 from ..constants import ALL_AXES, DEFAULT_DT_S, MM_PER_INCH, ROTARY_AXES
 from ..errors import MachineError, SourceLocation
 from .kinematics import KINEMATICS, normalise_params
-from .machine import DT_MAX_S, DT_MIN_S, LIMIT_MAX, START_MAX, TOL_MAX_MM, Machine
+from .model import DT_MAX_S, DT_MIN_S, LIMIT_MAX, START_MAX, TOL_MAX_MM, Machine
 from .presets import DEFAULT_PRESET, PRESETS
 
 
@@ -159,7 +162,8 @@ class _TomlLocator:
                 self.tables.append((i, parts))
 
     def __call__(self, table: tuple[str, ...] = (), key: str | None = None) -> SourceLocation:
-        spans = [(0, len(self.lines), ())]  # the root table runs up to the first header
+        # the root table runs up to the first header
+        spans: list[tuple[int, int, tuple[str, ...]]] = [(0, len(self.lines), ())]
         if self.tables:
             spans = [(0, self.tables[0][0], ())]
         for j, (start, parts) in enumerate(self.tables):
@@ -204,7 +208,7 @@ def _stem(path: str) -> str:
 
 
 # --- validation shared by TOML files and presets ----------------------------
-def _number(value, what: str, loc: SourceLocation, positive: bool = True, most: float | None = None) -> float:
+def _number(value: object, what: str, loc: SourceLocation, positive: bool = True, most: float | None = None) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise MachineError(f"{what} must be a number, not {type(value).__name__}", loc)
     try:
@@ -220,7 +224,12 @@ def _number(value, what: str, loc: SourceLocation, positive: bool = True, most: 
     return v
 
 
-def machine_from_data(data: dict, source: str, locate, default_name: str = "machine") -> Machine:
+def machine_from_data(
+    data: dict[str, Any],
+    source: str,
+    locate: Callable[[tuple[str, ...], str | None], SourceLocation],
+    default_name: str = "machine",
+) -> Machine:
     """Validate TOML-shaped ``data`` into a ``Machine``.
 
     ``locate(table_path, key)`` returns the ``SourceLocation`` used in errors.
@@ -267,7 +276,7 @@ def machine_from_data(data: dict, source: str, locate, default_name: str = "mach
     if not isinstance(axes_data, dict) or not axes_data:
         raise MachineError("axes must hold one table per axis, e.g. [axes.X]", locate((), "axes"))
     letters: list[str] = []
-    limits = {k: [] for k in _AXIS_KEYS}
+    limits: dict[str, list[float]] = {k: [] for k in _AXIS_KEYS}
     for raw_letter, table in axes_data.items():
         letter = raw_letter.upper()
         where = ("axes", raw_letter)
@@ -323,9 +332,9 @@ def machine_from_data(data: dict, source: str, locate, default_name: str = "mach
     return Machine(
         name=name,
         axes=axes,
-        vmax=limits["vmax"],
-        amax=limits["amax"],
-        jmax=limits["jmax"],
+        vmax=np.asarray(limits["vmax"], dtype=float),
+        amax=np.asarray(limits["amax"], dtype=float),
+        jmax=np.asarray(limits["jmax"], dtype=float),
         dt_s=dt_s,
         kinematics=kind,
         kinematics_params=params,
@@ -483,7 +492,8 @@ def _load_ini(text: str, path: str) -> Machine:
     dt_s = period * 1e-9 if period is not None else DEFAULT_DT_S
     if dt_s > _MAX_DT_S:
         item = ini.get("EMCMOT", "SERVO_PERIOD")
-        raise MachineError("[EMCMOT] SERVO_PERIOD is in nanoseconds; this is longer than 1 s", ini.loc(item[1]))
+        line = item[1] if item is not None else 0  # period is not None: the key is there
+        raise MachineError("[EMCMOT] SERVO_PERIOD is in nanoseconds; this is longer than 1 s", ini.loc(line))
     name_item = ini.get("EMC", "MACHINE")
     name = name_item[0] if name_item else _stem(path)
     kind = _ini_kinematics(ini, axes)
@@ -494,9 +504,9 @@ def _load_ini(text: str, path: str) -> Machine:
     return Machine(
         name=name,
         axes=axes,
-        vmax=vmax,
-        amax=amax,
-        jmax=jmax,
+        vmax=np.asarray(vmax, dtype=float),
+        amax=np.asarray(amax, dtype=float),
+        jmax=np.asarray(jmax, dtype=float),
         dt_s=dt_s,
         kinematics=kind,
         kinematics_params=normalise_params(kind, {}),
@@ -526,7 +536,7 @@ def _ini_kinematics(ini: _Ini, axes: str) -> str:
 
 
 # --- presets listing ---------------------------------------------------------
-def preset_table() -> list[dict]:
+def preset_table() -> list[dict[str, Any]]:
     """One JSON-able dict per preset: name, description, dt, kinematics, per-axis limits."""
     rows = []
     for key in sorted(PRESETS):
@@ -547,7 +557,7 @@ def preset_table() -> list[dict]:
     return rows
 
 
-def format_presets(table: list[dict]) -> str:
+def format_presets(table: list[dict[str, Any]]) -> str:
     """Human-readable listing of ``preset_table()``."""
     out = []
     for row in table:

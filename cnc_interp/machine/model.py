@@ -1,6 +1,6 @@
 """``Machine``: per-axis limits, sample period and kinematics.
 
-Loading (TOML, LinuxCNC INI, built-in presets) lives in ``machine_io``; this
+Loading (TOML, LinuxCNC INI, built-in presets) lives in ``load``; this
 module holds only the type.
 """
 
