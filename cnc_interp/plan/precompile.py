@@ -101,7 +101,7 @@ def _tiny_path():
     """A 1 mm rapid move of the default machine, fitted: the smallest real input."""
     from ..fit.fitter import fit_run
     from ..gcode import read_program
-    from .machine_io import DEFAULT_PRESET, load_machine
+    from ..machine.load import DEFAULT_PRESET, load_machine
 
     m = load_machine(DEFAULT_PRESET)
     prog = read_program(b"G21 G90\nG0 X1\n", "precompile", axes=m.axes, start=m.start)
@@ -121,7 +121,7 @@ def _job_loop() -> None:
     the preparation (Python and small kernels) so that ``prepare_identity`` is left to the
     other child."""
     from . import vpop
-    from .kinematics import Kinematics
+    from ..machine.kinematics import Kinematics
 
     class _MappedIdentity(Kinematics):
         """The identity, presented as a joint map: VPOp prepares it in Python."""
