@@ -350,6 +350,8 @@ def _iter_run_raws(run: Run, settings: FitSettings, info: dict):
             info["paths"] += 1
             info["methods"] = sorted(methods)
             yield m.raw
+        for cp in sub.curves:  # fitted: its exact evaluation is not needed again
+            evals.pop(id(cp.curve), None)
 
 
 def _fit_sub_repaired(
