@@ -4,8 +4,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 from ..errors import UsageError
+
+if TYPE_CHECKING:
+    import numpy as np
+    import numpy.typing as npt
+
+    from ..machine.model import Machine
 
 
 #: default maximum permissible error of the fit (mm); `--tol` overrides
@@ -83,10 +90,9 @@ class FitSettings:
         cls,
         tol_mm: float | None = None,
         corner_deg: float | None = None,
-        machine=None,
+        machine: Machine | None = None,
         method: str | None = None,
-        **extra,
-    ) -> "FitSettings":
+    ) -> FitSettings:
         """Settings from CLI options; the machine's ``tol_mm`` is used when ``--tol`` is absent,
         ``"nodes"`` when ``--fit-method`` is.
 
@@ -98,9 +104,9 @@ class FitSettings:
         """
         from ..constants import FIT_EXACT_CURVE_TOL_MM
 
-        kw = dict(extra)
+        kw: dict[str, Any] = {}
         user_tol = tol_mm
-        if tol_mm is None and machine is not None and getattr(machine, "tol_mm", None):
+        if tol_mm is None and machine is not None and machine.tol_mm:
             tol_mm = float(machine.tol_mm)
         if user_tol is not None:
             kw["tol_cap_mm"] = max(float(user_tol), 0.0)
@@ -125,7 +131,7 @@ class FitSettings:
         """The rotary tolerance the fit works to: ``tol_deg`` + ½ quantum."""
         return self.tol_deg + 0.5 * self.quantum_deg
 
-    def node_tolerance(self, tol_block_mm):
+    def node_tolerance(self, tol_block_mm: npt.ArrayLike) -> np.ndarray:
         """Per-move tolerance (mm) from the blocks' ``tol_mm`` (nan / 0 / G64 P) array:
         ``G64 P`` where given (``tol_mode``), else ``tol_mm``; at most the cap; 0 (exact
         path) under ``G61`` or a cap of 0; plus ½ quantum where it is not 0."""
