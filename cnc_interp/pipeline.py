@@ -395,8 +395,9 @@ def _few_malloc_arenas() -> None:
 def _warm_kernels(planner: str) -> None:
     """Load the planner's and the CSV formatter's compiled kernels in a thread while the
     program is read: loading them takes about a second, and the first rows wait for it.
-    On a first run of VPOp, two child processes compile its kernels meanwhile
-    (``_precompile``); the thread waits for them and then loads what they cached."""
+    On a first run of VPOp, a child process compiles its step loop meanwhile
+    (``plan.precompile``); the thread compiles the preparation, waits for the child and
+    then loads what it cached."""
     import threading
 
     from .plan import precompile as _precompile
@@ -405,7 +406,8 @@ def _warm_kernels(planner: str) -> None:
 
     def load():
         try:
-            if children:
+            if children:  # this process's share, then the child's
+                _precompile.compile_preparation()
                 _precompile.wait()
             from .export._repr import format_table
             from .plan import vpop_drive

@@ -1,17 +1,20 @@
-"""First run: compile VPOp's kernels in two child processes while this one parses and fits.
+"""First run: compile VPOp's step loop in a child process while this one parses and fits.
 
 Numba compiles on one core and holds the GIL while it does, so a warm-up *thread* cannot
-share the work with the fit's own compile; processes can. The planner's kernels fall into
+share the work with the fit's own compile; a process can. The planner's kernels fall into
 two independent trees below ``vpop_drive.plan_identity_batch`` (the call that plans a run
 of short paths): the preparation (``prepare_identity``: arc-length table, bounds) and the
-step loop (``drive``). On a cold cache each child compiles one tree on a tiny rapid move,
-numba writes it to its on-disk cache, and the plan's first planner call waits for both
-(``wait``) and then only compiles ``plan_identity_batch`` itself, loading the rest.
+step loop (``drive``). On a cold cache one child compiles the step loop (the larger tree)
+on a tiny rapid move and numba writes it to its on-disk cache; this process compiles the
+fit's kernels and the preparation (``compile_preparation``, in the warm-up thread), and
+the planner's first call waits for the child (``wait``) and then only compiles
+``plan_identity_batch`` itself, loading the step loop.
 
-Measured on the project's 2-core machine, cold cache, quick-start plan of
-``mill-contour.ngc``: 65 CPU-s of compiling in one process (about 65 s wall) against about
-40 s wall with the two children (the preparation tree is ~17 CPU-s, the step loop ~30,
-the fit's kernels and ``plan_identity_batch`` ~28 in this process).
+Measured on the project's 2-core machine, cold cache, kernels of the quick-start plan of
+``mill-contour.ngc`` (CPU-s): the fit's ~20, the preparation ~17, the step loop ~30,
+``plan_identity_batch`` ~7 (one process: 65-74 s wall). Two children (one per tree) were
+tried: every process also compiles numba's own helpers and the kernels both trees share,
+and three processes on two cores came to 95 CPU-s, more wall time than this split.
 
 A child that fails or is killed costs nothing but time: whatever it did not cache, this
 process compiles on its first call, as it would without children.
@@ -24,8 +27,9 @@ import subprocess
 import sys
 import threading
 
-#: the children's jobs: the preparation tree and the step-loop tree of VPOp's kernels
-JOBS = ("prepare", "loop")
+#: the children's jobs: the step-loop tree of VPOp's kernels (this process compiles the
+#: preparation, ``compile_preparation``, while the fit compiles too)
+JOBS = ("loop",)
 
 #: how long the planner waits for the children before compiling by itself (s): a child
 #: normally ends within a minute; one that hangs must not hang the plan
@@ -108,8 +112,9 @@ def _tiny_path():
     return fit_run(prog.runs[0])[0], m
 
 
-def _job_prepare() -> None:
-    """The preparation tree (``vpop_drive.prepare_identity``)."""
+def compile_preparation() -> None:
+    """The preparation tree (``vpop_drive.prepare_identity``), compiled (or loaded) in this
+    process."""
     from . import vpop
 
     path, m = _tiny_path()
@@ -145,7 +150,7 @@ def main(argv: list[str]) -> int:
     # Ctrl-C on the terminal must end the children too
     if hasattr(signal, "pthread_sigmask"):
         signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
-    jobs = {"prepare": _job_prepare, "loop": _job_loop}
+    jobs = {"loop": _job_loop}
     if len(argv) != 1 or argv[0] not in jobs:
         sys.stderr.write(f"usage: python -m {__name__} {{{','.join(JOBS)}}}\n")
         return 2
