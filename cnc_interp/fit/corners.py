@@ -17,6 +17,7 @@ alone. Nodes strictly inside a curve never split.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -168,14 +169,15 @@ def corner_turns(pr: PreparedRun, evals: dict | None = None):
     return turn, inside
 
 
-def split_run(pr: PreparedRun, settings, evals: dict | None = None) -> list[SubRun]:
+def split_run(pr: PreparedRun, settings, evals: dict | None = None) -> Iterator[SubRun]:
     """Cut a prepared run into sub-runs at corners, G61 nodes and metric changes; a
-    blended corner (``pr.blends``) does not cut.
+    blended corner (``pr.blends``) does not cut. The sub-runs are made one at a time, in
+    path order (a long run has 10⁴ of them).
 
     ``evals`` optionally shares each curve's ``CurveEval`` with the fitter."""
     n = pr.nodes.shape[0]
     if n < 2:
-        return []
+        return
     turn, inside = corner_turns(pr, evals)
     cut = np.zeros(n, dtype=bool)
     j = np.arange(1, n - 1)
@@ -202,13 +204,11 @@ def split_run(pr: PreparedRun, settings, evals: dict | None = None) -> list[SubR
     bl_hi = np.searchsorted(bl_owner, np.arange(n_sub), side="right").tolist()
     zero = pr.tol_mm == 0
     n_zero = np.concatenate(([0], np.cumsum(zero)))
-    subs = []
     for k, (a, b) in enumerate(zip(edges[:-1].tolist(), edges[1:].tolist())):
         cs = tuple(by_sub.get(k, ()))
         bs = pr.blends[bl_lo[k] : bl_hi[k]] if bl_hi[k] > bl_lo[k] else ()
         exact = not cs and not bs and (n_zero[b + 1] - n_zero[a + 1]) == b - a
-        subs.append(SubRun(a, b, "straight" if exact else "fit", bool(pr.rot_only[a]), cs, bs))
-    return subs
+        yield SubRun(a, b, "straight" if exact else "fit", bool(pr.rot_only[a]), cs, bs)
 
 
 def slice_run(pr: PreparedRun, first: int, last: int) -> PreparedRun:

@@ -332,9 +332,19 @@ def _iter_run_raws(run: Run, settings: FitSettings, info: dict):
     info["max_tol_mm"] = float(pr.tol_mm.max()) if pr.tol_mm.size else 0.0
     blend = settings.blend_corners and settings.method == "nodes"
     prb = add_blends(pr, settings, evals) if blend else pr
+    # only a repair needs the run without its blends again, and repairs are rare: it is
+    # prepared again then (the same arrays) rather than kept for the whole run
+    kept: list[PreparedRun] = [pr] if prb is pr else []
+    del pr
+
+    def unblended() -> PreparedRun:
+        if not kept:
+            kept.append(prepare_run(run, settings))
+        return kept[0]
+
     methods: set[str] = set()
     for sub in split_run(prb, settings, evals):
-        results, where = _fit_sub_repaired(pr, prb, sub, settings, evals, info, blend)
+        results, where = _fit_sub_repaired(unblended, prb, sub, settings, evals, info, blend)
         for m in results:
             methods.add(m.method)
             info["max_node_dev_mm"] = max(info["max_node_dev_mm"], m.dev_mm)
@@ -355,9 +365,9 @@ def _iter_run_raws(run: Run, settings: FitSettings, info: dict):
 
 
 def _fit_sub_repaired(
-    pr: PreparedRun, prb: PreparedRun, sub: SubRun, settings: FitSettings, evals: dict, info: dict, blend: bool
+    unblended, prb: PreparedRun, sub: SubRun, settings: FitSettings, evals: dict, info: dict, blend: bool
 ) -> tuple[list, PreparedRun]:
-    """Fit one sub-run of ``prb`` (``pr`` with its corners blended); where the measurement
+    """Fit one sub-run of ``prb`` (the run ``unblended()`` with its corners blended); where the measurement
     finds it outside its tolerance, repair it on its own programmed nodes: blends (or,
     where a corner cannot be blended, stops) at nodes inside its failing sections, then
     refit, over ``FIT_REPAIR_ROUNDS`` rounds, the last forcing every node there.
@@ -367,9 +377,9 @@ def _fit_sub_repaired(
         return results, prb
     # the sub-run's ends are cuts: programmed nodes, never inserted blend points
     first, last = int(prb.orig_index[sub.i0]), int(prb.orig_index[sub.i1])
-    local = slice_run(pr, first, last)
+    local = slice_run(unblended(), first, last)
     force = np.zeros(local.nodes.shape[0], dtype=bool)
-    force[_original_index(pr, prb, more) - first] = True
+    force[_original_index(prb, more) - first] = True
     lb = local
     for attempt in range(1, FIT_REPAIR_ROUNDS + 1):
         info["repaired"] = info.get("repaired", 0) + 1
@@ -380,14 +390,14 @@ def _fit_sub_repaired(
         results, more = _fit_run_once(lb, split_run(lb, settings, evals), settings, evals, info, attempt)
         if not more.size:
             break
-        force[_original_index(local, lb, more)] = True
+        force[_original_index(lb, more)] = True
     info["repair_stops"] = info.get("repair_stops", 0) + int(lb.stops.size)
     return results, lb
 
 
-def _original_index(pr: PreparedRun, prb: PreparedRun, idx: np.ndarray) -> np.ndarray:
-    """Indices in ``pr`` of nodes ``idx`` of ``prb`` (``pr`` with blend points inserted,
-    which are never asked for: the nodes to force are programmed ones)."""
+def _original_index(prb: PreparedRun, idx: np.ndarray) -> np.ndarray:
+    """Indices in the unblended run of nodes ``idx`` of ``prb`` (it with blend points
+    inserted, which are never asked for: the nodes to force are programmed ones)."""
     return prb.orig_index[idx]
 
 
