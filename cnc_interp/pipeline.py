@@ -395,14 +395,14 @@ def _few_malloc_arenas() -> None:
 def _warm_kernels(planner: str) -> None:
     """Load the planner's and the CSV formatter's compiled kernels in a thread while the
     program is read: loading them takes about a second, and the first rows wait for it.
-    On a first run of VPOp, a child process compiles its step loop meanwhile
-    (``plan.precompile``); the thread compiles the preparation, waits for the child and
-    then loads what it cached."""
+    On a first run of VPOp, a child process compiles its step loop and the formatter
+    meanwhile (``plan.precompile``); the thread compiles the preparation, waits for the
+    child and then loads what it cached."""
     import threading
 
     from .plan import precompile as _precompile
 
-    children = planner == "vpop" and _precompile.start()
+    children = planner == "vpop" and _precompile.start(also=("export._repr:warm_up",))
 
     def load():
         try:

@@ -50,6 +50,13 @@ def test_wait_gives_up_on_a_child_that_hangs(sleeping_children):
 def test_unknown_job_is_a_usage_error(capsys):
     assert precompile.main(["everything"]) == 2
     assert "usage" in capsys.readouterr().err
+    assert precompile.main(["loop", "export._repr.warm_up"]) == 2  # not module:function
+    assert "usage" in capsys.readouterr().err
+
+
+def test_the_child_command_names_its_job_and_the_callers_warm_ups():
+    cmd = precompile._command("loop", ("export._repr:warm_up",))
+    assert cmd[1:] == ["-m", "cnc_interp.plan.precompile", "loop", "export._repr:warm_up"]
 
 
 @pytest.mark.slow

@@ -359,6 +359,12 @@ def format_table(cols: np.ndarray) -> bytes:
     return _format_table(cols, _POW5_INV_SPLIT, _POW5_SPLIT).tobytes()
 
 
+def warm_up() -> None:
+    """Compile (or load) the formatter: a first run's child process calls it
+    (``plan.precompile``)."""
+    format_table(np.zeros((1, 1)))
+
+
 def repr_many(values: np.ndarray) -> list[str]:
     """``[repr(float(v)) for v in values]``, compiled (for tests and small uses)."""
     text = format_table(np.asarray(values, dtype=np.float64).reshape(1, -1))

@@ -8,7 +8,9 @@ step loop (``drive``). On a cold cache one child compiles the step loop (the lar
 on a tiny rapid move and numba writes it to its on-disk cache; this process compiles the
 fit's kernels and the preparation (``compile_preparation``, in the warm-up thread), and
 the planner's first call waits for the child (``wait``) and then only compiles
-``plan_identity_batch`` itself, loading the step loop.
+``plan_identity_batch`` itself, loading the step loop. The child also compiles the CSV
+formatter after the step loop (the caller names it: ``start(also=...)``), which evens the
+two processes' shares.
 
 Measured on the project's 2-core machine, cold cache, kernels of the quick-start plan of
 ``mill-contour.ngc`` (CPU-s): the fit's ~20, the preparation ~17, the step loop ~30,
@@ -39,9 +41,11 @@ _children: list[subprocess.Popen] = []
 _lock = threading.Lock()
 
 
-def start(root: str | None = None) -> bool:
+def start(root: str | None = None, also: tuple[str, ...] = ()) -> bool:
     """Start the children when VPOp's kernels are not cached yet (a first run, or the
-    first after an update changed them); returns whether it started them."""
+    first after an update changed them); returns whether it started them. ``also``:
+    more warm-up functions for the child to call after its job, as ``"module:function"``
+    below the package (the caller's floor decides what; this module imports none)."""
     from .._kernel_cache import missing_kernels
 
     root = root or os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -53,7 +57,7 @@ def start(root: str | None = None) -> bool:
         for job in JOBS:
             try:
                 proc = subprocess.Popen(
-                    _command(job),
+                    _command(job, also),
                     stdin=subprocess.DEVNULL,
                     stdout=subprocess.DEVNULL,
                     stderr=subprocess.DEVNULL,
@@ -70,8 +74,8 @@ def start(root: str | None = None) -> bool:
     return started
 
 
-def _command(job: str) -> list[str]:
-    return [sys.executable, "-m", __name__, job]
+def _command(job: str, also: tuple[str, ...] = ()) -> list[str]:
+    return [sys.executable, "-m", __name__, job, *also]
 
 
 def wait(timeout_s: float = PRECOMPILE_WAIT_S) -> None:
@@ -150,11 +154,17 @@ def main(argv: list[str]) -> int:
     # Ctrl-C on the terminal must end the children too
     if hasattr(signal, "pthread_sigmask"):
         signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+    import importlib
+
     jobs = {"loop": _job_loop}
-    if len(argv) != 1 or argv[0] not in jobs:
-        sys.stderr.write(f"usage: python -m {__name__} {{{','.join(JOBS)}}}\n")
+    if not argv or argv[0] not in jobs or not all(":" in a for a in argv[1:]):
+        sys.stderr.write(f"usage: python -m {__name__} {{{','.join(JOBS)}}} [module:function ...]\n")
         return 2
     jobs[argv[0]]()
+    package = __name__.split(".")[0]
+    for spec in argv[1:]:
+        module, _, function = spec.partition(":")
+        getattr(importlib.import_module(f"{package}.{module}"), function)()
     return 0
 
 
