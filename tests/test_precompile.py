@@ -14,7 +14,9 @@ from cnc_interp.plan import precompile
 @pytest.fixture
 def sleeping_children(monkeypatch):
     """Children that sleep instead of compiling, on a cache that looks cold."""
-    monkeypatch.setattr(precompile, "_command", lambda job: [sys.executable, "-c", "import time; time.sleep(60)"])
+    monkeypatch.setattr(
+        precompile, "_command", lambda job, also=(): [sys.executable, "-c", "import time; time.sleep(60)"]
+    )
     monkeypatch.setattr("cnc_interp._kernel_cache.missing_kernels", lambda root: ["plan.vpop_core"])
     yield
     precompile.stop()
