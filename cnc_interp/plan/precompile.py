@@ -78,8 +78,9 @@ def _command(job: str, also: tuple[str, ...] = ()) -> list[str]:
     return [sys.executable, "-m", __name__, job, *also]
 
 
-def wait(timeout_s: float = PRECOMPILE_WAIT_S) -> None:
-    """Block until the children have finished (at once when none was started)."""
+def wait(timeout_s: float = PRECOMPILE_WAIT_S) -> list[int]:
+    """Block until the children have finished (at once when none was started); returns
+    their exit statuses."""
     with _lock:
         procs = list(_children)
     for proc in procs:
@@ -92,6 +93,7 @@ def wait(timeout_s: float = PRECOMPILE_WAIT_S) -> None:
         for proc in procs:
             if proc in _children:
                 _children.remove(proc)
+    return [proc.returncode for proc in procs]
 
 
 def stop() -> None:
@@ -161,7 +163,7 @@ def main(argv: list[str]) -> int:
         sys.stderr.write(f"usage: python -m {__name__} {{{','.join(JOBS)}}} [module:function ...]\n")
         return 2
     jobs[argv[0]]()
-    package = __name__.split(".")[0]
+    package = (__package__ or "cnc_interp").split(".")[0]  # (``__name__`` is "__main__" under -m)
     for spec in argv[1:]:
         module, _, function = spec.partition(":")
         getattr(importlib.import_module(f"{package}.{module}"), function)()

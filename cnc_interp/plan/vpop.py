@@ -312,10 +312,7 @@ class _Prepared:
     (``vpop_drive.prepare_identity``); other kinematics: the table through the joint map."""
 
     def __init__(self, path, joint_map, machine, dt_s: float, settings, table=None):
-        from . import precompile as _precompile
         from . import vpop_drive as D
-
-        _precompile.wait()  # a first run's compiling children (else at once)
 
         if path.rapid:
             joint_map = None
@@ -422,7 +419,10 @@ class _Loop:
     ``window`` (samples) is set, checkpoints every ``VPOP_CHECKPOINT_SAMPLES``."""
 
     def __init__(self, prep: _Prepared, window: int | None):
+        from . import precompile as _precompile
         from . import vpop_drive as D
+
+        _precompile.wait()  # a first run's child compiling the step loop (else at once)
 
         self.D = D
         self.p = prep
