@@ -162,7 +162,7 @@ def test_a_fast_mode_failure_replans_from_the_last_checkpoint(small_checkpoints,
     def failing(*a):
         status = real(*a)
         calls["n"] += 1
-        fast = a[26]
+        fast = a[5].fast  # plan_core(pb, sh, qh, st, runs, cfg, stop_k, k_base)
         if fast and status == vpop_core.YIELD and calls["n"] == 6:
             return vpop_core.INFEASIBLE  # as if a shortened brake run misjudged a state
         return status

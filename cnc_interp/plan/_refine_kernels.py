@@ -23,6 +23,8 @@ never leaves the region where the barrier is defined.
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
 from numba import njit
 
@@ -37,6 +39,10 @@ FAILED = 2
 _Z_TARGET = -1e-6
 _MU0 = 1e-2
 _MU_MIN = 1e-10
+
+#: the barrier's Newton system that ``_assemble`` fills: gradient g (nfree,), band
+#: Hessian H (nfree, 4), the z column hz (nfree,), and gz (2,): z's gradient and curvature
+NewtonSystem = namedtuple("NewtonSystem", "g H hz gz")
 
 
 @njit(cache=True)
@@ -135,9 +141,13 @@ def _rows(P, nfree, moving, lim, fdt, Q0, z, u_out):
 
 
 @njit(cache=True)
-def _assemble(P, nfree, moving, lim, fdt, Q1, Q2, u, mu, g, H, hz, grad_z):
-    """Gradient g (nfree), band Hessian H (nfree, 4) and the z column hz, of
-    mu Σ -log(u_r) (z's own gradient 1 added by the caller in grad_z[0])."""
+def _assemble(P, nfree, moving, lim, fdt, Q1, Q2, u, mu, ns):
+    """The ``NewtonSystem`` ns: gradient g (nfree), band Hessian H (nfree, 4) and the z
+    column hz, of mu Σ -log(u_r) (z's own gradient 1 added by the caller in gz[0])."""
+    g = ns.g
+    H = ns.H
+    hz = ns.hz
+    grad_z = ns.gz
     n = Q1.shape[1]
     for k in range(nfree):
         g[k] = 0.0
@@ -260,7 +270,7 @@ def solve_window(S, C, QEND, pre, post, x0, moving, lim, fdt, max_newton, counts
     best_x = x.copy()
     for it in range(max_newton):
         counts[0] += 1
-        _assemble(P, nfree, moving, lim, fdt, Q1, Q2, u, mu, g, H, hz, gzz)
+        _assemble(P, nfree, moving, lim, fdt, Q1, Q2, u, mu, NewtonSystem(g, H, hz, gzz))
         gz = 1.0 + gzz[0]
         hzz = gzz[1]
         for k in range(nfree):
@@ -343,16 +353,17 @@ def solve_window(S, C, QEND, pre, post, x0, moving, lim, fdt, max_newton, counts
 
 
 @njit(cache=True)
-def exact_ok(S, C, QEND, sh, lo, hi, vl, al, jl, qbuf):
-    """Samples lo..hi-1 of sh (with the samples before lo) pass verify's exact checks;
-    q positions go to qbuf (rows lo..hi-1)."""
+def exact_ok(T, lim, sh, lo, hi, qbuf):
+    """Samples lo..hi-1 of sh (with the samples before lo) pass verify's exact checks
+    (the ``vpop_core.Limits`` lim) on the ``vpop_core.Table`` T; q positions go to qbuf
+    (rows lo..hi-1)."""
     n = qbuf.shape[1]
     q = np.empty(n)
     qs = np.empty(n)
     hint = 0
     for k in range(lo, hi):
-        hint = _eval(S, C, QEND, sh[k], hint, q, qs)
-        if not _feasible(qbuf, k, q, vl, al, jl):
+        hint = _eval(T, sh[k], hint, q, qs)
+        if not _feasible(qbuf, k, q, lim):
             return False
         for i in range(n):
             qbuf[k, i] = q[i]

@@ -286,19 +286,32 @@ def _core():
     return vpop_core
 
 
-def _machine_consts(machine, dt: float) -> dict:
-    """Per-machine inputs of the preparation, computed once in Python (the same float
-    operations as before the compiled path existed)."""
+def _machine_consts(machine, dt: float):
+    """Per-machine inputs of the preparation (``vpop_drive.MachineSteps``), computed once
+    in Python (the same float operations as before the compiled path existed)."""
+    from .vpop_drive import MachineSteps
+
     shrink = 1.0 - VPOP_LIMIT_SHRINK
     ramp = float(np.max(machine.vmax / machine.amax + machine.amax / machine.jmax))
-    return dict(
-        shrink=shrink,
+    return MachineSteps(
         vl0=np.ascontiguousarray(machine.vmax * dt * shrink, dtype=float),
         al0=np.ascontiguousarray(machine.amax * dt * dt * shrink, dtype=float),
         jl0=np.ascontiguousarray(machine.jmax * dt**3 * shrink, dtype=float),
         jl_floor=np.ascontiguousarray(0.5 * machine.jmax * dt**3, dtype=float),
         vmax=np.ascontiguousarray(machine.vmax, dtype=float),
-        ramp=ramp, brake_cap=8 * int(ramp / dt) + 4096)
+        ramp=ramp, dt=float(dt), brake_cap=8 * int(ramp / dt) + 4096, shrink=shrink)
+
+
+def _prep_settings():
+    """The preparation's knobs (``vpop_drive.PrepSettings``)."""
+    from .vpop_drive import PrepSettings
+
+    return PrepSettings(
+        lookback=VPOP_LOOKBACK_BRAKE_RUNS, table_tol=float(VPOP_TABLE_TOL),
+        max_depth=VPOP_TABLE_MAX_ROUNDS - 1, max_piece=float(VPOP_TABLE_MAX_PIECE), glx=_GL_X,
+        glw=_GL_W, max_tries=VPOP_TABLE_MAX_TRIES, rounding_ulps=float(VPOP_ROUNDING_ULPS),
+        brake_jerk_fraction=float(VPOP_BRAKE_JERK_FRACTION),
+        aim_gap_steps=float(VPOP_AIM_GAP_JERK_STEPS), min_length=float(VPOP_MIN_LENGTH))
 
 
 def _fast(settings) -> bool:
@@ -320,19 +333,14 @@ class _Prepared:
         self.n = path.n_axes
         self.dt = dt = float(dt_s)
         mc = _machine_consts(machine, dt)
-        self.brake_cap = mc["brake_cap"]
+        self.brake_cap = mc.brake_cap
         self.fast = _fast(settings)
         self.trivial = False
         identity = joint_map is None or getattr(joint_map, "is_identity", False)
         if identity and table is None:
-            r = D.prepare_identity(path.coef, path.breaks, path.s_breaks, path.weights,
-                                   float(path.length), path.feed_mm_s, mc["vl0"], mc["al0"],
-                                   mc["jl0"], mc["jl_floor"], mc["vmax"], mc["ramp"], dt,
-                                   mc["brake_cap"], VPOP_LOOKBACK_BRAKE_RUNS, mc["shrink"],
-                                   float(VPOP_TABLE_TOL), VPOP_TABLE_MAX_ROUNDS - 1,
-                                   float(VPOP_TABLE_MAX_PIECE), _GL_X, _GL_W, VPOP_TABLE_MAX_TRIES,
-                                   float(VPOP_ROUNDING_ULPS), float(VPOP_BRAKE_JERK_FRACTION),
-                                   float(VPOP_AIM_GAP_JERK_STEPS), float(VPOP_MIN_LENGTH))
+            data = D.PathData(path.coef, path.breaks, path.s_breaks, path.weights,
+                              float(path.length), path.feed_mm_s)
+            r = D.prepare_identity(data, mc, _prep_settings())
             status = r[0]
             if status == D.PREP_NOT_FINITE_PATH:
                 raise PlanError(f"bug: the fitted path ending at line {int(path.line[-1])} is "
@@ -349,11 +357,11 @@ class _Prepared:
             if status == D.PREP_JERK_TOO_SMALL:
                 raise PlanError(f"the jerk limits are too small for dt = {dt:g} s at positions "
                                 f"of {r[-1]:g} mm/deg: float64 cannot resolve them")
-            (_, self.S, self.C_axis_major, self.qend, self.qstart, self.vl, self.al, self.jl,
-             self.js, self.FB, self.FV, self.K2, self.K3, self.K23, self.KV, self.tol,
-             self.gap_tol, self.est, self.max_steps, self.floor_h, self.pieces,
+            (_, self.pb, self.qstart, tol, gap_tol, self.est, max_steps, floor_h, self.pieces,
              self.max_err) = r
+            self.qend = self.pb.table.QEND
             self.L = float(path.length)
+            self.cfg = self._settings(tol, max_steps, gap_tol, floor_h)
             return
         self._prepare_mapped(path, joint_map, machine, dt, mc, table)
 
@@ -375,39 +383,47 @@ class _Prepared:
         # cannot push a low limit (jmax * dt**3 ~ 1e-6 mm) past its ratio slack.
         q_scale = 1.0 + float(np.max(np.abs(table.C[:, 0, :])))
         margin = VPOP_ROUNDING_ULPS * np.finfo(float).eps * q_scale
-        vl = np.ascontiguousarray(mc["vl0"] - 2.0 * margin)
-        al = np.ascontiguousarray(mc["al0"] - 4.0 * margin)
-        jl = np.ascontiguousarray(mc["jl0"] - 8.0 * margin)
-        if np.any(jl <= mc["jl_floor"]):
+        vl = np.ascontiguousarray(mc.vl0 - 2.0 * margin)
+        al = np.ascontiguousarray(mc.al0 - 4.0 * margin)
+        jl = np.ascontiguousarray(mc.jl0 - 8.0 * margin)
+        if np.any(jl <= mc.jl_floor):
             raise PlanError(f"the jerk limits are too small for dt = {dt:g} s at positions of "
                             f"{q_scale:g} mm/deg: float64 cannot resolve them")
-        self.vl, self.al, self.jl = vl, al, jl
         L = table.length
         self.L = L
         FB = np.ascontiguousarray(path.s_breaks, dtype=float).copy()
         FB[-1] = L
         FV = np.where(np.isfinite(path.feed_mm_s) & (path.feed_mm_s > 0),
-                      path.feed_mm_s * mc["shrink"], 1e300)
-        self.FB, self.FV = FB, np.ascontiguousarray(FV, dtype=float)
+                      path.feed_mm_s * mc.shrink, 1e300)
+        FV = np.ascontiguousarray(FV, dtype=float)
         # rough duration: travel at the slowest of feed and axis speeds, plus ramps
         dq = np.abs(table.qend - table.qstart)
-        tv = float(np.max(dq / machine.vmax)) + L / float(np.min(self.FV))
-        est = int((tv + 2 * mc["ramp"]) / dt) + 16
+        tv = float(np.max(dq / machine.vmax)) + L / float(np.min(FV))
+        est = int((tv + 2 * mc.ramp) / dt) + 16
         self.est = est
-        self.max_steps = 200 * est + 100_000
-        self.floor_h = VPOP_LOOKBACK_BRAKE_RUNS * self.brake_cap
-        self.tol = max(4.0 * np.spacing(max(L, 1.0)), 1e-7 * float(np.min(jl)))
-        self.js = np.ascontiguousarray(jl * VPOP_BRAKE_JERK_FRACTION)
-        self.K2, self.K3, self.K23 = (core.range_max_table(x)
-                                      for x in table.curvature_bounds(al, jl))
-        self.KV = core.range_max_table(table.speed_bounds(vl, path, self.FV * dt))
-        self.gap_tol = VPOP_AIM_GAP_JERK_STEPS * float(np.min(jl))
-        self.S = table.S
-        self.C_axis_major = np.ascontiguousarray(table.C.transpose(0, 2, 1))  # (m, n, 6)
+        max_steps = 200 * est + 100_000
+        floor_h = VPOP_LOOKBACK_BRAKE_RUNS * self.brake_cap
+        tol = max(4.0 * np.spacing(max(L, 1.0)), 1e-7 * float(np.min(jl)))
+        js = np.ascontiguousarray(jl * VPOP_BRAKE_JERK_FRACTION)
+        K2, K3, K23 = (core.range_max_table(x) for x in table.curvature_bounds(al, jl))
+        KV = core.range_max_table(table.speed_bounds(vl, path, FV * dt))
+        gap_tol = VPOP_AIM_GAP_JERK_STEPS * float(np.min(jl))
+        C_axis_major = np.ascontiguousarray(table.C.transpose(0, 2, 1))  # (m, n, 6)
+        self.pb = core.Problem(core.Table(table.S, C_axis_major, table.qend),
+                               core.Limits(vl, al, jl), js, core.Feed(dt, L, FB, FV),
+                               core.Ease(K2, K3, K23, KV))
+        self.cfg = self._settings(tol, max_steps, gap_tol, floor_h)
         self.qend = table.qend
         self.qstart = table.qstart
         self.pieces = int(table.C.shape[0])
         self.max_err = float(table.max_err)
+
+    def _settings(self, tol, max_steps, gap_tol, floor_h):
+        """The step loop's ``vpop_core.Settings`` in fast mode."""
+        return _core().Settings(tol=float(tol), max_steps=int(max_steps),
+                                easy_frac=float(VPOP_EASY_FRACTION), gap_tol=float(gap_tol),
+                                fast=True, chain_seq=int(VPOP_CHAIN_SEQUENTIAL),
+                                floor_h=int(floor_h))
 
 
 class VpopFailed(PlanError):
@@ -424,23 +440,18 @@ class _Loop:
         self.D = D
         self.p = prep
         room = prep.brake_cap + 8
-        (self.sh, self.qh, self.st, self.cs, self.cq, self.bs, self.bq, self.stats, self.ds,
-         self.ck_st, self.ck_cs, self.ck_cq, self.ck_sh, self.ck_qh, self.max_cap) = D.new_loop(
-            prep.n, prep.qstart, prep.est, prep.brake_cap, prep.floor_h, room,
+        (self.sh, self.qh, self.st, self.runs, self.ds, self.ck, self.max_cap) = D.new_loop(
+            prep.n, prep.qstart, prep.est, prep.brake_cap, prep.cfg.floor_h, room,
             0 if window is None else max(1, int(window)), VPOP_CHECKPOINT_SAMPLES)
+        self.stats = self.runs.stats
         self.ds[D.DS_NEXT_CK] = VPOP_CHECKPOINT_SAMPLES
         self.ds[D.DS_FAST] = 1 if prep.fast else 0
-        D.checkpoint(self.sh, self.qh, self.st, self.cs, self.cq, self.ds, self.ck_st,
-                     self.ck_cs, self.ck_cq, self.ck_sh, self.ck_qh, True)
+        D.checkpoint(self.sh, self.qh, self.st, self.runs, self.ds, self.ck, True)
 
     def run(self) -> int:
         D, p = self.D, self.p
-        res, self.sh, self.qh = D.drive(
-            p.S, p.C_axis_major, p.qend, p.vl, p.al, p.jl, p.js, p.dt, p.L, p.FB, p.FV, p.tol,
-            p.max_steps, p.K2, p.K3, p.K23, p.KV, p.gap_tol, p.floor_h, VPOP_EASY_FRACTION,
-            VPOP_CHAIN_SEQUENTIAL, VPOP_CHECKPOINT_SAMPLES, self.sh, self.qh, self.st, self.cs,
-            self.cq, self.bs, self.bq, self.stats, self.ds, self.ck_st, self.ck_cs, self.ck_cq,
-            self.ck_sh, self.ck_qh, self.max_cap)
+        res, self.sh, self.qh = D.drive(p.pb, p.cfg, VPOP_CHECKPOINT_SAMPLES, self.sh, self.qh,
+                                        self.st, self.runs, self.ds, self.ck, self.max_cap)
         if res == D.FAILED:
             core = _core()
             status = int(self.ds[D.DS_STATUS])
@@ -550,8 +561,8 @@ class VpopRun:
 
         core, p = self.core, self.p
         room = p.brake_cap + 8
-        (_, _, st, cs, cq, bs, bq, stats, ds, ck_st, ck_cs, ck_cq, ck_sh, ck_qh, _) = D.new_loop(
-            p.n, p.qstart, 1, p.brake_cap, p.floor_h, room, 0, VPOP_CHECKPOINT_SAMPLES)
+        (_, _, st, runs, ds, ck, _) = D.new_loop(
+            p.n, p.qstart, 1, p.brake_cap, p.cfg.floor_h, room, 0, VPOP_CHECKPOINT_SAMPLES)
         st[core.ST_K] = k0
         st[core.ST_B] = b0
         ds[D.DS_NEXT_CK] = k0 + VPOP_CHECKPOINT_SAMPLES
@@ -562,14 +573,10 @@ class VpopRun:
             grow = k0 + room + 24 + self.cap
             sh = np.concatenate((sh, np.zeros(grow - sh.shape[0])))
             qh = np.concatenate((qh, np.zeros((grow - qh.shape[0], p.n))))
-        D.checkpoint(sh, qh, st, cs, cq, ds, ck_st, ck_cs, ck_cq, ck_sh, ck_qh, True)
-        res, sh, qh = D.drive(
-            p.S, p.C_axis_major, p.qend, p.vl, p.al, p.jl, p.js, p.dt, p.L, p.FB, p.FV, p.tol,
-            p.max_steps, p.K2, p.K3, p.K23, p.KV, p.gap_tol, p.floor_h, VPOP_EASY_FRACTION,
-            VPOP_CHAIN_SEQUENTIAL, VPOP_CHECKPOINT_SAMPLES, sh, qh, st, cs, cq, bs, bq, stats,
-            ds, ck_st, ck_cs, ck_cq, ck_sh, ck_qh, 0)
+        D.checkpoint(sh, qh, st, runs, ds, ck, True)
+        res, sh, qh = D.drive(p.pb, p.cfg, VPOP_CHECKPOINT_SAMPLES, sh, qh, st, runs, ds, ck, 0)
         self.fast = ds[D.DS_FAST] != 0
-        self.stats = stats
+        self.stats = runs.stats
         if res == D.FAILED:
             return int(ds[D.DS_STATUS]), int(st[core.ST_K]), sh, qh
         return core.OK, int(ds[D.DS_END]), sh, qh
@@ -597,13 +604,10 @@ def plan_many_vpop(paths, machine, dt_s: float, settings=None,
     weights = np.array([p.weights for p in paths], dtype=float)
     lengths = np.array([p.length for p in paths], dtype=float)
     feed = np.concatenate([p.feed_mm_s for p in paths])
+    ls = D.LoopSettings(easy_frac=float(VPOP_EASY_FRACTION), chain_seq=int(VPOP_CHAIN_SEQUENTIAL),
+                        checkpoint_every=int(VPOP_CHECKPOINT_SAMPLES), fast=_fast(settings))
     done, off, s_all, q_all, pstats, perr = D.plan_identity_batch(
-        coef, breaks, s_breaks, weights, lengths, feed, seg_off, mc["vl0"], mc["al0"],
-        mc["jl0"], mc["jl_floor"], mc["vmax"], mc["ramp"], dt, mc["brake_cap"],
-        VPOP_LOOKBACK_BRAKE_RUNS, mc["shrink"], float(VPOP_TABLE_TOL), VPOP_TABLE_MAX_ROUNDS - 1,
-        float(VPOP_TABLE_MAX_PIECE), _GL_X, _GL_W, VPOP_TABLE_MAX_TRIES, float(VPOP_ROUNDING_ULPS),
-        float(VPOP_BRAKE_JERK_FRACTION), float(VPOP_AIM_GAP_JERK_STEPS), float(VPOP_MIN_LENGTH),
-        VPOP_EASY_FRACTION, VPOP_CHAIN_SEQUENTIAL, VPOP_CHECKPOINT_SAMPLES, _fast(settings),
+        D.PathData(coef, breaks, s_breaks, weights, lengths, feed), seg_off, mc, _prep_settings(), ls,
         int(long_samples))
     out = []
     offs = off.tolist()
