@@ -21,6 +21,8 @@ view costs more (reference counting) than the arithmetic it feeds.
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
 from numba import njit
 
@@ -31,11 +33,18 @@ OK = 0
 NO_LENGTH = 1
 NOT_FINITE = 2
 
+#: ``_quarters``' scratch: the Gauss-Legendre nodes t and squared speeds s2 of the four
+#: rules (4 * len(glx),), and the quarters' half widths half (4,)
+QuarterScratch = namedtuple("QuarterScratch", "t s2 half")
+
 
 @njit(cache=True)
-def _quarters(coef, breaks, w, k, ua, ub, glx, glw, uc, sub, t, s2, half):
+def _quarters(coef, breaks, w, k, ua, ub, glx, glw, uc, sub, sc):
     """Quarter points uc (3,) of [ua, ub] and the arc lengths sub (4,) of its quarters,
-    each by one Gauss–Legendre rule (scratch t, s2 (4 * len(glx),), half (4,))."""
+    each by one Gauss–Legendre rule (scratch ``QuarterScratch`` sc)."""
+    t = sc.t
+    s2 = sc.s2
+    half = sc.half
     base = breaks[k]
     du = ub - ua
     ng = glx.shape[0]
@@ -86,7 +95,7 @@ def quarter_arcs(coef, breaks, w, seg, ua, ub, glx, glw):
     uc1 = np.empty(3)
     sub1 = np.empty(4)
     for p in range(m):
-        _quarters(coef, breaks, w, seg[p], ua[p], ub[p], glx, glw, uc1, sub1, t, s2, half)
+        _quarters(coef, breaks, w, seg[p], ua[p], ub[p], glx, glw, uc1, sub1, QuarterScratch(t, s2, half))
         for j in range(3):
             uc[p, j] = uc1[j]
         for j in range(4):
@@ -321,7 +330,7 @@ def _refine(coef, breaks, w, ua0, ub0, seg0, tol, scale, max_depth, glx, glw):
             a = st_a[top]
             b = st_b[top]
             d = st_d[top]
-            _quarters(coef, breaks, w, k, a, b, glx, glw, uc, sub, tg, s2, half)
+            _quarters(coef, breaks, w, k, a, b, glx, glw, uc, sub, QuarterScratch(tg, s2, half))
             ds = sub[0] + sub[1] + sub[2] + sub[3]
             if not ds > 0.0:
                 continue
