@@ -31,9 +31,9 @@ from numba import njit
 from ._ipm import _band_cholesky, _band_solve
 from .vpop_core import _eval, _feasible
 
-FEASIBLE = 0
-INFEASIBLE = 1
-FAILED = 2
+# solve_window's statuses (one set for every kernel: ``status``): OK (the window is
+# feasible), INFEASIBLE, FAILED (the start is not strictly monotone)
+from .status import FAILED, INFEASIBLE, OK
 
 #: z below which a window counts as feasible (the exact check follows)
 _Z_TARGET = -1e-6
@@ -338,7 +338,7 @@ def solve_window(S, C, QEND, pre, post, x0, moving, lim, fdt, max_newton, counts
             for k in range(nfree):
                 best_x[k] = x[k]
         if best_z < _Z_TARGET:
-            return FEASIBLE, best_x, best_z
+            return OK, best_x, best_z
         if dec < 1e-3 * mu * r or alpha < 1e-3:
             # near the central point of this μ: z exceeds the optimum by at most about
             # μ per row; when even that leaves it positive, the window is infeasible
@@ -348,7 +348,7 @@ def solve_window(S, C, QEND, pre, post, x0, moving, lim, fdt, max_newton, counts
                 break
             mu *= 0.1
     if best_z < _Z_TARGET:
-        return FEASIBLE, best_x, best_z
+        return OK, best_x, best_z
     return INFEASIBLE, best_x, best_z
 
 

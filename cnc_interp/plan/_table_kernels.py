@@ -29,9 +29,8 @@ from numba import njit
 from ..fit._quintic import quintic_d012
 
 # build_identity status codes
-OK = 0
-NO_LENGTH = 1
-NOT_FINITE = 2
+# build_identity's statuses (one set for every kernel: ``status``)
+from .status import NO_LENGTH, NOT_FINITE, OK
 
 #: ``_quarters``' scratch: the Gauss-Legendre nodes t and squared speeds s2 of the four
 #: rules (4 * len(glx),), and the quarters' half widths half (4,)

@@ -22,10 +22,10 @@ from numba import njit
 
 from .vpop_core import Scratch, _bounds, _eval, _feasible, _search, _seed
 
-OK = 0
-NEED_REF = 1  # the reference ends before the next target: give more and call again
-STUCK = 2  # no position satisfies every limit (the caller lowers the reference)
-NEED_SPACE = 3
+# track's statuses (one set for every kernel: ``status``): OK, NEED_REF (the reference
+# ends before the next target), STUCK (no position satisfies every limit: the caller
+# lowers the reference), NEED_SPACE
+from .status import NEED_REF, NEED_SPACE, OK, STUCK
 
 #: the reference time law's nodes: s (mm), t (s), v (mm/s), a (mm/s²), each (>= n,), of
 #: which the first n are used

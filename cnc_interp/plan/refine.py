@@ -94,7 +94,7 @@ class Refiner:
                 self.S, self.C, self.QE, pre, post, x0, self.moving, self.lim, self.fdt, REFINE_NEWTON, self.counts
             )
             self.solves += 1
-            if st != RK.FEASIBLE:
+            if st != RK.OK:
                 break
             cand = np.concatenate((sh[:a], x, sh[b:]))
             tail = np.full(3, self.L)

@@ -342,19 +342,19 @@ class _Prepared:
                               float(path.length), path.feed_mm_s)
             r = D.prepare_identity(data, mc, _prep_settings())
             status = r[0]
-            if status == D.PREP_NOT_FINITE_PATH:
+            if status == D.NOT_FINITE_PATH:
                 raise PlanError(f"bug: the fitted path ending at line {int(path.line[-1])} is "
                                 "not finite")
-            if status == D.PREP_TRIVIAL:
+            if status == D.TRIVIAL:
                 self.trivial = True
                 self.q0 = _positions(path, path.breaks[:1], None)
                 return
-            if status == D.PREP_NO_LENGTH:
+            if status == D.NO_LENGTH:
                 _no_length(path)
-            if status == D.PREP_TABLE_NOT_FINITE:
+            if status == D.NOT_FINITE:
                 raise PlanError(f"bug: the arc-length table of the path ending at line "
                                 f"{int(path.line[-1])} is not finite (a point of zero speed?)")
-            if status == D.PREP_JERK_TOO_SMALL:
+            if status == D.JERK_TOO_SMALL:
                 raise PlanError(f"the jerk limits are too small for dt = {dt:g} s at positions "
                                 f"of {r[-1]:g} mm/deg: float64 cannot resolve them")
             (_, self.pb, self.qstart, tol, gap_tol, self.est, max_steps, floor_h, self.pieces,

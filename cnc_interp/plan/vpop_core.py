@@ -54,11 +54,8 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-# status codes returned by plan_core (YIELD = 4 below)
-OK = 0
-NEED_SPACE = 1
-STUCK = 2
-INFEASIBLE = 3
+# plan_core's statuses (one set for every kernel: ``status``)
+from .status import INFEASIBLE, NEED_SPACE, OK, STUCK, YIELD
 
 _HUGE = 1e300
 # "clearly outside the bounds" for a zero step: far above the rounding of _bounds
@@ -933,8 +930,6 @@ def _chain_search(pb, sh, qh, j, m, runs, sc, cfg, last_k, last_j, hint):
 #: local to the caller's buffers (global = local + the caller's base).
 ST_K, ST_B, ST_CHAIN, ST_CAT, ST_CLEN, ST_CERT, ST_LASTK, ST_LASTJ, ST_HINT = range(9)
 ST_SIZE = 9
-#: plan_core returned at an iteration boundary because k reached ``stop_k``
-YIELD = 4
 
 
 def new_state() -> np.ndarray:

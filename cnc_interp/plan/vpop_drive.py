@@ -20,25 +20,16 @@ import numpy as np
 from numba import njit
 
 from . import vpop_core as core
-from ._table_kernels import NO_LENGTH, build_identity, curvature_bounds, speed_bound
-from ._table_kernels import OK as TABLE_OK
+from ._table_kernels import build_identity, curvature_bounds, speed_bound
 
-# drive's results
-DONE = 0
-HAND_OUT = 1
-FAILED = 2
+# statuses (one set for every kernel: ``status``): drive's results OK (the path is
+# done), HAND_OUT, FAILED; prepare_identity's OK, NOT_FINITE_PATH, NO_LENGTH,
+# NOT_FINITE (the table), JERK_TOO_SMALL, TRIVIAL
+from .status import FAILED, HAND_OUT, JERK_TOO_SMALL, NO_LENGTH, NOT_FINITE, NOT_FINITE_PATH, OK, TRIVIAL
 
 # the driver's state (int64 array ``ds``)
 DS_BASE, DS_HANDED, DS_NEXT_CK, DS_FAST, DS_CK_LO, DS_CK_LEN, DS_CK_FIRST, DS_END, DS_STATUS = range(9)
 DS_SIZE = 9
-
-# prepare_identity's results (else 0 = OK)
-PREP_OK = 0
-PREP_NOT_FINITE_PATH = 1
-PREP_NO_LENGTH = 2
-PREP_TABLE_NOT_FINITE = 3
-PREP_JERK_TOO_SMALL = 4
-PREP_TRIVIAL = 5
 
 #: samples kept before a checkpoint's last fixed sample (the stencils read 3 back)
 CKPT_HISTORY = 8
@@ -143,7 +134,7 @@ def prepare_identity(path, mc, ps):
     """``vpop._Prepared`` for identity kinematics: the ``PathData`` path on the machine
     ``MachineSteps`` mc with the ``PrepSettings`` ps. Returns (status, ``core.Problem``,
     qstart, tol, gap_tol, est, max_steps, floor_h, pieces, max_err); on a status other
-    than ``PREP_OK`` the arrays are empty and the last value is the position scale (the
+    than ``OK`` the arrays are empty and the last value is the position scale (the
     Python preparation then raises the right error, or plans a trivial path)."""
     coef = path.coef
     length = path.length
@@ -157,16 +148,16 @@ def prepare_identity(path, mc, ps):
             finite = False
             break
     if not finite:
-        return _failed(PREP_NOT_FINITE_PATH, n, 0.0)
+        return _failed(NOT_FINITE_PATH, n, 0.0)
     if length <= ps.min_length:
-        return _failed(PREP_TRIVIAL, n, 0.0)
+        return _failed(TRIVIAL, n, 0.0)
     status, u, S, C, max_err, qend = build_identity(coef, path.breaks, s_breaks, path.w, length,
                                                     ps.table_tol, ps.max_depth, ps.max_piece, ps.glx,
                                                     ps.glw, ps.max_tries)
     if status == NO_LENGTH:
-        return _failed(PREP_NO_LENGTH, n, 0.0)
-    if status != TABLE_OK:
-        return _failed(PREP_TABLE_NOT_FINITE, n, 0.0)
+        return _failed(NO_LENGTH, n, 0.0)
+    if status != OK:
+        return _failed(NOT_FINITE, n, 0.0)
     m = C.shape[0]
     qstart = C[0, 0].copy()
     big = 0.0
@@ -182,7 +173,7 @@ def prepare_identity(path, mc, ps):
     jl = mc.jl0 - 8.0 * margin
     for ax in range(n):
         if jl[ax] <= mc.jl_floor[ax]:
-            return _failed(PREP_JERK_TOO_SMALL, n, q_scale)
+            return _failed(JERK_TOO_SMALL, n, q_scale)
     L = length
     n_seg = feed.shape[0]
     FB = s_breaks.copy()
@@ -229,7 +220,7 @@ def prepare_identity(path, mc, ps):
     ease = core.Ease(range_max_packed(k2), range_max_packed(k3), range_max_packed(k23),
                      range_max_packed(kv))
     pb = core.Problem(core.Table(S, Cam, qend), core.Limits(vl, al, jl), js, core.Feed(dt, L, FB, FV), ease)
-    return PREP_OK, pb, qstart, tol, gap_tol, est, max_steps, floor_h, m, max_err
+    return OK, pb, qstart, tol, gap_tol, est, max_steps, floor_h, m, max_err
 
 
 # -- the driver ---------------------------------------------------------------------------
@@ -286,7 +277,7 @@ def _restore(sh, qh, st, runs, ds, ck):
 
 @njit(cache=True, nogil=True)
 def drive(pb, cfg, checkpoint_every, sh, qh, st, runs, ds, ck, max_cap):
-    """Run the step loop on the ``core.Problem`` pb until the path is done (``DONE``,
+    """Run the step loop on the ``core.Problem`` pb until the path is done (``OK``,
     ds[DS_END] = global end index), the window is full of final samples (``HAND_OUT``:
     samples ds[DS_HANDED] .. ds[DS_CK_LO] - 1 are final; hand them out, set
     ds[DS_HANDED], call again) or the loop failed in exact mode (``FAILED``,
@@ -304,7 +295,7 @@ def drive(pb, cfg, checkpoint_every, sh, qh, st, runs, ds, ck, max_cap):
         status = core.plan_core(pb, sh, qh, st, runs, run_cfg, ds[DS_NEXT_CK] - base, base)
         if status == core.OK:
             ds[DS_END] = st[core.ST_K] + base
-            return DONE, sh, qh
+            return OK, sh, qh
         if status == core.YIELD:
             checkpoint(sh, qh, st, runs, ds, ck, np.bool_(False))
             ds[DS_NEXT_CK] += checkpoint_every
@@ -422,7 +413,7 @@ def plan_identity_batch(paths, seg_off, mc, ps, ls, long_samples):
         sb = s_breaks[a + p:b + p + 1]
         r = prepare_identity(PathData(cf, br, sb, paths.w[p], paths.length[p], feed[a:b]), mc, ps)
         status = r[0]
-        if status == PREP_TRIVIAL:
+        if status == TRIVIAL:
             q0 = start_point(cf)
             m = 1
             if total + m > cap:
@@ -440,7 +431,7 @@ def plan_identity_batch(paths, seg_off, mc, ps, ls, long_samples):
             pstats[p, 6] = -1  # trivial: no table
             done[p] = True
             continue
-        if status != PREP_OK or r[5] > long_samples:
+        if status != OK or r[5] > long_samples:
             off[p + 1] = total
             continue
         _, pb, qstart, tol, gap_tol, est, max_steps, floor_h, pieces, max_err = r
@@ -452,7 +443,7 @@ def plan_identity_batch(paths, seg_off, mc, ps, ls, long_samples):
         checkpoint(sh, qh, st, runs, ds, ck, np.bool_(True))
         cfg = core.Settings(tol, max_steps, ls.easy_frac, gap_tol, ls.fast, ls.chain_seq, floor_h)
         res, sh, qh = drive(pb, cfg, checkpoint_every, sh, qh, st, runs, ds, ck, max_cap)
-        if res != DONE:
+        if res != OK:
             off[p + 1] = total
             continue
         last = end_index(sh, np.int64(0), np.int64(0), ds[DS_END], L)
