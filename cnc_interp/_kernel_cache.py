@@ -153,7 +153,8 @@ PLAN_KERNEL_MODULES = (
     "fit._linedev",
     "fit.planar",
     "plan._table_kernels",
-    "plan.vpop_core",
+    "plan.vpop.step",
+    "plan.vpop.drive",
 )
 #: what compiling them from scratch takes, measured on the project's 2-core machine
 #: (quick-start plan of mill-contour.ngc, idle: 95 s of CPU)

@@ -9,8 +9,8 @@ import pytest
 from cnc_interp.plan.status import Status
 
 KERNEL_MODULES = [
-    "cnc_interp.plan.vpop_core",
-    "cnc_interp.plan.vpop_drive",
+    "cnc_interp.plan.vpop.step",
+    "cnc_interp.plan.vpop.drive",
     "cnc_interp.plan._track_kernels",
     "cnc_interp.plan._table_kernels",
     "cnc_interp.plan._refine_kernels",

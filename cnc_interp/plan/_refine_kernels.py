@@ -29,7 +29,7 @@ import numpy as np
 from numba import njit
 
 from ._ipm import _band_cholesky, _band_solve
-from .vpop_core import _eval, _feasible
+from .vpop.step import _eval, _feasible
 
 # solve_window's statuses (one set for every kernel: ``status``): OK (the window is
 # feasible), INFEASIBLE, FAILED (the start is not strictly monotone)
@@ -355,7 +355,7 @@ def solve_window(S, C, QEND, pre, post, x0, moving, lim, fdt, max_newton, counts
 @njit(cache=True)
 def exact_ok(T, lim, sh, lo, hi, qbuf):
     """Samples lo..hi-1 of sh (with the samples before lo) pass verify's exact checks
-    (the ``vpop_core.Limits`` lim) on the ``vpop_core.Table`` T; q positions go to qbuf
+    (the ``vpop.step.Limits`` lim) on the ``vpop.step.Table`` T; q positions go to qbuf
     (rows lo..hi-1)."""
     n = qbuf.shape[1]
     q = np.empty(n)

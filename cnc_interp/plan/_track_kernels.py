@@ -3,10 +3,10 @@
 Each sample k takes the position the reference reaches one period after the
 position of sample k-1 (the reference clock follows the machine: a sample that had
 to deviate does not make the next ones chase the old clock) and checks it with
-exactly the float operations of ``verify`` (``vpop_core._feasible``). Where the
+exactly the float operations of ``verify`` (``vpop.step._feasible``). Where the
 reference would break a limit — it is the solution of a linear program imposed at
 collocation points, and sampled — the nearest allowed position is taken instead
-(``vpop_core._search`` on the per-axis intervals). An empty allowed set is reported
+(``vpop.step._search`` on the per-axis intervals). An empty allowed set is reported
 to the caller (``STUCK``), which then lowers the reference locally and retries.
 
 Reference nodes (s, t, v, a) come from ``timelaw.nodes_for``; between nodes s(t) is the
@@ -20,7 +20,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-from .vpop_core import Scratch, _bounds, _eval, _feasible, _search, _seed
+from .vpop.step import Scratch, _bounds, _eval, _feasible, _search, _seed
 
 # track's statuses (one set for every kernel: ``status``): OK, NEED_REF (the reference
 # ends before the next target), STUCK (no position satisfies every limit: the caller
@@ -124,7 +124,7 @@ def ref_t_of_s(ns, nt, nv, na, n, s, hint):
 @njit(cache=True)
 def _feed_cap(s, fd, seg):
     """s + F dt with F the lowest feed of the segments from s on within reach (the
-    ``vpop_core.Feed`` fd)."""
+    ``vpop.step.Feed`` fd)."""
     dt = fd.dt
     L = fd.L
     FB = fd.FB
@@ -149,8 +149,8 @@ def _feed_cap(s, fd, seg):
 @njit(cache=True, nogil=True)
 def track(ref, ref_final, T, lim, fd, sh, qh, k, tol, stats):
     """Samples k, k+1, ... following the ``Reference`` ref until it runs out, the path
-    ends at rest, or no position is allowed, on the joint table T (``vpop_core.Table``)
-    under the ``vpop_core.Limits`` lim and the ``vpop_core.Feed`` fd; ``tol`` is the
+    ends at rest, or no position is allowed, on the joint table T (``vpop.step.Table``)
+    under the ``vpop.step.Limits`` lim and the ``vpop.step.Feed`` fd; ``tol`` is the
     searches' tolerance in s.
 
     ``ref_final``: the reference is final (the path's own end) — else a target past the

@@ -105,7 +105,7 @@ class _Path:
 
     def __init__(self, path, joint_map, machine, dt, settings):
         from .vpop import JointTable
-        from .vpop_core import Feed, Limits, Table
+        from .vpop.step import Feed, Limits, Table
 
         self.path = path
         self.joint_map = joint_map

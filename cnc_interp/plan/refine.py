@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import _refine_kernels as RK
-from .vpop_core import Limits, Table
+from .vpop.step import Limits, Table
 
 #: samples per window, the stride between windows, Newton steps per solve
 REFINE_WINDOW = 60

@@ -55,7 +55,7 @@ import numpy as np
 from numba import njit
 
 # plan_core's statuses (one set for every kernel: ``status``)
-from .status import INFEASIBLE, NEED_SPACE, OK, STUCK, YIELD
+from ..status import INFEASIBLE, NEED_SPACE, OK, STUCK, YIELD
 
 _HUGE = 1e300
 # "clearly outside the bounds" for a zero step: far above the rounding of _bounds
@@ -413,18 +413,18 @@ def _stop_distance(v, a, J, A):
         if t2 < 0.0:
             t2 = 0.0
     t1 = (a + ap) / J
-    d = v * t1 + a * t1 * t1 / 2.0 - J * t1 ** 3 / 6.0
+    d = v * t1 + a * t1 * t1 / 2.0 - J * t1**3 / 6.0
     v1 = v + a * t1 - J * t1 * t1 / 2.0
     d += v1 * t2 - ap * t2 * t2 / 2.0
     v2 = v1 - ap * t2
     t3 = ap / J
-    d += v2 * t3 - ap * t3 * t3 / 2.0 + J * t3 ** 3 / 6.0
+    d += v2 * t3 - ap * t3 * t3 / 2.0 + J * t3**3 / 6.0
     return d
 
 
 # inlined into its two callers (_brake_step and _step's fallback): 15-20% off a brake
 # run; inlining _search or _step too adds minutes of compile time for a few per cent
-@njit(cache=True, inline='always')
+@njit(cache=True, inline="always")
 def _brake_value(pb, qh, k, sc, s0, d1, b, guess, hint, tol, qs0_known):
     """The brake policy's sample k (see ``_step``) on the ``Problem`` pb, given the bounds
     ``sc.lo``/``sc.hi`` of ``_bounds``. Returns (ok, s', hint); q, qs hold q(s'),
@@ -453,21 +453,22 @@ def _brake_value(pb, qh, k, sc, s0, d1, b, guess, hint, tol, qs0_known):
     # which side of the allowed interval is the target on? (linearised at the target)
     L, H = _lin_interval(q, qs, qh[k - 1], sc.lo, sc.hi, target, s0, b)
     if target < L or L > H:
-        okl, xl, hint = _search(T, lim, qh, k, sc, s0, b, np.bool_(False), hint, tol,
-                                Seed(target, np.bool_(True), L, H), np.bool_(True))
+        okl, xl, hint = _search(
+            T, lim, qh, k, sc, s0, b, np.bool_(False), hint, tol, Seed(target, np.bool_(True), L, H), np.bool_(True)
+        )
         if okl and xl >= target:
             return True, xl, hint
         if not okl:
             return False, s0, hint
-    oku, xu, hint = _search(T, lim, qh, k, sc, s0, b, np.bool_(True), hint, tol,
-                            Seed(target, np.bool_(True), L, H), np.bool_(False))
+    oku, xu, hint = _search(
+        T, lim, qh, k, sc, s0, b, np.bool_(True), hint, tol, Seed(target, np.bool_(True), L, H), np.bool_(False)
+    )
     if not oku:
         return False, s0, hint
     if xu <= target:
         return True, xu, hint
     # the linear model misled: the target lies inside; fall back to the lower end
-    okl, xl, hint = _search(T, lim, qh, k, sc, s0, b, np.bool_(False), hint, tol, _seed(guess),
-                            np.bool_(True))
+    okl, xl, hint = _search(T, lim, qh, k, sc, s0, b, np.bool_(False), hint, tol, _seed(guess), np.bool_(True))
     if not okl:
         return False, s0, hint
     if xl >= target:
@@ -488,7 +489,7 @@ def _path_state(sh, k):
 
 
 # inlined into the brake run's loop (its hot call) and into _step: 3-4% of a brake run
-@njit(cache=True, inline='always')
+@njit(cache=True, inline="always")
 def _brake_step(pb, sh, qh, k, hint, sc, tol, qs0_known):
     """``_step`` in mode 1 (brake)."""
     if not _bounds(qh, k, pb.lim, sc.lo, sc.hi):
@@ -520,8 +521,7 @@ def _step(pb, sh, qh, k, mode, hint, sc, tol, qs0_known, aim_jerk=1.0):
     b = _cap(s0, pb.feed)
     guess = s0 + d1 + d2
     if mode == 0:
-        ok, x, hint = _search(T, lim, qh, k, sc, s0, b, np.bool_(True), hint, tol, _seed(guess),
-                              np.bool_(False))
+        ok, x, hint = _search(T, lim, qh, k, sc, s0, b, np.bool_(True), hint, tol, _seed(guess), np.bool_(False))
         if ok:
             return ok, x, hint
         # the linearised search can miss a narrow allowed set (near a sharp turn the
@@ -529,17 +529,14 @@ def _step(pb, sh, qh, k, mode, hint, sc, tol, qs0_known, aim_jerk=1.0):
         okb, xb, hint = _brake_value(pb, qh, k, sc, s0, d1, b, guess, hint, tol, qs0_known)
         if not okb:
             return False, s0, hint
-        return _search(T, lim, qh, k, sc, s0, b, np.bool_(True), hint, tol, _seed(xb),
-                       np.bool_(False))
+        return _search(T, lim, qh, k, sc, s0, b, np.bool_(True), hint, tol, _seed(xb), np.bool_(False))
     hint = _eval(T, s0, hint, q, qs)
     jd, ad = _path_limits(qs, lim.jl, lim.al)
     # aim: the largest step whose continuous stop distance still fits before L
-    okl, xl, hint = _search(T, lim, qh, k, sc, s0, b, np.bool_(False), hint, tol, _seed(guess),
-                            np.bool_(False))
+    okl, xl, hint = _search(T, lim, qh, k, sc, s0, b, np.bool_(False), hint, tol, _seed(guess), np.bool_(False))
     if not okl:
         return False, s0, hint
-    oku, xu, hint = _search(T, lim, qh, k, sc, s0, b, np.bool_(True), hint, tol, _seed(guess),
-                            np.bool_(False))
+    oku, xu, hint = _search(T, lim, qh, k, sc, s0, b, np.bool_(True), hint, tol, _seed(guess), np.bool_(False))
     jd = jd * aim_jerk
     x = xl
     if xu >= L and L - s0 <= jd:
@@ -667,7 +664,7 @@ def _easy(pb, bs, kk, easy_frac, qs0, hint):
         return False
     k3 = _window_max(K.K3, p0, p1)
     k23 = _window_max(K.K23, p0, p1)
-    return k3 * d1 ** 3 + k23 * d1 * ab <= easy_frac
+    return k3 * d1**3 + k23 * d1 * ab <= easy_frac
 
 
 @njit(cache=True)

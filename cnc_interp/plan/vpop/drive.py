@@ -1,7 +1,7 @@
 """VPOp's step-loop driver and, for identity kinematics, its whole per-path preparation,
 compiled (imported lazily by ``vpop``).
 
-``drive`` runs ``vpop_core.plan_core`` over buffers that grow, or slide once a window is
+``drive`` runs ``step.plan_core`` over buffers that grow, or slide once a window is
 set, keeps a checkpoint of the loop every ``checkpoint`` samples and, after a fast-mode
 failure, re-plans exactly from the last one (the start, on paths shorter than a
 checkpoint), so samples before the last checkpoint's look-back are final: it returns
@@ -19,13 +19,13 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-from . import vpop_core as core
-from ._table_kernels import build_identity, curvature_bounds, speed_bound
+from . import step as core
+from .._table_kernels import build_identity, curvature_bounds, speed_bound
 
 # statuses (one set for every kernel: ``status``): drive's results OK (the path is
 # done), HAND_OUT, FAILED; prepare_identity's OK, NOT_FINITE_PATH, NO_LENGTH,
 # NOT_FINITE (the table), JERK_TOO_SMALL, TRIVIAL
-from .status import FAILED, HAND_OUT, JERK_TOO_SMALL, NO_LENGTH, NOT_FINITE, NOT_FINITE_PATH, OK, TRIVIAL
+from ..status import FAILED, HAND_OUT, JERK_TOO_SMALL, NO_LENGTH, NOT_FINITE, NOT_FINITE_PATH, OK, TRIVIAL
 
 # the driver's state (int64 array ``ds``)
 DS_BASE, DS_HANDED, DS_NEXT_CK, DS_FAST, DS_CK_LO, DS_CK_LEN, DS_CK_FIRST, DS_END, DS_STATUS = range(9)
@@ -35,7 +35,7 @@ DS_SIZE = 9
 CKPT_HISTORY = 8
 _RM_BLOCK = 32
 
-# The kernels' arguments, bundled by concept (see ``vpop_core`` for the step loop's own).
+# The kernels' arguments, bundled by concept (see ``step`` for the step loop's own).
 #: one fitted path (``fit.path.Path``): coef (segments, 6, n) power coefficients in the
 #: segment's parameter, breaks and s_breaks (segments + 1,) in parameter and arc length,
 #: the rational weights w, its length (mm) and feed (segments,) in mm/s
@@ -64,7 +64,7 @@ Checkpoint = namedtuple("Checkpoint", "st cs cq sh qh")
 
 @njit(cache=True)
 def range_max_packed(K):
-    """``vpop_core.range_max_table`` compiled (the same packed table, the same values)."""
+    """``step.range_max_table`` compiled (the same packed table, the same values)."""
     m = K.shape[0]
     B = _RM_BLOCK
     nb = max(1, (m + B - 1) // B)
@@ -124,8 +124,13 @@ def _failed(status, n, q_scale):
     """prepare_identity's result when it stops early: empty arrays."""
     e1 = np.empty(0)
     en = np.empty(n)
-    pb = core.Problem(core.Table(e1, np.empty((0, n, 6)), en), core.Limits(en, en, en), en,
-                      core.Feed(0.0, 0.0, e1, e1), core.Ease(e1, e1, e1, e1))
+    pb = core.Problem(
+        core.Table(e1, np.empty((0, n, 6)), en),
+        core.Limits(en, en, en),
+        en,
+        core.Feed(0.0, 0.0, e1, e1),
+        core.Ease(e1, e1, e1, e1),
+    )
     return status, pb, en, 0.0, 0.0, 0, 0, 0, 0, q_scale
 
 
@@ -151,9 +156,19 @@ def prepare_identity(path, mc, ps):
         return _failed(NOT_FINITE_PATH, n, 0.0)
     if length <= ps.min_length:
         return _failed(TRIVIAL, n, 0.0)
-    status, u, S, C, max_err, qend = build_identity(coef, path.breaks, s_breaks, path.w, length,
-                                                    ps.table_tol, ps.max_depth, ps.max_piece, ps.glx,
-                                                    ps.glw, ps.max_tries)
+    status, u, S, C, max_err, qend = build_identity(
+        coef,
+        path.breaks,
+        s_breaks,
+        path.w,
+        length,
+        ps.table_tol,
+        ps.max_depth,
+        ps.max_piece,
+        ps.glx,
+        ps.glw,
+        ps.max_tries,
+    )
     if status == NO_LENGTH:
         return _failed(NO_LENGTH, n, 0.0)
     if status != OK:
@@ -217,8 +232,7 @@ def prepare_identity(path, mc, ps):
         for ax in range(n):
             for i in range(6):
                 Cam[p, ax, i] = C[p, i, ax]
-    ease = core.Ease(range_max_packed(k2), range_max_packed(k3), range_max_packed(k23),
-                     range_max_packed(kv))
+    ease = core.Ease(range_max_packed(k2), range_max_packed(k3), range_max_packed(k23), range_max_packed(kv))
     pb = core.Problem(core.Table(S, Cam, qend), core.Limits(vl, al, jl), js, core.Feed(dt, L, FB, FV), ease)
     return OK, pb, qstart, tol, gap_tol, est, max_steps, floor_h, m, max_err
 
@@ -372,8 +386,7 @@ def new_loop(n, qstart, est, brake_cap, floor_h, room, window, checkpoint_every)
     ck_cq = np.empty((brake_cap, n))
     ck_sh = np.empty(span)
     ck_qh = np.empty((span, n))
-    return (sh, qh, st, core.Runs(bs, bq, cs, cq, stats), ds, Checkpoint(ck_st, ck_cs, ck_cq, ck_sh, ck_qh),
-            max_cap)
+    return (sh, qh, st, core.Runs(bs, bq, cs, cq, stats), ds, Checkpoint(ck_st, ck_cs, ck_cq, ck_sh, ck_qh), max_cap)
 
 
 @njit(cache=True, nogil=True)
@@ -409,8 +422,8 @@ def plan_identity_batch(paths, seg_off, mc, ps, ls, long_samples):
         a = seg_off[p]
         b = seg_off[p + 1]
         cf = coef[a:b]
-        br = breaks[a + p:b + p + 1]
-        sb = s_breaks[a + p:b + p + 1]
+        br = breaks[a + p : b + p + 1]
+        sb = s_breaks[a + p : b + p + 1]
         r = prepare_identity(PathData(cf, br, sb, paths.w[p], paths.length[p], feed[a:b]), mc, ps)
         status = r[0]
         if status == TRIVIAL:
@@ -436,8 +449,9 @@ def plan_identity_batch(paths, seg_off, mc, ps, ls, long_samples):
             continue
         _, pb, qstart, tol, gap_tol, est, max_steps, floor_h, pieces, max_err = r
         L = paths.length[p]
-        sh, qh, st, runs, ds, ck, max_cap = new_loop(n, qstart, est, brake_cap, floor_h, room, np.int64(0),
-                                                     checkpoint_every)
+        sh, qh, st, runs, ds, ck, max_cap = new_loop(
+            n, qstart, est, brake_cap, floor_h, room, np.int64(0), checkpoint_every
+        )
         ds[DS_NEXT_CK] = checkpoint_every
         ds[DS_FAST] = 1 if ls.fast else 0
         checkpoint(sh, qh, st, runs, ds, ck, np.bool_(True))
@@ -456,8 +470,8 @@ def plan_identity_batch(paths, seg_off, mc, ps, ls, long_samples):
             q2[:total] = q_all[:total]
             s_all = s2
             q_all = q2
-        s_all[total:total + m] = sh[:m]
-        q_all[total:total + m] = qh[:m]
+        s_all[total : total + m] = sh[:m]
+        q_all[total : total + m] = qh[:m]
         q_all[total + m - 1] = pb.table.QEND
         total += m
         off[p + 1] = total
