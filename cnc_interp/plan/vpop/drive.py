@@ -121,7 +121,9 @@ def start_point(coef):
 
 @njit(cache=True)
 def _failed(status, n, q_scale):
-    """prepare_identity's result when it stops early: empty arrays."""
+    """prepare_identity's result when it stops early: empty arrays. (Callers pass
+    ``np.int64(status)``: a bare status constant is a literal type to numba, which would
+    compile this once per status.)"""
     e1 = np.empty(0)
     en = np.empty(n)
     pb = core.Problem(
@@ -153,9 +155,9 @@ def prepare_identity(path, mc, ps):
             finite = False
             break
     if not finite:
-        return _failed(NOT_FINITE_PATH, n, 0.0)
+        return _failed(np.int64(NOT_FINITE_PATH), n, 0.0)
     if length <= ps.min_length:
-        return _failed(TRIVIAL, n, 0.0)
+        return _failed(np.int64(TRIVIAL), n, 0.0)
     status, u, S, C, max_err, qend = build_identity(
         coef,
         path.breaks,
@@ -170,9 +172,9 @@ def prepare_identity(path, mc, ps):
         ps.max_tries,
     )
     if status == NO_LENGTH:
-        return _failed(NO_LENGTH, n, 0.0)
+        return _failed(np.int64(NO_LENGTH), n, 0.0)
     if status != OK:
-        return _failed(NOT_FINITE, n, 0.0)
+        return _failed(np.int64(NOT_FINITE), n, 0.0)
     m = C.shape[0]
     qstart = C[0, 0].copy()
     big = 0.0
@@ -188,7 +190,7 @@ def prepare_identity(path, mc, ps):
     jl = mc.jl0 - 8.0 * margin
     for ax in range(n):
         if jl[ax] <= mc.jl_floor[ax]:
-            return _failed(JERK_TOO_SMALL, n, q_scale)
+            return _failed(np.int64(JERK_TOO_SMALL), n, q_scale)
     L = length
     n_seg = feed.shape[0]
     FB = s_breaks.copy()
