@@ -28,6 +28,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
+from ..fit._quintic import quintic
 from ._ipm import _band_cholesky, _band_solve
 from .vpop.step import _eval, _feasible
 
@@ -62,9 +63,7 @@ def _q_d012(S, C, QEND, x, hint, q0, q1, q2):
     t = x - S[p]
     for i in range(n):
         c = C[p, i]
-        q0[i] = ((((c[5] * t + c[4]) * t + c[3]) * t + c[2]) * t + c[1]) * t + c[0]
-        q1[i] = (((5.0 * c[5] * t + 4.0 * c[4]) * t + 3.0 * c[3]) * t + 2.0 * c[2]) * t + c[1]
-        q2[i] = ((20.0 * c[5] * t + 12.0 * c[4]) * t + 6.0 * c[3]) * t + 2.0 * c[2]
+        q0[i], q1[i], q2[i] = quintic(c[0], c[1], c[2], c[3], c[4], c[5], t)
     if x >= S[m]:
         for i in range(n):
             q0[i] = QEND[i]

@@ -126,10 +126,7 @@ def _seg_of_u(breaks, u):
 def _pos(coef, k, t, out, i, j):
     """q at local t of segment k into out[i, j, :]."""
     for ax in range(coef.shape[2]):
-        acc = coef[k, 5, ax]
-        for r in range(4, -1, -1):
-            acc = acc * t + coef[k, r, ax]
-        out[i, j, ax] = acc
+        out[i, j, ax] = quintic_d012(coef, k, ax, t)[0]
 
 
 @njit(cache=True)
@@ -192,10 +189,7 @@ def _piece_err(C, ic, t, QT, it, j):
     """max over the axes of |C[ic](t) - QT[it, j]|; a NaN counts as +inf."""
     e = 0.0
     for ax in range(C.shape[2]):
-        acc = C[ic, 5, ax]
-        for r in range(4, -1, -1):
-            acc = acc * t + C[ic, r, ax]
-        d = abs(acc - QT[it, j, ax])
+        d = abs(quintic_d012(C, ic, ax, t)[0] - QT[it, j, ax])
         if not d <= e:
             e = d if d == d else np.inf
     return e

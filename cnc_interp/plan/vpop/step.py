@@ -55,6 +55,7 @@ import numpy as np
 from numba import njit
 
 # plan_core's statuses (one set for every kernel: ``status``)
+from ...fit._quintic import quintic
 from ..status import INFEASIBLE, NEED_SPACE, OK, STUCK, YIELD
 
 _HUGE = 1e300
@@ -145,19 +146,12 @@ def _eval(T, x, hint, q, qs):
         for i in range(n):
             c = C[p, i]
             q[i] = QEND[i]
-            qs[i] = (((5.0 * c[5] * t + 4.0 * c[4]) * t + 3.0 * c[3]) * t + 2.0 * c[2]) * t + c[1]
+            qs[i] = quintic(c[0], c[1], c[2], c[3], c[4], c[5], t)[1]
         return p
     t = x - S[p]
     for i in range(n):
         c = C[p, i]
-        c0 = c[0]
-        c1 = c[1]
-        c2 = c[2]
-        c3 = c[3]
-        c4 = c[4]
-        c5 = c[5]
-        q[i] = ((((c5 * t + c4) * t + c3) * t + c2) * t + c1) * t + c0
-        qs[i] = (((5.0 * c5 * t + 4.0 * c4) * t + 3.0 * c3) * t + 2.0 * c2) * t + c1
+        q[i], qs[i], _ = quintic(c[0], c[1], c[2], c[3], c[4], c[5], t)
     return p
 
 
