@@ -419,20 +419,25 @@ def _stop_distance(v, a, J, A):
 # inlined into its two callers (_brake_step and _step's fallback): 15-20% off a brake
 # run; inlining _search or _step too adds minutes of compile time for a few per cent
 @njit(cache=True, inline="always")
-def _brake_value(pb, qh, k, sc, s0, d1, b, guess, hint, tol, qs0_known):
-    """The brake policy's sample k (see ``_step``) on the ``Problem`` pb, given the bounds
-    ``sc.lo``/``sc.hi`` of ``_bounds``. Returns (ok, s', hint); q, qs hold q(s'),
-    dq/ds(s'). With ``qs0_known`` wk[2] already holds dq/ds(s0) (a brake run carries it
-    from the step before)."""
-    T = pb.table
-    lim = pb.lim
+def _brake_value(T, lim, js, fd, sh, qh, k, sc, hint, tol, qs0_known):
+    """The brake policy's sample k (see ``_step``) on the joint table T under ``Limits``
+    lim, brake jerk js and ``Feed`` fd, given the bounds ``sc.lo``/``sc.hi`` of
+    ``_bounds``. Returns (ok, s', hint); q, qs hold q(s'), dq/ds(s'). With
+    ``qs0_known`` wk[2] already holds dq/ds(s0) (a brake run carries it from the step
+    before).
+
+    The hot kernels take the bundles they use, not the whole ``Problem``: numba counts
+    references to every array of a kernel's arguments on each call."""
+    s0, d1, d2 = _path_state(sh, k)
+    b = _cap(s0, fd)
+    guess = s0 + d1 + d2
     q = sc.q
     qs = sc.qs
     if qs0_known:
-        jd, ad = _path_limits(sc.wk[2], pb.js, lim.al)
+        jd, ad = _path_limits(sc.wk[2], js, lim.al)
     else:
         hint = _eval(T, s0, hint, q, qs)
-        jd, ad = _path_limits(qs, pb.js, lim.al)
+        jd, ad = _path_limits(qs, js, lim.al)
     # the least step after which a jerk ramp back to zero path acceleration still
     # leaves a non-negative speed (or a full stop once the speed is one jerk step)
     if d1 <= jd:
@@ -484,35 +489,31 @@ def _path_state(sh, k):
 
 # inlined into the brake run's loop (its hot call) and into _step: 3-4% of a brake run
 @njit(cache=True, inline="always")
-def _brake_step(pb, sh, qh, k, hint, sc, tol, qs0_known):
+def _brake_step(T, lim, js, fd, sh, qh, k, hint, sc, tol, qs0_known):
     """``_step`` in mode 1 (brake)."""
-    if not _bounds(qh, k, pb.lim, sc.lo, sc.hi):
+    if not _bounds(qh, k, lim, sc.lo, sc.hi):
         return False, sh[k - 1], hint
-    s0, d1, d2 = _path_state(sh, k)
-    b = _cap(s0, pb.feed)
-    return _brake_value(pb, qh, k, sc, s0, d1, b, s0 + d1 + d2, hint, tol, qs0_known)
+    return _brake_value(T, lim, js, fd, sh, qh, k, sc, hint, tol, qs0_known)
 
 
 @njit(cache=True)
-def _step(pb, sh, qh, k, mode, hint, sc, tol, qs0_known, aim_jerk=1.0):
-    """Choose sample k of the ``Problem`` pb. mode 0: max; 1: brake; 2: aim at rest
-    exactly at L.
+def _step(T, lim, js, fd, sh, qh, k, mode, hint, sc, tol, qs0_known):
+    """Choose sample k on the joint table T under ``Limits`` lim, brake jerk js and
+    ``Feed`` fd. mode 0: max; 1: brake; 2: aim at rest exactly at L.
 
     Returns (ok, s', hint); on success sc.q, sc.qs hold q(s'), dq/ds(s'). ``sc.wk``
     (3, n) is scratch; with ``qs0_known`` wk[2] holds dq/ds at sample k-1. Mode 0 fails
     only when the brake policy finds no sample k either, so "max failed at k" always
     means "braking from k fails" (what the dichotomy in ``plan_core`` relies on)."""
     if mode == 1:
-        return _brake_step(pb, sh, qh, k, hint, sc, tol, qs0_known)
-    T = pb.table
-    lim = pb.lim
+        return _brake_step(T, lim, js, fd, sh, qh, k, hint, sc, tol, qs0_known)
     q = sc.q
     qs = sc.qs
     if not _bounds(qh, k, lim, sc.lo, sc.hi):
         return False, sh[k - 1], hint
     s0, d1, d2 = _path_state(sh, k)
-    L = pb.feed.L
-    b = _cap(s0, pb.feed)
+    L = fd.L
+    b = _cap(s0, fd)
     guess = s0 + d1 + d2
     if mode == 0:
         ok, x, hint = _search(T, lim, qh, k, sc, s0, b, np.bool_(True), hint, tol, _seed(guess), np.bool_(False))
@@ -520,7 +521,7 @@ def _step(pb, sh, qh, k, mode, hint, sc, tol, qs0_known, aim_jerk=1.0):
             return ok, x, hint
         # the linearised search can miss a narrow allowed set (near a sharp turn the
         # joint positions are far from linear in s); the brake value is a feasible seed
-        okb, xb, hint = _brake_value(pb, qh, k, sc, s0, d1, b, guess, hint, tol, qs0_known)
+        okb, xb, hint = _brake_value(T, lim, js, fd, sh, qh, k, sc, hint, tol, qs0_known)
         if not okb:
             return False, s0, hint
         return _search(T, lim, qh, k, sc, s0, b, np.bool_(True), hint, tol, _seed(xb), np.bool_(False))
@@ -531,7 +532,6 @@ def _step(pb, sh, qh, k, mode, hint, sc, tol, qs0_known, aim_jerk=1.0):
     if not okl:
         return False, s0, hint
     oku, xu, hint = _search(T, lim, qh, k, sc, s0, b, np.bool_(True), hint, tol, _seed(guess), np.bool_(False))
-    jd = jd * aim_jerk
     x = xl
     if xu >= L and L - s0 <= jd:
         x = L  # close enough to land in one jerk step
@@ -625,21 +625,19 @@ def range_max_table(K: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def _easy(pb, bs, kk, easy_frac, qs0, hint):
-    """Early end of a brake run (samples bs[:kk]) on the ``Problem`` pb: braking, slow
+def _easy(S, K, js, al, L, bs, kk, easy_frac, qs0, hint):
+    """Early end of a brake run (samples bs[:kk]): braking, slow
     enough that the path's curvature uses at most ``easy_frac`` of any axis's
     acceleration and jerk over the whole remaining stop, and the stop ends before L.
-    (A heuristic; a plan it misleads is re-planned exactly.)"""
-    S = pb.table.S
-    L = pb.feed.L
-    K = pb.ease
+    (A heuristic; a plan it misleads is re-planned exactly.) S: the table's knots; K:
+    the ``Ease`` tables; js, al: brake jerk and acceleration limits (n,)."""
     s0 = bs[kk - 1]
     d1 = s0 - bs[kk - 2]
     d2 = d1 - (bs[kk - 2] - bs[kk - 3])
     if d2 > 0.0 or d1 <= 0.0:
         return False
     p0 = _piece(S, s0, hint)
-    jd, ad = _path_limits(qs0, pb.js, pb.lim.al)
+    jd, ad = _path_limits(qs0, js, al)
     # the ramp back to zero deceleration must not need a negative speed
     if d1 < 2.0 * d2 * d2 / jd:
         return False
@@ -671,6 +669,11 @@ def _brake_run(pb, sh, qh, j, runs, sc, cfg, mode, easy_frac, horizon):
     and is no longer speeding up counts as a success. Returns (ok, scratch index after the
     last sample, main-sequence index up to which the brake continuation is certified
     (_BIG: to rest))."""
+    T = pb.table
+    lim = pb.lim
+    js = pb.js
+    fd = pb.feed
+    K = pb.ease
     bs = runs.bs
     bq = runs.bq
     stats = runs.stats
@@ -690,9 +693,9 @@ def _brake_run(pb, sh, qh, j, runs, sc, cfg, mode, easy_frac, horizon):
     cap = bs.shape[0]
     while True:
         if mode == 1:
-            ok, x, hint = _brake_step(pb, bs, bq, kk, hint, sc, cfg.tol, kk > 3)
+            ok, x, hint = _brake_step(T, lim, js, fd, bs, bq, kk, hint, sc, cfg.tol, kk > 3)
         else:
-            ok, x, hint = _step(pb, bs, bq, kk, mode, hint, sc, cfg.tol, kk > 3, np.float64(1.0))
+            ok, x, hint = _step(T, lim, js, fd, bs, bq, kk, mode, hint, sc, cfg.tol, kk > 3)
         if not ok:
             return False, kk, 0
         bs[kk] = x
@@ -703,9 +706,13 @@ def _brake_run(pb, sh, qh, j, runs, sc, cfg, mode, easy_frac, horizon):
         kk += 1
         if bs[kk - 1] == bs[kk - 2] and bs[kk - 2] == bs[kk - 3]:
             return True, kk, _BIG
-        if easy_frac > 0.0 and mode == 1 and _easy(pb, bs, kk, easy_frac, wk[2], hint):
+        if easy_frac > 0.0 and mode == 1 and _easy(T.S, K, js, lim.al, fd.L, bs, kk, easy_frac, wk[2], hint):
             return True, kk, _BIG
-        if horizon > 0 and j + kk - 3 >= horizon and _easy(pb, bs, kk, np.float64(0.6), wk[2], hint):
+        if (
+            horizon > 0
+            and j + kk - 3 >= horizon
+            and _easy(T.S, K, js, lim.al, fd.L, bs, kk, np.float64(0.6), wk[2], hint)
+        ):
             return True, kk, j + kk - 3
         if kk >= cap or kk >= cfg.max_steps:
             return False, kk, 0
@@ -738,7 +745,7 @@ def _rest_value(pb, sh, qh, j, runs, sc, cfg, hint):
     tol = cfg.tol
     n = qh.shape[1]
     s0 = sh[j - 1]
-    ok, xm, hint = _step(pb, sh, qh, j, np.int64(0), hint, sc, tol, np.bool_(False), np.float64(1.0))
+    ok, xm, hint = _step(pb.table, pb.lim, pb.js, pb.feed, sh, qh, j, np.int64(0), hint, sc, tol, np.bool_(False))
     if not ok or not xm > s0:
         return False, s0, 0, hint
     good = s0
@@ -781,7 +788,7 @@ def _brake_fix(pb, sh, qh, j, runs, sc, cfg, hint):
     """Fix sample j at the brake value (at rest where that would stay put: ``_rest_value``).
     Returns (status OK / INFEASIBLE / STUCK, the certificate of a rest value or -1, hint)."""
     n = qh.shape[1]
-    ok, x, hint = _step(pb, sh, qh, j, np.int64(1), hint, sc, cfg.tol, np.bool_(False), np.float64(1.0))
+    ok, x, hint = _step(pb.table, pb.lim, pb.js, pb.feed, sh, qh, j, np.int64(1), hint, sc, cfg.tol, np.bool_(False))
     if not ok:
         return INFEASIBLE, -1, hint
     c = -1
@@ -854,7 +861,7 @@ def _chain_test(pb, sh, qh, j, t, runs, sc, cfg, last_k, last_j, hint):
     """Samples j+1..t-1 from the certificate, the max step at t, then a brake run from
     t+1: (passed, certified-up-to, hint)."""
     _put_cert(sh, qh, runs.cs, runs.cq, j, j + 1, t)
-    ok, x, hint = _step(pb, sh, qh, t, np.int64(0), hint, sc, cfg.tol, np.bool_(False), np.float64(1.0))
+    ok, x, hint = _step(pb.table, pb.lim, pb.js, pb.feed, sh, qh, t, np.int64(0), hint, sc, cfg.tol, np.bool_(False))
     runs.stats[3] += 1
     if not ok:
         return False, 0, hint
@@ -908,7 +915,7 @@ def _chain_search(pb, sh, qh, j, m, runs, sc, cfg, last_k, last_j, hint):
         _put_cert(sh, qh, runs.cs, runs.cq, j, j + 1, j + m)
         return -1, 0, hint
     _put_cert(sh, qh, runs.cs, runs.cq, j, j + 1, best)
-    ok, x, hint = _step(pb, sh, qh, best, np.int64(0), hint, sc, cfg.tol, np.bool_(False), np.float64(1.0))
+    ok, x, hint = _step(pb.table, pb.lim, pb.js, pb.feed, sh, qh, best, np.int64(0), hint, sc, cfg.tol, np.bool_(False))
     sh[best] = x
     for i in range(n):
         qh[best, i] = sc.q[i]
@@ -973,7 +980,11 @@ def plan_core(pb, sh, qh, st, runs, cfg, stop_k, k_base):
     hi = np.empty(n)
     wk = np.empty((3, n))
     sc = Scratch(q, qs, lo, hi, wk)
-    L = pb.feed.L
+    T = pb.table
+    lim = pb.lim
+    js = pb.js
+    fd = pb.feed
+    L = fd.L
     tol = cfg.tol
     fast = cfg.fast
     floor_h = cfg.floor_h
@@ -1021,7 +1032,7 @@ def plan_core(pb, sh, qh, st, runs, cfg, stop_k, k_base):
                 b = k + c_len - 2
                 k = k + c_len - 1
             continue
-        ok, x, hint = _step(pb, sh, qh, k, np.int64(0), hint, sc, tol, np.bool_(False), np.float64(1.0))
+        ok, x, hint = _step(T, lim, js, fd, sh, qh, k, np.int64(0), hint, sc, tol, np.bool_(False))
         stats[3] += 1
         if ok and chain and k + 1 < cap:
             # right after a brake fix the next failure is usually imminent: test the max
