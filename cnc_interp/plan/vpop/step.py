@@ -54,8 +54,9 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-# plan_core's statuses (one set for every kernel: ``status``)
 from ...fit._quintic import quintic
+
+# plan_core's statuses (one set for every kernel: ``status``)
 from ..status import INFEASIBLE, NEED_SPACE, OK, STUCK, YIELD
 
 _HUGE = 1e300
@@ -64,7 +65,9 @@ _STAY_MARGIN = 1e-6
 _BIG = 1 << 62
 
 # The kernels' arguments, bundled by concept (module level, so that numba's cache can
-# name their types). Step units throughout: see the module docstring.
+# name their types). Step units throughout: see the module docstring. A kernel called per
+# step takes only the bundles it reads, not the whole ``Problem``: numba increments and
+# decrements the reference count of every array in a kernel's arguments on each call.
 #: the joint table: knots S (m+1,) in arc length, power coefficients C (m, n, 6) in
 #: s - S[p] (each axis's six contiguous), the exact end point QEND (n,)
 Table = namedtuple("Table", "S C QEND")
