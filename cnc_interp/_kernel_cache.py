@@ -150,8 +150,8 @@ def _drop_cache(root: str, mod: str, is_pkg: bool) -> bool:
 PLAN_KERNEL_MODULES = (
     "fit._arclen",
     "plan._table_kernels",
-    "plan.vpop_core",
-    "plan.vpop_drive",
+    "plan.vpop.step",
+    "plan.vpop.drive",
 )
 #: what compiling them from scratch takes, measured on the project's 2-core machine
 #: (quick-start plan of mill-contour.ngc, idle: about 40 s with VPOp's kernels compiled by

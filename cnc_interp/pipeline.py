@@ -410,7 +410,7 @@ def _warm_kernels(planner: str) -> None:
                 _precompile.compile_preparation()
                 _precompile.wait()
             from .export._repr import format_table
-            from .plan import vpop_drive
+            from .plan.vpop import drive as vpop_drive
 
             format_table(np.zeros((1, 1)))
             vpop_drive.plan_identity_batch  # noqa: B018 - the import loads the module

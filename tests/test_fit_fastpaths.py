@@ -23,7 +23,7 @@ from cnc_interp.fit.deviation import PATH_DEV_MAX_SAMPLES
 from cnc_interp.fit.deviation import PATH_DEV_MIN_SAMPLES
 from cnc_interp.fit.deviation import PATH_DEV_SAMPLES_PER_SPAN
 from cnc_interp.fit import FitSettings, Path, fit_program
-from cnc_interp.fit._linedev import polyline_path_deviation
+from cnc_interp.fit._linedev import DeviationSettings, polyline_path_deviation
 from cnc_interp.fit.deviation import path_deviation
 from cnc_interp.fit.fitter import _build_paths, _fit_run_raw
 from cnc_interp.gcode.program import Program, Run, Stop
@@ -120,12 +120,7 @@ def test_compiled_polyline_deviation_equals_path_deviation(seed):
     if seed % 3 == 0:
         lin[-1] = False
     want = path_deviation(breaks, coef, nodes, tol, lin)
-    got = polyline_path_deviation(
-        breaks,
-        coef,
-        nodes,
-        tol,
-        lin,
+    cfg = DeviationSettings(
         PATH_DEV_SAMPLES_PER_SPAN,
         PATH_DEV_MIN_SAMPLES,
         PATH_DEV_MAX_SAMPLES,
@@ -135,12 +130,10 @@ def test_compiled_polyline_deviation_equals_path_deviation(seed):
         PATH_DEV_FIT_SAMPLES,
         PATH_DEV_NEWTON_ITERS,
     )
+    got = polyline_path_deviation(breaks, coef, nodes, tol, lin, cfg)
     assert want[0] > 0
     assert got == want
-    assert polyline_path_deviation(breaks, coef, nodes, tol, np.zeros(d, dtype=bool), 4, 3, 64, 0.5, 8, 256, 8, 8) == (
-        0.0,
-        0.0,
-    )
+    assert polyline_path_deviation(breaks, coef, nodes, tol, np.zeros(d, dtype=bool), cfg) == (0.0, 0.0)
 
 
 def test_single_moves_are_exact_lines_with_zero_deviation():

@@ -17,7 +17,7 @@ def sleeping_children(monkeypatch):
     monkeypatch.setattr(
         precompile, "_command", lambda job, also=(): [sys.executable, "-c", "import time; time.sleep(60)"]
     )
-    monkeypatch.setattr("cnc_interp._kernel_cache.missing_kernels", lambda root: ["plan.vpop_core"])
+    monkeypatch.setattr("cnc_interp._kernel_cache.missing_kernels", lambda root: ["plan.vpop.step"])
     yield
     precompile.stop()
 
@@ -70,7 +70,8 @@ def test_the_child_leaves_the_step_loop_cached(tmp_path, monkeypatch):
 
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
     code = (
-        "from cnc_interp.plan import precompile, vpop_drive as D\n"
+        "from cnc_interp.plan import precompile\n"
+        "from cnc_interp.plan.vpop import drive as D\n"
         "from cnc_interp import api\n"
         "assert precompile.start(also=('export._repr:warm_up',))\n"
         "precompile.compile_preparation()\n"

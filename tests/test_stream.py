@@ -121,9 +121,9 @@ def small_checkpoints(monkeypatch):
     """Checkpoints every 2048 samples, so that a path of a few 10^4 samples slides its
     buffers many times (the result depends on the checkpoint spacing only when a
     fast-mode failure is re-planned from one)."""
-    from cnc_interp.plan import vpop
+    from cnc_interp.plan.vpop import planner
 
-    monkeypatch.setattr(vpop, "VPOP_CHECKPOINT_SAMPLES", 2048)
+    monkeypatch.setattr(planner, "VPOP_CHECKPOINT_SAMPLES", 2048)
 
 
 def test_a_long_path_streams_in_bounded_chunks(small_checkpoints):
@@ -150,7 +150,7 @@ def test_a_fast_mode_failure_replans_from_the_last_checkpoint(small_checkpoints,
     """A failure of the fast mode far into a path re-plans exactly from the last checkpoint
     (never from the start, which may have been handed out): the streamed and the whole
     result agree, and every limit holds."""
-    from cnc_interp.plan import vpop_core
+    from cnc_interp.plan.vpop import step as vpop_core
     from cnc_interp.plan.base import collect_path_plan
     from cnc_interp.plan.verify import verify_arrays
     from cnc_interp.plan.vpop import iter_path_plan_vpop
@@ -162,12 +162,12 @@ def test_a_fast_mode_failure_replans_from_the_last_checkpoint(small_checkpoints,
     def failing(*a):
         status = real(*a)
         calls["n"] += 1
-        fast = a[26]
+        fast = a[5].fast  # plan_core(pb, sh, qh, st, runs, cfg, stop_k, k_base)
         if fast and status == vpop_core.YIELD and calls["n"] == 6:
             return vpop_core.INFEASIBLE  # as if a shortened brake run misjudged a state
         return status
 
-    import cnc_interp.plan.vpop_drive as D
+    import cnc_interp.plan.vpop.drive as D
 
     monkeypatch.setattr(D.core, "plan_core", failing)
     monkeypatch.setattr(D, "drive", D.drive.py_func)

@@ -329,7 +329,7 @@ def test_bisected_chain_matches_sequential_chain(seed, monkeypatch):
     every step in order is the reference. Both must hold the limits and end exactly, and
     the bisection may cost at most a little cycle time (it picks a later switch only
     where the tests do not pass from some step on)."""
-    import cnc_interp.plan.vpop as vpop_mod
+    import cnc_interp.plan.vpop.planner as vpop_mod
 
     rng = np.random.default_rng(seed)
     p = hermite_path(random_curve(rng), 40, 180.0)
@@ -347,7 +347,7 @@ def test_helix_at_the_acceleration_limit_chain(monkeypatch):
     """A helix cruising at the centripetal limit switches between speeding up and braking
     all the time: the bisected chain holds every limit and stays within 3% of the
     sequential chain's cycle."""
-    import cnc_interp.plan.vpop as vpop_mod
+    import cnc_interp.plan.vpop.planner as vpop_mod
 
     p = hermite_path(circle_fun(12.0, turns=2.0, z_per_turn=8.0), 64, 1000.0)
     fast = plan_path_vpop(p, None, MILL, DT)

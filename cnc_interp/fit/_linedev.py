@@ -11,32 +11,29 @@ there that this module calls needs an edit here too (its cache is keyed on this 
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
 from numba import njit
 
 from ._project import line_samples, march_distances, median
 
+#: the measurement's knobs (``deviation``'s PATH_DEV_* constants): samples_per_span,
+#: min_samples, max_samples (samples per move), local_frac, window and far_window (in
+#: sample spacings), n_coarse (samples of the coarse search) and iters (Newton steps)
+DeviationSettings = namedtuple(
+    "DeviationSettings", "samples_per_span min_samples max_samples local_frac window far_window n_coarse iters"
+)
+
 
 @njit(cache=True)
-def polyline_path_deviation(
-    breaks,
-    coef,
-    nodes,
-    tol_mm,
-    lin,
-    samples_per_span,
-    min_samples,
-    max_samples,
-    local_frac,
-    window,
-    far_window,
-    n_coarse,
-    iters,
-):
+def polyline_path_deviation(breaks, coef, nodes, tol_mm, lin, cfg):
     """(max distance mm, max distance / tolerance) of the moves through ``nodes`` (n, d)
     to the pieces (breaks (S+1,), coef (S, 6, d)) over the axes ``lin`` (d,) bool;
-    ``tol_mm`` (n,) the tolerance of the move ending at each node. As
-    ``path_deviation(breaks, coef, nodes, tol_mm, lin)`` with no curves."""
+    ``tol_mm`` (n,) the tolerance of the move ending at each node; ``cfg`` the
+    ``DeviationSettings``. As ``path_deviation(breaks, coef, nodes, tol_mm, lin)`` with
+    no curves."""
+    samples_per_span = cfg.samples_per_span
     n, d = nodes.shape
     n_lin = 0
     for a in range(d):
@@ -50,7 +47,7 @@ def polyline_path_deviation(
         h[k] = breaks[k + 1] - breaks[k]
     spacing = max(median(h), 1e-9) / samples_per_span
     in_curve = np.zeros(n - 1, dtype=np.bool_)
-    pts, tol, _ = line_samples(nodes, tol_mm, in_curve, spacing, min_samples, max_samples)
+    pts, tol, _ = line_samples(nodes, tol_mm, in_curve, spacing, cfg.min_samples, cfg.max_samples)
     K = pts.shape[0]
     if K == 0:
         return 0.0, 0.0
@@ -62,7 +59,9 @@ def polyline_path_deviation(
             cm[:, :, j] = coef[:, :, a]
             pm[:, j] = pts[:, a]
             j += 1
-    dist = march_distances(cm, h, pm, tol, local_frac, window * spacing, far_window * spacing, n_coarse, iters)
+    dist = march_distances(
+        cm, h, pm, tol, cfg.local_frac, cfg.window * spacing, cfg.far_window * spacing, cfg.n_coarse, cfg.iters
+    )
     dmax = dist[0]
     rmax = dist[0] / max(tol[0], 1e-300)
     for i in range(1, K):

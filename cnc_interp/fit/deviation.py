@@ -151,23 +151,20 @@ def polyline_deviation(breaks: np.ndarray, coef: np.ndarray, nodes: np.ndarray, 
     """``path_deviation`` for a sub-run of G1 moves only (no curves), in one compiled call
     (``_linedev``): the same samples, search and result, without the Python glue that
     dominates on programs of many short paths."""
-    from ._linedev import polyline_path_deviation
+    from ._linedev import DeviationSettings, polyline_path_deviation
 
-    return polyline_path_deviation(
-        np.ascontiguousarray(breaks, dtype=float),
-        np.ascontiguousarray(coef, dtype=float),
-        nodes,
-        tol_mm,
-        lin,
-        PATH_DEV_SAMPLES_PER_SPAN,
-        PATH_DEV_MIN_SAMPLES,
-        PATH_DEV_MAX_SAMPLES,
-        PATH_DEV_LOCAL_FRAC,
-        PATH_DEV_WINDOW,
-        PATH_DEV_FAR_WINDOW,
-        PATH_DEV_FIT_SAMPLES,
-        PATH_DEV_NEWTON_ITERS,
+    cfg = DeviationSettings(
+        samples_per_span=PATH_DEV_SAMPLES_PER_SPAN,
+        min_samples=PATH_DEV_MIN_SAMPLES,
+        max_samples=PATH_DEV_MAX_SAMPLES,
+        local_frac=PATH_DEV_LOCAL_FRAC,
+        window=PATH_DEV_WINDOW,
+        far_window=PATH_DEV_FAR_WINDOW,
+        n_coarse=PATH_DEV_FIT_SAMPLES,
+        iters=PATH_DEV_NEWTON_ITERS,
     )
+    breaks = np.ascontiguousarray(breaks, dtype=float)
+    return polyline_path_deviation(breaks, np.ascontiguousarray(coef, dtype=float), nodes, tol_mm, lin, cfg)
 
 
 def _sample_spacing(breaks: np.ndarray) -> float:

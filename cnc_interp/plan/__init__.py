@@ -6,8 +6,10 @@
   worker threads; ``timeline.plan_program`` is the same in memory (a ``Trajectory``);
 * ``base`` is the planners' contract (one-shot ``PathPlan`` or a stream of chunks);
 * ``vpop.plan_path_vpop`` / ``vpop.iter_path_plan_vpop`` is paper 001's maximum-feed
-  interpolator for one path (streaming within the path), ``vpop_drive`` its compiled
-  driver and batch kernel;
+  interpolator for one path (streaming within the path): the package ``vpop`` holds its
+  joint table (``table``), compiled step loop (``step``), compiled driver and batch
+  kernel (``drive``) and the planner on top (``planner``);
+* ``status`` names the compiled kernels' status codes (one set);
 * ``verify.verify`` re-checks every limit from the emitted setpoints;
 * ``optimality`` holds the references used to measure how close to minimum time a
   plan is.

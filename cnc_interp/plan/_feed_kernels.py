@@ -21,8 +21,21 @@ meets the true bound (the convex-concave procedure; iterating ŵ <- w converges)
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
 from numba import njit
+
+#: the collocation points of ``lp_rows`` (K of them): each point's first basis index
+#: ``first`` (K,) int64, the basis B (K, 3, 4) of ``cubic_basis``, and the joint
+#: derivatives q_s, q_ss, q_sss (K, n) of ``table_derivs``
+Collocation = namedtuple("Collocation", "first B q1 q2 q3")
+#: the LP's per-axis data (n,): which axes move, their acceleration (mm/s²) and jerk
+#: (mm/s³) limits
+AxisLimits = namedtuple("AxisLimits", "moving amax jmax")
+#: the LP rows ``lp_rows`` fills, one per row: first column ``first`` int64, the four
+#: coefficients ``coef`` (rows, 4) and the right-hand side ``b``
+Rows = namedtuple("Rows", "first coef b")
 
 
 @njit(cache=True)
@@ -103,14 +116,25 @@ def cubic_basis(knots, n_coef, x, first, B):
 
 
 @njit(cache=True)
-def lp_rows(first, B, q1, q2, q3, moving, wmax, w_hat, inner, amax, jmax, scale, row_first, row_coef, row_b):
-    """Fill the LP rows (in x_j = c_j / scale[j]) for the collocation points; returns
-    their count.
+def lp_rows(pts, lim, wmax, w_hat, inner, scale, rows):
+    """Fill the ``Rows`` rows (in x_j = c_j / scale[j]) for the ``Collocation`` pts under
+    the ``AxisLimits`` lim; returns their count.
 
     Per point k: w <= wmax (scaled by wmax) and for each moving axis i:
     ±(q_ss w + q_s w'/2) / A_i <= 1 and, where ``inner[k]`` (w > 0 is possible),
     ±E_i(w) √ŵ / (3/2 J_i) + w / (3 ŵ) <= 1 (the tangent bound of the module docstring).
     """
+    first = pts.first
+    B = pts.B
+    q1 = pts.q1
+    q2 = pts.q2
+    q3 = pts.q3
+    moving = lim.moving
+    amax = lim.amax
+    jmax = lim.jmax
+    row_first = rows.first
+    row_coef = rows.coef
+    row_b = rows.b
     K = first.shape[0]
     n = q1.shape[1]
     r = 0

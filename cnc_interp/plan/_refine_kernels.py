@@ -23,20 +23,27 @@ never leaves the region where the barrier is defined.
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
 from numba import njit
 
+from ..fit._quintic import quintic
 from ._ipm import _band_cholesky, _band_solve
-from .vpop_core import _eval, _feasible
+from .vpop.step import _eval, _feasible
 
-FEASIBLE = 0
-INFEASIBLE = 1
-FAILED = 2
+# solve_window's statuses (one set for every kernel: ``status``): OK (the window is
+# feasible), INFEASIBLE, FAILED (the start is not strictly monotone)
+from .status import FAILED, INFEASIBLE, OK
 
 #: z below which a window counts as feasible (the exact check follows)
 _Z_TARGET = -1e-6
 _MU0 = 1e-2
 _MU_MIN = 1e-10
+
+#: the barrier's Newton system that ``_assemble`` fills: gradient g (nfree,), band
+#: Hessian H (nfree, 4), the z column hz (nfree,), and gz (2,): z's gradient and curvature
+NewtonSystem = namedtuple("NewtonSystem", "g H hz gz")
 
 
 @njit(cache=True)
@@ -56,9 +63,7 @@ def _q_d012(S, C, QEND, x, hint, q0, q1, q2):
     t = x - S[p]
     for i in range(n):
         c = C[p, i]
-        q0[i] = ((((c[5] * t + c[4]) * t + c[3]) * t + c[2]) * t + c[1]) * t + c[0]
-        q1[i] = (((5.0 * c[5] * t + 4.0 * c[4]) * t + 3.0 * c[3]) * t + 2.0 * c[2]) * t + c[1]
-        q2[i] = ((20.0 * c[5] * t + 12.0 * c[4]) * t + 6.0 * c[3]) * t + 2.0 * c[2]
+        q0[i], q1[i], q2[i] = quintic(c[0], c[1], c[2], c[3], c[4], c[5], t)
     if x >= S[m]:
         for i in range(n):
             q0[i] = QEND[i]
@@ -135,9 +140,13 @@ def _rows(P, nfree, moving, lim, fdt, Q0, z, u_out):
 
 
 @njit(cache=True)
-def _assemble(P, nfree, moving, lim, fdt, Q1, Q2, u, mu, g, H, hz, grad_z):
-    """Gradient g (nfree), band Hessian H (nfree, 4) and the z column hz, of
-    mu Σ -log(u_r) (z's own gradient 1 added by the caller in grad_z[0])."""
+def _assemble(P, nfree, moving, lim, fdt, Q1, Q2, u, mu, ns):
+    """The ``NewtonSystem`` ns: gradient g (nfree), band Hessian H (nfree, 4) and the z
+    column hz, of mu Σ -log(u_r) (z's own gradient 1 added by the caller in gz[0])."""
+    g = ns.g
+    H = ns.H
+    hz = ns.hz
+    grad_z = ns.gz
     n = Q1.shape[1]
     for k in range(nfree):
         g[k] = 0.0
@@ -260,7 +269,7 @@ def solve_window(S, C, QEND, pre, post, x0, moving, lim, fdt, max_newton, counts
     best_x = x.copy()
     for it in range(max_newton):
         counts[0] += 1
-        _assemble(P, nfree, moving, lim, fdt, Q1, Q2, u, mu, g, H, hz, gzz)
+        _assemble(P, nfree, moving, lim, fdt, Q1, Q2, u, mu, NewtonSystem(g, H, hz, gzz))
         gz = 1.0 + gzz[0]
         hzz = gzz[1]
         for k in range(nfree):
@@ -328,7 +337,7 @@ def solve_window(S, C, QEND, pre, post, x0, moving, lim, fdt, max_newton, counts
             for k in range(nfree):
                 best_x[k] = x[k]
         if best_z < _Z_TARGET:
-            return FEASIBLE, best_x, best_z
+            return OK, best_x, best_z
         if dec < 1e-3 * mu * r or alpha < 1e-3:
             # near the central point of this μ: z exceeds the optimum by at most about
             # μ per row; when even that leaves it positive, the window is infeasible
@@ -338,21 +347,22 @@ def solve_window(S, C, QEND, pre, post, x0, moving, lim, fdt, max_newton, counts
                 break
             mu *= 0.1
     if best_z < _Z_TARGET:
-        return FEASIBLE, best_x, best_z
+        return OK, best_x, best_z
     return INFEASIBLE, best_x, best_z
 
 
 @njit(cache=True)
-def exact_ok(S, C, QEND, sh, lo, hi, vl, al, jl, qbuf):
-    """Samples lo..hi-1 of sh (with the samples before lo) pass verify's exact checks;
-    q positions go to qbuf (rows lo..hi-1)."""
+def exact_ok(T, lim, sh, lo, hi, qbuf):
+    """Samples lo..hi-1 of sh (with the samples before lo) pass verify's exact checks
+    (the ``vpop.step.Limits`` lim) on the ``vpop.step.Table`` T; q positions go to qbuf
+    (rows lo..hi-1)."""
     n = qbuf.shape[1]
     q = np.empty(n)
     qs = np.empty(n)
     hint = 0
     for k in range(lo, hi):
-        hint = _eval(S, C, QEND, sh[k], hint, q, qs)
-        if not _feasible(qbuf, k, q, vl, al, jl):
+        hint = _eval(T, sh[k], hint, q, qs)
+        if not _feasible(qbuf, k, q, lim):
             return False
         for i in range(n):
             qbuf[k, i] = q[i]

@@ -21,21 +21,29 @@ view costs more (reference counting) than the arithmetic it feeds.
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
 from numba import njit
 
 from ..fit._quintic import quintic_d012
 
 # build_identity status codes
-OK = 0
-NO_LENGTH = 1
-NOT_FINITE = 2
+# build_identity's statuses (one set for every kernel: ``status``)
+from .status import NO_LENGTH, NOT_FINITE, OK
+
+#: ``_quarters``' scratch: the Gauss-Legendre nodes t and squared speeds s2 of the four
+#: rules (4 * len(glx),), and the quarters' half widths half (4,)
+QuarterScratch = namedtuple("QuarterScratch", "t s2 half")
 
 
 @njit(cache=True)
-def _quarters(coef, breaks, w, k, ua, ub, glx, glw, uc, sub, t, s2, half):
+def _quarters(coef, breaks, w, k, ua, ub, glx, glw, uc, sub, sc):
     """Quarter points uc (3,) of [ua, ub] and the arc lengths sub (4,) of its quarters,
-    each by one Gauss–Legendre rule (scratch t, s2 (4 * len(glx),), half (4,))."""
+    each by one Gauss–Legendre rule (scratch ``QuarterScratch`` sc)."""
+    t = sc.t
+    s2 = sc.s2
+    half = sc.half
     base = breaks[k]
     du = ub - ua
     ng = glx.shape[0]
@@ -86,7 +94,7 @@ def quarter_arcs(coef, breaks, w, seg, ua, ub, glx, glw):
     uc1 = np.empty(3)
     sub1 = np.empty(4)
     for p in range(m):
-        _quarters(coef, breaks, w, seg[p], ua[p], ub[p], glx, glw, uc1, sub1, t, s2, half)
+        _quarters(coef, breaks, w, seg[p], ua[p], ub[p], glx, glw, uc1, sub1, QuarterScratch(t, s2, half))
         for j in range(3):
             uc[p, j] = uc1[j]
         for j in range(4):
@@ -118,10 +126,7 @@ def _seg_of_u(breaks, u):
 def _pos(coef, k, t, out, i, j):
     """q at local t of segment k into out[i, j, :]."""
     for ax in range(coef.shape[2]):
-        acc = coef[k, 5, ax]
-        for r in range(4, -1, -1):
-            acc = acc * t + coef[k, r, ax]
-        out[i, j, ax] = acc
+        out[i, j, ax] = quintic_d012(coef, k, ax, t)[0]
 
 
 @njit(cache=True)
@@ -184,10 +189,7 @@ def _piece_err(C, ic, t, QT, it, j):
     """max over the axes of |C[ic](t) - QT[it, j]|; a NaN counts as +inf."""
     e = 0.0
     for ax in range(C.shape[2]):
-        acc = C[ic, 5, ax]
-        for r in range(4, -1, -1):
-            acc = acc * t + C[ic, r, ax]
-        d = abs(acc - QT[it, j, ax])
+        d = abs(quintic_d012(C, ic, ax, t)[0] - QT[it, j, ax])
         if not d <= e:
             e = d if d == d else np.inf
     return e
@@ -321,7 +323,7 @@ def _refine(coef, breaks, w, ua0, ub0, seg0, tol, scale, max_depth, glx, glw):
             a = st_a[top]
             b = st_b[top]
             d = st_d[top]
-            _quarters(coef, breaks, w, k, a, b, glx, glw, uc, sub, tg, s2, half)
+            _quarters(coef, breaks, w, k, a, b, glx, glw, uc, sub, QuarterScratch(tg, s2, half))
             ds = sub[0] + sub[1] + sub[2] + sub[3]
             if not ds > 0.0:
                 continue

@@ -3,10 +3,10 @@
 Each sample k takes the position the reference reaches one period after the
 position of sample k-1 (the reference clock follows the machine: a sample that had
 to deviate does not make the next ones chase the old clock) and checks it with
-exactly the float operations of ``verify`` (``vpop_core._feasible``). Where the
+exactly the float operations of ``verify`` (``vpop.step._feasible``). Where the
 reference would break a limit — it is the solution of a linear program imposed at
 collocation points, and sampled — the nearest allowed position is taken instead
-(``vpop_core._search`` on the per-axis intervals). An empty allowed set is reported
+(``vpop.step._search`` on the per-axis intervals). An empty allowed set is reported
 to the caller (``STUCK``), which then lowers the reference locally and retries.
 
 Reference nodes (s, t, v, a) come from ``timelaw.nodes_for``; between nodes s(t) is the
@@ -15,15 +15,21 @@ quintic Hermite interpolant of (s, v, a).
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
 from numba import njit
 
-from .vpop_core import _bounds, _eval, _feasible, _search
+from .vpop.step import Scratch, _bounds, _eval, _feasible, _search, _seed
 
-OK = 0
-NEED_REF = 1  # the reference ends before the next target: give more and call again
-STUCK = 2  # no position satisfies every limit (the caller lowers the reference)
-NEED_SPACE = 3
+# track's statuses (one set for every kernel: ``status``): OK, NEED_REF (the reference
+# ends before the next target), STUCK (no position satisfies every limit: the caller
+# lowers the reference), NEED_SPACE
+from .status import NEED_REF, NEED_SPACE, OK, STUCK
+
+#: the reference time law's nodes: s (mm), t (s), v (mm/s), a (mm/s²), each (>= n,), of
+#: which the first n are used
+Reference = namedtuple("Reference", "s t v a n")
 
 
 @njit(cache=True)
@@ -116,8 +122,13 @@ def ref_t_of_s(ns, nt, nv, na, n, s, hint):
 
 
 @njit(cache=True)
-def _feed_cap(s, dt, L, FB, FV, seg):
-    """s + F dt with F the lowest feed of the segments from s on within reach."""
+def _feed_cap(s, fd, seg):
+    """s + F dt with F the lowest feed of the segments from s on within reach (the
+    ``vpop.step.Feed`` fd)."""
+    dt = fd.dt
+    L = fd.L
+    FB = fd.FB
+    FV = fd.FV
     m = FB.shape[0] - 1
     p = seg
     while p < m - 1 and s >= FB[p + 1]:
@@ -136,20 +147,30 @@ def _feed_cap(s, dt, L, FB, FV, seg):
 
 
 @njit(cache=True, nogil=True)
-def track(ns, nt, nv, na, n_nodes, ref_final, S, C, QEND, vl, al, jl, dt, L, FB, FV, sh, qh, k, tol, stats):
-    """Samples k, k+1, ... following the reference until it runs out, the path ends at
-    rest, or no position is allowed.
+def track(ref, ref_final, T, lim, fd, sh, qh, k, tol, stats):
+    """Samples k, k+1, ... following the ``Reference`` ref until it runs out, the path
+    ends at rest, or no position is allowed, on the joint table T (``vpop.step.Table``)
+    under the ``vpop.step.Limits`` lim and the ``vpop.step.Feed`` fd; ``tol`` is the
+    searches' tolerance in s.
 
     ``ref_final``: the reference is final (the path's own end) — else a target past the
     last node's time asks for more (``NEED_REF``). ``sh``/``qh`` hold samples < k (rest
     before sample 0 is implied). Returns (status, k). stats: [clamped samples, steps].
     """
+    ns = ref.s
+    nt = ref.t
+    nv = ref.v
+    na = ref.a
+    n_nodes = ref.n
+    dt = fd.dt
+    L = fd.L
     n = qh.shape[1]
     q = np.empty(n)
     qs = np.empty(n)
     lo = np.empty(n)
     hi = np.empty(n)
     wk = np.empty((3, n))
+    sc = Scratch(q, qs, lo, hi, wk)
     hint = 0
     rh = 0
     seg = 0
@@ -166,27 +187,25 @@ def track(ns, nt, nv, na, n_nodes, ref_final, S, C, QEND, vl, al, jl, dt, L, FB,
         if tn > t_last and not ref_final:
             return NEED_REF, k
         x, rh = ref_s_of_t(ns, nt, nv, na, n_nodes, tn, rh)
-        b, seg = _feed_cap(s0, dt, L, FB, FV, seg)
+        b, seg = _feed_cap(s0, fd, seg)
         if x > b:
             x = b
         if x < s0:
             x = s0
         stats[1] += 1
-        hint = _eval(S, C, QEND, x, hint, q, qs)
-        if not _feasible(qh, k, q, vl, al, jl):
+        hint = _eval(T, x, hint, q, qs)
+        if not _feasible(qh, k, q, lim):
             stats[0] += 1
-            if not _bounds(qh, k, vl, al, jl, lo, hi):
+            if not _bounds(qh, k, lim, lo, hi):
                 return STUCK, k
             # below the target first (the reference asked for too much), else above it
-            ok, xm, hint = _search(
-                S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, x, x, True, hint, q, qs, tol, wk, False, 0.0, 0.0, True
-            )
+            ok, xm, hint = _search(T, lim, qh, k, sc, s0, x, np.bool_(True), hint, tol, _seed(x), np.bool_(True))
             if not ok:
-                ok, xm, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, x, b, x, False, hint, q, qs, tol, wk)
+                ok, xm, hint = _search(T, lim, qh, k, sc, x, b, np.bool_(False), hint, tol, _seed(x), np.bool_(False))
                 if not ok:
                     return STUCK, k
             x = xm
-            hint = _eval(S, C, QEND, x, hint, q, qs)
+            hint = _eval(T, x, hint, q, qs)
         sh[k] = x
         for i in range(n):
             qh[k, i] = q[i]

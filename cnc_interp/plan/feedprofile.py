@@ -446,21 +446,13 @@ class FeedProfileBuilder:
         iters = 0
         for ccp in range(FEED_CCP_MAX):
             r = K.lp_rows(
-                first,
-                B,
-                q1,
-                q2,
-                q3,
-                self.moving,
+                K.Collocation(first, B, q1, q2, q3),
+                K.AxisLimits(self.moving, self.amax, self.jmax),
                 wmax,
                 w_hat,
                 inner,
-                self.amax,
-                self.jmax,
                 scale,
-                row_first,
-                row_coef,
-                row_b,
+                K.Rows(row_first, row_coef, row_b),
             )
             rf, rc, rb = self._end_rows(r, row_first, row_coef, row_b, tk, nc, scale, b0, b1, at_end)
             wts = cell * np.maximum(w_hat, FEED_WEIGHT_FLOOR * w_est) ** -1.5

@@ -111,6 +111,7 @@ class _Path:
 
     def __init__(self, path, joint_map, machine, dt, settings):
         from .vpop import JointTable
+        from .vpop.step import Feed, Limits, Table
 
         self.path = path
         self.joint_map = joint_map
@@ -121,7 +122,9 @@ class _Path:
         self.vl, self.al, self.jl = _step_limits(machine, dt, table)
         self.L = table.length
         self.n = path.n_axes
-        self.Cm = np.ascontiguousarray(table.C.transpose(0, 2, 1))
+        # the exact sampler's inputs (``_track_kernels.track``)
+        self.joints = Table(table.S, np.ascontiguousarray(table.C.transpose(0, 2, 1)), table.qend)
+        self.limits = Limits(self.vl, self.al, self.jl)
         self.tol = max(4.0 * np.spacing(max(self.L, 1.0)), 1e-7 * float(np.min(self.jl)))
         fb = np.ascontiguousarray(path.s_breaks, dtype=float).copy()
         fb[-1] = self.L
@@ -135,6 +138,7 @@ class _Path:
         ramp = float(np.max(machine.vmax / machine.amax + machine.amax / machine.jmax))
         self.ramp_s = 2.0 * ramp
         self.rough_s = float(np.max(dq / machine.vmax)) + self.L / float(np.min(self.FV)) + self.ramp_s
+        self.feed_caps = Feed(float(dt), float(self.L), self.FB, self.FV)
         self.stats = {
             "lp_iterations": 0,
             "knots": 0,
@@ -273,22 +277,11 @@ def _sampled(ctx):
                 (TK.NEED_REF, k)
                 if nodes.s.size < 2
                 else TK.track(
-                    nodes.s,
-                    nodes.t,
-                    nodes.v,
-                    nodes.a,
-                    nodes.s.shape[0],
+                    TK.Reference(nodes.s, nodes.t, nodes.v, nodes.a, nodes.s.shape[0]),
                     final,
-                    ctx.table.S,
-                    ctx.Cm,
-                    ctx.table.qend,
-                    ctx.vl,
-                    ctx.al,
-                    ctx.jl,
-                    dt,
-                    L,
-                    ctx.FB,
-                    ctx.FV,
+                    ctx.joints,
+                    ctx.limits,
+                    ctx.feed_caps,
                     sh,
                     qh,
                     k,

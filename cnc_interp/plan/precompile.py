@@ -2,7 +2,7 @@
 
 Numba compiles on one core and holds the GIL while it does, so a warm-up *thread* cannot
 share the work with the fit's own compile; a process can. The planner's kernels fall into
-two independent trees below ``vpop_drive.plan_identity_batch`` (the call that plans a run
+two independent trees below ``vpop.drive.plan_identity_batch`` (the call that plans a run
 of short paths): the preparation (``prepare_identity``: arc-length table, bounds) and the
 step loop (``drive``). On a cold cache one child compiles the step loop (the larger tree)
 on a tiny rapid move and numba writes it to its on-disk cache; this process compiles the
@@ -119,20 +119,21 @@ def _tiny_path():
 
 
 def compile_preparation() -> None:
-    """The preparation tree (``vpop_drive.prepare_identity``), compiled (or loaded) in this
+    """The preparation tree (``vpop.drive.prepare_identity``), compiled (or loaded) in this
     process."""
-    from . import vpop
+    from .vpop import planner
 
     path, m = _tiny_path()
-    vpop._Prepared(path, None, m, m.dt_s, None)
+    planner._Prepared(path, None, m, m.dt_s, None)
 
 
 def _job_loop() -> None:
-    """The step-loop tree (``vpop_drive.drive``), reached through the joint-map route of
+    """The step-loop tree (``vpop.drive.drive``), reached through the joint-map route of
     the preparation (Python and small kernels) so that ``prepare_identity`` is left to the
-    other child."""
-    from . import vpop
+    parent."""
     from ..machine.kinematics import Kinematics
+    from .vpop import planner
+    from .vpop.table import JointTable
 
     class _MappedIdentity(Kinematics):
         """The identity, presented as a joint map: VPOp prepares it in Python."""
@@ -143,9 +144,9 @@ def _job_loop() -> None:
 
     path, m = _tiny_path()
     joint_map = _MappedIdentity(m.axes)
-    table = vpop.JointTable(path, joint_map)
-    prep = vpop._Prepared(path, joint_map, m, m.dt_s, None, table=table)
-    for _ in vpop.iter_prepared(prep, joint_map, m, None, None):
+    table = JointTable(path, joint_map)
+    prep = planner._Prepared(path, joint_map, m, m.dt_s, None, table=table)
+    for _ in planner.iter_prepared(prep, joint_map, m, None, None):
         pass
 
 

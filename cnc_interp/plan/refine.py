@@ -20,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import _refine_kernels as RK
+from .vpop.step import Limits, Table
 
 #: samples per window, the stride between windows, Newton steps per solve
 REFINE_WINDOW = 60
@@ -41,6 +42,8 @@ class Refiner:
         self.q0 = table.qstart
         self.L = table.length
         self.vl, self.al, self.jl = vl, al, jl
+        self.joints = Table(self.S, self.C, self.QE)
+        self.limits = Limits(vl, al, jl)
         self.lim = np.ascontiguousarray(np.stack([vl, al, jl]))
         self.moving = np.ascontiguousarray(np.any(np.abs(table.C[:, 1:, :]) > 0, axis=(0, 1)))
         feeds = np.asarray(path.feed_mm_s, dtype=float)
@@ -91,7 +94,7 @@ class Refiner:
                 self.S, self.C, self.QE, pre, post, x0, self.moving, self.lim, self.fdt, REFINE_NEWTON, self.counts
             )
             self.solves += 1
-            if st != RK.FEASIBLE:
+            if st != RK.OK:
                 break
             cand = np.concatenate((sh[:a], x, sh[b:]))
             tail = np.full(3, self.L)
@@ -99,7 +102,7 @@ class Refiner:
             qb = np.empty((full.shape[0], self.n))
             qb[:a] = qh[:a]
             hi = min(a + Mn + 3, full.shape[0])
-            if not RK.exact_ok(self.S, self.C, self.QE, full, a, hi, self.vl, self.al, self.jl, qb):
+            if not RK.exact_ok(self.joints, self.limits, full, a, hi, qb):
                 break
             qn = np.concatenate((qh[:a], qb[a : a + Mn], qh[b:]))
             sh, qh = cand, qn

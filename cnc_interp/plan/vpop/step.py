@@ -49,19 +49,58 @@ checked exactly):
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
 from numba import njit
 
-# status codes returned by plan_core (YIELD = 4 below)
-OK = 0
-NEED_SPACE = 1
-STUCK = 2
-INFEASIBLE = 3
+from ...fit._quintic import quintic
+
+# plan_core's statuses (one set for every kernel: ``status``)
+from ..status import INFEASIBLE, NEED_SPACE, OK, STUCK, YIELD
 
 _HUGE = 1e300
 # "clearly outside the bounds" for a zero step: far above the rounding of _bounds
 _STAY_MARGIN = 1e-6
 _BIG = 1 << 62
+
+# The kernels' arguments, bundled by concept (module level, so that numba's cache can
+# name their types). Step units throughout: see the module docstring. A kernel called per
+# step takes only the bundles it reads, not the whole ``Problem``: numba increments and
+# decrements the reference count of every array in a kernel's arguments on each call.
+#: the joint table: knots S (m+1,) in arc length, power coefficients C (m, n, 6) in
+#: s - S[p] (each axis's six contiguous), the exact end point QEND (n,)
+Table = namedtuple("Table", "S C QEND")
+#: per-axis limits (n,) in step units: vl = V dt, al = A dt², jl = J dt³
+Limits = namedtuple("Limits", "vl al jl")
+#: the path's feed: period dt (s), length L, segment breaks FB (segments + 1,) in s with
+#: FB[-1] = L, and each segment's feed FV (segments,) in s per second
+Feed = namedtuple("Feed", "dt L FB FV")
+#: packed range-max tables (``range_max_table``) of the curvature and speed bounds per
+#: table piece that ``_easy`` reads: K2, K3, K23 (acceleration, jerk, cross term), KV
+Ease = namedtuple("Ease", "K2 K3 K23 KV")
+#: one path's planning problem: ``Table``, ``Limits``, the brake policy's jerk js (n,)
+#: (jl * VPOP_BRAKE_JERK_FRACTION), ``Feed``, ``Ease``
+Problem = namedtuple("Problem", "table lim js feed ease")
+#: per-step scratch: q, qs (position and dq/ds), lo, hi (allowed step bounds), all (n,),
+#: and wk (3, n) (see ``_step``)
+Scratch = namedtuple("Scratch", "q qs lo hi wk")
+#: the brake runs' buffers: scratch run bs (R,), bq (R, n), the last fix's certificate
+#: cs (R,), cq (R, n), and the counters ``stats`` (5,) int64 (see ``plan_core``)
+Runs = namedtuple("Runs", "bs bq cs cq stats")
+#: a ``plan_core`` call's settings: search tolerance ``tol`` (s units), ``max_steps``
+#: (global samples), ``easy_frac``, ``gap_tol``, ``fast``, ``chain_seq``, ``floor_h``
+#: (see ``plan_core``)
+Settings = namedtuple("Settings", "tol max_steps easy_frac gap_tol fast chain_seq floor_h")
+#: ``_search``'s start: the guess x, and whether the caller already found it infeasible
+#: (``bad``), with its linearised interval [L, H]
+Seed = namedtuple("Seed", "x bad L H")
+
+
+@njit(cache=True)
+def _seed(x):
+    """A guess not yet evaluated."""
+    return Seed(x, np.bool_(False), np.float64(0.0), np.float64(0.0))
 
 
 @njit(cache=True)
@@ -95,10 +134,13 @@ def _piece(S, x, hint):
 
 
 @njit(cache=True)
-def _eval(S, C, QEND, x, hint, q, qs):
-    """q(x) and dq/ds(x) into ``q``, ``qs``; returns the piece index (new hint).
-
-    ``C`` is (m, n, 6): each axis's six coefficients are contiguous (one cache line)."""
+def _eval(T, x, hint, q, qs):
+    """q(x) and dq/ds(x) of the ``Table`` T into ``q``, ``qs``; returns the piece index
+    (new hint). ``C`` is (m, n, 6): each axis's six coefficients are contiguous (one
+    cache line)."""
+    S = T.S
+    C = T.C
+    QEND = T.QEND
     m = S.shape[0] - 1
     n = q.shape[0]
     p = _piece(S, x, hint)
@@ -107,28 +149,25 @@ def _eval(S, C, QEND, x, hint, q, qs):
         for i in range(n):
             c = C[p, i]
             q[i] = QEND[i]
-            qs[i] = (((5.0 * c[5] * t + 4.0 * c[4]) * t + 3.0 * c[3]) * t + 2.0 * c[2]) * t + c[1]
+            qs[i] = quintic(c[0], c[1], c[2], c[3], c[4], c[5], t)[1]
         return p
     t = x - S[p]
     for i in range(n):
         c = C[p, i]
-        c0 = c[0]
-        c1 = c[1]
-        c2 = c[2]
-        c3 = c[3]
-        c4 = c[4]
-        c5 = c[5]
-        q[i] = ((((c5 * t + c4) * t + c3) * t + c2) * t + c1) * t + c0
-        qs[i] = (((5.0 * c5 * t + 4.0 * c4) * t + 3.0 * c3) * t + 2.0 * c2) * t + c1
+        q[i], qs[i], _ = quintic(c[0], c[1], c[2], c[3], c[4], c[5], t)
     return p
 
 
 @njit(cache=True)
-def _bounds(qh, k, vl, al, jl, lo, hi):
-    """Allowed interval [lo, hi] of e = q_new - q[k-1] per axis; False if one is empty.
+def _bounds(qh, k, lim, lo, hi):
+    """Allowed interval [lo, hi] of e = q_new - q[k-1] per axis under the ``Limits`` lim;
+    False if one is empty.
 
     ``qh`` holds samples 0..k-1; samples before 0 are the rest position q[0].
     """
+    vl = lim.vl
+    al = lim.al
+    jl = lim.jl
     n = qh.shape[1]
     ok = True
     for i in range(n):
@@ -155,8 +194,11 @@ def _bounds(qh, k, vl, al, jl, lo, hi):
 
 
 @njit(cache=True)
-def _feasible(qh, k, q, vl, al, jl):
-    """Exact check, in verify's own float operations, of q as sample k."""
+def _feasible(qh, k, q, lim):
+    """Exact check, in verify's own float operations, of q as sample k (``Limits`` lim)."""
+    vl = lim.vl
+    al = lim.al
+    jl = lim.jl
     n = q.shape[0]
     for i in range(n):
         q1 = qh[k - 1, i]
@@ -200,20 +242,26 @@ def _lin_interval(q, qs, qprev, lo, hi, x, a, b):
 
 
 @njit(cache=True)
-def _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, a, b, guess, want_max, hint, q, qs, tol, wk,
-            guess_bad=False, L0=0.0, H0=0.0, a_is_prev=False):
+def _search(T, lim, qh, k, sc, a, b, want_max, hint, tol, seed, a_is_prev):
     """Largest (want_max) or smallest feasible s' in [a, b] of the allowed set's component
-    found by linearisation. Returns (found, s', hint); ``q`` holds q(s') when found.
+    found by linearisation, from the ``Seed`` seed. Returns (found, s', hint); ``sc.q``
+    holds q(s') when found; ``sc.lo``/``sc.hi`` are ``_bounds``'s.
 
     Newton on the linearised per-axis intervals (q and dq/ds come with every evaluation,
     so each iteration costs one table evaluation), kept inside a bracket [f, u] of a
     feasible f and an infeasible u; stops when the bracket or the Newton step is below tol.
-    ``guess_bad``: the caller has just found ``guess`` (inside [a, b]) infeasible and passes
-    its linearised interval (L0, H0), which saves evaluating it again. On success q, qs
-    hold q(s') and dq/ds(s'). ``wk`` (>= 2, n) is scratch. ``a_is_prev``: a is sample
-    k-1's own s, where every axis's step e is exactly 0, so the bounds alone can rule
-    it out (only when clearly outside them; at the margin it is evaluated).
+    ``seed.bad``: the caller has just found ``seed.x`` (inside [a, b]) infeasible and passes
+    its linearised interval (seed.L, seed.H), which saves evaluating it again. On success
+    q, qs hold q(s') and dq/ds(s'). ``wk`` (>= 2, n) is scratch. ``a_is_prev``: a is
+    sample k-1's own s, where every axis's step e is exactly 0, so the bounds alone can
+    rule it out (only when clearly outside them; at the margin it is evaluated).
     """
+    q = sc.q
+    qs = sc.qs
+    lo = sc.lo
+    hi = sc.hi
+    wk = sc.wk
+    jl = lim.jl
     n = q.shape[0]
     qprev = qh[k - 1]
     ends = b if want_max else a
@@ -224,11 +272,11 @@ def _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, a, b, guess, want_max, hint, 
                 check_end = False  # standing still is outside the allowed set
                 break
     if check_end:
-        hint = _eval(S, C, QEND, ends, hint, q, qs)
-        if _feasible(qh, k, q, vl, al, jl):
+        hint = _eval(T, ends, hint, q, qs)
+        if _feasible(qh, k, q, lim):
             return True, ends, hint
     # 1. a feasible point: the guess, then the middle of the linearised allowed interval
-    x = guess
+    x = seed.x
     if x < a:
         x = a
     if x > b:
@@ -236,11 +284,11 @@ def _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, a, b, guess, want_max, hint, 
     f = 0.0
     have_f = False
     for it in range(10):
-        if it == 0 and guess_bad:
-            L, H = L0, H0
+        if it == 0 and seed.bad:
+            L, H = seed.L, seed.H
         else:
-            hint = _eval(S, C, QEND, x, hint, q, qs)
-            if _feasible(qh, k, q, vl, al, jl):
+            hint = _eval(T, x, hint, q, qs)
+            if _feasible(qh, k, q, lim):
                 f = x
                 have_f = True
                 break
@@ -282,8 +330,8 @@ def _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, a, b, guess, want_max, hint, 
             if not (xn < f and xn > u):
                 xn = 0.5 * (f + u)
         x = xn
-        hint = _eval(S, C, QEND, x, hint, q, qs)
-        if _feasible(qh, k, q, vl, al, jl):
+        hint = _eval(T, x, hint, q, qs)
+        if _feasible(qh, k, q, lim):
             f = x
             for i in range(n):
                 qf[i] = q[i]
@@ -299,8 +347,13 @@ def _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, a, b, guess, want_max, hint, 
 
 
 @njit(cache=True)
-def _cap(s, dt, L, FB, FV):
-    """Largest s' allowed by the feed: s' - s <= min(F over segments crossed) dt, s' <= L."""
+def _cap(s, fd):
+    """Largest s' allowed by the ``Feed`` fd: s' - s <= min(F over segments crossed) dt,
+    s' <= L."""
+    dt = fd.dt
+    L = fd.L
+    FB = fd.FB
+    FV = fd.FV
     m = FB.shape[0] - 1
     p = 0
     lo = 0
@@ -357,28 +410,37 @@ def _stop_distance(v, a, J, A):
         if t2 < 0.0:
             t2 = 0.0
     t1 = (a + ap) / J
-    d = v * t1 + a * t1 * t1 / 2.0 - J * t1 ** 3 / 6.0
+    d = v * t1 + a * t1 * t1 / 2.0 - J * t1**3 / 6.0
     v1 = v + a * t1 - J * t1 * t1 / 2.0
     d += v1 * t2 - ap * t2 * t2 / 2.0
     v2 = v1 - ap * t2
     t3 = ap / J
-    d += v2 * t3 - ap * t3 * t3 / 2.0 + J * t3 ** 3 / 6.0
+    d += v2 * t3 - ap * t3 * t3 / 2.0 + J * t3**3 / 6.0
     return d
 
 
 # inlined into its two callers (_brake_step and _step's fallback): 15-20% off a brake
 # run; inlining _search or _step too adds minutes of compile time for a few per cent
-@njit(cache=True, inline='always')
-def _brake_value(S, C, QEND, qh, k, vl, al, jl, js_lim, lo, hi, s0, d1, b, guess, hint, q, qs,
-                 tol, wk, qs0_known):
-    """The brake policy's sample k (see ``_step``), given the bounds ``lo``/``hi`` of
-    ``_bounds``. Returns (ok, s', hint); q, qs hold q(s'), dq/ds(s'). With ``qs0_known``
-    wk[2] already holds dq/ds(s0) (a brake run carries it from the step before)."""
+@njit(cache=True, inline="always")
+def _brake_value(T, lim, js, fd, sh, qh, k, sc, hint, tol, qs0_known):
+    """The brake policy's sample k (see ``_step``) on the joint table T under ``Limits``
+    lim, brake jerk js and ``Feed`` fd, given the bounds ``sc.lo``/``sc.hi`` of
+    ``_bounds``. Returns (ok, s', hint); q, qs hold q(s'), dq/ds(s'). With
+    ``qs0_known`` wk[2] already holds dq/ds(s0) (a brake run carries it from the step
+    before).
+
+    The hot kernels take the bundles they use, not the whole ``Problem``: numba counts
+    references to every array of a kernel's arguments on each call."""
+    s0, d1, d2 = _path_state(sh, k)
+    b = _cap(s0, fd)
+    guess = s0 + d1 + d2
+    q = sc.q
+    qs = sc.qs
     if qs0_known:
-        jd, ad = _path_limits(wk[2], js_lim, al)
+        jd, ad = _path_limits(sc.wk[2], js, lim.al)
     else:
-        hint = _eval(S, C, QEND, s0, hint, q, qs)
-        jd, ad = _path_limits(qs, js_lim, al)
+        hint = _eval(T, s0, hint, q, qs)
+        jd, ad = _path_limits(qs, js, lim.al)
     # the least step after which a jerk ramp back to zero path acceleration still
     # leaves a non-negative speed (or a full stop once the speed is one jerk step)
     if d1 <= jd:
@@ -387,33 +449,34 @@ def _brake_value(S, C, QEND, qh, k, vl, al, jl, js_lim, lo, hi, s0, d1, b, guess
         target = s0 + d1 + jd - np.sqrt(jd * (2.0 * d1 + jd))
     if target > b:
         target = b
-    hint = _eval(S, C, QEND, target, hint, q, qs)
-    if _feasible(qh, k, q, vl, al, jl):
+    hint = _eval(T, target, hint, q, qs)
+    if _feasible(qh, k, q, lim):
         return True, target, hint
     # which side of the allowed interval is the target on? (linearised at the target)
-    L, H = _lin_interval(q, qs, qh[k - 1], lo, hi, target, s0, b)
+    L, H = _lin_interval(q, qs, qh[k - 1], sc.lo, sc.hi, target, s0, b)
     if target < L or L > H:
-        okl, xl, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, target, np.bool_(False),
-                                hint, q, qs, tol, wk, np.bool_(True), L, H, np.bool_(True))
+        okl, xl, hint = _search(
+            T, lim, qh, k, sc, s0, b, np.bool_(False), hint, tol, Seed(target, np.bool_(True), L, H), np.bool_(True)
+        )
         if okl and xl >= target:
             return True, xl, hint
         if not okl:
             return False, s0, hint
-    oku, xu, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, target, np.bool_(True),
-                            hint, q, qs, tol, wk, np.bool_(True), L, H, np.bool_(False))
+    oku, xu, hint = _search(
+        T, lim, qh, k, sc, s0, b, np.bool_(True), hint, tol, Seed(target, np.bool_(True), L, H), np.bool_(False)
+    )
     if not oku:
         return False, s0, hint
     if xu <= target:
         return True, xu, hint
     # the linear model misled: the target lies inside; fall back to the lower end
-    okl, xl, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, np.bool_(False),
-                            hint, q, qs, tol, wk, np.bool_(False), np.float64(0.0), np.float64(0.0), np.bool_(True))
+    okl, xl, hint = _search(T, lim, qh, k, sc, s0, b, np.bool_(False), hint, tol, _seed(guess), np.bool_(True))
     if not okl:
         return False, s0, hint
     if xl >= target:
         return True, xl, hint
     # (q must hold q(xu) again)
-    hint = _eval(S, C, QEND, xu, hint, q, qs)
+    hint = _eval(T, xu, hint, q, qs)
     return True, xu, hint
 
 
@@ -428,58 +491,50 @@ def _path_state(sh, k):
 
 
 # inlined into the brake run's loop (its hot call) and into _step: 3-4% of a brake run
-@njit(cache=True, inline='always')
-def _brake_step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, hint, q, qs,
-                lo, hi, tol, wk, qs0_known):
+@njit(cache=True, inline="always")
+def _brake_step(T, lim, js, fd, sh, qh, k, hint, sc, tol, qs0_known):
     """``_step`` in mode 1 (brake)."""
-    if not _bounds(qh, k, vl, al, jl, lo, hi):
+    if not _bounds(qh, k, lim, sc.lo, sc.hi):
         return False, sh[k - 1], hint
-    s0, d1, d2 = _path_state(sh, k)
-    b = _cap(s0, dt, L, FB, FV)
-    return _brake_value(S, C, QEND, qh, k, vl, al, jl, js_lim, lo, hi, s0, d1, b, s0 + d1 + d2,
-                        hint, q, qs, tol, wk, qs0_known)
+    return _brake_value(T, lim, js, fd, sh, qh, k, sc, hint, tol, qs0_known)
 
 
 @njit(cache=True)
-def _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, mode, hint, q, qs,
-          lo, hi, tol, wk, qs0_known, aim_jerk=1.0):
-    """Choose sample k. mode 0: max; 1: brake; 2: aim at rest exactly at L.
+def _step(T, lim, js, fd, sh, qh, k, mode, hint, sc, tol, qs0_known):
+    """Choose sample k on the joint table T under ``Limits`` lim, brake jerk js and
+    ``Feed`` fd. mode 0: max; 1: brake; 2: aim at rest exactly at L.
 
-    Returns (ok, s', hint); on success q, qs hold q(s'), dq/ds(s'). ``wk`` (3, n) is
-    scratch; with ``qs0_known`` wk[2] holds dq/ds at sample k-1. Mode 0 fails only when the brake policy
-    finds no sample k either, so "max failed at k" always means "braking from k fails"
-    (what the dichotomy in ``plan_core`` relies on)."""
+    Returns (ok, s', hint); on success sc.q, sc.qs hold q(s'), dq/ds(s'). ``sc.wk``
+    (3, n) is scratch; with ``qs0_known`` wk[2] holds dq/ds at sample k-1. Mode 0 fails
+    only when the brake policy finds no sample k either, so "max failed at k" always
+    means "braking from k fails" (what the dichotomy in ``plan_core`` relies on)."""
     if mode == 1:
-        return _brake_step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, hint, q, qs,
-                           lo, hi, tol, wk, qs0_known)
-    if not _bounds(qh, k, vl, al, jl, lo, hi):
+        return _brake_step(T, lim, js, fd, sh, qh, k, hint, sc, tol, qs0_known)
+    q = sc.q
+    qs = sc.qs
+    if not _bounds(qh, k, lim, sc.lo, sc.hi):
         return False, sh[k - 1], hint
     s0, d1, d2 = _path_state(sh, k)
-    b = _cap(s0, dt, L, FB, FV)
+    L = fd.L
+    b = _cap(s0, fd)
     guess = s0 + d1 + d2
     if mode == 0:
-        ok, x, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, np.bool_(True), hint,
-                              q, qs, tol, wk, np.bool_(False), np.float64(0.0), np.float64(0.0), np.bool_(False))
+        ok, x, hint = _search(T, lim, qh, k, sc, s0, b, np.bool_(True), hint, tol, _seed(guess), np.bool_(False))
         if ok:
             return ok, x, hint
         # the linearised search can miss a narrow allowed set (near a sharp turn the
         # joint positions are far from linear in s); the brake value is a feasible seed
-        okb, xb, hint = _brake_value(S, C, QEND, qh, k, vl, al, jl, js_lim, lo, hi, s0, d1, b,
-                                     guess, hint, q, qs, tol, wk, qs0_known)
+        okb, xb, hint = _brake_value(T, lim, js, fd, sh, qh, k, sc, hint, tol, qs0_known)
         if not okb:
             return False, s0, hint
-        return _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, xb, np.bool_(True), hint, q, qs, tol,
-                       wk, np.bool_(False), np.float64(0.0), np.float64(0.0), np.bool_(False))
-    hint = _eval(S, C, QEND, s0, hint, q, qs)
-    jd, ad = _path_limits(qs, jl, al)
+        return _search(T, lim, qh, k, sc, s0, b, np.bool_(True), hint, tol, _seed(xb), np.bool_(False))
+    hint = _eval(T, s0, hint, q, qs)
+    jd, ad = _path_limits(qs, lim.jl, lim.al)
     # aim: the largest step whose continuous stop distance still fits before L
-    okl, xl, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, np.bool_(False),
-                            hint, q, qs, tol, wk, np.bool_(False), np.float64(0.0), np.float64(0.0), np.bool_(False))
+    okl, xl, hint = _search(T, lim, qh, k, sc, s0, b, np.bool_(False), hint, tol, _seed(guess), np.bool_(False))
     if not okl:
         return False, s0, hint
-    oku, xu, hint = _search(S, C, QEND, qh, k, vl, al, jl, lo, hi, s0, b, guess, np.bool_(True), hint,
-                            q, qs, tol, wk, np.bool_(False), np.float64(0.0), np.float64(0.0), np.bool_(False))
-    jd = jd * aim_jerk
+    oku, xu, hint = _search(T, lim, qh, k, sc, s0, b, np.bool_(True), hint, tol, _seed(guess), np.bool_(False))
     x = xl
     if xu >= L and L - s0 <= jd:
         x = L  # close enough to land in one jerk step
@@ -497,10 +552,10 @@ def _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, mode, hint, 
             if b_ - a_ <= tol:
                 break
         x = a_
-    hint = _eval(S, C, QEND, x, hint, q, qs)
-    if _feasible(qh, k, q, vl, al, jl):
+    hint = _eval(T, x, hint, q, qs)
+    if _feasible(qh, k, q, lim):
         return True, x, hint
-    hint = _eval(S, C, QEND, xl, hint, q, qs)
+    hint = _eval(T, xl, hint, q, qs)
     return True, xl, hint
 
 
@@ -573,17 +628,19 @@ def range_max_table(K: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def _easy(S, K2, K3, K23, KV, bs, kk, al, js_lim, L, easy_frac, qs0, hint):
-    """Early end of a brake run: braking, slow enough that the path's curvature uses at most
-    ``easy_frac`` of any axis's acceleration and jerk over the whole remaining stop, and
-    the stop ends before L. (A heuristic; a plan it misleads is re-planned exactly.)"""
+def _easy(S, K, js, al, L, bs, kk, easy_frac, qs0, hint):
+    """Early end of a brake run (samples bs[:kk]): braking, slow
+    enough that the path's curvature uses at most ``easy_frac`` of any axis's
+    acceleration and jerk over the whole remaining stop, and the stop ends before L.
+    (A heuristic; a plan it misleads is re-planned exactly.) S: the table's knots; K:
+    the ``Ease`` tables; js, al: brake jerk and acceleration limits (n,)."""
     s0 = bs[kk - 1]
     d1 = s0 - bs[kk - 2]
     d2 = d1 - (bs[kk - 2] - bs[kk - 3])
     if d2 > 0.0 or d1 <= 0.0:
         return False
     p0 = _piece(S, s0, hint)
-    jd, ad = _path_limits(qs0, js_lim, al)
+    jd, ad = _path_limits(qs0, js, al)
     # the ramp back to zero deceleration must not need a negative speed
     if d1 < 2.0 * d2 * d2 / jd:
         return False
@@ -595,25 +652,37 @@ def _easy(S, K2, K3, K23, KV, bs, kk, al, js_lim, L, easy_frac, qs0, hint):
     p1 = _piece(S, s0 + D, p0)
     # speed limits ahead (axis velocities, segment feeds) must already be met: the
     # brake only slows down from here
-    if _window_max(KV, p0, p1) * d1 > 1.0:
+    if _window_max(K.KV, p0, p1) * d1 > 1.0:
         return False
-    k2 = _window_max(K2, p0, p1)
+    k2 = _window_max(K.K2, p0, p1)
     if k2 * d1 * d1 > easy_frac:
         return False
-    k3 = _window_max(K3, p0, p1)
-    k23 = _window_max(K23, p0, p1)
-    return k3 * d1 ** 3 + k23 * d1 * ab <= easy_frac
+    k3 = _window_max(K.K3, p0, p1)
+    k23 = _window_max(K.K23, p0, p1)
+    return k3 * d1**3 + k23 * d1 * ab <= easy_frac
 
 
 @njit(cache=True)
-def _brake_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq, max_steps,
-               q, qs, lo, hi, tol, stats, mode, K2, K3, K23, KV, easy_frac, horizon, wk):
+def _brake_run(pb, sh, qh, j, runs, sc, cfg, mode, easy_frac, horizon):
     """Does the brake (mode 1) or aim (mode 2) policy from step j (samples < j fixed) reach
-    rest? Uses scratch bs/bq, which start with copies of samples j-3..j-1 at 0..2.
+    rest? Uses the scratch run ``runs.bs``/``runs.bq``, which start with copies of samples
+    j-3..j-1 at 0..2; ``easy_frac`` > 0 lets it end early (``_easy``).
 
     ``horizon`` > 0 (fast mode): a run that survives until main-sequence index ``horizon``
-    and is no longer speeding up counts as a success. Returns (ok, scratch index after the last sample, main-sequence
-    index up to which the brake continuation is certified (_BIG: to rest))."""
+    and is no longer speeding up counts as a success. Returns (ok, scratch index after the
+    last sample, main-sequence index up to which the brake continuation is certified
+    (_BIG: to rest))."""
+    T = pb.table
+    lim = pb.lim
+    js = pb.js
+    fd = pb.feed
+    K = pb.ease
+    bs = runs.bs
+    bq = runs.bq
+    stats = runs.stats
+    q = sc.q
+    qs = sc.qs
+    wk = sc.wk
     n = qh.shape[1]
     for r in range(3):
         src = j - 3 + r
@@ -627,11 +696,9 @@ def _brake_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq,
     cap = bs.shape[0]
     while True:
         if mode == 1:
-            ok, x, hint = _brake_step(S, C, QEND, bs, bq, kk, vl, al, jl, js_lim, dt, L, FB, FV,
-                                      hint, q, qs, lo, hi, tol, wk, kk > 3)
+            ok, x, hint = _brake_step(T, lim, js, fd, bs, bq, kk, hint, sc, cfg.tol, kk > 3)
         else:
-            ok, x, hint = _step(S, C, QEND, bs, bq, kk, vl, al, jl, js_lim, dt, L, FB, FV, mode,
-                                hint, q, qs, lo, hi, tol, wk, kk > 3, np.float64(1.0))
+            ok, x, hint = _step(T, lim, js, fd, bs, bq, kk, mode, hint, sc, cfg.tol, kk > 3)
         if not ok:
             return False, kk, 0
         bs[kk] = x
@@ -642,13 +709,15 @@ def _brake_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq,
         kk += 1
         if bs[kk - 1] == bs[kk - 2] and bs[kk - 2] == bs[kk - 3]:
             return True, kk, _BIG
-        if easy_frac > 0.0 and mode == 1 and _easy(S, K2, K3, K23, KV, bs, kk, al, js_lim,
-                                                   L, easy_frac, wk[2], hint):
+        if easy_frac > 0.0 and mode == 1 and _easy(T.S, K, js, lim.al, fd.L, bs, kk, easy_frac, wk[2], hint):
             return True, kk, _BIG
-        if horizon > 0 and j + kk - 3 >= horizon and \
-                _easy(S, K2, K3, K23, KV, bs, kk, al, js_lim, L, np.float64(0.6), wk[2], hint):
+        if (
+            horizon > 0
+            and j + kk - 3 >= horizon
+            and _easy(T.S, K, js, lim.al, fd.L, bs, kk, np.float64(0.6), wk[2], hint)
+        ):
             return True, kk, j + kk - 3
-        if kk >= cap or kk >= max_steps:
+        if kk >= cap or kk >= cfg.max_steps:
             return False, kk, 0
 
 
@@ -664,8 +733,7 @@ def _stays_at_rest(sh, j, x, L):
 
 
 @njit(cache=True)
-def _rest_value(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq, max_steps,
-                q, qs, lo, hi, tol, stats, K2, K3, K23, KV, easy_frac, hint, wk):
+def _rest_value(pb, sh, qh, j, runs, sc, cfg, hint):
     """Sample j when the machine is at rest before it, the brake policy would stay put
     and the max step's continuation cannot stop (e.g. a path shorter than what one
     step from rest and the stop after it allow): the largest value in (s0, max] found
@@ -674,10 +742,13 @@ def _rest_value(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq
     Staying put is always safe and a small enough step from rest always stops again,
     so a value > s0 exists; returns (ok, s', certified up to, hint) with q = q(s') and
     sh[j]/qh[j] set, or ok False when float resolution leaves none."""
+    T = pb.table
+    q = sc.q
+    qs = sc.qs
+    tol = cfg.tol
     n = qh.shape[1]
     s0 = sh[j - 1]
-    ok, xm, hint = _step(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, np.int64(0),
-                         hint, q, qs, lo, hi, tol, wk, np.bool_(False), np.float64(1.0))
+    ok, xm, hint = _step(pb.table, pb.lim, pb.js, pb.feed, sh, qh, j, np.int64(0), hint, sc, tol, np.bool_(False))
     if not ok or not xm > s0:
         return False, s0, 0, hint
     good = s0
@@ -685,15 +756,13 @@ def _rest_value(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq
     bad = xm
     x = xm
     for _ in range(80):
-        hint = _eval(S, C, QEND, x, hint, q, qs)
-        if _feasible(qh, j, q, vl, al, jl):
+        hint = _eval(T, x, hint, q, qs)
+        if _feasible(qh, j, q, pb.lim):
             sh[j] = x
             for i in range(n):
                 qh[j, i] = q[i]
-            r = _brake_run(S, C, QEND, sh, qh, j + 1, vl, al, jl, js_lim, dt, L, FB, FV,
-                           bs, bq, max_steps, q, qs, lo, hi, tol, stats, np.int64(1), K2, K3, K23, KV,
-                           easy_frac, np.int64(0), wk)
-            stats[1] += 1
+            r = _brake_run(pb, sh, qh, j + 1, runs, sc, cfg, np.int64(1), cfg.easy_frac, np.int64(0))
+            runs.stats[1] += 1
             passed = r[0]
         else:
             passed = False
@@ -710,7 +779,7 @@ def _rest_value(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq
         x = 0.5 * (good + bad)
     if not good > s0:
         return False, s0, 0, hint
-    hint = _eval(S, C, QEND, good, hint, q, qs)
+    hint = _eval(T, good, hint, q, qs)
     sh[j] = good
     for i in range(n):
         qh[j, i] = q[i]
@@ -718,25 +787,21 @@ def _rest_value(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq
 
 
 @njit(cache=True)
-def _brake_fix(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq, max_steps,
-               q, qs, lo, hi, tol, stats, K2, K3, K23, KV, easy_frac, hint, wk):
+def _brake_fix(pb, sh, qh, j, runs, sc, cfg, hint):
     """Fix sample j at the brake value (at rest where that would stay put: ``_rest_value``).
     Returns (status OK / INFEASIBLE / STUCK, the certificate of a rest value or -1, hint)."""
     n = qh.shape[1]
-    ok, x, hint = _step(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, np.int64(1),
-                        hint, q, qs, lo, hi, tol, wk, np.bool_(False), np.float64(1.0))
+    ok, x, hint = _step(pb.table, pb.lim, pb.js, pb.feed, sh, qh, j, np.int64(1), hint, sc, cfg.tol, np.bool_(False))
     if not ok:
         return INFEASIBLE, -1, hint
     c = -1
-    if _stays_at_rest(sh, j, x, L):
-        ok, x, c, hint = _rest_value(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L,
-                                     FB, FV, bs, bq, max_steps, q, qs, lo, hi, tol,
-                                     stats, K2, K3, K23, KV, easy_frac, hint, wk)
+    if _stays_at_rest(sh, j, x, pb.feed.L):
+        ok, x, c, hint = _rest_value(pb, sh, qh, j, runs, sc, cfg, hint)
         if not ok:
             return STUCK, -1, hint
     sh[j] = x
     for i in range(n):
-        qh[j, i] = q[i]
+        qh[j, i] = sc.q[i]
     return OK, c, hint
 
 
@@ -751,17 +816,17 @@ def _horizon(k, j, fast):
 
 
 @njit(cache=True)
-def _certified_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq,
-                   max_steps, q, qs, lo, hi, tol, stats, K2, K3, K23, KV, easy_frac, horizon,
-                   wk, cs, cq):
-    """A brake run from j; when it succeeds it is kept in cs/cq as the certificate the
+def _certified_run(pb, sh, qh, j, runs, sc, cfg, horizon):
+    """A brake run from j; when it succeeds it is kept in runs.cs/cq as the certificate the
     chain after a fix at j bisects along. Returns (ok, certified-up-to, its length)."""
-    r = _brake_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs, bq,
-                   max_steps, q, qs, lo, hi, tol, stats, np.int64(1), K2, K3, K23, KV, easy_frac,
-                   horizon, wk)
-    stats[1] += 1
+    r = _brake_run(pb, sh, qh, j, runs, sc, cfg, np.int64(1), cfg.easy_frac, horizon)
+    runs.stats[1] += 1
     if not r[0]:
         return False, 0, 0
+    bs = runs.bs
+    bq = runs.bq
+    cs = runs.cs
+    cq = runs.cq
     n = bq.shape[1]
     for t in range(r[1]):
         cs[t] = bs[t]
@@ -781,66 +846,53 @@ def _put_cert(sh, qh, cs, cq, j, t0, t1):
 
 
 @njit(cache=True)
-def _max_then_brake(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, t, x, bs, bq,
-                    max_steps, q, qs, lo, hi, tol, stats, K2, K3, K23, KV, easy_frac, fast,
-                    last_k, last_j, wk):
+def _max_then_brake(pb, sh, qh, t, x, runs, sc, cfg, last_k, last_j):
     """Sample t = x (q holds q(x)), then a brake run from t+1 with the chain's horizon:
     the run's (ok, scratch end, certified-up-to)."""
     n = qh.shape[1]
     sh[t] = x
     for i in range(n):
-        qh[t, i] = q[i]
-    hz = (t + 1 + 2 * (last_k - last_j) + 8) if fast else 0
-    r = _brake_run(S, C, QEND, sh, qh, t + 1, vl, al, jl, js_lim, dt, L, FB, FV,
-                   bs, bq, max_steps, q, qs, lo, hi, tol, stats, np.int64(1), K2, K3, K23, KV,
-                   easy_frac, hz, wk)
-    stats[1] += 1
+        qh[t, i] = sc.q[i]
+    hz = (t + 1 + 2 * (last_k - last_j) + 8) if cfg.fast else 0
+    r = _brake_run(pb, sh, qh, t + 1, runs, sc, cfg, np.int64(1), cfg.easy_frac, hz)
+    runs.stats[1] += 1
     return r
 
 
 @njit(cache=True)
-def _chain_test(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, j, t, cs, cq, bs, bq,
-                max_steps, q, qs, lo, hi, tol, stats, K2, K3, K23, KV, easy_frac, fast,
-                last_k, last_j, wk, hint):
+def _chain_test(pb, sh, qh, j, t, runs, sc, cfg, last_k, last_j, hint):
     """Samples j+1..t-1 from the certificate, the max step at t, then a brake run from
     t+1: (passed, certified-up-to, hint)."""
-    _put_cert(sh, qh, cs, cq, j, j + 1, t)
-    ok, x, hint = _step(S, C, QEND, sh, qh, t, vl, al, jl, js_lim, dt, L, FB, FV, np.int64(0),
-                        hint, q, qs, lo, hi, tol, wk, np.bool_(False), np.float64(1.0))
-    stats[3] += 1
+    _put_cert(sh, qh, runs.cs, runs.cq, j, j + 1, t)
+    ok, x, hint = _step(pb.table, pb.lim, pb.js, pb.feed, sh, qh, t, np.int64(0), hint, sc, cfg.tol, np.bool_(False))
+    runs.stats[3] += 1
     if not ok:
         return False, 0, hint
-    r = _max_then_brake(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, t, x, bs, bq,
-                        max_steps, q, qs, lo, hi, tol, stats, K2, K3, K23, KV, easy_frac, fast,
-                        last_k, last_j, wk)
+    r = _max_then_brake(pb, sh, qh, t, x, runs, sc, cfg, last_k, last_j)
     return r[0], r[2], hint
 
 
 @njit(cache=True)
-def _chain_search(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, j, m, cs, cq, bs, bq,
-                  max_steps, q, qs, lo, hi, tol, stats, K2, K3, K23, KV, easy_frac, fast,
-                  last_k, last_j, wk, hint, chain_seq):
-    """After a brake fix at j with its brake run kept in cs/cq (samples j..j+m-1): the first
-    t in (j, j+m) where the max step followed by braking reaches rest, the samples between
-    following the certificate. Sequentially that is one brake run per step of the chain;
-    here the first ``chain_seq`` t are tested in order, the rest by bisection and then
-    probes below the bisection's answer at doubling distances (the tests mostly pass from
-    some t on; where they do not, an earlier pass is worth finding: the switch to
-    speeding up comes sooner). Any t chosen has passed its own test: never unsafe.
+def _chain_search(pb, sh, qh, j, m, runs, sc, cfg, last_k, last_j, hint):
+    """After a brake fix at j with its brake run kept in runs.cs/cq (samples j..j+m-1): the
+    first t in (j, j+m) where the max step followed by braking reaches rest, the samples
+    between following the certificate. Sequentially that is one brake run per step of the
+    chain; here the first ``cfg.chain_seq`` t are tested in order, the rest by bisection
+    and then probes below the bisection's answer at doubling distances (the tests mostly
+    pass from some t on; where they do not, an earlier pass is worth finding: the switch
+    to speeding up comes sooner). Any t chosen has passed its own test: never unsafe.
 
     Returns (P, certified-up-to of P's run, hint); P = -1 when no t passes, with the
     samples up to j+m-1 then set to the certificate. On success sh/qh hold j..P."""
     n = qh.shape[1]
-    lo_t = j          # known: fails (or is the fix itself)
-    hi_t = j + m      # no test there yet: a virtual pass
+    chain_seq = cfg.chain_seq
+    lo_t = j  # known: fails (or is the fix itself)
+    hi_t = j + m  # no test there yet: a virtual pass
     best = -1
     best_cert = 0
     t = j + 1
     while hi_t - lo_t > 1:
-        passed, cert, hint = _chain_test(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh,
-                                         j, t, cs, cq, bs, bq, max_steps, q, qs, lo, hi, tol,
-                                         stats, K2, K3, K23, KV, easy_frac, fast, last_k,
-                                         last_j, wk, hint)
+        passed, cert, hint = _chain_test(pb, sh, qh, j, t, runs, sc, cfg, last_k, last_j, hint)
         if passed:
             hi_t = t
             best = t
@@ -855,10 +907,7 @@ def _chain_search(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, j, m, c
         d = 2
         while best - d > j + chain_seq:
             t = best - d
-            passed, cert, hint = _chain_test(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh,
-                                             qh, j, t, cs, cq, bs, bq, max_steps, q, qs, lo,
-                                             hi, tol, stats, K2, K3, K23, KV, easy_frac, fast,
-                                             last_k, last_j, wk, hint)
+            passed, cert, hint = _chain_test(pb, sh, qh, j, t, runs, sc, cfg, last_k, last_j, hint)
             if passed:
                 best = t
                 best_cert = cert
@@ -866,14 +915,13 @@ def _chain_search(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, j, m, c
             else:
                 d *= 2
     if best < 0:
-        _put_cert(sh, qh, cs, cq, j, j + 1, j + m)
+        _put_cert(sh, qh, runs.cs, runs.cq, j, j + 1, j + m)
         return -1, 0, hint
-    _put_cert(sh, qh, cs, cq, j, j + 1, best)
-    ok, x, hint = _step(S, C, QEND, sh, qh, best, vl, al, jl, js_lim, dt, L, FB, FV, np.int64(0),
-                        hint, q, qs, lo, hi, tol, wk, np.bool_(False), np.float64(1.0))
+    _put_cert(sh, qh, runs.cs, runs.cq, j, j + 1, best)
+    ok, x, hint = _step(pb.table, pb.lim, pb.js, pb.feed, sh, qh, best, np.int64(0), hint, sc, cfg.tol, np.bool_(False))
     sh[best] = x
     for i in range(n):
-        qh[best, i] = q[i]
+        qh[best, i] = sc.q[i]
     return best, best_cert, hint
 
 
@@ -883,8 +931,6 @@ def _chain_search(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, j, m, c
 #: local to the caller's buffers (global = local + the caller's base).
 ST_K, ST_B, ST_CHAIN, ST_CAT, ST_CLEN, ST_CERT, ST_LASTK, ST_LASTJ, ST_HINT = range(9)
 ST_SIZE = 9
-#: plan_core returned at an iteration boundary because k reached ``stop_k``
-YIELD = 4
 
 
 def new_state() -> np.ndarray:
@@ -910,24 +956,25 @@ def _save(st, k, b, chain, c_at, c_len, cert, last_k, last_j, hint):
 
 
 @njit(cache=True, nogil=True)
-def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, st, cs, cq, tol, max_steps,
-              bs, bq, stats, K2, K3, K23, KV, easy_frac, gap_tol, fast, chain_seq, floor_h,
-              stop_k, k_base):
-    """Run VPOp from the state ``st`` (samples < st[ST_K] fixed; see ``ST_*``).
+def plan_core(pb, sh, qh, st, runs, cfg, stop_k, k_base):
+    """Run VPOp on the ``Problem`` pb from the state ``st`` (samples < st[ST_K] fixed; see
+    ``ST_*``).
 
     Fills ``sh`` (K,), ``qh`` (K, n) and returns the status; the state is saved in ``st``
     at every return, so a call that returns OK... YIELD or NEED_SPACE resumes exactly where
-    it stopped: the result does not depend on where the caller's buffers end. ``cs``/``cq``
-    (brake-run sized) hold the certificate of the last fix across calls.
-    Returns at the top of an iteration only: NEED_SPACE when fewer than a brake run's
-    worth of samples (``bs``'s length) is left in ``sh``, YIELD when k >= ``stop_k``.
-    ``floor_h`` > 0 bounds the backtracking: no sample before k - floor_h is changed
-    (samples up to b are final), so a caller may hand out and drop old samples.
-    ``k_base`` is the global index of local sample 0 (for ``max_steps``).
-    stats: [backtracks, brake runs, brake-run steps, max steps, aim runs committed].
-    ``easy_frac`` > 0 lets brake runs end early (see ``_easy``); ``gap_tol`` is how far
-    short of L a committed aim run may stop; ``fast`` bounds brake runs by ``_horizon``;
-    ``chain_seq`` is how many chain tests run in order before bisection (``_chain_search``).
+    it stopped: the result does not depend on where the caller's buffers end.
+    ``runs.cs``/``runs.cq`` (brake-run sized) hold the certificate of the last fix across
+    calls. Returns at the top of an iteration only: NEED_SPACE when fewer than a brake
+    run's worth of samples (``runs.bs``'s length) is left in ``sh``, YIELD when k >=
+    ``stop_k``. ``k_base`` is the global index of local sample 0 (for ``max_steps``).
+
+    ``cfg`` (``Settings``): ``floor_h`` > 0 bounds the backtracking: no sample before
+    k - floor_h is changed (samples up to b are final), so a caller may hand out and drop
+    old samples. ``easy_frac`` > 0 lets brake runs end early (see ``_easy``); ``gap_tol``
+    is how far short of L a committed aim run may stop; ``fast`` bounds brake runs by
+    ``_horizon``; ``chain_seq`` is how many chain tests run in order before bisection
+    (``_chain_search``); ``tol`` is the searches' tolerance in s.
+    runs.stats: [backtracks, brake runs, brake-run steps, max steps, aim runs committed].
     """
     n = qh.shape[1]
     q = np.empty(n)
@@ -935,6 +982,18 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, st, cs, cq,
     lo = np.empty(n)
     hi = np.empty(n)
     wk = np.empty((3, n))
+    sc = Scratch(q, qs, lo, hi, wk)
+    T = pb.table
+    lim = pb.lim
+    js = pb.js
+    fd = pb.feed
+    L = fd.L
+    tol = cfg.tol
+    fast = cfg.fast
+    floor_h = cfg.floor_h
+    stats = runs.stats
+    bs = runs.bs
+    bq = runs.bq
     k = st[ST_K]
     b = st[ST_B]
     chain = st[ST_CHAIN] != 0  # the last sample was fixed by a backtrack
@@ -956,7 +1015,7 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, st, cs, cq,
         if k + room >= cap:
             _save(st, k, b, chain, c_at, c_len, cert, last_k, last_j, hint)
             return NEED_SPACE
-        if k + k_base >= max_steps:
+        if k + k_base >= cfg.max_steps:
             _save(st, k, b, chain, c_at, c_len, cert, last_k, last_j, hint)
             return STUCK
         if k >= stop_k:
@@ -964,10 +1023,7 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, st, cs, cq,
             return YIELD
         if chain and c_at == k - 1 and c_len >= 3 and k + c_len + 1 < cap:
             # the chain after a fix, along the fix's own brake run, by bisection
-            P, pc, hint = _chain_search(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh,
-                                        k - 1, c_len, cs, cq, bs, bq, max_steps, q, qs, lo, hi,
-                                        tol, stats, K2, K3, K23, KV, easy_frac, fast, last_k,
-                                        last_j, wk, hint, chain_seq)
+            P, pc, hint = _chain_search(pb, sh, qh, k - 1, c_len, runs, sc, cfg, last_k, last_j, hint)
             c_at = -1
             if P >= 0:
                 cert = pc
@@ -979,16 +1035,13 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, st, cs, cq,
                 b = k + c_len - 2
                 k = k + c_len - 1
             continue
-        ok, x, hint = _step(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV, np.int64(0),
-                            hint, q, qs, lo, hi, tol, wk, np.bool_(False), np.float64(1.0))
+        ok, x, hint = _step(T, lim, js, fd, sh, qh, k, np.int64(0), hint, sc, tol, np.bool_(False))
         stats[3] += 1
         if ok and chain and k + 1 < cap:
             # right after a brake fix the next failure is usually imminent: test the max
             # step at once (the same test the dichotomy would run first) instead of
             # re-running max steps up to the failure
-            r = _max_then_brake(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, k, x,
-                                bs, bq, max_steps, q, qs, lo, hi, tol, stats, K2, K3, K23, KV,
-                                easy_frac, fast, last_k, last_j, wk)
+            r = _max_then_brake(pb, sh, qh, k, x, runs, sc, cfg, last_k, last_j)
             if r[0]:
                 cert = r[2]
                 chain = np.bool_(False)
@@ -996,17 +1049,12 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, st, cs, cq,
                 continue
             if k + 1 >= cert:
                 hz = (k + 2 * (last_k - last_j) + 8) if fast else 0
-                ok, cert, c_len = _certified_run(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt,
-                                                 L, FB, FV, bs, bq, max_steps, q, qs, lo, hi,
-                                                 tol, stats, K2, K3, K23, KV, easy_frac, hz, wk,
-                                                 cs, cq)
+                ok, cert, c_len = _certified_run(pb, sh, qh, k, runs, sc, cfg, hz)
                 if not ok:
                     _save(st, k, b, chain, c_at, c_len, cert, last_k, last_j, hint)
                     return INFEASIBLE
                 c_at = k
-            stf, c, hint = _brake_fix(S, C, QEND, sh, qh, k, vl, al, jl, js_lim, dt, L, FB, FV,
-                                      bs, bq, max_steps, q, qs, lo, hi, tol, stats, K2, K3, K23,
-                                      KV, easy_frac, hint, wk)
+            stf, c, hint = _brake_fix(pb, sh, qh, k, runs, sc, cfg, hint)
             if stf != OK:
                 _save(st, k, b, chain, c_at, c_len, cert, last_k, last_j, hint)
                 return stf
@@ -1040,10 +1088,7 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, st, cs, cq,
             lo_j = base
             while hi_j - lo_j > 1:
                 mid = (lo_j + hi_j) // 2
-                ok, cc, cl = _certified_run(S, C, QEND, sh, qh, mid, vl, al, jl, js_lim, dt, L,
-                                            FB, FV, bs, bq, max_steps, q, qs, lo, hi, tol, stats,
-                                            K2, K3, K23, KV, easy_frac, _horizon(k, mid, fast),
-                                            wk, cs, cq)
+                ok, cc, cl = _certified_run(pb, sh, qh, mid, runs, sc, cfg, _horizon(k, mid, fast))
                 if ok:
                     lo_j = mid
                     tested = True
@@ -1053,10 +1098,7 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, st, cs, cq,
                 else:
                     hi_j = mid
             if not tested:
-                ok, cc, cl = _certified_run(S, C, QEND, sh, qh, base, vl, al, jl, js_lim, dt, L,
-                                            FB, FV, bs, bq, max_steps, q, qs, lo, hi, tol, stats,
-                                            K2, K3, K23, KV, easy_frac, _horizon(k, base, fast),
-                                            wk, cs, cq)
+                ok, cc, cl = _certified_run(pb, sh, qh, base, runs, sc, cfg, _horizon(k, base, fast))
                 if ok:
                     tested = True
                     cert = cc
@@ -1068,26 +1110,21 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, st, cs, cq,
         if not tested and (j + 1 >= cert or (floor_h > 0 and j <= k - floor_h)):
             # fast mode: the brake chain has run past what its last run certified; or the
             # look-back floor, not a brake fix, is all that is left below (never assumed)
-            ok, cert, c_len = _certified_run(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB,
-                                             FV, bs, bq, max_steps, q, qs, lo, hi, tol, stats, K2,
-                                             K3, K23, KV, easy_frac, _horizon(k, j, fast), wk,
-                                             cs, cq)
+            ok, cert, c_len = _certified_run(pb, sh, qh, j, runs, sc, cfg, _horizon(k, j, fast))
             if not ok:
                 _save(st, k, b, chain, c_at, c_len, cert, last_k, last_j, hint)
                 return INFEASIBLE
             c_at = j
         # the end is what stops us: try to land on it with the aim policy in one run
-        if gap_tol > 0.0 and k >= 2 and sh[k - 1] >= L - 2.0 * (sh[k - 1] - sh[k - 2]) - tol:
+        if cfg.gap_tol > 0.0 and k >= 2 and sh[k - 1] >= L - 2.0 * (sh[k - 1] - sh[k - 2]) - tol:
             done = False
             for back in range(4):
                 jj = j - back
                 if jj <= b:
                     break
-                r = _brake_run(S, C, QEND, sh, qh, jj, vl, al, jl, js_lim, dt, L, FB, FV,
-                               bs, bq, max_steps, q, qs, lo, hi, tol, stats, np.int64(2), K2, K3, K23, KV,
-                               np.float64(0.0), np.int64(0), wk)
+                r = _brake_run(pb, sh, qh, jj, runs, sc, cfg, np.int64(2), np.float64(0.0), np.int64(0))
                 kk = r[1]
-                if r[0] and L - bs[kk - 1] <= gap_tol:
+                if r[0] and L - bs[kk - 1] <= cfg.gap_tol:
                     need = jj + kk - 3
                     for t in range(3, kk):
                         sh[jj + t - 3] = bs[t]
@@ -1100,9 +1137,7 @@ def plan_core(S, C, QEND, vl, al, jl, js_lim, dt, L, FB, FV, sh, qh, st, cs, cq,
                     break
             if done:
                 continue
-        stf, c, hint = _brake_fix(S, C, QEND, sh, qh, j, vl, al, jl, js_lim, dt, L, FB, FV, bs,
-                                  bq, max_steps, q, qs, lo, hi, tol, stats, K2, K3, K23, KV,
-                                  easy_frac, hint, wk)
+        stf, c, hint = _brake_fix(pb, sh, qh, j, runs, sc, cfg, hint)
         if stf != OK:
             _save(st, j, b, chain, c_at, c_len, cert, last_k, last_j, hint)
             return stf
