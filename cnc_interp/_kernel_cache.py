@@ -154,8 +154,8 @@ PLAN_KERNEL_MODULES = (
     "plan.vpop.drive",
 )
 #: what compiling them from scratch takes, measured on the project's 2-core machine
-#: (quick-start plan of mill-contour.ngc, idle: about 40 s with VPOp's kernels compiled by
-#: two child processes, ``plan.precompile``)
+#: (quick-start plan of mill-contour.ngc, idle: 44 s with VPOp's step loop compiled by
+#: a child process, ``plan.precompile``)
 FIRST_COMPILE_ESTIMATE = "about 40 s"
 
 
