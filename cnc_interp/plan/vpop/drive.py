@@ -391,6 +391,21 @@ def new_loop(n, qstart, est, brake_cap, floor_h, room, window, checkpoint_every)
     return (sh, qh, st, core.Runs(bs, bq, cs, cq, stats), ds, Checkpoint(ck_st, ck_cs, ck_cq, ck_sh, ck_qh), max_cap)
 
 
+@njit(cache=True)
+def _grown(s, q, keep, need):
+    """``s`` (cap,) and ``q`` (cap, n) with room for ``need`` rows: themselves when they have
+    it, else new arrays at least twice as long holding their first ``keep`` rows."""
+    cap = s.shape[0]
+    if need <= cap:
+        return s, q
+    cap = max(2 * cap, need)
+    s2 = np.empty(cap)
+    q2 = np.empty((cap, q.shape[1]))
+    s2[:keep] = s[:keep]
+    q2[:keep] = q[:keep]
+    return s2, q2
+
+
 @njit(cache=True, nogil=True)
 def plan_identity_batch(paths, seg_off, mc, ps, ls, long_samples):
     """Plan paths p = 0..P-1 (segments seg_off[p]..seg_off[p+1]-1 of the concatenated
@@ -413,9 +428,8 @@ def plan_identity_batch(paths, seg_off, mc, ps, ls, long_samples):
     n = coef.shape[2]
     done = np.zeros(P, dtype=np.bool_)
     off = np.zeros(P + 1, dtype=np.int64)
-    cap = 1024
-    s_all = np.empty(cap)
-    q_all = np.empty((cap, n))
+    s_all = np.empty(1024)
+    q_all = np.empty((1024, n))
     pstats = np.zeros((P, 7), dtype=np.int64)
     perr = np.zeros(P)
     room = brake_cap + 8
@@ -431,14 +445,7 @@ def plan_identity_batch(paths, seg_off, mc, ps, ls, long_samples):
         if status == TRIVIAL:
             q0 = start_point(cf)
             m = 1
-            if total + m > cap:
-                cap = max(2 * cap, total + m)
-                s2 = np.empty(cap)
-                q2 = np.empty((cap, n))
-                s2[:total] = s_all[:total]
-                q2[:total] = q_all[:total]
-                s_all = s2
-                q_all = q2
+            s_all, q_all = _grown(s_all, q_all, total, total + m)
             s_all[total] = 0.0
             q_all[total] = q0[0]
             total += 1
@@ -464,14 +471,7 @@ def plan_identity_batch(paths, seg_off, mc, ps, ls, long_samples):
             continue
         last = end_index(sh, np.int64(0), np.int64(0), ds[DS_END], L)
         m = last + 1
-        if total + m > cap:
-            cap = max(2 * cap, total + m)
-            s2 = np.empty(cap)
-            q2 = np.empty((cap, n))
-            s2[:total] = s_all[:total]
-            q2[:total] = q_all[:total]
-            s_all = s2
-            q_all = q2
+        s_all, q_all = _grown(s_all, q_all, total, total + m)
         s_all[total : total + m] = sh[:m]
         q_all[total : total + m] = qh[:m]
         q_all[total + m - 1] = pb.table.QEND
