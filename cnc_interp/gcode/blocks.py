@@ -80,22 +80,30 @@ class _Source:
     def __init__(self, data: bytes | str):
         from .fastpath import scan
 
+        # The text is ``b`` decoded as latin-1 (one byte, one character: byte offsets are
+        # character offsets), decoded a line or a chunk at a time where it is needed: a
+        # decoded copy of the whole file would be held for the whole run (32 MB for a
+        # 32 MB program). Only a str holding characters outside latin-1 keeps its text.
+        text: str | None = None
         if isinstance(data, str):
-            text = data
             b = data.encode("latin-1", "replace")  # 1 char -> 1 byte keeps offsets
+            if b.count(b"?") != data.count("?"):  # characters were replaced
+                text = data
         else:
             b = bytes(data)
-            text = b.decode("latin-1")
         if b.startswith(b"\xef\xbb\xbf"):  # a UTF-8 byte order mark (Windows editors)
             b = b[3:]
-            text = text[3:] if text.startswith("\xef\xbb\xbf") else text.lstrip("\ufeff")
-        if "\r" in text:
+            if text is not None:
+                text = text[3:] if text.startswith("\xef\xbb\xbf") else text.lstrip("\ufeff")
+        if b"\r" in b:
             # CRLF (DOS) and CR alone (classic Mac) both end a line
-            text = text.replace("\r\n", "\n").replace("\r", "\n")
             b = b.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
-        if not text.endswith("\n"):
-            text += "\n"
+            if text is not None:
+                text = text.replace("\r\n", "\n").replace("\r", "\n")
+        if not b.endswith(b"\n"):
             b += b"\n"
+            if text is not None:
+                text += "\n"
         self.text = text
         self.b = b
         self.line_starts, self.special = scan(b)
@@ -105,6 +113,8 @@ class _Source:
     def line(self, i: int) -> str:
         """Raw text of 0-based line ``i`` (no newline)."""
         ls = self.line_starts
+        if self.text is None:
+            return self.b[int(ls[i]) : int(ls[i + 1]) - 1].decode("latin-1")
         return self.text[int(ls[i]) : int(ls[i + 1]) - 1]
 
     def chunk(self, k: int) -> _Chunk:

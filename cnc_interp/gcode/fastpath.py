@@ -50,8 +50,9 @@ def scan(b: bytes):
     return line_starts, special
 
 
-def tokenize_chunk(b: bytes, text: str, line_starts, special, l0: int, l1: int):
-    """Tokenise lines ``l0 .. l1-1`` (0-based) of ``b`` / ``text``.
+def tokenize_chunk(b: bytes, text: str | None, line_starts, special, l0: int, l1: int):
+    """Tokenise lines ``l0 .. l1-1`` (0-based) of ``b`` / ``text`` (``None``: the text is
+    ``b`` decoded as latin-1, and only this chunk of it is decoded).
 
     Returns ``(slow, offs, tuples, lines)``: ``slow`` (n,) bool array (True: use
     the slow path), ``offs`` (n+1,) int array, the words of plain line j being
@@ -63,7 +64,7 @@ def tokenize_chunk(b: bytes, text: str, line_starts, special, l0: int, l1: int):
     s0 = int(line_starts[l0])
     s1 = int(line_starts[l1])
     nlines = l1 - l0
-    lines = text[s0:s1].split("\n")
+    lines = (b[s0:s1].decode("latin-1") if text is None else text[s0:s1]).split("\n")
     starts = line_starts[l0:l1] - s0  # local start of each line
     nl_pos = line_starts[l0 + 1 : l1 + 1] - 1 - s0  # local position of each newline
     lens = np.diff(line_starts[l0 : l1 + 1])
