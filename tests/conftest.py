@@ -1,4 +1,5 @@
-"""Shared test set-up: where the samples and the corpus are, and one CLI runner.
+"""Shared test set-up: where the samples and the corpus are, program factories and one
+CLI runner.
 
 Module constants (importable as ``from conftest import CORPUS``, since pytest puts this
 folder on ``sys.path``) for parametrisation at collection time; fixtures for the rest.
@@ -20,6 +21,22 @@ CORPUS_ROOT = os.path.dirname(CORPUS)  # holds ``linuxcnc/`` (names in reports s
 HAVE_CORPUS = os.path.isdir(CORPUS)
 
 needs_corpus = pytest.mark.skipif(not HAVE_CORPUS, reason=f"corpus not found at {CORPUS}")
+
+
+def program_of(text: str, source: str = "t.ngc", **kw):
+    """The ``Program`` of G-code ``text`` (``read_program(text, source, **kw)``: ``axes``,
+    ``start``, ``tool_table``)."""
+    from cnc_interp.gcode import read_program
+
+    return read_program(text, source, **kw)
+
+
+def fitted_of(text: str, source: str = "t.ngc", axes: str | None = None, **settings):
+    """The ``FitResult`` of G-code ``text`` fitted with ``FitSettings(**settings)``."""
+    from cnc_interp.fit import FitSettings, fit_program
+
+    kw = {} if axes is None else {"axes": axes}
+    return fit_program(program_of(text, source, **kw), FitSettings(**settings))
 
 
 @pytest.fixture

@@ -11,14 +11,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cnc_interp.fit import FitSettings, fit_program
-from cnc_interp.gcode import read_program
+from .conftest import fitted_of
 
 FEEDS3 = "G21 G90 G64\nG0 X0 Y0 Z0\nG1 X10 F6000\nG1 X20 F60\nG1 X30 F6000\nM2\n"
-
-
-def _fit(text, **kw):
-    return fit_program(read_program(text, source="t.ngc"), FitSettings(**kw))
 
 
 def _feed_at_x(paths, x):
@@ -37,7 +32,7 @@ def _feed_at_x(paths, x):
 @pytest.mark.parametrize("g61", [False, True])
 def test_collinear_moves_keep_their_own_feed(g61):
     text = FEEDS3.replace("G64", "G61") if g61 else FEEDS3
-    res = _fit(text)
+    res = fitted_of(text)
     feed_paths = [p for p in res.paths if not p.rapid]
     assert len(feed_paths) == 1  # collinear: one path, no stop
     for x, f in ((5, 100.0), (15, 1.0), (25, 100.0)):
@@ -60,7 +55,7 @@ def test_curved_polyline_segments_never_straddle_a_feed_change(method):
         f = 3000 if (j - 1) // 25 % 2 == 0 else 600
         feeds.append(f / 60.0)
         lines.append(f"G1 X{20 * np.cos(a[j]):.6f} Y{20 * np.sin(a[j]):.6f} F{f}")
-    res = _fit("\n".join(lines) + "\nM2\n", method=method)
+    res = fitted_of("\n".join(lines) + "\nM2\n", method=method)
     (p,) = [q for q in res.paths if not q.rapid]
     assert set(np.unique(p.feed_mm_s)) == {50.0, 10.0}
     # every segment's end point lies on the programmed arc part of its own feed

@@ -9,11 +9,9 @@ import pytest
 from numpy.testing import assert_allclose
 
 from cnc_interp.errors import GCodeError, UnsupportedError
-from cnc_interp.gcode import Stop, read_program
+from cnc_interp.gcode import Stop
 
-
-def prog(text: str, **kw):
-    return read_program(text, "t.ngc", **kw)
+from .conftest import program_of as prog
 
 
 def all_nodes(p):

@@ -10,12 +10,10 @@ from numpy.testing import assert_allclose
 
 from cnc_interp.constants import CURVE_CHORD_TOL_MM
 from cnc_interp.errors import GCodeError
-from cnc_interp.gcode import Arc, Nurbs, read_program
+from cnc_interp.gcode import Arc, Nurbs
 from cnc_interp.gcode.splines import clamped_uniform_knots
 
-
-def prog(text: str, **kw):
-    return read_program(text, "t.ngc", **kw)
+from .conftest import program_of as prog
 
 
 def only_curve(p):

@@ -6,11 +6,9 @@ import numpy as np
 import pytest
 
 from cnc_interp.errors import GCodeError
-from cnc_interp.gcode import Dwell, Run, read_program
+from cnc_interp.gcode import Dwell, Run
 
-
-def prog(text: str, **kw):
-    return read_program(text, "t.ngc", **kw)
+from .conftest import program_of as prog
 
 
 def moves(p):
