@@ -71,7 +71,8 @@ class SubRun:
 
     kind: ``"straight"`` (collinear G61 moves: one exact line) or ``"fit"``;
     rotary: the path moves rotary axes only (metric in degrees); blends: the
-    blended corners inside (``blends.Blend``).
+    blended corners inside (``blends.Blend``), rows ``blend_range`` = (first, end) of
+    the prepared run's table.
     """
 
     i0: int
@@ -80,6 +81,7 @@ class SubRun:
     rotary: bool
     curves: tuple[CurvePiece, ...]
     blends: tuple | BlendTable = ()
+    blend_range: tuple[int, int] = (0, 0)
 
 
 def prepare_run(run: Run, settings) -> PreparedRun:
@@ -208,7 +210,7 @@ def split_run(pr: PreparedRun, settings, evals: dict | None = None) -> Iterator[
         cs = tuple(by_sub.get(k, ()))
         bs = pr.blends[bl_lo[k] : bl_hi[k]] if bl_hi[k] > bl_lo[k] else ()
         exact = not cs and not bs and (n_zero[b + 1] - n_zero[a + 1]) == b - a
-        yield SubRun(a, b, "straight" if exact else "fit", bool(pr.rot_only[a]), cs, bs)
+        yield SubRun(a, b, "straight" if exact else "fit", bool(pr.rot_only[a]), cs, bs, (bl_lo[k], bl_hi[k]))
 
 
 def slice_run(pr: PreparedRun, first: int, last: int) -> PreparedRun:

@@ -343,8 +343,13 @@ def _iter_run_raws(run: Run, settings: FitSettings, info: dict):
         return kept[0]
 
     methods: set[str] = set()
-    for sub in split_run(prb, settings, evals):
-        results, where = _fit_sub_repaired(unblended, prb, sub, settings, evals, info, blend)
+    # the sub-runs the compiled batch fitter covers are fitted FIT_KERNEL_BATCH at a time
+    # (the same fits: ``_subrun``); the others, and any fit found outside its tolerance,
+    # by the Python code, in path order
+    batcher = _SubRunBatcher(prb, settings, evals) if _SubRunBatcher.covers_run(prb, settings) else None
+    pending: list[SubRun] = []
+
+    def emit(sub: SubRun, results: list, where: PreparedRun):
         for m in results:
             methods.add(m.method)
             info["max_node_dev_mm"] = max(info["max_node_dev_mm"], m.dev_mm)
@@ -362,6 +367,233 @@ def _iter_run_raws(run: Run, settings: FitSettings, info: dict):
             yield m.raw
         for cp in sub.curves:  # fitted: its exact evaluation is not needed again
             evals.pop(id(cp.curve), None)
+
+    def flush():
+        assert batcher is not None
+        for sub, m in zip(pending, batcher.fit(pending)):
+            if m is not None:
+                yield from emit(sub, [m], prb)
+            else:
+                yield from emit(sub, *_fit_sub_repaired(unblended, prb, sub, settings, evals, info, blend))
+        pending.clear()
+
+    for sub in split_run(prb, settings, evals):
+        if batcher is not None and batcher.covers(sub):
+            pending.append(sub)
+            if len(pending) >= FIT_KERNEL_BATCH:
+                yield from flush()
+            continue
+        if pending:
+            yield from flush()
+        yield from emit(sub, *_fit_sub_repaired(unblended, prb, sub, settings, evals, info, blend))
+    if pending:
+        yield from flush()
+
+
+#: sub-runs fitted per call of the compiled batch fitter (any value gives the same paths;
+#: a batch's paths are handed on together)
+FIT_KERNEL_BATCH = 32
+
+
+class _SubRunBatcher:
+    """The compiled batch fitter (``_subrun.fit_batch``) for one prepared run: the run's
+    arrays once, each batch's arcs and sub-run table, and the results as ``_Measured``
+    (None where the Python code must fit the sub-run: the kernel left it, or the
+    measurement finds the fit outside its tolerance, which the Python code repairs)."""
+
+    @staticmethod
+    def covers_run(pr: PreparedRun, settings: FitSettings) -> bool:
+        return settings.method == "nodes" and bool(np.all(pr.lin)) and pr.nodes.shape[0] >= 2
+
+    def __init__(self, pr: PreparedRun, settings: FitSettings, evals: dict):
+        from . import _subrun as sr
+        from ._linedev import DeviationSettings
+        from .curves import (
+            _MIN_PIECE_SPEED,
+            _MIN_SPEED,
+            _PIECE_GL_W,
+            _PIECE_GL_X,
+            _SMALL_PIECE,
+            CURVE_CHECK_POINTS,
+            CURVE_MAX_DEPTH,
+        )
+        from .deviation import (
+            PATH_DEV_FAR_WINDOW,
+            PATH_DEV_FIT_SAMPLES,
+            PATH_DEV_LOCAL_FRAC,
+            PATH_DEV_MAX_SAMPLES,
+            PATH_DEV_MIN_SAMPLES,
+            PATH_DEV_NEWTON_ITERS,
+            PATH_DEV_SAMPLES_PER_SPAN,
+            PATH_DEV_WINDOW,
+        )
+        from .nodes import section_params
+        from ..constants import FIT_TOL_SAFETY
+
+        self.pr = pr
+        self.evals = evals
+        self.weights = _weights(pr.lin, False)
+        d = pr.nodes.shape[1]
+        self.scale = np.ones(d)
+        self.run = sr.RunArrays(
+            np.ascontiguousarray(pr.nodes, dtype=float),
+            np.ascontiguousarray(fit_tolerance(pr.tol_mm), dtype=float),
+            np.ascontiguousarray(pr.line, dtype=np.int64),
+            np.ascontiguousarray(pr.feed_mm_s, dtype=float),
+        )
+        bl = pr.blends
+        if len(bl):
+            self.blends = sr.BlendArrays(
+                np.ascontiguousarray(bl.i, dtype=np.int64),
+                np.ascontiguousarray(bl.h, dtype=float),
+                np.ascontiguousarray(bl.coef, dtype=float),
+                np.ascontiguousarray(bl.line, dtype=np.int64),
+                np.ascontiguousarray(bl.feed_mm_s, dtype=float),
+                np.ascontiguousarray(bl.t_in, dtype=float),
+                np.ascontiguousarray(bl.t_out, dtype=float),
+            )
+        else:
+            z = np.zeros(0)
+            self.blends = sr.BlendArrays(
+                np.zeros(0, dtype=np.int64),
+                z,
+                np.zeros((0, 6, d)),
+                np.zeros(0, dtype=np.int64),
+                z,
+                np.zeros((0, d)),
+                np.zeros((0, d)),
+            )
+        self.prm = sr.BatchParams(
+            section_params(settings.fit_tol_deg, pr.lin, pr.lin, 0.0),
+            sr.CurveParams(
+                FIT_TOL_SAFETY,
+                CURVE_CHECK_POINTS,
+                CURVE_MAX_DEPTH,
+                _MIN_SPEED,
+                _MIN_PIECE_SPEED,
+                _SMALL_PIECE,
+                _PIECE_GL_X,
+                _PIECE_GL_W,
+            ),
+            DeviationSettings(
+                samples_per_span=PATH_DEV_SAMPLES_PER_SPAN,
+                min_samples=PATH_DEV_MIN_SAMPLES,
+                max_samples=PATH_DEV_MAX_SAMPLES,
+                local_frac=PATH_DEV_LOCAL_FRAC,
+                window=PATH_DEV_WINDOW,
+                far_window=PATH_DEV_FAR_WINDOW,
+                n_coarse=PATH_DEV_FIT_SAMPLES,
+                iters=PATH_DEV_NEWTON_ITERS,
+            ),
+        )
+
+    @staticmethod
+    def covers(sub: SubRun) -> bool:
+        from ..gcode.program import Arc
+
+        return (
+            sub.kind == "fit"
+            and not sub.rotary
+            and (sub.i1 - sub.i0 > 1 or bool(sub.curves))
+            and all(isinstance(cp.curve, Arc) for cp in sub.curves)
+        )
+
+    def _arcs(self, subs: list[SubRun]):
+        from . import _subrun as sr
+        from .curves import curve_eval, end_states, param_scale
+
+        cps = [cp for sub in subs for cp in sub.curves]
+        A = len(cps)
+        d = self.scale.size
+        first = np.empty(A, dtype=np.int64)
+        last = np.empty(A, dtype=np.int64)
+        line = np.empty(A, dtype=np.int64)
+        nq = np.empty(A, dtype=np.int64)
+        start = np.empty((A, d))
+        delta = np.empty((A, d))
+        center = np.empty((A, 2))
+        plane = np.empty((A, 2), dtype=np.int64)
+        sc = np.empty((A, 5))  # sweep, a0, r0, r1, g
+        ends = np.empty((A, 4, d))
+        for k, cp in enumerate(cps):
+            c = cp.curve
+            ev = curve_eval(c, self.evals)
+            (t0, k0), (t1, k1) = end_states(ev, self.scale)
+            first[k], last[k], line[k], nq[k] = cp.first, cp.last, c.line, ev.breaks.size - 1
+            start[k], delta[k], center[k] = c.start, ev._d, c.center
+            plane[k] = c.plane[:2]
+            sc[k] = (c.sweep_rad, ev._a0, ev._r0, ev._r1, param_scale(ev, self.scale))
+            ends[k, 0], ends[k, 1], ends[k, 2], ends[k, 3] = t0, k0, t1, k1
+        return sr.ArcArrays(
+            first,
+            last,
+            line,
+            nq,
+            start,
+            delta,
+            center,
+            plane,
+            sc[:, 0].copy(),
+            sc[:, 1].copy(),
+            sc[:, 2].copy(),
+            sc[:, 3].copy(),
+            sc[:, 4].copy(),
+            ends,
+        )
+
+    def fit(self, subs: list[SubRun]) -> list:
+        from . import _subrun as sr
+
+        B = len(subs)
+        n_arcs = np.array([len(sub.curves) for sub in subs], dtype=np.int64)
+        arc_off = np.zeros(B + 1, dtype=np.int64)
+        np.cumsum(n_arcs, out=arc_off[1:])
+        table = sr.SubRunTable(
+            np.array([sub.i0 for sub in subs], dtype=np.int64),
+            np.array([sub.i1 for sub in subs], dtype=np.int64),
+            np.array([sub.blend_range[0] for sub in subs], dtype=np.int64),
+            np.array([sub.blend_range[1] for sub in subs], dtype=np.int64),
+            arc_off[:-1].copy(),
+            arc_off[1:].copy(),
+        )
+        got = sr.fit_batch(self.run, self.blends, self._arcs(subs), table, self.prm)
+        pr = self.pr
+        out: list = []
+        so = got.seg_off.tolist()
+        for s, sub in enumerate(subs):
+            if got.status[s] != 0:
+                out.append(None)
+                continue
+            pratio = float(got.pratio[s])
+            ok = bool(got.fit_ok[s]) and max(pratio, 0.0) <= 1.0 + PATH_DEV_SLACK
+            if not ok:
+                out.append(None)
+                continue
+            q0, q1 = so[s], so[s + 1]
+            raw = _Raw(
+                pr.axes,
+                got.breaks[q0 + s : q1 + s + 1],
+                got.coef[q0:q1],
+                got.line[q0:q1],
+                got.feed[q0:q1],
+                self.weights,
+            )
+            method = "curves+nodes" if sub.curves else "nodes"
+            out.append(
+                _Measured(
+                    sub.i0,
+                    sub.i1,
+                    raw,
+                    method,
+                    float(got.dmm[s]),
+                    float(got.ddeg[s]),
+                    float(got.pdev[s]),
+                    pratio,
+                    0.0,
+                    True,
+                )
+            )
+        return out
 
 
 def _fit_sub_repaired(
