@@ -51,7 +51,7 @@ SectionFit = namedtuple("SectionFit", "breaks coef line feed max_mm max_deg ok")
 _N_FRACS = 7
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def hermite_into(coef, k, p, v, acc, i, dp, hp):
     """``nodes.hermite`` for one piece k: the quintic on [0, h] from the values (rows i and
     i + 1 of p, v, acc: position, first and second derivative); dp (d,) = p[i + 1] - p[i]
@@ -69,7 +69,7 @@ def hermite_into(coef, k, p, v, acc, i, dp, hp):
         coef[k, 5, a] = (12.0 * dp[a] - 6.0 * (v1 + v0) * h - (a0 - a1) * hh2) / (2.0 * h5)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def fit_section(sec, ends, prm):
     """``nodes.fit_polyline`` of the nodes ``sec`` (``SectionNodes``) with the end states
     ``ends`` (``_bspline.EndStates`` in the scaled metric; mode 0: free) and settings
@@ -240,7 +240,7 @@ def fit_section(sec, ends, prm):
     return _pieces(t, m, c, u, sec, ends, scale, max_mm, max_deg, ok)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _straight(nodes, length, line, feed):
     """``nodes.straight_piece`` of a two-node section."""
     d = nodes.shape[1]
@@ -254,7 +254,7 @@ def _straight(nodes, length, line, feed):
     return SectionFit(breaks, coef, np.full(1, line), np.full(1, feed), 0.0, 0.0, True)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _pieces(t, m, c, u, sec, ends, scale, max_mm, max_deg, ok):
     """``nodes._to_pieces``: each knot span as the quintic Hermite of the spline's q, q', q''
     at its two knots, with the exact end nodes and imposed end derivatives."""

@@ -27,6 +27,7 @@ import numpy as np
 from numba import njit
 from numba.typed import List
 
+from ._arcs import arc_eval, linspace
 from ._bspline import EndStates
 from ._linedev import polyline_path_deviation
 from ._npexact import blas_dot, numpy_arc_terms, numpy_powers, pairwise_sum
@@ -39,13 +40,6 @@ RunArrays = namedtuple("RunArrays", "nodes tol line feed")
 
 #: the run's blended corners (``blends.BlendTable``'s arrays)
 BlendArrays = namedtuple("BlendArrays", "i h coef line feed t_in t_out")
-
-#: the run's arcs (A of them) as ``curves.CurveEval`` holds them: nodes first/last (run
-#: indices), block line, quarter-turn pieces nq, start / end - start (A, d), centre
-#: (A, 2), plane (A, 2) axis indices, sweep (rad), start angle a0, radii r0 / r1, the
-#: parameter scale g (``curves.param_scale``) and end states (A, 4, d): T0, K0, T1, K1
-#: (``curves.end_states``)
-ArcArrays = namedtuple("ArcArrays", "first last line nq start delta center plane sweep a0 r0 r1 g ends")
 
 #: the batch's sub-runs (B): nodes i0..i1 and their ranges of blends and arcs
 SubRunTable = namedtuple("SubRunTable", "i0 i1 blend_lo blend_hi arc_lo arc_hi")
@@ -74,27 +68,7 @@ _BLEND = 2
 STATUS_PYTHON = 1
 
 
-@njit(cache=True)
-def _linspace(start, stop, num):
-    """``np.linspace(start, stop, num)``: i * step + start, the last value exactly ``stop``."""
-    out = np.empty(num)
-    div = num - 1
-    delta = stop - start
-    if div > 0:
-        step = delta / div
-        for i in range(num):
-            if step == 0.0:
-                out[i] = i / div * delta + start
-            else:
-                out[i] = i * step + start
-        out[num - 1] = stop
-    else:
-        for i in range(num):
-            out[i] = i * delta + start
-    return out
-
-
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _row_sumsq(x, i, buf):
     """numpy's ``(x[i] ** 2).sum()`` of a row of x (n, d); ``buf`` (>= d) scratch."""
     d = x.shape[1]
@@ -103,42 +77,7 @@ def _row_sumsq(x, i, buf):
     return 0.0 + pairwise_sum(buf, 0, d)
 
 
-@njit(cache=True)
-def _arc_eval(arcs, c, w, P, P1, P2):
-    """``CurveEval.eval`` of arc c at w (K,) into P, P1, P2 (K, d); P1 / P2 may be None-like
-    (size 0) when only positions are wanted."""
-    i = arcs.plane[c, 0]
-    j = arcs.plane[c, 1]
-    sw = arcs.sweep[c]
-    a0 = arcs.a0[c]
-    r0 = arcs.r0[c]
-    r1 = arcs.r1[c]
-    cx = arcs.center[c, 0]
-    cy = arcs.center[c, 1]
-    dr = r1 - r0
-    d = P.shape[1]
-    derivs = P1.shape[0] > 0
-    for k in range(w.shape[0]):
-        wk = w[k]
-        ang = a0 + sw * wk
-        r = r0 + (r1 - r0) * wk
-        co = np.cos(ang)
-        si = np.sin(ang)
-        for a in range(d):
-            P[k, a] = arcs.start[c, a] + arcs.delta[c, a] * wk
-        P[k, i] = cx + r * co
-        P[k, j] = cy + r * si
-        if derivs:
-            for a in range(d):
-                P1[k, a] = arcs.delta[c, a]
-                P2[k, a] = 0.0
-            P1[k, i] = dr * co - r * sw * si
-            P1[k, j] = dr * si + r * sw * co
-            P2[k, i] = -2.0 * dr * sw * si - r * sw * sw * co
-            P2[k, j] = 2.0 * dr * sw * co - r * sw * sw * si
-
-
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _horner(coef, k, a, t):
     """``curves._polyval``: coef[k, :, a] at t."""
     acc = coef[k, 5, a]
@@ -147,7 +86,7 @@ def _horner(coef, k, a, t):
     return acc
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _horner_d(coef, k, a, t):
     """``curves._polyval`` of ``curves._derivative(coef)``: the t-derivative at t (its
     padded zero coefficient first, as numpy runs it)."""
@@ -157,7 +96,7 @@ def _horner_d(coef, k, a, t):
     return acc
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def fit_arc(arcs, c, ends, lin, tol_mm, tol_deg, line, feed, cp):
     """``curves.fit_curve`` of arc c (``ArcArrays``) on linear axes only (scale 1), with the
     imposed end tangent / curvature ``ends`` (``_bspline.EndStates``): (``SectionFit``,
@@ -165,7 +104,7 @@ def fit_arc(arcs, c, ends, lin, tol_mm, tol_deg, line, feed, cp):
     (``curves._direction``'s case, left to Python)."""
     d = arcs.start.shape[1]
     g = arcs.g[c]
-    wb = _linspace(0.0, 1.0, arcs.nq[c] + 1)
+    wb = linspace(0.0, 1.0, arcs.nq[c] + 1)
     tl = tol_mm * cp.tol_safety
     tr = tol_deg * cp.tol_safety
     M = cp.check_points
@@ -187,7 +126,7 @@ def fit_arc(arcs, c, ends, lin, tol_mm, tol_deg, line, feed, cp):
         Ps = np.empty((nb, d))
         V = np.empty((nb, d))
         A = np.empty((nb, d))
-        _arc_eval(arcs, c, wb, Ps, V, A)
+        arc_eval(arcs, c, wb, Ps, V, A)
         sp = np.empty(nb)
         for k in range(nb):
             sp[k] = np.sqrt(_row_sumsq(V, k, buf))
@@ -219,7 +158,7 @@ def fit_arc(arcs, c, ends, lin, tol_mm, tol_deg, line, feed, cp):
         Pq = np.empty((npc * G, d))
         D1 = np.empty((npc * G, d))
         D2 = np.empty((npc * G, d))
-        _arc_eval(arcs, c, wq, Pq, D1, D2)
+        arc_eval(arcs, c, wq, Pq, D1, D2)
         sp8 = np.empty((npc, G))
         for k in range(npc):
             for q in range(G):
@@ -230,8 +169,8 @@ def fit_arc(arcs, c, ends, lin, tol_mm, tol_deg, line, feed, cp):
             wd2[k, 0] = -at[k] / sp3[k]
         pa = np.empty((npc, d))
         pz = np.empty((npc, d))
-        _arc_eval(arcs, c, wa, pa, empty, empty)
-        _arc_eval(arcs, c, wz, pz, empty, empty)
+        arc_eval(arcs, c, wa, pa, empty, empty)
+        arc_eval(arcs, c, wz, pz, empty, empty)
         h = np.empty(npc)
         dp = np.empty((npc, d))
         dpd = np.empty((npc, d))
@@ -285,7 +224,7 @@ def fit_arc(arcs, c, ends, lin, tol_mm, tol_deg, line, feed, cp):
             for i in range(M):
                 tt[i] = tfr[i] * h[k]
                 wc[i] = min(max(_horner(wcoef, k, 0, tt[i]), 0.0), 1.0)
-            _arc_eval(arcs, c, wc, ex, empty, empty)
+            arc_eval(arcs, c, wc, ex, empty, empty)
             e_lin = 0.0
             slow_q = np.inf
             slow_w = np.inf
@@ -329,7 +268,7 @@ def fit_arc(arcs, c, ends, lin, tol_mm, tol_deg, line, feed, cp):
     return SectionFit(breaks, coef, np.full(n, line), np.full(n, feed), max_mm, max_deg, ok), 0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _straight_move(p0, p1, line, feed):
     """``nodes.straight_piece`` of the move p0 -> p1 with length ``np.linalg.norm(p1 - p0)``."""
     d = p0.shape[0]
@@ -347,7 +286,7 @@ def _straight_move(p0, p1, line, feed):
     return SectionFit(breaks, coef, np.full(1, line), np.full(1, feed), 0.0, 0.0, True)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _sections(blends, arcs, a, b, lo_hi):
     """``fitter._fit_sections``' sections of sub-run a..b: kind (_POLY, _CURVE, _BLEND),
     first and last node, and the blend's or arc's index, in path order."""
@@ -380,7 +319,7 @@ def _sections(blends, arcs, a, b, lo_hi):
     return kind[:ns], si[:ns], sj[:ns], obj[:ns]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _junctions(blends, arcs, kind, obj, d):
     """The end states imposed on each section (``fitter._fit_sections``): for section k,
     (has, tangent, curvature vector) at its start and at its end."""
@@ -429,7 +368,7 @@ def _junctions(blends, arcs, kind, obj, d):
     return s_has, s_state, e_has, e_state
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _fit_subrun(run, blends, arcs, subs, s, prm):
     """``fitter._fit_sub`` of sub-run s: (its sections' fits joined, worst node deviations
     mm / deg, every fitter's check passed, status)."""
@@ -515,17 +454,17 @@ def _fit_subrun(run, blends, arcs, subs, s, prm):
     return SectionFit(breaks, coef, line, feed, 0.0, 0.0, True), dmm, ddeg, ok, 0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _arc_samples(arcs, c, k):
     """``deviation.programmed_samples``' samples of arc c: its points at np.linspace(0, 1, k + 1)."""
     d = arcs.start.shape[1]
     pts = np.empty((k + 1, d))
     empty = np.empty((0, d))
-    _arc_eval(arcs, c, _linspace(0.0, 1.0, k + 1), pts, empty, empty)
+    arc_eval(arcs, c, linspace(0.0, 1.0, k + 1), pts, empty, empty)
     return pts
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _path_deviation(run, arcs, a, b, lo_hi, fit, cfg):
     """``deviation.path_deviation`` of sub-run a..b (its arcs lo_hi = (first, end)) against
     the fit (``SectionFit``): (max distance mm, max distance / tolerance)."""
@@ -618,7 +557,7 @@ def _path_deviation(run, arcs, a, b, lo_hi, fit, cfg):
     return dmax, rmax
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def fit_batch(run, blends, arcs, subs, prm):
     """Fit and measure the sub-runs ``subs`` (``SubRunTable``) of the run ``run``
     (``RunArrays``, its ``BlendArrays`` and ``ArcArrays``) with the settings ``prm``

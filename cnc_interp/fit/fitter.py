@@ -33,6 +33,7 @@ from ..constants import ARC_LENGTH_MAX_SUB, ARC_LENGTH_REL_TOL
 from ..gcode.program import Dwell, Program, Run, Stop
 from .deviation import path_deviation, polyline_deviation, rotary_path_deviation
 from .corners import PreparedRun, SubRun, add_blends, fit_tolerance, prepare_run, slice_run, split_run
+from .curves import arc_table
 from .nodes import EndState, fit_polyline, straight_piece
 from .path import Path, PlanarSegments
 from .result import FitResult, fit_outside_error
@@ -331,7 +332,16 @@ def _iter_run_raws(run: Run, settings: FitSettings, info: dict):
     info["nodes_in"] = int(run.n_nodes)
     info["max_tol_mm"] = float(pr.tol_mm.max()) if pr.tol_mm.size else 0.0
     blend = settings.blend_corners and settings.method == "nodes"
-    prb = add_blends(pr, settings, evals) if blend else pr
+    # the compiled batch fitter's runs: their arcs' constants and end states once, as
+    # arrays (the corner split needs the end tangents too)
+    covered = _SubRunBatcher.covers_run(pr, settings)
+    arcs = arc_table(pr.curves, pr.nodes.shape[1]) if covered and pr.curves else None
+    prb = add_blends(pr, settings, evals, arcs=arcs) if blend else pr
+    if arcs is not None:  # the same arcs, at their nodes in the blended run
+        arcs = arcs._replace(
+            first=np.array([cp.first for cp in prb.curves], dtype=np.int64),
+            last=np.array([cp.last for cp in prb.curves], dtype=np.int64),
+        )
     # only a repair needs the run without its blends again, and repairs are rare: it is
     # prepared again then (the same arrays) rather than kept for the whole run
     kept: list[PreparedRun] = [pr] if prb is pr else []
@@ -346,8 +356,8 @@ def _iter_run_raws(run: Run, settings: FitSettings, info: dict):
     # the sub-runs the compiled batch fitter covers are fitted FIT_KERNEL_BATCH at a time
     # (the same fits: ``_subrun``); the others, and any fit found outside its tolerance,
     # by the Python code, in path order
-    batcher = _SubRunBatcher(prb, settings, evals) if _SubRunBatcher.covers_run(prb, settings) else None
-    pending: list[SubRun] = []
+    batcher = _SubRunBatcher(prb, settings, arcs) if covered else None
+    pending: list[tuple[SubRun, int]] = []  # with the index of its first curve
 
     def emit(sub: SubRun, results: list, where: PreparedRun):
         for m in results:
@@ -370,19 +380,22 @@ def _iter_run_raws(run: Run, settings: FitSettings, info: dict):
 
     def flush():
         assert batcher is not None
-        for sub, m in zip(pending, batcher.fit(pending)):
+        for (sub, _), m in zip(pending, batcher.fit(pending)):
             if m is not None:
                 yield from emit(sub, [m], prb)
             else:
                 yield from emit(sub, *_fit_sub_repaired(unblended, prb, sub, settings, evals, info, blend))
         pending.clear()
 
-    for sub in split_run(prb, settings, evals):
-        if batcher is not None and batcher.covers(sub):
-            pending.append(sub)
+    c_pos = 0  # the sub-runs take the run's curves in order
+    for sub in split_run(prb, settings, evals, arcs):
+        if batcher is not None and batcher.covers(sub, c_pos):
+            pending.append((sub, c_pos))
+            c_pos += len(sub.curves)
             if len(pending) >= FIT_KERNEL_BATCH:
                 yield from flush()
             continue
+        c_pos += len(sub.curves)
         if pending:
             yield from flush()
         yield from emit(sub, *_fit_sub_repaired(unblended, prb, sub, settings, evals, info, blend))
@@ -405,7 +418,7 @@ class _SubRunBatcher:
     def covers_run(pr: PreparedRun, settings: FitSettings) -> bool:
         return settings.method == "nodes" and bool(np.all(pr.lin)) and pr.nodes.shape[0] >= 2
 
-    def __init__(self, pr: PreparedRun, settings: FitSettings, evals: dict):
+    def __init__(self, pr: PreparedRun, settings: FitSettings, arcs):
         from . import _subrun as sr
         from ._linedev import DeviationSettings
         from .curves import (
@@ -431,10 +444,9 @@ class _SubRunBatcher:
         from ..constants import FIT_TOL_SAFETY
 
         self.pr = pr
-        self.evals = evals
         self.weights = _weights(pr.lin, False)
         d = pr.nodes.shape[1]
-        self.scale = np.ones(d)
+        self.arcs = arcs if arcs is not None else arc_table((), d)
         self.run = sr.RunArrays(
             np.ascontiguousarray(pr.nodes, dtype=float),
             np.ascontiguousarray(fit_tolerance(pr.tol_mm), dtype=float),
@@ -487,80 +499,32 @@ class _SubRunBatcher:
             ),
         )
 
-    @staticmethod
-    def covers(sub: SubRun) -> bool:
-        from ..gcode.program import Arc
-
+    def covers(self, sub: SubRun, c_pos: int) -> bool:
+        """Whether the kernel fits ``sub`` (its curves from the run's ``c_pos``-th)."""
         return (
             sub.kind == "fit"
             and not sub.rotary
             and (sub.i1 - sub.i0 > 1 or bool(sub.curves))
-            and all(isinstance(cp.curve, Arc) for cp in sub.curves)
+            and bool(np.all(self.arcs.ok[c_pos : c_pos + len(sub.curves)]))
         )
 
-    def _arcs(self, subs: list[SubRun]):
-        from . import _subrun as sr
-        from .curves import curve_eval, end_states, param_scale
-
-        cps = [cp for sub in subs for cp in sub.curves]
-        A = len(cps)
-        d = self.scale.size
-        first = np.empty(A, dtype=np.int64)
-        last = np.empty(A, dtype=np.int64)
-        line = np.empty(A, dtype=np.int64)
-        nq = np.empty(A, dtype=np.int64)
-        start = np.empty((A, d))
-        delta = np.empty((A, d))
-        center = np.empty((A, 2))
-        plane = np.empty((A, 2), dtype=np.int64)
-        sc = np.empty((A, 5))  # sweep, a0, r0, r1, g
-        ends = np.empty((A, 4, d))
-        for k, cp in enumerate(cps):
-            c = cp.curve
-            ev = curve_eval(c, self.evals)
-            (t0, k0), (t1, k1) = end_states(ev, self.scale)
-            first[k], last[k], line[k], nq[k] = cp.first, cp.last, c.line, ev.breaks.size - 1
-            start[k], delta[k], center[k] = c.start, ev._d, c.center
-            plane[k] = c.plane[:2]
-            sc[k] = (c.sweep_rad, ev._a0, ev._r0, ev._r1, param_scale(ev, self.scale))
-            ends[k, 0], ends[k, 1], ends[k, 2], ends[k, 3] = t0, k0, t1, k1
-        return sr.ArcArrays(
-            first,
-            last,
-            line,
-            nq,
-            start,
-            delta,
-            center,
-            plane,
-            sc[:, 0].copy(),
-            sc[:, 1].copy(),
-            sc[:, 2].copy(),
-            sc[:, 3].copy(),
-            sc[:, 4].copy(),
-            ends,
-        )
-
-    def fit(self, subs: list[SubRun]) -> list:
+    def fit(self, batch: list[tuple[SubRun, int]]) -> list:
+        """The ``_Measured`` of each (sub-run, index of its first curve), or None."""
         from . import _subrun as sr
 
-        B = len(subs)
-        n_arcs = np.array([len(sub.curves) for sub in subs], dtype=np.int64)
-        arc_off = np.zeros(B + 1, dtype=np.int64)
-        np.cumsum(n_arcs, out=arc_off[1:])
         table = sr.SubRunTable(
-            np.array([sub.i0 for sub in subs], dtype=np.int64),
-            np.array([sub.i1 for sub in subs], dtype=np.int64),
-            np.array([sub.blend_range[0] for sub in subs], dtype=np.int64),
-            np.array([sub.blend_range[1] for sub in subs], dtype=np.int64),
-            arc_off[:-1].copy(),
-            arc_off[1:].copy(),
+            np.array([sub.i0 for sub, _ in batch], dtype=np.int64),
+            np.array([sub.i1 for sub, _ in batch], dtype=np.int64),
+            np.array([sub.blend_range[0] for sub, _ in batch], dtype=np.int64),
+            np.array([sub.blend_range[1] for sub, _ in batch], dtype=np.int64),
+            np.array([c for _, c in batch], dtype=np.int64),
+            np.array([c + len(sub.curves) for sub, c in batch], dtype=np.int64),
         )
-        got = sr.fit_batch(self.run, self.blends, self._arcs(subs), table, self.prm)
+        got = sr.fit_batch(self.run, self.blends, self.arcs, table, self.prm)
         pr = self.pr
         out: list = []
         so = got.seg_off.tolist()
-        for s, sub in enumerate(subs):
+        for s, (sub, _) in enumerate(batch):
             if got.status[s] != 0:
                 out.append(None)
                 continue
