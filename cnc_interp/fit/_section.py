@@ -6,9 +6,6 @@ the quintic Hermite of them, and each segment's source line and feed).
 Stellabee-like programs fit ~10⁵ sections of a few nodes each; the numpy glue around the
 rounds cost more than the rounds. The arithmetic is ``fit_polyline``'s, operation for
 operation (numpy's sums and powers through ``_npexact``), so the pieces are the same bits.
-
-Numba's cache of this module does not notice changes in the kernels it calls
-(``_bspline``, ``_npexact``); a change there needs an edit here too.
 """
 
 from __future__ import annotations
@@ -201,7 +198,7 @@ def fit_section(sec, ends, prm):
         interior,
         total,
         ends,
-        FitData(xc0, ref0, tol_c0, exp_lin0, xc0, ref0, w_data0, span_f),
+        FitData(xc0, ref0, tol_c0, exp_lin0, w_data0, span_f),
         RefineParams(
             tol_ref,
             tol_rot,

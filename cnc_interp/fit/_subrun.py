@@ -13,10 +13,6 @@ summation, dot products and vector powers (``_npexact``), so the paths are the s
 bits. What this kernel does not cover (a NURBS, rotary axes, an arc whose parameter
 speed vanishes, a fit the measurement finds outside: its repair) is left to the
 Python code, which gives the same first fit.
-
-Numba's cache of this module does not notice changes in the kernels it calls
-(``_section``, ``_bspline``, ``_linedev``, ``_project``, ``_npexact``); a change there
-needs an edit here too.
 """
 
 from __future__ import annotations
