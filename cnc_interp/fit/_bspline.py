@@ -89,7 +89,7 @@ class RefineParams(NamedTuple):
     max_interior: int
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def find_span(t, m, x):
     """Index i with t[i] <= x < t[i+1], K <= i <= m-1 (m = number of coefficients)."""
     if x >= t[m]:
@@ -106,7 +106,7 @@ def find_span(t, m, x):
     return lo
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def basis(t, i, x, p, out, left, right):
     """The p+1 non-zero B-spline basis values of degree p at x in span i (NURBS book A2.2).
 
@@ -125,7 +125,7 @@ def basis(t, i, x, p, out, left, right):
         out[j] = saved
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def basis54(t, i, x, n5, n4, left, right):
     """``basis(t, i, x, 5)`` into n5 (6,), and into n4 (5,) the degree-4 values it passes
     through, which are ``basis(t[1:], i - 1, x, 4)`` (the same knots, the same operations):
@@ -146,7 +146,7 @@ def basis54(t, i, x, n5, n4, left, right):
                 n4[r] = n5[r]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def point_bases(t, m, x):
     """Span (P,), degree-5 basis (P, 6) and degree-4 basis (P, 5) of every point x (P,)."""
     P = x.shape[0]
@@ -162,7 +162,7 @@ def point_bases(t, m, x):
     return spans, n5, n4
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def end_coefs(t, m, c, y0, y1, d1s, d2s, d1e, d2e, start_mode, end_mode):
     """Fill the fixed coefficients from end positions and (optional) u-derivatives.
 
@@ -181,7 +181,7 @@ def end_coefs(t, m, c, y0, y1, d1s, d2s, d1e, d2e, start_mode, end_mode):
         c[m - 3, :] = c[m - 2, :] - dpm3 * (b - t[m - 2]) / 5.0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def solve_lsq(t, m, bases, y, w, prior, fixed, c, lam, ridge):
     """Weighted LS for the free coefficients (``fixed[i]`` False), in place in ``c``.
 
@@ -301,7 +301,7 @@ def solve_lsq(t, m, bases, y, w, prior, fixed, c, lam, ridge):
             c[i] = rhs[idx[i]]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def evaluate(t, m, c, x, val, der):
     """Positions val (K, d) and first derivatives der (K, d) at sorted-or-not points x."""
     d = c.shape[1]
@@ -330,7 +330,7 @@ def evaluate(t, m, c, x, val, der):
             der[j, a] = acc
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def evaluate012(t, m, c, x, d0, d1, d2):
     """Values d0, first d1 and second derivatives d2 (K, d) of the quintic spline at x (K,)
     (each point in its span t[i] <= x < t[i+1], the last knot from the left): ``evaluate``,
@@ -361,7 +361,7 @@ def _d1_coef(t, c, i, a):
     return K * (c[i + 1, a] - c[i, a]) / den if den > 0.0 else 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _evaluate_bases(t, c, bases, val, der):
     """``evaluate`` at the points of ``bases`` (``point_bases``): the same sums."""
     spans, n5, n4 = bases
@@ -383,7 +383,7 @@ def _evaluate_bases(t, c, bases, val, der):
             der[j, a] = acc
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def check(t, m, c, pts, bases, limits, bad_span, n_hard):
     """Mark spans whose check points deviate or slow down too much.
 
@@ -452,7 +452,7 @@ def check(t, m, c, pts, bases, limits, bad_span, n_hard):
     return worst_lin, worst_rot, hard, soft
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def segment_sources_kernel(x, u, line, feed):
     """See ``nodes.segment_sources``: per segment [x_k, x_k+1], the line of the move
     containing its end and the least feed of the moves it overlaps (move j ends at node j)."""
@@ -479,7 +479,7 @@ def segment_sources_kernel(x, u, line, feed):
     return seg_line, seg_feed
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def refine(nodes, interior, total, ends, data, prm):
     """The knot-insertion rounds of ``nodes.fit_polyline`` (see its module docstring),
     compiled: one call instead of a Python loop with dozens of array operations per
