@@ -85,7 +85,7 @@ def arc_length_table(coef, breaks, w, glx, glw, rel_tol, max_sub):
     return sub_u, sub_s, sub_seg, starts
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def arc_length_tables(coef, breaks, seg_off, w, glx, glw, rel_tol, max_sub):
     """``arc_length_table`` of many paths at once (one compiled call for a whole run).
 
@@ -127,7 +127,7 @@ def arc_length_tables(coef, breaks, seg_off, w, glx, glw, rel_tol, max_sub):
     return all_u, all_s, all_seg, all_sb, sub_off
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def chain_ends(coef, breaks, seg_off, start, has_start):
     """Chain paths end to start: coef[first segment of p, 0] = end of path p-1 (of
     ``start`` (n,) for p = 0 when ``has_start``), in place. Returns the ends (P, n) and

@@ -85,7 +85,7 @@ def arc_eval(arcs, c, w, P, P1, P2):
             P2[k, j] = 2.0 * dr * sw * co - r * sw * sw * si
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", nogil=True)
 def arc_param_scales(arcs):
     """``curves.param_scale`` of every arc (scale 1): its length from a chord sum over
     ``_G_SAMPLES`` points per piece, over its parameter range 1. (g (A,), ok (A,)): not
@@ -114,7 +114,7 @@ def arc_param_scales(arcs):
     return g, ok
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", nogil=True)
 def arc_end_derivs(arcs, g, g2, min_speed, ok):
     """``curves._derivs`` / ``end_states`` at both ends of every arc (scale 1), up to the
     curvature's division by the squared speed: (unit tangents T (A, 2, d), accelerations

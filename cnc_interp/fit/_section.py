@@ -66,7 +66,7 @@ def hermite_into(coef, k, p, v, acc, i, dp, hp):
         coef[k, 5, a] = (12.0 * dp[a] - 6.0 * (v1 + v0) * h - (a0 - a1) * hh2) / (2.0 * h5)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", nogil=True)
 def fit_section(sec, ends, prm):
     """``nodes.fit_polyline`` of the nodes ``sec`` (``SectionNodes``) with the end states
     ``ends`` (``_bspline.EndStates`` in the scaled metric; mode 0: free) and settings

@@ -553,7 +553,7 @@ def _path_deviation(run, arcs, a, b, lo_hi, fit, cfg):
     return dmax, rmax
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", nogil=True)
 def fit_batch(run, blends, arcs, subs, prm):
     """Fit and measure the sub-runs ``subs`` (``SubRunTable``) of the run ``run``
     (``RunArrays``, its ``BlendArrays`` and ``ArcArrays``) with the settings ``prm``

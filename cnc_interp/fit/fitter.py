@@ -447,6 +447,7 @@ class _SubRunBatcher:
         self.weights = _weights(pr.lin, False)
         d = pr.nodes.shape[1]
         self.arcs = arcs if arcs is not None else arc_table((), d)
+        self.arc_ok = self.arcs.ok.tolist()
         self.run = sr.RunArrays(
             np.ascontiguousarray(pr.nodes, dtype=float),
             np.ascontiguousarray(fit_tolerance(pr.tol_mm), dtype=float),
@@ -501,12 +502,11 @@ class _SubRunBatcher:
 
     def covers(self, sub: SubRun, c_pos: int) -> bool:
         """Whether the kernel fits ``sub`` (its curves from the run's ``c_pos``-th)."""
-        return (
-            sub.kind == "fit"
-            and not sub.rotary
-            and (sub.i1 - sub.i0 > 1 or bool(sub.curves))
-            and bool(np.all(self.arcs.ok[c_pos : c_pos + len(sub.curves)]))
-        )
+        if sub.kind != "fit" or sub.rotary:
+            return False
+        if not sub.curves:
+            return sub.i1 - sub.i0 > 1
+        return all(self.arc_ok[c_pos : c_pos + len(sub.curves)])
 
     def fit(self, batch: list[tuple[SubRun, int]]) -> list:
         """The ``_Measured`` of each (sub-run, index of its first curve), or None."""
