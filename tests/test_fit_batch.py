@@ -125,13 +125,13 @@ def test_batch_fit_equals_python_fit(case, monkeypatch):
 
     prog = _program(case)
     calls = {"n": 0}
-    real = sr.fit_batch
+    real = sr.join_and_measure
 
     def counted(*args):
         calls["n"] += 1
         return real(*args)
 
-    monkeypatch.setattr(sr, "fit_batch", counted)
+    monkeypatch.setattr(sr, "join_and_measure", counted)
     batched = fit_program(prog, FitSettings())
     assert calls["n"] > 0
     monkeypatch.setattr(fitter._SubRunBatcher, "covers_run", staticmethod(lambda pr, settings: False))

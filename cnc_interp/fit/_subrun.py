@@ -1,4 +1,4 @@
-"""A batch of sub-runs fitted and measured in one compiled call.
+"""A batch of sub-runs fitted and measured in four compiled calls.
 
 ``fitter._fit_measured`` for a run on linear axes only (the default N-axis fit): the
 sub-run's sections (``fitter._fit_sections``: polylines, corner blends, the exact
@@ -10,9 +10,16 @@ each: in Python that was ~2 ms of glue per sub-run around the compiled kernels.
 
 Every float operation is the Python code's, in the same order, with numpy's own
 summation, dot products and vector powers (``_npexact``), so the paths are the same
-bits. What this kernel does not cover (a NURBS, rotary axes, an arc whose parameter
+bits. What these kernels do not cover (a NURBS, rotary axes, an arc whose parameter
 speed vanishes, a fit the measurement finds outside: its repair) is left to the
 Python code, which gives the same first fit.
+
+The four calls (``plan_sections``, ``fit_poly_sections``, ``fit_arc_sections``,
+``join_and_measure``) are separate kernels: numba links a kernel's callees into its
+module and optimizes the whole again, so each layer of calls re-optimizes everything
+below it. First-run compile of the fit's kernels (quick-start program, cold cache,
+machine at load 4-6): one batch kernel ~75 CPU-s, these four ~65, the Python fitter's
+kernels before ~24.
 """
 
 from __future__ import annotations
@@ -56,9 +63,23 @@ BatchParams = namedtuple("BatchParams", "section curve deviation")
 #: fit_ok (every check of the fitters passed), the measured pdev (mm) and pratio
 BatchFits = namedtuple("BatchFits", "status seg_off breaks coef line feed dmm ddeg fit_ok pdev pratio")
 
+#: the batch's sections (``fitter._fit_sections``), NS of them: sub-run s has sections
+#: off[s]:off[s + 1]; per section its kind (_POLY, _CURVE, _BLEND, _MOVE: a move between
+#: blends, the exact line), first and last node i / j, its arc's or blend's index obj,
+#: the imposed end states (has (NS, 2): start, end; state (NS, 2, 2, d): start / end,
+#: tangent / curvature vector) and its sub-run's tol_ref (NS,)
+SectionTable = namedtuple("SectionTable", "off kind i j obj has state tol_ref")
+
+#: the fitted pieces of some sections (K of them) of a ``SectionTable``: section k has
+#: segments off[k]:off[k + 1] of coef / line / feed and breaks breaks[off[k] + k :
+#: off[k + 1] + k + 1] (from 0); worst node deviations max_mm / max_deg, ok, and status
+#: (0, or ``STATUS_PYTHON``)
+SectionPieces = namedtuple("SectionPieces", "off breaks coef line feed max_mm max_deg ok status")
+
 _POLY = 0
 _CURVE = 1
 _BLEND = 2
+_MOVE = 3
 
 #: status of a sub-run left to the Python code (an arc's parameter speed vanishes)
 STATUS_PYTHON = 1
@@ -265,24 +286,6 @@ def fit_arc(arcs, c, ends, lin, tol_mm, tol_deg, line, feed, cp):
 
 
 @njit(cache=True, error_model="numpy")
-def _straight_move(p0, p1, line, feed):
-    """``nodes.straight_piece`` of the move p0 -> p1 with length ``np.linalg.norm(p1 - p0)``."""
-    d = p0.shape[0]
-    v = np.empty(d)
-    for a in range(d):
-        v[a] = p1[a] - p0[a]
-    length = np.sqrt(blas_dot(v, v))
-    coef = np.zeros((1, 6, d))
-    for a in range(d):
-        coef[0, 0, a] = p0[a]
-        coef[0, 1, a] = v[a] / length
-    breaks = np.empty(2)
-    breaks[0] = 0.0
-    breaks[1] = length
-    return SectionFit(breaks, coef, np.full(1, line), np.full(1, feed), 0.0, 0.0, True)
-
-
-@njit(cache=True, error_model="numpy")
 def _sections(blends, arcs, a, b, lo_hi):
     """``fitter._fit_sections``' sections of sub-run a..b: kind (_POLY, _CURVE, _BLEND),
     first and last node, and the blend's or arc's index, in path order."""
@@ -362,92 +365,6 @@ def _junctions(blends, arcs, kind, obj, d):
             e_state[k, 0] = st[k + 1, 0]
             e_state[k, 1] = st[k + 1, 1]
     return s_has, s_state, e_has, e_state
-
-
-@njit(cache=True, error_model="numpy")
-def _fit_subrun(run, blends, arcs, subs, s, prm):
-    """``fitter._fit_sub`` of sub-run s: (its sections' fits joined, worst node deviations
-    mm / deg, every fitter's check passed, status)."""
-    a = subs.i0[s]
-    b = subs.i1[s]
-    nodes = run.nodes
-    d = nodes.shape[1]
-    tol = run.tol[a : b + 1]
-    tol_ref = np.max(tol)
-    sp = prm.section
-    sprm = SectionParams(
-        sp.tol_deg,
-        sp.lin,
-        sp.metric,
-        tol_ref,
-        sp.tol_safety,
-        sp.between_safety,
-        sp.smoothing,
-        sp.ridge,
-        sp.min_ratio,
-        sp.stop_ratio,
-        sp.max_rounds,
-        sp.stale_rounds,
-        sp.min_span_rel,
-        sp.initial_step,
-    )
-    lo_hi = (subs.blend_lo[s], subs.blend_hi[s], subs.arc_lo[s], subs.arc_hi[s])
-    kind, si, sj, obj = _sections(blends, arcs, a, b, lo_hi)
-    s_has, s_state, e_has, e_state = _junctions(blends, arcs, kind, obj, d)
-    ns = kind.shape[0]
-    fits = List()
-    dmm = 0.0
-    ddeg = 0.0
-    ok = True
-    n_seg = 0
-    for k in range(ns):
-        ends = EndStates(
-            s_state[k, 0], s_state[k, 1], e_state[k, 0], e_state[k, 1], 1 if s_has[k] else 0, 1 if e_has[k] else 0
-        )
-        i = si[k]
-        j = sj[k]
-        if kind[k] == _CURVE:
-            c = obj[k]
-            pf, status = fit_arc(arcs, c, ends, sp.lin, tol[j - a], sp.tol_deg, arcs.line[c], run.feed[j], prm.curve)
-            if status != 0:
-                return pf, 0.0, 0.0, False, status
-        elif kind[k] == _BLEND:
-            bl = obj[k]
-            brk = np.empty(2)
-            brk[0] = 0.0
-            brk[1] = blends.h[bl]
-            cf = np.empty((1, 6, d))
-            cf[0] = blends.coef[bl]
-            pf = SectionFit(brk, cf, np.full(1, blends.line[bl]), np.full(1, blends.feed[bl]), 0.0, 0.0, True)
-        else:
-            free_or_blend = (not s_has[k] or kind[k - 1] == _BLEND) and (not e_has[k] or kind[k + 1] == _BLEND)
-            if j == i + 1 and free_or_blend:
-                pf = _straight_move(nodes[i], nodes[j], run.line[j], run.feed[j])
-            else:
-                sec = SectionNodes(nodes[i : j + 1], tol[i - a : j - a + 1], run.line[i : j + 1], run.feed[i : j + 1])
-                pf = fit_section(sec, ends, sprm)
-        fits.append(pf)
-        n_seg += pf.coef.shape[0]
-        dmm = max(dmm, pf.max_mm)
-        ddeg = max(ddeg, pf.max_deg)
-        ok = ok and pf.ok
-    breaks = np.empty(n_seg + 1)
-    coef = np.empty((n_seg, 6, d))
-    line = np.empty(n_seg, dtype=np.int64)
-    feed = np.empty(n_seg)
-    breaks[0] = 0.0
-    off = 0.0
-    q = 0
-    for pf in fits:
-        m = pf.coef.shape[0]
-        for k in range(m):
-            breaks[q + k + 1] = pf.breaks[k + 1] + off
-            coef[q + k] = pf.coef[k]
-            line[q + k] = pf.line[k]
-            feed[q + k] = pf.feed[k]
-        off += pf.breaks[m]
-        q += m
-    return SectionFit(breaks, coef, line, feed, 0.0, 0.0, True), dmm, ddeg, ok, 0
 
 
 @njit(cache=True, error_model="numpy")
@@ -554,12 +471,156 @@ def _path_deviation(run, arcs, a, b, lo_hi, fit, cfg):
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
-def fit_batch(run, blends, arcs, subs, prm):
-    """Fit and measure the sub-runs ``subs`` (``SubRunTable``) of the run ``run``
-    (``RunArrays``, its ``BlendArrays`` and ``ArcArrays``) with the settings ``prm``
-    (``BatchParams``): a ``BatchFits``."""
+def plan_sections(run, blends, arcs, subs):
+    """The sections of the sub-runs ``subs`` (``SubRunTable``) of the run ``run``
+    (``RunArrays``, its ``BlendArrays`` and ``ArcArrays``) with their imposed end
+    states: a ``SectionTable`` (``fitter._fit_sections``' sections and junctions; a
+    move between blends, or between a blend and the path's end, is its own kind)."""
     B = subs.i0.shape[0]
     d = run.nodes.shape[1]
+    cap = 0
+    for s in range(B):
+        cap += 2 * ((subs.blend_hi[s] - subs.blend_lo[s]) + (subs.arc_hi[s] - subs.arc_lo[s])) + 1
+    off = np.zeros(B + 1, dtype=np.int64)
+    kind = np.empty(cap, dtype=np.int64)
+    first = np.empty(cap, dtype=np.int64)
+    last = np.empty(cap, dtype=np.int64)
+    obj = np.empty(cap, dtype=np.int64)
+    has = np.zeros((cap, 2), dtype=np.bool_)
+    state = np.zeros((cap, 2, 2, d))
+    tol_ref = np.empty(cap)
+    q = 0
+    for s in range(B):
+        a = subs.i0[s]
+        b = subs.i1[s]
+        lo_hi = (subs.blend_lo[s], subs.blend_hi[s], subs.arc_lo[s], subs.arc_hi[s])
+        k_s, i_s, j_s, o_s = _sections(blends, arcs, a, b, lo_hi)
+        s_has, s_state, e_has, e_state = _junctions(blends, arcs, k_s, o_s, d)
+        tr = np.max(run.tol[a : b + 1])
+        ns = k_s.shape[0]
+        for k in range(ns):
+            kd = k_s[k]
+            if kd == _POLY and j_s[k] == i_s[k] + 1:
+                before = not s_has[k] or k_s[k - 1] == _BLEND
+                after = not e_has[k] or k_s[k + 1] == _BLEND
+                if before and after:
+                    kd = _MOVE
+            kind[q + k] = kd
+            first[q + k] = i_s[k]
+            last[q + k] = j_s[k]
+            obj[q + k] = o_s[k]
+            has[q + k, 0] = s_has[k]
+            has[q + k, 1] = e_has[k]
+            state[q + k, 0] = s_state[k]
+            state[q + k, 1] = e_state[k]
+            tol_ref[q + k] = tr
+        q += ns
+        off[s + 1] = q
+    return SectionTable(off, kind[:q], first[:q], last[:q], obj[:q], has[:q], state[:q], tol_ref[:q])
+
+
+@njit(cache=True, error_model="numpy")
+def _ends(table, k):
+    """The imposed end states of section k (``_bspline.EndStates``)."""
+    st = table.state
+    return EndStates(
+        st[k, 0, 0], st[k, 0, 1], st[k, 1, 0], st[k, 1, 1], 1 if table.has[k, 0] else 0, 1 if table.has[k, 1] else 0
+    )
+
+
+@njit(cache=True, error_model="numpy")
+def _gather(fits, status):
+    """``SectionPieces`` of the fits (``SectionFit``, one per section) in order."""
+    K = len(fits)
+    off = np.zeros(K + 1, dtype=np.int64)
+    for k in range(K):
+        off[k + 1] = off[k] + fits[k].coef.shape[0]
+    S = off[K]
+    d = fits[0].coef.shape[2] if K > 0 else 0
+    breaks = np.empty(S + K)
+    coef = np.empty((S, 6, d))
+    line = np.empty(S, dtype=np.int64)
+    feed = np.empty(S)
+    max_mm = np.empty(K)
+    max_deg = np.empty(K)
+    ok = np.empty(K, dtype=np.bool_)
+    for k in range(K):
+        f = fits[k]
+        q = off[k]
+        m = off[k + 1] - q
+        breaks[q + k : q + k + m + 1] = f.breaks
+        coef[q : q + m] = f.coef
+        line[q : q + m] = f.line
+        feed[q : q + m] = f.feed
+        max_mm[k] = f.max_mm
+        max_deg[k] = f.max_deg
+        ok[k] = f.ok
+    return SectionPieces(off, breaks, coef, line, feed, max_mm, max_deg, ok, status)
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def fit_poly_sections(run, table, prm):
+    """``nodes.fit_polyline`` (``_section.fit_section``) of every polyline section of
+    ``table`` (``SectionTable``) in order: their ``SectionPieces``."""
+    sp = prm.section
+    nodes = run.nodes
+    fits = List()
+    for k in range(table.kind.shape[0]):
+        if table.kind[k] != _POLY:
+            continue
+        i = table.i[k]
+        j = table.j[k]
+        sprm = SectionParams(
+            sp.tol_deg,
+            sp.lin,
+            sp.metric,
+            table.tol_ref[k],
+            sp.tol_safety,
+            sp.between_safety,
+            sp.smoothing,
+            sp.ridge,
+            sp.min_ratio,
+            sp.stop_ratio,
+            sp.max_rounds,
+            sp.stale_rounds,
+            sp.min_span_rel,
+            sp.initial_step,
+        )
+        sec = SectionNodes(nodes[i : j + 1], run.tol[i : j + 1], run.line[i : j + 1], run.feed[i : j + 1])
+        fits.append(fit_section(sec, _ends(table, k), sprm))
+    return _gather(fits, np.zeros(len(fits), dtype=np.int64))
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def fit_arc_sections(run, arcs, table, prm):
+    """``curves.fit_curve`` (``fit_arc``) of every arc section of ``table`` in order: their
+    ``SectionPieces`` (status ``STATUS_PYTHON``: left to Python, its pieces empty)."""
+    fits = List()
+    status = np.zeros(table.kind.shape[0], dtype=np.int64)
+    n = 0
+    lin = prm.section.lin
+    for k in range(table.kind.shape[0]):
+        if table.kind[k] != _CURVE:
+            continue
+        c = table.obj[k]
+        j = table.j[k]
+        tol_deg = prm.section.tol_deg
+        pf, st = fit_arc(arcs, c, _ends(table, k), lin, run.tol[j], tol_deg, arcs.line[c], run.feed[j], prm.curve)
+        fits.append(pf)
+        status[n] = st
+        n += 1
+    return _gather(fits, status[:n])
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def join_and_measure(run, blends, arcs, subs, table, polys, arcfits, prm):
+    """Each sub-run of ``subs`` as ``fitter._fit_sub`` joins its sections (``table``; the
+    polylines' and arcs' pieces ``polys`` / ``arcfits``, the blends' and the moves' own)
+    and as ``fitter._fit_measured`` measures it (``deviation.path_deviation`` /
+    ``polyline_deviation``): a ``BatchFits``."""
+    B = subs.i0.shape[0]
+    nodes = run.nodes
+    d = nodes.shape[1]
     status = np.zeros(B, dtype=np.int64)
     dmm = np.zeros(B)
     ddeg = np.zeros(B)
@@ -567,39 +628,108 @@ def fit_batch(run, blends, arcs, subs, prm):
     pdev = np.zeros(B)
     pratio = np.zeros(B)
     seg_off = np.zeros(B + 1, dtype=np.int64)
-    fits = List()
+    # segments per sub-run, and whether an arc of it was left to Python
+    kp = 0
+    kc = 0
     for s in range(B):
-        fit, dm, dd, ok, st = _fit_subrun(run, blends, arcs, subs, s, prm)
-        fits.append(fit)
-        status[s] = st
-        seg_off[s + 1] = seg_off[s] + (fit.coef.shape[0] if st == 0 else 0)
-        if st != 0:
-            continue
-        dmm[s] = dm
-        ddeg[s] = dd
-        fit_ok[s] = ok
-        a = subs.i0[s]
-        b = subs.i1[s]
-        if subs.arc_hi[s] > subs.arc_lo[s]:
-            pdev[s], pratio[s] = _path_deviation(run, arcs, a, b, (subs.arc_lo[s], subs.arc_hi[s]), fit, prm.deviation)
-        else:
-            lin = np.ones(d, dtype=np.bool_)
-            pdev[s], pratio[s] = polyline_path_deviation(
-                fit.breaks, fit.coef, run.nodes[a : b + 1], run.tol[a : b + 1], lin, prm.deviation
-            )
+        n_seg = 0
+        for k in range(table.off[s], table.off[s + 1]):
+            kd = table.kind[k]
+            if kd == _POLY:
+                n_seg += polys.off[kp + 1] - polys.off[kp]
+                kp += 1
+            elif kd == _CURVE:
+                n_seg += arcfits.off[kc + 1] - arcfits.off[kc]
+                if arcfits.status[kc] != 0:
+                    status[s] = arcfits.status[kc]
+                kc += 1
+            else:
+                n_seg += 1
+        seg_off[s + 1] = seg_off[s] + (n_seg if status[s] == 0 else 0)
     S = seg_off[B]
     breaks = np.empty(S + B)
     coef = np.empty((S, 6, d))
     line = np.empty(S, dtype=np.int64)
     feed = np.empty(S)
+    lin = np.ones(d, dtype=np.bool_)
+    kp = 0
+    kc = 0
     for s in range(B):
+        q = seg_off[s]
+        bq = q + s
+        breaks[bq] = 0.0
+        off = 0.0
+        ok = True
+        for k in range(table.off[s], table.off[s + 1]):
+            kd = table.kind[k]
+            if kd == _POLY or kd == _CURVE:
+                src = polys if kd == _POLY else arcfits
+                kk = kp if kd == _POLY else kc
+                if kd == _POLY:
+                    kp += 1
+                else:
+                    kc += 1
+                if status[s] != 0:
+                    continue
+                a0 = src.off[kk]
+                m = src.off[kk + 1] - a0
+                for e in range(m):
+                    breaks[bq + e + 1] = src.breaks[a0 + kk + e + 1] + off
+                    coef[q + e] = src.coef[a0 + e]
+                    line[q + e] = src.line[a0 + e]
+                    feed[q + e] = src.feed[a0 + e]
+                off += src.breaks[a0 + kk + m]
+                dmm[s] = max(dmm[s], src.max_mm[kk])
+                ddeg[s] = max(ddeg[s], src.max_deg[kk])
+                ok = ok and src.ok[kk]
+                q += m
+                bq += m
+                continue
+            if status[s] != 0:
+                continue
+            if kd == _BLEND:
+                # the blend's one piece (``fitter._fit_sections``' PieceFit of the Blend)
+                bl = table.obj[k]
+                length = blends.h[bl]
+                coef[q] = blends.coef[bl]
+                line[q] = blends.line[bl]
+                feed[q] = blends.feed[bl]
+            else:
+                # the move itself (``nodes.straight_piece``, its length ``np.linalg.norm``)
+                i = table.i[k]
+                j = table.j[k]
+                v = nodes[j] - nodes[i]
+                length = np.sqrt(blas_dot(v, v))
+                coef[q] = 0.0
+                for e in range(d):
+                    coef[q, 0, e] = nodes[i, e]
+                    coef[q, 1, e] = v[e] / length
+                line[q] = run.line[j]
+                feed[q] = run.feed[j]
+            breaks[bq + 1] = length + off
+            off += length
+            q += 1
+            bq += 1
         if status[s] != 0:
             continue
-        fit = fits[s]
-        q = seg_off[s]
-        m = seg_off[s + 1] - q
-        breaks[q + s : q + s + m + 1] = fit.breaks
-        coef[q : q + m] = fit.coef
-        line[q : q + m] = fit.line
-        feed[q : q + m] = fit.feed
+        fit_ok[s] = ok
+        q0 = seg_off[s]
+        n_seg = seg_off[s + 1] - q0
+        fit = SectionFit(
+            breaks[q0 + s : q0 + s + n_seg + 1],
+            coef[q0 : q0 + n_seg],
+            line[q0 : q0 + n_seg],
+            feed[q0 : q0 + n_seg],
+            0.0,
+            0.0,
+            True,
+        )
+        a = subs.i0[s]
+        b = subs.i1[s]
+        if subs.arc_hi[s] > subs.arc_lo[s]:
+            pdev[s], pratio[s] = _path_deviation(run, arcs, a, b, (subs.arc_lo[s], subs.arc_hi[s]), fit, prm.deviation)
+        else:
+            pdev[s], pratio[s] = polyline_path_deviation(
+                fit.breaks, fit.coef, nodes[a : b + 1], run.tol[a : b + 1], lin, prm.deviation
+            )
     return BatchFits(status, seg_off, breaks, coef, line, feed, dmm, ddeg, fit_ok, pdev, pratio)

@@ -409,7 +409,7 @@ FIT_KERNEL_BATCH = 32
 
 
 class _SubRunBatcher:
-    """The compiled batch fitter (``_subrun.fit_batch``) for one prepared run: the run's
+    """The compiled batch fitter (``_subrun``) for one prepared run: the run's
     arrays once, each batch's arcs and sub-run table, and the results as ``_Measured``
     (None where the Python code must fit the sub-run: the kernel left it, or the
     measurement finds the fit outside its tolerance, which the Python code repairs)."""
@@ -520,7 +520,10 @@ class _SubRunBatcher:
             np.array([c for _, c in batch], dtype=np.int64),
             np.array([c + len(sub.curves) for sub, c in batch], dtype=np.int64),
         )
-        got = sr.fit_batch(self.run, self.blends, self.arcs, table, self.prm)
+        sections = sr.plan_sections(self.run, self.blends, self.arcs, table)
+        polys = sr.fit_poly_sections(self.run, sections, self.prm)
+        arcfits = sr.fit_arc_sections(self.run, self.arcs, sections, self.prm)
+        got = sr.join_and_measure(self.run, self.blends, self.arcs, table, sections, polys, arcfits, self.prm)
         pr = self.pr
         out: list = []
         so = got.seg_off.tolist()
