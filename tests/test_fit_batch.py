@@ -132,6 +132,7 @@ def test_batch_fit_equals_python_fit(case, monkeypatch):
         return real(*args)
 
     monkeypatch.setattr(sr, "join_and_measure", counted)
+    monkeypatch.setattr(fitter, "_kernels_ready", True)  # whatever numba has cached
     batched = fit_program(prog, FitSettings())
     assert calls["n"] > 0
     monkeypatch.setattr(fitter._SubRunBatcher, "covers_run", staticmethod(lambda pr, settings: False))

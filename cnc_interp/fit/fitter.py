@@ -407,6 +407,28 @@ def _iter_run_raws(run: Run, settings: FitSettings, info: dict):
 #: a batch's paths are handed on together)
 FIT_KERNEL_BATCH = 32
 
+#: nodes of a run from which the batch fitter's kernels are compiled when numba has not
+#: cached them yet: they cost ~40 CPU-s to compile (first run after an install or update)
+#: and save ~70 µs a node, so a shorter run is fitted by the Python fitter (the same
+#: paths) until a long one, or any earlier process, has compiled them — the quick
+#: start's first run keeps its compile time
+FIT_KERNEL_COMPILE_NODES = 50_000
+
+_kernels_ready = False
+
+
+def _batch_kernels_ready(n_nodes: int) -> bool:
+    """Whether the batch fitter fits a run of ``n_nodes`` (see FIT_KERNEL_COMPILE_NODES)."""
+    global _kernels_ready
+    if not _kernels_ready:
+        import os
+
+        from .._kernel_cache import missing_kernels
+
+        root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+        _kernels_ready = n_nodes >= FIT_KERNEL_COMPILE_NODES or not missing_kernels(root, ("fit._subrun",))
+    return _kernels_ready
+
 
 class _SubRunBatcher:
     """The compiled batch fitter (``_subrun``) for one prepared run: the run's
@@ -416,7 +438,8 @@ class _SubRunBatcher:
 
     @staticmethod
     def covers_run(pr: PreparedRun, settings: FitSettings) -> bool:
-        return settings.method == "nodes" and bool(np.all(pr.lin)) and pr.nodes.shape[0] >= 2
+        n = pr.nodes.shape[0]
+        return settings.method == "nodes" and bool(np.all(pr.lin)) and n >= 2 and _batch_kernels_ready(n)
 
     def __init__(self, pr: PreparedRun, settings: FitSettings, arcs):
         from . import _subrun as sr
