@@ -139,25 +139,141 @@ def fit_polyline(
     move 1), ``tol_deg`` for rotary axes, ``lin`` (d,) bool linear axes,
     ``metric`` (d,) bool axes of the arc-length metric, ``line``/``feed`` (n,)
     per node. ``start``/``end`` impose u-derivatives in the scaled space.
+
+    ``_section.fit_section`` is the same fit in one compiled call (the batch fitter's);
+    this one serves the runs the batch fitter leaves (NURBS, rotary axes, repairs, short
+    runs before its kernels are cached) and compiles only the rounds' kernel.
     """
     from . import _bspline as bs
-    from ._section import SectionNodes, fit_section
 
-    zero = np.zeros(nodes.shape[1])
+    n, d = nodes.shape
+    scale = np.where(lin, 1.0, tol_ref_mm / tol_deg)
+    # relative to the first node: differences of large absolute coordinates lose digits
+    y = (nodes - nodes[0]) * scale
+    chords = np.diff(y, axis=0)
+    clen = np.linalg.norm(chords, axis=1)
+    u = np.concatenate(([0.0], np.cumsum(clen)))
+    total = float(u[-1])
+    tol = np.asarray(tol_mm, dtype=float) * FIT_TOL_SAFETY
+    tol_rot = tol_deg * FIT_TOL_SAFETY * scale[~lin].max(initial=1.0) if (~lin).any() else np.inf
+
+    if n == 2 and start is None and end is None:
+        return straight_piece(nodes[0], nodes[1], total, int(line[1]), float(feed[1]))
+
+    # check points: nodes and fractions of each chord
+    metric_len = np.sqrt((chords[:, metric] ** 2).sum(axis=1))
+    lin_ratio = metric_len / clen
+    # check points on the programmed moves: fractions of every chord (more on long chords
+    # than their neighbours' scale would need is left to the per-span points below); the
+    # tolerance is a bound on the distance to the programmed path everywhere, so no
+    # allowance beyond the tolerance (a smooth curve may not bulge off a chord)
+    f = _FRACS
+    xc_ch = (u[:-1, None] + clen[:, None] * f[None, :]).ravel()
+    ref_ch = (y[:-1, None, :] + chords[:, None, :] * f[None, :, None]).reshape(-1, d)
+    # between the nodes the deviation is only sampled: keep a margin there
+    tol_ch = np.repeat(tol[1:], f.size) * FIT_BETWEEN_NODES_SAFETY
+    node_ratio = np.empty(n)
+    node_ratio[0] = lin_ratio[0]
+    node_ratio[-1] = lin_ratio[-1]
+    node_ratio[1:-1] = np.minimum(lin_ratio[:-1], lin_ratio[1:])
+    xc0 = np.concatenate((u, xc_ch))
+    ref0 = np.concatenate((y, ref_ch))
+    tol_c0 = np.concatenate((tol, tol_ch))
+    exp_lin0 = np.concatenate((node_ratio, np.repeat(lin_ratio, f.size)))
+    w = tol_ref_mm / np.maximum(tol, 1e-12)
+    # chord points are data too (else a span without nodes follows only the smoothing):
+    # the check points are the data points
+    w_ch = 0.5 * tol_ref_mm / (tol_ch + 1e-12)
+    w_data0 = np.concatenate((w, w_ch))
+    span_f = np.arange(1, FIT_SPAN_CHECKS + 1) / (FIT_SPAN_CHECKS + 1)
+
+    step = FIT_INITIAL_NODES_PER_SPAN
+    interior = u[step : n - 1 : step].copy()
+    if interior.size and total - interior[-1] < 0.5 * (interior[-1] - (interior[-2] if interior.size > 1 else 0.0)):
+        interior = interior[:-1]
+    # a knot (a segment boundary) wherever the programmed feed changes: every segment
+    # then lies within one feed (``segment_sources``) and each move keeps its own F
+    f_in = np.asarray(feed, dtype=float)
+    brk = np.nonzero(f_in[1:-1] != f_in[2:])[0] + 1 if n > 2 else np.zeros(0, dtype=np.int64)
+    if brk.size:
+        interior = np.unique(np.concatenate((interior, u[brk])))
+    zero = np.zeros(d)
+    d1s = start.d1 if start is not None else zero
+    d2s = start.d2 if start is not None else zero
+    d1e = end.d1 if end is not None else zero
+    d2e = end.d2 if end is not None else zero
     f64 = _kernel_array
-    got = fit_section(
-        SectionNodes(f64(nodes), f64(tol_mm), f64(line, dtype=np.int64), f64(feed)),
+
+    # where rotary axes move, at most one segment per move (knots chasing the soft speed
+    # check of the tool's own path, whose share of the motion jumps from move to move,
+    # multiplied the segments several times over)
+    rotary_moves = bool(np.any(np.ptp(nodes[:, ~lin], axis=0) > 0)) if (~lin).any() else False
+    # the knot-insertion rounds (compiled; see bs.refine)
+    t, m, c, ok = bs.refine(
+        bs.FitNodes(f64(u), f64(y), f64(tol), f64(chords), f64(clen), f64(lin_ratio)),
+        f64(interior),
+        float(total),
         bs.EndStates(
-            f64(start.d1) if start is not None else zero,
-            f64(start.d2) if start is not None else zero,
-            f64(end.d1) if end is not None else zero,
-            f64(end.d2) if end is not None else zero,
+            f64(d1s, dtype=float),
+            f64(d2s, dtype=float),
+            f64(d1e, dtype=float),
+            f64(d2e, dtype=float),
             0 if start is None else 1,
             0 if end is None else 1,
         ),
-        section_params(tol_deg, lin, metric, tol_ref_mm),
+        bs.FitData(f64(xc0), f64(ref0), f64(tol_c0), f64(exp_lin0), f64(w_data0), f64(span_f)),
+        bs.RefineParams(
+            float(tol_ref_mm),
+            float(tol_rot),
+            f64(lin, dtype=np.bool_),
+            f64(metric, dtype=np.bool_),
+            FIT_BETWEEN_NODES_SAFETY,
+            FIT_SMOOTHING,
+            _RIDGE,
+            FIT_MIN_SPEED_RATIO,
+            FIT_STOP_SPEED_RATIO,
+            FIT_MAX_ROUNDS,
+            FIT_SOFT_STALE_ROUNDS,
+            FIT_MIN_SPAN_REL * total,
+            n - 2 if rotary_moves else -1,
+        ),
     )
-    return PieceFit(got.breaks, got.coef, got.line, got.feed, got.max_mm, got.max_deg, got.ok, int(nodes.shape[0]))
+    val = np.empty((n, d))
+    der = np.empty((n, d))
+    bs.evaluate(t, m, c, u, val, der)
+    dev = val - y
+    max_mm = float(np.sqrt((dev[:, lin] ** 2).sum(axis=1)).max()) if lin.any() else 0.0
+    max_deg = float(np.abs(dev[:, ~lin] / scale[~lin]).max()) if (~lin).any() else 0.0
+    ends = (
+        None if start is None else (start.d1 / scale, start.d2 / scale),
+        None if end is None else (end.d1 / scale, end.d2 / scale),
+    )
+    return _to_pieces(t, c / scale, u, line, feed, nodes[0], nodes[-1], max_mm, max_deg, ok, ends)
+
+
+def _to_pieces(t, c, u, line, feed, p0, p_end, max_mm, max_deg, ok, ends=(None, None)) -> PieceFit:
+    """Power-basis pieces of the B-spline: each span is the quintic Hermite interpolant of
+    q, q', q'' at its two knots (exact for a quintic), so neighbouring pieces share the
+    very same end values and the joins are C2 up to the rounding of one Hermite solve
+    (converting via 5th derivatives would lose digits next to tiny spans)."""
+    from . import _bspline as bs
+
+    x = np.unique(t)
+    c = np.ascontiguousarray(c, dtype=float)
+    d0, d1, d2 = (np.empty((x.size, c.shape[1])) for _ in range(3))
+    bs.evaluate012(np.ascontiguousarray(t, dtype=float), t.size - 6, c, x, d0, d1, d2)
+    # (the last knot is evaluated from the left.) Exact end values: the end nodes and any imposed end derivatives
+    d0 += p0
+    d0[0] = p0
+    d0[-1] = p_end
+    if ends[0] is not None:
+        d1[0], d2[0] = ends[0]
+    if ends[1] is not None:
+        d1[-1], d2[-1] = ends[1]
+    h = np.diff(x)
+    coef = hermite(d0[:-1], d1[:-1], d2[:-1], d0[1:], d1[1:], d2[1:], h)
+    seg_line, seg_feed = segment_sources(x, u, line, feed)
+    return PieceFit(x - x[0], coef, seg_line, seg_feed, max_mm, max_deg, ok, int(u.size))
 
 
 def section_params(tol_deg: float, lin: np.ndarray, metric: np.ndarray, tol_ref_mm: float):
