@@ -32,10 +32,13 @@ def arc_length_table(coef, breaks, w, glx, glw, rel_tol, max_sub):
     """Sub-interval table: (sub_u, sub_s, sub_seg, starts) like ``Path._build_arc_length``.
 
     Each segment is split into 2^j equal sub-intervals, doubling until the total
-    changes by at most ``rel_tol`` (relative) or ``max_sub`` is reached.
+    changes by at most ``rel_tol`` (relative) or ``max_sub`` is reached. The table's
+    sub-integrals are those of the last doubling, kept rather than computed again.
     """
     n_seg = coef.shape[0]
     n_sub = np.empty(n_seg, dtype=np.int64)
+    vals = np.empty(4 * max(n_seg, 1))  # each segment's sub-integrals, in order
+    used = 0
     for k in range(n_seg):
         h = breaks[k + 1] - breaks[k]
         m = 2
@@ -44,16 +47,21 @@ def arc_length_table(coef, breaks, w, glx, glw, rel_tol, max_sub):
             prev += _seg_integral(coef, k, w, j * h / m, (j + 1) * h / m, glx, glw)
         while True:
             m *= 2
+            if used + m > vals.shape[0]:
+                grown = np.empty(2 * (used + m))
+                grown[:used] = vals[:used]
+                vals = grown
             tot = 0.0
             for j in range(m):
-                tot += _seg_integral(coef, k, w, j * h / m, (j + 1) * h / m, glx, glw)
+                v = _seg_integral(coef, k, w, j * h / m, (j + 1) * h / m, glx, glw)
+                vals[used + j] = v
+                tot += v
             if abs(tot - prev) <= rel_tol * max(tot, 1e-300) + 1e-300 or m >= max_sub:
                 break
             prev = tot
         n_sub[k] = m
-    total = 0
-    for k in range(n_seg):
-        total += n_sub[k]
+        used += m
+    total = used
     sub_u = np.empty(total + 1)
     sub_s = np.empty(total + 1)
     sub_seg = np.empty(total, dtype=np.int64)
@@ -69,7 +77,7 @@ def arc_length_table(coef, breaks, w, glx, glw, rel_tol, max_sub):
             a = j * h / m
             sub_u[i] = breaks[k] + a
             sub_seg[i] = k
-            s += _seg_integral(coef, k, w, a, (j + 1) * h / m, glx, glw)
+            s += vals[i]
             sub_s[i + 1] = s
             i += 1
     starts[n_seg] = total
@@ -77,7 +85,7 @@ def arc_length_table(coef, breaks, w, glx, glw, rel_tol, max_sub):
     return sub_u, sub_s, sub_seg, starts
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def arc_length_tables(coef, breaks, seg_off, w, glx, glw, rel_tol, max_sub):
     """``arc_length_table`` of many paths at once (one compiled call for a whole run).
 
@@ -119,7 +127,7 @@ def arc_length_tables(coef, breaks, seg_off, w, glx, glw, rel_tol, max_sub):
     return all_u, all_s, all_seg, all_sb, sub_off
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def chain_ends(coef, breaks, seg_off, start, has_start):
     """Chain paths end to start: coef[first segment of p, 0] = end of path p-1 (of
     ``start`` (n,) for p = 0 when ``has_start``), in place. Returns the ends (P, n) and

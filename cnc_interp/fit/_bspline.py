@@ -53,17 +53,16 @@ class CheckPoints(NamedTuple):
 
 
 class FitData(NamedTuple):
-    """Round-invariant least-squares data and checks: the node and chord check points
-    (``xc``, ``ref``, ``tol_c``, ``exp_lin``), data points (``u_data``, ``y_data``,
-    weights ``w_data``) and ``span_f``, the fractions of each knot span that get points
-    on the programmed moves."""
+    """Round-invariant least-squares data and checks: the node and chord points, each
+    both a check point and a data point — parameter ``xc``, position ``ref``, allowed
+    deviation ``tol_c``, expected speed of the metric's axes ``exp_lin``, data weight
+    ``w_data`` — and ``span_f``, the fractions of each knot span that get such points on
+    the programmed moves."""
 
     xc: np.ndarray
     ref: np.ndarray
     tol_c: np.ndarray
     exp_lin: np.ndarray
-    u_data: np.ndarray
-    y_data: np.ndarray
     w_data: np.ndarray
     span_f: np.ndarray
 
@@ -90,7 +89,7 @@ class RefineParams(NamedTuple):
     max_interior: int
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def find_span(t, m, x):
     """Index i with t[i] <= x < t[i+1], K <= i <= m-1 (m = number of coefficients)."""
     if x >= t[m]:
@@ -107,7 +106,7 @@ def find_span(t, m, x):
     return lo
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def basis(t, i, x, p, out, left, right):
     """The p+1 non-zero B-spline basis values of degree p at x in span i (NURBS book A2.2).
 
@@ -126,7 +125,44 @@ def basis(t, i, x, p, out, left, right):
         out[j] = saved
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
+def basis54(t, i, x, n5, n4, left, right):
+    """``basis(t, i, x, 5)`` into n5 (6,), and into n4 (5,) the degree-4 values it passes
+    through, which are ``basis(t[1:], i - 1, x, 4)`` (the same knots, the same operations):
+    the values and first derivatives of a point from one triangle."""
+    n5[0] = 1.0
+    for j in range(1, K + 1):
+        left[j] = x - t[i + 1 - j]
+        right[j] = t[i + j] - x
+        saved = 0.0
+        for r in range(j):
+            den = right[r + 1] + left[j - r]
+            temp = n5[r] / den if den != 0.0 else 0.0
+            n5[r] = saved + right[r + 1] * temp
+            saved = left[j - r] * temp
+        n5[j] = saved
+        if j == K - 1:
+            for r in range(K):
+                n4[r] = n5[r]
+
+
+@njit(cache=True, error_model="numpy")
+def point_bases(t, m, x):
+    """Span (P,), degree-5 basis (P, 6) and degree-4 basis (P, 5) of every point x (P,)."""
+    P = x.shape[0]
+    spans = np.empty(P, dtype=np.int64)
+    n5 = np.empty((P, K + 1))
+    n4 = np.empty((P, K))
+    wl = np.empty(K + 1)
+    wr = np.empty(K + 1)
+    for j in range(P):
+        sp = find_span(t, m, x[j])
+        spans[j] = sp
+        basis54(t, sp, x[j], n5[j], n4[j], wl, wr)
+    return spans, n5, n4
+
+
+@njit(cache=True, error_model="numpy")
 def end_coefs(t, m, c, y0, y1, d1s, d2s, d1e, d2e, start_mode, end_mode):
     """Fill the fixed coefficients from end positions and (optional) u-derivatives.
 
@@ -145,13 +181,15 @@ def end_coefs(t, m, c, y0, y1, d1s, d2s, d1e, d2e, start_mode, end_mode):
         c[m - 3, :] = c[m - 2, :] - dpm3 * (b - t[m - 2]) / 5.0
 
 
-@njit(cache=True)
-def solve_lsq(t, m, u, y, w, prior, fixed, c, lam, ridge):
+@njit(cache=True, error_model="numpy")
+def solve_lsq(t, m, bases, y, w, prior, fixed, c, lam, ridge):
     """Weighted LS for the free coefficients (``fixed[i]`` False), in place in ``c``.
 
     Minimises sum_j w_j^2 |q(u_j) - y_j|^2 + lam * sum_i |scaled DD3(c)_i|^2
-    + ridge * sum_i |c_i - prior_i|^2 (the ridge keeps empty spans well posed).
+    + ridge * sum_i |c_i - prior_i|^2 (the ridge keeps empty spans well posed);
+    ``bases`` = (spans, degree-5 basis, _) of the data points u (``point_bases``).
     """
+    spans, n5, _ = bases
     n, d = y.shape
     idx = -np.ones(m, dtype=np.int64)
     nf = 0
@@ -163,13 +201,10 @@ def solve_lsq(t, m, u, y, w, prior, fixed, c, lam, ridge):
         return
     ab = np.zeros((nf, 6))
     rhs = np.zeros((nf, d))
-    nb = np.empty(6)
-    wl = np.empty(6)
-    wr = np.empty(6)
     tgt = np.empty(d)
     for j in range(n):
-        sp = find_span(t, m, u[j])
-        basis(t, sp, u[j], K, nb, wl, wr)
+        sp = spans[j]
+        nb = n5[j]
         ww = w[j] * w[j]
         # residual target after moving fixed coefficients to the right-hand side
         for a in range(d):
@@ -266,7 +301,7 @@ def solve_lsq(t, m, u, y, w, prior, fixed, c, lam, ridge):
             c[i] = rhs[idx[i]]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def evaluate(t, m, c, x, val, der):
     """Positions val (K, d) and first derivatives der (K, d) at sorted-or-not points x."""
     d = c.shape[1]
@@ -295,7 +330,7 @@ def evaluate(t, m, c, x, val, der):
             der[j, a] = acc
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def evaluate012(t, m, c, x, d0, d1, d2):
     """Values d0, first d1 and second derivatives d2 (K, d) of the quintic spline at x (K,)
     (each point in its span t[i] <= x < t[i+1], the last knot from the left): ``evaluate``,
@@ -326,8 +361,30 @@ def _d1_coef(t, c, i, a):
     return K * (c[i + 1, a] - c[i, a]) / den if den > 0.0 else 0.0
 
 
-@njit(cache=True)
-def check(t, m, c, pts, tol_rot, lin, metric, min_ratio, bad_span, n_hard, hard_ratio):
+@njit(cache=True, error_model="numpy")
+def _evaluate_bases(t, c, bases, val, der):
+    """``evaluate`` at the points of ``bases`` (``point_bases``): the same sums."""
+    spans, n5, n4 = bases
+    d = c.shape[1]
+    for j in range(spans.shape[0]):
+        sp = spans[j]
+        for a in range(d):
+            acc = 0.0
+            for r in range(6):
+                acc += n5[j, r] * c[sp - K + r, a]
+            val[j, a] = acc
+        for a in range(d):
+            acc = 0.0
+            for r in range(5):
+                ci = sp - 1 - (K - 1) + r
+                den = t[ci + 6] - t[ci + 1]
+                if den > 0.0:
+                    acc += n4[j, r] * K * (c[ci + 1, a] - c[ci, a]) / den
+            der[j, a] = acc
+
+
+@njit(cache=True, error_model="numpy")
+def check(t, m, c, pts, bases, limits, bad_span, n_hard):
     """Mark spans whose check points deviate or slow down too much.
 
     Returns (max linear error, max rotary error, hard failures, soft failures): any
@@ -336,15 +393,18 @@ def check(t, m, c, pts, tol_rot, lin, metric, min_ratio, bad_span, n_hard, hard_
     speed below ``hard_ratio`` of the expected one are hard; speeds between
     ``hard_ratio`` and ``min_ratio`` of the expected one are soft.
 
-    pts: the check points (``CheckPoints``), tol_rot scalar allowed rotary deviation
-    (scaled units), ``metric`` the arc-length metric's axes.
+    pts: the check points (``CheckPoints``) and ``bases`` their ``point_bases``;
+    ``limits`` = (tol_rot: allowed rotary deviation (scaled units), lin and ``metric`` the
+    linear and the arc-length metric's axes, min_ratio, hard_ratio).
     """
     xc, ref, tol_lin, exp_speed, exp_lin_speed = pts
+    tol_rot, lin, metric, min_ratio, hard_ratio = limits
+    spans = bases[0]
     P = xc.shape[0]
     d = c.shape[1]
     val = np.empty((P, d))
     der = np.empty((P, d))
-    evaluate(t, m, c, xc, val, der)
+    _evaluate_bases(t, c, bases, val, der)
     worst_lin = 0.0
     worst_rot = 0.0
     hard = 0
@@ -378,7 +438,7 @@ def check(t, m, c, pts, tol_rot, lin, metric, min_ratio, bad_span, n_hard, hard_
         # a near-stop is never accepted; a mere slow-down (a rounded corner) may remain
         stop = np.sqrt(sp_all) < hard_ratio * exp_speed[j] or np.sqrt(sp_lin) < hard_ratio * exp_lin_speed[j]
         if not (dev_ok and speed_ok):
-            bad_span[find_span(t, m, xc[j])] = True
+            bad_span[spans[j]] = True
             # every check point lies on the programmed path: a deviation is a failure
             if stop or not dev_ok:
                 hard += 1
@@ -392,7 +452,7 @@ def check(t, m, c, pts, tol_rot, lin, metric, min_ratio, bad_span, n_hard, hard_
     return worst_lin, worst_rot, hard, soft
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def segment_sources_kernel(x, u, line, feed):
     """See ``nodes.segment_sources``: per segment [x_k, x_k+1], the line of the move
     containing its end and the least feed of the moves it overlaps (move j ends at node j)."""
@@ -419,7 +479,7 @@ def segment_sources_kernel(x, u, line, feed):
     return seg_line, seg_feed
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def refine(nodes, interior, total, ends, data, prm):
     """The knot-insertion rounds of ``nodes.fit_polyline`` (see its module docstring),
     compiled: one call instead of a Python loop with dozens of array operations per
@@ -434,7 +494,7 @@ def refine(nodes, interior, total, ends, data, prm):
     """
     u, y, tol, chords, clen, lin_ratio = nodes
     d1s, d2s, d1e, d2e, start_mode, end_mode = ends
-    xc0, ref0, tol_c0, exp_lin0, u_data0, y_data0, w_data0, span_f = data
+    xc0, ref0, tol_c0, exp_lin0, w_data0, span_f = data
     (
         tol_ref,
         tol_rot,
@@ -457,7 +517,6 @@ def refine(nodes, interior, total, ends, data, prm):
     hard = 0
     ok = False
     P0 = xc0.shape[0]
-    D0 = u_data0.shape[0]
     t = np.empty(0)
     m = 0
     c = np.zeros((0, d))
@@ -500,12 +559,8 @@ def refine(nodes, interior, total, ends, data, prm):
         ref[:P0] = ref0
         tol_c[:P0] = tol_c0
         exp_lin[:P0] = exp_lin0
-        u_data = np.empty(D0 + K)
-        y_data = np.empty((D0 + K, d))
-        w_data = np.empty(D0 + K)
-        u_data[:D0] = u_data0
-        y_data[:D0] = y_data0
-        w_data[:D0] = w_data0
+        w_data = np.empty(P)
+        w_data[:P0] = w_data0
         q = 0
         for sp in range(nsp):
             k0 = 0.0 if sp == 0 else interior[sp - 1]
@@ -520,19 +575,19 @@ def refine(nodes, interior, total, ends, data, prm):
                 fr = (x - u[j]) / clen[j]
                 ts = tol[j + 1] * between_safety
                 xc[P0 + q] = x
-                u_data[D0 + q] = x
                 for a in range(d):
-                    v = y[j, a] + chords[j, a] * fr
-                    ref[P0 + q, a] = v
-                    y_data[D0 + q, a] = v
+                    ref[P0 + q, a] = y[j, a] + chords[j, a] * fr
                 tol_c[P0 + q] = ts
                 exp_lin[P0 + q] = lin_ratio[j]
-                w_data[D0 + q] = 0.5 * tol_ref / (ts + 1e-12)
+                w_data[P0 + q] = 0.5 * tol_ref / (ts + 1e-12)
                 q += 1
-        solve_lsq(t, m, u_data, y_data, w_data, prior, fixed, c, smoothing, ridge)
+        # the check points are the data points: one basis triangle each per round
+        bases = point_bases(t, m, xc)
+        solve_lsq(t, m, bases, ref, w_data, prior, fixed, c, smoothing, ridge)
         bad = np.zeros(m + 1, dtype=np.bool_)
+        limits = (tol_rot, lin, metric, min_ratio, stop_ratio)
         worst_lin, worst_rot, hard, soft = check(
-            t, m, c, CheckPoints(xc, ref, tol_c, exp_all, exp_lin), tol_rot, lin, metric, min_ratio, bad, n, stop_ratio
+            t, m, c, CheckPoints(xc, ref, tol_c, exp_all, exp_lin), bases, limits, bad, n
         )
         if hard == 0:
             # chord points are a heuristic against bulges: stop refining for them once

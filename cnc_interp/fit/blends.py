@@ -43,7 +43,7 @@ stopping, measured with VPOp on a dense-corner CAM program).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -125,7 +125,9 @@ class BlendTable:
 
     def __getitem__(self, k):
         if isinstance(k, slice):
-            return BlendTable(*(getattr(self, f.name)[k] for f in fields(self)))
+            return BlendTable(
+                self.i[k], self.h[k], self.coef[k], self.line[k], self.feed_mm_s[k], self.t_in[k], self.t_out[k]
+            )
         i, h, line, feed = int(self.i[k]), float(self.h[k]), int(self.line[k]), float(self.feed_mm_s[k])
         return Blend(i, h, self.coef[k], line, feed, self.t_in[k], self.t_out[k])
 

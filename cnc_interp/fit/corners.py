@@ -71,7 +71,8 @@ class SubRun:
 
     kind: ``"straight"`` (collinear G61 moves: one exact line) or ``"fit"``;
     rotary: the path moves rotary axes only (metric in degrees); blends: the
-    blended corners inside (``blends.Blend``).
+    blended corners inside (``blends.Blend``), rows ``blend_range`` = (first, end) of
+    the prepared run's table.
     """
 
     i0: int
@@ -80,6 +81,7 @@ class SubRun:
     rotary: bool
     curves: tuple[CurvePiece, ...]
     blends: tuple | BlendTable = ()
+    blend_range: tuple[int, int] = (0, 0)
 
 
 def prepare_run(run: Run, settings) -> PreparedRun:
@@ -143,10 +145,11 @@ def _distinct_nodes_seq(scaled: np.ndarray, threshold: float) -> np.ndarray:
     return distinct_nodes(scaled, threshold)
 
 
-def corner_turns(pr: PreparedRun, evals: dict | None = None):
+def corner_turns(pr: PreparedRun, evals: dict | None = None, arcs=None):
     """Turn angle (deg) at every node (n,) in the fitter's metric (and, with rotary axes,
     the larger of that and the linear axes' own turn), and the nodes strictly inside a
-    curve (n,) bool."""
+    curve (n,) bool. ``arcs`` (``curves.arc_table`` of ``pr.curves``, linear axes only)
+    gives the end tangents of the curves it has."""
     from .curves import curve_eval, end_states
 
     n = pr.nodes.shape[0]
@@ -156,8 +159,11 @@ def corner_turns(pr: PreparedRun, evals: dict | None = None):
     d_in[1:] = chords
     d_out[:-1] = chords
     inside = np.zeros(n, dtype=bool)
-    for cp in pr.curves:
-        (t0, _), (t1, _) = end_states(curve_eval(cp.curve, evals), pr.scale)
+    for k, cp in enumerate(pr.curves):
+        if arcs is not None and arcs.ok[k]:
+            t0, t1 = arcs.ends[k, 0], arcs.ends[k, 2]
+        else:
+            (t0, _), (t1, _) = end_states(curve_eval(cp.curve, evals), pr.scale)
         d_out[cp.first] = t0
         d_in[cp.last] = t1
         inside[cp.first + 1 : cp.last] = True
@@ -169,16 +175,17 @@ def corner_turns(pr: PreparedRun, evals: dict | None = None):
     return turn, inside
 
 
-def split_run(pr: PreparedRun, settings, evals: dict | None = None) -> Iterator[SubRun]:
+def split_run(pr: PreparedRun, settings, evals: dict | None = None, arcs=None) -> Iterator[SubRun]:
     """Cut a prepared run into sub-runs at corners, G61 nodes and metric changes; a
     blended corner (``pr.blends``) does not cut. The sub-runs are made one at a time, in
     path order (a long run has 10⁴ of them).
 
-    ``evals`` optionally shares each curve's ``CurveEval`` with the fitter."""
+    ``evals`` optionally shares each curve's ``CurveEval`` with the fitter; ``arcs`` see
+    ``corner_turns``."""
     n = pr.nodes.shape[0]
     if n < 2:
         return
-    turn, inside = corner_turns(pr, evals)
+    turn, inside = corner_turns(pr, evals, arcs)
     cut = np.zeros(n, dtype=bool)
     j = np.arange(1, n - 1)
     tol_move = pr.tol_mm  # tolerance of the move ending at each node
@@ -208,7 +215,7 @@ def split_run(pr: PreparedRun, settings, evals: dict | None = None) -> Iterator[
         cs = tuple(by_sub.get(k, ()))
         bs = pr.blends[bl_lo[k] : bl_hi[k]] if bl_hi[k] > bl_lo[k] else ()
         exact = not cs and not bs and (n_zero[b + 1] - n_zero[a + 1]) == b - a
-        yield SubRun(a, b, "straight" if exact else "fit", bool(pr.rot_only[a]), cs, bs)
+        yield SubRun(a, b, "straight" if exact else "fit", bool(pr.rot_only[a]), cs, bs, (bl_lo[k], bl_hi[k]))
 
 
 def slice_run(pr: PreparedRun, first: int, last: int) -> PreparedRun:
@@ -235,18 +242,21 @@ def slice_run(pr: PreparedRun, first: int, last: int) -> PreparedRun:
     )
 
 
-def add_blends(pr: PreparedRun, settings, evals: dict | None = None, force: np.ndarray | None = None) -> PreparedRun:
+def add_blends(
+    pr: PreparedRun, settings, evals: dict | None = None, force: np.ndarray | None = None, arcs=None
+) -> PreparedRun:
     """``pr`` with its sharp corners blended (``blends.py``): a node at each blend's
     start and end is inserted on the two moves (taking that move's line, feed and
     tolerance), and ``blends`` lists them. A corner is a candidate when it turns more
     than ``corner_deg`` (or ``force`` (n,) marks it), both its moves are straight (no
-    exact curve) and within one metric, and neither is under G61."""
+    exact curve) and within one metric, and neither is under G61. ``arcs`` see
+    ``corner_turns``."""
     from .blends import blend_piece, plan_blends
 
     n = pr.nodes.shape[0]
     if n < 3:
         return pr if force is None else replace(pr, stops=np.nonzero(force)[0])
-    turn, inside = corner_turns(pr, evals)
+    turn, inside = corner_turns(pr, evals, arcs)
     cand = turn > settings.corner_deg
     if force is not None:
         cand |= force & (turn > FIT_COLLINEAR_DEG)

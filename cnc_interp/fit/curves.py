@@ -19,11 +19,16 @@ are then subdivided until the modified interpolant is within tolerance too.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from ..constants import FIT_TOL_SAFETY
 from ..gcode.program import Arc, Nurbs
 from .nodes import PieceFit, hermite
+
+if TYPE_CHECKING:
+    from ._arcs import ArcArrays
 
 
 #: curves: exact-geometry check points per quintic piece when converting arcs / NURBS
@@ -326,6 +331,54 @@ def fit_curve(
     breaks = np.concatenate(([0.0], np.cumsum(h)))
     n = h.size
     return PieceFit(breaks, coef, np.full(n, line, dtype=np.int64), np.full(n, feed), max_mm, max_deg, ok, 0)
+
+
+def arc_table(pieces, n_axes: int) -> "ArcArrays":
+    """The arcs among the curve pieces ``pieces`` (``CurvePiece``, node indices as given) of
+    a run on ``n_axes`` linear axes only (scale 1) as arrays (``_arcs.ArcArrays``): what
+    ``CurveEval``, ``param_scale`` and ``end_states`` give for each, the same bits, for all
+    of them in two compiled calls. Entries that are not arcs, or arcs whose length or end
+    speed vanishes (``param_scale`` raises, ``_derivs`` turns to ``_direction``), are not
+    ok: the Python code handles those."""
+    from ._arcs import ArcArrays, arc_end_derivs, arc_param_scales
+
+    A = len(pieces)
+    is_arc = np.array([isinstance(cp.curve, Arc) for cp in pieces], dtype=bool)
+    d = n_axes
+    first = np.array([cp.first for cp in pieces], dtype=np.int64)
+    last = np.array([cp.last for cp in pieces], dtype=np.int64)
+    line = np.array([cp.curve.line for cp in pieces], dtype=np.int64)
+    arcs = [cp.curve if isinstance(cp.curve, Arc) else None for cp in pieces]
+    start = np.zeros((A, d))
+    end = np.zeros((A, d))
+    center = np.zeros((A, 2))
+    plane = np.zeros((A, 2), dtype=np.int64)
+    sweep = np.zeros(A)
+    for k, c in enumerate(arcs):
+        if c is not None:
+            start[k], end[k], center[k] = c.start, c.end, c.center
+            plane[k] = c.plane[:2]
+            sweep[k] = c.sweep_rad
+    # CurveEval's constants, elementwise as it computes them
+    rows = np.arange(A)
+    si, sj = start[rows, plane[:, 0]], start[rows, plane[:, 1]]
+    ei, ej = end[rows, plane[:, 0]], end[rows, plane[:, 1]]
+    a0 = np.arctan2(sj - center[:, 1], si - center[:, 0])
+    r0 = np.hypot(si - center[:, 0], sj - center[:, 1])
+    r1 = np.hypot(ei - center[:, 0], ej - center[:, 1])
+    nq = np.maximum(1, np.ceil(np.abs(sweep) / (0.5 * np.pi)).astype(np.int64))
+    zero = np.zeros(A)
+    table = ArcArrays(
+        first, last, line, nq, start, end - start, center, plane, sweep, a0, r0, r1, zero, np.zeros((A, 4, d)), is_arc
+    )
+    g, ok_g = arc_param_scales(table)
+    g2 = np.array([v**2 for v in g.tolist()])  # Python's g ** 2 (``_derivs``)
+    T, acc, sp, at, ok = arc_end_derivs(table, g, g2, _MIN_SPEED, is_arc & ok_g)
+    sp2 = np.array([v**2 for v in sp.ravel().tolist()]).reshape(sp.shape)  # numpy scalars' sp ** 2
+    ends = np.empty((A, 4, d))
+    ends[:, 0::2] = T
+    ends[:, 1::2] = (acc - at[..., None] * T) / sp2[..., None]
+    return table._replace(g=g, ends=ends, ok=ok)
 
 
 def curve_start(curve) -> np.ndarray:

@@ -33,6 +33,7 @@ from ..constants import ARC_LENGTH_MAX_SUB, ARC_LENGTH_REL_TOL
 from ..gcode.program import Dwell, Program, Run, Stop
 from .deviation import path_deviation, polyline_deviation, rotary_path_deviation
 from .corners import PreparedRun, SubRun, add_blends, fit_tolerance, prepare_run, slice_run, split_run
+from .curves import arc_table
 from .nodes import EndState, fit_polyline, straight_piece
 from .path import Path, PlanarSegments
 from .result import FitResult, fit_outside_error
@@ -331,7 +332,16 @@ def _iter_run_raws(run: Run, settings: FitSettings, info: dict):
     info["nodes_in"] = int(run.n_nodes)
     info["max_tol_mm"] = float(pr.tol_mm.max()) if pr.tol_mm.size else 0.0
     blend = settings.blend_corners and settings.method == "nodes"
-    prb = add_blends(pr, settings, evals) if blend else pr
+    # the compiled batch fitter's runs: their arcs' constants and end states once, as
+    # arrays (the corner split needs the end tangents too)
+    covered = _SubRunBatcher.covers_run(pr, settings)
+    arcs = arc_table(pr.curves, pr.nodes.shape[1]) if covered and pr.curves else None
+    prb = add_blends(pr, settings, evals, arcs=arcs) if blend else pr
+    if arcs is not None:  # the same arcs, at their nodes in the blended run
+        arcs = arcs._replace(
+            first=np.array([cp.first for cp in prb.curves], dtype=np.int64),
+            last=np.array([cp.last for cp in prb.curves], dtype=np.int64),
+        )
     # only a repair needs the run without its blends again, and repairs are rare: it is
     # prepared again then (the same arrays) rather than kept for the whole run
     kept: list[PreparedRun] = [pr] if prb is pr else []
@@ -343,8 +353,13 @@ def _iter_run_raws(run: Run, settings: FitSettings, info: dict):
         return kept[0]
 
     methods: set[str] = set()
-    for sub in split_run(prb, settings, evals):
-        results, where = _fit_sub_repaired(unblended, prb, sub, settings, evals, info, blend)
+    # the sub-runs the compiled batch fitter covers are fitted FIT_KERNEL_BATCH at a time
+    # (the same fits: ``_subrun``); the others, and any fit found outside its tolerance,
+    # by the Python code, in path order
+    batcher = _SubRunBatcher(prb, settings, arcs) if covered else None
+    pending: list[tuple[SubRun, int]] = []  # with the index of its first curve
+
+    def emit(sub: SubRun, results: list, where: PreparedRun):
         for m in results:
             methods.add(m.method)
             info["max_node_dev_mm"] = max(info["max_node_dev_mm"], m.dev_mm)
@@ -362,6 +377,213 @@ def _iter_run_raws(run: Run, settings: FitSettings, info: dict):
             yield m.raw
         for cp in sub.curves:  # fitted: its exact evaluation is not needed again
             evals.pop(id(cp.curve), None)
+
+    def flush():
+        assert batcher is not None
+        for (sub, _), m in zip(pending, batcher.fit(pending)):
+            if m is not None:
+                yield from emit(sub, [m], prb)
+            else:
+                yield from emit(sub, *_fit_sub_repaired(unblended, prb, sub, settings, evals, info, blend))
+        pending.clear()
+
+    c_pos = 0  # the sub-runs take the run's curves in order
+    for sub in split_run(prb, settings, evals, arcs):
+        if batcher is not None and batcher.covers(sub, c_pos):
+            pending.append((sub, c_pos))
+            c_pos += len(sub.curves)
+            if len(pending) >= FIT_KERNEL_BATCH:
+                yield from flush()
+            continue
+        c_pos += len(sub.curves)
+        if pending:
+            yield from flush()
+        yield from emit(sub, *_fit_sub_repaired(unblended, prb, sub, settings, evals, info, blend))
+    if pending:
+        yield from flush()
+
+
+#: sub-runs fitted per call of the compiled batch fitter (any value gives the same paths;
+#: a batch's paths are handed on together)
+FIT_KERNEL_BATCH = 32
+
+#: nodes of a run from which the batch fitter's kernels are compiled when numba has not
+#: cached them yet: they cost ~40 CPU-s to compile (first run after an install or update)
+#: and save ~70 µs a node, so a shorter run is fitted by the Python fitter (the same
+#: paths) until a long one, or any earlier process, has compiled them — the quick
+#: start's first run keeps its compile time
+FIT_KERNEL_COMPILE_NODES = 50_000
+
+_kernels_ready = False
+
+
+def _batch_kernels_ready(n_nodes: int) -> bool:
+    """Whether the batch fitter fits a run of ``n_nodes`` (see FIT_KERNEL_COMPILE_NODES)."""
+    global _kernels_ready
+    if not _kernels_ready:
+        import os
+
+        from .._kernel_cache import missing_kernels
+
+        root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+        _kernels_ready = n_nodes >= FIT_KERNEL_COMPILE_NODES or not missing_kernels(root, ("fit._subrun",))
+    return _kernels_ready
+
+
+class _SubRunBatcher:
+    """The compiled batch fitter (``_subrun``) for one prepared run: the run's
+    arrays once, each batch's arcs and sub-run table, and the results as ``_Measured``
+    (None where the Python code must fit the sub-run: the kernel left it, or the
+    measurement finds the fit outside its tolerance, which the Python code repairs)."""
+
+    @staticmethod
+    def covers_run(pr: PreparedRun, settings: FitSettings) -> bool:
+        n = pr.nodes.shape[0]
+        return settings.method == "nodes" and bool(np.all(pr.lin)) and n >= 2 and _batch_kernels_ready(n)
+
+    def __init__(self, pr: PreparedRun, settings: FitSettings, arcs):
+        from . import _subrun as sr
+        from ._linedev import DeviationSettings
+        from .curves import (
+            _MIN_PIECE_SPEED,
+            _MIN_SPEED,
+            _PIECE_GL_W,
+            _PIECE_GL_X,
+            _SMALL_PIECE,
+            CURVE_CHECK_POINTS,
+            CURVE_MAX_DEPTH,
+        )
+        from .deviation import (
+            PATH_DEV_FAR_WINDOW,
+            PATH_DEV_FIT_SAMPLES,
+            PATH_DEV_LOCAL_FRAC,
+            PATH_DEV_MAX_SAMPLES,
+            PATH_DEV_MIN_SAMPLES,
+            PATH_DEV_NEWTON_ITERS,
+            PATH_DEV_SAMPLES_PER_SPAN,
+            PATH_DEV_WINDOW,
+        )
+        from .nodes import section_params
+        from ..constants import FIT_TOL_SAFETY
+
+        self.pr = pr
+        self.weights = _weights(pr.lin, False)
+        d = pr.nodes.shape[1]
+        self.arcs = arcs if arcs is not None else arc_table((), d)
+        self.arc_ok = self.arcs.ok.tolist()
+        self.run = sr.RunArrays(
+            np.ascontiguousarray(pr.nodes, dtype=float),
+            np.ascontiguousarray(fit_tolerance(pr.tol_mm), dtype=float),
+            np.ascontiguousarray(pr.line, dtype=np.int64),
+            np.ascontiguousarray(pr.feed_mm_s, dtype=float),
+        )
+        bl = pr.blends
+        if len(bl):
+            self.blends = sr.BlendArrays(
+                np.ascontiguousarray(bl.i, dtype=np.int64),
+                np.ascontiguousarray(bl.h, dtype=float),
+                np.ascontiguousarray(bl.coef, dtype=float),
+                np.ascontiguousarray(bl.line, dtype=np.int64),
+                np.ascontiguousarray(bl.feed_mm_s, dtype=float),
+                np.ascontiguousarray(bl.t_in, dtype=float),
+                np.ascontiguousarray(bl.t_out, dtype=float),
+            )
+        else:
+            z = np.zeros(0)
+            self.blends = sr.BlendArrays(
+                np.zeros(0, dtype=np.int64),
+                z,
+                np.zeros((0, 6, d)),
+                np.zeros(0, dtype=np.int64),
+                z,
+                np.zeros((0, d)),
+                np.zeros((0, d)),
+            )
+        self.prm = sr.BatchParams(
+            section_params(settings.fit_tol_deg, pr.lin, pr.lin, 0.0),
+            sr.CurveParams(
+                FIT_TOL_SAFETY,
+                CURVE_CHECK_POINTS,
+                CURVE_MAX_DEPTH,
+                _MIN_SPEED,
+                _MIN_PIECE_SPEED,
+                _SMALL_PIECE,
+                _PIECE_GL_X,
+                _PIECE_GL_W,
+            ),
+            DeviationSettings(
+                samples_per_span=PATH_DEV_SAMPLES_PER_SPAN,
+                min_samples=PATH_DEV_MIN_SAMPLES,
+                max_samples=PATH_DEV_MAX_SAMPLES,
+                local_frac=PATH_DEV_LOCAL_FRAC,
+                window=PATH_DEV_WINDOW,
+                far_window=PATH_DEV_FAR_WINDOW,
+                n_coarse=PATH_DEV_FIT_SAMPLES,
+                iters=PATH_DEV_NEWTON_ITERS,
+            ),
+        )
+
+    def covers(self, sub: SubRun, c_pos: int) -> bool:
+        """Whether the kernel fits ``sub`` (its curves from the run's ``c_pos``-th)."""
+        if sub.kind != "fit" or sub.rotary:
+            return False
+        if not sub.curves:
+            return sub.i1 - sub.i0 > 1
+        return all(self.arc_ok[c_pos : c_pos + len(sub.curves)])
+
+    def fit(self, batch: list[tuple[SubRun, int]]) -> list:
+        """The ``_Measured`` of each (sub-run, index of its first curve), or None."""
+        from . import _subrun as sr
+
+        table = sr.SubRunTable(
+            np.array([sub.i0 for sub, _ in batch], dtype=np.int64),
+            np.array([sub.i1 for sub, _ in batch], dtype=np.int64),
+            np.array([sub.blend_range[0] for sub, _ in batch], dtype=np.int64),
+            np.array([sub.blend_range[1] for sub, _ in batch], dtype=np.int64),
+            np.array([c for _, c in batch], dtype=np.int64),
+            np.array([c + len(sub.curves) for sub, c in batch], dtype=np.int64),
+        )
+        sections = sr.plan_sections(self.run, self.blends, self.arcs, table)
+        polys = sr.fit_poly_sections(self.run, sections, self.prm)
+        arcfits = sr.fit_arc_sections(self.run, self.arcs, sections, self.prm)
+        got = sr.join_and_measure(self.run, self.blends, self.arcs, table, sections, polys, arcfits, self.prm)
+        pr = self.pr
+        out: list = []
+        so = got.seg_off.tolist()
+        for s, (sub, _) in enumerate(batch):
+            if got.status[s] != 0:
+                out.append(None)
+                continue
+            pratio = float(got.pratio[s])
+            ok = bool(got.fit_ok[s]) and max(pratio, 0.0) <= 1.0 + PATH_DEV_SLACK
+            if not ok:
+                out.append(None)
+                continue
+            q0, q1 = so[s], so[s + 1]
+            raw = _Raw(
+                pr.axes,
+                got.breaks[q0 + s : q1 + s + 1],
+                got.coef[q0:q1],
+                got.line[q0:q1],
+                got.feed[q0:q1],
+                self.weights,
+            )
+            method = "curves+nodes" if sub.curves else "nodes"
+            out.append(
+                _Measured(
+                    sub.i0,
+                    sub.i1,
+                    raw,
+                    method,
+                    float(got.dmm[s]),
+                    float(got.ddeg[s]),
+                    float(got.pdev[s]),
+                    pratio,
+                    0.0,
+                    True,
+                )
+            )
+        return out
 
 
 def _fit_sub_repaired(

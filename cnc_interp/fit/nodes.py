@@ -139,6 +139,10 @@ def fit_polyline(
     move 1), ``tol_deg`` for rotary axes, ``lin`` (d,) bool linear axes,
     ``metric`` (d,) bool axes of the arc-length metric, ``line``/``feed`` (n,)
     per node. ``start``/``end`` impose u-derivatives in the scaled space.
+
+    ``_section.fit_section`` is the same fit in one compiled call (the batch fitter's);
+    this one serves the runs the batch fitter leaves (NURBS, rotary axes, repairs, short
+    runs before its kernels are cached) and compiles only the rounds' kernel.
     """
     from . import _bspline as bs
 
@@ -177,10 +181,9 @@ def fit_polyline(
     tol_c0 = np.concatenate((tol, tol_ch))
     exp_lin0 = np.concatenate((node_ratio, np.repeat(lin_ratio, f.size)))
     w = tol_ref_mm / np.maximum(tol, 1e-12)
-    # chord points are data too (else a span without nodes follows only the smoothing)
+    # chord points are data too (else a span without nodes follows only the smoothing):
+    # the check points are the data points
     w_ch = 0.5 * tol_ref_mm / (tol_ch + 1e-12)
-    u_data0 = np.concatenate((u, xc_ch))
-    y_data0 = np.concatenate((y, ref_ch))
     w_data0 = np.concatenate((w, w_ch))
     span_f = np.arange(1, FIT_SPAN_CHECKS + 1) / (FIT_SPAN_CHECKS + 1)
 
@@ -218,9 +221,7 @@ def fit_polyline(
             0 if start is None else 1,
             0 if end is None else 1,
         ),
-        bs.FitData(
-            f64(xc0), f64(ref0), f64(tol_c0), f64(exp_lin0), f64(u_data0), f64(y_data0), f64(w_data0), f64(span_f)
-        ),
+        bs.FitData(f64(xc0), f64(ref0), f64(tol_c0), f64(exp_lin0), f64(w_data0), f64(span_f)),
         bs.RefineParams(
             float(tol_ref_mm),
             float(tol_rot),
@@ -273,6 +274,28 @@ def _to_pieces(t, c, u, line, feed, p0, p_end, max_mm, max_deg, ok, ends=(None, 
     coef = hermite(d0[:-1], d1[:-1], d2[:-1], d0[1:], d1[1:], d2[1:], h)
     seg_line, seg_feed = segment_sources(x, u, line, feed)
     return PieceFit(x - x[0], coef, seg_line, seg_feed, max_mm, max_deg, ok, int(u.size))
+
+
+def section_params(tol_deg: float, lin: np.ndarray, metric: np.ndarray, tol_ref_mm: float):
+    """The compiled section fitter's settings (``_section.SectionParams``): this module's constants."""
+    from ._section import SectionParams
+
+    return SectionParams(
+        float(tol_deg),
+        _kernel_array(lin, dtype=np.bool_),
+        _kernel_array(metric, dtype=np.bool_),
+        float(tol_ref_mm),
+        FIT_TOL_SAFETY,
+        FIT_BETWEEN_NODES_SAFETY,
+        FIT_SMOOTHING,
+        _RIDGE,
+        FIT_MIN_SPEED_RATIO,
+        FIT_STOP_SPEED_RATIO,
+        FIT_MAX_ROUNDS,
+        FIT_SOFT_STALE_ROUNDS,
+        FIT_MIN_SPAN_REL,
+        FIT_INITIAL_NODES_PER_SPAN,
+    )
 
 
 def hermite(p0, v0, a0, p1, v1, a1, h, dp=None):
