@@ -58,6 +58,11 @@ _U64 = np.uint64(64)
 _MASK32 = np.uint64(0xFFFFFFFF)
 _MANT_MASK = np.uint64((1 << _MANT_BITS) - 1)
 
+#: numba options of the per-number kernels (``_d2d``, ``_put_repr``): no reference
+#: counting (``_nrt=False``), which cost two atomic operations per array argument on every
+#: number written; they allocate nothing and return no array (as ``plan.vpop.step``'s)
+_NO_REFCOUNT = {"cache": True, "_nrt": False}
+
 
 @njit(cache=True, inline="always")
 def _umul128_hi_lo(a, b):
@@ -115,7 +120,7 @@ def _pow5_factor(v):
         count += 1
 
 
-@njit(cache=True)
+@njit(**_NO_REFCOUNT)
 def _d2d(mant, expo, inv, pos):
     """Ryu's d2d: (digits, decimal exponent) of the shortest closest representation of
     the positive finite double with biased exponent ``expo`` and mantissa bits ``mant``."""
@@ -205,17 +210,10 @@ def _d2d(mant, expo, inv, pos):
     return out, e10 + removed
 
 
-@njit(cache=True, inline="always")
-def _bits(x):
-    a = np.empty(1, dtype=np.float64)
-    a[0] = x
-    return a.view(np.uint64)[0]
-
-
-@njit(cache=True)
-def _put_repr(x, buf, p, digits, inv, pos):
-    """Write repr(x) at buf[p:]; returns the new end. ``digits`` is scratch (>= 17)."""
-    u = _bits(x)
+@njit(**_NO_REFCOUNT)
+def _put_repr(u, buf, p, digits, inv, pos):
+    """Write repr(x) at buf[p:] for the float64 x of bits ``u`` (uint64); returns the new
+    end. ``digits`` is scratch (>= 17)."""
     neg = (u >> np.uint64(63)) != _U0
     expo = np.int64((u >> np.uint64(_MANT_BITS)) & np.uint64(0x7FF))
     mant = u & _MANT_MASK
@@ -343,7 +341,7 @@ def _format_table(cols, inv, pos):
                 prev_at[c] = p
                 p += n
                 continue
-            e = _put_repr(cols[c, k], buf, p, digits, inv, pos)
+            e = _put_repr(bits[c, k], buf, p, digits, inv, pos)
             prev_at[c] = p
             prev_len[c] = e - p
             p = e

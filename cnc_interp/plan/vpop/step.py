@@ -64,10 +64,25 @@ _HUGE = 1e300
 _STAY_MARGIN = 1e-6
 _BIG = 1 << 62
 
+#: numba options of every kernel here but ``plan_core``: no reference counting
+#: (``_nrt=False``, numba's own option for its string and sort helpers). With it, each
+#: call of a kernel increments and decrements, atomically, the count of every array it is
+#: passed (bundles included) and of every view it takes: NRT_incref/NRT_decref were 35 %
+#: of the planning CPU on stellabee1 (perf; 52.9 -> 35.0 CPU-s without them, identical
+#: samples). Running without the count is sound because these kernels allocate nothing
+#: (numba refuses to compile an allocation without it) and return no array: every array
+#: they see is owned by ``plan_core`` or its caller for the whole call.
+_PER_STEP = {"cache": True, "_nrt": False}
+# The small kernels of the inner loops are inlined (``inline="always"``): ``_bounds``,
+# ``_feasible``, ``_lin_interval``, ``_easy``, and ``_eval`` within ``_search`` (as
+# ``_eval_at``). A call passes each array of its bundles field by field (data, shape,
+# strides...: ~40 machine words for ``_eval``, ~100 for ``_search``); inlining these took
+# stellabee1's first 3000 paths from 10.7 to 7.5 planning CPU-s, for ~5 CPU-s more
+# compiling on a cold cache. ``_eval`` inlined everywhere saved ~4 % more for ~12 CPU-s.
+
 # The kernels' arguments, bundled by concept (module level, so that numba's cache can
 # name their types). Step units throughout: see the module docstring. A kernel called per
-# step takes only the bundles it reads, not the whole ``Problem``: numba increments and
-# decrements the reference count of every array in a kernel's arguments on each call.
+# step takes only the bundles it reads, not the whole ``Problem``.
 #: the joint table: knots S (m+1,) in arc length, power coefficients C (m, n, 6) in
 #: s - S[p] (each axis's six contiguous), the exact end point QEND (n,)
 Table = namedtuple("Table", "S C QEND")
@@ -97,13 +112,13 @@ Settings = namedtuple("Settings", "tol max_steps easy_frac gap_tol fast chain_se
 Seed = namedtuple("Seed", "x bad L H")
 
 
-@njit(cache=True)
+@njit(**_PER_STEP)
 def _seed(x):
     """A guess not yet evaluated."""
     return Seed(x, np.bool_(False), np.float64(0.0), np.float64(0.0))
 
 
-@njit(cache=True)
+@njit(**_PER_STEP)
 def _piece(S, x, hint):
     """Index p with S[p] <= x < S[p+1] (clipped), searching from ``hint``."""
     m = S.shape[0] - 1
@@ -133,11 +148,17 @@ def _piece(S, x, hint):
     return lo
 
 
-@njit(cache=True)
+@njit(**_PER_STEP)
 def _eval(T, x, hint, q, qs):
     """q(x) and dq/ds(x) of the ``Table`` T into ``q``, ``qs``; returns the piece index
     (new hint). ``C`` is (m, n, 6): each axis's six coefficients are contiguous (one
     cache line)."""
+    return _eval_at(T, x, hint, q, qs)
+
+
+@njit(inline="always", **_PER_STEP)
+def _eval_at(T, x, hint, q, qs):
+    """``_eval`` inlined where it is called (``_search``'s iterations)."""
     S = T.S
     C = T.C
     QEND = T.QEND
@@ -158,7 +179,7 @@ def _eval(T, x, hint, q, qs):
     return p
 
 
-@njit(cache=True)
+@njit(inline="always", **_PER_STEP)
 def _bounds(qh, k, lim, lo, hi):
     """Allowed interval [lo, hi] of e = q_new - q[k-1] per axis under the ``Limits`` lim;
     False if one is empty.
@@ -193,7 +214,7 @@ def _bounds(qh, k, lim, lo, hi):
     return ok
 
 
-@njit(cache=True)
+@njit(inline="always", **_PER_STEP)
 def _feasible(qh, k, q, lim):
     """Exact check, in verify's own float operations, of q as sample k (``Limits`` lim)."""
     vl = lim.vl
@@ -214,7 +235,7 @@ def _feasible(qh, k, q, lim):
     return True
 
 
-@njit(cache=True)
+@njit(inline="always", **_PER_STEP)
 def _lin_interval(q, qs, qprev, lo, hi, x, a, b):
     """Linearised allowed s-interval around x, intersected with [a, b]: (lo_s, hi_s)."""
     n = q.shape[0]
@@ -241,7 +262,7 @@ def _lin_interval(q, qs, qprev, lo, hi, x, a, b):
     return L, H
 
 
-@njit(cache=True)
+@njit(**_PER_STEP)
 def _search(T, lim, qh, k, sc, a, b, want_max, hint, tol, seed, a_is_prev):
     """Largest (want_max) or smallest feasible s' in [a, b] of the allowed set's component
     found by linearisation, from the ``Seed`` seed. Returns (found, s', hint); ``sc.q``
@@ -272,7 +293,7 @@ def _search(T, lim, qh, k, sc, a, b, want_max, hint, tol, seed, a_is_prev):
                 check_end = False  # standing still is outside the allowed set
                 break
     if check_end:
-        hint = _eval(T, ends, hint, q, qs)
+        hint = _eval_at(T, ends, hint, q, qs)
         if _feasible(qh, k, q, lim):
             return True, ends, hint
     # 1. a feasible point: the guess, then the middle of the linearised allowed interval
@@ -287,7 +308,7 @@ def _search(T, lim, qh, k, sc, a, b, want_max, hint, tol, seed, a_is_prev):
         if it == 0 and seed.bad:
             L, H = seed.L, seed.H
         else:
-            hint = _eval(T, x, hint, q, qs)
+            hint = _eval_at(T, x, hint, q, qs)
             if _feasible(qh, k, q, lim):
                 f = x
                 have_f = True
@@ -330,7 +351,7 @@ def _search(T, lim, qh, k, sc, a, b, want_max, hint, tol, seed, a_is_prev):
             if not (xn < f and xn > u):
                 xn = 0.5 * (f + u)
         x = xn
-        hint = _eval(T, x, hint, q, qs)
+        hint = _eval_at(T, x, hint, q, qs)
         if _feasible(qh, k, q, lim):
             f = x
             for i in range(n):
@@ -346,7 +367,7 @@ def _search(T, lim, qh, k, sc, a, b, want_max, hint, tol, seed, a_is_prev):
     return True, f, hint
 
 
-@njit(cache=True)
+@njit(**_PER_STEP)
 def _cap(s, fd):
     """Largest s' allowed by the ``Feed`` fd: s' - s <= min(F over segments crossed) dt,
     s' <= L."""
@@ -379,7 +400,7 @@ def _cap(s, fd):
     return c
 
 
-@njit(cache=True)
+@njit(**_PER_STEP)
 def _path_limits(qs, js_lim, al):
     """One-step path jerk and acceleration (s units) the tightest axis allows at q_s = qs."""
     jd = _HUGE
@@ -396,7 +417,7 @@ def _path_limits(qs, js_lim, al):
     return jd, ad
 
 
-@njit(cache=True)
+@njit(**_PER_STEP)
 def _stop_distance(v, a, J, A):
     """Distance of the time-optimal jerk-limited stop from speed v, acceleration a (continuous,
     step units); -1 when the state already brakes too hard to stop without reversing."""
@@ -421,16 +442,13 @@ def _stop_distance(v, a, J, A):
 
 # inlined into its two callers (_brake_step and _step's fallback): 15-20% off a brake
 # run; inlining _search or _step too adds minutes of compile time for a few per cent
-@njit(cache=True, inline="always")
+@njit(inline="always", **_PER_STEP)
 def _brake_value(T, lim, js, fd, sh, qh, k, sc, hint, tol, qs0_known):
     """The brake policy's sample k (see ``_step``) on the joint table T under ``Limits``
     lim, brake jerk js and ``Feed`` fd, given the bounds ``sc.lo``/``sc.hi`` of
     ``_bounds``. Returns (ok, s', hint); q, qs hold q(s'), dq/ds(s'). With
     ``qs0_known`` wk[2] already holds dq/ds(s0) (a brake run carries it from the step
-    before).
-
-    The hot kernels take the bundles they use, not the whole ``Problem``: numba counts
-    references to every array of a kernel's arguments on each call."""
+    before)."""
     s0, d1, d2 = _path_state(sh, k)
     b = _cap(s0, fd)
     guess = s0 + d1 + d2
@@ -480,7 +498,7 @@ def _brake_value(T, lim, js, fd, sh, qh, k, sc, hint, tol, qs0_known):
     return True, xu, hint
 
 
-@njit(cache=True)
+@njit(**_PER_STEP)
 def _path_state(sh, k):
     """Position, step and step difference (s units) at sample k-1; rest before sample 0."""
     s0 = sh[k - 1]
@@ -491,7 +509,7 @@ def _path_state(sh, k):
 
 
 # inlined into the brake run's loop (its hot call) and into _step: 3-4% of a brake run
-@njit(cache=True, inline="always")
+@njit(inline="always", **_PER_STEP)
 def _brake_step(T, lim, js, fd, sh, qh, k, hint, sc, tol, qs0_known):
     """``_step`` in mode 1 (brake)."""
     if not _bounds(qh, k, lim, sc.lo, sc.hi):
@@ -499,7 +517,7 @@ def _brake_step(T, lim, js, fd, sh, qh, k, hint, sc, tol, qs0_known):
     return _brake_value(T, lim, js, fd, sh, qh, k, sc, hint, tol, qs0_known)
 
 
-@njit(cache=True)
+@njit(**_PER_STEP)
 def _step(T, lim, js, fd, sh, qh, k, mode, hint, sc, tol, qs0_known):
     """Choose sample k on the joint table T under ``Limits`` lim, brake jerk js and
     ``Feed`` fd. mode 0: max; 1: brake; 2: aim at rest exactly at L.
@@ -565,7 +583,7 @@ _RM_BLOCK = 32
 _RM_HEAD = 3
 
 
-@njit(cache=True)
+@njit(**_PER_STEP)
 def _window_max(T, p0, p1):
     """Largest value over the table pieces p0..p1 of ``range_max_table``'s packed table:
     short spans (the usual case: a brake distance) are scanned, long ones read the
@@ -627,7 +645,7 @@ def range_max_table(K: np.ndarray) -> np.ndarray:
     return np.concatenate((np.array([m, nb, levels], dtype=float), K, T.ravel()))
 
 
-@njit(cache=True)
+@njit(inline="always", **_PER_STEP)
 def _easy(S, K, js, al, L, bs, kk, easy_frac, qs0, hint):
     """Early end of a brake run (samples bs[:kk]): braking, slow
     enough that the path's curvature uses at most ``easy_frac`` of any axis's
@@ -662,7 +680,7 @@ def _easy(S, K, js, al, L, bs, kk, easy_frac, qs0, hint):
     return k3 * d1**3 + k23 * d1 * ab <= easy_frac
 
 
-@njit(cache=True)
+@njit(**_PER_STEP)
 def _brake_run(pb, sh, qh, j, runs, sc, cfg, mode, easy_frac, horizon):
     """Does the brake (mode 1) or aim (mode 2) policy from step j (samples < j fixed) reach
     rest? Uses the scratch run ``runs.bs``/``runs.bq``, which start with copies of samples
@@ -721,7 +739,7 @@ def _brake_run(pb, sh, qh, j, runs, sc, cfg, mode, easy_frac, horizon):
             return False, kk, 0
 
 
-@njit(cache=True)
+@njit(**_PER_STEP)
 def _stays_at_rest(sh, j, x, L):
     """True when sample j = x would leave the machine at rest where it stood (three
     equal samples before j, x equal to them) short of the end: fixing that brake value
@@ -732,7 +750,7 @@ def _stays_at_rest(sh, j, x, L):
     return x == s0 and s1 == s0 and s2 == s0 and s0 < L
 
 
-@njit(cache=True)
+@njit(**_PER_STEP)
 def _rest_value(pb, sh, qh, j, runs, sc, cfg, hint):
     """Sample j when the machine is at rest before it, the brake policy would stay put
     and the max step's continuation cannot stop (e.g. a path shorter than what one
@@ -786,7 +804,7 @@ def _rest_value(pb, sh, qh, j, runs, sc, cfg, hint):
     return True, good, good_cert, hint
 
 
-@njit(cache=True)
+@njit(**_PER_STEP)
 def _brake_fix(pb, sh, qh, j, runs, sc, cfg, hint):
     """Fix sample j at the brake value (at rest where that would stay put: ``_rest_value``).
     Returns (status OK / INFEASIBLE / STUCK, the certificate of a rest value or -1, hint)."""
@@ -805,7 +823,7 @@ def _brake_fix(pb, sh, qh, j, runs, sc, cfg, hint):
     return OK, c, hint
 
 
-@njit(cache=True)
+@njit(**_PER_STEP)
 def _horizon(k, j, fast):
     """Fast mode: a brake run from j that outlives the failed max run (index k) by as many
     steps again (+8) and then meets ``_easy`` at a 60% share is taken as safe; 0 (exact
@@ -815,7 +833,7 @@ def _horizon(k, j, fast):
     return k + (k - j) + 8
 
 
-@njit(cache=True)
+@njit(**_PER_STEP)
 def _certified_run(pb, sh, qh, j, runs, sc, cfg, horizon):
     """A brake run from j; when it succeeds it is kept in runs.cs/cq as the certificate the
     chain after a fix at j bisects along. Returns (ok, certified-up-to, its length)."""
@@ -835,7 +853,7 @@ def _certified_run(pb, sh, qh, j, runs, sc, cfg, horizon):
     return True, r[2], r[1] - 3
 
 
-@njit(cache=True)
+@njit(**_PER_STEP)
 def _put_cert(sh, qh, cs, cq, j, t0, t1):
     """Write certificate samples t0..t1-1 (main indices; the certificate starts at j)."""
     n = qh.shape[1]
@@ -845,7 +863,7 @@ def _put_cert(sh, qh, cs, cq, j, t0, t1):
             qh[t, i] = cq[3 + t - j, i]
 
 
-@njit(cache=True)
+@njit(**_PER_STEP)
 def _max_then_brake(pb, sh, qh, t, x, runs, sc, cfg, last_k, last_j):
     """Sample t = x (q holds q(x)), then a brake run from t+1 with the chain's horizon:
     the run's (ok, scratch end, certified-up-to)."""
@@ -859,7 +877,7 @@ def _max_then_brake(pb, sh, qh, t, x, runs, sc, cfg, last_k, last_j):
     return r
 
 
-@njit(cache=True)
+@njit(**_PER_STEP)
 def _chain_test(pb, sh, qh, j, t, runs, sc, cfg, last_k, last_j, hint):
     """Samples j+1..t-1 from the certificate, the max step at t, then a brake run from
     t+1: (passed, certified-up-to, hint)."""
@@ -872,7 +890,7 @@ def _chain_test(pb, sh, qh, j, t, runs, sc, cfg, last_k, last_j, hint):
     return r[0], r[2], hint
 
 
-@njit(cache=True)
+@njit(**_PER_STEP)
 def _chain_search(pb, sh, qh, j, m, runs, sc, cfg, last_k, last_j, hint):
     """After a brake fix at j with its brake run kept in runs.cs/cq (samples j..j+m-1): the
     first t in (j, j+m) where the max step followed by braking reaches rest, the samples
@@ -942,7 +960,7 @@ def new_state() -> np.ndarray:
     return st
 
 
-@njit(cache=True)
+@njit(**_PER_STEP)
 def _save(st, k, b, chain, c_at, c_len, cert, last_k, last_j, hint):
     st[ST_K] = k
     st[ST_B] = b
