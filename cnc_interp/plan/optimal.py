@@ -55,6 +55,12 @@ OPT_REFINE_PASSES = 2
 #: periods at and above which every window is refined; below, only the path's ends and
 #: dips of the speed (targeted), the rest costs more than it gains
 OPT_FULL_REFINE_DT = 0.002
+#: targeted refinement of a path stops once OPT_REFINE_PROBE window solves have gained
+#: less than OPT_REFINE_RATE periods per solve (each costs ~0.4-1 ms of CPU: refining
+#: every dip of stellabee1's short CAM paths cost ~0.25 s a path; zigzag_0.002_0.001
+#: gains 0.89 period per solve, 27 % of its cycle)
+OPT_REFINE_PROBE = 30
+OPT_REFINE_RATE = 0.6
 #: a step below this share of the largest within a window around it marks a dip
 OPT_DIP = 0.7
 #: a path goes through the profile when its static speed limit (curvature, jerk) is
@@ -412,6 +418,7 @@ def _refined(ctx, blocks, targeted: bool = False):
     base = 0  # global index of sh[0]
     a = 1  # next window start, global index
     emitted = 0
+    gained = 0
     done = False
     it = iter(blocks)
     while True:
@@ -428,8 +435,13 @@ def _refined(ctx, blocks, targeted: bool = False):
         if la >= N - 1:
             break
         b = min(la + W, N - 1)
-        if b - la >= 3 and (not targeted or _dip_or_end(sh, la, b, W, done)) and ref.loose(sh, qh, la, b):
+        # targeted: once the windows have been tried OPT_REFINE_PROBE times, go on only
+        # while they gain OPT_REFINE_RATE periods per solve (a window that loses k
+        # periods takes k + 1 solves)
+        paying = not targeted or ref.solves < OPT_REFINE_PROBE or gained >= OPT_REFINE_RATE * ref.solves
+        if paying and b - la >= 3 and (not targeted or _dip_or_end(sh, la, b, W, done)) and ref.loose(sh, qh, la, b):
             sh, qh, d = ref.window(sh, qh, la, b, max(1, (b - la) // 2))
+            gained += d
             ctx.stats["refined_periods"] += d
         a += REFINE_STRIDE
         upto = min(a, base + sh.shape[0])
