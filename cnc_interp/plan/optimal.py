@@ -74,17 +74,22 @@ OPT_ROUTE_SHARE = 0.03
 OPT_ROUTE_MIN_S = 0.5
 #: paths whose travel at the feed plus ramps is shorter than this take VPOp at once
 OPT_ROUTE_TINY_S = 0.1
-#: a profile-routed path whose rough duration is at most this many samples is also
-#: planned by VPOp and the shorter plan kept (both whole: this bounds the memory a path
-#: takes, like VPOp's own stream window); longer paths stream the profile's plan. (On fitted
-#: CAM contours whose q_sss jumps from segment to segment the continuous profile can be
-#: ~0.3 % slower than VPOp, which samples them; the comparison keeps the better.) The
+#: a profile-routed path whose rough duration is at most this many samples is planned
+#: whole before any of its samples leaves (this bounds the memory a path takes, like
+#: VPOp's own stream window): it is one LP window when short enough
+#: (``feedprofile.FEED_WHOLE_KNOTS``), and when the profile got stuck for good before its
+#: last OPT_COMPARE_TAIL_S (VPOp planned the rest) it is also planned by VPOp and the
+#: shorter plan kept. Longer paths stream the profile's plan. The
 #: ``OptimalOptions.compare_s`` overrides it: 0 makes every sample depend on the path up to one
 #: profile window ahead only, as a streaming pipeline wants.
 OPT_COMPARE_SAMPLES = 1 << 18
 #: ... unless the profile reached the path's end (no hand-over to VPOp, or one within
 #: this much motion of the end): then it is kept as it is
 OPT_COMPARE_TAIL_S = 0.3
+#: ... and a short one (rough duration at most this, s: VPOp's run costs little there)
+#: whose reference had to be lowered by dips is compared all the same (such a profile
+#: can lose a few periods to VPOp: quick-tests/tolerance_parabolic_check, 17 periods)
+OPT_COMPARE_DIPPED_S = 2.5
 #: samples per chunk of ``iter_path_plan_optimal`` (the plan does not depend on it)
 OPT_CHUNK = 4096
 #: a profile piece whose time law spends more than this many times the estimated time
@@ -567,7 +572,9 @@ def _better_of(ctx, stage, vpop_passes, targeted):
     s = np.concatenate([b[0] for b in blocks])
     q = np.concatenate([b[1] for b in blocks])
     ho = int(ctx.stats.get("handover", -1))
-    if "fallback" not in ctx.stats and (ho < 0 or ho >= s.shape[0] - int(OPT_COMPARE_TAIL_S / ctx.dt)):
+    reached_end = ho < 0 or ho >= s.shape[0] - int(OPT_COMPARE_TAIL_S / ctx.dt)
+    dipped_short = ctx.stats.get("retries", 0) > 0 and ctx.rough_s <= OPT_COMPARE_DIPPED_S
+    if "fallback" not in ctx.stats and reached_end and not dipped_short:
         # the profile ran to the end (VPOp at most finished its last stop): it is kept
         # without running VPOp (over the corpus VPOp won on such paths by 351 periods in
         # all against the profile's 22k; the runs cost as much as 4.6 s of planning)

@@ -30,9 +30,10 @@ class OptimalOptions:
         refine_passes: passes of the window refinement over the sampled plan (default
             ``OPT_REFINE_PASSES`` at coarse periods, fewer at fine ones).
         compare_s: a profile-routed path whose rough duration is at most this long, s, is
-            also planned by VPOp and the shorter plan kept (default
-            ``OPT_COMPARE_SAMPLES`` periods); 0 never compares (every sample then depends
-            on at most one profile window ahead).
+            planned whole (one LP window when short), and also by VPOp, the shorter plan
+            kept, when the profile got stuck before its end (default
+            ``OPT_COMPARE_SAMPLES`` periods); 0: neither (every sample then depends on at
+            most one profile window ahead).
         chunk_samples: samples per streamed chunk (default ``OPT_CHUNK``; the plan does
             not depend on it).
     """
