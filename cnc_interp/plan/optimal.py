@@ -55,12 +55,15 @@ OPT_REFINE_PASSES = 2
 #: periods at and above which every window is refined; below, only the path's ends and
 #: dips of the speed (targeted), the rest costs more than it gains
 OPT_FULL_REFINE_DT = 0.002
-#: targeted refinement of a path stops once OPT_REFINE_PROBE window solves have gained
-#: less than OPT_REFINE_RATE periods per solve (each costs ~0.4-1 ms of CPU: refining
-#: every dip of stellabee1's short CAM paths cost ~0.25 s a path; zigzag_0.002_0.001
-#: gains 0.89 period per solve, 27 % of its cycle)
+#: targeted refinement (fine periods) is judged by blocks of OPT_REFINE_PROBE window
+#: solves: a block that gained less than OPT_REFINE_RATE periods per solve pauses it for
+#: OPT_REFINE_PAUSE strides (each solve costs ~0.4-3 ms of CPU: refining every dip of
+#: stellabee1's short CAM paths cost ~0.25 s a path; zigzag_0.002_0.001 gains 0.89
+#: period per solve on axis_mm.ini, 27 % of its cycle, and on LinuxCNC's XYZ machine of
+#: issue 13 blocks of 0.4-0.6, 10 % of its cycle: 0.6 left it slower than LinuxCNC)
 OPT_REFINE_PROBE = 30
-OPT_REFINE_RATE = 0.6
+OPT_REFINE_RATE = 0.4
+OPT_REFINE_PAUSE = 50
 #: a step below this share of the largest within a window around it marks a dip
 OPT_DIP = 0.7
 #: a path goes through the profile when its static speed limit (curvature, jerk) is
@@ -424,6 +427,8 @@ def _refined(ctx, blocks, targeted: bool = False):
     a = 1  # next window start, global index
     emitted = 0
     gained = 0
+    blk = (0, 0)  # solves and periods gained when the current block began
+    pause = 0  # strides left before the windows are tried again
     done = False
     it = iter(blocks)
     while True:
@@ -440,10 +445,19 @@ def _refined(ctx, blocks, targeted: bool = False):
         if la >= N - 1:
             break
         b = min(la + W, N - 1)
-        # targeted: once the windows have been tried OPT_REFINE_PROBE times, go on only
-        # while they gain OPT_REFINE_RATE periods per solve (a window that loses k
-        # periods takes k + 1 solves)
-        paying = not targeted or ref.solves < OPT_REFINE_PROBE or gained >= OPT_REFINE_RATE * ref.solves
+        # targeted: the windows are judged by blocks of OPT_REFINE_PROBE solves; a block
+        # that gained less than OPT_REFINE_RATE periods per solve (a window that loses k
+        # periods takes k + 1 solves) pauses them for OPT_REFINE_PAUSE strides
+        if targeted:
+            if pause > 0:
+                pause -= 1
+                if pause == 0:
+                    blk = (ref.solves, gained)
+            elif ref.solves - blk[0] >= OPT_REFINE_PROBE:
+                if gained - blk[1] < OPT_REFINE_RATE * (ref.solves - blk[0]):
+                    pause = OPT_REFINE_PAUSE
+                blk = (ref.solves, gained)
+        paying = pause == 0
         if paying and b - la >= 3 and (not targeted or _dip_or_end(sh, la, b, W, done)) and ref.loose(sh, qh, la, b):
             sh, qh, d = ref.window(sh, qh, la, b, max(1, (b - la) // 2))
             gained += d
