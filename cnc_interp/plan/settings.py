@@ -14,9 +14,9 @@ if TYPE_CHECKING:
     from ..machine.model import Machine
 
 #: the planner of ``plan`` and ``batch`` when none is named (``stream`` has its own).
-#: VPOp, not ``optimal``: optimal's cycles are 1.3 % shorter over the corpus, but it plans
-#: 5.6x slower there and took more than 15 min on stellabee1 (VPOp ~1 min): a default
-#: must not make the user wait that long (issue 13's note)
+#: VPOp, not ``optimal``: optimal's cycles are 1.8 % shorter over the corpus, but it plans
+#: 3.3x slower there and its profile-routed paths of stellabee1 cost ~0.3 s each (VPOp ~1 min
+#: for the whole program): a default must not make the user wait that long (issue 13)
 DEFAULT_PLANNER = "vpop"
 
 
