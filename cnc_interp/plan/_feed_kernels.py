@@ -43,7 +43,11 @@ def table_derivs(S, C, x, q1, q2, q3):
     """q_s, q_ss, q_sss (each (K, n)) of the table at sorted arc lengths x (K,)."""
     m = S.shape[0] - 1
     n = C.shape[2]
+    # the first point's piece by bisection (a window far along a long path's table
+    # would otherwise walk every piece before it), then walked in order
     p = 0
+    if x.shape[0] > 0:
+        p = min(max(np.searchsorted(S, x[0], side="right") - 1, 0), max(m - 1, 0))
     for k in range(x.shape[0]):
         xk = x[k]
         while p < m - 1 and xk >= S[p + 1]:
@@ -183,7 +187,10 @@ def join_derivs(S, C, xj, q1, q2, q3l, q3r):
     derivative from the piece on the left and on the right (it jumps at path joins)."""
     n = C.shape[2]
     m = S.shape[0] - 1
+    # the first knot's piece by bisection, then walked in order (see table_derivs)
     p = 1
+    if xj.shape[0] > 0:
+        p = min(max(np.searchsorted(S, xj[0], side="left"), 1), max(m - 1, 1))
     for r in range(xj.shape[0]):
         while p < m - 1 and S[p] < xj[r]:
             p += 1

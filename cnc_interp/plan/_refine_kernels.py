@@ -30,7 +30,7 @@ from numba import njit
 
 from ..fit._quintic import quintic
 from ._ipm import _band_cholesky, _band_solve
-from .vpop.step import _eval, _feasible
+from .vpop.step import _eval, _feasible, _piece
 
 # solve_window's statuses (one set for every kernel: ``status``): OK (the window is
 # feasible), INFEASIBLE, FAILED (the start is not strictly monotone)
@@ -40,6 +40,12 @@ from .status import FAILED, INFEASIBLE, OK
 _Z_TARGET = -1e-6
 _MU0 = 1e-2
 _MU_MIN = 1e-10
+#: the barrier's log-sum takes one log per this many rows (``_log_sum``); a block's
+#: product outside (_LOG_SAFE_LO, _LOG_SAFE_HI) is summed one log at a time instead
+#: (it would lose precision to underflow or overflow)
+_LOG_BLOCK = 8
+_LOG_SAFE_LO = 1e-250
+_LOG_SAFE_HI = 1e250
 
 #: the barrier's Newton system that ``_assemble`` fills: gradient g (nfree,), band
 #: Hessian H (nfree, 4), the z column hz (nfree,), and gz (2,): z's gradient and curvature
@@ -48,18 +54,12 @@ NewtonSystem = namedtuple("NewtonSystem", "g H hz gz")
 
 @njit(cache=True)
 def _q_d012(S, C, QEND, x, hint, q0, q1, q2):
-    """q, q_s, q_ss of every axis at x (C axis-major (m, n, 6)); returns the piece."""
+    """q, q_s, q_ss of every axis at x (C axis-major (m, n, 6)); returns the piece (found
+    from ``hint`` by ``_piece``: a walk from piece 0 along a long path's table was most of
+    a window solve's time)."""
     m = S.shape[0] - 1
     n = q0.shape[0]
-    p = hint
-    if p < 0:
-        p = 0
-    if p > m - 1:
-        p = m - 1
-    while p > 0 and x < S[p]:
-        p -= 1
-    while p < m - 1 and x >= S[p + 1]:
-        p += 1
+    p = _piece(S, x, hint)
     t = x - S[p]
     for i in range(n):
         c = C[p, i]
@@ -228,6 +228,27 @@ def _assemble(P, nfree, moving, lim, fdt, Q1, Q2, u, mu, ns):
 
 
 @njit(cache=True)
+def _log_sum(u, r):
+    """Σ log u[i] over i < r (every u[i] > 0), one log per block of _LOG_BLOCK factors
+    (the barrier's value is most of a Newton step's work when every row takes a log);
+    a block whose product leaves the safe range is summed term by term."""
+    acc = 0.0
+    i = 0
+    while i < r:
+        j = min(i + _LOG_BLOCK, r)
+        p = 1.0
+        for k in range(i, j):
+            p *= u[k]
+        if _LOG_SAFE_LO < p < _LOG_SAFE_HI:
+            acc += np.log(p)
+        else:
+            for k in range(i, j):
+                acc += np.log(u[k])
+        i = j
+    return acc
+
+
+@njit(cache=True)
 def solve_window(S, C, QEND, pre, post, x0, moving, lim, fdt, max_newton, counts):
     """Positions x (nfree,) between ``pre`` (3,) and ``post`` (3,) minimising the largest
     relative violation z; stops as soon as z < _Z_TARGET. Returns (status, x, z);
@@ -256,6 +277,7 @@ def solve_window(S, C, QEND, pre, post, x0, moving, lim, fdt, max_newton, counts
         if not P[e] - P[e - 1] > -1e-12 * fdt:
             return FAILED, x, worst
     r, worst = _rows(P, nfree, moving, lim, fdt, Q0, z, u)
+    log_u = _log_sum(u, r)
     g = np.empty(nfree)
     H = np.empty((nfree, 4))
     hz = np.empty(nfree)
@@ -293,9 +315,7 @@ def solve_window(S, C, QEND, pre, post, x0, moving, lim, fdt, max_newton, counts
         for k in range(nfree):
             dec -= g[k] * dx[k]
         # backtracking: stay strictly inside, decrease the barrier function
-        phi0 = z
-        for i in range(r):
-            phi0 -= mu * np.log(u[i])
+        phi0 = z - mu * log_u
         alpha = 1.0
         accepted = False
         for _ in range(40):
@@ -309,13 +329,12 @@ def solve_window(S, C, QEND, pre, post, x0, moving, lim, fdt, max_newton, counts
             _evaluate(S, C, QEND, Pt, nfree, moving, lim, fdt, Q0, Q1, Q2)
             rt, wt = _rows(Pt, nfree, moving, lim, fdt, Q0, zt, ut)
             ok = True
-            phi = zt
             for i in range(rt):
                 if not ut[i] > 0.0:
                     ok = False
                     break
-                phi -= mu * np.log(ut[i])
-            if ok and phi <= phi0 - 1e-4 * alpha * dec:
+            log_ut = _log_sum(ut, rt) if ok else 0.0
+            if ok and zt - mu * log_ut <= phi0 - 1e-4 * alpha * dec:
                 accepted = True
                 break
             alpha *= 0.5
@@ -330,6 +349,7 @@ def solve_window(S, C, QEND, pre, post, x0, moving, lim, fdt, max_newton, counts
             x[k] = Pt[3 + k]
             P[3 + k] = x[k]
         z = zt
+        log_u = log_ut
         for i in range(rt):
             u[i] = ut[i]
         if wt < best_z:

@@ -173,7 +173,10 @@ def track(ref, ref_final, T, lim, fd, sh, qh, k, tol, stats):
     sc = Scratch(q, qs, lo, hi, wk)
     hint = 0
     rh = 0
-    seg = 0
+    # the feed segment of the first sample by bisection (``_feed_cap`` walks on from it;
+    # from segment 0 it walked every segment before on each call)
+    m_fb = fd.FB.shape[0] - 1
+    seg = min(max(np.searchsorted(fd.FB, sh[k - 1], side="right") - 1, 0), max(m_fb - 1, 0))
     cap = sh.shape[0]
     t_last = nt[n_nodes - 1]
     while True:

@@ -72,6 +72,8 @@ FEED_LIMIT_SHARE = 0.998
 #: above this share of their bound take part; rows left out are checked after each
 #: solve and added back if violated (the answer is the same, the solve smaller)
 FEED_ROW_SCREEN = 0.3
+#: a path of at most this many knot intervals is solved as one window (``windows``)
+FEED_WHOLE_KNOTS = 1500
 #: table pieces per block of the knot placement
 FEED_KNOT_BLOCK = 256
 
@@ -123,7 +125,7 @@ def _discrete_start_curve(x, jp, dt):
 class FeedProfileBuilder:
     """Builds the profile of one path window by window (see module docstring)."""
 
-    def __init__(self, table, path, machine, dt_s: float, limit_share: float = FEED_LIMIT_SHARE):
+    def __init__(self, table, path, machine, dt_s: float, limit_share: float = FEED_LIMIT_SHARE, whole: bool = False):
         self.L = float(table.length)
         self.dt = float(dt_s)
         self.n = table.C.shape[2]
@@ -174,6 +176,8 @@ class FeedProfileBuilder:
         self._ex = np.zeros(0)  # probes (x, enveloped w) from the current window on
         self._ew = np.zeros(0)
         self.knots_done = False
+        #: the caller holds the whole path anyway: a short one may be one window
+        self.whole = bool(whole)
 
     # -- geometry -----------------------------------------------------------------
     def derivs(self, x):
@@ -342,6 +346,15 @@ class FeedProfileBuilder:
         b0 = 0
         fixed = np.zeros(0)  # coefficients b0 .. b0+2 (committed), global indices
         prev = None  # (knots, coef) of the previous window's whole solution
+        # when the caller holds the whole path (``whole``), one of at most
+        # FEED_WHOLE_KNOTS intervals is one window: windows overlap by their braking part
+        # (about as long again as what they commit) and each costs a few LPs, so on a
+        # short path one LP over everything is cheaper, and its optimum is the whole
+        # path's (a streaming caller keeps the windows: bounded look-ahead)
+        if self.whole:
+            self._breaks_upto(FEED_WHOLE_KNOTS + 1)
+            if self.knots_done and len(self._br) - 1 <= FEED_WHOLE_KNOTS:
+                self.window = max(self.window, len(self._br) - 1)
         while True:
             self._breaks_upto(b0 + self.window + 4)
             nb = len(self._br) - 1

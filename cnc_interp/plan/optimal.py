@@ -36,6 +36,10 @@ from .settings import OptimalOptions
 
 #: depths of the successive dips of w around a place where the sampler got stuck
 OPT_RETRY_DEPTHS = (0.04, 0.1, 0.2, 0.4)
+#: every stuck place gets the dips above; a path gets at most OPT_RETRY_PLACES places
+#: worth plus one dip per OPT_RETRY_PER_S of its rough duration
+OPT_RETRY_PLACES = 4
+OPT_RETRY_PER_S = 0.05
 #: a dip spans this much motion at the reference speed before the stuck place (half as
 #: much after it), s: wide enough that the lowered reference stays smooth
 OPT_RETRY_SPAN_S = 0.1
@@ -51,6 +55,15 @@ OPT_REFINE_PASSES = 2
 #: periods at and above which every window is refined; below, only the path's ends and
 #: dips of the speed (targeted), the rest costs more than it gains
 OPT_FULL_REFINE_DT = 0.002
+#: targeted refinement (fine periods) is judged by blocks of OPT_REFINE_PROBE window
+#: solves: a block that gained less than OPT_REFINE_RATE periods per solve pauses it for
+#: OPT_REFINE_PAUSE strides (each solve costs ~0.4-3 ms of CPU: refining every dip of
+#: stellabee1's short CAM paths cost ~0.25 s a path; zigzag_0.002_0.001 gains 0.89
+#: period per solve on axis_mm.ini, 27 % of its cycle, and on LinuxCNC's XYZ machine of
+#: issue 13 blocks of 0.4-0.6, 10 % of its cycle: 0.6 left it slower than LinuxCNC)
+OPT_REFINE_PROBE = 30
+OPT_REFINE_RATE = 0.4
+OPT_REFINE_PAUSE = 50
 #: a step below this share of the largest within a window around it marks a dip
 OPT_DIP = 0.7
 #: a path goes through the profile when its static speed limit (curvature, jerk) is
@@ -64,14 +77,22 @@ OPT_ROUTE_SHARE = 0.03
 OPT_ROUTE_MIN_S = 0.5
 #: paths whose travel at the feed plus ramps is shorter than this take VPOp at once
 OPT_ROUTE_TINY_S = 0.1
-#: a profile-routed path whose rough duration is at most this many samples is also
-#: planned by VPOp and the shorter plan kept (both whole: this bounds the memory a path
-#: takes, like VPOp's own stream window); longer paths stream the profile's plan. (On fitted
-#: CAM contours whose q_sss jumps from segment to segment the continuous profile can be
-#: ~0.3 % slower than VPOp, which samples them; the comparison keeps the better.) The
+#: a profile-routed path whose rough duration is at most this many samples is planned
+#: whole before any of its samples leaves (this bounds the memory a path takes, like
+#: VPOp's own stream window): it is one LP window when short enough
+#: (``feedprofile.FEED_WHOLE_KNOTS``), and when the profile got stuck for good before its
+#: last OPT_COMPARE_TAIL_S (VPOp planned the rest) it is also planned by VPOp and the
+#: shorter plan kept. Longer paths stream the profile's plan. The
 #: ``OptimalOptions.compare_s`` overrides it: 0 makes every sample depend on the path up to one
 #: profile window ahead only, as a streaming pipeline wants.
 OPT_COMPARE_SAMPLES = 1 << 18
+#: ... unless the profile reached the path's end (no hand-over to VPOp, or one within
+#: this much motion of the end): then it is kept as it is
+OPT_COMPARE_TAIL_S = 0.3
+#: ... and a short one (rough duration at most this, s: VPOp's run costs little there)
+#: whose reference had to be lowered by dips is compared all the same (such a profile
+#: can lose a few periods to VPOp: quick-tests/tolerance_parabolic_check, 17 periods)
+OPT_COMPARE_DIPPED_S = 2.5
 #: samples per chunk of ``iter_path_plan_optimal`` (the plan does not depend on it)
 OPT_CHUNK = 4096
 #: a profile piece whose time law spends more than this many times the estimated time
@@ -150,6 +171,8 @@ class _Path:
         }
         self._vrun = None
         self._prep = None
+        #: the whole path is held before any sample leaves (``_better_of``)
+        self.whole = False
 
     def vrun(self):
         from .vpop import VpopRun
@@ -248,7 +271,7 @@ def _sampled(ctx):
     from .feedprofile import FeedProfileBuilder, ProfileError
 
     dt, n, L = ctx.dt, ctx.n, ctx.L
-    builder = FeedProfileBuilder(ctx.table, ctx.path, ctx.machine, dt)
+    builder = FeedProfileBuilder(ctx.table, ctx.path, ctx.machine, dt, whole=ctx.whole)
     pieces = builder.windows()
     nodes = _Nodes()
     final = False
@@ -262,6 +285,9 @@ def _sampled(ctx):
     emitted = 0  # global index of the first sample not yet emitted
     stats = np.zeros(2, dtype=np.int64)
     retries_here = 0
+    dip_hi = -1.0  # the end of the last dip: a stuck place beyond it is a new one
+    # dips per path at most (each re-samples a stretch): a path stuck that often goes to VPOp
+    dip_budget = OPT_RETRY_PLACES * len(OPT_RETRY_DEPTHS) + int(ctx.rough_s / OPT_RETRY_PER_S)
     final_handover = False
     # a sane bound on the samples: ten times travel at the lowest feed and axis speed
     # plus ramps (the profile is never that slow unless something went wrong)
@@ -299,13 +325,13 @@ def _sampled(ctx):
             if piece is None:  # VPOp finishes from here
                 status = TK.STUCK
                 final = True
-                retries_here = len(OPT_RETRY_DEPTHS)
+                retries_here, final_handover = len(OPT_RETRY_DEPTHS), True
             elif not _append_piece(ctx, nodes, piece, builder):
                 if nodes.s.size == 0:
                     raise _Fallback("reference")
                 status = TK.STUCK  # the profile stops inside a piece: VPOp finishes
                 final = True
-                retries_here = len(OPT_RETRY_DEPTHS)
+                retries_here, final_handover = len(OPT_RETRY_DEPTHS), True
             else:
                 final = piece.s1 >= L
                 continue
@@ -333,14 +359,19 @@ def _sampled(ctx):
         # STUCK at buffer index k
         t_here, _ = TK.ref_t_of_s(nodes.s, nodes.t, nodes.v, nodes.a, nodes.s.shape[0], sh[k - 1], 0)
         near_end = final and nodes.t[-1] - t_here <= OPT_TAIL_S
+        s_bad = float(sh[k - 1])
+        if s_bad > dip_hi and not final_handover and ctx.stats["retries"] < dip_budget:
+            # stuck at a new place, past the last dip: it gets dips of its own (the
+            # budget was per path: after four places anywhere VPOp planned the rest)
+            retries_here = 0
         if not near_end and retries_here < len(OPT_RETRY_DEPTHS):
-            s_bad = float(sh[k - 1])
             i = min(int(np.searchsorted(nodes.s, s_bad)), nodes.v.shape[0] - 1)
             v_here = max(float(np.max(nodes.v[max(i - 8, 0) : i + 8])), 1e-9)
             reach = max(OPT_RETRY_SPAN_S * v_here, 20.0 * dt * v_here, 1e-6)
             s_floor = float(sh[emitted - base]) if emitted > base else float(sh[0])
             if nodes.dip(s_bad, OPT_RETRY_DEPTHS[retries_here], reach, s_floor):
                 retries_here += 1
+                dip_hi = max(dip_hi, min(s_bad + 0.5 * reach, L))
                 ctx.stats["retries"] += 1
                 # restart before the dip (every sample there is unchanged)
                 lo = max(s_bad - reach, s_floor)
@@ -395,6 +426,9 @@ def _refined(ctx, blocks, targeted: bool = False):
     base = 0  # global index of sh[0]
     a = 1  # next window start, global index
     emitted = 0
+    gained = 0
+    blk = (0, 0)  # solves and periods gained when the current block began
+    pause = 0  # strides left before the windows are tried again
     done = False
     it = iter(blocks)
     while True:
@@ -411,8 +445,22 @@ def _refined(ctx, blocks, targeted: bool = False):
         if la >= N - 1:
             break
         b = min(la + W, N - 1)
-        if b - la >= 3 and (not targeted or _dip_or_end(sh, la, b, W, done)) and ref.loose(sh, qh, la, b):
+        # targeted: the windows are judged by blocks of OPT_REFINE_PROBE solves; a block
+        # that gained less than OPT_REFINE_RATE periods per solve (a window that loses k
+        # periods takes k + 1 solves) pauses them for OPT_REFINE_PAUSE strides
+        if targeted:
+            if pause > 0:
+                pause -= 1
+                if pause == 0:
+                    blk = (ref.solves, gained)
+            elif ref.solves - blk[0] >= OPT_REFINE_PROBE:
+                if gained - blk[1] < OPT_REFINE_RATE * (ref.solves - blk[0]):
+                    pause = OPT_REFINE_PAUSE
+                blk = (ref.solves, gained)
+        paying = pause == 0
+        if paying and b - la >= 3 and (not targeted or _dip_or_end(sh, la, b, W, done)) and ref.loose(sh, qh, la, b):
             sh, qh, d = ref.window(sh, qh, la, b, max(1, (b - la) // 2))
+            gained += d
             ctx.stats["refined_periods"] += d
         a += REFINE_STRIDE
         upto = min(a, base + sh.shape[0])
@@ -500,11 +548,12 @@ def _iter(path, joint_map, machine, dt_s, settings, stats, window):
     # discrete optimum, and windows on every short path would cost more than planning)
     default_passes = OPT_REFINE_PASSES if not targeted else (1 if route == "profile" else 0)
     passes = int(_or(opts.refine_passes, default_passes))
+    limit_s = float(_or(opts.compare_s, OPT_COMPARE_SAMPLES * dt))
+    ctx.whole = route == "profile" and ctx.rough_s <= limit_s
     stage = _sampled(ctx) if route == "profile" else _vpop_stage(ctx, window)
     for _ in range(passes):
         stage = _refined(ctx, stage, targeted)
-    limit_s = float(_or(opts.compare_s, OPT_COMPARE_SAMPLES * dt))
-    if route == "profile" and ctx.rough_s <= limit_s:
+    if ctx.whole:
         stage = _better_of(ctx, stage, passes if not targeted else 0, targeted)
     produced = 0
     try:
@@ -536,6 +585,16 @@ def _better_of(ctx, stage, vpop_passes, targeted):
     blocks = list(stage)
     s = np.concatenate([b[0] for b in blocks])
     q = np.concatenate([b[1] for b in blocks])
+    ho = int(ctx.stats.get("handover", -1))
+    reached_end = ho < 0 or ho >= s.shape[0] - int(OPT_COMPARE_TAIL_S / ctx.dt)
+    dipped_short = ctx.stats.get("retries", 0) > 0 and ctx.rough_s <= OPT_COMPARE_DIPPED_S
+    if "fallback" not in ctx.stats and reached_end and not dipped_short:
+        # the profile ran to the end (VPOp at most finished its last stop): it is kept
+        # without running VPOp (over the corpus VPOp won on such paths by 351 periods in
+        # all against the profile's 22k; the runs cost as much as 4.6 s of planning)
+        ctx.stats["kept"] = "profile"
+        yield s, q
+        return
     alt = _vpop_stage(ctx, None)
     for _ in range(vpop_passes):
         alt = _refined(ctx, alt, targeted)

@@ -78,13 +78,20 @@ class Refiner:
 
     def window(self, sh, qh, a: int, b: int, max_cut: int):
         """Try to drop samples from the window a..b-1 of (sh, qh) (both ending at the
-        end point, rest implied after). Returns the new (sh, qh, dropped)."""
+        end point, rest implied after), one at a time while each next one succeeds (a
+        try that drops several at once costs more Newton steps than the tries it saves).
+        Returns the new (sh, qh, dropped); the buffers are spliced once, at the end."""
         N = sh.shape[0]
+        M = b - a
         pre = np.array([sh[max(a - 3 + i, 0)] for i in range(3)])
         post = np.array([sh[min(b + i, N - 1)] for i in range(3)])
-        M = b - a
-        dropped = 0
+        # the exact check's buffer: three samples before the window (rest padding at the
+        # path's start), the window, the three after it (rest at L past the end)
+        post_exact = np.array([sh[b + i] if b + i < N else self.L for i in range(3)])
+        q_pre = qh[[max(a - 3 + i, 0) for i in range(3)]]
         cur = sh[a - 1 : b + 1].copy()
+        dropped = 0
+        kept = None
         while dropped < max_cut and M - 1 >= 2:
             Mn = M - 1
             tn = np.linspace(0.0, 1.0, Mn + 2)
@@ -96,18 +103,18 @@ class Refiner:
             self.solves += 1
             if st != RK.OK:
                 break
-            cand = np.concatenate((sh[:a], x, sh[b:]))
-            tail = np.full(3, self.L)
-            full = np.concatenate((cand, tail))
+            full = np.concatenate((pre, x, post_exact))
             qb = np.empty((full.shape[0], self.n))
-            qb[:a] = qh[:a]
-            hi = min(a + Mn + 3, full.shape[0])
-            if not RK.exact_ok(self.joints, self.limits, full, a, hi, qb):
+            qb[:3] = q_pre
+            if not RK.exact_ok(self.joints, self.limits, full, 3, full.shape[0], qb):
                 break
-            qn = np.concatenate((qh[:a], qb[a : a + Mn], qh[b:]))
-            sh, qh = cand, qn
-            cur = np.concatenate(([sh[a - 1]], x, [sh[a + Mn]]))
+            kept = (x, qb[3 : 3 + Mn].copy())
+            cur = np.concatenate(([cur[0]], x, [cur[-1]]))
             M = Mn
-            b = a + Mn
             dropped += 1
+        if kept is None:
+            return sh, qh, 0
+        x, qx = kept
+        sh = np.concatenate((sh[:a], x, sh[b:]))
+        qh = np.concatenate((qh[:a], qx, qh[b:]))
         return sh, qh, dropped

@@ -14,9 +14,9 @@ if TYPE_CHECKING:
     from ..machine.model import Machine
 
 #: the planner of ``plan`` and ``batch`` when none is named (``stream`` has its own).
-#: VPOp, not ``optimal``: optimal's cycles are 1.3 % shorter over the corpus, but it plans
-#: 5.6x slower there and took more than 15 min on stellabee1 (VPOp ~1 min): a default
-#: must not make the user wait that long (issue 13's note)
+#: VPOp, not ``optimal``: optimal's cycles are 1.8 % shorter over the corpus, but it plans
+#: 3.3x slower there and its profile-routed paths of stellabee1 cost ~0.3 s each (VPOp ~1 min
+#: for the whole program): a default must not make the user wait that long (issue 13)
 DEFAULT_PLANNER = "vpop"
 
 
@@ -30,9 +30,10 @@ class OptimalOptions:
         refine_passes: passes of the window refinement over the sampled plan (default
             ``OPT_REFINE_PASSES`` at coarse periods, fewer at fine ones).
         compare_s: a profile-routed path whose rough duration is at most this long, s, is
-            also planned by VPOp and the shorter plan kept (default
-            ``OPT_COMPARE_SAMPLES`` periods); 0 never compares (every sample then depends
-            on at most one profile window ahead).
+            planned whole (one LP window when short), and also by VPOp, the shorter plan
+            kept, when the profile got stuck before its end (default
+            ``OPT_COMPARE_SAMPLES`` periods); 0: neither (every sample then depends on at
+            most one profile window ahead).
         chunk_samples: samples per streamed chunk (default ``OPT_CHUNK``; the plan does
             not depend on it).
     """
