@@ -173,6 +173,16 @@ def missing_kernels(root: str, modules=PLAN_KERNEL_MODULES) -> list[str]:
     return out
 
 
+def kernel_cached(root: str, module: str, function: str) -> bool:
+    """Whether numba's cache holds the kernel ``function`` of ``module`` (dotted, relative
+    to the package folder ``root``): numba names its index ``module.function-LINE.pyXY.nbi``."""
+    import glob
+
+    *pkg, name = module.split(".")
+    folder = _cache_folder(os.path.join(root, *pkg))
+    return bool(glob.glob(os.path.join(glob.escape(folder), f"{name}.{function}-*.nbi")))
+
+
 def _cache_folder(source_dir: str) -> str:
     """Where numba caches the kernels of the modules in ``source_dir``: its
     ``__pycache__``, or under ``NUMBA_CACHE_DIR`` when set, or numba's per-user folder when

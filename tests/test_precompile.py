@@ -24,6 +24,7 @@ def sleeping_children(monkeypatch):
 
 def test_no_children_when_the_planner_kernels_are_cached(monkeypatch):
     monkeypatch.setattr("cnc_interp._kernel_cache.missing_kernels", lambda root: ["fit._arclen"])
+    monkeypatch.setattr("cnc_interp._kernel_cache.kernel_cached", lambda root, module, function: True)
     assert not precompile.start()
     assert precompile._children == []
     t0 = time.perf_counter()
@@ -49,6 +50,64 @@ def test_wait_gives_up_on_a_child_that_hangs(sleeping_children):
     assert all(p.poll() is not None for p in procs) and precompile._children == []
 
 
+def _ready_then_sleep(job, also=()):
+    return [sys.executable, "-c", "import os, time; os.write(1, b'ready\\n'); time.sleep(60)"]
+
+
+def test_a_ready_child_is_waited_for_only_until_its_line(monkeypatch):
+    """The parent waits for the step loop (the ready line), not for the batch driver the
+    child compiles next; it plans path by path meanwhile, and leaves the child to finish
+    when the command ends (Ctrl-C or an error still kill it: ``stop``)."""
+    monkeypatch.setattr(precompile, "_command", _ready_then_sleep)
+    monkeypatch.setattr("cnc_interp._kernel_cache.missing_kernels", lambda root: ["plan.vpop.step"])
+    try:
+        assert precompile.start()
+        (proc,) = precompile._children
+        t0 = time.perf_counter()
+        assert precompile.wait(timeout_s=30) == [0]
+        assert time.perf_counter() - t0 < 20 and proc.poll() is None
+        assert precompile.batch_pending()
+        precompile._at_exit()
+        assert proc.poll() is None  # still compiling the batch driver
+    finally:
+        precompile.stop()
+    assert proc.poll() is not None and not precompile.batch_pending()
+
+
+def test_only_the_batch_missing_starts_a_child_nobody_waits_for(monkeypatch):
+    monkeypatch.setattr(
+        precompile,
+        "_command",
+        lambda job, also=(): [sys.executable, "-c", f"import time; assert {job!r} == 'batch'; time.sleep(60)"],
+    )
+    monkeypatch.setattr("cnc_interp._kernel_cache.missing_kernels", lambda root: [])
+    monkeypatch.setattr("cnc_interp._kernel_cache.kernel_cached", lambda root, module, function: False)
+    try:
+        assert precompile.start()
+        t0 = time.perf_counter()
+        assert precompile.wait() == []
+        assert time.perf_counter() - t0 < 0.5 and precompile.batch_pending()
+    finally:
+        precompile.stop()
+
+
+def test_paths_planned_one_at_a_time_while_the_batch_compiles(monkeypatch):
+    """While a child compiles the batch driver, VPOp plans each path on its own: the same
+    samples as the batch (the first run's output is the next runs')."""
+    import numpy as np
+
+    from cnc_interp import api
+
+    m = api.load_machine("generic-mill")
+    fitted = api.fit(api.read_program("samples/gcode/mill-contour.ngc", machine=m))
+    batch = api.plan(fitted, m)
+    monkeypatch.setattr(precompile, "batch_pending", lambda: True)
+    one_by_one = api.plan(fitted, m)
+    np.testing.assert_array_equal(one_by_one.q, batch.q)
+    np.testing.assert_array_equal(one_by_one.s, batch.s)
+    np.testing.assert_array_equal(one_by_one.line, batch.line)
+
+
 def test_unknown_job_is_a_usage_error(capsys):
     assert precompile.main(["everything"]) == 2
     assert "usage" in capsys.readouterr().err
@@ -63,8 +122,8 @@ def test_the_child_command_names_its_job_and_the_callers_warm_ups():
 
 @pytest.mark.slow
 def test_the_child_leaves_the_step_loop_cached(tmp_path, monkeypatch):
-    """On an empty cache, after the child, this process loads the step loop from the cache
-    and does not compile it (a signature that differs from the real call's would make it
+    """On an empty cache, after the child, this process loads the batch driver (with the
+    step loop below it) from the cache and does not compile it (a signature that differs from the real call's would make it
     compile the tree again: the work would be done twice)."""
     import subprocess
 
@@ -76,15 +135,16 @@ def test_the_child_leaves_the_step_loop_cached(tmp_path, monkeypatch):
         "assert precompile.start(also=('export._repr:warm_up',))\n"
         "precompile.compile_preparation()\n"
         "assert precompile.wait() == [0], 'the child failed'\n"
+        "assert precompile.finish() == [0], 'the batch job failed'\n"
         "from cnc_interp.export import _repr\n"
         "_repr.warm_up()\n"
         "assert sum(_repr._format_table.stats.cache_hits.values()) == 1, _repr._format_table.stats\n"
         "m = api.load_machine('generic-mill')\n"
         "api.run('samples/gcode/mill-contour.ngc', machine=m)\n"
-        "assert sum(D.drive.stats.cache_hits.values()) == 1, D.drive.stats\n"
         "assert sum(D.drive.stats.cache_misses.values()) == 0, D.drive.stats\n"
         "assert sum(D.prepare_identity.stats.cache_misses.values()) == 1\n"
-        "assert sum(D.plan_identity_batch.stats.cache_misses.values()) == 1\n"
+        "assert sum(D.plan_identity_batch.stats.cache_hits.values()) == 1, D.plan_identity_batch.stats\n"
+        "assert sum(D.plan_identity_batch.stats.cache_misses.values()) == 0\n"
     )
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     r = subprocess.run([sys.executable, "-c", code], cwd=root, env=env, capture_output=True, text=True, timeout=900)

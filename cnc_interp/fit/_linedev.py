@@ -5,8 +5,8 @@ glue around the measurement's kernels (sampling, masking, projection) then costs
 than the kernels. This is the same measurement — the same kernels (``_project``) with
 the same arguments and arithmetic, so the same numbers — without that glue.
 
-Numba's cache of this module does not notice changes in ``_project``; a change of a kernel
-there that this module calls needs an edit here too (its cache is keyed on this file).
+Numba keys this module's cache on this file alone; ``cnc_interp._kernel_cache.refresh``
+drops it at import when ``_project`` (or anything else it imports) changes.
 """
 
 from __future__ import annotations

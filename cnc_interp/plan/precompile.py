@@ -18,6 +18,14 @@ Measured on the project's 2-core machine, cold cache, kernels of the quick-start
 tried: every process also compiles numba's own helpers and the kernels both trees share,
 and three processes on two cores came to 95 CPU-s, more wall time than this split.
 
+``plan_identity_batch`` itself took another ~9 s after the wait (numba optimises the
+kernel's module with what it links in), on the critical path. So the child says it is
+ready (a line on its standard output) once the step loop and the warm-ups are cached, and
+then compiles ``plan_identity_batch`` (the ``batch`` job); while it does, VPOp plans each
+path on its own (``plan_many_vpop`` leaves them to ``iter_path_plan_vpop``: the same
+samples), and the child may outlive this process by those seconds to cache it. A later
+run that finds only the batch missing starts a ``batch`` child and waits for nothing.
+
 A child that fails or is killed costs nothing but time: whatever it did not cache, this
 process compiles on its first call, as it would without children.
 """
@@ -30,48 +38,62 @@ import sys
 import threading
 
 #: the children's jobs: the step-loop tree of VPOp's kernels (this process compiles the
-#: preparation, ``compile_preparation``, while the fit compiles too)
+#: preparation, ``compile_preparation``, while the fit compiles too), then the batch
+#: driver; or the batch driver alone when only it is missing
 JOBS = ("loop",)
 
 #: how long the planner waits for the children before compiling by itself (s): a child
 #: normally ends within a minute; one that hangs must not hang the plan
 PRECOMPILE_WAIT_S = 600.0
 
+#: what a child writes on its standard output when the parent's share is cached
+READY_LINE = b"ready\n"
+
+#: the kernel the child compiles after saying it is ready (module, function)
+BATCH_KERNEL = ("plan.vpop.drive", "plan_identity_batch")
+
 _children: list[subprocess.Popen] = []
+_ready: set[int] = set()  # pids of children past their ready line (compiling the batch)
 _lock = threading.Lock()
 
 
-def start(root: str | None = None, also: tuple[str, ...] = ()) -> bool:
-    """Start the children when VPOp's kernels are not cached yet (a first run, or the
-    first after an update changed them); returns whether it started them. ``also``:
-    more warm-up functions for the child to call after its job, as ``"module:function"``
-    below the package (the caller's floor decides what; this module imports none)."""
-    from .._kernel_cache import missing_kernels
+def _root() -> str:
+    return os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
-    root = root or os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    if not any(m.startswith("plan.") for m in missing_kernels(root)):
+
+def start(root: str | None = None, also: tuple[str, ...] = ()) -> bool:
+    """Start a child when VPOp's kernels are not cached yet (a first run, or the first
+    after an update changed them); returns whether it started one. ``also``: more
+    warm-up functions for the child to call after the step loop, before it says it is
+    ready, as ``"module:function"`` below the package (the caller's floor decides what;
+    this module imports none)."""
+    from .._kernel_cache import kernel_cached, missing_kernels
+
+    root = root or _root()
+    need_loop = any(m.startswith("plan.") for m in missing_kernels(root))
+    if not need_loop and kernel_cached(root, *BATCH_KERNEL):
         return False
+    job = "loop" if need_loop else "batch"
     with _lock:
         if _children:
             return True
-        for job in JOBS:
-            try:
-                proc = subprocess.Popen(
-                    _command(job, also),
-                    stdin=subprocess.DEVNULL,
-                    stdout=subprocess.DEVNULL,
-                    stderr=subprocess.DEVNULL,
-                    close_fds=True,
-                )
-            except OSError:  # no process to spare: this process compiles everything
-                break
-            _children.append(proc)
-        started = bool(_children)
-    if started:
-        import atexit
+        try:
+            proc = subprocess.Popen(
+                _command(job, also if need_loop else ()),
+                stdin=subprocess.DEVNULL,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.DEVNULL,
+                close_fds=True,
+            )
+        except OSError:  # no process to spare: this process compiles everything
+            return False
+        _children.append(proc)
+        if job == "batch":  # nothing this process waits for
+            _ready.add(proc.pid)
+    import atexit
 
-        atexit.register(stop)
-    return started
+    atexit.register(_at_exit)
+    return True
 
 
 def _command(job: str, also: tuple[str, ...] = ()) -> list[str]:
@@ -79,8 +101,49 @@ def _command(job: str, also: tuple[str, ...] = ()) -> list[str]:
 
 
 def wait(timeout_s: float = PRECOMPILE_WAIT_S) -> list[int]:
-    """Block until the children have finished (at once when none was started); returns
-    their exit statuses."""
+    """Block until every child has cached this process's share (its ready line, or its
+    end); at once when none was started. Returns the status of each child waited for: 0
+    ready, else its exit status (a child that hangs past ``timeout_s`` is killed)."""
+    import select
+    import time
+
+    with _lock:
+        procs = [p for p in _children if p.pid not in _ready]
+    out = []
+    for proc in procs:
+        deadline = time.monotonic() + timeout_s
+        line = b""
+        if proc.stdout is not None:
+            if select.select([proc.stdout], [], [], max(0.0, deadline - time.monotonic()))[0]:
+                line = proc.stdout.readline()
+            else:  # it hangs: this process compiles what it needs
+                proc.kill()
+        if line == READY_LINE:
+            out.append(0)
+            with _lock:
+                _ready.add(proc.pid)
+            continue
+        out.append(proc.wait())  # it ended (or was killed) before its line
+        with _lock:
+            if proc in _children:
+                _children.remove(proc)
+    return out
+
+
+def batch_pending() -> bool:
+    """Whether a child is compiling VPOp's batch driver now: the planner then plans
+    paths one at a time instead of compiling the same kernel itself."""
+    with _lock:
+        for proc in list(_children):
+            if proc.poll() is not None:
+                _children.remove(proc)
+                _ready.discard(proc.pid)
+        return bool(_children)
+
+
+def finish(timeout_s: float = PRECOMPILE_WAIT_S) -> list[int]:
+    """Wait for the children to end (their batch job included); returns their exit
+    statuses. For tests and benchmarks that need the whole cache."""
     with _lock:
         procs = list(_children)
     for proc in procs:
@@ -89,10 +152,7 @@ def wait(timeout_s: float = PRECOMPILE_WAIT_S) -> list[int]:
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
-    with _lock:
-        for proc in procs:
-            if proc in _children:
-                _children.remove(proc)
+    batch_pending()
     return [proc.returncode for proc in procs]
 
 
@@ -101,6 +161,18 @@ def stop() -> None:
     with _lock:
         procs = list(_children)
         _children.clear()
+        _ready.clear()
+    for proc in procs:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+def _at_exit() -> None:
+    """At the end of the command: kill a child still compiling this process's share (the
+    command ended without planning); a child compiling the batch driver finishes it."""
+    with _lock:
+        procs = [p for p in _children if p.pid not in _ready]
     for proc in procs:
         if proc.poll() is None:
             proc.kill()
@@ -150,6 +222,15 @@ def _job_loop() -> None:
         pass
 
 
+def _job_batch() -> None:
+    """VPOp's batch driver (``vpop.drive.plan_identity_batch``), compiled through the
+    planner's own call (the same signature as a plan's), loading both trees below it."""
+    from .vpop.planner import plan_many_vpop
+
+    path, m = _tiny_path()
+    plan_many_vpop([path], m, m.dt_s)
+
+
 def main(argv: list[str]) -> int:
     import signal
 
@@ -159,16 +240,30 @@ def main(argv: list[str]) -> int:
         signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
     import importlib
 
-    jobs = {"loop": _job_loop}
+    jobs = {"loop": _job_loop, "batch": _job_batch}
     if not argv or argv[0] not in jobs or not all(":" in a for a in argv[1:]):
-        sys.stderr.write(f"usage: python -m {__name__} {{{','.join(JOBS)}}} [module:function ...]\n")
+        sys.stderr.write(f"usage: python -m {__name__} {{{','.join(jobs)}}} [module:function ...]\n")
         return 2
     jobs[argv[0]]()
     package = (__package__ or "cnc_interp").split(".")[0]  # (``__name__`` is "__main__" under -m)
     for spec in argv[1:]:
         module, _, function = spec.partition(":")
         getattr(importlib.import_module(f"{package}.{module}"), function)()
+    if argv[0] == "loop":
+        _say_ready()
+        _job_batch()
     return 0
+
+
+def _say_ready() -> None:
+    """The ready line, then standard output closed (the parent may be gone by the end)."""
+    try:
+        os.write(1, READY_LINE)
+    except OSError:  # the parent has gone: the batch is still worth caching
+        pass
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, 1)
+    os.close(devnull)
 
 
 if __name__ == "__main__":
