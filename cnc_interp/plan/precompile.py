@@ -55,6 +55,7 @@ BATCH_KERNEL = ("plan.vpop.drive", "plan_identity_batch")
 _children: list[subprocess.Popen] = []
 _ready: set[int] = set()  # pids of children past their ready line (compiling the batch)
 _lock = threading.Lock()
+_wait_lock = threading.Lock()  # held by the thread reading the children's lines
 
 
 def _root() -> str:
@@ -104,6 +105,11 @@ def wait(timeout_s: float = PRECOMPILE_WAIT_S) -> list[int]:
     """Block until every child has cached this process's share (its ready line, or its
     end); at once when none was started. Returns the status of each child waited for: 0
     ready, else its exit status (a child that hangs past ``timeout_s`` is killed)."""
+    with _wait_lock:  # two threads waiting on one pipe: one reads the line, one waits
+        return _wait_for_lines(timeout_s)
+
+
+def _wait_for_lines(timeout_s: float) -> list[int]:
     import select
     import time
 
