@@ -147,13 +147,11 @@ def programmed_samples(nodes: np.ndarray, tol_mm: np.ndarray, curves, i0: int, s
     return np.concatenate(pts)[order], np.concatenate(tols)[order]
 
 
-def polyline_deviation(breaks: np.ndarray, coef: np.ndarray, nodes: np.ndarray, tol_mm: np.ndarray, lin: np.ndarray):
-    """``path_deviation`` for a sub-run of G1 moves only (no curves), in one compiled call
-    (``_linedev``): the same samples, search and result, without the Python glue that
-    dominates on programs of many short paths."""
-    from ._linedev import DeviationSettings, polyline_path_deviation
+def deviation_settings():
+    """This module's PATH_DEV_* knobs as the compiled measurement's ``DeviationSettings``."""
+    from ._linedev import DeviationSettings
 
-    cfg = DeviationSettings(
+    return DeviationSettings(
         samples_per_span=PATH_DEV_SAMPLES_PER_SPAN,
         min_samples=PATH_DEV_MIN_SAMPLES,
         max_samples=PATH_DEV_MAX_SAMPLES,
@@ -163,6 +161,15 @@ def polyline_deviation(breaks: np.ndarray, coef: np.ndarray, nodes: np.ndarray, 
         n_coarse=PATH_DEV_FIT_SAMPLES,
         iters=PATH_DEV_NEWTON_ITERS,
     )
+
+
+def polyline_deviation(breaks: np.ndarray, coef: np.ndarray, nodes: np.ndarray, tol_mm: np.ndarray, lin: np.ndarray):
+    """``path_deviation`` for a sub-run of G1 moves only (no curves), in one compiled call
+    (``_linedev``): the same samples, search and result, without the Python glue that
+    dominates on programs of many short paths."""
+    from ._linedev import polyline_path_deviation
+
+    cfg = deviation_settings()
     breaks = np.ascontiguousarray(breaks, dtype=float)
     return polyline_path_deviation(breaks, np.ascontiguousarray(coef, dtype=float), nodes, tol_mm, lin, cfg)
 

@@ -443,7 +443,6 @@ class _SubRunBatcher:
 
     def __init__(self, pr: PreparedRun, settings: FitSettings, arcs):
         from . import _subrun as sr
-        from ._linedev import DeviationSettings
         from .curves import (
             _MIN_PIECE_SPEED,
             _MIN_SPEED,
@@ -453,16 +452,7 @@ class _SubRunBatcher:
             CURVE_CHECK_POINTS,
             CURVE_MAX_DEPTH,
         )
-        from .deviation import (
-            PATH_DEV_FAR_WINDOW,
-            PATH_DEV_FIT_SAMPLES,
-            PATH_DEV_LOCAL_FRAC,
-            PATH_DEV_MAX_SAMPLES,
-            PATH_DEV_MIN_SAMPLES,
-            PATH_DEV_NEWTON_ITERS,
-            PATH_DEV_SAMPLES_PER_SPAN,
-            PATH_DEV_WINDOW,
-        )
+        from .deviation import deviation_settings
         from .nodes import section_params
         from ..constants import FIT_TOL_SAFETY
 
@@ -511,16 +501,7 @@ class _SubRunBatcher:
                 _PIECE_GL_X,
                 _PIECE_GL_W,
             ),
-            DeviationSettings(
-                samples_per_span=PATH_DEV_SAMPLES_PER_SPAN,
-                min_samples=PATH_DEV_MIN_SAMPLES,
-                max_samples=PATH_DEV_MAX_SAMPLES,
-                local_frac=PATH_DEV_LOCAL_FRAC,
-                window=PATH_DEV_WINDOW,
-                far_window=PATH_DEV_FAR_WINDOW,
-                n_coarse=PATH_DEV_FIT_SAMPLES,
-                iters=PATH_DEV_NEWTON_ITERS,
-            ),
+            deviation_settings(),
         )
 
     def covers(self, sub: SubRun, c_pos: int) -> bool:
