@@ -123,8 +123,9 @@ def test_the_child_command_names_its_job_and_the_callers_warm_ups():
 @pytest.mark.slow
 def test_the_child_leaves_the_step_loop_cached(tmp_path, monkeypatch):
     """On an empty cache, after the child, this process loads the batch driver (with the
-    step loop below it) from the cache and does not compile it (a signature that differs from the real call's would make it
-    compile the tree again: the work would be done twice)."""
+    step loop below it) from the cache and does not compile it (a signature that differs
+    from the real call's would make it compile the tree again: the work would be done
+    twice)."""
     import subprocess
 
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
