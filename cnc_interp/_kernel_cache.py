@@ -173,6 +173,18 @@ def missing_kernels(root: str, modules=PLAN_KERNEL_MODULES) -> list[str]:
     return out
 
 
+#: set by ``plan.precompile`` while a child process of its compiles kernels in the
+#: background: a call that says whether it still does (the fit then keeps its Python
+#: fitter rather than compile the same kernels a second time)
+background_check = None
+
+
+def compiling_elsewhere() -> bool:
+    """Whether a child process is compiling the background kernels now."""
+    check = background_check
+    return bool(check is not None and check())
+
+
 def kernel_cached(root: str, module: str, function: str) -> bool:
     """Whether numba's cache holds the kernel ``function`` of ``module`` (dotted, relative
     to the package folder ``root``): numba names its index ``module.function-LINE.pyXY.nbi``."""

@@ -411,7 +411,8 @@ FIT_KERNEL_BATCH = 32
 #: cached them yet: they cost ~40 CPU-s to compile (first run after an install or update)
 #: and save ~70 µs a node, so a shorter run is fitted by the Python fitter (the same
 #: paths) until a long one, or any earlier process, has compiled them — the quick
-#: start's first run keeps its compile time
+#: start's first run keeps its compile time, and its precompile child compiles them
+#: afterwards (``plan.precompile``)
 FIT_KERNEL_COMPILE_NODES = 50_000
 
 _kernels_ready = False
@@ -423,8 +424,10 @@ def _batch_kernels_ready(n_nodes: int) -> bool:
     if not _kernels_ready:
         import os
 
-        from .._kernel_cache import missing_kernels
+        from .._kernel_cache import compiling_elsewhere, missing_kernels
 
+        if compiling_elsewhere():  # a first run's child compiles them: not twice
+            return False
         root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
         _kernels_ready = n_nodes >= FIT_KERNEL_COMPILE_NODES or not missing_kernels(root, ("fit._subrun",))
     return _kernels_ready

@@ -21,10 +21,11 @@ and three processes on two cores came to 95 CPU-s, more wall time than this spli
 ``plan_identity_batch`` itself took another ~9 s after the wait (numba optimises the
 kernel's module with what it links in), on the critical path. So the child says it is
 ready (a line on its standard output) once the step loop and the warm-ups are cached, and
-then compiles ``plan_identity_batch`` (the ``batch`` job); while it does, VPOp plans each
-path on its own (``plan_many_vpop`` leaves them to ``iter_path_plan_vpop``: the same
-samples), and the child may outlive this process by those seconds to cache it. A later
-run that finds only the batch missing starts a ``batch`` child and waits for nothing.
+then compiles ``plan_identity_batch`` and the batch fitter's kernels (the ``batch`` job,
+~50 CPU-s); while it does, VPOp plans each path on its own (``plan_many_vpop`` leaves
+them to ``iter_path_plan_vpop``: the same samples) and the fit keeps its Python fitter
+(the same paths), and the child may outlive this process to cache them. A later run that
+finds only these missing starts a ``batch`` child and waits for nothing.
 
 A child that fails or is killed costs nothing but time: whatever it did not cache, this
 process compiles on its first call, as it would without children.
@@ -51,6 +52,11 @@ READY_LINE = b"ready\n"
 
 #: the kernel the child compiles after saying it is ready (module, function)
 BATCH_KERNEL = ("plan.vpop.drive", "plan_identity_batch")
+#: and the batch fitter's kernels (~40 CPU-s; a plan compiles them only for a run of
+#: ``fit.fitter.FIT_KERNEL_COMPILE_NODES`` nodes or more)
+FIT_KERNEL_MODULES = ("fit._subrun",)
+#: a program whose fit runs through every batch-fitter kernel (lines, an arc, a corner)
+_FIT_WARM_PROGRAM = b"G21 G90\nG0 X1 Y1\nG1 X5 Y3 F600\nG2 X7 Y5 I1 J1\nG1 X5 Z-1\nM2\n"
 
 _children: list[subprocess.Popen] = []
 _ready: set[int] = set()  # pids of children past their ready line (compiling the batch)
@@ -72,7 +78,7 @@ def start(root: str | None = None, also: tuple[str, ...] = ()) -> bool:
 
     root = root or _root()
     need_loop = any(m.startswith("plan.") for m in missing_kernels(root))
-    if not need_loop and kernel_cached(root, *BATCH_KERNEL):
+    if not need_loop and kernel_cached(root, *BATCH_KERNEL) and not missing_kernels(root, FIT_KERNEL_MODULES):
         return False
     job = "loop" if need_loop else "batch"
     with _lock:
@@ -93,6 +99,9 @@ def start(root: str | None = None, also: tuple[str, ...] = ()) -> bool:
             _ready.add(proc.pid)
     import atexit
 
+    from .. import _kernel_cache
+
+    _kernel_cache.background_check = batch_pending
     atexit.register(_at_exit)
     return True
 
@@ -230,11 +239,18 @@ def _job_loop() -> None:
 
 def _job_batch() -> None:
     """VPOp's batch driver (``vpop.drive.plan_identity_batch``), compiled through the
-    planner's own call (the same signature as a plan's), loading both trees below it."""
+    planner's own call (the same signature as a plan's), loading both trees below it;
+    then the batch fitter's kernels, through the fit's own call."""
+    from ..fit import fitter
+    from ..gcode import read_program
     from .vpop.planner import plan_many_vpop
 
     path, m = _tiny_path()
     plan_many_vpop([path], m, m.dt_s)
+    fitter._kernels_ready = True  # the batch fitter whatever the run's length
+    prog = read_program(_FIT_WARM_PROGRAM, "precompile", axes=m.axes, start=m.start)
+    for run in prog.runs:
+        fitter.fit_run(run)
 
 
 def main(argv: list[str]) -> int:
