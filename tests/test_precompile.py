@@ -150,3 +150,17 @@ def test_the_child_leaves_the_step_loop_cached(tmp_path, monkeypatch):
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     r = subprocess.run([sys.executable, "-c", code], cwd=root, env=env, capture_output=True, text=True, timeout=900)
     assert r.returncode == 0, r.stderr[-3000:]
+
+
+def test_the_fit_does_not_compile_what_a_child_compiles(monkeypatch):
+    """While a first run's child compiles the batch fitter's kernels, even a long run
+    keeps the Python fitter (the same paths) instead of compiling them a second time."""
+    from cnc_interp import _kernel_cache
+    from cnc_interp.fit import fitter
+
+    monkeypatch.setattr(fitter, "_kernels_ready", False)
+    monkeypatch.setattr(_kernel_cache, "background_check", lambda: True)
+    assert not fitter._batch_kernels_ready(10 * fitter.FIT_KERNEL_COMPILE_NODES)
+    assert not fitter._kernels_ready
+    monkeypatch.setattr(_kernel_cache, "background_check", lambda: False)
+    assert fitter._batch_kernels_ready(10 * fitter.FIT_KERNEL_COMPILE_NODES)
