@@ -17,13 +17,16 @@ def sleeping_children(monkeypatch):
     monkeypatch.setattr(
         precompile, "_command", lambda job, also=(): [sys.executable, "-c", "import time; time.sleep(60)"]
     )
-    monkeypatch.setattr("cnc_interp._kernel_cache.missing_kernels", lambda root: ["plan.vpop.step"])
+    monkeypatch.setattr("cnc_interp._kernel_cache.missing_kernels", lambda root, modules=None: ["plan.vpop.step"])
     yield
     precompile.stop()
 
 
 def test_no_children_when_the_planner_kernels_are_cached(monkeypatch):
-    monkeypatch.setattr("cnc_interp._kernel_cache.missing_kernels", lambda root: ["fit._arclen"])
+    # (a fit kernel of the plan missing: no child; the batch fitter's: cached)
+    monkeypatch.setattr(
+        "cnc_interp._kernel_cache.missing_kernels", lambda root, modules=None: [] if modules else ["fit._arclen"]
+    )
     monkeypatch.setattr("cnc_interp._kernel_cache.kernel_cached", lambda root, module, function: True)
     assert not precompile.start()
     assert precompile._children == []
@@ -59,7 +62,7 @@ def test_a_ready_child_is_waited_for_only_until_its_line(monkeypatch):
     child compiles next; it plans path by path meanwhile, and leaves the child to finish
     when the command ends (Ctrl-C or an error still kill it: ``stop``)."""
     monkeypatch.setattr(precompile, "_command", _ready_then_sleep)
-    monkeypatch.setattr("cnc_interp._kernel_cache.missing_kernels", lambda root: ["plan.vpop.step"])
+    monkeypatch.setattr("cnc_interp._kernel_cache.missing_kernels", lambda root, modules=None: ["plan.vpop.step"])
     try:
         assert precompile.start()
         (proc,) = precompile._children
@@ -80,7 +83,7 @@ def test_only_the_batch_missing_starts_a_child_nobody_waits_for(monkeypatch):
         "_command",
         lambda job, also=(): [sys.executable, "-c", f"import time; assert {job!r} == 'batch'; time.sleep(60)"],
     )
-    monkeypatch.setattr("cnc_interp._kernel_cache.missing_kernels", lambda root: [])
+    monkeypatch.setattr("cnc_interp._kernel_cache.missing_kernels", lambda root, modules=None: [])
     monkeypatch.setattr("cnc_interp._kernel_cache.kernel_cached", lambda root, module, function: False)
     try:
         assert precompile.start()
