@@ -139,17 +139,10 @@ def warm_up(machine: str) -> None:
         p = os.path.join(d, "w.ngc")
         with open(p, "w") as fh:
             fh.write("G21 G90\nG0 X1 Y1\nG1 X5 Y3 F600\nG2 X7 Y5 I1 J1\nG1 X5 Z-1\nM2\n")
-        # in-process first (no precompile child left compiling during the measurement),
-        # with the batch fitter's kernels, which a plan compiles only for a long run
-        code = (
-            "import sys, cnc_interp as ci\n"
-            "from cnc_interp.fit import fitter\n"
-            "fitter._kernels_ready = True\n"
-            "m = ci.load_machine(sys.argv[1])\n"
-            "ci.write(ci.plan(ci.fit(ci.read_program(sys.argv[2], machine=m)), m), sys.argv[3])\n"
-        )
+        # the first run's background job first (VPOp's batch driver and the batch fitter's
+        # kernels, plan/precompile.py), so that no child is left compiling during the runs
         subprocess.run(
-            [sys.executable, "-c", code, machine, p, os.path.join(d, "w0.csv")], check=True, stdin=subprocess.DEVNULL
+            [sys.executable, "-m", "cnc_interp.plan.precompile", "batch"], check=True, stdin=subprocess.DEVNULL
         )
         subprocess.run(
             [console_script(), "plan", p, "-m", machine, "-o", os.path.join(d, "w.csv"), "-q"],

@@ -39,8 +39,8 @@ import sys
 import threading
 
 #: the children's jobs: the step-loop tree of VPOp's kernels (this process compiles the
-#: preparation, ``compile_preparation``, while the fit compiles too), then the batch
-#: driver; or the batch driver alone when only it is missing
+#: preparation, ``compile_preparation``, while the fit compiles too), then the ``batch``
+#: job; or the ``batch`` job alone when only its kernels are missing
 JOBS = ("loop",)
 
 #: how long the planner waits for the children before compiling by itself (s): a child
@@ -120,16 +120,14 @@ def wait(timeout_s: float = PRECOMPILE_WAIT_S) -> list[int]:
 
 def _wait_for_lines(timeout_s: float) -> list[int]:
     import select
-    import time
 
     with _lock:
         procs = [p for p in _children if p.pid not in _ready]
     out = []
     for proc in procs:
-        deadline = time.monotonic() + timeout_s
         line = b""
         if proc.stdout is not None:
-            if select.select([proc.stdout], [], [], max(0.0, deadline - time.monotonic()))[0]:
+            if select.select([proc.stdout], [], [], timeout_s)[0]:
                 line = proc.stdout.readline()
             else:  # it hangs: this process compiles what it needs
                 proc.kill()
@@ -148,12 +146,16 @@ def _wait_for_lines(timeout_s: float) -> list[int]:
 def batch_pending() -> bool:
     """Whether a child is compiling VPOp's batch driver now: the planner then plans
     paths one at a time instead of compiling the same kernel itself."""
+    return bool(_reap())
+
+
+def _reap() -> list[subprocess.Popen]:
+    """Forget the children that have ended; returns those still running."""
     with _lock:
-        for proc in list(_children):
-            if proc.poll() is not None:
-                _children.remove(proc)
-                _ready.discard(proc.pid)
-        return bool(_children)
+        for proc in [p for p in _children if p.poll() is not None]:
+            _children.remove(proc)
+            _ready.discard(proc.pid)
+        return list(_children)
 
 
 def finish(timeout_s: float = PRECOMPILE_WAIT_S) -> list[int]:
@@ -167,7 +169,7 @@ def finish(timeout_s: float = PRECOMPILE_WAIT_S) -> list[int]:
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
-    batch_pending()
+    _reap()
     return [proc.returncode for proc in procs]
 
 
