@@ -89,6 +89,9 @@ def _child(func: Callable[[dict], dict], job: dict, wfd: int) -> None:
         import faulthandler
 
         faulthandler.disable()  # a crash is reported as this job's status, not a dump on stderr
+        from .fit.fitter import cap_default_threads
+
+        cap_default_threads(1)  # the batch runs a child per core already
         result = func(job)
         payload = pickle.dumps(result, protocol=pickle.HIGHEST_PROTOCOL)
     except BaseException as exc:  # noqa: BLE001 - nothing may escape a forked child

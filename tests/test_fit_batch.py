@@ -139,3 +139,30 @@ def test_batch_fit_equals_python_fit(case, monkeypatch):
     python = fit_program(prog, FitSettings())
     _same_fit(batched, python)
     assert batched.stats["within_tolerance"]
+
+
+@pytest.mark.parametrize("case", ["mixed", pytest.param(("performance/stellabee1.ngc", 3000), marks=needs_corpus)])
+def test_worker_threads_give_the_same_fit(case, monkeypatch):
+    """The batch fitter's kernels and the arc-length tables on worker threads, many small
+    batches in flight, interleaved with sub-runs the Python fitter takes: the same paths
+    in the same order as one thread."""
+    import cnc_interp.fit.fitter as fitter
+    from cnc_interp.fit.fitter import iter_fit
+    from cnc_interp.fit.result import FitResult
+
+    prog = _program(case)
+    monkeypatch.setattr(fitter, "_kernels_ready", True)
+    one = fit_program(prog, FitSettings(), threads=1)
+    monkeypatch.setattr(fitter, "FIT_KERNEL_BATCH", 3)
+    launched = []
+    real = fitter._SubRunBatcher.launch
+
+    def launch(self, batch):
+        launched.append(len(batch))
+        return real(self, batch)
+
+    monkeypatch.setattr(fitter._SubRunBatcher, "launch", launch)
+    stats: dict = {}
+    items = tuple(iter_fit(prog.items, FitSettings(), stats, batch=5, threads=3))
+    assert len(launched) > 5
+    _same_fit(one, FitResult(program=prog, items=items, stats=stats))

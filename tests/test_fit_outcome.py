@@ -80,9 +80,9 @@ def test_a_fit_outside_its_tolerance_fails_with_exit_1_naming_the_line(tmp_path,
 
     real = fitter._iter_run_raws
 
-    def outside(run, settings, info):
+    def outside(run, settings, info, threads=1):
         # every path of the pipeline (fit_program and the streaming iter_fit) fits runs here
-        yield from real(run, settings, info)
+        yield from real(run, settings, info, threads)
         if run.kind != "rapid":
             info["within_tolerance"] = False
             info["outside_lines"] = [4, 6]

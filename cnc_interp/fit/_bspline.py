@@ -155,10 +155,32 @@ def point_bases(t, m, x):
     n4 = np.empty((P, K))
     wl = np.empty(K + 1)
     wr = np.empty(K + 1)
+    # the reciprocals of the knot differences of every span (a point's denominators
+    # are its span's: one division per span and triangle entry, not per point)
+    inv = np.empty((m, K + 1, K + 1))
+    for i in range(K, m):
+        for jj in range(1, K + 1):
+            for r in range(jj):
+                den = t[i + r + 1] - t[i + 1 - jj + r]
+                inv[i, jj, r] = 1.0 / den if den != 0.0 else 0.0
     for j in range(P):
         sp = find_span(t, m, x[j])
         spans[j] = sp
-        basis54(t, sp, x[j], n5[j], n4[j], wl, wr)
+        xj = x[j]
+        out = n5[j]
+        out[0] = 1.0
+        for jj in range(1, K + 1):
+            wl[jj] = xj - t[sp + 1 - jj]
+            wr[jj] = t[sp + jj] - xj
+            saved = 0.0
+            for r in range(jj):
+                temp = out[r] * inv[sp, jj, r]
+                out[r] = saved + wr[r + 1] * temp
+                saved = wl[jj - r] * temp
+            out[jj] = saved
+            if jj == K - 1:
+                for r in range(K):
+                    n4[j, r] = out[r]
     return spans, n5, n4
 
 
@@ -206,6 +228,16 @@ def solve_lsq(t, m, bases, y, w, prior, fixed, c, lam, ridge):
         sp = spans[j]
         nb = n5[j]
         ww = w[j] * w[j]
+        f0 = idx[sp - K]
+        if f0 >= 0 and idx[sp] == f0 + K:
+            # the span's six coefficients all free (consecutive): the same sums, no lookups
+            for r in range(6):
+                f = ww * nb[r]
+                for a in range(d):
+                    rhs[f0 + r, a] += f * y[j, a]
+                for s_ in range(r, 6):
+                    ab[f0 + r, s_ - r] += f * nb[s_]
+            continue
         # residual target after moving fixed coefficients to the right-hand side
         for a in range(d):
             tgt[a] = y[j, a]
@@ -365,7 +397,15 @@ def _d1_coef(t, c, i, a):
 def _evaluate_bases(t, c, bases, val, der):
     """``evaluate`` at the points of ``bases`` (``point_bases``): the same sums."""
     spans, n5, n4 = bases
-    d = c.shape[1]
+    m, d = c.shape
+    # the derivative spline's coefficients once (the same expression per point before)
+    dc = np.empty((max(m - 1, 0), d))
+    pos = np.empty(max(m - 1, 0), dtype=np.bool_)
+    for ci in range(m - 1):
+        den = t[ci + 6] - t[ci + 1]
+        pos[ci] = den > 0.0
+        for a in range(d):
+            dc[ci, a] = K * (c[ci + 1, a] - c[ci, a]) / den if den > 0.0 else 0.0
     for j in range(spans.shape[0]):
         sp = spans[j]
         for a in range(d):
@@ -377,9 +417,8 @@ def _evaluate_bases(t, c, bases, val, der):
             acc = 0.0
             for r in range(5):
                 ci = sp - 1 - (K - 1) + r
-                den = t[ci + 6] - t[ci + 1]
-                if den > 0.0:
-                    acc += n4[j, r] * K * (c[ci + 1, a] - c[ci, a]) / den
+                if pos[ci]:
+                    acc += n4[j, r] * dc[ci, a]
             der[j, a] = acc
 
 
@@ -477,6 +516,24 @@ def segment_sources_kernel(x, u, line, feed):
         seg_line[k] = line[jj]
         seg_feed[k] = f
     return seg_line, seg_feed
+
+
+@njit(cache=True, error_model="numpy")
+def _merge_sorted(a, b):
+    """``np.unique(np.concatenate((a, b)))`` of two sorted arrays, in one pass."""
+    out = np.empty(a.shape[0] + b.shape[0])
+    i = j = k = 0
+    while i < a.shape[0] or j < b.shape[0]:
+        if j >= b.shape[0] or (i < a.shape[0] and a[i] <= b[j]):
+            v = a[i]
+            i += 1
+        else:
+            v = b[j]
+            j += 1
+        if k == 0 or v != out[k - 1]:
+            out[k] = v
+            k += 1
+    return out[:k].copy()
 
 
 @njit(cache=True, error_model="numpy")
@@ -626,7 +683,7 @@ def refine(nodes, interior, total, ends, data, prm):
             nn += 1
         if nn == 0:
             break
-        interior = np.unique(np.concatenate((interior, new[:nn])))
+        interior = _merge_sorted(interior, new[:nn])
     # out of rounds or of refinable spans: fine if only soft checks still fail
     ok = ok or hard == 0
     return t, m, c, ok

@@ -223,7 +223,9 @@ def march_feet(coef, h, pts, tol, local_frac, window_u, far_window_u, n_coarse, 
     if K == 0 or S == 0:
         out[:] = np.inf
         return out, foot_k, foot_t
-    lo, hi = piece_boxes(coef, h)
+    # the pieces' boxes only serve tiers 2 and 3: made when a point first needs them
+    lo = np.empty((0, 0))
+    hi = np.empty((0, 0))
     u0 = np.empty(S + 1)  # piece starts along the path parameter
     u0[0] = 0.0
     for kk in range(S):
@@ -231,10 +233,16 @@ def march_feet(coef, h, pts, tol, local_frac, window_u, far_window_u, n_coarse, 
     k = 0
     t = 0.0
     r2, t = _piece_min(coef, np.int64(0), h[0], pts[0], n_coarse, iters)
+    # the foot point's last advance on its piece: the next one starts that much further
+    # (the samples are about evenly spaced), so Newton starts close to it
+    advance = 0.0
     for i in range(K):
         p = pts[i]
+        k_last = k
+        t_last = t
         if i > 0:
-            r2, t = _newton(coef, k, h[k], p, t, iters, np.inf, t)
+            t0 = min(max(t + advance, 0.0), h[k])
+            r2, t = _newton(coef, k, h[k], p, t0, iters, np.inf, t0)
         # slide forward while the minimum sits on the piece's end, or the distance still
         # falls there (Newton may stop short of the end in a strongly curved piece)
         moved = False
@@ -261,6 +269,8 @@ def march_feet(coef, h, pts, tol, local_frac, window_u, far_window_u, n_coarse, 
         if best > lim * lim:
             # tiers 2 and 3: the pieces near the marched foot point along the path (not
             # another pass over the same place: a helix's next turn, a contour's overlap)
+            if lo.shape[0] == 0:
+                lo, hi = piece_boxes(coef, h)
             u_foot = u0[k] + t
             k_best = k
             t_best = t
@@ -290,6 +300,7 @@ def march_feet(coef, h, pts, tol, local_frac, window_u, far_window_u, n_coarse, 
         out[i] = math.sqrt(best)
         foot_k[i] = k
         foot_t[i] = t
+        advance = t - t_last if k == k_last else 0.0
     return out, foot_k, foot_t
 
 

@@ -46,6 +46,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from .nodes import hermite
 
@@ -188,24 +189,45 @@ def choose_shapes(theta: np.ndarray, tol: np.ndarray, d_max: np.ndarray):
     peak |dκ/ds| within tolerance ``tol`` and d <= ``d_max`` (see module docstring)."""
     deg = np.degrees(theta) / _ANGLE_STEP_DEG
     lo = np.floor(deg).astype(np.int64)
-    K = theta.size
-    r = np.empty(K)
+    grid = np.unique(lo)
+    # per grid angle used, the tables of the interval [k, k + 1] it starts
+    dev1 = np.empty((grid.size, BLEND_R.size))
+    cj = np.empty((grid.size, BLEND_R.size))
+    usable = np.empty((grid.size, BLEND_R.size), dtype=bool)
+    for g, k in enumerate(grid.tolist()):
+        dev_a, cj_a, ok_a = _table(k)
+        dev_b, cj_b, ok_b = _table(k + 1)
+        dev1[g] = np.maximum(dev_a, dev_b) * _DEV_MARGIN
+        cj[g] = np.maximum(cj_a, cj_b)
+        usable[g] = ok_a & ok_b
+    which = np.searchsorted(grid, lo)
+    best, d = _choose_kernel(which, np.asarray(tol, dtype=float), np.asarray(d_max, dtype=float), dev1, cj, usable)
+    return BLEND_R[best], d, dev1[which, best] * d
+
+
+@njit(cache=True, nogil=True)
+def _choose_kernel(which, tol, d_max, dev1, cj, usable):
+    """``choose_shapes``' search per corner: the first r of the least cj / d² over the
+    usable shapes, d = min(tol / dev₁, d_max) (numpy's operations, one corner at a time)."""
+    K = which.shape[0]
+    R = dev1.shape[1]
+    best = np.zeros(K, dtype=np.int64)
     d = np.empty(K)
-    dev = np.empty(K)
-    for k in np.unique(lo):
-        sel = lo == k
-        dev_a, cj_a, ok_a = _table(int(k))
-        dev_b, cj_b, ok_b = _table(int(k) + 1)
-        dev1 = np.maximum(dev_a, dev_b) * _DEV_MARGIN  # (R,)
-        cj = np.maximum(cj_a, cj_b)
-        usable = ok_a & ok_b
-        dd = np.minimum(tol[sel, None] / dev1[None, :], d_max[sel, None])  # (k, R)
-        score = np.where(usable[None, :], cj[None, :] / dd**2, np.inf)
-        best = np.argmin(score, axis=1)
-        r[sel] = BLEND_R[best]
-        d[sel] = dd[np.arange(best.size), best]
-        dev[sel] = dev1[best] * d[sel]
-    return r, d, dev
+    for i in range(K):
+        g = which[i]
+        b = 0
+        b_score = np.inf
+        b_d = min(tol[i] / dev1[g, 0], d_max[i])
+        for r in range(R):
+            dd = min(tol[i] / dev1[g, r], d_max[i])
+            score = cj[g, r] / (dd * dd) if usable[g, r] else np.inf
+            if score < b_score:
+                b_score = score
+                b = r
+                b_d = dd
+        best[i] = b
+        d[i] = b_d
+    return best, d
 
 
 def plan_blends(

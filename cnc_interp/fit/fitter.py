@@ -25,6 +25,10 @@ that into a ``FitError`` for the commands.
 
 from __future__ import annotations
 
+import os
+import threading
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -98,11 +102,38 @@ class _Raw:
 #: paths built per compiled call while streaming a run (any value gives the same paths)
 FIT_STREAM_BATCH = 128
 
+#: most worker threads ``fit_program`` gives the batch fitter by default: one thread
+#: collects the batches in order (Python), so more workers than that gain little
+FIT_MAX_THREADS = 4
 
-def fit_program(program: Program, settings: FitSettings | None = None) -> FitResult:
-    """Fit every run of ``program``; dwells and stops pass through (see ``FitResult``)."""
+
+_thread_cap = FIT_MAX_THREADS
+
+
+def default_fit_threads() -> int:
+    """``fit_program``'s default worker threads: the CPUs this process may use, capped
+    (by ``FIT_MAX_THREADS`` and ``cap_default_threads``)."""
+    try:
+        cpus = len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not on Linux
+        cpus = os.cpu_count() or 1
+    return max(1, min(cpus, _thread_cap))
+
+
+def cap_default_threads(n: int) -> None:
+    """Cap ``default_fit_threads`` for this process (a batch runs a program per core in
+    its own process already: its children fit on their own thread)."""
+    global _thread_cap
+    _thread_cap = max(1, int(n))
+
+
+def fit_program(program: Program, settings: FitSettings | None = None, threads: int | None = None) -> FitResult:
+    """Fit every run of ``program``; dwells and stops pass through (see ``FitResult``).
+    ``threads``: worker threads of the batch fitter's kernels (default: the CPUs this
+    process may use, at most ``FIT_MAX_THREADS``); the paths do not depend on it."""
     stats: dict = {}
-    items = tuple(iter_fit(program.items, settings, stats))
+    n_threads = default_fit_threads() if threads is None else threads
+    items = tuple(iter_fit(program.items, settings, stats, threads=n_threads))
     return FitResult(program=program, items=items, stats=stats)
 
 
@@ -112,6 +143,7 @@ def iter_fit(
     stats: dict | None = None,
     batch: int = FIT_STREAM_BATCH,
     source: str | None = None,
+    threads: int = 1,
 ):
     """Fit a program's items lazily, in order: each run's paths as soon as they are
     fitted (``batch`` at a time), dwells and stops passed through. ``stats`` (a dict) is
@@ -119,7 +151,8 @@ def iter_fit(
     are the same as ``fit_program``'s, whatever ``batch`` is. A run is fitted whole (its
     repair rounds refit the whole run), so a run's paths come out together. With
     ``source`` (the part program's name), a run whose fit stays outside its tolerance
-    raises ``FitError`` before any of its paths is handed on."""
+    raises ``FitError`` before any of its paths is handed on. ``threads`` > 1 runs the
+    batch fitter's kernels on that many worker threads (the same paths)."""
     from .quantum import QuantumDetector
 
     settings = settings or FitSettings()
@@ -149,22 +182,38 @@ def iter_fit(
             info["item"] = idx
             # a run's paths are built and handed on ``batch`` at a time as its sub-runs are
             # fitted (stellabee1 is one run of 258k nodes: holding all its fits costs 250 MB)
+            # with worker threads, a batch's arc-length tables are computed on one of them
+            # while the next batch is fitted, and its paths handed on after that
             pending: list[_Raw] = []
+            ahead: deque = deque()  # (parts, future of their tables) of the batches not handed on
             n_raws = 0
-            for raw in _iter_run_raws(it, run_settings, info):
+
+            def build(raws: list[_Raw]):
+                if threads <= 1:
+                    return _build_paths(raws, prev_end)
+                parts = _PathParts(raws)
+                ahead.append(_fit_pool(threads).submit(parts.compute_tables))
+                if len(ahead) < 2:
+                    return [], prev_end
+                return _finish_paths(ahead.popleft().result(), prev_end)
+
+            for raw in _iter_run_raws(it, run_settings, info, threads):
                 pending.append(raw)
                 n_raws += 1
                 if len(pending) >= batch:
                     if source is not None and not info["within_tolerance"]:
                         raise fit_outside_error(info, source)
-                    paths, prev_end = _build_paths(pending, prev_end)
+                    paths, prev_end = build(pending)
                     pending = []
                     yield from paths
             runs_info.append(info)
             if source is not None and not info["within_tolerance"]:
                 raise fit_outside_error(info, source)
             if pending:
-                paths, prev_end = _build_paths(pending, prev_end)
+                paths, prev_end = build(pending)
+                yield from paths
+            while ahead:
+                paths, prev_end = _finish_paths(ahead.popleft().result(), prev_end)
                 yield from paths
             if it.kind == "rapid":
                 totals["rapid_moves"] += n_raws
@@ -215,48 +264,98 @@ def _build_paths(raws: list[_Raw], start: np.ndarray | None):
     The same values as ``raw.build(prev_end)`` one by one, with the chaining and every
     arc-length table computed by two compiled calls for the whole run (small paths
     are otherwise dominated by per-path overhead)."""
-    from ._arclen import arc_length_tables, chain_ends
-    from .path import _GL_W, _GL_X
+    return _finish_paths(_PathParts.of(raws), start)
 
+
+class _PathParts:
+    """``_build_paths``' first half, which does not depend on the start: the raws'
+    arrays concatenated and their arc-length tables (a compiled call without the GIL,
+    so a worker thread may compute it while the next raws are fitted)."""
+
+    def __init__(self, raws: list[_Raw]):
+        self.raws = raws
+        self.valid = False
+        self.tables = None
+        if not raws:
+            return
+        n_p = len(raws)
+        self.axes = axes = raws[0].axes
+        n_ax = len(axes)
+        nseg = np.array([r.coef.shape[0] for r in raws], dtype=np.int64)
+        seg_off = np.zeros(n_p + 1, dtype=np.int64)
+        np.cumsum(nseg, out=seg_off[1:])
+        valid = all(
+            r.axes == axes
+            and r.coef.ndim == 3
+            and r.coef.shape[1:] == (6, n_ax)
+            and r.breaks.shape == (r.coef.shape[0] + 1,)
+            for r in raws
+        ) and bool(nseg.min() >= 1)
+        if valid:
+            breaks = np.concatenate([r.breaks for r in raws]).astype(float, copy=False)
+            steps = np.diff(breaks) > 0
+            steps[seg_off[1:-1] + np.arange(n_p - 1)] = True  # junctions between paths
+            valid = bool(steps.all())
+        if not valid:  # Path's own checks raise the error
+            return
+        self.valid = True
+        coef = np.concatenate([r.coef for r in raws]).astype(float, copy=False)
+        if len(raws) == 1 and coef is raws[0].coef:
+            coef = coef.copy()
+        self.seg_off = seg_off
+        self.breaks = breaks
+        self.coef = coef
+        self.line = np.concatenate([np.asarray(r.line, dtype=np.int64).reshape(-1) for r in raws])
+        self.feed = np.concatenate([np.asarray(r.feed, dtype=float).reshape(-1) for r in raws])
+        self.weights = np.array([r.weights for r in raws], dtype=float).reshape(n_p, n_ax)
+
+    @classmethod
+    def of(cls, raws: list[_Raw]) -> "_PathParts":
+        parts = cls(raws)
+        parts.compute_tables()
+        return parts
+
+    def compute_tables(self) -> "_PathParts":
+        """The arc-length tables (from the derivatives only: the chaining, which moves
+        each path's first point, does not change them)."""
+        from ._arclen import arc_length_tables
+        from .path import _GL_W, _GL_X
+
+        if self.valid:
+            self.tables = arc_length_tables(
+                self.coef, self.breaks, self.seg_off, self.weights, _GL_X, _GL_W, ARC_LENGTH_REL_TOL, ARC_LENGTH_MAX_SUB
+            )
+        return self
+
+
+def _finish_paths(parts: _PathParts, start: np.ndarray | None):
+    """``_build_paths``' second half: chain the paths of ``parts`` from ``start``."""
+    from ._arclen import chain_ends
+
+    raws = parts.raws
     if not raws:
         return [], start
-    n_p = len(raws)
-    axes = raws[0].axes
-    n_ax = len(axes)
-    nseg = np.array([r.coef.shape[0] for r in raws], dtype=np.int64)
-    seg_off = np.zeros(n_p + 1, dtype=np.int64)
-    np.cumsum(nseg, out=seg_off[1:])
-    valid = all(
-        r.axes == axes
-        and r.coef.ndim == 3
-        and r.coef.shape[1:] == (6, n_ax)
-        and r.breaks.shape == (r.coef.shape[0] + 1,)
-        for r in raws
-    ) and bool(nseg.min() >= 1)
-    if valid:
-        breaks = np.concatenate([r.breaks for r in raws]).astype(float, copy=False)
-        steps = np.diff(breaks) > 0
-        steps[seg_off[1:-1] + np.arange(n_p - 1)] = True  # junctions between paths
-        valid = bool(steps.all())
-    if not valid:  # Path's own checks raise the error
+    if not parts.valid:
         out = []
         for raw in raws:
             out.append(raw.build(start))
             start = out[-1].end
         return out, start
-    coef = np.concatenate([r.coef for r in raws]).astype(float, copy=False)
-    if len(raws) == 1 and coef is raws[0].coef:
-        coef = coef.copy()
-    line = np.concatenate([np.asarray(r.line, dtype=np.int64).reshape(-1) for r in raws])
-    feed = np.concatenate([np.asarray(r.feed, dtype=float).reshape(-1) for r in raws])
-    weights = np.array([r.weights for r in raws], dtype=float).reshape(n_p, n_ax)
+    n_ax = len(parts.axes)
+    coef, breaks, seg_off, line, feed, weights = (
+        parts.coef,
+        parts.breaks,
+        parts.seg_off,
+        parts.line,
+        parts.feed,
+        parts.weights,
+    )
     has_start = start is not None
     ends, delta = chain_ends(
         coef, breaks, seg_off, np.asarray(start, dtype=float) if has_start else np.zeros(n_ax), has_start
     )
-    sub_u, sub_s, sub_seg, s_breaks, sub_off = arc_length_tables(
-        coef, breaks, seg_off, weights, _GL_X, _GL_W, ARC_LENGTH_REL_TOL, ARC_LENGTH_MAX_SUB
-    )
+    assert parts.tables is not None
+    sub_u, sub_s, sub_seg, s_breaks, sub_off = parts.tables
     out = []
     so = seg_off.tolist()
     uo = sub_off.tolist()
@@ -271,7 +370,7 @@ def _build_paths(raws: list[_Raw], start: np.ndarray | None):
             planar = replace(planar, origin=origin)
         out.append(
             Path._from_parts(
-                axes,
+                parts.axes,
                 breaks[a + p : b + p + 1],
                 coef[a:b],
                 line[a:b],
@@ -318,9 +417,11 @@ def _fit_run_raw(run: Run, settings: FitSettings):
     return raws, info
 
 
-def _iter_run_raws(run: Run, settings: FitSettings, info: dict):
+def _iter_run_raws(run: Run, settings: FitSettings, info: dict, threads: int = 1):
     """The raw paths of one run in order, each sub-run's as soon as it is fitted; ``info``
-    (``_run_info``) holds the statistics of what was yielded so far."""
+    (``_run_info``) holds the statistics of what was yielded so far. With ``threads`` > 1
+    the batch fitter's kernels run on that many worker threads, a few batches ahead of
+    this one, which builds the results in order (the same paths)."""
     lin = np.array([a in "XYZUVW" for a in run.axes], dtype=bool)
     if run.kind == "rapid":
         raws = _rapid_raws(run, lin)
@@ -378,34 +479,89 @@ def _iter_run_raws(run: Run, settings: FitSettings, info: dict):
         for cp in sub.curves:  # fitted: its exact evaluation is not needed again
             evals.pop(id(cp.curve), None)
 
-    def flush():
+    # what is fitted but not yet handed on, in path order: a batch with its kernels'
+    # result (a future on the worker threads), or a sub-run for the Python fitter
+    queue: deque = deque()
+    pool = _fit_pool(threads) if batcher is not None and threads > 1 else None
+    n_batches = 0  # batches in the queue
+
+    def hand_on():
+        nonlocal n_batches
+        batch, got = queue.popleft()
+        if batch is None:  # got: a sub-run the batch fitter does not cover
+            yield from emit(got, *_fit_sub_repaired(unblended, prb, got, settings, evals, info, blend))
+            return
         assert batcher is not None
-        for (sub, _), m in zip(pending, batcher.fit(pending)):
+        n_batches -= 1
+        got = got.result() if pool is not None else got
+        for (sub, _), m in zip(batch, batcher.collect(batch, got)):
             if m is not None:
                 yield from emit(sub, [m], prb)
             else:
                 yield from emit(sub, *_fit_sub_repaired(unblended, prb, sub, settings, evals, info, blend))
-        pending.clear()
 
-    c_pos = 0  # the sub-runs take the run's curves in order
-    for sub in split_run(prb, settings, evals, arcs):
-        if batcher is not None and batcher.covers(sub, c_pos):
-            pending.append((sub, c_pos))
+    def launch():
+        nonlocal n_batches
+        assert batcher is not None
+        batch = pending.copy()
+        pending.clear()
+        queue.append((batch, pool.submit(batcher.launch, batch) if pool is not None else batcher.launch(batch)))
+        n_batches += 1
+        # a few batches ahead per worker keep the workers busy while this thread hands on
+        while n_batches > FIT_BATCHES_AHEAD * threads:
+            yield from hand_on()
+
+    try:
+        c_pos = 0  # the sub-runs take the run's curves in order
+        for sub in split_run(prb, settings, evals, arcs):
+            if batcher is not None and batcher.covers(sub, c_pos):
+                pending.append((sub, c_pos))
+                c_pos += len(sub.curves)
+                if len(pending) >= FIT_KERNEL_BATCH:
+                    yield from launch()
+                continue
             c_pos += len(sub.curves)
-            if len(pending) >= FIT_KERNEL_BATCH:
-                yield from flush()
-            continue
-        c_pos += len(sub.curves)
+            if pending:
+                yield from launch()
+            if n_batches == 0:
+                yield from emit(sub, *_fit_sub_repaired(unblended, prb, sub, settings, evals, info, blend))
+            else:
+                queue.append((None, sub))
         if pending:
-            yield from flush()
-        yield from emit(sub, *_fit_sub_repaired(unblended, prb, sub, settings, evals, info, blend))
-    if pending:
-        yield from flush()
+            yield from launch()
+        while queue:
+            yield from hand_on()
+    finally:
+        for batch, got in queue:  # abandoned (an error downstream): let the workers go
+            if batch is not None and pool is not None:
+                got.cancel()
 
 
 #: sub-runs fitted per call of the compiled batch fitter (any value gives the same paths;
 #: a batch's paths are handed on together)
 FIT_KERNEL_BATCH = 32
+
+#: batches queued per worker thread of the batch fitter: enough that a worker never waits
+#: for the collecting thread, few enough that the fits held stay small (a batch ~100 kB)
+FIT_BATCHES_AHEAD = 2
+
+_pools: dict[tuple[int, int], ThreadPoolExecutor] = {}
+_pools_lock = threading.Lock()
+
+
+def _fit_pool(threads: int) -> ThreadPoolExecutor:
+    """The process's worker threads for the batch fitter's kernels (made once per size and
+    process: a forked child, such as a batch job's, has none of its parent's threads)."""
+    key = (os.getpid(), threads)
+    with _pools_lock:
+        pool = _pools.get(key)
+        if pool is None:
+            pool = _pools[key] = ThreadPoolExecutor(threads, thread_name_prefix="cnc-fit")
+        return pool
+
+
+if hasattr(os, "register_at_fork"):  # the lock may be held by a thread that is not forked
+    os.register_at_fork(after_in_child=lambda: globals().update(_pools={}, _pools_lock=threading.Lock()))
 
 #: nodes of a run from which the batch fitter's kernels are compiled when numba has not
 #: cached them yet: they cost ~40 CPU-s to compile (first run after an install or update)
@@ -517,6 +673,11 @@ class _SubRunBatcher:
 
     def fit(self, batch: list[tuple[SubRun, int]]) -> list:
         """The ``_Measured`` of each (sub-run, index of its first curve), or None."""
+        return self.collect(batch, self.launch(batch))
+
+    def launch(self, batch: list[tuple[SubRun, int]]):
+        """The compiled part of ``fit``: the kernels' ``BatchFits`` (they release the GIL,
+        so batches may run on worker threads; they only read the run's arrays)."""
         from . import _subrun as sr
 
         table = sr.SubRunTable(
@@ -530,7 +691,10 @@ class _SubRunBatcher:
         sections = sr.plan_sections(self.run, self.blends, self.arcs, table)
         polys = sr.fit_poly_sections(self.run, sections, self.prm)
         arcfits = sr.fit_arc_sections(self.run, self.arcs, sections, self.prm)
-        got = sr.join_and_measure(self.run, self.blends, self.arcs, table, sections, polys, arcfits, self.prm)
+        return sr.join_and_measure(self.run, self.blends, self.arcs, table, sections, polys, arcfits, self.prm)
+
+    def collect(self, batch: list[tuple[SubRun, int]], got) -> list:
+        """``fit``'s results from ``launch``'s ``BatchFits``."""
         pr = self.pr
         out: list = []
         so = got.seg_off.tolist()
