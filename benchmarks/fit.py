@@ -70,8 +70,8 @@ def main(argv=None) -> int:
         n = st["nodes_in"]
         print(
             f"{os.path.basename(f)[:40]:40s} {n:8d} {st['segments_out']:7d} {st['segments_per_node']:8.3f} "
-            f"{best:8.3f} {n / best:10.0f} {median:8.3f} {best_cpu:8.3f} {n / best_cpu:11.0f} {st['max_node_dev_mm']:10.2e} "
-            f"{st['max_path_dev_ratio']:8.4f}"
+            f"{best:8.3f} {n / best:10.0f} {median:8.3f} {best_cpu:8.3f} {n / best_cpu:11.0f} "
+            f"{st['max_node_dev_mm']:10.2e} {st['max_path_dev_ratio']:8.4f}"
         )
     return 0
 

@@ -465,7 +465,6 @@ def check(t, m, c, pts, bases, limits, bad_span, n_hard):
             else:
                 e_rot = max(e_rot, abs(e))
         e_all = np.sqrt(e_all)
-        e_lin = np.sqrt(e_lin)
         if j < n_hard:
             # nodes: Euclidean in the scaled metric too (linear and scaled rotary errors
             # each within the tolerance could sum to √2 of it), and each rotary axis
@@ -473,9 +472,11 @@ def check(t, m, c, pts, bases, limits, bad_span, n_hard):
         else:
             # chord points: one Euclidean allowance in the scaled metric (it holds the sagitta)
             dev_ok = e_all <= tol_lin[j]
-        speed_ok = np.sqrt(sp_all) >= min_ratio * exp_speed[j] and np.sqrt(sp_lin) >= min_ratio * exp_lin_speed[j]
+        sp_all = np.sqrt(sp_all)
+        sp_lin = np.sqrt(sp_lin)
+        speed_ok = sp_all >= min_ratio * exp_speed[j] and sp_lin >= min_ratio * exp_lin_speed[j]
         # a near-stop is never accepted; a mere slow-down (a rounded corner) may remain
-        stop = np.sqrt(sp_all) < hard_ratio * exp_speed[j] or np.sqrt(sp_lin) < hard_ratio * exp_lin_speed[j]
+        stop = sp_all < hard_ratio * exp_speed[j] or sp_lin < hard_ratio * exp_lin_speed[j]
         if not (dev_ok and speed_ok):
             bad_span[spans[j]] = True
             # every check point lies on the programmed path: a deviation is a failure
@@ -484,6 +485,7 @@ def check(t, m, c, pts, bases, limits, bad_span, n_hard):
             else:
                 soft += 1
         if j < n_hard:
+            e_lin = np.sqrt(e_lin)
             if e_lin > worst_lin:
                 worst_lin = e_lin
             if e_rot > worst_rot:
@@ -516,6 +518,30 @@ def segment_sources_kernel(x, u, line, feed):
         seg_line[k] = line[jj]
         seg_feed[k] = f
     return seg_line, seg_feed
+
+
+@njit(cache=True, error_model="numpy")
+def _interp_rows(x, xp, fp, out):
+    """``out[:, a] = np.interp(x, xp, fp[:, a])`` for every column a, x and xp ascending:
+    numpy's formula (slope from the two nodes around x, then slope * (x - xp[j]) + fp[j]),
+    found by one walk along xp for all columns instead of a search per point and column."""
+    n = xp.shape[0]
+    d = fp.shape[1]
+    j = 0
+    for i in range(x.shape[0]):
+        xv = x[i]
+        while j + 1 < n and xp[j + 1] <= xv:
+            j += 1
+        for a in range(d):
+            if xv < xp[0]:
+                out[i, a] = fp[0, a]
+            elif j == n - 1:  # at or beyond the last node
+                out[i, a] = fp[n - 1, a]
+            elif xp[j] == xv:
+                out[i, a] = fp[j, a]
+            else:
+                slope = (fp[j + 1, a] - fp[j, a]) / (xp[j + 1] - xp[j])
+                out[i, a] = slope * (xv - xp[j]) + fp[j, a]
 
 
 @njit(cache=True, error_model="numpy")
@@ -601,8 +627,7 @@ def refine(nodes, interior, total, ends, data, prm):
             for r in range(5):
                 acc += 0.2 * t[i + 1 + r]
             g[i] = acc
-        for a in range(d):
-            prior[:, a] = np.interp(g, u, y[:, a])
+        _interp_rows(g, u, y, prior)
         # points inside every knot span, on the programmed moves
         nsp = ni + 1
         K = nsp * ns
