@@ -326,3 +326,29 @@ def test_random_sweep_slow(seed):
         for route in ("profile", "vpop"):
             plan = plan_path_optimal(p, None, machine, dt, PlanSettings(optimal=OptimalOptions(route=route)))
             check(plan, machine, p.start, p.end, dt)
+
+
+def test_the_shorter_of_two_knot_spacings_is_kept(monkeypatch):
+    # a path planned whole is planned with the profile's knots FEED_KNOT_TIME_S and half
+    # that apart, and the shorter plan kept: never longer than either alone, every limit held
+    import cnc_interp.plan.feedprofile as fp
+    import cnc_interp.plan.optimal as optimal
+
+    def fun(u):
+        u = np.asarray(u, dtype=float)
+        w = 3.0 * np.pi
+        p = np.stack([30 * u, 6 * np.sin(w * u), 0 * u], axis=1)
+        p1 = np.stack([30 + 0 * u, 6 * w * np.cos(w * u), 0 * u], axis=1)
+        p2 = np.stack([0 * u, -6 * w * w * np.sin(w * u), 0 * u], axis=1)
+        return p, p1, p2
+
+    p = hermite_path(fun, 24, 60.0)
+    dt = 0.001
+    hedged = plan_path_optimal(p, None, UCP, dt)
+    check(hedged, UCP, p.start, p.end, dt)
+    monkeypatch.setattr(optimal, "OPT_ALT_KNOT_SHARE", 1.0)  # the second plan is the first
+    plain = plan_path_optimal(p, None, UCP, dt)
+    monkeypatch.setattr(fp, "FEED_KNOT_TIME_S", fp.FEED_KNOT_TIME_S * 0.5)
+    halved = plan_path_optimal(p, None, UCP, dt)
+    assert periods(plain) != periods(halved)  # the case tells the two spacings apart
+    assert periods(hedged) == min(periods(plain), periods(halved)), (periods(plain), periods(halved))

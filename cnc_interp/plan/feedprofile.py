@@ -125,7 +125,17 @@ def _discrete_start_curve(x, jp, dt):
 class FeedProfileBuilder:
     """Builds the profile of one path window by window (see module docstring)."""
 
-    def __init__(self, table, path, machine, dt_s: float, limit_share: float = FEED_LIMIT_SHARE, whole: bool = False):
+    def __init__(
+        self,
+        table,
+        path,
+        machine,
+        dt_s: float,
+        limit_share: float = FEED_LIMIT_SHARE,
+        whole: bool = False,
+        knot_time_s: float = FEED_KNOT_TIME_S,
+    ):
+        self.knot_time_s = float(knot_time_s)
         self.L = float(table.length)
         self.dt = float(dt_s)
         self.n = table.C.shape[2]
@@ -164,8 +174,8 @@ class FeedProfileBuilder:
         t_brake = float(np.max(np.minimum(self.vmax, np.max(self.feed_values)) / self.amax + self.amax / self.jmax))
         # window: a committed part of FEED_COMMIT_S of motion, then two braking times for
         # the terminal rest to stay out of it
-        self.commit = max(8, int(np.ceil(FEED_COMMIT_S / FEED_KNOT_TIME_S)))
-        self.brake = int(np.ceil(2.0 * t_brake / FEED_KNOT_TIME_S)) + 8
+        self.commit = max(8, int(np.ceil(FEED_COMMIT_S / self.knot_time_s)))
+        self.brake = int(np.ceil(2.0 * t_brake / self.knot_time_s)) + 8
         self.window = self.commit + self.brake
         # incremental knot placement state
         self._br = [0.0]
@@ -265,7 +275,7 @@ class FeedProfileBuilder:
             w, _ = self._raw_estimate(x)
         v = np.sqrt(np.maximum(w, 0.0))
         hmin = np.where(x < 0.5 * self.L, self.hmin0, self.hmin1)
-        return np.maximum(np.minimum(FEED_KNOT_TIME_S * v, FEED_KNOT_GEO * geo), hmin)
+        return np.maximum(np.minimum(self.knot_time_s * v, FEED_KNOT_GEO * geo), hmin)
 
     # -- knots, block by block ----------------------------------------------------
     def _extend_knots(self):
