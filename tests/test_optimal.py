@@ -61,18 +61,21 @@ def test_line_within_a_few_periods_of_the_discrete_minimum(length, feed, machine
 
 
 # -- curves: exact limits, and the cycle time ------------------------------------------
+def _trident_like(u):
+    """A curve whose curvature changes sign (x 30 mm, y 6 sin(3πu)): value, first and
+    second derivative at u."""
+    u = np.asarray(u, dtype=float)
+    w = 3.0 * np.pi
+    p = np.stack([30 * u, 6 * np.sin(w * u), 0 * u], axis=1)
+    p1 = np.stack([30 + 0 * u, 6 * w * np.cos(w * u), 0 * u], axis=1)
+    p2 = np.stack([0 * u, -6 * w * w * np.sin(w * u), 0 * u], axis=1)
+    return p, p1, p2
+
+
 def test_trident_like_curve_at_6ms_beats_vpop_by_far():
     # paper 001's machine at 6 ms on a curve whose curvature changes sign: jerk binds and
     # VPOp's greedy steps lose (issue 13: ~20 % on the trident)
-    def fun(u):
-        u = np.asarray(u, dtype=float)
-        w = 3.0 * np.pi
-        p = np.stack([30 * u, 6 * np.sin(w * u), 0 * u], axis=1)
-        p1 = np.stack([30 + 0 * u, 6 * w * np.cos(w * u), 0 * u], axis=1)
-        p2 = np.stack([0 * u, -6 * w * w * np.sin(w * u), 0 * u], axis=1)
-        return p, p1, p2
-
-    p = hermite_path(fun, 24, 60.0)
+    p = hermite_path(_trident_like, 24, 60.0)
     opt = plan_path_optimal(p, None, UCP, UCP.dt_s)
     check(opt, UCP, p.start, p.end, UCP.dt_s)
     vp = plan_path_vpop(p, None, UCP, UCP.dt_s)
@@ -334,15 +337,7 @@ def test_the_shorter_of_two_knot_spacings_is_kept(monkeypatch):
     import cnc_interp.plan.feedprofile as fp
     import cnc_interp.plan.optimal as optimal
 
-    def fun(u):
-        u = np.asarray(u, dtype=float)
-        w = 3.0 * np.pi
-        p = np.stack([30 * u, 6 * np.sin(w * u), 0 * u], axis=1)
-        p1 = np.stack([30 + 0 * u, 6 * w * np.cos(w * u), 0 * u], axis=1)
-        p2 = np.stack([0 * u, -6 * w * w * np.sin(w * u), 0 * u], axis=1)
-        return p, p1, p2
-
-    p = hermite_path(fun, 24, 60.0)
+    p = hermite_path(_trident_like, 24, 60.0)
     dt = 0.001
     hedged = plan_path_optimal(p, None, UCP, dt)
     check(hedged, UCP, p.start, p.end, dt)

@@ -126,29 +126,10 @@ def basis(t, i, x, p, out, left, right):
 
 
 @njit(cache=True, error_model="numpy")
-def basis54(t, i, x, n5, n4, left, right):
-    """``basis(t, i, x, 5)`` into n5 (6,), and into n4 (5,) the degree-4 values it passes
-    through, which are ``basis(t[1:], i - 1, x, 4)`` (the same knots, the same operations):
-    the values and first derivatives of a point from one triangle."""
-    n5[0] = 1.0
-    for j in range(1, K + 1):
-        left[j] = x - t[i + 1 - j]
-        right[j] = t[i + j] - x
-        saved = 0.0
-        for r in range(j):
-            den = right[r + 1] + left[j - r]
-            temp = n5[r] / den if den != 0.0 else 0.0
-            n5[r] = saved + right[r + 1] * temp
-            saved = left[j - r] * temp
-        n5[j] = saved
-        if j == K - 1:
-            for r in range(K):
-                n4[r] = n5[r]
-
-
-@njit(cache=True, error_model="numpy")
 def point_bases(t, m, x):
-    """Span (P,), degree-5 basis (P, 6) and degree-4 basis (P, 5) of every point x (P,)."""
+    """Span (P,), degree-5 basis (P, 6) and degree-4 basis (P, 5) of every point x (P,):
+    ``basis`` (NURBS book A2.2) of degree 5, the degree-4 values being those its triangle
+    passes through (``basis(t[1:], span - 1, x, 4)``: the first derivative's basis)."""
     P = x.shape[0]
     spans = np.empty(P, dtype=np.int64)
     n5 = np.empty((P, K + 1))
