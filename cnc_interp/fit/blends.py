@@ -215,7 +215,7 @@ def _choose_kernel(which, tol, d_max, dev1, cj, usable):
     d = np.empty(K)
     for i in range(K):
         g = which[i]
-        b = 0
+        b = 0  # numpy's argmin: the first shape when none is usable
         b_score = np.inf
         b_d = min(tol[i] / dev1[g, 0], d_max[i])
         for r in range(R):

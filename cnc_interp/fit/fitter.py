@@ -185,7 +185,7 @@ def iter_fit(
             # with worker threads, a batch's arc-length tables are computed on one of them
             # while the next batch is fitted, and its paths handed on after that
             pending: list[_Raw] = []
-            ahead: deque = deque()  # (parts, future of their tables) of the batches not handed on
+            ahead: deque = deque()  # futures of the batches' _PathParts, not yet handed on
             n_raws = 0
 
             def build(raws: list[_Raw]):
@@ -264,7 +264,7 @@ def _build_paths(raws: list[_Raw], start: np.ndarray | None):
     The same values as ``raw.build(prev_end)`` one by one, with the chaining and every
     arc-length table computed by two compiled calls for the whole run (small paths
     are otherwise dominated by per-path overhead)."""
-    return _finish_paths(_PathParts.of(raws), start)
+    return _finish_paths(_PathParts(raws).compute_tables(), start)
 
 
 class _PathParts:
@@ -309,12 +309,6 @@ class _PathParts:
         self.feed = np.concatenate([np.asarray(r.feed, dtype=float).reshape(-1) for r in raws])
         self.weights = np.array([r.weights for r in raws], dtype=float).reshape(n_p, n_ax)
 
-    @classmethod
-    def of(cls, raws: list[_Raw]) -> "_PathParts":
-        parts = cls(raws)
-        parts.compute_tables()
-        return parts
-
     def compute_tables(self) -> "_PathParts":
         """The arc-length tables (from the derivatives only: the chaining, which moves
         each path's first point, does not change them)."""
@@ -341,15 +335,8 @@ def _finish_paths(parts: _PathParts, start: np.ndarray | None):
             out.append(raw.build(start))
             start = out[-1].end
         return out, start
+    coef, breaks, seg_off = parts.coef, parts.breaks, parts.seg_off
     n_ax = len(parts.axes)
-    coef, breaks, seg_off, line, feed, weights = (
-        parts.coef,
-        parts.breaks,
-        parts.seg_off,
-        parts.line,
-        parts.feed,
-        parts.weights,
-    )
     has_start = start is not None
     ends, delta = chain_ends(
         coef, breaks, seg_off, np.asarray(start, dtype=float) if has_start else np.zeros(n_ax), has_start
@@ -373,9 +360,9 @@ def _finish_paths(parts: _PathParts, start: np.ndarray | None):
                 parts.axes,
                 breaks[a + p : b + p + 1],
                 coef[a:b],
-                line[a:b],
-                feed[a:b],
-                weights[p],
+                parts.line[a:b],
+                parts.feed[a:b],
+                parts.weights[p],
                 r.rapid,
                 planar,
                 sub_u[ua + p : ub + p + 1],
@@ -485,20 +472,20 @@ def _iter_run_raws(run: Run, settings: FitSettings, info: dict, threads: int = 1
     pool = _fit_pool(threads) if batcher is not None and threads > 1 else None
     n_batches = 0  # batches in the queue
 
+    def fit_python(sub: SubRun):
+        yield from emit(sub, *_fit_sub_repaired(unblended, prb, sub, settings, evals, info, blend))
+
     def hand_on():
         nonlocal n_batches
         batch, got = queue.popleft()
         if batch is None:  # got: a sub-run the batch fitter does not cover
-            yield from emit(got, *_fit_sub_repaired(unblended, prb, got, settings, evals, info, blend))
+            yield from fit_python(got)
             return
         assert batcher is not None
         n_batches -= 1
         got = got.result() if pool is not None else got
         for (sub, _), m in zip(batch, batcher.collect(batch, got)):
-            if m is not None:
-                yield from emit(sub, [m], prb)
-            else:
-                yield from emit(sub, *_fit_sub_repaired(unblended, prb, sub, settings, evals, info, blend))
+            yield from (emit(sub, [m], prb) if m is not None else fit_python(sub))
 
     def launch():
         nonlocal n_batches
@@ -524,7 +511,7 @@ def _iter_run_raws(run: Run, settings: FitSettings, info: dict, threads: int = 1
             if pending:
                 yield from launch()
             if n_batches == 0:
-                yield from emit(sub, *_fit_sub_repaired(unblended, prb, sub, settings, evals, info, blend))
+                yield from fit_python(sub)
             else:
                 queue.append((None, sub))
         if pending:
@@ -545,22 +532,22 @@ FIT_KERNEL_BATCH = 32
 #: for the collecting thread, few enough that the fits held stay small (a batch ~100 kB)
 FIT_BATCHES_AHEAD = 2
 
-_pools: dict[tuple[int, int], ThreadPoolExecutor] = {}
+_pools: dict[int, ThreadPoolExecutor] = {}
 _pools_lock = threading.Lock()
 
 
 def _fit_pool(threads: int) -> ThreadPoolExecutor:
-    """The process's worker threads for the batch fitter's kernels (made once per size and
-    process: a forked child, such as a batch job's, has none of its parent's threads)."""
-    key = (os.getpid(), threads)
+    """The process's worker threads for the batch fitter's kernels (made once per size)."""
     with _pools_lock:
-        pool = _pools.get(key)
+        pool = _pools.get(threads)
         if pool is None:
-            pool = _pools[key] = ThreadPoolExecutor(threads, thread_name_prefix="cnc-fit")
+            pool = _pools[threads] = ThreadPoolExecutor(threads, thread_name_prefix="cnc-fit")
         return pool
 
 
-if hasattr(os, "register_at_fork"):  # the lock may be held by a thread that is not forked
+if hasattr(os, "register_at_fork"):
+    # a forked child (a batch job) has none of its parent's threads, and the lock may be
+    # held by one of them: the child starts with no pools
     os.register_at_fork(after_in_child=lambda: globals().update(_pools={}, _pools_lock=threading.Lock()))
 
 #: nodes of a run from which the batch fitter's kernels are compiled when numba has not
@@ -578,8 +565,6 @@ def _batch_kernels_ready(n_nodes: int) -> bool:
     """Whether the batch fitter fits a run of ``n_nodes`` (see FIT_KERNEL_COMPILE_NODES)."""
     global _kernels_ready
     if not _kernels_ready:
-        import os
-
         from .._kernel_cache import compiling_elsewhere, missing_kernels
 
         if compiling_elsewhere():  # a first run's child compiles them: not twice
@@ -671,13 +656,10 @@ class _SubRunBatcher:
             return sub.i1 - sub.i0 > 1
         return all(self.arc_ok[c_pos : c_pos + len(sub.curves)])
 
-    def fit(self, batch: list[tuple[SubRun, int]]) -> list:
-        """The ``_Measured`` of each (sub-run, index of its first curve), or None."""
-        return self.collect(batch, self.launch(batch))
-
     def launch(self, batch: list[tuple[SubRun, int]]):
-        """The compiled part of ``fit``: the kernels' ``BatchFits`` (they release the GIL,
-        so batches may run on worker threads; they only read the run's arrays)."""
+        """The kernels' ``BatchFits`` of the (sub-run, index of its first curve) pairs
+        (they release the GIL, so batches may run on worker threads; they only read the
+        run's arrays)."""
         from . import _subrun as sr
 
         table = sr.SubRunTable(
@@ -694,7 +676,8 @@ class _SubRunBatcher:
         return sr.join_and_measure(self.run, self.blends, self.arcs, table, sections, polys, arcfits, self.prm)
 
     def collect(self, batch: list[tuple[SubRun, int]], got) -> list:
-        """``fit``'s results from ``launch``'s ``BatchFits``."""
+        """The ``_Measured`` of each sub-run of ``batch`` from ``launch``'s ``BatchFits``,
+        or None where the Python code must fit it."""
         pr = self.pr
         out: list = []
         so = got.seg_off.tolist()

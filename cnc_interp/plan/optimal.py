@@ -565,7 +565,7 @@ def _iter(path, joint_map, machine, dt_s, settings, stats, window):
     for _ in range(passes):
         stage = _refined(ctx, stage, targeted)
     if ctx.whole:
-        stage = _better_of(ctx, stage, passes if not targeted else 0, targeted, passes)
+        stage = _better_of(ctx, stage, passes, targeted)
     produced = 0
     try:
         for s, q in _rechunk(stage, chunk):
@@ -590,9 +590,14 @@ def _iter(path, joint_map, machine, dt_s, settings, stats, window):
     stats["samples_total"] = produced
 
 
-def _better_of(ctx, stage, vpop_passes, targeted, profile_passes):
+def _samples(blocks) -> int:
+    return sum(b[0].shape[0] for b in blocks)
+
+
+def _better_of(ctx, stage, passes, targeted):
     """The shortest of the profile's plan, the profile's with knots OPT_ALT_KNOT_SHARE as
-    far apart, and VPOp's (all whole: bounded by ``OPT_COMPARE_SAMPLES``)."""
+    far apart, and VPOp's (all whole: bounded by ``OPT_COMPARE_SAMPLES``); ``passes`` of
+    refinement for the profile's plans, and for VPOp's at coarse periods."""
     from .feedprofile import FEED_KNOT_TIME_S
 
     try:
@@ -603,26 +608,23 @@ def _better_of(ctx, stage, vpop_passes, targeted, profile_passes):
     # where the profile's tracking got stuck (dips of the reference, a hand-over to VPOp, or
     # giving up), its outcome moves by up to ±15 % with the knot spacing: a second spacing
     # is the hedge (a profile that ran clean is kept: the second plan would double its cost)
-    kept = dict(ctx.stats)
-    troubled = blocks is None or kept.get("retries", 0) > 0 or int(kept.get("handover", -1)) >= 0
-    alt_blocks: list | None = None
-    planned_s = ctx.dt * sum(b[0].shape[0] for b in blocks) if blocks is not None else 0.0
+    troubled = blocks is None or ctx.stats.get("retries", 0) > 0 or int(ctx.stats.get("handover", -1)) >= 0
+    planned_s = ctx.dt * _samples(blocks) if blocks is not None else 0.0
     if troubled and planned_s <= OPT_ALT_KNOT_MAX_S:
+        kept = dict(ctx.stats)  # the second run's stats stand only if its plan is kept
         try:
             alt = _sampled(ctx, FEED_KNOT_TIME_S * OPT_ALT_KNOT_SHARE)
-            for _ in range(profile_passes):
+            for _ in range(passes):
                 alt = _refined(ctx, alt, targeted)
-            alt_blocks = list(alt)
+            alt_blocks: list | None = list(alt)
         except _Fallback:
             alt_blocks = None
-    if alt_blocks is not None and (
-        blocks is None or sum(b[0].shape[0] for b in alt_blocks) < sum(b[0].shape[0] for b in blocks)
-    ):
-        blocks = alt_blocks
-        ctx.stats["knot_time_s"] = FEED_KNOT_TIME_S * OPT_ALT_KNOT_SHARE
-    else:
-        ctx.stats.clear()
-        ctx.stats.update(kept)
+        if alt_blocks is not None and (blocks is None or _samples(alt_blocks) < _samples(blocks)):
+            blocks = alt_blocks
+            ctx.stats["knot_time_s"] = FEED_KNOT_TIME_S * OPT_ALT_KNOT_SHARE
+        else:
+            ctx.stats.clear()
+            ctx.stats.update(kept)
     if blocks is None:
         assert failed is not None
         raise failed  # neither spacing planned the path: VPOp does (the caller's fallback)
@@ -639,7 +641,7 @@ def _better_of(ctx, stage, vpop_passes, targeted, profile_passes):
         yield s, q
         return
     alt = _vpop_stage(ctx, None)
-    for _ in range(vpop_passes):
+    for _ in range(passes if not targeted else 0):
         alt = _refined(ctx, alt, targeted)
     alt = list(alt)
     sv = np.concatenate([b[0] for b in alt])
