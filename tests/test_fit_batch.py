@@ -15,7 +15,15 @@ import pytest
 
 from .conftest import CORPUS, needs_corpus
 from cnc_interp.fit import FitSettings, Path, fit_program
-from cnc_interp.fit._npexact import blas_dot, numpy_arc_terms, numpy_powers, pairwise_sum
+from cnc_interp.fit._npexact import (
+    arc_terms,
+    blas_dot,
+    cube,
+    hermite_powers,
+    pairwise_sum,
+    powers345,
+    weighted_rows,
+)
 from cnc_interp.gcode import read_program
 
 
@@ -41,18 +49,23 @@ def test_blas_dot_is_numpys_dot_and_norm():
             assert np.sqrt(blas_dot(x, x)) == np.linalg.norm(x)
 
 
-def test_numpy_powers_and_arc_terms_are_numpys():
+def test_kernel_powers_and_arc_terms_are_the_python_fitters():
+    # the compiled fitter and the Python fitter must give the same bits: both take the
+    # powers by products and the quadrature left to right (numpy's vector pow and BLAS
+    # would differ in the last bit); and these are the powers, to rounding
     rng = np.random.default_rng(3)
     h = rng.uniform(1e-6, 10.0, 5000)
-    p3, p4, p5 = numpy_powers(h)
-    np.testing.assert_array_equal(p3, h**3)
-    np.testing.assert_array_equal(p4, h**4)
-    np.testing.assert_array_equal(p5, h**5)
+    p3, p4, p5 = powers345(h)
+    for got, want, k in zip((p3, p4, p5), hermite_powers(h), (3, 4, 5)):
+        np.testing.assert_array_equal(got, want)
+        np.testing.assert_allclose(got, h**k, rtol=4e-16 * k, atol=0)
     sp = rng.uniform(0.1, 3.0, (37, 8))
     w = np.polynomial.legendre.leggauss(8)[1]
-    s3, quad = numpy_arc_terms(h[:37].copy(), sp, w)
-    np.testing.assert_array_equal(s3, h[:37] ** 3)
-    np.testing.assert_array_equal(quad, sp @ w)
+    s3, quad = arc_terms(h[:37].copy(), sp, w)
+    np.testing.assert_array_equal(s3, cube(h[:37]))
+    np.testing.assert_array_equal(quad, weighted_rows(sp, w))
+    np.testing.assert_allclose(s3, h[:37] ** 3, rtol=1e-15, atol=0)
+    np.testing.assert_allclose(quad, sp @ w, rtol=1e-14, atol=0)
 
 
 def _mixed_program() -> str:

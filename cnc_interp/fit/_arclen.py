@@ -7,11 +7,12 @@ from numba import njit
 
 
 @njit(cache=True)
-def _seg_integral(coef, k, w, a, b, glx, glw):
-    """∫_a^b |dq/dt|_w dt on segment k (local t) with one Gauss–Legendre rule."""
+def _seg_integral(dc, w, a, b, glx, glw):
+    """∫_a^b |dq/dt|_w dt on one segment (local t) with one Gauss–Legendre rule; ``dc``
+    (5, n) the derivative's coefficients ``i * coef[i]``, i = 1..5 (``_deriv_coef``)."""
     half = 0.5 * (b - a)
     mid = 0.5 * (b + a)
-    n_ax = coef.shape[2]
+    n_ax = dc.shape[1]
     acc = 0.0
     for g in range(glx.shape[0]):
         t = mid + half * glx[g]
@@ -19,12 +20,21 @@ def _seg_integral(coef, k, w, a, b, glx, glw):
         for ax in range(n_ax):
             if w[ax] == 0.0:
                 continue
-            d = 5.0 * coef[k, 5, ax]
-            for i in range(4, 0, -1):
-                d = d * t + i * coef[k, i, ax]
+            d = dc[4, ax]
+            for i in range(3, -1, -1):
+                d = d * t + dc[i, ax]
             s2 += w[ax] * d * d
         acc += glw[g] * np.sqrt(s2)
     return half * acc
+
+
+@njit(cache=True)
+def _deriv_coef(coef, k, dc):
+    """``dc[i - 1] = i * coef[k, i]`` (i = 1..5): the derivative's coefficients, the same
+    products Horner's rule on the derivative would form at every point."""
+    for i in range(1, 6):
+        for ax in range(coef.shape[2]):
+            dc[i - 1, ax] = i * coef[k, i, ax]
 
 
 @njit(cache=True)
@@ -39,12 +49,14 @@ def arc_length_table(coef, breaks, w, glx, glw, rel_tol, max_sub):
     n_sub = np.empty(n_seg, dtype=np.int64)
     vals = np.empty(4 * max(n_seg, 1))  # each segment's sub-integrals, in order
     used = 0
+    dc = np.empty((5, coef.shape[2]))
     for k in range(n_seg):
+        _deriv_coef(coef, k, dc)
         h = breaks[k + 1] - breaks[k]
         m = 2
         prev = 0.0
         for j in range(m):
-            prev += _seg_integral(coef, k, w, j * h / m, (j + 1) * h / m, glx, glw)
+            prev += _seg_integral(dc, w, j * h / m, (j + 1) * h / m, glx, glw)
         while True:
             m *= 2
             if used + m > vals.shape[0]:
@@ -53,7 +65,7 @@ def arc_length_table(coef, breaks, w, glx, glw, rel_tol, max_sub):
                 vals = grown
             tot = 0.0
             for j in range(m):
-                v = _seg_integral(coef, k, w, j * h / m, (j + 1) * h / m, glx, glw)
+                v = _seg_integral(dc, w, j * h / m, (j + 1) * h / m, glx, glw)
                 vals[used + j] = v
                 tot += v
             if abs(tot - prev) <= rel_tol * max(tot, 1e-300) + 1e-300 or m >= max_sub:

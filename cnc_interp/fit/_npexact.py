@@ -10,9 +10,11 @@ both, but two things are not —
   squares; below 8 terms it is the plain left-to-right sum);
 * numpy's ``x ** 3`` (and 4, 5) on an array runs the CPU's vector pow (SVML on AVX-512
   machines), which differs in the last bit from the C library's ``pow`` in a few per
-  cent of the cases, and a matrix-vector product runs BLAS's kernel: ``numpy_powers``
-  and ``numpy_arc_terms`` ask numpy itself (an object-mode block, a few µs, once per
-  piece set rather than once per number). ``x ** 2`` is ``x * x`` in both;
+  cent of the cases, and a matrix-vector product runs BLAS's kernel. Asking numpy from
+  the kernel (an object-mode block) takes the GIL once per piece set, which stalled the
+  fit's worker threads; so the Python fitter computes these powers and sums by products
+  and a left-to-right sum instead (``hermite_powers``, ``cube``, ``weighted_rows``),
+  the kernels the same way (``powers345``, ``arc_terms``). ``x ** 2`` is ``x * x`` in both;
 * a 1-D ``x @ y`` (and ``np.linalg.norm(x)`` = sqrt(x @ x)) is BLAS's ``ddot``, which
   on short vectors accumulates left to right with fused multiply-adds: ``blas_dot``
   (checked against numpy in the tests for 1..9 terms).
@@ -22,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 from llvmlite import ir
-from numba import njit, objmode
+from numba import njit
 from numba.core import cgutils, types
 from numba.extending import intrinsic
 
@@ -119,13 +121,28 @@ def row_norm(x, i, buf):
 
 
 @njit(cache=True)
-def numpy_powers(h):
-    """(h ** 3, h ** 4, h ** 5) exactly as numpy computes them on the array ``h`` (1-D)."""
-    with objmode(p3="float64[:]", p4="float64[:]", p5="float64[:]"):
-        p3 = h**3
-        p4 = h**4
-        p5 = h**5
+def powers345(h):
+    """(h³, h⁴, h⁵) of the array ``h`` (1-D) by products — ``hermite_powers``' arithmetic,
+    which the Python fitter uses, so both give the same bits without numpy's vector pow."""
+    n = h.shape[0]
+    p3 = np.empty(n)
+    p4 = np.empty(n)
+    p5 = np.empty(n)
+    for i in range(n):
+        h2 = h[i] * h[i]
+        p3[i] = h2 * h[i]
+        p4[i] = h2 * h2
+        p5[i] = p4[i] * h[i]
     return p3, p4, p5
+
+
+def hermite_powers(h: np.ndarray):
+    """(h³, h⁴, h⁵) elementwise by products (numpy's ``h ** 3`` is a vector pow whose last
+    bit a compiled kernel cannot reproduce): ``powers345``' arithmetic, for the Python
+    fitter's quintic Hermites."""
+    h2 = h * h
+    p4 = h2 * h2
+    return h2 * h, p4, p4 * h
 
 
 @intrinsic
@@ -152,10 +169,31 @@ def blas_dot(x, y):
 
 
 @njit(cache=True)
-def numpy_arc_terms(sp, speeds, weights):
-    """(sp ** 3, speeds @ weights) exactly as numpy computes them: sp (K,), speeds (K, G),
-    weights (G,) (``curves._geometric``'s power and ``curves._piece_lengths``' quadrature)."""
-    with objmode(p3="float64[:]", quad="float64[:]"):
-        p3 = sp**3
-        quad = speeds @ weights
+def arc_terms(sp, speeds, weights):
+    """(sp³, the quadrature speeds @ weights) as ``cube`` and ``weighted_rows`` compute them:
+    sp (K,), speeds (K, G), weights (G,)."""
+    K, G = speeds.shape
+    p3 = np.empty(sp.shape[0])
+    for i in range(sp.shape[0]):
+        p3[i] = sp[i] * sp[i] * sp[i]
+    quad = np.empty(K)
+    for i in range(K):
+        acc = speeds[i, 0] * weights[0]
+        for g in range(1, G):
+            acc += speeds[i, g] * weights[g]
+        quad[i] = acc
     return p3, quad
+
+
+def cube(x: np.ndarray) -> np.ndarray:
+    """x³ elementwise by products (``arc_terms``' arithmetic)."""
+    return x * x * x
+
+
+def weighted_rows(speeds: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """``speeds @ weights`` (K, G) @ (G,) summed left to right (``arc_terms``' arithmetic;
+    BLAS's matrix-vector product would not be reproducible in a compiled kernel)."""
+    acc = speeds[:, 0] * weights[0]
+    for g in range(1, speeds.shape[1]):
+        acc = acc + speeds[:, g] * weights[g]
+    return acc

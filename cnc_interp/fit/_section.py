@@ -24,7 +24,7 @@ from ._bspline import (
     refine,
     segment_sources_kernel,
 )
-from ._npexact import numpy_powers, pairwise_sum
+from ._npexact import powers345, pairwise_sum
 
 #: one section of programmed nodes (n, d) in machine units, with per node the tolerance
 #: (mm, of the move ending there), source line and feed
@@ -52,7 +52,7 @@ _N_FRACS = 7
 def hermite_into(coef, k, p, v, acc, i, dp, hp):
     """``nodes.hermite`` for one piece k: the quintic on [0, h] from the values (rows i and
     i + 1 of p, v, acc: position, first and second derivative); dp (d,) = p[i + 1] - p[i]
-    (or a more accurate difference), hp = (h, h³, h⁴, h⁵) with numpy's powers."""
+    (or a more accurate difference), hp = (h, h³, h⁴, h⁵) as ``powers345`` gives them."""
     h, h3, h4, h5 = hp
     hh2 = h * h
     j = i + 1
@@ -280,7 +280,7 @@ def _pieces(t, m, c, u, sec, ends, scale, max_mm, max_deg, ok):
     h = np.empty(nx - 1)
     for k in range(nx - 1):
         h[k] = x[k + 1] - x[k]
-    h3, h4, h5 = numpy_powers(h)
+    h3, h4, h5 = powers345(h)
     coef = np.empty((nx - 1, 6, d))
     dp = np.empty(d)
     for k in range(nx - 1):

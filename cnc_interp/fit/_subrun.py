@@ -33,7 +33,7 @@ from numba.typed import List
 from ._arcs import arc_eval, linspace
 from ._bspline import EndStates
 from ._linedev import polyline_path_deviation
-from ._npexact import blas_dot, numpy_arc_terms, numpy_powers, pairwise_sum
+from ._npexact import blas_dot, arc_terms, powers345, pairwise_sum
 from ._project import march_feet, median
 from ._section import SectionFit, SectionNodes, SectionParams, fit_section, hermite_into
 
@@ -180,7 +180,7 @@ def fit_arc(arcs, c, ends, lin, tol_mm, tol_deg, line, feed, cp):
         for k in range(npc):
             for q in range(G):
                 sp8[k, q] = np.sqrt(_row_sumsq(D1, k * G + q, buf))
-        sp3, quad = numpy_arc_terms(sp, sp8, cp.gl_w)
+        sp3, quad = arc_terms(sp, sp8, cp.gl_w)
         wd2 = np.empty((nb, 1))
         for k in range(nb):
             wd2[k, 0] = -at[k] / sp3[k]
@@ -208,7 +208,7 @@ def fit_arc(arcs, c, ends, lin, tol_mm, tol_deg, line, feed, cp):
                 else:
                     dp[k, a] = dpd[k, a]
             h[k] = max(half[k] * quad[k], chord)
-        h3, h4, h5 = numpy_powers(h)
+        h3, h4, h5 = powers345(h)
         # unit-speed pieces q(τ) ≈ P(w(τ)) with w(τ) the Hermite of the reparametrisation
         if ends.start_mode == 1:
             for a in range(d):

@@ -21,11 +21,12 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from numba import njit
 
 from ..constants import FIT_COLLINEAR_DEG, FIT_EXACT_CURVE_TOL_MM, LINEAR_AXES
 from ..gcode.program import CurvePiece, Run
+from ._npexact import pairwise_sum
 from .blends import BlendTable
-from .nodes import turn_angles
 
 
 #: nodes closer than this (mm, combined metric) are merged before fitting
@@ -152,27 +153,112 @@ def corner_turns(pr: PreparedRun, evals: dict | None = None, arcs=None):
     gives the end tangents of the curves it has."""
     from .curves import curve_eval, end_states
 
-    n = pr.nodes.shape[0]
-    chords = np.diff(pr.nodes * pr.scale, axis=0)
-    d_in = np.zeros((n, chords.shape[1]))
-    d_out = np.zeros((n, chords.shape[1]))
-    d_in[1:] = chords
-    d_out[:-1] = chords
-    inside = np.zeros(n, dtype=bool)
-    for k, cp in enumerate(pr.curves):
-        if arcs is not None and arcs.ok[k]:
-            t0, t1 = arcs.ends[k, 0], arcs.ends[k, 2]
-        else:
-            (t0, _), (t1, _) = end_states(curve_eval(cp.curve, evals), pr.scale)
-        d_out[cp.first] = t0
-        d_in[cp.last] = t1
-        inside[cp.first + 1 : cp.last] = True
-    turn = np.degrees(turn_angles(d_in, d_out))
+    d = pr.nodes.shape[1]
+    K = len(pr.curves)
+    first = np.fromiter((cp.first for cp in pr.curves), dtype=np.int64, count=K)
+    last = np.fromiter((cp.last for cp in pr.curves), dtype=np.int64, count=K)
+    if arcs is not None:
+        t0 = np.ascontiguousarray(arcs.ends[:, 0], dtype=float)
+        t1 = np.ascontiguousarray(arcs.ends[:, 2], dtype=float)
+        todo = np.nonzero(~np.asarray(arcs.ok, dtype=bool))[0].tolist()
+    else:
+        t0 = np.zeros((K, d))
+        t1 = np.zeros((K, d))
+        todo = range(K)
+    for k in todo:
+        (t0[k], _), (t1[k], _) = end_states(curve_eval(pr.curves[k].curve, evals), pr.scale)
+    nodes = np.ascontiguousarray(pr.nodes, dtype=float)
+    scale = np.ascontiguousarray(pr.scale, dtype=float)
+    inside = _inside_curves(nodes.shape[0], first, last)
+    turn = _turns(nodes, scale, first, last, t0, t1, np.ones(d, dtype=bool))
     if (~pr.lin).any() and pr.lin.any():
         # the tool's own path (linear axes) must not turn sharply either, however much
         # the rotary axes move: a corner there would be a near-stop of the arc length s
-        turn = np.maximum(turn, np.degrees(turn_angles(d_in[:, pr.lin], d_out[:, pr.lin])))
+        turn = np.maximum(turn, _turns(nodes, scale, first, last, t0, t1, np.asarray(pr.lin, dtype=bool)))
     return turn, inside
+
+
+def _turns(nodes, scale, first, last, t0, t1, axes) -> np.ndarray:
+    """``corner_turns``' angles (deg) over the axes ``axes`` (d,) bool: the same numbers as
+    ``np.degrees(nodes.turn_angles(d_in, d_out))`` on the chords in and out of each node
+    (a curve's end tangents at its ends); its arctangent is numpy's."""
+    cross, dot, ok = _turn_parts(nodes, scale, first, last, t0, t1, axes, bool(axes.all()))
+    return np.degrees(np.where(ok, np.arctan2(cross, dot), 0.0))
+
+
+@njit(cache=True, nogil=True)
+def _inside_curves(n, first, last):
+    inside = np.zeros(n, dtype=np.bool_)
+    for k in range(first.shape[0]):
+        for i in range(first[k] + 1, last[k]):
+            inside[i] = True
+    return inside
+
+
+@njit(cache=True, nogil=True)
+def _turn_parts(nodes, scale, first, last, t0, t1, axes, pairwise):
+    """Per node (n,): |d_in x d_out|, d_in . d_out and whether both are nonzero, with
+    ``turn_angles``' arithmetic; d_in/d_out the chords of ``nodes * scale`` into and out of
+    each node (zero at the run's ends), replaced at a curve's first node (d_out = t0) and
+    last node (d_in = t1). ``pairwise``: numpy sums a contiguous row pairwise
+    (``pairwise_sum``), but the rows of a column selection (``d_in[:, lin]``, laid out
+    column by column) left to right; the two differ from 8 terms on."""
+    n, d = nodes.shape
+    cross = np.zeros(n)
+    dot = np.zeros(n)
+    ok = np.zeros(n, dtype=np.bool_)
+    # the tangent override of each node, if any (-1: the chord)
+    out_of = np.full(n, -1, dtype=np.int64)
+    in_of = np.full(n, -1, dtype=np.int64)
+    for k in range(first.shape[0]):
+        out_of[first[k]] = k
+        in_of[last[k]] = k
+    vi = np.zeros(d)
+    vo = np.zeros(d)
+    b1 = np.empty(d)
+    b2 = np.empty(d)
+    b3 = np.empty(d)
+    for i in range(n):
+        for a in range(d):
+            if in_of[i] >= 0:
+                vi[a] = t1[in_of[i], a]
+            elif i > 0:
+                vi[a] = nodes[i, a] * scale[a] - nodes[i - 1, a] * scale[a]
+            else:
+                vi[a] = 0.0
+            if out_of[i] >= 0:
+                vo[a] = t0[out_of[i], a]
+            elif i < n - 1:
+                vo[a] = nodes[i + 1, a] * scale[a] - nodes[i, a] * scale[a]
+            else:
+                vo[a] = 0.0
+        m = 0
+        for a in range(d):
+            if axes[a]:
+                b1[m] = vi[a] * vi[a]
+                b2[m] = vo[a] * vo[a]
+                b3[m] = vi[a] * vo[a]
+                m += 1
+        if pairwise:
+            s1 = pairwise_sum(b1, 0, m)
+            s2 = pairwise_sum(b2, 0, m)
+            p = pairwise_sum(b3, 0, m)
+        else:
+            s1 = 0.0
+            s2 = 0.0
+            p = 0.0
+            for a in range(m):
+                s1 += b1[a]
+                s2 += b2[a]
+                p += b3[a]
+        n1 = np.sqrt(s1)
+        n2 = np.sqrt(s2)
+        nn = n1 * n2
+        c = nn * nn - p * p
+        cross[i] = np.sqrt(c if c > 0.0 else 0.0)
+        dot[i] = p
+        ok[i] = n1 > 0.0 and n2 > 0.0
+    return cross, dot, ok
 
 
 def split_run(pr: PreparedRun, settings, evals: dict | None = None, arcs=None) -> Iterator[SubRun]:

@@ -25,6 +25,7 @@ import numpy as np
 
 from ..constants import FIT_TOL_SAFETY
 from ..gcode.program import Arc, Nurbs
+from ._npexact import cube, weighted_rows
 from .nodes import PieceFit, hermite
 
 if TYPE_CHECKING:
@@ -225,7 +226,7 @@ def _geometric(ev: CurveEval, w: np.ndarray, scale: np.ndarray, g: float):
     K = (A - at[:, None] * T) / sp_safe[:, None] ** 2
     K[weak] = 0.0
     wd1 = 1.0 / sp_safe
-    wd2 = np.where(weak, 0.0, -at / sp_safe**3)
+    wd2 = np.where(weak, 0.0, -at / cube(sp_safe))
     return Ps, T, K, wd1, wd2
 
 
@@ -242,7 +243,7 @@ def _piece_lengths(ev: CurveEval, wa: np.ndarray, wz: np.ndarray, scale: np.ndar
     w = (mid[:, None] + half[:, None] * x[None, :]).ravel()
     d1 = (ev.eval(w)[1] * scale).reshape(wa.size, x.size, -1)
     sp = np.linalg.norm(d1, axis=2)
-    L = half * (sp @ wts)
+    L = half * weighted_rows(sp, wts)
     dp_quad = half[:, None] * np.einsum("kgd,g->kd", d1, wts)
     pa = ev.points(wa)
     dp_diff = (ev.points(wz) - pa) * scale

@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..constants import FIT_BETWEEN_NODES_SAFETY, FIT_TOL_SAFETY
+from ._npexact import hermite_powers
 
 
 #: N-axis fitter: weight of the 3rd-divided-difference smoothing term (in tolerance units)
@@ -311,9 +312,10 @@ def hermite(p0, v0, a0, p1, v1, a1, h, dp=None):
     c[:, 0] = p0
     c[:, 1] = v0
     c[:, 2] = 0.5 * a0
-    c[:, 3] = (20 * dp - (8 * v1 + 12 * v0) * hh - (3 * a0 - a1) * hh**2) / (2 * hh**3)
-    c[:, 4] = (-30 * dp + (14 * v1 + 16 * v0) * hh + (3 * a0 - 2 * a1) * hh**2) / (2 * hh**4)
-    c[:, 5] = (12 * dp - 6 * (v1 + v0) * hh - (a0 - a1) * hh**2) / (2 * hh**5)
+    h3, h4, h5 = hermite_powers(hh)  # the compiled twin's (``_section.hermite_into``) powers
+    c[:, 3] = (20 * dp - (8 * v1 + 12 * v0) * hh - (3 * a0 - a1) * hh**2) / (2 * h3)
+    c[:, 4] = (-30 * dp + (14 * v1 + 16 * v0) * hh + (3 * a0 - 2 * a1) * hh**2) / (2 * h4)
+    c[:, 5] = (12 * dp - 6 * (v1 + v0) * hh - (a0 - a1) * hh**2) / (2 * h5)
     return c
 
 
