@@ -163,3 +163,43 @@ def test_plan_blends_respects_room_and_crowding():
     assert not ok.any()
     ok, dist, _ = plan_blends(nodes, np.ones(2, bool), np.full(4, 0.001), cand)
     assert ok[1] and ok[2] and np.all(dist[1:3] <= 0.1 + 1e-15)
+
+
+@pytest.mark.parametrize("n_axes", [2, 3, 5, 8, 9])
+def test_compiled_corner_turns_are_numpys(n_axes):
+    # corner_turns' compiled pass must give turn_angles' numbers bit for bit (a corner at
+    # the threshold is cut or not the same way): numpy sums a whole row pairwise but a
+    # column selection (the linear axes alone) left to right, which differ from 8 axes on
+    from cnc_interp.fit.corners import PreparedRun, corner_turns
+    from cnc_interp.fit.nodes import turn_angles
+
+    rng = np.random.default_rng(n_axes)
+    n = 4000
+    steps = rng.standard_normal((n, n_axes)) * rng.choice([1e-4, 1e-2, 1.0, 100.0], size=(n, 1))
+    steps[rng.random(n) < 0.05] = 0.0  # zero moves: no turn
+    nodes = np.cumsum(steps, axis=0)
+    for lin_count in sorted({1, n_axes - 1, n_axes} - {0}):
+        lin = np.arange(n_axes) < lin_count
+        scale = np.where(lin, 1.0, 0.37)
+        pr = PreparedRun(
+            "XYZABCUVW"[:n_axes],
+            nodes,
+            np.arange(n),
+            np.ones(n),
+            np.full(n, 0.01),
+            (),
+            lin,
+            scale,
+            np.zeros(n - 1, bool),
+        )
+        chords = np.diff(nodes * scale, axis=0)
+        d_in = np.zeros_like(nodes)
+        d_out = np.zeros_like(nodes)
+        d_in[1:] = chords
+        d_out[:-1] = chords
+        want = np.degrees(turn_angles(d_in, d_out))
+        if not lin.all():
+            want = np.maximum(want, np.degrees(turn_angles(d_in[:, lin], d_out[:, lin])))
+        turn, inside = corner_turns(pr)
+        np.testing.assert_array_equal(turn, want)
+        assert not inside.any()
