@@ -8,7 +8,8 @@
 For each case (a program, a machine, a sample period): plan it with every planner
 (``--planners``, default ``optimal vpop``), write the plan as CSV, and run the oracle
 ``optimum_gap.py`` (``../shared/tools``; CasADi + IPOPT: a measuring tool, not a
-dependency of the package) on the plan's main move: the longest run of samples in
+dependency of the package; ``CNC_ORACLE_PYTHON`` names an interpreter that has them)
+on the plan's main move: the longest run of samples in
 which the machine moves, from rest to rest. The oracle rebuilds the geometry from the
 plan's samples and computes the least number of periods that path can be run in
 under the same limits. Its result depends on the path, not on the plan it was given,
@@ -39,6 +40,9 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 HERE = os.path.dirname(os.path.abspath(__file__))
 CORPUS = os.environ.get("CNC_CORPUS", os.path.join(HERE, "..", "..", "shared", "corpus", "linuxcnc"))
 ORACLE = os.environ.get("CNC_OPTIMUM_GAP", os.path.join(HERE, "..", "..", "shared", "tools", "optimum_gap.py"))
+#: the interpreter that runs the oracle: one with CasADi (it is not the package's dependency,
+#: so it may live in a separate environment)
+ORACLE_PYTHON = os.environ.get("CNC_ORACLE_PYTHON", sys.executable)
 
 MIKRON_TOML = """name = "Mikron UCP 710"
 dt = 0.006
@@ -235,7 +239,7 @@ def _oracle(case, plan: dict, cache: dict, key: str, timeout: float) -> dict | N
     if key in cache:
         return cache[key]
     cmd = [
-        sys.executable,
+        ORACLE_PYTHON,
         ORACLE,
         plan["csv"],
         plan["machine"],
