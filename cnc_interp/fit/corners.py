@@ -188,6 +188,7 @@ def _turns(nodes, scale, first, last, t0, t1, axes) -> np.ndarray:
 
 @njit(cache=True, nogil=True)
 def _inside_curves(n, first, last):
+    """(n,) bool: the nodes strictly inside a curve (first[k] < i < last[k])."""
     inside = np.zeros(n, dtype=np.bool_)
     for k in range(first.shape[0]):
         for i in range(first[k] + 1, last[k]):
