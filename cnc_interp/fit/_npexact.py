@@ -2,12 +2,14 @@
 
 The fit's compiled kernels take over work that was written with numpy, and must give
 the very same paths (same bits): elementwise arithmetic is the same IEEE operations in
-both, but two things are not —
+both, but three things are not —
 
 * numpy sums with pairwise summation (8 accumulators, blocks of 128), not left to
   right: ``pairwise_sum`` is that algorithm (``x.sum()``, ``add.reduce`` along a
   contiguous row, ``np.linalg.norm(x, axis=1)`` = sqrt of the row's pairwise sum of
-  squares; below 8 terms it is the plain left-to-right sum);
+  squares; below 8 terms it is the plain left-to-right sum). A column selection
+  ``x[:, mask]`` is laid out column by column, and numpy sums its rows left to right
+  whatever their length (``corners._turn_parts``);
 * numpy's ``x ** 3`` (and 4, 5) on an array runs the CPU's vector pow (SVML on AVX-512
   machines), which differs in the last bit from the C library's ``pow`` in a few per
   cent of the cases, and a matrix-vector product runs BLAS's kernel. Asking numpy from
