@@ -312,8 +312,13 @@ class FeedProfileBuilder:
             need = np.ceil(gap / (0.25 * np.minimum(h[:-1], h[1:]))).astype(np.int64)
             if not np.any(need > 1):
                 break
-            extra = [probe[i] + gap[i] * np.arange(1, need[i]) / need[i] for i in np.flatnonzero(need > 1)]
-            probe = np.unique(np.concatenate([probe] + extra))
+            # need[i] - 1 points evenly inside each such gap, all at once (the same
+            # arithmetic as one gap at a time: probe + gap * k / need)
+            sel = np.flatnonzero(need > 1)
+            cnt = need[sel] - 1
+            at = np.repeat(sel, cnt)
+            k = np.arange(at.shape[0]) - np.repeat(np.cumsum(cnt) - cnt, cnt) + 1
+            probe = np.unique(np.concatenate((probe, probe[at] + gap[at] * k / need[at])))
         else:
             w, h = enveloped_spacing(probe)
         self._carry = (float(probe[-1]), float(w[-1]))
