@@ -167,11 +167,18 @@ def test_plan_blends_respects_room_and_crowding():
 
 @pytest.mark.parametrize("n_axes", [2, 3, 5, 8, 9])
 def test_compiled_corner_turns_are_numpys(n_axes):
-    # corner_turns' compiled pass must give turn_angles' numbers bit for bit (a corner at
-    # the threshold is cut or not the same way): numpy sums a whole row pairwise but a
-    # column selection (the linear axes alone) left to right, which differ from 8 axes on
+    # corner_turns' compiled pass must give numpy's numbers for the angle formula bit for
+    # bit (a corner at the threshold is cut or not the same way): numpy sums a whole row
+    # pairwise but a column selection (the linear axes alone) left to right, which differ
+    # from 8 axes on
     from cnc_interp.fit.corners import PreparedRun, corner_turns
-    from cnc_interp.fit.nodes import turn_angles
+
+    def turn_angles(v_in, v_out):  # the numpy reference (rad), 0 where a vector is zero
+        n1 = np.linalg.norm(v_in, axis=-1)
+        n2 = np.linalg.norm(v_out, axis=-1)
+        dot = (v_in * v_out).sum(axis=-1)
+        cross = np.sqrt(np.maximum((n1 * n2) ** 2 - dot**2, 0.0))
+        return np.where((n1 > 0) & (n2 > 0), np.arctan2(cross, dot), 0.0)
 
     rng = np.random.default_rng(n_axes)
     n = 4000

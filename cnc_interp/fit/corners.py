@@ -179,9 +179,10 @@ def corner_turns(pr: PreparedRun, evals: dict | None = None, arcs=None):
 
 
 def _turns(nodes, scale, first, last, t0, t1, axes) -> np.ndarray:
-    """``corner_turns``' angles (deg) over the axes ``axes`` (d,) bool: the same numbers as
-    ``np.degrees(nodes.turn_angles(d_in, d_out))`` on the chords in and out of each node
-    (a curve's end tangents at its ends); its arctangent is numpy's."""
+    """``corner_turns``' angles (deg) over the axes ``axes`` (d,) bool between the chords in
+    and out of each node (a curve's end tangents at its ends): arctan2(|d_in x d_out|,
+    d_in . d_out), 0 where either is zero. The arctangent is numpy's (the C library's
+    differs in the last bit), so the angles are those of the same formula in numpy."""
     cross, dot, ok = _turn_parts(nodes, scale, first, last, t0, t1, axes, bool(axes.all()))
     return np.degrees(np.where(ok, np.arctan2(cross, dot), 0.0))
 
@@ -198,12 +199,13 @@ def _inside_curves(n, first, last):
 
 @njit(cache=True, nogil=True)
 def _turn_parts(nodes, scale, first, last, t0, t1, axes, pairwise):
-    """Per node (n,): |d_in x d_out|, d_in . d_out and whether both are nonzero, with
-    ``turn_angles``' arithmetic; d_in/d_out the chords of ``nodes * scale`` into and out of
-    each node (zero at the run's ends), replaced at a curve's first node (d_out = t0) and
-    last node (d_in = t1). ``pairwise``: numpy sums a contiguous row pairwise
-    (``pairwise_sum``), but the rows of a column selection (``d_in[:, lin]``, laid out
-    column by column) left to right; the two differ from 8 terms on."""
+    """Per node (n,): |d_in x d_out| (as sqrt(max(|d_in|² |d_out|² - dot², 0))), d_in . d_out
+    and whether both are nonzero, with numpy's arithmetic for that formula. d_in/d_out: the
+    chords of ``nodes * scale`` into and out of each node (zero at the run's ends), replaced
+    at a curve's first node (d_out = t0) and last node (d_in = t1). ``pairwise``: numpy sums
+    a contiguous row pairwise (``pairwise_sum``), but the rows of a column selection
+    (``d_in[:, lin]``, laid out column by column) left to right; the two differ from 8
+    terms on."""
     n, d = nodes.shape
     cross = np.zeros(n)
     dot = np.zeros(n)

@@ -97,16 +97,6 @@ class PieceFit:
     n_nodes: int
 
 
-def turn_angles(v_in: np.ndarray, v_out: np.ndarray) -> np.ndarray:
-    """Angle (rad) between direction vectors row by row; 0 where one is zero."""
-    n1 = np.linalg.norm(v_in, axis=-1)
-    n2 = np.linalg.norm(v_out, axis=-1)
-    dot = (v_in * v_out).sum(axis=-1)
-    cross = np.sqrt(np.maximum((n1 * n2) ** 2 - dot**2, 0.0))
-    ang = np.arctan2(cross, dot)
-    return np.where((n1 > 0) & (n2 > 0), ang, 0.0)
-
-
 def straight_piece(p0: np.ndarray, p1: np.ndarray, length: float, line: int, feed: float) -> PieceFit:
     """One exact straight segment from p0 to p1 with parameter length ``length``."""
     coef = np.zeros((1, 6, p0.shape[0]))
