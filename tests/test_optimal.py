@@ -17,6 +17,7 @@ from cnc_interp.plan.verify import verify_arrays
 from cnc_interp.plan.vpop import plan_path_vpop
 
 from ._vpop_paths import circle_fun, hermite_path, line_path, random_curve
+from .conftest import CORPUS, needs_corpus
 
 DT = 0.001
 MILL = Machine(
@@ -347,3 +348,42 @@ def test_the_shorter_of_two_knot_spacings_is_kept(monkeypatch):
     halved = plan_path_optimal(p, None, UCP, dt)
     assert periods(plain) != periods(halved)  # the case tells the two spacings apart
     assert periods(hedged) == min(periods(plain), periods(halved)), (periods(plain), periods(halved))
+
+
+@needs_corpus
+def test_a_window_that_cannot_brake_under_the_estimate_is_solved_again(monkeypatch):
+    # corpus spiral_tangent_test.ngc, its 21 mm spiral, planned window by window
+    # (compare_s = 0): a window's LP linearised at the speed estimate past where the
+    # previous window brakes has no solution (that window's speed is more than three
+    # times the estimate there); it used to end the profile, and VPOp planned the rest
+    import dataclasses
+
+    from cnc_interp.fit import FitSettings, fit_program
+    from cnc_interp.gcode import read_program
+    from cnc_interp.machine.load import load_machine
+    from cnc_interp.plan import feedprofile
+
+    src = os.path.join(CORPUS, "quick-tests", "spiral_tangent_test.ngc")
+    m = load_machine("generic-mill")
+    prog = read_program(open(src, "rb").read(), src, axes=m.axes, start=m.start)
+    fitted = fit_program(prog, FitSettings.from_options(machine=m))
+    path = max((p for p in fitted.items if hasattr(p, "coef") and not p.rapid), key=lambda p: p.length)
+    settings = dataclasses.replace(
+        PlanSettings.from_options(planner="optimal", machine=m), optimal=OptimalOptions(compare_s=0.0, refine_passes=0)
+    )
+    plan = plan_path_optimal(path, None, m, m.dt_s, settings)
+    check(plan, m, plan.q[0], plan.q[-1], m.dt_s)
+    assert plan.stats["route"] == "profile" and plan.stats.get("lp_restarts", 0) >= 1
+    assert plan.stats["handover"] < 0 and "crawl" not in plan.stats
+    # without the second solve the profile ends at the first such window
+    solve_from = feedprofile.FeedProfileBuilder._solve_from
+
+    def no_restart(self, b0, b1, at_end, fixed, prev, s_prev, ccp_max):
+        if s_prev is not None and prev is not None and s_prev == prev[3]:
+            raise feedprofile.ProfileError("no restart")
+        return solve_from(self, b0, b1, at_end, fixed, prev, s_prev, ccp_max)
+
+    monkeypatch.setattr(feedprofile.FeedProfileBuilder, "_solve_from", no_restart)
+    without = plan_path_optimal(path, None, m, m.dt_s, settings)
+    assert 0 <= without.stats["handover"] < 0.5 * without.s.shape[0]
+    assert periods(plan) < periods(without)

@@ -410,6 +410,8 @@ def _sampled(ctx, knot_time_s: float | None = None):
 
 def _append_piece(ctx, nodes, piece, builder) -> bool:
     ctx.stats["lp_iterations"] += piece.lp_iters
+    if builder.restarts:
+        ctx.stats["lp_restarts"] = builder.restarts
     if nodes.append(piece.knots, piece.coef, piece.s0, piece.s1, builder.estimate):
         return True
     ctx.stats["crawl"] = ctx.stats.get("crawl", 0) + 1
