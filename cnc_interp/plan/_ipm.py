@@ -99,35 +99,18 @@ def _ax(first, coef, x, out):
 
 
 @njit(cache=True)
-def _atx(first, coef, y, n, out):
-    m, W = coef.shape
-    for i in range(n):
-        out[i] = 0.0
-    for r in range(m):
-        f = first[r]
-        yr = y[r]
-        for k in range(W):
-            out[f + k] += coef[r, k] * yr
-
-
-@njit(cache=True)
-def _max_step(v, dv):
-    """Largest α in (0, 1] keeping v + α dv >= 0 (before the boundary fraction)."""
-    a = 1.0
-    for i in range(v.shape[0]):
-        if dv[i] < 0.0:
-            t = -v[i] / dv[i]
-            if t < a:
-                a = t
-    return a
-
-
-@njit(cache=True)
 def lp_solve(n, first, coef, b, c, x, max_iter, tol):
     """Minimise c·x subject to the banded rows (see module docstring).
 
     ``x`` (n,) is the start and receives the solution. Returns (status, iterations,
     multipliers λ (m,), slacks s (m,)).
+
+    Each iteration makes five passes over the rows (they are most of its time): the
+    residuals, the normal matrix and the predictor's right-hand side together; the
+    predictor's step and its longest steps; its complementarity; the corrector's
+    right-hand side; the corrector's step and its longest steps. The step itself is
+    taken at the start of the next iteration's first pass, and A x is updated with the
+    step's A dx rather than formed again.
     """
     m, W = coef.shape
     s = np.empty(m)
@@ -141,10 +124,10 @@ def lp_solve(n, first, coef, b, c, x, max_iter, tol):
     rd = np.empty(n)
     rp = np.empty(m)
     rhs = np.empty(n)
-    tmp = np.empty(m)
     dx = np.empty(n)
-    ds = np.empty(m)
-    dl = np.empty(m)
+    adx = np.zeros(m)  # A dx of the last step
+    ds = np.zeros(m)
+    dl = np.zeros(m)
     dsa = np.empty(m)
     dla = np.empty(m)
     bnorm = 1.0
@@ -156,88 +139,134 @@ def lp_solve(n, first, coef, b, c, x, max_iter, tol):
         if abs(c[i]) > cnorm:
             cnorm = abs(c[i])
     status = MAX_ITER
+    ap = 0.0
+    ad = 0.0
     it = 0
     for it in range(max_iter):
-        _ax(first, coef, x, ax)
-        _atx(first, coef, lam, n, rd)
+        # pass 1: take the last step; residuals, μ, A^T λ, the normal matrix A^T D A
+        # (lower band, D = λ / s) and A^T of the predictor's right-hand side
+        for i in range(n):
+            rd[i] = 0.0
+            rhs[i] = 0.0
+            for d in range(W):
+                M[i, d] = 0.0
         ep = 0.0
+        mu = 0.0
         for r in range(m):
-            rp[r] = ax[r] + s[r] - b[r]
-            if abs(rp[r]) > ep:
-                ep = abs(rp[r])
+            sr = s[r] + ap * ds[r]
+            lr = lam[r] + ad * dl[r]
+            if sr < 1e-300:
+                sr = 1e-300
+            if lr < 1e-300:
+                lr = 1e-300
+            s[r] = sr
+            lam[r] = lr
+            axr = ax[r] + ap * adx[r]
+            ax[r] = axr
+            rpr = axr + sr - b[r]
+            rp[r] = rpr
+            if abs(rpr) > ep:
+                ep = abs(rpr)
+            mu += sr * lr
+            dr = lr / sr
+            tr = lr * rpr / sr - lr  # predictor: r_c = -λ s
+            f = first[r]
+            for a in range(W):
+                cra = coef[r, a]
+                if cra == 0.0:
+                    continue
+                rd[f + a] += cra * lr
+                rhs[f + a] += cra * tr
+                ca = cra * dr
+                for bb in range(a + 1):
+                    M[f + a, a - bb] += ca * coef[r, bb]
+        mu /= m
         ed = 0.0
         for i in range(n):
             rd[i] += c[i]
             if abs(rd[i]) > ed:
                 ed = abs(rd[i])
-        mu = 0.0
-        for r in range(m):
-            mu += s[r] * lam[r]
-        mu /= m
         # the dual residual is limited by the conditioning of λ/s near the end (the
         # normal matrix's condition grows like 1/μ): a looser bound on it, and once the
         # complementarity is at rounding level nothing is left to gain
         if ep <= tol * bnorm and mu <= tol and (ed <= _DUAL_TOL * cnorm or mu <= _MU_FLOOR):
             status = OK
             break
-        # normal matrix A^T D A (lower band), D = λ / s
-        for i in range(n):
-            for d in range(W):
-                M[i, d] = 0.0
-        for r in range(m):
-            f = first[r]
-            dr = lam[r] / s[r]
-            for a in range(W):
-                ca = coef[r, a] * dr
-                if ca == 0.0:
-                    continue
-                for bb in range(a + 1):
-                    M[f + a, a - bb] += ca * coef[r, bb]
         for i in range(n):  # relative to each diagonal entry: λ/s spans many decades
             M[i, 0] += _REG * M[i, 0] + 1e-300
         if not _band_cholesky(M, n, W):
             status = BREAKDOWN
             break
-        # predictor (affine scaling): r_c = -λ s
-        for r in range(m):
-            tmp[r] = (-lam[r] * s[r] + lam[r] * rp[r]) / s[r]
-        _atx(first, coef, tmp, n, rhs)
+        # predictor (affine scaling)
         for i in range(n):
             dx[i] = -rd[i] - rhs[i]
         _band_solve(M, n, W, dx)
-        _ax(first, coef, dx, ds)
+        # pass 2: its steps in s and λ, and the longest steps keeping them >= 0
+        ap = 1.0
+        ad = 1.0
         for r in range(m):
-            dsa[r] = -rp[r] - ds[r]
-            dla[r] = (-lam[r] * s[r] - lam[r] * dsa[r]) / s[r]
-        ap = _max_step(s, dsa)
-        ad = _max_step(lam, dla)
+            f = first[r]
+            acc = 0.0
+            for k in range(W):
+                acc += coef[r, k] * dx[f + k]
+            d_s = -rp[r] - acc
+            d_l = (-lam[r] * s[r] - lam[r] * d_s) / s[r]
+            dsa[r] = d_s
+            dla[r] = d_l
+            if d_s < 0.0:
+                t = -s[r] / d_s
+                if t < ap:
+                    ap = t
+            if d_l < 0.0:
+                t = -lam[r] / d_l
+                if t < ad:
+                    ad = t
+        # pass 3: the complementarity it would reach
         mu_aff = 0.0
         for r in range(m):
             mu_aff += (s[r] + ap * dsa[r]) * (lam[r] + ad * dla[r])
         mu_aff /= m
         sigma = (mu_aff / mu) ** 3 if mu > 0.0 else 0.0
-        # corrector: r_c = -λ s - Δs_aff Δλ_aff + σ μ
+        # pass 4: corrector, r_c = -λ s - Δs_aff Δλ_aff + σ μ
+        for i in range(n):
+            rhs[i] = 0.0
         for r in range(m):
             rc = -lam[r] * s[r] - dsa[r] * dla[r] + sigma * mu
-            tmp[r] = (rc + lam[r] * rp[r]) / s[r]
-        _atx(first, coef, tmp, n, rhs)
+            dla[r] = rc  # kept for pass 5
+            tr = (rc + lam[r] * rp[r]) / s[r]
+            f = first[r]
+            for k in range(W):
+                rhs[f + k] += coef[r, k] * tr
         for i in range(n):
             dx[i] = -rd[i] - rhs[i]
         _band_solve(M, n, W, dx)
-        _ax(first, coef, dx, ds)
+        # pass 5: the corrected steps and the longest steps (taken in the next pass 1)
+        ap = 1.0
+        ad = 1.0
         for r in range(m):
-            rc = -lam[r] * s[r] - dsa[r] * dla[r] + sigma * mu
-            ds[r] = -rp[r] - ds[r]
-            dl[r] = (rc - lam[r] * ds[r]) / s[r]
-        ap = min(1.0, _TO_BOUNDARY * _max_step(s, ds))
-        ad = min(1.0, _TO_BOUNDARY * _max_step(lam, dl))
+            f = first[r]
+            acc = 0.0
+            for k in range(W):
+                acc += coef[r, k] * dx[f + k]
+            adx[r] = acc
+            d_s = -rp[r] - acc
+            d_l = (dla[r] - lam[r] * d_s) / s[r]
+            ds[r] = d_s
+            dl[r] = d_l
+            if d_s < 0.0:
+                t = -s[r] / d_s
+                if t < ap:
+                    ap = t
+            if d_l < 0.0:
+                t = -lam[r] / d_l
+                if t < ad:
+                    ad = t
+        ap = min(1.0, _TO_BOUNDARY * ap)
+        ad = min(1.0, _TO_BOUNDARY * ad)
         for i in range(n):
             x[i] += ap * dx[i]
+    if status == MAX_ITER:  # the last step is not yet in s and λ
         for r in range(m):
-            s[r] += ap * ds[r]
-            lam[r] += ad * dl[r]
-            if s[r] < 1e-300:
-                s[r] = 1e-300
-            if lam[r] < 1e-300:
-                lam[r] = 1e-300
+            s[r] = max(s[r] + ap * ds[r], 1e-300)
+            lam[r] = max(lam[r] + ad * dl[r], 1e-300)
     return status, it, lam, s

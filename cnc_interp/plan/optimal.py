@@ -610,8 +610,12 @@ def _better_of(ctx, stage, passes, targeted):
     # where the profile's tracking got stuck (dips of the reference, a hand-over to VPOp, or
     # giving up), its outcome moves by up to ±15 % with the knot spacing: a second spacing
     # is the hedge (a profile that ran clean is kept: the second plan would double its cost)
-    troubled = blocks is None or ctx.stats.get("retries", 0) > 0 or int(ctx.stats.get("handover", -1)) >= 0
     planned_s = ctx.dt * _samples(blocks) if blocks is not None else 0.0
+    # (VPOp finishing the last stop, within OPT_COMPARE_TAIL_S of the end, is no trouble:
+    # arc_maxvel_xy's helix handed over one sample before its end and was planned twice)
+    ho = int(ctx.stats.get("handover", -1))
+    early_handover = blocks is not None and 0 <= ho < _samples(blocks) - int(OPT_COMPARE_TAIL_S / ctx.dt)
+    troubled = blocks is None or ctx.stats.get("retries", 0) > 0 or early_handover
     if troubled and planned_s <= OPT_ALT_KNOT_MAX_S:
         kept = dict(ctx.stats)  # the second run's stats stand only if its plan is kept
         try:
