@@ -44,12 +44,18 @@ from ._ipm import OK as LP_OK, _ax, lp_solve
 FEED_KNOT_TIME_S = 0.006
 #: knot spacing at most this share of the geometry's length scale (radius of curvature,
 #: and that of its change): a rounded corner gets several knots
-FEED_KNOT_GEO = 0.35
-#: collocation points per knot interval (constraints are imposed there). Finer knots and
-#: points follow CAM paths' short features: fewer places where the exact sampler gets
-#: stuck, so fewer dips, hand-overs to VPOp and refinement solves (0.5 and 2 before: on
-#: stellabee1's first 139 profile-routed paths 0.35 and 3 cost 28 % less planning CPU
-#: for 0.2 % less cycle time)
+FEED_KNOT_GEO = 0.5
+#: ... and this share of the length scale of q_sss where the jerk limits the speed (the
+#: jerk term of the estimate is within FEED_KNOT_JERK_NEAR of the estimate, in w). Where
+#: the jerk binds, finer knots follow CAM paths' short features: fewer places where the
+#: exact sampler gets stuck, so fewer dips, hand-overs to VPOp and refinement solves
+#: (stellabee1's first 139 profile-routed paths: 0.5 -> 0.35 cost a third less planning
+#: CPU for 0.13 % less cycle); everywhere, it cost LinuxCNC's XYZ machine of issue 13
+#: (jerk out of the way) up to 0.8 % of cycle on stellabee-violation-spirals
+FEED_KNOT_GEO_JERK = 0.35
+FEED_KNOT_JERK_NEAR = 2.0
+#: collocation points per knot interval (constraints are imposed there; 2 before: three
+#: leave fewer stuck places for the sampler, the same 139 paths 20 % less planning CPU)
 FEED_COLLOCATION = 3
 #: a window commits this much motion (estimated) and looks two braking times further, s
 FEED_COMMIT_S = 0.5
@@ -284,12 +290,17 @@ class FeedProfileBuilder:
         _, q2, q3 = self.derivs(x)
         k2 = np.max(np.abs(q2), axis=1)
         k3 = np.max(np.abs(q3), axis=1)
-        geo = np.minimum(1.0 / np.maximum(k2, 1e-300), 1.0 / np.sqrt(np.maximum(k3, 1e-300)))
         if w is None:
             w, _ = self._raw_estimate(x)
+        # the length scale of q_sss matters where the jerk limits the speed (the jerk
+        # term of the estimate is within FEED_KNOT_JERK_NEAR of it): finer knots there
+        with np.errstate(divide="ignore"):
+            wj = np.min(np.where(np.abs(q3) > 0, (self.jmax / np.abs(q3)) ** (2.0 / 3.0), np.inf), axis=1)
+        g3 = np.where(FEED_EST_JERK_FACTOR**2 * wj <= FEED_KNOT_JERK_NEAR * w, FEED_KNOT_GEO_JERK, FEED_KNOT_GEO)
+        geo = np.minimum(FEED_KNOT_GEO / np.maximum(k2, 1e-300), g3 / np.sqrt(np.maximum(k3, 1e-300)))
         v = np.sqrt(np.maximum(w, 0.0))
         hmin = np.where(x < 0.5 * self.L, self.hmin0, self.hmin1)
-        return np.maximum(np.minimum(self.knot_time_s * v, FEED_KNOT_GEO * geo), hmin)
+        return np.maximum(np.minimum(self.knot_time_s * v, geo), hmin)
 
     # -- knots, block by block ----------------------------------------------------
     def _extend_knots(self):
