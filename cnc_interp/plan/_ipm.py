@@ -99,6 +99,36 @@ def _ax(first, coef, x, out):
 
 
 @njit(cache=True)
+def _steps(first, coef, dx, rp, s, lam, rc, predictor, ds, dl, adx):
+    """The steps ds = -r_p - A dx and dλ = (r_c - λ ds) / s of a direction dx (r_c = -λ s
+    for the predictor, else ``rc``), A dx into ``adx``; returns the longest steps (α_s,
+    α_λ) <= 1 keeping s and λ >= 0."""
+    m, W = coef.shape
+    ap = 1.0
+    ad = 1.0
+    for r in range(m):
+        f = first[r]
+        acc = 0.0
+        for k in range(W):
+            acc += coef[r, k] * dx[f + k]
+        adx[r] = acc
+        d_s = -rp[r] - acc
+        rcr = -lam[r] * s[r] if predictor else rc[r]
+        d_l = (rcr - lam[r] * d_s) / s[r]
+        ds[r] = d_s
+        dl[r] = d_l
+        if d_s < 0.0:
+            t = -s[r] / d_s
+            if t < ap:
+                ap = t
+        if d_l < 0.0:
+            t = -lam[r] / d_l
+            if t < ad:
+                ad = t
+    return ap, ad
+
+
+@njit(cache=True)
 def lp_solve(n, first, coef, b, c, x, max_iter, tol):
     """Minimise c·x subject to the banded rows (see module docstring).
 
@@ -202,25 +232,7 @@ def lp_solve(n, first, coef, b, c, x, max_iter, tol):
             dx[i] = -rd[i] - rhs[i]
         _band_solve(M, n, W, dx)
         # pass 2: its steps in s and λ, and the longest steps keeping them >= 0
-        ap = 1.0
-        ad = 1.0
-        for r in range(m):
-            f = first[r]
-            acc = 0.0
-            for k in range(W):
-                acc += coef[r, k] * dx[f + k]
-            d_s = -rp[r] - acc
-            d_l = (-lam[r] * s[r] - lam[r] * d_s) / s[r]
-            dsa[r] = d_s
-            dla[r] = d_l
-            if d_s < 0.0:
-                t = -s[r] / d_s
-                if t < ap:
-                    ap = t
-            if d_l < 0.0:
-                t = -lam[r] / d_l
-                if t < ad:
-                    ad = t
+        ap, ad = _steps(first, coef, dx, rp, s, lam, dla, True, dsa, dla, adx)
         # pass 3: the complementarity it would reach
         mu_aff = 0.0
         for r in range(m):
@@ -241,26 +253,7 @@ def lp_solve(n, first, coef, b, c, x, max_iter, tol):
             dx[i] = -rd[i] - rhs[i]
         _band_solve(M, n, W, dx)
         # pass 5: the corrected steps and the longest steps (taken in the next pass 1)
-        ap = 1.0
-        ad = 1.0
-        for r in range(m):
-            f = first[r]
-            acc = 0.0
-            for k in range(W):
-                acc += coef[r, k] * dx[f + k]
-            adx[r] = acc
-            d_s = -rp[r] - acc
-            d_l = (dla[r] - lam[r] * d_s) / s[r]
-            ds[r] = d_s
-            dl[r] = d_l
-            if d_s < 0.0:
-                t = -s[r] / d_s
-                if t < ap:
-                    ap = t
-            if d_l < 0.0:
-                t = -lam[r] / d_l
-                if t < ad:
-                    ad = t
+        ap, ad = _steps(first, coef, dx, rp, s, lam, dla, False, ds, dl, adx)
         ap = min(1.0, _TO_BOUNDARY * ap)
         ad = min(1.0, _TO_BOUNDARY * ad)
         for i in range(n):
