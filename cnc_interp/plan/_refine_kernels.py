@@ -39,6 +39,13 @@ from .status import FAILED, INFEASIBLE, OK
 #: z below which a window counts as feasible (the exact check follows)
 _Z_TARGET = -1e-6
 _MU0 = 1e-2
+#: a μ stage that ends at z > 0 having taken off less than _STALL z since the last one
+#: ends the solve as infeasible. Along the stages z_k ≈ z* + c μ_k, so the last drop is
+#: 9 c μ_{k+1}; with z* <= 0 it is at least 9 z_{k+1} > _STALL z_{k+1}: a feasible window
+#: is not cut short (< 9). Windows that cannot lose a period were most of the
+#: refinement's time: stellabee-violation-spirals 54 -> 39 Newton steps per such window,
+#: 7 of 2354 feasible solves lost
+_STALL = 8.0
 _MU_MIN = 1e-10
 #: the barrier's log-sum takes one log per this many rows (``_log_sum``); a block's
 #: product outside (_LOG_SAFE_LO, _LOG_SAFE_HI) is summed one log at a time instead
@@ -289,6 +296,7 @@ def solve_window(S, C, QEND, pre, post, x0, moving, lim, fdt, max_newton, counts
     mu = _MU0
     best_z = worst
     best_x = x.copy()
+    stage_z = np.inf  # z where the last μ stage ended
     for it in range(max_newton):
         counts[0] += 1
         _assemble(P, nfree, moving, lim, fdt, Q1, Q2, u, mu, NewtonSystem(g, H, hz, gzz))
@@ -363,6 +371,10 @@ def solve_window(S, C, QEND, pre, post, x0, moving, lim, fdt, max_newton, counts
             # μ per row; when even that leaves it positive, the window is infeasible
             if z - mu * r > 1e-9:
                 return INFEASIBLE, best_x, best_z
+            # a tenfold smaller μ that took off less than _STALL z: z* > 0 (see _STALL)
+            if z > 0.0 and stage_z - z < _STALL * z:
+                return INFEASIBLE, best_x, best_z
+            stage_z = z
             if mu <= _MU_MIN:
                 break
             mu *= 0.1
