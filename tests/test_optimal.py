@@ -379,7 +379,7 @@ def test_a_window_that_cannot_brake_under_the_estimate_is_solved_again(monkeypat
     solve_from = feedprofile.FeedProfileBuilder._solve_from
 
     def no_restart(self, b0, b1, at_end, fixed, prev, s_prev, ccp_max):
-        if s_prev is not None and prev is not None and s_prev == prev[3]:
+        if s_prev is not None and prev is not None and s_prev == prev.s_end:
             raise feedprofile.ProfileError("no restart")
         return solve_from(self, b0, b1, at_end, fixed, prev, s_prev, ccp_max)
 

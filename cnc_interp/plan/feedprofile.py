@@ -34,6 +34,7 @@ w'(L) >= -2 J_t dt with J_t the tangent's path jerk limit.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -94,6 +95,17 @@ FEED_ROW_SCREEN = 0.3
 FEED_WHOLE_KNOTS = 1500
 #: table pieces per block of the knot placement
 FEED_KNOT_BLOCK = 256
+
+
+class _Window(NamedTuple):
+    """A window's whole solution, as the next window sees it: the B-spline of w
+    (``knots`` (nc + 4,), ``coef`` (nc,)), where it starts braking for its terminal rest
+    and where that rest is (``s_brake``, ``s_end``, mm)."""
+
+    knots: np.ndarray
+    coef: np.ndarray
+    s_brake: float
+    s_end: float
 
 
 class ProfileError(Exception):
@@ -385,7 +397,7 @@ class FeedProfileBuilder:
         """Yield ``FeedPiece``s in path order (see module docstring)."""
         b0 = 0
         fixed = np.zeros(0)  # coefficients b0 .. b0+2 (committed), global indices
-        prev = None  # (knots, coef) of the previous window's whole solution
+        prev = None  # the previous window's whole solution (``_Window``)
         # when the caller holds the whole path (``whole``), one of at most
         # FEED_WHOLE_KNOTS intervals is one window: windows overlap by their braking part
         # (about as long again as what they commit) and each costs a few LPs, so on a
@@ -412,7 +424,7 @@ class FeedProfileBuilder:
             n_keep = bc - b0 + 3
             yield FeedPiece(tk[: n_keep + 4].copy(), coef[:n_keep].copy(), self._br[b0], self._br[bc], it)
             fixed = coef[commit : commit + 3].copy()
-            prev = (tk, coef, self._br[max(b1 - self.brake, bc)], self._br[b1])
+            prev = _Window(tk, coef, self._br[max(b1 - self.brake, bc)], self._br[b1])
             b0 = bc
             # forget the estimate's probes before the next window (bounded memory)
             i = max(int(np.searchsorted(self._ex, self._br[b0], side="right")) - 2, 0)
@@ -448,19 +460,19 @@ class FeedProfileBuilder:
         """The LPs of the window [b0, b1]: coefficients b0 .. b1+2, their knots, iterations.
 
         The rows are linearised at the previous window's solution up to where it brakes
-        for its terminal rest (``prev[2]``). When that LP has no solution (the committed
+        for its terminal rest (``prev.s_brake``). When that LP has no solution (the committed
         coefficients cannot brake under rows linearised at the estimate beyond: the
         tangent bound is exact only at its own point), the window is solved again
-        linearised at the previous solution up to its end (``prev[3]``): that solution,
+        linearised at the previous solution up to its end (``prev.s_end``): that solution,
         then rest, meets every row, so this LP is feasible.
         """
         try:
-            return self._solve_from(b0, b1, at_end, fixed, prev, None if prev is None else prev[2], FEED_CCP_MAX)
+            return self._solve_from(b0, b1, at_end, fixed, prev, None if prev is None else prev.s_brake, FEED_CCP_MAX)
         except ProfileError:
             if prev is None:
                 raise
             self.restarts += 1
-            return self._solve_from(b0, b1, at_end, fixed, prev, prev[3], FEED_CCP_MAX_RESTART)
+            return self._solve_from(b0, b1, at_end, fixed, prev, prev.s_end, FEED_CCP_MAX_RESTART)
 
     def _solve_from(self, b0, b1, at_end, fixed, prev, s_prev, ccp_max):
         """``_solve`` with the rows linearised at ``prev`` up to ``s_prev``."""
@@ -483,7 +495,7 @@ class FeedProfileBuilder:
             # it met (a tangent elsewhere would cut it off), and further on it is a
             # better start than the estimate
             near = x <= max(self._br[min(b0 + 3, len(self._br) - 1)], s_prev)
-            wc = spline_values(prev[0], prev[1], np.clip(x[near], prev[0][3], prev[0][-4]))
+            wc = spline_values(prev.knots, prev.coef, np.clip(x[near], prev.knots[3], prev.knots[-4]))
             w_hat[near] = np.maximum(wc, 1e-9 * W0)
         # fixed coefficients: the committed three (b0 > 0), w(0) = 0, w(L) = 0
         free = np.ones(nc, dtype=bool)
