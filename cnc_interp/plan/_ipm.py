@@ -160,6 +160,7 @@ def lp_solve(n, first, coef, b, c, x, max_iter, tol):
     dl = np.zeros(m)
     dsa = np.empty(m)
     dla = np.empty(m)
+    rcs = np.empty(m)  # the corrector's r_c, for pass 5
     bnorm = 1.0
     for r in range(m):
         if abs(b[r]) > bnorm:
@@ -232,7 +233,7 @@ def lp_solve(n, first, coef, b, c, x, max_iter, tol):
             dx[i] = -rd[i] - rhs[i]
         _band_solve(M, n, W, dx)
         # pass 2: its steps in s and λ, and the longest steps keeping them >= 0
-        ap, ad = _steps(first, coef, dx, rp, s, lam, dla, True, dsa, dla, adx)
+        ap, ad = _steps(first, coef, dx, rp, s, lam, rcs, True, dsa, dla, adx)
         # pass 3: the complementarity it would reach
         mu_aff = 0.0
         for r in range(m):
@@ -244,7 +245,7 @@ def lp_solve(n, first, coef, b, c, x, max_iter, tol):
             rhs[i] = 0.0
         for r in range(m):
             rc = -lam[r] * s[r] - dsa[r] * dla[r] + sigma * mu
-            dla[r] = rc  # kept for pass 5
+            rcs[r] = rc
             tr = (rc + lam[r] * rp[r]) / s[r]
             f = first[r]
             for k in range(W):
@@ -253,7 +254,7 @@ def lp_solve(n, first, coef, b, c, x, max_iter, tol):
             dx[i] = -rd[i] - rhs[i]
         _band_solve(M, n, W, dx)
         # pass 5: the corrected steps and the longest steps (taken in the next pass 1)
-        ap, ad = _steps(first, coef, dx, rp, s, lam, dla, False, ds, dl, adx)
+        ap, ad = _steps(first, coef, dx, rp, s, lam, rcs, False, ds, dl, adx)
         ap = min(1.0, _TO_BOUNDARY * ap)
         ad = min(1.0, _TO_BOUNDARY * ad)
         for i in range(n):

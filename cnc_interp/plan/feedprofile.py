@@ -97,6 +97,16 @@ FEED_WHOLE_KNOTS = 1500
 FEED_KNOT_BLOCK = 256
 
 
+class _Local(NamedTuple):
+    """The geometry behind ``_raw_estimate`` at K points: q_s, q_ss, q_sss (K, n) and the
+    estimate's jerk term w_jerk (K,), mm²/s²."""
+
+    q1: np.ndarray
+    q2: np.ndarray
+    q3: np.ndarray
+    w_jerk: np.ndarray
+
+
 class _Window(NamedTuple):
     """A window's whole solution, as the next window sees it: the B-spline of w
     (``knots`` (nc + 4,), ``coef`` (nc,)), where it starts braking for its terminal rest
@@ -247,7 +257,7 @@ class FeedProfileBuilder:
 
     def _raw_estimate(self, x):
         """Estimated speed² at x (K,) from the geometry there: static limits inflated,
-        sampled start and stop near the ends."""
+        sampled start and stop near the ends; and the ``_Local`` geometry it came from."""
         q1, q2, q3 = self.derivs(x)
         with np.errstate(divide="ignore", invalid="ignore"):
             wa = np.min(np.where(np.abs(q2) > 0, self.amax / np.abs(q2), np.inf), axis=1)
@@ -255,7 +265,7 @@ class FeedProfileBuilder:
         w = np.minimum.reduce([self.wmax_at(x, q1), FEED_EST_ACC_FACTOR**2 * wa, FEED_EST_JERK_FACTOR**2 * wj])
         ws = _discrete_start_curve(x, self.jt0, self.dt)
         we = _discrete_start_curve(self.L - x, self.jt1, self.dt)
-        return np.minimum(w, np.minimum(ws, we)), q1
+        return np.minimum(w, np.minimum(ws, we)), _Local(q1, q2, q3, FEED_EST_JERK_FACTOR**2 * wj)
 
     def estimate(self, x):
         """Estimated speed² at x (K,): ``_raw_estimate`` under the reach envelope of the
@@ -297,18 +307,14 @@ class FeedProfileBuilder:
         w = np.minimum(w, np.maximum(u, 0.0) ** (4.0 / 3.0))
         return w[1:] if carry is not None else w
 
-    def _spacing(self, x, w=None):
-        """Knot spacing wanted at x: time of motion at the estimated speed (w), geometry."""
-        _, q2, q3 = self.derivs(x)
-        k2 = np.max(np.abs(q2), axis=1)
-        k3 = np.max(np.abs(q3), axis=1)
-        if w is None:
-            w, _ = self._raw_estimate(x)
+    def _spacing(self, x, w, local):
+        """Knot spacing wanted at x: time of motion at the estimated speed (w), geometry
+        (``local``: ``_raw_estimate``'s at x)."""
+        k2 = np.max(np.abs(local.q2), axis=1)
+        k3 = np.max(np.abs(local.q3), axis=1)
         # the length scale of q_sss matters where the jerk limits the speed (the jerk
         # term of the estimate is within FEED_KNOT_JERK_NEAR of it): finer knots there
-        with np.errstate(divide="ignore"):
-            wj = np.min(np.where(np.abs(q3) > 0, (self.jmax / np.abs(q3)) ** (2.0 / 3.0), np.inf), axis=1)
-        g3 = np.where(FEED_EST_JERK_FACTOR**2 * wj <= FEED_KNOT_JERK_NEAR * w, FEED_KNOT_GEO_JERK, FEED_KNOT_GEO)
+        g3 = np.where(local.w_jerk <= FEED_KNOT_JERK_NEAR * w, FEED_KNOT_GEO_JERK, FEED_KNOT_GEO)
         geo = np.minimum(FEED_KNOT_GEO / np.maximum(k2, 1e-300), g3 / np.sqrt(np.maximum(k3, 1e-300)))
         v = np.sqrt(np.maximum(w, 0.0))
         hmin = np.where(x < 0.5 * self.L, self.hmin0, self.hmin1)
@@ -333,15 +339,15 @@ class FeedProfileBuilder:
         p2 = min(p1 + FEED_KNOT_BLOCK, m)
         ahead = np.concatenate((S[p1 + 1 : p2 + 1], 0.5 * (S[p1:p2] + S[p1 + 1 : p2 + 1])))
         ahead.sort()
-        wa_raw, qa = self._raw_estimate(ahead) if ahead.size else (np.zeros(0), None)
+        wa_raw, la = self._raw_estimate(ahead) if ahead.size else (np.zeros(0), None)
 
         def enveloped_spacing(probe):
-            w_raw, q1 = self._raw_estimate(probe)
+            w_raw, local = self._raw_estimate(probe)
             xs = np.concatenate((probe, ahead))
             ws = np.concatenate((w_raw, wa_raw))
-            qs = np.concatenate((q1, qa)) if ahead.size else q1
+            qs = np.concatenate((local.q1, la.q1)) if la is not None else local.q1
             w = self._envelope(xs, ws, qs, self._carry)[: probe.shape[0]]
-            return w, self._spacing(probe, w)
+            return w, self._spacing(probe, w, local)
 
         for _ in range(3):
             w, h = enveloped_spacing(probe)

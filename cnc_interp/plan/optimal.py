@@ -611,11 +611,9 @@ def _better_of(ctx, stage, passes, targeted):
     # giving up), its outcome moves by up to ±15 % with the knot spacing: a second spacing
     # is the hedge (a profile that ran clean is kept: the second plan would double its cost)
     planned_s = ctx.dt * _samples(blocks) if blocks is not None else 0.0
-    # (VPOp finishing the last stop, within OPT_COMPARE_TAIL_S of the end, is no trouble:
-    # arc_maxvel_xy's helix handed over one sample before its end and was planned twice)
-    ho = int(ctx.stats.get("handover", -1))
-    early_handover = blocks is not None and 0 <= ho < _samples(blocks) - int(OPT_COMPARE_TAIL_S / ctx.dt)
-    troubled = blocks is None or ctx.stats.get("retries", 0) > 0 or early_handover
+    # (VPOp finishing the last stop is no trouble: arc_maxvel_xy's helix handed over one
+    # sample before its end and was planned twice)
+    troubled = blocks is None or ctx.stats.get("retries", 0) > 0 or _handed_over_early(ctx, _samples(blocks))
     if troubled and planned_s <= OPT_ALT_KNOT_MAX_S:
         kept = dict(ctx.stats)  # the second run's stats stand only if its plan is kept
         try:
@@ -636,8 +634,7 @@ def _better_of(ctx, stage, passes, targeted):
         raise failed  # neither spacing planned the path: VPOp does (the caller's fallback)
     s = np.concatenate([b[0] for b in blocks])
     q = np.concatenate([b[1] for b in blocks])
-    ho = int(ctx.stats.get("handover", -1))
-    reached_end = ho < 0 or ho >= s.shape[0] - int(OPT_COMPARE_TAIL_S / ctx.dt)
+    reached_end = not _handed_over_early(ctx, s.shape[0])
     dipped_short = ctx.stats.get("retries", 0) > 0 and ctx.rough_s <= OPT_COMPARE_DIPPED_S
     if "fallback" not in ctx.stats and reached_end and not dipped_short:
         # the profile ran to the end (VPOp at most finished its last stop): it is kept
@@ -657,6 +654,13 @@ def _better_of(ctx, stage, passes, targeted):
     else:
         ctx.stats["kept"] = "profile"
         yield s, q
+
+
+def _handed_over_early(ctx, n_samples: int) -> bool:
+    """Did VPOp take over the profile's plan of ``n_samples`` before its last
+    OPT_COMPARE_TAIL_S (more than finishing the last stop)?"""
+    ho = int(ctx.stats.get("handover", -1))
+    return 0 <= ho < n_samples - int(OPT_COMPARE_TAIL_S / ctx.dt)
 
 
 def _route(ctx) -> str:
