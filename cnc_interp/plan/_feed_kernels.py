@@ -38,7 +38,7 @@ AxisLimits = namedtuple("AxisLimits", "moving amax jmax")
 Rows = namedtuple("Rows", "first coef b")
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def table_derivs(S, C, x, q1, q2, q3):
     """q_s, q_ss, q_sss (each (K, n)) of the table at sorted arc lengths x (K,)."""
     m = S.shape[0] - 1
@@ -64,7 +64,7 @@ def table_derivs(S, C, x, q1, q2, q3):
             q3[k, a] = 6.0 * c3 + t * (24.0 * c4 + t * 60.0 * c5)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def cubic_basis(knots, n_coef, x, first, B):
     """For sorted x (K,): ``first[k]`` the index of the first non-zero basis function and
     ``B[k, d, j]`` the d-th derivative (d = 0, 1, 2) of basis function first + j."""
@@ -119,7 +119,7 @@ def cubic_basis(knots, n_coef, x, first, B):
             B[k, 2, j] *= p * (p - 1)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def lp_rows(pts, lim, wmax, w_hat, inner, scale, rows):
     """Fill the ``Rows`` rows (in x_j = c_j / scale[j]) for the ``Collocation`` pts under
     the ``AxisLimits`` lim; returns their count.
@@ -181,7 +181,7 @@ def lp_rows(pts, lim, wmax, w_hat, inner, scale, rows):
     return r
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def join_derivs(S, C, xj, q1, q2, q3l, q3r):
     """At table knots xj (sorted, interior): q_s, q_ss (continuous there) and the third
     derivative from the piece on the left and on the right (it jumps at path joins)."""

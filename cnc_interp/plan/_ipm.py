@@ -39,7 +39,7 @@ _HUGE_PIVOT = 1e128
 _REG = 1e-12
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _band_cholesky(M, n, W):
     """In-place Cholesky of the SPD band matrix M (n, W): M[i, d] = M(i, i-d). False when
     a pivot is not positive."""
@@ -66,7 +66,7 @@ def _band_cholesky(M, n, W):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _band_solve(M, n, W, y):
     """Solve (L L^T) x = y in place with the band factor M of ``_band_cholesky``."""
     for i in range(n):
@@ -87,7 +87,7 @@ def _band_solve(M, n, W, y):
         y[i] = acc / M[i, 0]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _ax(first, coef, x, out):
     m, W = coef.shape
     for r in range(m):
@@ -98,7 +98,7 @@ def _ax(first, coef, x, out):
         out[r] = acc
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _steps(first, coef, dx, rp, s, lam, rc, predictor, ds, dl, adx):
     """The steps ds = -r_p - A dx and dλ = (r_c - λ ds) / s of a direction dx (r_c = -λ s
     for the predictor, else ``rc``), A dx into ``adx``; returns the longest steps (α_s,
@@ -128,7 +128,7 @@ def _steps(first, coef, dx, rp, s, lam, rc, predictor, ds, dl, adx):
     return ap, ad
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def lp_solve(n, first, coef, b, c, x, max_iter, tol):
     """Minimise c·x subject to the banded rows (see module docstring).
 

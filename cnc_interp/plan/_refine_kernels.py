@@ -59,7 +59,7 @@ _LOG_SAFE_HI = 1e250
 NewtonSystem = namedtuple("NewtonSystem", "g H hz gz")
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _q_d012(S, C, QEND, x, hint, q0, q1, q2):
     """q, q_s, q_ss of every axis at x (C axis-major (m, n, 6)); returns the piece (found
     from ``hint`` by ``_piece``: a walk from piece 0 along a long path's table was most of
@@ -77,7 +77,7 @@ def _q_d012(S, C, QEND, x, hint, q0, q1, q2):
     return p
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _stencil(d, i):
     """Coefficient i (0..d) of the d-th backward difference, oldest sample first."""
     if d == 1:
@@ -93,7 +93,7 @@ def _stencil(d, i):
     return 1.0
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _evaluate(S, C, QEND, P, nfree, moving, lim, fdt, Q0, Q1, Q2):
     """Axis positions and derivatives at every sample of the sequence P (K,)."""
     K = P.shape[0]
@@ -110,7 +110,7 @@ def _evaluate(S, C, QEND, P, nfree, moving, lim, fdt, Q0, Q1, Q2):
             Q2[k, i] = q2[i]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _rows(P, nfree, moving, lim, fdt, Q0, z, u_out):
     """u_r = bound - row (the barrier's arguments) for every row; returns the count and
     the largest relative violation (max over rows of row/bound - 1)."""
@@ -146,7 +146,7 @@ def _rows(P, nfree, moving, lim, fdt, Q0, z, u_out):
     return r, worst
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _assemble(P, nfree, moving, lim, fdt, Q1, Q2, u, mu, ns):
     """The ``NewtonSystem`` ns: gradient g (nfree), band Hessian H (nfree, 4) and the z
     column hz, of mu Σ -log(u_r) (z's own gradient 1 added by the caller in gz[0])."""
@@ -234,7 +234,7 @@ def _assemble(P, nfree, moving, lim, fdt, Q1, Q2, u, mu, ns):
     grad_z[1] = hzz
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _log_sum(u, r):
     """Σ log u[i] over i < r (every u[i] > 0), one log per block of _LOG_BLOCK factors
     (the barrier's value is most of a Newton step's work when every row takes a log);
@@ -255,7 +255,7 @@ def _log_sum(u, r):
     return acc
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def solve_window(S, C, QEND, pre, post, x0, moving, lim, fdt, max_newton, counts):
     """Positions x (nfree,) between ``pre`` (3,) and ``post`` (3,) minimising the largest
     relative violation z; stops as soon as z < _Z_TARGET. Returns (status, x, z);
@@ -383,7 +383,7 @@ def solve_window(S, C, QEND, pre, post, x0, moving, lim, fdt, max_newton, counts
     return INFEASIBLE, best_x, best_z
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def exact_ok(T, lim, sh, lo, hi, qbuf):
     """Samples lo..hi-1 of sh (with the samples before lo) pass verify's exact checks
     (the ``vpop.step.Limits`` lim) on the ``vpop.step.Table`` T; q positions go to qbuf

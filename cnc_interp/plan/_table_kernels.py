@@ -42,7 +42,7 @@ from .status import NO_LENGTH, NOT_FINITE, OK
 QuarterScratch = namedtuple("QuarterScratch", "t s2 half")
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _quarters(coef, breaks, w, k, ua, ub, glx, glw, uc, sub, sc):
     """Quarter points uc (3,) of [ua, ub] and the arc lengths sub (4,) of its quarters,
     each by one Gauss–Legendre rule (scratch ``QuarterScratch`` sc)."""
@@ -86,7 +86,7 @@ def _quarters(coef, breaks, w, k, ua, ub, glx, glw, uc, sub, sc):
         sub[j] = half[j] * acc
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def quarter_arcs(coef, breaks, w, seg, ua, ub, glx, glw):
     """Per piece (K,): quarter points uc (K, 3) and arc lengths of its quarters (K, 4)."""
     m = ua.shape[0]
@@ -107,7 +107,7 @@ def quarter_arcs(coef, breaks, w, seg, ua, ub, glx, glw):
     return uc, sub
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _seg_of_u(breaks, u):
     """``Path.segment_of_u`` for one value: searchsorted(breaks, u, 'right') - 1, clipped."""
     lo = 0
@@ -127,14 +127,14 @@ def _seg_of_u(breaks, u):
     return k
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _pos(coef, k, t, out, i, j):
     """q at local t of segment k into out[i, j, :]."""
     for ax in range(coef.shape[2]):
         out[i, j, ax] = quintic_d012(coef, k, ax, t)[0]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _knot(coef, breaks, w, u, Q, i):
     """Q[i] = q, q_s, q_ss at parameter u, as ``Path.derivatives_s`` (NaN where |q_u| = 0)."""
     k = _seg_of_u(breaks, u)
@@ -159,14 +159,14 @@ def _knot(coef, breaks, w, u, Q, i):
         Q[i, 2, ax] = Q[i, 2, ax] / sig**2 - qu * sig_u / sig**3
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _copy_knot(src, i, dst, j):
     for r in range(3):
         for ax in range(src.shape[2]):
             dst[j, r, ax] = src[i, r, ax]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _hermite(h, QA, ia, QB, ib, C, ic):
     """C[ic] (6, n): quintic Hermite power coefficients in s - s_a over a piece of
     length h from the knot data QA[ia] to QB[ib]."""
@@ -189,7 +189,7 @@ def _hermite(h, QA, ia, QB, ib, C, ic):
         C[ic, 5, ax] = (12.0 * d0 - 6.0 * d1 * h + d2 * h2) / (2.0 * h5)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, nogil=True, inline="always")
 def _piece_err(C, ic, t, QT, it, j):
     """max over the axes of |C[ic](t) - QT[it, j]|; a NaN counts as +inf."""
     e = 0.0
@@ -200,7 +200,7 @@ def _piece_err(C, ic, t, QT, it, j):
     return e
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def hermite_check(S, Q, off, qc):
     """Table of knots S (m+1,) and knot data Q (m+1, 3, n): coefficients C (m, 6, n)
     and each piece's largest deviation (m,) from the true positions qc (m, 3, n) at arc
@@ -220,7 +220,7 @@ def hermite_check(S, Q, off, qc):
     return C, err
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def piece_errors(h, QA, QB, off, qc):
     """Pieces with their own end data QA, QB (each (K, 3, n)) and lengths h (K,): the
     largest deviation (K,) of each Hermite piece from qc (K, 3, n) at local s = off (K, 3)."""
@@ -238,7 +238,7 @@ def piece_errors(h, QA, QB, off, qc):
     return err
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def initial_pieces(breaks, s_breaks, max_piece):
     """Initial pieces (ua, ub, seg): every segment, cut into equal u parts of at most
     ``max_piece`` of arc length each."""
@@ -264,14 +264,14 @@ def initial_pieces(breaks, s_breaks, max_piece):
     return ua, ub, seg
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _grow(x, cap):
     y = np.empty((cap,) + x.shape[1:], dtype=x.dtype)
     y[: x.shape[0]] = x
     return y
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _refine(coef, breaks, w, ua0, ub0, seg0, tol, scale, max_depth, glx, glw):
     """Depth-first bisection of the initial pieces (identity kinematics).
 
@@ -406,7 +406,7 @@ def _refine(coef, breaks, w, ua0, ub0, seg0, tol, scale, max_depth, glx, glw):
     )
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _finish(length, ds, off, Q, qc):
     """Knots S (m+1,) scaled so that S[-1] = length exactly, then (C, err) of
     ``hermite_check`` on that table, and the scale factor."""
@@ -427,7 +427,7 @@ def _finish(length, ds, off, Q, qc):
     return S, C, err, scale
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def build_identity(coef, breaks, s_breaks, w, length, tol, max_depth, max_piece, glx, glw, max_tries):
     """The whole table of one path in joint = program coordinates.
 
@@ -492,7 +492,7 @@ def build_identity(coef, breaks, s_breaks, w, length, tol, max_depth, max_piece,
     return OK, u, S, C, max_err, qend[0, 0]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def curvature_bounds(S, C, al, jl):
     """``JointTable.curvature_bounds`` (same sums in the same order): per piece (m,)
     max_i 1.25 max|q_ss,i|/al_i, max_i 1.25 max|q_sss,i|/jl_i and max_i 3.75 max|q_ss,i|/jl_i
@@ -531,7 +531,7 @@ def curvature_bounds(S, C, al, jl):
     return k2, k3, k23
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def speed_bound(S, C, vl):
     """Per piece (m,): max_i 1.02 max|q_s,i|/vl_i over five points of the piece."""
     m = C.shape[0]
