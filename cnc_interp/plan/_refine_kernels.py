@@ -120,7 +120,7 @@ def _evaluate(S, C, QEND, P, nfree, moving, lim, fdt, Q0, Q1, Q2):
 
 
 @njit(cache=True, nogil=True)
-def _rows(P, nfree, moving, lim, fdt, Q0, z, u_out):
+def _rows(P, nfree, moving, ilim, ifdt, Q0, z, u_out):
     """u_r = bound - row (the barrier's arguments) for every row; returns the count and
     the largest relative violation (max over rows of row/bound - 1)."""
     n = Q0.shape[1]
@@ -135,7 +135,7 @@ def _rows(P, nfree, moving, lim, fdt, Q0, z, u_out):
                 val = 0.0
                 for j in range(d + 1):
                     val += _stencil(d, j) * Q0[e - d + j, i]
-                rel = val / lim[d - 1, i]
+                rel = val * ilim[d - 1, i]
                 if rel - 1.0 > worst:
                     worst = rel - 1.0
                 if -rel - 1.0 > worst:
@@ -146,7 +146,7 @@ def _rows(P, nfree, moving, lim, fdt, Q0, z, u_out):
     # feed and monotonicity per step into/through the window
     for e in range(3, 3 + nfree + 1):
         step = P[e] - P[e - 1]
-        rel = step / fdt
+        rel = step * ifdt
         if rel - 1.0 > worst:
             worst = rel - 1.0
         u_out[r] = 1.0 + z - rel
@@ -156,7 +156,7 @@ def _rows(P, nfree, moving, lim, fdt, Q0, z, u_out):
 
 
 @njit(cache=True, nogil=True)
-def _assemble(P, nfree, moving, lim, fdt, Q1, Q2, u, mu, ns):
+def _assemble(P, nfree, moving, ilim, ifdt, Q1, Q2, u, mu, ns):
     """The ``NewtonSystem`` ns: gradient g (nfree), band Hessian H (nfree, 4) and the z
     column hz, of mu Σ -log(u_r) (z's own gradient 1 added by the caller in gz[0])."""
     g = ns.g
@@ -185,7 +185,7 @@ def _assemble(P, nfree, moving, lim, fdt, Q1, Q2, u, mu, ns):
                 for j in range(d + 1):
                     k = e - d + j - 3  # free index
                     if 0 <= k < nfree:
-                        c = _stencil(d, j) / lim[d - 1, i]
+                        c = _stencil(d, j) * ilim[d - 1, i]
                         idx[cnt] = k
                         gr[cnt] = c * Q1[e - d + j, i]
                         cr[cnt] = c * Q2[e - d + j, i]
@@ -194,10 +194,12 @@ def _assemble(P, nfree, moving, lim, fdt, Q1, Q2, u, mu, ns):
                 # summed once: both rows share gr, cr and the sample indices
                 up = u[r]
                 um = u[r + 1]
-                wp = mu / up
-                wm = mu / um
-                w2p = wp / up
-                w2m = wm / um
+                ip = 1.0 / up
+                im = 1.0 / um
+                wp = mu * ip
+                wm = mu * im
+                w2p = wp * ip
+                w2m = wm * im
                 wd = wp - wm
                 w2d = w2m - w2p
                 w2s = w2p + w2m
@@ -222,13 +224,13 @@ def _assemble(P, nfree, moving, lim, fdt, Q1, Q2, u, mu, ns):
             w = mu / ur
             w2 = mu / (ur * ur)
             if row == 0:  # u = 1 + z - (P_e - P_{e-1})/fdt
-                c1 = -1.0 / fdt
-                c0 = 1.0 / fdt
+                c1 = -ifdt
+                c0 = ifdt
                 gz -= w
                 hzz += w2
             else:  # u = (P_e - P_{e-1})/fdt + 1e-12
-                c1 = 1.0 / fdt
-                c0 = -1.0 / fdt
+                c1 = ifdt
+                c0 = -ifdt
             if 0 <= k1 < nfree:
                 g[k1] -= w * c1
                 H[k1, 0] += w2 * c1 * c1
@@ -247,7 +249,7 @@ def _assemble(P, nfree, moving, lim, fdt, Q1, Q2, u, mu, ns):
 
 
 @njit(cache=True, nogil=True)
-def _max_step(nfree, moving, lim, fdt, Q1, u, dx, dz, tau):
+def _max_step(nfree, moving, ilim, ifdt, Q1, u, dx, dz, tau):
     """The largest step alpha <= 1 along (dx, dz) keeping every row's linearisation at
     least (1 - tau) of its u (fraction to the boundary)."""
     n = Q1.shape[1]
@@ -262,7 +264,7 @@ def _max_step(nfree, moving, lim, fdt, Q1, u, dx, dz, tau):
                 for j in range(d + 1):
                     k = e - d + j - 3
                     if 0 <= k < nfree:
-                        drow += _stencil(d, j) / lim[d - 1, i] * Q1[e - d + j, i] * dx[k]
+                        drow += _stencil(d, j) * ilim[d - 1, i] * Q1[e - d + j, i] * dx[k]
                 # u+ = 1 + z - row: du = dz - drow; u- = 1 + z + row: du = dz + drow
                 du = dz - drow
                 if du < 0.0 and alpha * du < -tau * u[r]:
@@ -279,10 +281,10 @@ def _max_step(nfree, moving, lim, fdt, Q1, u, dx, dz, tau):
             dstep += dx[k1]
         if 0 <= k0 < nfree:
             dstep -= dx[k0]
-        du = dz - dstep / fdt
+        du = dz - dstep * ifdt
         if du < 0.0 and alpha * du < -tau * u[r]:
             alpha = -tau * u[r] / du
-        du = dstep / fdt
+        du = dstep * ifdt
         if du < 0.0 and alpha * du < -tau * u[r + 1]:
             alpha = -tau * u[r + 1] / du
         r += 2
@@ -332,13 +334,16 @@ def solve_window(S, C, QEND, pre, post, x0, moving, lim, fdt, max_newton, counts
     u = np.empty(nrows)
     ut = np.empty(nrows)
     _evaluate(S, C, QEND, P, nfree, moving, lim, fdt, Q0, Q1, Q2)
-    r, worst = _rows(P, nfree, moving, lim, fdt, Q0, 0.0, u)
+    # the rows are scaled by the limits' inverses (a product per term, not a quotient)
+    ilim = 1.0 / lim
+    ifdt = 1.0 / fdt
+    r, worst = _rows(P, nfree, moving, ilim, ifdt, Q0, 0.0, u)
     z = worst + 0.1 * (1.0 + abs(worst))
     # monotonicity must hold strictly from the start
     for e in range(3, 3 + nfree + 1):
         if not P[e] - P[e - 1] > -1e-12 * fdt:
             return FAILED, x, worst
-    r, worst = _rows(P, nfree, moving, lim, fdt, Q0, z, u)
+    r, worst = _rows(P, nfree, moving, ilim, ifdt, Q0, z, u)
     log_u = _log_sum(u, r)
     g = np.empty(nfree)
     H = np.empty((nfree, 4))
@@ -354,7 +359,7 @@ def solve_window(S, C, QEND, pre, post, x0, moving, lim, fdt, max_newton, counts
     stage_z = np.inf  # z where the last μ stage ended
     for it in range(max_newton):
         counts[0] += 1
-        _assemble(P, nfree, moving, lim, fdt, Q1, Q2, u, mu, NewtonSystem(g, H, hz, gzz))
+        _assemble(P, nfree, moving, ilim, ifdt, Q1, Q2, u, mu, NewtonSystem(g, H, hz, gzz))
         gz = 1.0 + gzz[0]
         hzz = gzz[1]
         for k in range(nfree):
@@ -379,7 +384,7 @@ def solve_window(S, C, QEND, pre, post, x0, moving, lim, fdt, max_newton, counts
             dec -= g[k] * dx[k]
         # backtracking: stay strictly inside, decrease the barrier function
         phi0 = z - mu * log_u
-        alpha = _max_step(nfree, moving, lim, fdt, Q1, u, dx, dz, _TAU)
+        alpha = _max_step(nfree, moving, ilim, ifdt, Q1, u, dx, dz, _TAU)
         accepted = False
         for _ in range(40):
             for k in range(nfree):
@@ -390,7 +395,7 @@ def solve_window(S, C, QEND, pre, post, x0, moving, lim, fdt, max_newton, counts
             zt = z + alpha * dz
             counts[1] += 1
             _evaluate(S, C, QEND, Pt, nfree, moving, lim, fdt, Q0, Q1, Q2)
-            rt, wt = _rows(Pt, nfree, moving, lim, fdt, Q0, zt, ut)
+            rt, wt = _rows(Pt, nfree, moving, ilim, ifdt, Q0, zt, ut)
             ok = True
             for i in range(rt):
                 if not ut[i] > 0.0:
