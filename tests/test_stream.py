@@ -21,7 +21,7 @@ from ._contract_helpers import SAMPLES, console_script
 from .conftest import CORPUS  # noqa: E402
 
 #: the smallest window there is: blocks of 7 samples, one path per job, nothing ahead
-TINY = Window(block_samples=7, job_paths=1, job_samples=1, jobs_ahead=1, chunks_ahead=1, path_window=1)
+TINY = Window(block_samples=7, job_paths=1, job_samples=1, jobs_ahead=1, samples_ahead=1, path_window=1)
 
 SAMPLE_MACHINES = {"five-axis-xyzac.ngc": "mikron-ucp710", "lathe-profile.ngc": "xz-lathe"}
 CORPUS_PROGRAMS = [

@@ -133,3 +133,26 @@ def test_low_jerk_limit_holds_across_path_joins(planner):
     report = verify(traj, machine)
     assert report.ok, report.format()
     assert_allclose(traj.q[-1], [40.0, 5.0, 0.0], rtol=0, atol=1e-12)
+
+
+def test_a_job_queue_holds_at_most_samples_ahead_samples():
+    """A worker waits for room by samples, not by chunks: a job of many short paths
+    must be able to run ahead of the consumer (a bound of 16 chunks made the second
+    worker wait on stellabee1's short paths), and a long path must not."""
+    from cnc_interp.plan.base import PathPlan
+    from cnc_interp.plan.timeline import _DONE, _Job
+
+    def chunk(k):
+        return PathPlan(s=np.arange(float(k)), q=np.zeros((k, 3)))
+
+    job = _Job([None] * 50, samples_ahead=100)
+    for i in range(50):  # fifty one-sample chunks: far more than sixteen
+        assert job.put((i, chunk(1)), timeout=0.01)
+    assert job.put((50, chunk(50)), timeout=0.01)  # 100 samples held: full
+    assert not job.put((51, chunk(1)), timeout=0.01)
+    assert job.get()[0] == 0
+    assert job.put((51, chunk(1)), timeout=0.01)  # one sample of room again
+    empty = _Job([None], samples_ahead=10)
+    assert empty.put((0, chunk(1000)), timeout=0.01)  # a first chunk goes in whatever its size
+    assert empty.put(_DONE, timeout=0.01)  # the end marker takes no room
+    assert empty.get()[1].s.shape[0] == 1000 and empty.get() is _DONE and empty.held == 0

@@ -59,7 +59,12 @@ class Window:
         job_paths: most paths planned as one job by a worker.
         job_samples: a job is closed once its paths' rough sample estimate reaches this.
         jobs_ahead: most jobs planned ahead of the one being consumed.
-        chunks_ahead: most chunks of one job waiting for the consumer.
+        samples_ahead: most samples of one job's chunks waiting for the consumer (a
+            job's first chunk is taken whatever its size). A bound on chunks instead
+            stalled the workers on programs of many short paths: a job ahead filled
+            its queue with one chunk per path and waited for the consumer, so one
+            worker planned at a time (stellabee1's first 20k lines, optimal: 1.15x
+            from a second thread).
         path_window: a streaming planner's own buffer (samples), ``None`` = whole path.
     """
 
@@ -67,7 +72,7 @@ class Window:
     job_paths: int = 256
     job_samples: int = 1 << 15
     jobs_ahead: int = 8
-    chunks_ahead: int = 16
+    samples_ahead: int = 1 << 19
     path_window: int | None = 1 << 18
 
     @classmethod
@@ -75,7 +80,7 @@ class Window:
         """Everything at once (what ``plan_program`` uses)."""
         big = 1 << 62
         return cls(
-            block_samples=big, job_paths=big, job_samples=big, jobs_ahead=big, chunks_ahead=big, path_window=None
+            block_samples=big, job_paths=big, job_samples=big, jobs_ahead=big, samples_ahead=big, path_window=None
         )
 
 
@@ -156,13 +161,43 @@ _DONE = object()
 
 class _Job:
     """Consecutive paths planned by one worker; their chunks arrive in ``out`` in order
-    as (path index in the job, chunk), then ``_DONE`` (or the exception raised)."""
+    as (path index in the job, chunk), then ``_DONE`` (or the exception raised). The
+    samples waiting in ``out`` are at most ``samples_ahead`` (``put`` waits for room)."""
 
-    __slots__ = ("paths", "out")
+    __slots__ = ("paths", "out", "cap", "held", "room")
 
-    def __init__(self, paths: list, chunks_ahead: int):
+    def __init__(self, paths: list, samples_ahead: int):
         self.paths = paths
-        self.out: queue.Queue = queue.Queue(maxsize=max(1, chunks_ahead))
+        self.out: queue.Queue = queue.Queue()
+        self.cap = max(1, samples_ahead)
+        self.held = 0  # samples in ``out``
+        self.room = threading.Condition()
+
+    def put(self, value, timeout: float) -> bool:
+        """Queue ``value`` once there is room for its samples (or ``out`` is empty; the
+        end marker and an exception take no room); False if there was none within
+        ``timeout`` seconds."""
+        n = _samples_of(value)
+        with self.room:
+            if not self.room.wait_for(lambda: n == 0 or self.held == 0 or self.held + n <= self.cap, timeout):
+                return False
+            self.held += n
+        self.out.put(value)
+        return True
+
+    def get(self):
+        value = self.out.get()
+        n = _samples_of(value)
+        if n:
+            with self.room:
+                self.held -= n
+                self.room.notify()
+        return value
+
+
+def _samples_of(value) -> int:
+    """Samples in a job's queue entry: (path index, chunk), ``_DONE`` or an exception."""
+    return int(value[1].s.shape[0]) if isinstance(value, tuple) else 0
 
 
 class _Workers:
@@ -188,11 +223,8 @@ class _Workers:
 
     def _put(self, job: _Job, value) -> bool:
         while not self.stop.is_set():
-            try:
-                job.out.put(value, timeout=0.1)
+            if job.put(value, timeout=0.1):
                 return True
-            except queue.Full:
-                continue
         return False
 
     def _loop(self) -> None:
@@ -282,7 +314,7 @@ def _job_results(pool, job: _Job):
         yield from pool.results(job)
         return
     while True:
-        got = job.out.get()
+        got = job.get()
         if got is _DONE:
             return
         if isinstance(got, BaseException):
@@ -459,7 +491,7 @@ def iter_timeline(
                 break
             if u[0] == "job":
                 budget.check(u[1])
-                job = _Job(u[1], window.chunks_ahead)
+                job = _Job(u[1], window.samples_ahead)
                 pool.submit(job)
                 in_flight += 1
                 ahead.append(("job", job))
