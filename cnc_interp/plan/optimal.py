@@ -32,6 +32,7 @@ import numpy as np
 from ..constants import VPOP_LIMIT_SHRINK, VPOP_MIN_LENGTH, VPOP_ROUNDING_ULPS
 from ..errors import PlanError
 from .base import PathPlan, collect_path_plan
+from .prefetch import ahead
 from .settings import OptimalOptions
 
 #: depths of the successive dips of w around a place where the sampler got stuck
@@ -101,6 +102,11 @@ OPT_COMPARE_TAIL_S = 0.3
 #: whose reference had to be lowered by dips is compared all the same (such a profile
 #: can lose a few periods to VPOp: quick-tests/tolerance_parabolic_check, 17 periods)
 OPT_COMPARE_DIPPED_S = 2.5
+#: a profile-routed path lasting at least this long (at its static limits, s) is profiled and
+#: sampled by a thread of its own ahead of its refinement (``prefetch.ahead``: the two
+#: stages on two cores; the samples do not depend on it): a long path is otherwise one
+#: core's work however many the timeline has (zigzag_0.002_0.001, one 50 s path)
+OPT_AHEAD_S = 1.0
 #: samples per chunk of ``iter_path_plan_optimal`` (the plan does not depend on it)
 OPT_CHUNK = 4096
 #: a profile piece whose time law spends more than this many times the estimated time
@@ -181,6 +187,9 @@ class _Path:
         self._prep = None
         #: the whole path is held before any sample leaves (``_better_of``)
         self.whole = False
+        #: the path's duration at its static speed limits (feed, axis speeds, curvature,
+        #: jerk; ``_route``), s: unlike ``rough_s``, it sees a curvature-limited path's length
+        self.static_s = 0.0
 
     def vrun(self):
         from .vpop import VpopRun
@@ -564,6 +573,8 @@ def _iter(path, joint_map, machine, dt_s, settings, stats, window):
     limit_s = float(_or(opts.compare_s, OPT_COMPARE_SAMPLES * dt))
     ctx.whole = route == "profile" and ctx.rough_s <= limit_s
     stage = _sampled(ctx) if route == "profile" else _vpop_stage(ctx, window)
+    if route == "profile" and passes and max(ctx.rough_s, ctx.static_s) >= OPT_AHEAD_S:
+        stage = ahead(stage)  # the refinement of one stretch while the next is profiled
     for _ in range(passes):
         stage = _refined(ctx, stage, targeted)
     if ctx.whole:
@@ -692,6 +703,7 @@ def _route(ctx) -> str:
     # duration at the static limits (a lower bound of the motion's, ramps aside)
     v = np.maximum(np.minimum(cap, curv), 1e-300)
     t_static = float(np.sum(w * 2.0 / (v[:-1] + v[1:])))
+    ctx.static_s = t_static
     ctx.stats["limited_share"] = round(share, 4)
     long_enough = t_static + ctx.ramp_s >= OPT_ROUTE_MIN_S
     return "profile" if share >= OPT_ROUTE_SHARE and long_enough else "vpop"
