@@ -105,8 +105,11 @@ OPT_COMPARE_DIPPED_S = 2.5
 #: a profile-routed path lasting at least this long (at its static limits, s) is profiled and
 #: sampled by a thread of its own ahead of its refinement (``prefetch.ahead``: the two
 #: stages on two cores; the samples do not depend on it): a long path is otherwise one
-#: core's work however many the timeline has (zigzag_0.002_0.001, one 50 s path)
-OPT_AHEAD_S = 1.0
+#: core's work however many the timeline has (zigzag_0.002_0.001, one 50 s path). Shorter
+#: paths keep one thread: the timeline's workers already keep the cores busy on a program
+#: of many (stellabee1 whole: 5:02 wall and 529 user-s with no thread, 5:39 and 582 with
+#: 1 s here, 5:20 and 551 with 10 s)
+OPT_AHEAD_S = 10.0
 #: samples per chunk of ``iter_path_plan_optimal`` (the plan does not depend on it)
 OPT_CHUNK = 4096
 #: a profile piece whose time law spends more than this many times the estimated time
