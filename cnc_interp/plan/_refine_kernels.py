@@ -248,6 +248,14 @@ def _assemble(P, nfree, moving, ilim, ifdt, Q1, Q2, u, mu, ns):
     grad_z[1] = hzz
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _to_boundary(alpha, du, ur, tau):
+    """alpha, shortened so that ur + alpha du keeps (1 - tau) of ur."""
+    if du < 0.0 and alpha * du < -tau * ur:
+        return -tau * ur / du
+    return alpha
+
+
 @njit(cache=True, nogil=True)
 def _max_step(nfree, moving, ilim, ifdt, Q1, u, dx, dz, tau):
     """The largest step alpha <= 1 along (dx, dz) keeping every row's linearisation at
@@ -266,12 +274,8 @@ def _max_step(nfree, moving, ilim, ifdt, Q1, u, dx, dz, tau):
                     if 0 <= k < nfree:
                         drow += _stencil(d, j) * ilim[d - 1, i] * Q1[e - d + j, i] * dx[k]
                 # u+ = 1 + z - row: du = dz - drow; u- = 1 + z + row: du = dz + drow
-                du = dz - drow
-                if du < 0.0 and alpha * du < -tau * u[r]:
-                    alpha = -tau * u[r] / du
-                du = dz + drow
-                if du < 0.0 and alpha * du < -tau * u[r + 1]:
-                    alpha = -tau * u[r + 1] / du
+                alpha = _to_boundary(alpha, dz - drow, u[r], tau)
+                alpha = _to_boundary(alpha, dz + drow, u[r + 1], tau)
                 r += 2
     for e in range(3, 3 + nfree + 1):
         k1 = e - 3
@@ -281,12 +285,8 @@ def _max_step(nfree, moving, ilim, ifdt, Q1, u, dx, dz, tau):
             dstep += dx[k1]
         if 0 <= k0 < nfree:
             dstep -= dx[k0]
-        du = dz - dstep * ifdt
-        if du < 0.0 and alpha * du < -tau * u[r]:
-            alpha = -tau * u[r] / du
-        du = dstep * ifdt
-        if du < 0.0 and alpha * du < -tau * u[r + 1]:
-            alpha = -tau * u[r + 1] / du
+        alpha = _to_boundary(alpha, dz - dstep * ifdt, u[r], tau)
+        alpha = _to_boundary(alpha, dstep * ifdt, u[r + 1], tau)
         r += 2
     return alpha
 
