@@ -272,7 +272,8 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
     from .gcode.stream import ProgramStream
     from .machine.load import DEFAULT_PRESET, load_machine
     from .plan.settings import PlanSettings
-    from .plan.timeline import Prefetch, TimelineInfo, iter_timeline
+    from .plan.prefetch import Prefetch
+    from .plan.timeline import TimelineInfo, iter_timeline
 
     t_start = time.perf_counter()
     out = opts.out or "-"

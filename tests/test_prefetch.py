@@ -1,15 +1,15 @@
-"""``plan.prefetch.ahead``: the same items, in order, and the producer's exception at the
-same point of the sequence."""
+"""``plan.prefetch.Prefetch``: the same items, in order, and the producer's exception at
+the same point of the sequence."""
 
 import threading
 import time
 
 import pytest
 
-from cnc_interp.plan.prefetch import ahead
+from cnc_interp.plan.prefetch import Prefetch
 
 
-def test_ahead_yields_the_items_in_order_from_another_thread():
+def test_prefetch_yields_the_items_in_order_from_another_thread():
     producers = set()
 
     def items():
@@ -17,11 +17,11 @@ def test_ahead_yields_the_items_in_order_from_another_thread():
             producers.add(threading.current_thread().name)
             yield i
 
-    assert list(ahead(items(), depth=3)) == list(range(100))
-    assert producers == {"cnc-interp-ahead"}
+    assert list(Prefetch(items(), ahead=3, name="cnc-interp-test")) == list(range(100))
+    assert producers == {"cnc-interp-test"}
 
 
-def test_ahead_raises_the_producers_exception_after_the_items_before_it():
+def test_prefetch_raises_the_producers_exception_after_the_items_before_it():
     def items():
         yield 1
         yield 2
@@ -29,12 +29,12 @@ def test_ahead_raises_the_producers_exception_after_the_items_before_it():
 
     got = []
     with pytest.raises(ValueError, match="stuck at 3"):
-        for x in ahead(items()):
+        for x in Prefetch(items()):
             got.append(x)
     assert got == [1, 2]
 
 
-def test_closing_ahead_stops_the_producer():
+def test_closing_the_iteration_stops_the_producer():
     made = []
 
     def items():
@@ -42,7 +42,7 @@ def test_closing_ahead_stops_the_producer():
             made.append(i)
             yield i
 
-    it = ahead(items(), depth=2)
+    it = iter(Prefetch(items(), ahead=2))
     assert next(it) == 0
     it.close()
     time.sleep(0.3)  # the producer notices within its poll (0.1 s)

@@ -32,7 +32,7 @@ import numpy as np
 from ..constants import VPOP_LIMIT_SHRINK, VPOP_MIN_LENGTH, VPOP_ROUNDING_ULPS
 from ..errors import PlanError
 from .base import PathPlan, collect_path_plan
-from .prefetch import ahead
+from .prefetch import Prefetch
 from .settings import OptimalOptions
 
 #: depths of the successive dips of w around a place where the sampler got stuck
@@ -103,13 +103,15 @@ OPT_COMPARE_TAIL_S = 0.3
 #: can lose a few periods to VPOp: quick-tests/tolerance_parabolic_check, 17 periods)
 OPT_COMPARE_DIPPED_S = 2.5
 #: a profile-routed path lasting at least this long (at its static limits, s) is profiled and
-#: sampled by a thread of its own ahead of its refinement (``prefetch.ahead``: the two
+#: sampled by a thread of its own ahead of its refinement (``prefetch.Prefetch``: the two
 #: stages on two cores; the samples do not depend on it): a long path is otherwise one
 #: core's work however many the timeline has (zigzag_0.002_0.001, one 50 s path). Shorter
 #: paths keep one thread: the timeline's workers already keep the cores busy on a program
 #: of many (stellabee1 whole: 5:02 wall and 529 user-s with no thread, 5:39 and 582 with
 #: 1 s here, 5:20 and 551 with 10 s)
 OPT_AHEAD_S = 10.0
+#: ... and that thread runs at most this many sampled blocks ahead
+OPT_AHEAD_BLOCKS = 8
 #: samples per chunk of ``iter_path_plan_optimal`` (the plan does not depend on it)
 OPT_CHUNK = 4096
 #: a profile piece whose time law spends more than this many times the estimated time
@@ -577,7 +579,8 @@ def _iter(path, joint_map, machine, dt_s, settings, stats, window):
     ctx.whole = route == "profile" and ctx.rough_s <= limit_s
     stage = _sampled(ctx) if route == "profile" else _vpop_stage(ctx, window)
     if route == "profile" and passes and max(ctx.rough_s, ctx.static_s) >= OPT_AHEAD_S:
-        stage = ahead(stage)  # the refinement of one stretch while the next is profiled
+        # the refinement of one stretch while the next is profiled
+        stage = Prefetch(stage, ahead=OPT_AHEAD_BLOCKS, name="cnc-interp-profile")
     for _ in range(passes):
         stage = _refined(ctx, stage, targeted)
     if ctx.whole:

@@ -1,72 +1,73 @@
-"""Run a generator ahead in its own thread: two pipeline stages on two cores.
+"""Run an iterable ahead of its consumer in a thread of its own (``Prefetch``).
 
-``ahead(items, depth)`` yields exactly what ``items`` yields, in order, and raises what it
-raises, at the same point of the sequence; a worker thread computes up to ``depth`` items
-before the consumer asks for them. The planners' stages are compiled loops that release
-the GIL, so a producing stage (the optimal planner's feed profile and sampler) and a
-consuming one (its window refinement) then run at once. The items do not depend on the
-timing: the output is the same bytes as without the thread.
+Two users: the streamed pipeline fits the program while the timeline hands out samples,
+and the optimal planner profiles a long path while it refines the stretch before (the
+planners' compiled loops release the GIL, so both stages run at once). The items, their
+order and where an exception is raised do not depend on the thread: the output is the
+same bytes as without it.
 """
 
 from __future__ import annotations
 
 import queue
 import threading
-from typing import Iterator, TypeVar
-
-T = TypeVar("T")
 
 #: how often a blocked producer checks that the consumer still wants items, s
 _POLL_S = 0.1
 
-_END = object()
 
+class Prefetch:
+    """Iterates ``iterable`` in a thread of its own (named ``name``), ``ahead`` items
+    ahead: the fit runs while the timeline hands out samples, and ``ready()`` tells the
+    timeline whether the next item is there (so that it consumes planned samples instead
+    of waiting). The thread's CPU time is ``cpu_s``; an exception is raised where the
+    consumer reaches it. Closing the iteration (or an exception in the consumer) stops the
+    thread at its next item; a daemon thread never keeps an interrupted process alive."""
 
-class _Raised:
-    """An exception raised by the producer, handed over to be raised by the consumer."""
+    def __init__(self, iterable, ahead: int = 512, name: str = "cnc-interp-fit"):
+        self.q: queue.Queue = queue.Queue(maxsize=max(1, ahead))
+        self.cpu_s = 0.0
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._run, args=(iterable,), daemon=True, name=name)
+        self.thread.start()
 
-    __slots__ = ("exc",)
-
-    def __init__(self, exc: BaseException):
-        self.exc = exc
-
-
-def ahead(items: Iterator[T], depth: int = 8) -> Iterator[T]:
-    """``items``, computed by a daemon thread up to ``depth`` items ahead of the caller.
-
-    Closing the returned generator (or an exception in the caller) stops the producer at
-    its next item; a daemon thread never keeps an interrupted process alive.
-    """
-    out: queue.Queue = queue.Queue(maxsize=max(1, depth))
-    stop = threading.Event()
-
-    def put(value) -> bool:
-        while not stop.is_set():
+    def _put(self, value) -> bool:
+        while not self.stop.is_set():
             try:
-                out.put(value, timeout=_POLL_S)
+                self.q.put(value, timeout=_POLL_S)
                 return True
             except queue.Full:
                 continue
         return False
 
-    def produce() -> None:
-        try:
-            for item in items:
-                if not put(item):
-                    return
-            put(_END)
-        except BaseException as exc:  # raised again by the consumer, where it belongs
-            put(_Raised(exc))
+    def _run(self, iterable) -> None:
+        import time
 
-    worker = threading.Thread(target=produce, daemon=True, name="cnc-interp-ahead")
-    worker.start()
-    try:
-        while True:
-            got = out.get()
-            if got is _END:
-                return
-            if isinstance(got, _Raised):
-                raise got.exc
-            yield got
-    finally:
-        stop.set()
+        t0 = time.thread_time()
+        try:
+            for item in iterable:
+                if not self._put(("item", item)):
+                    return
+            self._put(("end", None))
+        except BaseException as exc:
+            self._put(("error", exc))
+        finally:
+            self.cpu_s = time.thread_time() - t0
+
+    def ready(self) -> bool:
+        return not self.q.empty()
+
+    def __iter__(self):
+        try:
+            while True:
+                kind, value = self.q.get()
+                if kind == "end":
+                    return
+                if kind == "error":
+                    raise value
+                yield value
+        finally:
+            self.close()
+
+    def close(self) -> None:
+        self.stop.set()
