@@ -3,13 +3,17 @@
     .venv/bin/python benchmarks/plan.py                  # trident + a corpus selection
     .venv/bin/python benchmarks/plan.py --sweep          # every corpus program (slow)
     .venv/bin/python benchmarks/plan.py --json out.json
+    .venv/bin/python benchmarks/plan.py --sweep --planner optimal --baseline vpop.json
 
 For each program: parse + fit + plan (VPOp) + verify, with the plan stage timed on
 its own (numba compiled beforehand; the selection keeps the fastest of ``--repeat`` runs).
 "x real time" = cycle time / planning wall time.
 The sweep plans every corpus program that parses on a LinuxCNC configuration
 (corpus ``configs/*.ini``, default jerk where the INI has none), checks every limit,
-and lists failures with their error message.
+and lists failures with their error message. Every run ends with the programs below
+issue 13's 100x real time (and their share of the cycle); ``--baseline`` an earlier
+run's ``--json`` (VPOp's sweep, or one from an older checkout) compares the total plan time
+and cycle of the programs both planned.
 """
 
 from __future__ import annotations
@@ -27,6 +31,8 @@ CORPUS = os.environ.get(
     "CNC_CORPUS", os.path.join(os.path.dirname(__file__), "..", "..", "shared", "corpus", "linuxcnc")
 )
 TRIDENT = os.path.join(CORPUS, "nurbs-g5", "trident-xy.ngc")
+#: issue 13's planning-speed target per 3-axis corpus program, x real time at 1 kHz
+TARGET_X_REAL_TIME = 100.0
 SELECTION = [
     ("nurbs-g5/trident-xy.ngc", "mikron-ucp710"),
     ("nurbs-g5/trident-xy.ngc", "generic-mill"),
@@ -97,6 +103,13 @@ def main() -> None:
     ap.add_argument("--sweep", action="store_true", help="every corpus program on a LinuxCNC INI")
     ap.add_argument("--ini", default=os.path.join(CORPUS, "configs", "axis_mm.ini"))
     ap.add_argument("--json", default=None)
+    ap.add_argument(
+        "--baseline",
+        default=None,
+        metavar="B.json",
+        help="an earlier run's --json (another planner, or an older checkout): total plan "
+        "time and cycle of the programs both planned, against it",
+    )
     ap.add_argument("--planner", default="vpop", help="the per-path planner (default vpop)")
     ap.add_argument("--no-bound", action="store_true", help="skip the V/A lower bound")
     ap.add_argument(
@@ -149,9 +162,39 @@ def main() -> None:
             f"plan {tot_plan:.2f} s -> {tot_samples / tot_plan:,.0f} setpoints/s, "
             f"{tot_cycle / tot_plan:.1f}x real time (process CPU {tot_cpu:.2f} s)"
         )
+        # the issue-13 target is per program: the slow ones, and how much of the cycle
+        # they carry (programs that do not move are left out)
+        slow = [r for r in ok if r["cycle_time_s"] > 0 and r["x_real_time"] < TARGET_X_REAL_TIME]
+        slow_cycle = sum(r["cycle_time_s"] for r in slow)
+        print(
+            f"BELOW {TARGET_X_REAL_TIME:g}x: {len(slow)} programs, {slow_cycle:.2f} s of cycle "
+            f"({100.0 * slow_cycle / max(tot_cycle, 1e-300):.1f} %), {sum(r['plan_s'] for r in slow):.2f} s of plan"
+        )
+        if args.baseline:
+            _compare(ok, args.baseline)
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(rows, fh, indent=1)
+
+
+def _compare(ok: list, baseline_path: str) -> None:
+    """Total plan time and cycle of the programs planned here and in the baseline run."""
+    with open(baseline_path) as fh:
+        base = {(r["program"], os.path.basename(r["machine"])): r for r in json.load(fh) if r.get("status") == "ok"}
+    pairs = [(r, base[key]) for r in ok if (key := (r["program"], os.path.basename(r["machine"]))) in base]
+    if not pairs:
+        print(f"AGAINST {baseline_path}: no program in common")
+        return
+    plan, plan0 = sum(r["plan_s"] for r, _ in pairs), sum(b["plan_s"] for _, b in pairs)
+    cyc, cyc0 = sum(r["cycle_time_s"] for r, _ in pairs), sum(b["cycle_time_s"] for _, b in pairs)
+    print(
+        f"AGAINST {os.path.basename(baseline_path)} ({len(pairs)} programs): plan {plan:.2f} s vs "
+        f"{plan0:.2f} s ({plan / max(plan0, 1e-300):.2f}x), cycle {cyc:.2f} s vs {cyc0:.2f} s "
+        f"({100.0 * (cyc / max(cyc0, 1e-300) - 1.0):+.2f} %)"
+    )
+    worst = sorted(pairs, key=lambda p: p[1]["plan_s"] - p[0]["plan_s"])[:5]
+    for r, b in worst:
+        print(f"  {r['program']:48s} plan {r['plan_s']:8.2f} s vs {b['plan_s']:8.2f} s")
 
 
 def _print(r: dict) -> None:
