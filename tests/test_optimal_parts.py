@@ -173,3 +173,56 @@ def test_refine_keeps_plans_exact_and_never_longer(machine):
     assert_allclose(q[:-1], _eval_table(table.S, table.C, s[:-1]), atol=1e-12)
     if machine is UCP:
         assert saved >= 1  # at 6 ms VPOp's plan always leaves a period or more
+
+
+def _loose_numpy(sh, qh, a, b, moving, vl, al, jl, fdt, skip):
+    """The window test as numpy computes it (the reference of ``_refine_kernels.loose``)."""
+    lo = max(a - 3, 0)
+    q = qh[lo:b]
+    if lo == 0:
+        q = np.concatenate((np.repeat(qh[:1], 3, axis=0), q))
+    d1 = np.diff(q, axis=0)
+    d2 = np.diff(d1, axis=0)
+    d3 = np.diff(d2, axis=0)
+    r = np.max(np.abs(d3[:, moving]) / jl[moving], axis=1)
+    r = np.maximum(r, np.max(np.abs(d2[1:, moving]) / al[moving], axis=1))
+    r = np.maximum(r, np.max(np.abs(d1[2:, moving]) / vl[moving], axis=1))
+    steps = np.diff(sh[max(a - 1, 0) : b])
+    m = min(r.shape[0], steps.shape[0])
+    return bool(np.any(np.maximum(r[-m:], steps[-m:] / fdt) < skip))
+
+
+def test_refine_kernels_match_numpy_bit_for_bit():
+    """The window visit's helpers compiled (``_resample``, ``loose``, ``dip_or_end``) give
+    numpy's answers exactly: the plans do not depend on where they run."""
+    from cnc_interp.plan import _refine_kernels as RK
+
+    rng = np.random.default_rng(7)
+    for _ in range(300):
+        nt = int(rng.integers(5, 70))
+        cur = np.cumsum(rng.uniform(0.0, 1.0, nt))
+        m = int(rng.integers(2, nt - 1))
+        want = np.interp(np.linspace(0.0, 1.0, m + 2), np.linspace(0.0, 1.0, nt), cur)[1:-1]
+        assert np.array_equal(RK._resample(cur, m), want)
+    vl, al, jl = np.array([0.5, 0.5, 0.6]), np.array([0.3, 0.3, 0.4]), np.array([0.5, 0.5, 0.6])
+    moving = np.array([True, False, True])
+    hits = 0
+    for _ in range(400):
+        N = int(rng.integers(12, 90))
+        steps = rng.uniform(0.0, 0.2, N - 1) * (1.0 + np.sin(np.arange(N - 1) / 3.0))
+        sh = np.concatenate(([0.0], np.cumsum(steps)))
+        qh = np.stack([sh, 0.0 * sh, 0.5 * sh + 1e-4 * np.sin(sh * 9.0)], axis=1)
+        a = int(rng.integers(1, N - 4))
+        b = int(rng.integers(a + 3, N))
+        skip = float(rng.uniform(0.0, 0.5))
+        got = RK.loose(sh, qh, a, b, moving, vl, al, jl, 0.4, skip)
+        assert got == _loose_numpy(sh, qh, a, b, moving, vl, al, jl, 0.4, skip)
+        hits += got
+        W, done, dip = int(rng.integers(5, 60)), bool(rng.integers(0, 2)), 0.7
+        if a <= 2 or (done and b >= N - 2):
+            want_dip = True
+        else:
+            inner = np.diff(sh[a - 1 : b])
+            want_dip = bool(np.min(inner) < dip * np.max(np.diff(sh[max(a - W, 1) - 1 : min(b + W, N)])))
+        assert RK.dip_or_end(sh, a, b, W, done, dip) == want_dip
+    assert 40 < hits < 360, hits  # both answers occur

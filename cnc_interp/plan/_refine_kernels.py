@@ -459,3 +459,130 @@ def exact_ok(T, lim, sh, lo, hi, qbuf):
         for i in range(n):
             qbuf[k, i] = q[i]
     return True
+
+
+@njit(cache=True, nogil=True)
+def _resample(cur, m):
+    """``np.interp(np.linspace(0, 1, m + 2), np.linspace(0, 1, len(cur)), cur)[1:-1]``
+    with numpy's arithmetic (the same bits): the window's samples spread over m."""
+    nt = cur.shape[0]
+    step_t = 1.0 / (nt - 1)
+    step_n = 1.0 / (m + 1)
+    out = np.empty(m)
+    j = 0
+    for i in range(1, m + 1):
+        x = i * step_n + 0.0
+        while j + 2 < nt and (j + 1) * step_t + 0.0 <= x:
+            j += 1
+        x0 = j * step_t + 0.0
+        x1 = (j + 1) * step_t + 0.0 if j + 1 < nt - 1 else 1.0
+        slope = (cur[j + 1] - cur[j]) / (x1 - x0)
+        out[i - 1] = slope * (x - x0) + cur[j]
+    return out
+
+
+@njit(cache=True, nogil=True)
+def shorten(S, C, QEND, T, lim_exact, sh, qh, a, b, L, max_cut, moving, lim, fdt, max_newton, counts):
+    """One window visit of ``refine.Refiner.window``: samples a..b-1 of (sh, qh) with one
+    fewer at a time (``solve_window``, then ``exact_ok`` with the three samples after the
+    window, rest at L past the end) while each try succeeds, at most ``max_cut``.
+    Returns (dropped, solves, x, qx): the last accepted positions and their axis values
+    (empty when none was)."""
+    N = sh.shape[0]
+    n = qh.shape[1]
+    pre = np.empty(3)
+    post = np.empty(3)
+    post_exact = np.empty(3)
+    q_pre = np.empty((3, n))
+    for i in range(3):
+        k = max(a - 3 + i, 0)
+        pre[i] = sh[k]
+        q_pre[i] = qh[k]
+        post[i] = sh[min(b + i, N - 1)]
+        post_exact[i] = sh[b + i] if b + i < N else L
+    cur = sh[a - 1 : b + 1].copy()
+    M = b - a
+    dropped = 0
+    solves = 0
+    kept_x = np.empty(0)
+    kept_q = np.empty((0, n))
+    while dropped < max_cut and M - 1 >= 2:
+        m = M - 1
+        x0 = _resample(cur, m)
+        st, x, z = solve_window(S, C, QEND, pre, post, x0, moving, lim, fdt, max_newton, counts)
+        solves += 1
+        if st != OK:
+            break
+        full = np.empty(m + 6)
+        full[:3] = pre
+        full[3 : 3 + m] = x
+        full[3 + m :] = post_exact
+        qb = np.empty((m + 6, n))
+        qb[:3] = q_pre
+        if not exact_ok(T, lim_exact, full, 3, m + 6, qb):
+            break
+        kept_x = x
+        kept_q = qb[3 : 3 + m].copy()
+        nxt = np.empty(m + 2)
+        nxt[0] = cur[0]
+        nxt[1 : m + 1] = x
+        nxt[m + 1] = cur[cur.shape[0] - 1]
+        cur = nxt
+        M = m
+        dropped += 1
+    return dropped, solves, kept_x, kept_q
+
+
+@njit(cache=True, nogil=True)
+def loose(sh, qh, a, b, moving, vl, al, jl, fdt, skip):
+    """``refine.Refiner.loose`` with numpy's arithmetic: has some sample of the window
+    a..b-1 every limit ratio below ``skip`` (velocity, acceleration and jerk of the moving
+    axes, the step against the feed)? Needs the three samples before a (copies of the
+    first sample at the path's start)."""
+    lo = max(a - 3, 0)
+    pad = 3 if lo == 0 else 0
+    nr = b - lo + pad - 3  # third differences in the window (and d2[1:], d1[2:])
+    base = max(a - 1, 0)
+    ns = b - base - 1  # steps
+    m = min(nr, ns)
+    n = qh.shape[1]
+    for u in range(m):
+        t = nr - m + u  # the rows t .. t+3 of the padded sequence
+        i0 = max(lo + t - pad, lo)
+        i1 = max(lo + t + 1 - pad, lo)
+        i2 = max(lo + t + 2 - pad, lo)
+        i3 = lo + t + 3 - pad
+        r = 0.0
+        for i in range(n):
+            if not moving[i]:
+                continue
+            d10 = qh[i1, i] - qh[i0, i]
+            d11 = qh[i2, i] - qh[i1, i]
+            d12 = qh[i3, i] - qh[i2, i]
+            d20 = d11 - d10
+            d21 = d12 - d11
+            r = max(r, abs(d21 - d20) / jl[i], abs(d21) / al[i], abs(d12) / vl[i])
+        v = ns - m + u
+        r = max(r, (sh[base + v + 1] - sh[base + v]) / fdt)
+        if r < skip:
+            return True
+    return False
+
+
+@njit(cache=True, nogil=True)
+def dip_or_end(sh, la, b, W, done, dip):
+    """``optimal._dip_or_end``: does the window la..b-1 hold the path's start, its end
+    (``done``: no sample follows the buffer), or a step below ``dip`` times the largest
+    step within W samples around?"""
+    N = sh.shape[0]
+    if la <= 2 or (done and b >= N - 2):
+        return True
+    if b - la < 1:
+        return False
+    big = -np.inf
+    for k in range(max(la - W, 1), min(b + W, N)):
+        big = max(big, sh[k] - sh[k - 1])
+    small = np.inf
+    for k in range(la, b):
+        small = min(small, sh[k] - sh[k - 1])
+    return small < dip * big

@@ -507,11 +507,9 @@ def _refined(ctx, blocks, targeted: bool = False):
 def _dip_or_end(sh, la, b, W, done) -> bool:
     """Does the window la..b-1 hold the path's start, its end, or a dip of the speed (a
     step below OPT_DIP times the largest step within W samples around)?"""
-    if la <= 2 or (done and b >= sh.shape[0] - 2):
-        return True
-    steps = np.diff(sh[max(la - W, 1) - 1 : min(b + W, sh.shape[0])])
-    inner = np.diff(sh[la - 1 : b])
-    return bool(inner.size and np.min(inner) < OPT_DIP * np.max(steps))
+    from . import _refine_kernels as RK
+
+    return bool(RK.dip_or_end(sh, la, b, W, done, OPT_DIP))
 
 
 def _rechunk(blocks, chunk: int):

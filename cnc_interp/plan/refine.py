@@ -60,61 +60,35 @@ class Refiner:
         """Is some sample of the window a..b-1 clearly below every limit? (A window whose
         samples all keep a limit within REFINE_SKIP of active cannot lose a period
         cheaply; it is skipped.) Needs the three samples before a."""
-        lo = max(a - 3, 0)
-        q = qh[lo:b]
-        if lo == 0:
-            q = np.concatenate((np.repeat(qh[:1], 3, axis=0), q))
-        d1 = np.diff(q, axis=0)
-        d2 = np.diff(d1, axis=0)
-        d3 = np.diff(d2, axis=0)
-        mv = self.moving
-        r = np.max(np.abs(d3[:, mv]) / self.jl[mv], axis=1)
-        r = np.maximum(r, np.max(np.abs(d2[1:, mv]) / self.al[mv], axis=1))
-        r = np.maximum(r, np.max(np.abs(d1[2:, mv]) / self.vl[mv], axis=1))
-        steps = np.diff(sh[max(a - 1, 0) : b])
-        m = min(r.shape[0], steps.shape[0])
-        r = np.maximum(r[-m:], steps[-m:] / self.fdt)
-        return bool(np.any(r < REFINE_SKIP))
+        return RK.loose(sh, qh, a, b, self.moving, self.vl, self.al, self.jl, self.fdt, REFINE_SKIP)
 
     def window(self, sh, qh, a: int, b: int, max_cut: int):
         """Try to drop samples from the window a..b-1 of (sh, qh) (both ending at the
         end point, rest implied after), one at a time while each next one succeeds (a
-        try that drops several at once costs more Newton steps than the tries it saves).
-        Returns the new (sh, qh, dropped); the buffers are spliced once, at the end."""
-        N = sh.shape[0]
-        M = b - a
-        pre = np.array([sh[max(a - 3 + i, 0)] for i in range(3)])
-        post = np.array([sh[min(b + i, N - 1)] for i in range(3)])
-        # the exact check's buffer: three samples before the window (rest padding at the
-        # path's start), the window, the three after it (rest at L past the end)
-        post_exact = np.array([sh[b + i] if b + i < N else self.L for i in range(3)])
-        q_pre = qh[[max(a - 3 + i, 0) for i in range(3)]]
-        cur = sh[a - 1 : b + 1].copy()
-        dropped = 0
-        kept = None
-        while dropped < max_cut and M - 1 >= 2:
-            Mn = M - 1
-            tn = np.linspace(0.0, 1.0, Mn + 2)
-            tt = np.linspace(0.0, 1.0, cur.shape[0])
-            x0 = np.interp(tn, tt, cur)[1:-1]
-            st, x, z = RK.solve_window(
-                self.S, self.C, self.QE, pre, post, x0, self.moving, self.lim, self.fdt, REFINE_NEWTON, self.counts
-            )
-            self.solves += 1
-            if st != RK.OK:
-                break
-            full = np.concatenate((pre, x, post_exact))
-            qb = np.empty((full.shape[0], self.n))
-            qb[:3] = q_pre
-            if not RK.exact_ok(self.joints, self.limits, full, 3, full.shape[0], qb):
-                break
-            kept = (x, qb[3 : 3 + Mn].copy())
-            cur = np.concatenate(([cur[0]], x, [cur[-1]]))
-            M = Mn
-            dropped += 1
-        if kept is None:
+        try that drops several at once costs more Newton steps than the tries it saves;
+        ``_refine_kernels.shorten``). Returns the new (sh, qh, dropped); the buffers are
+        spliced once, at the end."""
+        dropped, solves, x, qx = RK.shorten(
+            self.S,
+            self.C,
+            self.QE,
+            self.joints,
+            self.limits,
+            sh,
+            qh,
+            a,
+            b,
+            self.L,
+            max_cut,
+            self.moving,
+            self.lim,
+            self.fdt,
+            REFINE_NEWTON,
+            self.counts,
+        )
+        self.solves += solves
+        if not dropped:
             return sh, qh, 0
-        x, qx = kept
         sh = np.concatenate((sh[:a], x, sh[b:]))
         qh = np.concatenate((qh[:a], qx, qh[b:]))
         return sh, qh, dropped
