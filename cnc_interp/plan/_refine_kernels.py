@@ -63,6 +63,13 @@ _LOG_BLOCK = 8
 _LOG_SAFE_LO = 1e-250
 _LOG_SAFE_HI = 1e250
 
+#: one path's refinement problem, as ``shorten`` needs it: the joint table (S (m + 1,),
+#: C axis-major (m, n, 6), QEND (n,)) and the same as a ``vpop.step.Table`` (joints), the
+#: exact check's ``vpop.step.Limits`` (limits), the moving axes (n,) bool, the step limits
+#: lim (3, n) (velocity, acceleration, jerk per period), the feed per period fdt and the
+#: path's length L (the rest after its end)
+RefineProblem = namedtuple("RefineProblem", "S C QEND joints limits moving lim fdt L")
+
 #: the barrier's Newton system that ``_assemble`` fills: gradient g (nfree,), band
 #: Hessian H (nfree, 4), the z column hz (nfree,), and gz (2,): z's gradient and curvature
 NewtonSystem = namedtuple("NewtonSystem", "g H hz gz")
@@ -482,12 +489,14 @@ def _resample(cur, m):
 
 
 @njit(cache=True, nogil=True)
-def shorten(S, C, QEND, T, lim_exact, sh, qh, a, b, L, max_cut, moving, lim, fdt, max_newton, counts):
-    """One window visit of ``refine.Refiner.window``: samples a..b-1 of (sh, qh) with one
-    fewer at a time (``solve_window``, then ``exact_ok`` with the three samples after the
-    window, rest at L past the end) while each try succeeds, at most ``max_cut``.
-    Returns (dropped, solves, x, qx): the last accepted positions and their axis values
-    (empty when none was)."""
+def shorten(prob, sh, qh, a, b, max_cut, max_newton, counts):
+    """One window visit of ``refine.Refiner.window`` on the ``RefineProblem`` prob:
+    samples a..b-1 of (sh, qh) with one fewer at a time (``solve_window``, then
+    ``exact_ok`` with the three samples after the window, rest at L past the end) while
+    each try succeeds, at most ``max_cut``. Returns (dropped, solves, x, qx): the last
+    accepted positions and their axis values (empty when none was)."""
+    S, C, QEND, T, lim_exact = prob.S, prob.C, prob.QEND, prob.joints, prob.limits
+    moving, lim, fdt, L = prob.moving, prob.lim, prob.fdt, prob.L
     N = sh.shape[0]
     n = qh.shape[1]
     pre = np.empty(3)

@@ -52,6 +52,9 @@ class Refiner:
         # change, so a path whose segments differ in feed is rare; it is only slower)
         self.fdt = (float(np.min(feeds)) if feeds.size else 1e300) * dt * (1.0 - 1e-10)
         self.n = table.C.shape[2]
+        self.problem = RK.RefineProblem(
+            self.S, self.C, self.QE, self.joints, self.limits, self.moving, self.lim, self.fdt, float(self.L)
+        )
         #: Newton steps, row evaluations and window solves spent (statistics)
         self.counts = np.zeros(2, dtype=np.int64)
         self.solves = 0
@@ -68,24 +71,7 @@ class Refiner:
         try that drops several at once costs more Newton steps than the tries it saves;
         ``_refine_kernels.shorten``). Returns the new (sh, qh, dropped); the buffers are
         spliced once, at the end."""
-        dropped, solves, x, qx = RK.shorten(
-            self.S,
-            self.C,
-            self.QE,
-            self.joints,
-            self.limits,
-            sh,
-            qh,
-            a,
-            b,
-            self.L,
-            max_cut,
-            self.moving,
-            self.lim,
-            self.fdt,
-            REFINE_NEWTON,
-            self.counts,
-        )
+        dropped, solves, x, qx = RK.shorten(self.problem, sh, qh, a, b, max_cut, REFINE_NEWTON, self.counts)
         self.solves += solves
         if not dropped:
             return sh, qh, 0
