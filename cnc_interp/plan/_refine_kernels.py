@@ -20,6 +20,12 @@ one sample each), so the Newton matrix is a band of half-width 3 bordered by the
 two band solves per step. The negative part of the rows' curvature is dropped (a
 Gauss–Newton-like matrix, always positive definite), and every iterate stays strictly
 inside (u > 0): the method never leaves the region where the barrier is defined.
+
+``shorten`` is one visit of a window (``refine.Refiner.window``): one fewer sample at a time,
+each solve followed by ``exact_ok``, while the tries succeed. ``loose`` and ``dip_or_end``
+are the refinement's tests of which windows to visit. The three compute exactly what the
+numpy code they replaced did (the same operations in the same order): a plan does not
+depend on where its refinement ran.
 """
 
 from __future__ import annotations
