@@ -175,8 +175,9 @@ def test_refine_keeps_plans_exact_and_never_longer(machine):
         assert saved >= 1  # at 6 ms VPOp's plan always leaves a period or more
 
 
-def _loose_numpy(sh, qh, a, b, moving, vl, al, jl, fdt, skip):
+def _loose_numpy(sh, qh, a, b, moving, lim, fdt, skip):
     """The window test as numpy computes it (the reference of ``_refine_kernels.loose``)."""
+    vl, al, jl = lim
     lo = max(a - 3, 0)
     q = qh[lo:b]
     if lo == 0:
@@ -204,7 +205,7 @@ def test_refine_kernels_match_numpy_bit_for_bit():
         m = int(rng.integers(2, nt - 1))
         want = np.interp(np.linspace(0.0, 1.0, m + 2), np.linspace(0.0, 1.0, nt), cur)[1:-1]
         assert np.array_equal(RK._resample(cur, m), want)
-    vl, al, jl = np.array([0.5, 0.5, 0.6]), np.array([0.3, 0.3, 0.4]), np.array([0.5, 0.5, 0.6])
+    lim = np.array([[0.5, 0.5, 0.6], [0.3, 0.3, 0.4], [0.5, 0.5, 0.6]])  # vl, al, jl
     moving = np.array([True, False, True])
     hits = 0
     for _ in range(400):
@@ -215,8 +216,8 @@ def test_refine_kernels_match_numpy_bit_for_bit():
         a = int(rng.integers(1, N - 4))
         b = int(rng.integers(a + 3, N))
         skip = float(rng.uniform(0.0, 0.5))
-        got = RK.loose(sh, qh, a, b, moving, vl, al, jl, 0.4, skip)
-        assert got == _loose_numpy(sh, qh, a, b, moving, vl, al, jl, 0.4, skip)
+        got = RK.loose(sh, qh, a, b, moving, lim, 0.4, skip)
+        assert got == _loose_numpy(sh, qh, a, b, moving, lim, 0.4, skip)
         hits += got
         W, done, dip = int(rng.integers(5, 60)), bool(rng.integers(0, 2)), 0.7
         if a <= 2 or (done and b >= N - 2):

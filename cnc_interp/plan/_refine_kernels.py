@@ -549,10 +549,10 @@ def shorten(prob, sh, qh, a, b, max_cut, max_newton, counts):
 
 
 @njit(cache=True, nogil=True)
-def loose(sh, qh, a, b, moving, vl, al, jl, fdt, skip):
+def loose(sh, qh, a, b, moving, lim, fdt, skip):
     """``refine.Refiner.loose`` with numpy's arithmetic: has some sample of the window
     a..b-1 every limit ratio below ``skip`` (velocity, acceleration and jerk of the moving
-    axes, the step against the feed)? Needs the three samples before a (copies of the
+    axes against lim (3, n), the step against the feed fdt)? Needs the three samples before a (copies of the
     first sample at the path's start)."""
     lo = max(a - 3, 0)
     pad = 3 if lo == 0 else 0
@@ -576,7 +576,7 @@ def loose(sh, qh, a, b, moving, vl, al, jl, fdt, skip):
             d12 = qh[i3, i] - qh[i2, i]
             d20 = d11 - d10
             d21 = d12 - d11
-            r = max(r, abs(d21 - d20) / jl[i], abs(d21) / al[i], abs(d12) / vl[i])
+            r = max(r, abs(d21 - d20) / lim[2, i], abs(d21) / lim[1, i], abs(d12) / lim[0, i])
         v = ns - m + u
         r = max(r, (sh[base + v + 1] - sh[base + v]) / fdt)
         if r < skip:
@@ -586,9 +586,9 @@ def loose(sh, qh, a, b, moving, vl, al, jl, fdt, skip):
 
 @njit(cache=True, nogil=True)
 def dip_or_end(sh, la, b, W, done, dip):
-    """``optimal._dip_or_end``: does the window la..b-1 hold the path's start, its end
-    (``done``: no sample follows the buffer), or a step below ``dip`` times the largest
-    step within W samples around?"""
+    """The targeted refinement's window test (``optimal._refined``): does the window
+    la..b-1 hold the path's start, its end (``done``: no sample follows the buffer), or a
+    step below ``dip`` times the largest step within W samples around?"""
     N = sh.shape[0]
     if la <= 2 or (done and b >= N - 2):
         return True

@@ -443,6 +443,7 @@ def _refined(ctx, blocks, targeted: bool = False):
     ``targeted``: only windows at the ends of the path and around dips of the speed
     (where a sampled plan gains most over the continuous profile), for fine periods
     where a pass over everything costs too much."""
+    from . import _refine_kernels as RK
     from .refine import REFINE_STRIDE, REFINE_WINDOW, Refiner
 
     ref = Refiner(ctx.table, ctx.path, ctx.vl, ctx.al, ctx.jl, ctx.dt)
@@ -485,7 +486,13 @@ def _refined(ctx, blocks, targeted: bool = False):
                     pause = OPT_REFINE_PAUSE
                 blk = (ref.solves, gained)
         paying = pause == 0
-        if paying and b - la >= 3 and (not targeted or _dip_or_end(sh, la, b, W, done)) and ref.loose(sh, qh, la, b):
+        # targeted: only windows at the path's ends or around a dip of the speed
+        if (
+            paying
+            and b - la >= 3
+            and (not targeted or RK.dip_or_end(sh, la, b, W, done, OPT_DIP))
+            and ref.loose(sh, qh, la, b)
+        ):
             sh, qh, d = ref.window(sh, qh, la, b, max(1, (b - la) // 2))
             gained += d
             ctx.stats["refined_periods"] += d
@@ -502,14 +509,6 @@ def _refined(ctx, blocks, targeted: bool = False):
     ctx.stats["refine_solves"] = ctx.stats.get("refine_solves", 0) + ref.solves
     ctx.stats["refine_newton"] = ctx.stats.get("refine_newton", 0) + int(ref.counts[0])
     ctx.stats["refine_evals"] = ctx.stats.get("refine_evals", 0) + int(ref.counts[1])
-
-
-def _dip_or_end(sh, la, b, W, done) -> bool:
-    """Does the window la..b-1 hold the path's start, its end, or a dip of the speed (a
-    step below OPT_DIP times the largest step within W samples around)?"""
-    from . import _refine_kernels as RK
-
-    return bool(RK.dip_or_end(sh, la, b, W, done, OPT_DIP))
 
 
 def _rechunk(blocks, chunk: int):

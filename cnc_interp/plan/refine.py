@@ -36,24 +36,24 @@ class Refiner:
     """The exact-check and window-solve machinery for one path's table."""
 
     def __init__(self, table, path, vl, al, jl, dt: float):
-        self.S = table.S
-        self.C = np.ascontiguousarray(table.C.transpose(0, 2, 1))
-        self.QE = table.qend
-        self.q0 = table.qstart
-        self.L = table.length
-        self.vl, self.al, self.jl = vl, al, jl
-        self.joints = Table(self.S, self.C, self.QE)
-        self.limits = Limits(vl, al, jl)
-        self.lim = np.ascontiguousarray(np.stack([vl, al, jl]))
-        self.moving = np.ascontiguousarray(np.any(np.abs(table.C[:, 1:, :]) > 0, axis=(0, 1)))
+        S = table.S
+        C = np.ascontiguousarray(table.C.transpose(0, 2, 1))
         feeds = np.asarray(path.feed_mm_s, dtype=float)
         feeds = feeds[np.isfinite(feeds) & (feeds > 0)]
         # one feed per path here: windows use the lowest (segments never straddle a feed
         # change, so a path whose segments differ in feed is rare; it is only slower)
-        self.fdt = (float(np.min(feeds)) if feeds.size else 1e300) * dt * (1.0 - 1e-10)
-        self.n = table.C.shape[2]
+        fdt = (float(np.min(feeds)) if feeds.size else 1e300) * dt * (1.0 - 1e-10)
+        #: the path's ``_refine_kernels.RefineProblem``
         self.problem = RK.RefineProblem(
-            self.S, self.C, self.QE, self.joints, self.limits, self.moving, self.lim, self.fdt, float(self.L)
+            S,
+            C,
+            table.qend,
+            Table(S, C, table.qend),
+            Limits(vl, al, jl),
+            np.ascontiguousarray(np.any(np.abs(table.C[:, 1:, :]) > 0, axis=(0, 1))),
+            np.ascontiguousarray(np.stack([vl, al, jl])),
+            fdt,
+            float(table.length),
         )
         #: Newton steps, row evaluations and window solves spent (statistics)
         self.counts = np.zeros(2, dtype=np.int64)
@@ -63,7 +63,8 @@ class Refiner:
         """Is some sample of the window a..b-1 clearly below every limit? (A window whose
         samples all keep a limit within REFINE_SKIP of active cannot lose a period
         cheaply; it is skipped.) Needs the three samples before a."""
-        return RK.loose(sh, qh, a, b, self.moving, self.vl, self.al, self.jl, self.fdt, REFINE_SKIP)
+        p = self.problem
+        return RK.loose(sh, qh, a, b, p.moving, p.lim, p.fdt, REFINE_SKIP)
 
     def window(self, sh, qh, a: int, b: int, max_cut: int):
         """Try to drop samples from the window a..b-1 of (sh, qh) (both ending at the
