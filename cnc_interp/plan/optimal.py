@@ -66,10 +66,11 @@ OPT_REFINE_PROBE = 30
 OPT_REFINE_RATE = 0.4
 OPT_REFINE_PAUSE = 50
 #: a profile-routed path planned whole is also planned with the profile's knots this
-#: share of ``feedprofile.FEED_KNOT_TIME_S`` apart, and the shorter plan kept (trident
-#: NURBS at 1 ms: 2291 -> 1911 periods; 3D_Chips excerpt 1307 -> 1253)
+#: share of ``feedprofile.FEED_KNOT_TIME_S`` apart, and the shorter plan kept (on
+#: generic-mill: LHchips4 531 periods shorter, 3D_Chips 136; the trochoidal excerpt of
+#: ``benchmarks/optimality.py`` 1564 -> 1547)
 OPT_ALT_KNOT_SHARE = 0.5
-#: ... when its profile got stuck somewhere (or gave up) and its plan lasts at most this
+#: ... when VPOp took its plan over early (or the profile gave up) and it lasts at most this
 #: long, s (a longer path costs too much to plan twice: zigzag_0.002_0.001, one 50 s path,
 #: 15 CPU-s more for nothing)
 OPT_ALT_KNOT_MAX_S = 2.5
@@ -621,13 +622,16 @@ def _better_of(ctx, stage, passes, targeted):
         failed = None
     except _Fallback as why:
         blocks, failed = None, why
-    # where the profile's tracking got stuck (dips of the reference, a hand-over to VPOp, or
-    # giving up), its outcome moves by up to ±15 % with the knot spacing: a second spacing
-    # is the hedge (a profile that ran clean is kept: the second plan would double its cost)
+    # where the profile's tracking gave up early (VPOp took over before the last stop, or
+    # nothing planned), its outcome moves by up to ±15 % with the knot spacing: a second
+    # spacing is the hedge (a profile that reached the end is kept: the second plan would
+    # double its cost). Dips of the reference alone are no trouble: the second spacing
+    # gained 0.2 % on such paths (stellabee1's, stellabee-kink-test) at 9 % of the CPU,
+    # against 2.7 % on paths handed over early (LHchips4, 3D_Chips, blur_torus)
     planned_s = ctx.dt * _samples(blocks) if blocks is not None else 0.0
     # (VPOp finishing the last stop is no trouble: arc_maxvel_xy's helix handed over one
     # sample before its end and was planned twice)
-    troubled = blocks is None or ctx.stats.get("retries", 0) > 0 or _handed_over_early(ctx, _samples(blocks))
+    troubled = blocks is None or _handed_over_early(ctx, _samples(blocks))
     if troubled and planned_s <= OPT_ALT_KNOT_MAX_S:
         kept = dict(ctx.stats)  # the second run's stats stand only if its plan is kept
         try:
