@@ -387,3 +387,36 @@ def test_a_window_that_cannot_brake_under_the_estimate_is_solved_again(monkeypat
     without = plan_path_optimal(path, None, m, m.dt_s, settings)
     assert 0 <= without.stats["handover"] < 0.5 * without.s.shape[0]
     assert periods(plan) < periods(without)
+
+
+@needs_corpus
+def test_a_profile_that_only_dipped_is_planned_with_one_knot_spacing(monkeypatch):
+    # corpus stellabee-violation-spirals.ngc, the path ending at line 548: its profile dips
+    # once and reaches the end. The second knot spacing gained 0.2 % on such paths for 9 %
+    # of the CPU; it runs only where VPOp took the plan over early (the test above)
+    from cnc_interp.fit import FitSettings, fit_program
+    from cnc_interp.gcode import read_program
+    from cnc_interp.machine.load import load_machine
+    from cnc_interp.plan import feedprofile
+
+    src = os.path.join(CORPUS, "violation_checks", "stellabee-violation-spirals.ngc")
+    m = load_machine("generic-mill")
+    prog = read_program(open(src, "rb").read(), src, axes=m.axes, start=m.start)
+    fitted = fit_program(prog, FitSettings.from_options(machine=m))
+    path = next(p for p in fitted.items if hasattr(p, "coef") and int(p.line[-1]) == 548)
+    spacings = []
+    builder = feedprofile.FeedProfileBuilder
+
+    class Recording(builder):
+        def __init__(self, *args, knot_time_s=feedprofile.FEED_KNOT_TIME_S, **kwargs):
+            spacings.append(knot_time_s)
+            super().__init__(*args, knot_time_s=knot_time_s, **kwargs)
+
+    monkeypatch.setattr(feedprofile, "FeedProfileBuilder", Recording)
+    settings = PlanSettings.from_options(planner="optimal", machine=m)
+    plan = plan_path_optimal(path, None, m, m.dt_s, settings)
+    check(plan, m, plan.q[0], plan.q[-1], m.dt_s)
+    assert plan.stats["route"] == "profile"
+    assert plan.stats["retries"] > 0  # the profile dipped ...
+    assert plan.stats["handover"] < 0  # ... and reached the end
+    assert spacings == [feedprofile.FEED_KNOT_TIME_S]
