@@ -350,6 +350,20 @@ def test_the_shorter_of_two_knot_spacings_is_kept(monkeypatch):
     assert periods(hedged) == min(periods(plain), periods(halved)), (periods(plain), periods(halved))
 
 
+def _corpus_paths(rel: str):
+    """generic-mill and the fitted paths (feed moves and rapids) of the corpus program at
+    ``rel``."""
+    from cnc_interp.fit import FitSettings, fit_program
+    from cnc_interp.gcode import read_program
+    from cnc_interp.machine.load import load_machine
+
+    src = os.path.join(CORPUS, rel)
+    m = load_machine("generic-mill")
+    prog = read_program(open(src, "rb").read(), src, axes=m.axes, start=m.start)
+    fitted = fit_program(prog, FitSettings.from_options(machine=m))
+    return m, [p for p in fitted.items if hasattr(p, "coef")]
+
+
 @needs_corpus
 def test_a_window_that_cannot_brake_under_the_estimate_is_solved_again(monkeypatch):
     # corpus spiral_tangent_test.ngc, its 21 mm spiral, planned window by window
@@ -358,16 +372,10 @@ def test_a_window_that_cannot_brake_under_the_estimate_is_solved_again(monkeypat
     # times the estimate there); it used to end the profile, and VPOp planned the rest
     import dataclasses
 
-    from cnc_interp.fit import FitSettings, fit_program
-    from cnc_interp.gcode import read_program
-    from cnc_interp.machine.load import load_machine
     from cnc_interp.plan import feedprofile
 
-    src = os.path.join(CORPUS, "quick-tests", "spiral_tangent_test.ngc")
-    m = load_machine("generic-mill")
-    prog = read_program(open(src, "rb").read(), src, axes=m.axes, start=m.start)
-    fitted = fit_program(prog, FitSettings.from_options(machine=m))
-    path = max((p for p in fitted.items if hasattr(p, "coef") and not p.rapid), key=lambda p: p.length)
+    m, paths = _corpus_paths(os.path.join("quick-tests", "spiral_tangent_test.ngc"))
+    path = max((p for p in paths if not p.rapid), key=lambda p: p.length)
     settings = dataclasses.replace(
         PlanSettings.from_options(planner="optimal", machine=m), optimal=OptimalOptions(compare_s=0.0, refine_passes=0)
     )
@@ -393,17 +401,12 @@ def test_a_window_that_cannot_brake_under_the_estimate_is_solved_again(monkeypat
 def test_a_profile_that_only_dipped_is_planned_with_one_knot_spacing(monkeypatch):
     # corpus stellabee-violation-spirals.ngc, the path ending at line 548: its profile dips
     # once and reaches the end. The second knot spacing gained 0.2 % on such paths for 9 %
-    # of the CPU; it runs only where VPOp took the plan over early (the test above)
-    from cnc_interp.fit import FitSettings, fit_program
-    from cnc_interp.gcode import read_program
-    from cnc_interp.machine.load import load_machine
+    # of the CPU; it runs only where VPOp took the plan over early
+    # (test_the_shorter_of_two_knot_spacings_is_kept)
     from cnc_interp.plan import feedprofile
 
-    src = os.path.join(CORPUS, "violation_checks", "stellabee-violation-spirals.ngc")
-    m = load_machine("generic-mill")
-    prog = read_program(open(src, "rb").read(), src, axes=m.axes, start=m.start)
-    fitted = fit_program(prog, FitSettings.from_options(machine=m))
-    path = next(p for p in fitted.items if hasattr(p, "coef") and int(p.line[-1]) == 548)
+    m, paths = _corpus_paths(os.path.join("violation_checks", "stellabee-violation-spirals.ngc"))
+    path = next(p for p in paths if int(p.line[-1]) == 548)
     spacings = []
     builder = feedprofile.FeedProfileBuilder
 
