@@ -148,15 +148,16 @@ def test_time_law_hermite_is_consistent():
 
 @pytest.mark.parametrize("machine", [MILL, UCP])
 def test_refine_keeps_plans_exact_and_never_longer(machine):
-    from cnc_interp.plan.optimal import _step_limits
+    from cnc_interp.plan.optimal import _Path
     from cnc_interp.plan.refine import Refiner
-    from cnc_interp.plan.vpop import JointTable, plan_path_vpop
+    from cnc_interp.plan.vpop import plan_path_vpop
 
     dt = machine.dt_s
     p = hermite_path(circle_fun(15.0, turns=0.6), 8, 150.0)
     plan = plan_path_vpop(p, None, machine, dt)
-    table = JointTable(p, None)
-    ref = Refiner(table, p, *_step_limits(machine, dt, table), dt)
+    ctx = _Path(p, None, machine, dt, None)
+    table = ctx.table
+    ref = Refiner(ctx.refine_problem())
     s, q = plan.s, plan.q
     saved = 0
     for a in range(1, s.shape[0] - 4, 20):

@@ -191,6 +191,7 @@ class _Path:
         }
         self._vrun = None
         self._prep = None
+        self._refine = None
         #: the whole path is held before any sample leaves (``_better_of``)
         self.whole = False
         #: the path's duration at its static speed limits (feed, axis speeds, curvature,
@@ -203,6 +204,15 @@ class _Path:
         if self._vrun is None:
             self._vrun = VpopRun(self.table, self.path, self.machine, self.dt, self.settings, self.joint_map)
         return self._vrun
+
+    def refine_problem(self):
+        """The refinement's problem of this path (``refine.refine_problem``), built once
+        for every pass and knot spacing."""
+        from .refine import refine_problem
+
+        if self._refine is None:
+            self._refine = refine_problem(self.table, self.path, self.joints, self.limits, self.dt)
+        return self._refine
 
     def prepared(self):
         """VPOp's preparation of this path on the same joint table."""
@@ -447,7 +457,7 @@ def _refined(ctx, blocks, targeted: bool = False):
     from . import _refine_kernels as RK
     from .refine import REFINE_STRIDE, REFINE_WINDOW, Refiner
 
-    ref = Refiner(ctx.table, ctx.path, ctx.vl, ctx.al, ctx.jl, ctx.dt)
+    ref = Refiner(ctx.refine_problem())
     W = REFINE_WINDOW
     ahead = W + 4 + (W if targeted else 0)
     sh = np.zeros(0)

@@ -20,7 +20,6 @@ from __future__ import annotations
 import numpy as np
 
 from . import _refine_kernels as RK
-from .vpop.step import Limits, Table
 
 #: samples per window, the stride between windows, Newton steps per solve
 REFINE_WINDOW = 60
@@ -32,29 +31,34 @@ REFINE_MAX_CUT = 0.5
 REFINE_SKIP = 0.99
 
 
-class Refiner:
-    """The exact-check and window-solve machinery for one path's table."""
+def refine_problem(table, path, joints, limits, dt: float) -> RK.RefineProblem:
+    """The refinement's ``_refine_kernels.RefineProblem`` of one path: its joint table
+    (``vpop.JointTable``) and the same as the exact sampler's ``vpop.step.Table`` (C
+    axis-major: ``joints``), the step limits (``vpop.step.Limits``) and the period dt, s."""
+    feeds = np.asarray(path.feed_mm_s, dtype=float)
+    feeds = feeds[np.isfinite(feeds) & (feeds > 0)]
+    # one feed per path here: windows use the lowest (segments never straddle a feed
+    # change, so a path whose segments differ in feed is rare; it is only slower)
+    fdt = (float(np.min(feeds)) if feeds.size else 1e300) * dt * (1.0 - 1e-10)
+    return RK.RefineProblem(
+        joints.S,
+        joints.C,
+        joints.QEND,
+        joints,
+        limits,
+        np.ascontiguousarray(np.any(np.abs(table.C[:, 1:, :]) > 0, axis=(0, 1))),
+        np.ascontiguousarray(np.stack(limits)),
+        fdt,
+        float(table.length),
+    )
 
-    def __init__(self, table, path, vl, al, jl, dt: float):
-        S = table.S
-        C = np.ascontiguousarray(table.C.transpose(0, 2, 1))
-        feeds = np.asarray(path.feed_mm_s, dtype=float)
-        feeds = feeds[np.isfinite(feeds) & (feeds > 0)]
-        # one feed per path here: windows use the lowest (segments never straddle a feed
-        # change, so a path whose segments differ in feed is rare; it is only slower)
-        fdt = (float(np.min(feeds)) if feeds.size else 1e300) * dt * (1.0 - 1e-10)
+
+class Refiner:
+    """The exact-check and window-solve machinery for one path (``refine_problem``)."""
+
+    def __init__(self, problem: RK.RefineProblem):
         #: the path's ``_refine_kernels.RefineProblem``
-        self.problem = RK.RefineProblem(
-            S,
-            C,
-            table.qend,
-            Table(S, C, table.qend),
-            Limits(vl, al, jl),
-            np.ascontiguousarray(np.any(np.abs(table.C[:, 1:, :]) > 0, axis=(0, 1))),
-            np.ascontiguousarray(np.stack([vl, al, jl])),
-            fdt,
-            float(table.length),
-        )
+        self.problem = problem
         #: Newton steps, row evaluations and window solves spent (statistics)
         self.counts = np.zeros(2, dtype=np.int64)
         self.solves = 0
