@@ -6,7 +6,7 @@ import pytest
 from numpy.testing import assert_allclose
 
 from cnc_interp.plan import _feed_kernels as FK
-from cnc_interp.plan._ipm import OK, _band_cholesky, _band_solve, lp_solve
+from cnc_interp.plan._ipm import OK, _band_cholesky, _band_solve, band4_cholesky, band4_solve2, lp_solve
 from cnc_interp.machine.model import Machine
 from cnc_interp.plan.safe import scurve
 from cnc_interp.plan.verify import verify_arrays
@@ -79,6 +79,29 @@ def test_band_cholesky_solves_like_numpy():
     x = y.copy()
     _band_solve(M, n, W, x)
     assert_allclose(x, np.linalg.solve(A, y), rtol=1e-10)
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 4, 9, 61])
+def test_unrolled_band4_is_the_general_band_solver_bit_for_bit(n):
+    """``band4_cholesky``/``band4_solve2`` are ``_band_cholesky``/``_band_solve`` at W = 4
+    unrolled: the same bits (the planners' outputs do not change), also where a pivot
+    is lost to rounding (the huge pivot)."""
+    rng = np.random.default_rng(n)
+    for trial in range(20):
+        M = rng.normal(size=(n, 4))
+        M[:, 0] = np.abs(M[:, 0]) * 4.0 + 3.0
+        if trial % 5 == 4 and n > 2:
+            M[n // 2, 0] = 0.0  # a lost pivot
+        y, w = rng.normal(size=n), rng.normal(size=n)
+        A, B = M.copy(), M.copy()
+        _band_cholesky(A, n, 4)
+        band4_cholesky(B, n)
+        assert np.array_equal(A, B)
+        ya, wa = y.copy(), w.copy()
+        _band_solve(A, n, 4, ya)
+        _band_solve(A, n, 4, wa)
+        band4_solve2(B, n, y, w)
+        assert np.array_equal(ya, y) and np.array_equal(wa, w)
 
 
 def test_cubic_basis_matches_scipy():
@@ -194,18 +217,48 @@ def _loose_numpy(sh, qh, a, b, moving, lim, fdt, skip):
     return bool(np.any(np.maximum(r[-m:], steps[-m:] / fdt) < skip))
 
 
-def test_refine_kernels_match_numpy_bit_for_bit():
-    """The window visit's helpers compiled (``_resample``, ``loose``, ``dip_or_end``) give
-    numpy's answers exactly: the plans do not depend on where they run."""
+def test_a_try_starts_from_the_window_retimed_by_room():
+    """``_start`` with equal shares is the uniform resample; with any shares it keeps the
+    positions increasing between the fixed ends. ``_room_shares`` gives equal shares to a
+    window of equal room, and the floor share to periods whose rows are at their bound."""
     from cnc_interp.plan import _refine_kernels as RK
 
     rng = np.random.default_rng(7)
     for _ in range(300):
-        nt = int(rng.integers(5, 70))
-        cur = np.cumsum(rng.uniform(0.0, 1.0, nt))
-        m = int(rng.integers(2, nt - 1))
-        want = np.interp(np.linspace(0.0, 1.0, m + 2), np.linspace(0.0, 1.0, nt), cur)[1:-1]
-        assert np.array_equal(RK._resample(cur, m), want)
+        M = int(rng.integers(3, 70))
+        cur = np.cumsum(rng.uniform(0.01, 1.0, M + 2))
+        even = np.full(M + 1, 1.0 / (M + 1))
+        want = np.interp(np.linspace(0.0, 1.0, M + 1), np.linspace(0.0, 1.0, M + 2), cur)[1:-1]
+        assert_allclose(RK._start(cur, even, M - 1), want, rtol=1e-12, atol=1e-12 * cur[-1])
+        share = rng.dirichlet(np.full(M + 1, 0.3))
+        share = 0.9 * share + 0.1 / (M + 1)  # every period keeps some time
+        x = RK._start(cur, share, M - 1)
+        assert np.all(np.diff(np.concatenate(([cur[0]], x, [cur[-1]]))) > 0.0)
+    # a line at constant speed (half the velocity limit): equal room everywhere
+    moving = np.array([True, False])
+    lim = np.array([[1.0, 1.0], [1.0, 1.0], [1.0, 1.0]])
+    M = 20
+    P = 0.5 * np.arange(M + 6)
+    Q = np.stack([P, np.zeros_like(P)], axis=1)
+    share = RK._room_shares(P, Q, moving, lim, 10.0)
+    assert_allclose(share, np.full(M + 1, 1.0 / (M + 1)), rtol=1e-12)
+    # the same line braking at the acceleration limit from period 10 on: room 0 there
+    v = np.concatenate((np.full(13, 0.5), 0.5 - 0.01 * np.arange(1, M - 6)))
+    P = np.concatenate(([0.0], np.cumsum(v)))
+    Q = np.stack([P, np.zeros_like(P)], axis=1)
+    lim[1, 0] = 0.01 * (1.0 + 1e-12)
+    share = RK._room_shares(P, Q, moving, lim, 10.0)
+    floor = RK._ROOM_FLOOR
+    assert_allclose(share[13:] / share[0], floor / (RK._ROOM_CLIP + floor), rtol=1e-9)
+    assert_allclose(share.sum(), 1.0)
+
+
+def test_refine_kernels_match_numpy_bit_for_bit():
+    """The window visit's helpers compiled (``loose``, ``dip_or_end``) give numpy's
+    answers exactly: the plans do not depend on where they run."""
+    from cnc_interp.plan import _refine_kernels as RK
+
+    rng = np.random.default_rng(7)
     lim = np.array([[0.5, 0.5, 0.6], [0.3, 0.3, 0.4], [0.5, 0.5, 0.6]])  # vl, al, jl
     moving = np.array([True, False, True])
     hits = 0

@@ -67,6 +67,75 @@ def _band_cholesky(M, n, W):
 
 
 @njit(cache=True, nogil=True)
+def band4_cholesky(M, n):
+    """``_band_cholesky`` for W = 4 (cubic B-spline rows; the refinement's stencils),
+    unrolled: the same float operations in the same order, so the same bits."""
+    for i in range(min(n, 3)):
+        for d in range(3, -1, -1):
+            j = i - d
+            if j < 0:
+                continue
+            acc = M[i, d]
+            for e in range(1, 4 - d):
+                k = j - e
+                if k < 0:
+                    break
+                acc -= M[i, d + e] * M[j, e]
+            if d == 0:
+                if not acc > _PIVOT_TOL * M[i, 0] or not acc > 0.0:
+                    acc = _HUGE_PIVOT
+                M[i, 0] = np.sqrt(acc)
+            else:
+                M[i, d] = acc / M[j, 0]
+    for i in range(3, n):
+        m3 = M[i, 3] / M[i - 3, 0]
+        M[i, 3] = m3
+        m2 = (M[i, 2] - m3 * M[i - 2, 1]) / M[i - 2, 0]
+        M[i, 2] = m2
+        m1 = ((M[i, 1] - m2 * M[i - 1, 1]) - m3 * M[i - 1, 2]) / M[i - 1, 0]
+        M[i, 1] = m1
+        acc = ((M[i, 0] - m1 * m1) - m2 * m2) - m3 * m3
+        if not acc > _PIVOT_TOL * M[i, 0] or not acc > 0.0:
+            acc = _HUGE_PIVOT
+        M[i, 0] = np.sqrt(acc)
+    return True
+
+
+@njit(cache=True, nogil=True)
+def band4_solve2(M, n, y, w):
+    """``_band_solve`` for W = 4 on two right-hand sides at once (the same bits as two
+    calls)."""
+    for i in range(n):
+        a = y[i]
+        b = w[i]
+        if i >= 1:
+            a -= M[i, 1] * y[i - 1]
+            b -= M[i, 1] * w[i - 1]
+            if i >= 2:
+                a -= M[i, 2] * y[i - 2]
+                b -= M[i, 2] * w[i - 2]
+                if i >= 3:
+                    a -= M[i, 3] * y[i - 3]
+                    b -= M[i, 3] * w[i - 3]
+        y[i] = a / M[i, 0]
+        w[i] = b / M[i, 0]
+    for i in range(n - 1, -1, -1):
+        a = y[i]
+        b = w[i]
+        if i + 1 < n:
+            a -= M[i + 1, 1] * y[i + 1]
+            b -= M[i + 1, 1] * w[i + 1]
+            if i + 2 < n:
+                a -= M[i + 2, 2] * y[i + 2]
+                b -= M[i + 2, 2] * w[i + 2]
+                if i + 3 < n:
+                    a -= M[i + 3, 3] * y[i + 3]
+                    b -= M[i + 3, 3] * w[i + 3]
+        y[i] = a / M[i, 0]
+        w[i] = b / M[i, 0]
+
+
+@njit(cache=True, nogil=True)
 def _band_solve(M, n, W, y):
     """Solve (L L^T) x = y in place with the band factor M of ``_band_cholesky``."""
     for i in range(n):
@@ -225,7 +294,7 @@ def lp_solve(n, first, coef, b, c, x, max_iter, tol):
             break
         for i in range(n):  # relative to each diagonal entry: λ/s spans many decades
             M[i, 0] += _REG * M[i, 0] + 1e-300
-        if not _band_cholesky(M, n, W):
+        if not (band4_cholesky(M, n) if W == 4 else _band_cholesky(M, n, W)):
             status = BREAKDOWN
             break
         # predictor (affine scaling)

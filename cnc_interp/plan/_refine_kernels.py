@@ -22,10 +22,11 @@ Gauss–Newton-like matrix, always positive definite), and every iterate stays s
 inside (u > 0): the method never leaves the region where the barrier is defined.
 
 ``shorten`` is one visit of a window (``refine.Refiner.window``): one fewer sample at a time,
-each solve followed by ``exact_ok``, while the tries succeed. ``loose`` and ``dip_or_end``
-are the refinement's tests of which windows to visit. The three compute exactly what the
-numpy code they replaced did (the same operations in the same order): a plan does not
-depend on where its refinement ran.
+each solve followed by ``exact_ok``, while the tries succeed; a try starts from the window
+retimed so that each period gives up time in proportion to its room (``_room_shares``,
+``_start``). ``loose`` and ``dip_or_end`` are the refinement's tests of which windows to
+visit; they compute exactly what the numpy code they replaced did (the same operations in
+the same order): a plan does not depend on where its refinement ran.
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ import numpy as np
 from numba import njit
 
 from ..fit._quintic import quintic
-from ._ipm import _band_cholesky, _band_solve
+from ._ipm import band4_cholesky, band4_solve2
 from .vpop.step import _eval, _feasible, _piece
 
 # solve_window's statuses (one set for every kernel: ``status``): OK (the window is
@@ -68,6 +69,16 @@ _TAU = 0.8
 _LOG_BLOCK = 8
 _LOG_SAFE_LO = 1e-250
 _LOG_SAFE_HI = 1e250
+
+#: a try's start gives each period of the window a share of the one it loses in proportion
+#: to its room (``_room_shares``): how far its rows could shrink in time before reaching
+#: their bounds, clipped to _ROOM_CLIP, plus _ROOM_FLOOR. Spreading the loss evenly (a
+#: uniform resample) broke the refined plan's structure everywhere, also where the rows
+#: were at their bounds: on 50 of stellabee1's paths, stellabee-kink-test, -spirals and
+#: zigzag_0.002_0.001, the refinement then took 16 % fewer Newton steps for 608 fewer
+#: samples (floor 0.005: zigzag 1.1 % longer; 0.05: 4 % more steps)
+_ROOM_CLIP = 1.0
+_ROOM_FLOOR = 0.02
 
 #: one path's refinement problem, as ``shorten`` needs it: the joint table (S (m + 1,),
 #: C axis-major (m, n, 6), QEND (n,)) and the same as a ``vpop.step.Table`` (joints), the
@@ -377,12 +388,11 @@ def solve_window(S, C, QEND, pre, post, x0, moving, lim, fdt, max_newton, counts
         hzz = gzz[1]
         for k in range(nfree):
             H[k, 0] += 1e-12 * H[k, 0] + 1e-300
-        _band_cholesky(H, nfree, 4)
+        band4_cholesky(H, nfree)
         for k in range(nfree):
             y1[k] = -g[k]
             y2[k] = hz[k]
-        _band_solve(H, nfree, 4, y1)
-        _band_solve(H, nfree, 4, y2)
+        band4_solve2(H, nfree, y1, y2)
         # [H hz; hz^T hzz] [dx; dz] = -[g; gz]
         den = hzz
         num = -gz
@@ -475,22 +485,69 @@ def exact_ok(T, lim, sh, lo, hi, qbuf):
 
 
 @njit(cache=True, nogil=True)
-def _resample(cur, m):
-    """``np.interp(np.linspace(0, 1, m + 2), np.linspace(0, 1, len(cur)), cur)[1:-1]``
-    with numpy's arithmetic (the same bits): the window's samples spread over m."""
-    nt = cur.shape[0]
-    step_t = 1.0 / (nt - 1)
-    step_n = 1.0 / (m + 1)
+def _room_shares(P, Q, moving, lim, fdt):
+    """Each period's share of the one a try takes off (see _ROOM_FLOOR). P (M + 6,) the
+    window's samples with the three before and after, Q (M + 6, n) their axis positions;
+    period j runs from P[2 + j] to P[3 + j] (j = 0 .. M) and enters the rows ending at
+    P[3 + j] .. P[5 + j]. A row of order d at ratio r to its bound allows a time scale
+    of r^(-1/d) (its difference scales with the d-th power); the room is that less one."""
+    K = P.shape[0]
+    n = Q.shape[1]
+    room = np.empty(K - 3)
+    for e in range(3, K):
+        r1 = (P[e] - P[e - 1]) / fdt
+        r2 = 0.0
+        r3 = 0.0
+        for i in range(n):
+            if not moving[i]:
+                continue
+            d10 = Q[e - 2, i] - Q[e - 3, i]
+            d11 = Q[e - 1, i] - Q[e - 2, i]
+            d12 = Q[e, i] - Q[e - 1, i]
+            r1 = max(r1, abs(d12) / lim[0, i])
+            r2 = max(r2, abs(d12 - d11) / lim[1, i])
+            r3 = max(r3, abs((d12 - d11) - (d11 - d10)) / lim[2, i])
+        g = _ROOM_CLIP + 1.0
+        if r1 > 0.0:
+            g = min(g, 1.0 / r1)
+        if r2 > 0.0:
+            g = min(g, 1.0 / np.sqrt(r2))
+        if r3 > 0.0:
+            g = min(g, 1.0 / np.cbrt(r3))
+        room[e - 3] = g - 1.0
+    M = K - 6
+    share = np.empty(M + 1)
+    total = 0.0
+    for j in range(M + 1):
+        w = min(room[j], room[j + 1], room[j + 2])
+        w = min(max(w, 0.0), _ROOM_CLIP) + _ROOM_FLOOR
+        share[j] = w
+        total += w
+    for j in range(M + 1):
+        share[j] /= total
+    return share
+
+
+@njit(cache=True, nogil=True)
+def _start(cur, share, m):
+    """A try's start: the window's positions cur (M + 2,: the fixed sample before, the M
+    free ones, the fixed one after) retimed onto m = M - 1 free samples, period j of cur
+    lasting 1 - share[j] (the shares sum to one), positions linear in time within it."""
     out = np.empty(m)
+    t0 = 0.0
+    t1 = 1.0 - share[0]
     j = 0
+    nj = share.shape[0]
     for i in range(1, m + 1):
-        x = i * step_n + 0.0
-        while j + 2 < nt and (j + 1) * step_t + 0.0 <= x:
+        ti = float(i)
+        while j + 1 < nj and t1 <= ti:
             j += 1
-        x0 = j * step_t + 0.0
-        x1 = (j + 1) * step_t + 0.0 if j + 1 < nt - 1 else 1.0
-        slope = (cur[j + 1] - cur[j]) / (x1 - x0)
-        out[i - 1] = slope * (x - x0) + cur[j]
+            t0 = t1
+            t1 = t0 + (1.0 - share[j])
+        f = (ti - t0) / (t1 - t0)
+        if f > 1.0:
+            f = 1.0
+        out[i - 1] = cur[j] + f * (cur[j + 1] - cur[j])
     return out
 
 
@@ -517,13 +574,23 @@ def shorten(prob, sh, qh, a, b, max_cut, max_newton, counts):
         post_exact[i] = sh[b + i] if b + i < N else L
     cur = sh[a - 1 : b + 1].copy()
     M = b - a
+    # the window with the three samples before and after, positions and axis values
+    Pw = np.empty(M + 6)
+    Qw = np.empty((M + 6, n))
+    for i in range(3):
+        Pw[i] = pre[i]
+        Qw[i] = q_pre[i]
+        Pw[M + 3 + i] = post[i]
+        Qw[M + 3 + i] = qh[min(b + i, N - 1)]
+    Pw[3 : M + 3] = sh[a:b]
+    Qw[3 : M + 3] = qh[a:b]
     dropped = 0
     solves = 0
     kept_x = np.empty(0)
     kept_q = np.empty((0, n))
     while dropped < max_cut and M - 1 >= 2:
         m = M - 1
-        x0 = _resample(cur, m)
+        x0 = _start(cur, _room_shares(Pw, Qw, moving, lim, fdt), m)
         st, x, z = solve_window(S, C, QEND, pre, post, x0, moving, lim, fdt, max_newton, counts)
         solves += 1
         if st != OK:
@@ -538,6 +605,16 @@ def shorten(prob, sh, qh, a, b, max_cut, max_newton, counts):
             break
         kept_x = x
         kept_q = qb[3 : 3 + m].copy()
+        nP = np.empty(m + 6)
+        nQ = np.empty((m + 6, n))
+        nP[:3] = Pw[:3]
+        nQ[:3] = Qw[:3]
+        nP[3 : m + 3] = x
+        nQ[3 : m + 3] = kept_q
+        nP[m + 3 :] = Pw[M + 3 :]
+        nQ[m + 3 :] = Qw[M + 3 :]
+        Pw = nP
+        Qw = nQ
         nxt = np.empty(m + 2)
         nxt[0] = cur[0]
         nxt[1 : m + 1] = x
