@@ -39,30 +39,42 @@ _HUGE_PIVOT = 1e128
 _REG = 1e-12
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _pivot(acc, diag):
+    """The factor's diagonal entry from the pivot acc (diag: the matrix's own entry)."""
+    if not acc > _PIVOT_TOL * diag or not acc > 0.0:
+        # a direction the rows do not determine (rounding has eaten the pivot): freeze it
+        # with a huge pivot, as interior-point codes do
+        acc = _HUGE_PIVOT
+    return np.sqrt(acc)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _cholesky_row(M, i, W):
+    """Row i of ``_band_cholesky`` (rows before i already factored)."""
+    for d in range(W - 1, -1, -1):
+        j = i - d
+        if j < 0:
+            continue
+        acc = M[i, d]
+        # sum over k < j within both bands: L(i, k) L(j, k)
+        for e in range(1, W - d):
+            k = j - e
+            if k < 0:
+                break
+            acc -= M[i, d + e] * M[j, e]
+        if d == 0:
+            M[i, 0] = _pivot(acc, M[i, 0])
+        else:
+            M[i, d] = acc / M[j, 0]
+
+
 @njit(cache=True, nogil=True)
 def _band_cholesky(M, n, W):
     """In-place Cholesky of the SPD band matrix M (n, W): M[i, d] = M(i, i-d). False when
     a pivot is not positive."""
     for i in range(n):
-        for d in range(W - 1, -1, -1):
-            j = i - d
-            if j < 0:
-                continue
-            acc = M[i, d]
-            # sum over k < j within both bands: L(i, k) L(j, k)
-            for e in range(1, W - d):
-                k = j - e
-                if k < 0:
-                    break
-                acc -= M[i, d + e] * M[j, e]
-            if d == 0:
-                if not acc > _PIVOT_TOL * M[i, 0] or not acc > 0.0:
-                    # a direction the rows do not determine (rounding has eaten the pivot):
-                    # freeze it with a huge pivot, as interior-point codes do
-                    acc = _HUGE_PIVOT
-                M[i, 0] = np.sqrt(acc)
-            else:
-                M[i, d] = acc / M[j, 0]
+        _cholesky_row(M, i, W)
     return True
 
 
@@ -71,22 +83,7 @@ def band4_cholesky(M, n):
     """``_band_cholesky`` for W = 4 (cubic B-spline rows; the refinement's stencils),
     unrolled: the same float operations in the same order, so the same bits."""
     for i in range(min(n, 3)):
-        for d in range(3, -1, -1):
-            j = i - d
-            if j < 0:
-                continue
-            acc = M[i, d]
-            for e in range(1, 4 - d):
-                k = j - e
-                if k < 0:
-                    break
-                acc -= M[i, d + e] * M[j, e]
-            if d == 0:
-                if not acc > _PIVOT_TOL * M[i, 0] or not acc > 0.0:
-                    acc = _HUGE_PIVOT
-                M[i, 0] = np.sqrt(acc)
-            else:
-                M[i, d] = acc / M[j, 0]
+        _cholesky_row(M, i, 4)
     for i in range(3, n):
         m3 = M[i, 3] / M[i - 3, 0]
         M[i, 3] = m3
@@ -94,10 +91,7 @@ def band4_cholesky(M, n):
         M[i, 2] = m2
         m1 = ((M[i, 1] - m2 * M[i - 1, 1]) - m3 * M[i - 1, 2]) / M[i - 1, 0]
         M[i, 1] = m1
-        acc = ((M[i, 0] - m1 * m1) - m2 * m2) - m3 * m3
-        if not acc > _PIVOT_TOL * M[i, 0] or not acc > 0.0:
-            acc = _HUGE_PIVOT
-        M[i, 0] = np.sqrt(acc)
+        M[i, 0] = _pivot(((M[i, 0] - m1 * m1) - m2 * m2) - m3 * m3, M[i, 0])
     return True
 
 
