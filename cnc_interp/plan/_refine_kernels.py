@@ -554,9 +554,9 @@ def _start(cur, share, m):
 @njit(cache=True, nogil=True)
 def shorten(prob, sh, qh, a, b, max_cut, max_newton, counts):
     """One window visit of ``refine.Refiner.window`` on the ``RefineProblem`` prob:
-    samples a..b-1 of (sh, qh) with one fewer at a time (``solve_window``, then
-    ``exact_ok`` with the three samples after the window, rest at L past the end) while
-    each try succeeds, at most ``max_cut``. Returns (dropped, solves, x, qx): the last
+    samples a..b-1 of (sh, qh) (1 <= a, b < len(sh)) with one fewer at a time
+    (``solve_window``, then ``exact_ok`` with the three samples after the window, rest at L
+    past the end) while each try succeeds, at most ``max_cut``. Returns (dropped, solves, x, qx): the last
     accepted positions and their axis values (empty when none was)."""
     S, C, QEND, T, lim_exact = prob.S, prob.C, prob.QEND, prob.joints, prob.limits
     moving, lim, fdt, L = prob.moving, prob.lim, prob.fdt, prob.L
@@ -572,9 +572,9 @@ def shorten(prob, sh, qh, a, b, max_cut, max_newton, counts):
         q_pre[i] = qh[k]
         post[i] = sh[min(b + i, N - 1)]
         post_exact[i] = sh[b + i] if b + i < N else L
-    cur = sh[a - 1 : b + 1].copy()
     M = b - a
-    # the window with the three samples before and after, positions and axis values
+    # the window with the three samples before and after, positions and axis values (the
+    # sample before the window is pre[2], the one after it post[0]: b < N)
     Pw = np.empty(M + 6)
     Qw = np.empty((M + 6, n))
     for i in range(3):
@@ -590,7 +590,7 @@ def shorten(prob, sh, qh, a, b, max_cut, max_newton, counts):
     kept_q = np.empty((0, n))
     while dropped < max_cut and M - 1 >= 2:
         m = M - 1
-        x0 = _start(cur, _room_shares(Pw, Qw, moving, lim, fdt), m)
+        x0 = _start(Pw[2 : M + 4], _room_shares(Pw, Qw, moving, lim, fdt), m)
         st, x, z = solve_window(S, C, QEND, pre, post, x0, moving, lim, fdt, max_newton, counts)
         solves += 1
         if st != OK:
@@ -615,11 +615,6 @@ def shorten(prob, sh, qh, a, b, max_cut, max_newton, counts):
         nQ[m + 3 :] = Qw[M + 3 :]
         Pw = nP
         Qw = nQ
-        nxt = np.empty(m + 2)
-        nxt[0] = cur[0]
-        nxt[1 : m + 1] = x
-        nxt[m + 1] = cur[cur.shape[0] - 1]
-        cur = nxt
         M = m
         dropped += 1
     return dropped, solves, kept_x, kept_q
