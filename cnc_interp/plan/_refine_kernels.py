@@ -484,6 +484,28 @@ def exact_ok(T, lim, sh, lo, hi, qbuf):
     return True
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _row_ratios(Q, i0, i1, i2, i3, moving, lim):
+    """The largest ratio to its bound of the velocity, acceleration and jerk rows (backward
+    differences, as ``verify`` takes them) ending at sample i3 of Q (K, n), over the moving
+    axes; i0..i2 are the three samples before (repeated at a path's start)."""
+    r1 = 0.0
+    r2 = 0.0
+    r3 = 0.0
+    for i in range(Q.shape[1]):
+        if not moving[i]:
+            continue
+        d10 = Q[i1, i] - Q[i0, i]
+        d11 = Q[i2, i] - Q[i1, i]
+        d12 = Q[i3, i] - Q[i2, i]
+        d20 = d11 - d10
+        d21 = d12 - d11
+        r1 = max(r1, abs(d12) / lim[0, i])
+        r2 = max(r2, abs(d21) / lim[1, i])
+        r3 = max(r3, abs(d21 - d20) / lim[2, i])
+    return r1, r2, r3
+
+
 @njit(cache=True, nogil=True)
 def _room_shares(P, Q, moving, lim, fdt):
     """Each period's share of the one a try takes off (see _ROOM_FLOOR). P (M + 6,) the
@@ -492,21 +514,10 @@ def _room_shares(P, Q, moving, lim, fdt):
     P[3 + j] .. P[5 + j]. A row of order d at ratio r to its bound allows a time scale
     of r^(-1/d) (its difference scales with the d-th power); the room is that less one."""
     K = P.shape[0]
-    n = Q.shape[1]
     room = np.empty(K - 3)
     for e in range(3, K):
-        r1 = (P[e] - P[e - 1]) / fdt
-        r2 = 0.0
-        r3 = 0.0
-        for i in range(n):
-            if not moving[i]:
-                continue
-            d10 = Q[e - 2, i] - Q[e - 3, i]
-            d11 = Q[e - 1, i] - Q[e - 2, i]
-            d12 = Q[e, i] - Q[e - 1, i]
-            r1 = max(r1, abs(d12) / lim[0, i])
-            r2 = max(r2, abs(d12 - d11) / lim[1, i])
-            r3 = max(r3, abs((d12 - d11) - (d11 - d10)) / lim[2, i])
+        r1, r2, r3 = _row_ratios(Q, e - 3, e - 2, e - 1, e, moving, lim)
+        r1 = max(r1, (P[e] - P[e - 1]) / fdt)
         g = _ROOM_CLIP + 1.0
         if r1 > 0.0:
             g = min(g, 1.0 / r1)
@@ -566,24 +577,19 @@ def shorten(prob, sh, qh, a, b, max_cut, max_newton, counts):
     post = np.empty(3)
     post_exact = np.empty(3)
     q_pre = np.empty((3, n))
+    q_post = np.empty((3, n))
     for i in range(3):
         k = max(a - 3 + i, 0)
         pre[i] = sh[k]
         q_pre[i] = qh[k]
         post[i] = sh[min(b + i, N - 1)]
+        q_post[i] = qh[min(b + i, N - 1)]
         post_exact[i] = sh[b + i] if b + i < N else L
     M = b - a
     # the window with the three samples before and after, positions and axis values (the
     # sample before the window is pre[2], the one after it post[0]: b < N)
-    Pw = np.empty(M + 6)
-    Qw = np.empty((M + 6, n))
-    for i in range(3):
-        Pw[i] = pre[i]
-        Qw[i] = q_pre[i]
-        Pw[M + 3 + i] = post[i]
-        Qw[M + 3 + i] = qh[min(b + i, N - 1)]
-    Pw[3 : M + 3] = sh[a:b]
-    Qw[3 : M + 3] = qh[a:b]
+    Pw = np.concatenate((pre, sh[a:b], post))
+    Qw = np.concatenate((q_pre, qh[a:b], q_post))
     dropped = 0
     solves = 0
     kept_x = np.empty(0)
@@ -605,16 +611,8 @@ def shorten(prob, sh, qh, a, b, max_cut, max_newton, counts):
             break
         kept_x = x
         kept_q = qb[3 : 3 + m].copy()
-        nP = np.empty(m + 6)
-        nQ = np.empty((m + 6, n))
-        nP[:3] = Pw[:3]
-        nQ[:3] = Qw[:3]
-        nP[3 : m + 3] = x
-        nQ[3 : m + 3] = kept_q
-        nP[m + 3 :] = Pw[M + 3 :]
-        nQ[m + 3 :] = Qw[M + 3 :]
-        Pw = nP
-        Qw = nQ
+        Pw = np.concatenate((Pw[:3], x, Pw[M + 3 :]))
+        Qw = np.concatenate((Qw[:3], kept_q, Qw[M + 3 :]))
         M = m
         dropped += 1
     return dropped, solves, kept_x, kept_q
@@ -632,23 +630,14 @@ def loose(sh, qh, a, b, moving, lim, fdt, skip):
     base = max(a - 1, 0)
     ns = b - base - 1  # steps
     m = min(nr, ns)
-    n = qh.shape[1]
     for u in range(m):
         t = nr - m + u  # the rows t .. t+3 of the padded sequence
         i0 = max(lo + t - pad, lo)
         i1 = max(lo + t + 1 - pad, lo)
         i2 = max(lo + t + 2 - pad, lo)
         i3 = lo + t + 3 - pad
-        r = 0.0
-        for i in range(n):
-            if not moving[i]:
-                continue
-            d10 = qh[i1, i] - qh[i0, i]
-            d11 = qh[i2, i] - qh[i1, i]
-            d12 = qh[i3, i] - qh[i2, i]
-            d20 = d11 - d10
-            d21 = d12 - d11
-            r = max(r, abs(d21 - d20) / lim[2, i], abs(d21) / lim[1, i], abs(d12) / lim[0, i])
+        r1, r2, r3 = _row_ratios(qh, i0, i1, i2, i3, moving, lim)
+        r = max(r1, r2, r3)
         v = ns - m + u
         r = max(r, (sh[base + v + 1] - sh[base + v]) / fdt)
         if r < skip:
