@@ -423,3 +423,58 @@ def test_a_profile_that_only_dipped_is_planned_with_one_knot_spacing(monkeypatch
     assert plan.stats["retries"] > 0  # the profile dipped ...
     assert plan.stats["handover"] < 0  # ... and reached the end
     assert spacings == [feedprofile.FEED_KNOT_TIME_S]
+
+
+# -- the paths routed to VPOp go through VPOp's compiled batch ------------------------
+def _mixed_paths():
+    """Short lines (VPOp's route) around a curvature-limited circle (the profile's)."""
+    return [
+        line_path([0, 0, 0], [2, 0, 0], 50.0),
+        line_path([2, 0, 0], [2, 3, 0], 50.0, line=2),
+        hermite_path(circle_fun(4.0, turns=1.5, z_per_turn=-0.5), 18, 180.0, line0=3),
+        line_path([0, 0, 0], [0, 0, -1], 20.0, line=30),
+        line_path([0, 0, 0], [40, 0, 0], 150.0, line=31),
+    ]
+
+
+def test_the_paths_routed_to_vpop_are_planned_by_vpops_batch_byte_for_byte():
+    from cnc_interp.plan.optimal import batched_optimal
+    from cnc_interp.plan.vpop import plan_many_vpop
+
+    paths = _mixed_paths()
+    marks = batched_optimal(paths, None, MILL, DT)
+    streamed = [plan_path_optimal(p, None, MILL, DT) for p in paths]
+    routes = [s.stats["route"] for s in streamed]
+    assert routes.count("vpop") >= 3 and "profile" in routes
+    assert [m is not None for m in marks] == [r == "vpop" for r in routes]
+    assert all(m == {"route": "vpop"} for m in marks if m is not None)
+    sel = [i for i, m in enumerate(marks) if m is not None]
+    for i, got in zip(sel, plan_many_vpop([paths[i] for i in sel], MILL, DT)):
+        assert got is not None
+        assert got.s.tobytes() == streamed[i].s.tobytes() and got.q.tobytes() == streamed[i].q.tobytes()
+    # a path refined (coarse periods, or asked for), the profile asked for, or a joint
+    # map: this planner streams every path itself
+    assert batched_optimal(paths, None, UCP, 0.006) == [None] * len(paths)
+    for opts in (OptimalOptions(refine_passes=1), OptimalOptions(route="profile")):
+        assert batched_optimal(paths, None, MILL, DT, PlanSettings(optimal=opts)) == [None] * len(paths)
+    assert batched_optimal(paths, object(), MILL, DT) == [None] * len(paths)
+    # asked for VPOp's route everywhere, every path goes to the batch
+    every = batched_optimal(paths, None, MILL, DT, PlanSettings(optimal=OptimalOptions(route="vpop")))
+    assert all(m is not None for m in every)
+
+
+def test_the_timeline_gives_the_same_plan_and_route_counts_with_the_batch(monkeypatch):
+    import cnc_interp as ci
+    from cnc_interp.plan import optimal
+
+    m = ci.load_machine("generic-mill")
+    src = b"G21 G90 G17 G61\nG0 X0 Y0 Z0\nG1 X2 F3000\nG1 Y3\nG2 X2 Y3 I-4 J0 F10000\nG1 Z-1 F600\nG1 X40 F9000\nM2\n"
+    fitted = ci.fit(ci.read_program(src, m, name="mixed.ngc"))
+    batched = ci.plan(fitted, m, planner="optimal")
+    monkeypatch.delattr(optimal.iter_path_plan_optimal, "batched")
+    streamed = ci.plan(fitted, m, planner="optimal")
+    routes = batched.settings["stats"]["routes"]
+    assert routes == streamed.settings["stats"]["routes"]
+    assert routes.get("vpop", 0) >= 3 and routes.get("profile", 0) == 1, routes
+    assert batched.q.tobytes() == streamed.q.tobytes()
+    assert ci.verify(batched, m).ok

@@ -203,3 +203,58 @@ def join_derivs(S, C, xj, q1, q2, q3l, q3r):
             c4 = C[p - 1, 4, a]
             c5 = C[p - 1, 5, a]
             q3l[r, a] = 6.0 * c3 + h * (24.0 * c4 + h * 60.0 * c5)
+
+
+@njit(cache=True, nogil=True)
+def route_measures(S, C, FB, FV, vmax, amax, jmax, speed_share):
+    """The optimal planner's route test on a joint table (``optimal._route``), at its
+    knots and piece midpoints x: the share of the length where the curvature speed
+    (√(amax/|q_ss|), ∛(jmax/|q_sss|), least over the axes) is below ``speed_share`` of
+    the cap (the feed FV over breaks FB, vmax/|q_s|), and the duration (s) at the least
+    of the two, trapezoidal in 1/v. Returns (share, t_static)."""
+    m = S.shape[0] - 1
+    n = C.shape[2]
+    x = np.empty(2 * m + 1)
+    for p in range(m):
+        x[2 * p] = S[p]
+        x[2 * p + 1] = 0.5 * (S[p] + S[p + 1])
+    x[2 * m] = S[m]
+    K = x.shape[0]
+    q1 = np.empty((K, n))
+    q2 = np.empty((K, n))
+    q3 = np.empty((K, n))
+    table_derivs(S, C, x, q1, q2, q3)
+    nf = FV.shape[0]
+    v = np.empty(K)
+    limited = np.zeros(K, dtype=np.bool_)
+    seg = 0
+    for k in range(K):
+        vv = np.inf
+        va = np.inf
+        vj = np.inf
+        for a in range(n):
+            g1 = abs(q1[k, a])
+            g2 = abs(q2[k, a])
+            g3 = abs(q3[k, a])
+            if g1 > 0.0 and vmax[a] / g1 < vv:
+                vv = vmax[a] / g1
+            if g2 > 0.0 and np.sqrt(amax[a] / g2) < va:
+                va = np.sqrt(amax[a] / g2)
+            if g3 > 0.0 and np.cbrt(jmax[a] / g3) < vj:
+                vj = np.cbrt(jmax[a] / g3)
+        while seg < nf - 1 and FB[seg + 1] <= x[k]:
+            seg += 1
+        cap = min(vv, FV[seg])
+        curv = min(va, vj)
+        limited[k] = curv < speed_share * cap
+        v[k] = max(min(cap, curv), 1e-300)
+    total = 0.0
+    lim = 0.0
+    t = 0.0
+    for k in range(K - 1):
+        w = x[k + 1] - x[k]
+        total += w
+        if limited[k]:
+            lim += w
+        t += w * 2.0 / (v[k] + v[k + 1])
+    return lim / max(total, 1e-300), t

@@ -147,26 +147,15 @@ def _or(value, default):
     return default if value is None else value
 
 
-class _Path:
-    """What every stage needs about one path."""
+class _RouteInputs:
+    """What ``_route`` reads of a path: its joint table, feed caps and rough durations."""
 
-    def __init__(self, path, joint_map, machine, dt, settings):
+    def __init__(self, path, joint_map, machine):
         from .vpop import JointTable
-        from .vpop.step import Feed, Limits, Table
 
-        self.path = path
-        self.joint_map = joint_map
         self.machine = machine
-        self.dt = dt
-        self.settings = settings
         self.table = table = JointTable(path, joint_map)
-        self.vl, self.al, self.jl = _step_limits(machine, dt, table)
         self.L = table.length
-        self.n = path.n_axes
-        # the exact sampler's inputs (``_track_kernels.track``)
-        self.joints = Table(table.S, np.ascontiguousarray(table.C.transpose(0, 2, 1)), table.qend)
-        self.limits = Limits(self.vl, self.al, self.jl)
-        self.tol = max(4.0 * np.spacing(max(self.L, 1.0)), 1e-7 * float(np.min(self.jl)))
         fb = np.ascontiguousarray(path.s_breaks, dtype=float).copy()
         fb[-1] = self.L
         self.FB = fb
@@ -179,6 +168,30 @@ class _Path:
         ramp = float(np.max(machine.vmax / machine.amax + machine.amax / machine.jmax))
         self.ramp_s = 2.0 * ramp
         self.rough_s = float(np.max(dq / machine.vmax)) + self.L / float(np.min(self.FV)) + self.ramp_s
+        self.stats: dict = {}
+        #: the path's duration at its static speed limits (feed, axis speeds, curvature,
+        #: jerk; ``_route``), s: unlike ``rough_s``, it sees a curvature-limited path's length
+        self.static_s = 0.0
+
+
+class _Path(_RouteInputs):
+    """What every stage needs about one path."""
+
+    def __init__(self, path, joint_map, machine, dt, settings):
+        from .vpop.step import Feed, Limits, Table
+
+        super().__init__(path, joint_map, machine)
+        table = self.table
+        self.path = path
+        self.joint_map = joint_map
+        self.dt = dt
+        self.settings = settings
+        self.vl, self.al, self.jl = _step_limits(machine, dt, table)
+        self.n = path.n_axes
+        # the exact sampler's inputs (``_track_kernels.track``)
+        self.joints = Table(table.S, np.ascontiguousarray(table.C.transpose(0, 2, 1)), table.qend)
+        self.limits = Limits(self.vl, self.al, self.jl)
+        self.tol = max(4.0 * np.spacing(max(self.L, 1.0)), 1e-7 * float(np.min(self.jl)))
         self.feed_caps = Feed(float(dt), float(self.L), self.FB, self.FV)
         self.stats = {
             "lp_iterations": 0,
@@ -194,9 +207,6 @@ class _Path:
         self._refine = None
         #: the whole path is held before any sample leaves (``_better_of``)
         self.whole = False
-        #: the path's duration at its static speed limits (feed, axis speeds, curvature,
-        #: jerk; ``_route``), s: unlike ``rough_s``, it sees a curvature-limited path's length
-        self.static_s = 0.0
 
     def vrun(self):
         from .vpop import VpopRun
@@ -558,6 +568,36 @@ def iter_path_plan_optimal(path, joint_map, machine, dt_s: float, settings=None,
 iter_path_plan_optimal.streams = True
 
 
+def batched_optimal(paths, joint_map, machine, dt_s: float, settings=None) -> list:
+    """Which of ``paths`` this planner gives to VPOp whole and leaves unrefined, where
+    the joints are the program axes: their plans are ``vpop.plan_many_vpop``'s, one
+    compiled call for a job's short paths (the timeline's batch) instead of a VPOp run
+    per path on this planner's own table (5-9x the planning time of flowsnake and
+    zigzag_0.002_0.0005, whose every path goes to VPOp). Returns, per path, the stats it
+    adds to the batch's ({"route": "vpop"}), or ``None``: a path this planner streams."""
+    out: list = [None] * len(paths)
+    opts = _options(settings)
+    dt = float(dt_s)
+    passes = int(_or(opts.refine_passes, 0 if dt < OPT_FULL_REFINE_DT else OPT_REFINE_PASSES))
+    if joint_map is not None or opts.route == "profile" or passes:
+        return out
+    for i, path in enumerate(paths):
+        if path.rapid or not (np.isfinite(path.length) and np.all(np.isfinite(path.coef))):
+            continue
+        if path.length <= VPOP_MIN_LENGTH:
+            continue
+        try:
+            route = opts.route or _route(_RouteInputs(path, None, machine))
+        except PlanError:
+            continue  # raised again in order when the path is streamed
+        if route == "vpop":
+            out[i] = {"route": "vpop"}
+    return out
+
+
+iter_path_plan_optimal.batched = batched_optimal
+
+
 def _iter(path, joint_map, machine, dt_s, settings, stats, window):
     """(s, q) chunks of the plan (see ``iter_path_plan_optimal``); fills ``stats``."""
     from .vpop import _positions
@@ -698,28 +738,18 @@ def _route(ctx) -> str:
         return "vpop"  # travel at the feed and ramps: far below the threshold anyway
     from . import _feed_kernels as K
 
-    S = ctx.table.S
-    x = np.concatenate((S, 0.5 * (S[:-1] + S[1:])))
-    x.sort()
-    n = ctx.n
-    q1 = np.empty((x.shape[0], n))
-    q2 = np.empty_like(q1)
-    q3 = np.empty_like(q1)
-    K.table_derivs(S, np.ascontiguousarray(ctx.table.C), x, q1, q2, q3)
     m = ctx.machine
-    with np.errstate(divide="ignore", invalid="ignore"):
-        vv = np.min(np.where(np.abs(q1) > 0, m.vmax / np.abs(q1), np.inf), axis=1)
-        va = np.min(np.where(np.abs(q2) > 0, np.sqrt(m.amax / np.abs(q2)), np.inf), axis=1)
-        vj = np.min(np.where(np.abs(q3) > 0, np.cbrt(m.jmax / np.abs(q3)), np.inf), axis=1)
-    seg = np.clip(np.searchsorted(ctx.FB, x, side="right") - 1, 0, ctx.FV.shape[0] - 1)
-    cap = np.minimum(vv, ctx.FV[seg])
-    curv = np.minimum(va, vj)
-    limited = curv < OPT_ROUTE_SPEED * cap
-    w = np.diff(x)
-    share = float(np.sum(w * limited[:-1])) / max(float(np.sum(w)), 1e-300)
-    # duration at the static limits (a lower bound of the motion's, ramps aside)
-    v = np.maximum(np.minimum(cap, curv), 1e-300)
-    t_static = float(np.sum(w * 2.0 / (v[:-1] + v[1:])))
+    share, t_static = K.route_measures(
+        ctx.table.S,
+        np.ascontiguousarray(ctx.table.C),
+        ctx.FB,
+        ctx.FV,
+        np.asarray(m.vmax, dtype=float),
+        np.asarray(m.amax, dtype=float),
+        np.asarray(m.jmax, dtype=float),
+        float(OPT_ROUTE_SPEED),
+    )
+    # duration at the static limits: a lower bound of the motion's, ramps aside
     ctx.static_s = t_static
     ctx.stats["limited_share"] = round(share, 4)
     long_enough = t_static + ctx.ramp_s >= OPT_ROUTE_MIN_S

@@ -30,7 +30,7 @@ import math
 import queue
 import threading
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -413,16 +413,23 @@ def iter_timeline(
     budget = WindowBudget(machine, dt, source, streams, window)
     pw = window.path_window
 
+    batched = getattr(planner, "batched", None)
+
     def plan_many(paths):
-        """VPOp's compiled batch for the paths it plans in joint = program space (rapids;
-        every path without kinematics when VPOp is the planner): the same samples."""
+        """VPOp's compiled batch for the rapids and for the paths the planner would plan
+        exactly as VPOp does in joint = program space (its ``batched``: every path without
+        kinematics when VPOp is the planner, the optimal planner's VPOp-routed ones): the
+        same samples, the planner's own stats for the path added."""
         from .vpop import plan_many_vpop
 
-        sel = [i for i, p in enumerate(paths) if p.rapid or (settings.planner == "vpop" and joint_map is None)]
+        extra = batched(paths, joint_map, machine, dt, settings) if batched is not None else [None] * len(paths)
+        sel = [i for i, p in enumerate(paths) if p.rapid or extra[i] is not None]
         out = [None] * len(paths)
         if sel:
             got = plan_many_vpop([paths[i] for i in sel], machine, dt, settings)
             for i, g in zip(sel, got):
+                if g is not None and extra[i]:
+                    g = replace(g, stats={**(g.stats or {}), **extra[i]})
                 out[i] = g
         return out
 

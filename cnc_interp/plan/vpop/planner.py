@@ -452,6 +452,16 @@ def plan_many_vpop(paths, machine, dt_s: float, settings=None, long_samples: int
     return out
 
 
+def batched_vpop(paths, joint_map, machine, dt_s: float, settings=None) -> list:
+    """Which of ``paths`` ``plan_many_vpop`` plans as ``iter_path_plan_vpop`` does (the
+    timeline's batch of a job's paths): every one when the joints are the program axes
+    (``joint_map`` ``None``), with no stats to add ({}); ``None`` for a path to stream."""
+    return [{} if joint_map is None else None for _ in paths]
+
+
+iter_path_plan_vpop.batched = batched_vpop
+
+
 def plan_path_vpop(path, joint_map, machine, dt_s: float, settings=None) -> PathPlan:
     """Plan one path from rest to rest with VPOp (see module docstring).
 
