@@ -99,10 +99,6 @@ OPT_COMPARE_SAMPLES = 1 << 18
 #: ... unless the profile reached the path's end (no hand-over to VPOp, or one within
 #: this much motion of the end): then it is kept as it is
 OPT_COMPARE_TAIL_S = 0.3
-#: ... and a short one (rough duration at most this, s: VPOp's run costs little there)
-#: whose reference had to be lowered by dips is compared all the same (such a profile
-#: can lose a few periods to VPOp: quick-tests/tolerance_parabolic_check, 17 periods)
-OPT_COMPARE_DIPPED_S = 2.5
 #: a profile-routed path lasting at least this long (at its static limits, s) is profiled and
 #: sampled by a thread of its own ahead of its refinement (``prefetch.Prefetch``: the two
 #: stages on two cores; the samples do not depend on it): a long path is otherwise one
@@ -703,11 +699,12 @@ def _better_of(ctx, stage, passes, targeted):
     s = np.concatenate([b[0] for b in blocks])
     q = np.concatenate([b[1] for b in blocks])
     reached_end = not _handed_over_early(ctx, s.shape[0])
-    dipped_short = ctx.stats.get("retries", 0) > 0 and ctx.rough_s <= OPT_COMPARE_DIPPED_S
-    if "fallback" not in ctx.stats and reached_end and not dipped_short:
+    if "fallback" not in ctx.stats and reached_end:
         # the profile ran to the end (VPOp at most finished its last stop): it is kept
         # without running VPOp (over the corpus VPOp won on such paths by 351 periods in
-        # all against the profile's 22k; the runs cost as much as 4.6 s of planning)
+        # all against the profile's 22k; the runs cost as much as 4.6 s of planning).
+        # Also where the reference had to be lowered by dips: on the sweep (axis_mm.ini)
+        # VPOp won there by 51 periods in all (LHchips4) for ~7 % of stellabee1's CPU
         ctx.stats["kept"] = "profile"
         yield s, q
         return
