@@ -169,6 +169,38 @@ def test_time_law_hermite_is_consistent():
     assert TK.ref_s_of_t(ns, nt, nv, na, 4, 2.0, 0)[0] == 3.0
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_a_time_law_recomputed_where_coefficients_changed_is_the_full_one_bit_for_bit(seed):
+    from cnc_interp.plan.timelaw import time_law
+
+    rng = np.random.default_rng(seed)
+    br = np.concatenate(([0.0], np.sort(rng.uniform(0.0, 30.0, 40)), [30.0]))
+    knots = np.concatenate(([0.0] * 3, br, [30.0] * 3))
+    n_coef = knots.shape[0] - 4
+    coef = rng.uniform(50.0, 400.0, n_coef)
+    # rest at one end or both (the u² substitution's intervals), or none
+    if seed % 3 != 2:
+        coef[0] = 0.0
+    if seed % 3 == 1:
+        coef[-1] = 0.0
+    s0, s1 = (0.0, 30.0) if seed < 3 else (float(br[5]), float(br[-8]))
+    old = time_law(knots, coef, s0, s1)
+    for _ in range(5):
+        j0 = int(rng.integers(0, n_coef))
+        j1 = min(n_coef - 1, j0 + int(rng.integers(0, 6)))
+        new = coef.copy()
+        new[j0 : j1 + 1] *= rng.uniform(0.5, 0.99, j1 - j0 + 1)
+        full = time_law(knots, new, s0, s1)
+        part = time_law(knots, new, s0, s1, old=old, changed=(j0, j1))
+        for name in ("s", "dt", "w", "w1", "v", "a"):
+            assert getattr(part, name).tobytes() == getattr(full, name).tobytes(), name
+        # and something did change (the test would pass on an unchanged law otherwise)
+        if s0 <= knots[j0 + 2] and knots[j1 + 2] <= s1:
+            assert part.dt.tobytes() != old.dt.tobytes()
+        t_full = full.nodes(0.25)[1]
+        assert t_full.tobytes() == part.nodes(0.25)[1].tobytes()
+
+
 @pytest.mark.parametrize("machine", [MILL, UCP])
 def test_refine_keeps_plans_exact_and_never_longer(machine):
     from cnc_interp.plan.optimal import _Path

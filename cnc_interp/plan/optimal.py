@@ -233,7 +233,7 @@ class _Nodes:
     """The time-law nodes of the committed profile, appended piece by piece."""
 
     def __init__(self):
-        self.parts = []  # (knots, coef, s0, s1)
+        self.parts = []  # [knots, coef, s0, s1, timelaw.TimeLaw]
         self.s = np.zeros(0)
         self.t = np.zeros(0)
         self.v = np.zeros(0)
@@ -243,13 +243,15 @@ class _Nodes:
         """Append a profile piece's nodes; False (nothing appended) if its time law is
         not finite or, given the profile's speed estimate, crawls somewhere (takes more
         than OPT_CRAWL times the estimate's time over a node interval)."""
-        from .timelaw import nodes_for
+        from .timelaw import time_law
 
+        law = time_law(knots, coef, s0, s1)
+        return law is not None and self._add(knots, coef, s0, s1, law, estimate)
+
+    def _add(self, knots, coef, s0, s1, law, estimate=None) -> bool:
+        """``append`` with the piece's time law known."""
         t0 = float(self.t[-1]) if self.t.size else 0.0
-        nodes = nodes_for(knots, coef, s0, s1, t0)
-        if nodes is None:
-            return False
-        ns, nt, nv, na = nodes
+        ns, nt, nv, na = law.nodes(t0)
         if not (np.all(np.isfinite(nt)) and np.all(np.isfinite(nv)) and np.all(np.isfinite(na))):
             return False
         if estimate is not None and ns.shape[0] >= 2:
@@ -258,7 +260,7 @@ class _Nodes:
                 t_est = np.diff(ns) / np.maximum(ve[:-1], ve[1:])
             if np.any(np.diff(nt) > OPT_CRAWL * t_est):
                 return False
-        self.parts.append([knots, coef.copy(), s0, s1])
+        self.parts.append([knots, coef.copy(), s0, s1, law])
         if self.s.size:
             ns, nt, nv, na = ns[1:], nt[1:], nv[1:], na[1:]
         self.s = np.concatenate((self.s, ns))
@@ -278,28 +280,33 @@ class _Nodes:
     def dip(self, s_bad: float, depth: float, reach: float, s_floor: float) -> bool:
         """Lower w by a smooth dip of the given depth on [s_bad - reach, s_bad + reach/2]
         (not before s_floor) and recompute the nodes from there. False if impossible."""
+        from .timelaw import time_law
+
         lo = max(s_bad - reach, s_floor)
         hi = min(s_bad + 0.5 * reach, self.parts[-1][3] if self.parts else s_bad)
         if not lo < s_bad < hi:
             return False
-        changed = False
-        for part in self.parts:
-            knots, coef, s0, s1 = part
+        parts = []
+        for knots, coef, s0, s1, law in self.parts:
             nc = coef.shape[0]
             g = (knots[1 : nc + 1] + knots[2 : nc + 2] + knots[3 : nc + 3]) / 3.0
             u = np.where(g < s_bad, (g - s_bad) / (s_bad - lo), (g - s_bad) / (hi - s_bad))
             phi = np.where(np.abs(u) < 1.0, 0.5 * (1.0 + np.cos(np.pi * u)), 0.0)
-            if np.any(phi > 0):
-                part[1] = coef * (1.0 - depth * phi)
-                changed = True
-        if not changed:
+            hit = np.flatnonzero(phi > 0)
+            if hit.size:
+                parts.append((knots, coef * (1.0 - depth * phi), s0, s1, law, (int(hit[0]), int(hit[-1]))))
+            else:
+                parts.append((knots, coef, s0, s1, law, None))
+        if all(p[5] is None for p in parts):
             return False
-        # rebuild every node from the first part (their times change from there on)
-        parts = self.parts
+        # the nodes again from the first part (their times change from the dip on); a
+        # part's time law is computed again only where its coefficients changed
         self.parts = []
         self.s = self.t = self.v = self.a = np.zeros(0)
-        for knots, coef, s0, s1 in parts:
-            if not self.append(knots, coef, s0, s1):
+        for knots, coef, s0, s1, law, changed in parts:
+            if changed is not None:
+                law = time_law(knots, coef, s0, s1, old=law, changed=changed)
+            if law is None or not self._add(knots, coef, s0, s1, law):
                 return False
         return True
 
