@@ -403,7 +403,7 @@ def _warm_kernels(planner: str) -> None:
 
     from .plan import precompile as _precompile
 
-    children = planner == "vpop" and _precompile.start(also=("export._repr:warm_up",))
+    children = planner in ("vpop", "optimal") and _precompile.start(also=("export._repr:warm_up",))
 
     def load():
         try:
