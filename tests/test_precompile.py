@@ -94,18 +94,21 @@ def test_only_the_batch_missing_starts_a_child_nobody_waits_for(monkeypatch):
         precompile.stop()
 
 
-def test_paths_planned_one_at_a_time_while_the_batch_compiles(monkeypatch):
-    """While a child compiles the batch driver, VPOp plans each path on its own: the same
-    samples as the batch (the first run's output is the next runs')."""
+@pytest.mark.parametrize("planner", ["vpop", "optimal"])
+def test_paths_planned_one_at_a_time_while_the_batch_compiles(monkeypatch, planner):
+    """While a child compiles the batch driver, VPOp plans each path on its own (and the
+    optimal planner each path it routes to VPOp): the same samples as the batch (the
+    first run's output is the next runs')."""
     import numpy as np
 
     from cnc_interp import api
 
     m = api.load_machine("generic-mill")
     fitted = api.fit(api.read_program("samples/gcode/mill-contour.ngc", machine=m))
-    batch = api.plan(fitted, m)
+    batch = api.plan(fitted, m, planner=planner)
     monkeypatch.setattr(precompile, "batch_pending", lambda: True)
-    one_by_one = api.plan(fitted, m)
+    one_by_one = api.plan(fitted, m, planner=planner)
+    assert one_by_one.settings["stats"].get("routes") == batch.settings["stats"].get("routes")
     np.testing.assert_array_equal(one_by_one.q, batch.q)
     np.testing.assert_array_equal(one_by_one.s, batch.s)
     np.testing.assert_array_equal(one_by_one.line, batch.line)
@@ -167,3 +170,13 @@ def test_the_fit_does_not_compile_what_a_child_compiles(monkeypatch):
     assert not fitter._kernels_ready
     monkeypatch.setattr(_kernel_cache, "background_check", lambda: False)
     assert fitter._batch_kernels_ready(10 * fitter.FIT_KERNEL_COMPILE_NODES)
+
+
+@pytest.mark.parametrize("planner,child", [("vpop", True), ("optimal", True), ("constant", False)])
+def test_a_first_run_of_the_planners_that_use_vpops_step_loop_starts_the_child(monkeypatch, planner, child):
+    from cnc_interp import pipeline
+
+    started = []
+    monkeypatch.setattr(precompile, "start", lambda also=(): started.append(also) or False)
+    pipeline._warm_kernels(planner)
+    assert bool(started) == child
