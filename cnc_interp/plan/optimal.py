@@ -143,6 +143,15 @@ def _or(value, default):
     return default if value is None else value
 
 
+def _refine_passes(opts: OptimalOptions, dt: float, route: str) -> int:
+    """Passes of window refinement for a path on ``route``: every window at coarse periods;
+    at fine ones only the profile's dips and ends, once (VPOp's plans there are within a
+    few periods per path of the discrete optimum, and windows on every short path would
+    cost more than planning); ``opts.refine_passes`` when set."""
+    default = OPT_REFINE_PASSES if dt >= OPT_FULL_REFINE_DT else (1 if route == "profile" else 0)
+    return int(_or(opts.refine_passes, default))
+
+
 class _RouteInputs:
     """What ``_route`` reads of a path: its joint table, feed caps and rough durations."""
 
@@ -581,8 +590,7 @@ def batched_optimal(paths, joint_map, machine, dt_s: float, settings=None) -> li
     out: list = [None] * len(paths)
     opts = _options(settings)
     dt = float(dt_s)
-    passes = int(_or(opts.refine_passes, 0 if dt < OPT_FULL_REFINE_DT else OPT_REFINE_PASSES))
-    if joint_map is not None or opts.route == "profile" or passes:
+    if joint_map is not None or opts.route == "profile" or _refine_passes(opts, dt, "vpop"):
         return out
     for i, path in enumerate(paths):
         if path.rapid or not (np.isfinite(path.length) and np.all(np.isfinite(path.coef))):
@@ -621,11 +629,7 @@ def _iter(path, joint_map, machine, dt_s, settings, stats, window):
     targeted = dt < OPT_FULL_REFINE_DT
     route = opts.route or _route(ctx)
     ctx.stats["route"] = route
-    # refinement: every window at coarse periods; at fine ones only the profile's dips
-    # and ends, once (VPOp's plans there are within a few periods per path of the
-    # discrete optimum, and windows on every short path would cost more than planning)
-    default_passes = OPT_REFINE_PASSES if not targeted else (1 if route == "profile" else 0)
-    passes = int(_or(opts.refine_passes, default_passes))
+    passes = _refine_passes(opts, dt, route)
     limit_s = float(_or(opts.compare_s, OPT_COMPARE_SAMPLES * dt))
     ctx.whole = route == "profile" and ctx.rough_s <= limit_s
     stage = _sampled(ctx) if route == "profile" else _vpop_stage(ctx, window)
@@ -648,8 +652,7 @@ def _iter(path, joint_map, machine, dt_s, settings, stats, window):
                 f"{int(path.line[-1])} after emitting samples ({why})"
             ) from None
         ctx.stats["fallback"] = str(why)
-        if targeted:
-            passes = int(_or(opts.refine_passes, 0))
+        passes = _refine_passes(opts, dt, "vpop")
         stage = _vpop_stage(ctx, window)
         for _ in range(passes):
             stage = _refined(ctx, stage, targeted)

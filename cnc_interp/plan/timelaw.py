@@ -36,14 +36,6 @@ def _spline_w(knots, coef, x):
     return np.einsum("kj,kj->k", B[:, 0], c), np.einsum("kj,kj->k", B[:, 1], c)
 
 
-def nodes_for(knots, coef, s0: float, s1: float, t0: float):
-    """Time-law nodes on [s0, s1] (s, t, v, a arrays), starting at time t0, of the
-    profile piece (knots, coef) (``feedprofile.FeedPiece``); None when w reaches zero
-    inside the interval (the profile would stop there)."""
-    law = time_law(knots, coef, s0, s1)
-    return None if law is None else law.nodes(t0)
-
-
 class TimeLaw:
     """A profile piece's time law: nodes ``s`` (K,), mm; the time of each node interval
     ``dt`` (K-1,), s; at the nodes w = ṡ² ``w`` (K,), mm²/s², its derivative ``w1`` (K,),
