@@ -6,7 +6,8 @@
     .venv/bin/python benchmarks/optimality.py --json out.json --markdown
 
 For each case (a program, a machine, a sample period): plan it with every planner
-(``--planners``, default ``optimal vpop``), write the plan as CSV, and run the oracle
+(``--planners``, default ``optimal vpop``; ``optimal:fast`` is the optimal planner at
+``--effort fast``), write the plan as CSV, and run the oracle
 ``optimum_gap.py`` (``../shared/tools``; CasADi + IPOPT: a measuring tool, not a
 dependency of the package; ``CNC_ORACLE_PYTHON`` names an interpreter that has them)
 on the plan's main move: the longest run of samples in
@@ -202,11 +203,13 @@ def _plan(case, text: str, planner: str, work: str) -> dict:
         fh.write(text)
     with open(mach, "w") as fh:
         fh.write(case[2])
-    plan_part(part, mach, planner, case[3], start=case[4], fit_method=case[5])  # warm up
+    name_only, _, effort = planner.partition(":")
+    kw = {"start": case[4], "fit_method": case[5], "effort": effort or None}
+    plan_part(part, mach, name_only, case[3], **kw)  # warm up
     c0 = time.process_time()
-    out = plan_part(part, mach, planner, case[3], start=case[4], fit_method=case[5])
+    out = plan_part(part, mach, name_only, case[3], **kw)
     cpu = time.process_time() - c0
-    csv = os.path.join(work, f"{name}.{planner}.csv")
+    csv = os.path.join(work, f"{name}.{planner.replace(':', '-')}.csv")
     write_csv(out.trajectory, csv)
     traj = out.trajectory
     steps = _main_move(traj.q)
@@ -332,7 +335,7 @@ def _print(row: dict) -> None:
     for p in row["plans"]:
         r = f"{p['ratio']:.4f}" if p["ratio"] else "   -  "
         print(
-            f"    {p['planner']:8s} {p['main_steps']:6d} steps  ratio {r}  cycle {p['cycle_s']:8.3f} s"
+            f"    {p['planner']:12s} {p['main_steps']:6d} steps  ratio {r}  cycle {p['cycle_s']:8.3f} s"
             f"  plan {p['plan_wall_s'] * 1e3:8.1f} ms wall {p['plan_cpu_s'] * 1e3:8.1f} ms cpu"
             f"  worst {p['worst_ratio']:.9f}",
             flush=True,

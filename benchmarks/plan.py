@@ -52,7 +52,12 @@ def corpus_programs():
 
 
 def plan_one(
-    path: str, machine: str, dt_s: float | None = 0.001, optimality: bool = False, planner: str = "vpop"
+    path: str,
+    machine: str,
+    dt_s: float | None = 0.001,
+    optimality: bool = False,
+    planner: str = "vpop",
+    effort: str | None = None,
 ) -> dict:
     from cnc_interp.errors import CncInterpError
     from cnc_interp.pipeline import plan_part
@@ -60,7 +65,7 @@ def plan_one(
     t0 = time.perf_counter()
     try:
         c0 = time.process_time()
-        out = plan_part(path, machine, planner, dt_s)
+        out = plan_part(path, machine, planner, dt_s, effort=effort)
         cpu = time.process_time() - c0
     except CncInterpError as exc:
         return {
@@ -78,6 +83,7 @@ def plan_one(
         "machine": machine,
         "status": "ok",
         "planner": planner,
+        "effort": effort,
         "cpu_s": cpu,
         "samples": traj.n_samples,
         "cycle_time_s": traj.duration_s,
@@ -111,6 +117,7 @@ def main() -> None:
         "time and cycle of the programs both planned, against it",
     )
     ap.add_argument("--planner", default="vpop", help="the per-path planner (default vpop)")
+    ap.add_argument("--effort", default=None, help="the optimal planner's --effort (fast, normal, max)")
     ap.add_argument("--no-bound", action="store_true", help="skip the V/A lower bound")
     ap.add_argument(
         "--exclude",
@@ -128,13 +135,13 @@ def main() -> None:
     )
     args = ap.parse_args()
     # compile once outside the timings
-    plan_one(TRIDENT, "generic-mill", planner=args.planner)
+    plan_one(TRIDENT, "generic-mill", planner=args.planner, effort=args.effort)
     rows = []
     if args.sweep:
         for f in corpus_programs():
             if any(x in f for x in args.exclude):
                 continue
-            rec = plan_one(f, args.ini, planner=args.planner)
+            rec = plan_one(f, args.ini, planner=args.planner, effort=args.effort)
             rows.append(rec)
             _print(rec)
     else:
@@ -143,9 +150,9 @@ def main() -> None:
             if os.path.isdir(targets[0]):
                 targets = sorted(glob.glob(os.path.join(targets[0], "*.ngc")))[:3]
             for f in targets:
-                rec = plan_one(f, machine, optimality=not args.no_bound, planner=args.planner)
+                rec = plan_one(f, machine, optimality=not args.no_bound, planner=args.planner, effort=args.effort)
                 for _ in range(max(args.repeat, 1) - 1):
-                    again = plan_one(f, machine, planner=args.planner)
+                    again = plan_one(f, machine, planner=args.planner, effort=args.effort)
                     if again["status"] == "ok" and again["plan_s"] < rec["plan_s"]:
                         for key in ("plan_s", "setpoints_per_s", "x_real_time", "timings", "cpu_s"):
                             rec[key] = again[key]

@@ -78,6 +78,7 @@ class BatchOptions:
     dt_s: float | None = None
     tol_mm: float | None = None
     fit_method: str | None = None
+    effort: str | None = None
     jobs: int | None = None
     report: str | None = None
     baseline: str | None = None
@@ -173,6 +174,7 @@ def _make_jobs(programs, machine, opts: BatchOptions, embed: bool) -> list[dict]
             "dt_s": opts.dt_s,
             "tol_mm": opts.tol_mm,
             "fit_method": opts.fit_method,
+            "effort": opts.effort,
             "data": None,
         }
         if embed:  # Dask workers may not share our file system: ship the program text
@@ -409,7 +411,10 @@ def build_report(opts: BatchOptions) -> dict:
     from . import __version__
     from .machine.load import load_machine
 
+    from .pipeline import plan_settings
+
     machine = load_machine(opts.machine_spec)
+    plan_settings(opts.planner, opts.dt_s, opts.tol_mm, machine, opts.effort)  # a usage error before any job
     slowdown = parse_slowdown(opts.max_slowdown)
     baseline = load_baseline(opts.baseline) if opts.baseline else None
     programs = collect_programs(opts.paths)
@@ -428,6 +433,7 @@ def build_report(opts: BatchOptions) -> dict:
         "dt_s": machine.with_dt(opts.dt_s).dt_s,
         "tol_mm": opts.tol_mm,
         "fit_method": opts.fit_method or "nodes",
+        "effort": opts.effort,
         "max_slowdown": slowdown,
         "executor": "dask" if opts.dask_address else "local",
         "programs": records,

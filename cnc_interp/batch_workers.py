@@ -68,6 +68,7 @@ def _run_job(job: dict) -> dict:
             dt_s=job.get("dt_s"),
             tol_mm=job.get("tol_mm"),
             fit_method=job.get("fit_method"),
+            effort=job.get("effort"),
         )
     except CncInterpError as exc:
         return {"status": "error", "message": exc.format(), "error_line": exc.location.line}

@@ -61,6 +61,17 @@ def fit_loaded(program, settings):
     return require_within_tolerance(fit_program(program, settings))
 
 
+def plan_settings(planner: str, dt_s, tol_mm, machine, effort: str | None = None):
+    """``PlanSettings`` from the CLI's options (``--dt`` wins over the machine's period);
+    ``effort`` (``--effort``) is the optimal planner's only: a ``UsageError`` with another."""
+    from .plan.settings import OptimalOptions, PlanSettings
+
+    if effort is not None and planner != "optimal":
+        raise UsageError(f"--effort applies to --planner optimal, not {planner}")
+    optimal = OptimalOptions(effort=effort)
+    return PlanSettings.from_options(planner=planner, dt_s=dt_s, tol_mm=tol_mm, machine=machine, optimal=optimal)
+
+
 # --- batch: one program from bytes to a result record (H3a, issue 7) ----------
 def process_program(
     name: str,
@@ -70,6 +81,7 @@ def process_program(
     dt_s: float | None = None,
     tol_mm: float | None = None,
     fit_method: str | None = None,
+    effort: str | None = None,
 ) -> dict:
     """Parse, fit, plan and verify one program; the batch's per-program record.
 
@@ -78,9 +90,13 @@ def process_program(
     ``nodes``, ``segments``, ``path_length_mm`` (rapids included), ``cycle_time_s``,
     ``worst_ratio`` (verify), ``worst`` (axis/limit/sample of it), ``max_fit_dev_mm``.
     """
-    from .api import run
+    from .api import load_machine, run
+    from .fit.settings import FitSettings
 
-    res = run(data, machine, planner=planner, dt_s=dt_s, tol_mm=tol_mm, fit_method=fit_method, name=name, check=False)
+    m = load_machine(machine)
+    fit_settings = FitSettings.from_options(tol_mm=tol_mm, machine=m, method=fit_method)
+    settings = plan_settings(planner, dt_s, tol_mm, m, effort)
+    res = run(data, m, fit_settings=fit_settings, plan_settings=settings, name=name, check=False)
     program, result, traj, report = res.program, res.fit, res.trajectory, res.report
     axis, kind, ratio, sample = report.worst()
     return {
@@ -129,6 +145,7 @@ class PlanOptions:
     out: str = "-"
     quiet: bool = False
     summary_json: bool = False
+    effort: str | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -155,6 +172,8 @@ class PlanOutcome:
             "part": self.source,
             "machine": self.machine.name,
             "planner": traj.planner,
+            # the planner's knobs that differ from their defaults (``--effort``)
+            "options": dict(traj.settings.get("options", {})),
             "dt_s": traj.dt_s,
             "samples": traj.n_samples,
             "cycle_time_s": traj.duration_s,
@@ -203,12 +222,14 @@ def plan_part(
     progress=None,
     fit_method: str | None = None,
     tool_table: str | None = None,
+    effort: str | None = None,
 ) -> PlanOutcome:
     """Parse, fit, plan and verify one part program (no output written).
 
     Raises ``PlanError`` (exit 1) when the plan violates a limit: that is a bug.
     """
     from .api import run
+    from .fit.settings import FitSettings
     from .machine.load import DEFAULT_PRESET, load_machine
 
     machine = load_machine(machine_spec if machine_spec is not None else DEFAULT_PRESET)
@@ -218,10 +239,8 @@ def plan_part(
     res = run(
         data,
         machine,
-        planner=planner,
-        dt_s=dt_s,
-        tol_mm=tol_mm,
-        fit_method=fit_method,
+        fit_settings=FitSettings.from_options(tol_mm=tol_mm, machine=machine, method=fit_method),
+        plan_settings=plan_settings(planner, dt_s, tol_mm, machine, effort),
         start=start,
         tool_table=tool_table,
         name=name,
@@ -271,7 +290,6 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
     from .fit.settings import FitSettings
     from .gcode.stream import ProgramStream
     from .machine.load import DEFAULT_PRESET, load_machine
-    from .plan.settings import PlanSettings
     from .plan.prefetch import Prefetch
     from .plan.timeline import TimelineInfo, iter_timeline
 
@@ -283,7 +301,7 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
     if isinstance(start, str):
         start = parse_start(start, machine.axes, machine.start)
     machine = machine.with_start(start)
-    settings = PlanSettings.from_options(planner=opts.planner, dt_s=opts.dt_s, tol_mm=opts.tol_mm, machine=machine)
+    settings = plan_settings(opts.planner, opts.dt_s, opts.tol_mm, machine, opts.effort)
     machine = machine.with_dt(settings.dt_s)
     _warm_kernels(settings.planner)
     dt = float(settings.dt_s)
@@ -356,6 +374,7 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
         "part": name,
         "machine": machine.name,
         "planner": settings.planner,
+        "options": settings.options(),
         "dt_s": dt,
         "samples": samples,
         "cycle_time_s": cycle,

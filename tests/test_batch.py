@@ -317,3 +317,25 @@ def test_fit_method_reaches_the_workers(tmp_path, folder):
     assert ok and all(nodes["programs"][k]["status"] == "ok" for k in ok)
     # the two fitters give different segmentations of at least one program
     assert any(auto["programs"][k]["segments"] != nodes["programs"][k]["segments"] for k in ok)
+
+
+def test_effort_reaches_the_workers_and_needs_the_optimal_planner(tmp_path, folder):
+    from cnc_interp.batch import build_report, run_batch
+
+    # a small circle at a high feed: curvature binds, the optimal planner's profile route
+    (folder / "circle.ngc").write_text("G21 G90 G17\nG0 X4 Y0\nG2 X4 Y0 I-4 J0 F10000\nM2\n")
+    m = machine_file(tmp_path, 20000.0)
+    reps = {
+        e: build_report(
+            BatchOptions(paths=(str(folder),), machine_spec=m, planner="optimal", effort=e, jobs=1, quiet=True)
+        )
+        for e in ("fast", None)
+    }
+    assert reps["fast"]["effort"] == "fast" and reps[None]["effort"] is None
+    cycle = {e: {r["key"]: r for r in rep["programs"]} for e, rep in reps.items()}
+    circle = next(k for k in cycle[None] if k.endswith("circle.ngc"))
+    assert cycle[None][circle]["status"] == cycle["fast"][circle]["status"] == "ok"
+    # the refinement gains on the circle; fast leaves it out
+    assert cycle[None][circle]["samples"] < cycle["fast"][circle]["samples"]
+    with pytest.raises(UsageError, match="--effort"):
+        run_batch(BatchOptions(paths=(str(folder),), machine_spec=m, effort="fast", quiet=True))

@@ -9,7 +9,8 @@ from numpy.testing import assert_array_equal
 
 from cnc_interp.machine.kinematics import make_kinematics
 from cnc_interp.machine.model import Machine
-from cnc_interp.plan.optimal import iter_path_plan_optimal, plan_path_optimal
+from cnc_interp.errors import UsageError
+from cnc_interp.plan.optimal import batched_optimal, iter_path_plan_optimal, plan_path_optimal
 from cnc_interp.plan.optimality import line_min_samples
 from cnc_interp.plan.safe import plan_path_safe
 from cnc_interp.plan.settings import OptimalOptions, PlanSettings
@@ -438,7 +439,6 @@ def _mixed_paths():
 
 
 def test_the_paths_routed_to_vpop_are_planned_by_vpops_batch_byte_for_byte():
-    from cnc_interp.plan.optimal import batched_optimal
     from cnc_interp.plan.vpop import plan_many_vpop
 
     paths = _mixed_paths()
@@ -478,3 +478,40 @@ def test_the_timeline_gives_the_same_plan_and_route_counts_with_the_batch(monkey
     assert routes.get("vpop", 0) >= 3 and routes.get("profile", 0) == 1, routes
     assert batched.q.tobytes() == streamed.q.tobytes()
     assert ci.verify(batched, m).ok
+
+
+# -- the planning effort (``OptimalOptions.effort``, ``--effort``) ---------------------
+def test_the_effort_trades_planning_time_for_cycle_time():
+    # fine periods: "fast" leaves the profile's plan unrefined and gives VPOp's paths to
+    # the batch; "normal" refines the profile's dips and ends; "max" every window of every
+    # path, VPOp's lines included (their stops lose a few periods to VPOp's greedy steps)
+    paths = _mixed_paths()
+    plans = {}
+    for effort in ("fast", "normal", "max"):
+        settings = PlanSettings(planner="optimal", optimal=OptimalOptions(effort=effort))
+        plans[effort] = [plan_path_optimal(p, None, MILL, DT, settings) for p in paths]
+        for p, plan in zip(paths, plans[effort]):
+            check(plan, MILL, p.start, p.end, DT)
+        marks = batched_optimal(paths, None, MILL, DT, settings)
+        assert [m is not None for m in marks] == [
+            effort != "max" and plan.stats["route"] == "vpop" for plan in plans[effort]
+        ]
+    refined = {e: [p.stats["refined_periods"] for p in plans[e]] for e in plans}
+    n = {e: [periods(p) for p in plans[e]] for e in plans}
+    helix = [p.stats["route"] for p in plans["normal"]].index("profile")
+    assert refined["fast"] == [0] * len(paths)
+    assert refined["normal"][helix] > 0 and sum(refined["normal"]) == refined["normal"][helix]
+    assert all(r > 0 for r in refined["max"])
+    assert n["normal"][helix] < n["fast"][helix]
+    assert all(a <= b for a, b in zip(n["max"], n["normal"])) and sum(n["max"]) < sum(n["normal"])
+    # the default is "normal", to the byte
+    default = [plan_path_optimal(p, None, MILL, DT) for p in paths]
+    assert [p.q.tobytes() for p in default] == [p.q.tobytes() for p in plans["normal"]]
+    # coarse periods: fast still refines, once (cheap there, and it carries the most)
+    p = hermite_path(_trident_like, 24, 60.0)
+    fast = PlanSettings(planner="optimal", dt_s=UCP.dt_s, optimal=OptimalOptions(effort="fast"))
+    plan = plan_path_optimal(p, None, UCP, UCP.dt_s, fast)
+    check(plan, UCP, p.start, p.end, UCP.dt_s)
+    assert plan.stats["refined_periods"] > 0
+    with pytest.raises(UsageError, match="effort"):
+        OptimalOptions(effort="fastest")

@@ -164,3 +164,21 @@ def test_start_keeps_the_machines_position_on_unnamed_axes(tmp_path):
     assert r.returncode == 0, r.stderr.decode()
     _, rows = read_csv(r.stdout)
     assert np.array_equal(rows[0, 3:], [0, 3, 50])
+
+
+def test_effort_is_the_optimal_planners_and_recorded(part, tmp_path):
+    fast = run([str(part), "--planner", "optimal", "--effort", "fast", "--json", "-o", str(tmp_path / "f.csv")])
+    assert fast.returncode == 0, fast.stderr.decode()
+    summary = json.loads(fast.stdout.decode())
+    assert summary["planner"] == "optimal" and summary["options"] == {"effort": "fast"}
+    normal = run([str(part), "--planner", "optimal", "--json", "-o", str(tmp_path / "n.csv")])
+    assert json.loads(normal.stdout.decode())["options"] == {}
+    assert summary["worst_ratio"] <= 1.0 + 1e-9
+    # another planner has no effort to set: a usage error, one line, nothing written
+    r = run([str(part), "--effort", "fast", "-o", str(tmp_path / "v.csv")])
+    assert r.returncode == 2
+    lines = r.stderr.decode().strip().splitlines()
+    assert lines == ["cnc-interp: error: --effort applies to --planner optimal, not vpop"]
+    assert not (tmp_path / "v.csv").exists()
+    r = run([str(part), "--planner", "optimal", "--effort", "fastest", "-o", str(tmp_path / "x.csv")])
+    assert r.returncode == 2 and b"--effort" in r.stderr

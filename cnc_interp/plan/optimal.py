@@ -144,12 +144,26 @@ def _or(value, default):
 
 
 def _refine_passes(opts: OptimalOptions, dt: float, route: str) -> int:
-    """Passes of window refinement for a path on ``route``: every window at coarse periods;
-    at fine ones only the profile's dips and ends, once (VPOp's plans there are within a
-    few periods per path of the discrete optimum, and windows on every short path would
-    cost more than planning); ``opts.refine_passes`` when set."""
-    default = OPT_REFINE_PASSES if dt >= OPT_FULL_REFINE_DT else (1 if route == "profile" else 0)
-    return int(_or(opts.refine_passes, default))
+    """Passes of window refinement for a path on ``route`` at ``opts.effort``: every
+    window at coarse periods or at the max effort; at fine ones only the profile's dips
+    and ends, once (VPOp's plans there are within a few periods per path of the discrete
+    optimum, and windows on every short path would cost more than planning). Fast: none
+    at fine periods, one pass at coarse ones (where it is cheap and carries the most:
+    paper 001's trident at 6 ms, 324 periods unrefined, 296 after one pass as after two);
+    ``opts.refine_passes`` when set."""
+    if opts.refine_passes is not None:
+        return int(opts.refine_passes)
+    if opts.effort == "fast":
+        return 0 if dt < OPT_FULL_REFINE_DT else 1
+    if opts.effort == "max" or dt >= OPT_FULL_REFINE_DT:
+        return OPT_REFINE_PASSES
+    return 1 if route == "profile" else 0
+
+
+def _targeted(opts: OptimalOptions, dt: float) -> bool:
+    """Does the refinement visit only the dips and ends, under the pause rule (fine
+    periods), rather than every window?"""
+    return dt < OPT_FULL_REFINE_DT and opts.effort != "max"
 
 
 class _RouteInputs:
@@ -626,7 +640,7 @@ def _iter(path, joint_map, machine, dt_s, settings, stats, window):
         return
     ctx = _Path(path, joint_map, machine, dt, settings)
     ctx.window = window
-    targeted = dt < OPT_FULL_REFINE_DT
+    targeted = _targeted(opts, dt)
     route = opts.route or _route(ctx)
     ctx.stats["route"] = route
     passes = _refine_passes(opts, dt, route)

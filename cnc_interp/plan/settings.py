@@ -26,10 +26,16 @@ class OptimalOptions:
     """Knobs of the ``optimal`` planner (``plan.optimal``); ``None`` keeps its default.
 
     Attributes:
+        effort: how much planning time buys cycle time (``OPTIMAL_EFFORTS``).
+            ``"fast"``: the feed profile sampled exactly, unrefined at fine periods (below
+            ``OPT_FULL_REFINE_DT``), one pass of window refinement at coarse ones.
+            ``"normal"`` (``None``): every window refined at coarse periods; at fine ones
+            the profile's dips and ends while that pays (the pause rule). ``"max"``:
+            every window of every path refined at every period.
         route: ``"profile"`` (the feed-profile LP) or ``"vpop"`` for every path;
             ``None``: the planner chooses per path (``OPT_ROUTE_*``).
-        refine_passes: passes of the window refinement over the sampled plan (default
-            ``OPT_REFINE_PASSES`` at coarse periods, fewer at fine ones).
+        refine_passes: passes of the window refinement over the sampled plan (default: by
+            ``effort``); it overrides the effort's number of passes, not which windows.
         compare_s: a profile-routed path whose rough duration is at most this long, s, is
             planned whole (one LP window when short), and also by VPOp, the shorter plan
             kept, when the profile got stuck before its end (default
@@ -39,12 +45,15 @@ class OptimalOptions:
             not depend on it).
     """
 
+    effort: str | None = None
     route: str | None = None
     refine_passes: int | None = None
     compare_s: float | None = None
     chunk_samples: int | None = None
 
     def __post_init__(self) -> None:
+        if self.effort not in (None, *OPTIMAL_EFFORTS):
+            raise UsageError(f"optimal effort must be one of {OPTIMAL_EFFORTS}, got {self.effort!r}")
         if self.route not in (None, *OPTIMAL_ROUTES):
             raise UsageError(f"optimal route must be one of {OPTIMAL_ROUTES}, got {self.route!r}")
         for name in ("refine_passes", "chunk_samples"):
@@ -104,6 +113,8 @@ class Paper000Options:
 
 #: ``optimal``'s routes (``OptimalOptions.route``)
 OPTIMAL_ROUTES = ("profile", "vpop")
+#: ``optimal``'s planning efforts (``OptimalOptions.effort``, ``--effort``)
+OPTIMAL_EFFORTS = ("fast", "normal", "max")
 
 
 def _is_number(v: object) -> bool:
