@@ -49,7 +49,7 @@ def _planner_option(f):
 
 
 def _effort_option(f):
-    # plan and batch; the optimal planner's OptimalOptions.effort
+    # plan, batch and stream; the optimal planner's OptimalOptions.effort
     return click.option(
         "--effort",
         type=click.Choice(OPTIMAL_EFFORTS),
@@ -324,6 +324,7 @@ def emulate(frames, out) -> None:
     show_default=True,
     help="The planner whose plan is quantized (variable: paper 000's, whose segments the device evaluates).",
 )
+@_effort_option
 @_dt_option
 @_tol_option
 @_fit_method_option
@@ -340,7 +341,7 @@ def emulate(frames, out) -> None:
     help="Resume a broken stream after the last acknowledged sequence number.",
 )
 @click.option("--quiet", "-q", is_flag=True, help="No summary lines on stderr.")
-def stream(part, machine_spec, planner, dt_s, tol_mm, fit_method, device, dry_run, resume_from, quiet) -> None:
+def stream(part, machine_spec, planner, effort, dt_s, tol_mm, fit_method, device, dry_run, resume_from, quiet) -> None:
     """Quantize PART's plan to fixed point and stream it to the FPGA over USB."""
     from .fpga.commands import StreamOptions, run_stream
 
@@ -350,6 +351,7 @@ def stream(part, machine_spec, planner, dt_s, tol_mm, fit_method, device, dry_ru
             part=part,
             machine_spec=machine_spec,
             planner=planner,
+            effort=effort,
             dt_s=dt_s,
             tol_mm=tol_mm,
             fit_method=fit_method or "planar",

@@ -135,6 +135,17 @@ def test_stream_other_planners_round_trip(tmp_path, planner):
     assert prog.stats["segments"] > 0
 
 
+def test_stream_passes_the_effort_to_the_optimal_planner(tmp_path):
+    from cnc_interp.errors import UsageError
+    from cnc_interp.fpga.commands import StreamOptions, plan_for_stream
+
+    part = _xz_part(tmp_path)
+    _, traj = plan_for_stream(StreamOptions(part=str(part), machine_spec=XZ_INI, planner="optimal", effort="fast"))
+    assert traj.planner == "optimal" and traj.settings["options"] == {"effort": "fast"}
+    with pytest.raises(UsageError, match="--effort applies to --planner optimal, not variable"):
+        plan_for_stream(StreamOptions(part=str(part), machine_spec=XZ_INI, effort="fast"))
+
+
 def test_stream_to_emulated_device_with_faults(tmp_path, capsys):
     from cnc_interp.fpga.commands import StreamOptions, build_stream, run_stream
     from cnc_interp.fpga.device import DeviceCore
