@@ -410,7 +410,6 @@ def build_report(opts: BatchOptions) -> dict:
     """Run the batch and return the report dict (no printing, no exit code)."""
     from . import __version__
     from .machine.load import load_machine
-
     from .pipeline import plan_settings
 
     machine = load_machine(opts.machine_spec)

@@ -61,7 +61,7 @@ def fit_loaded(program, settings):
     return require_within_tolerance(fit_program(program, settings))
 
 
-def plan_settings(planner: str, dt_s, tol_mm, machine, effort: str | None = None):
+def plan_settings(planner: str, dt_s: float | None, tol_mm: float | None, machine, effort: str | None = None):
     """``PlanSettings`` from the CLI's options (``--dt`` wins over the machine's period);
     ``effort`` (``--effort``) is the optimal planner's only: a ``UsageError`` with another."""
     from .plan.settings import OptimalOptions, PlanSettings
