@@ -410,10 +410,11 @@ def build_report(opts: BatchOptions) -> dict:
     """Run the batch and return the report dict (no printing, no exit code)."""
     from . import __version__
     from .machine.load import load_machine
-    from .pipeline import plan_settings
+    from .plan.settings import PlanSettings
 
     machine = load_machine(opts.machine_spec)
-    plan_settings(opts.planner, opts.dt_s, opts.tol_mm, machine, opts.effort)  # a usage error before any job
+    # a usage error before any job
+    PlanSettings.from_options(planner=opts.planner, dt_s=opts.dt_s, machine=machine, effort=opts.effort)
     slowdown = parse_slowdown(opts.max_slowdown)
     baseline = load_baseline(opts.baseline) if opts.baseline else None
     programs = collect_programs(opts.paths)

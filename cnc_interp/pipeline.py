@@ -61,17 +61,6 @@ def fit_loaded(program, settings):
     return require_within_tolerance(fit_program(program, settings))
 
 
-def plan_settings(planner: str, dt_s: float | None, tol_mm: float | None, machine, effort: str | None = None):
-    """``PlanSettings`` from the CLI's options (``--dt`` wins over the machine's period);
-    ``effort`` (``--effort``) is the optimal planner's only: a ``UsageError`` with another."""
-    from .plan.settings import OptimalOptions, PlanSettings
-
-    if effort is not None and planner != "optimal":
-        raise UsageError(f"--effort applies to --planner optimal, not {planner}")
-    optimal = OptimalOptions(effort=effort)
-    return PlanSettings.from_options(planner=planner, dt_s=dt_s, tol_mm=tol_mm, machine=machine, optimal=optimal)
-
-
 # --- batch: one program from bytes to a result record (H3a, issue 7) ----------
 def process_program(
     name: str,
@@ -91,12 +80,11 @@ def process_program(
     ``worst_ratio`` (verify), ``worst`` (axis/limit/sample of it), ``max_fit_dev_mm``.
     """
     from .api import load_machine, run
-    from .fit.settings import FitSettings
+    from .plan.settings import PlanSettings
 
     m = load_machine(machine)
-    fit_settings = FitSettings.from_options(tol_mm=tol_mm, machine=m, method=fit_method)
-    settings = plan_settings(planner, dt_s, tol_mm, m, effort)
-    res = run(data, m, fit_settings=fit_settings, plan_settings=settings, name=name, check=False)
+    settings = PlanSettings.from_options(planner=planner, dt_s=dt_s, tol_mm=tol_mm, machine=m, effort=effort)
+    res = run(data, m, tol_mm=tol_mm, fit_method=fit_method, plan_settings=settings, name=name, check=False)
     program, result, traj, report = res.program, res.fit, res.trajectory, res.report
     axis, kind, ratio, sample = report.worst()
     return {
@@ -229,8 +217,8 @@ def plan_part(
     Raises ``PlanError`` (exit 1) when the plan violates a limit: that is a bug.
     """
     from .api import run
-    from .fit.settings import FitSettings
     from .machine.load import DEFAULT_PRESET, load_machine
+    from .plan.settings import PlanSettings
 
     machine = load_machine(machine_spec if machine_spec is not None else DEFAULT_PRESET)
     if isinstance(start, str):
@@ -239,8 +227,11 @@ def plan_part(
     res = run(
         data,
         machine,
-        fit_settings=FitSettings.from_options(tol_mm=tol_mm, machine=machine, method=fit_method),
-        plan_settings=plan_settings(planner, dt_s, tol_mm, machine, effort),
+        tol_mm=tol_mm,
+        fit_method=fit_method,
+        plan_settings=PlanSettings.from_options(
+            planner=planner, dt_s=dt_s, tol_mm=tol_mm, machine=machine, effort=effort
+        ),
         start=start,
         tool_table=tool_table,
         name=name,
@@ -291,6 +282,7 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
     from .gcode.stream import ProgramStream
     from .machine.load import DEFAULT_PRESET, load_machine
     from .plan.prefetch import Prefetch
+    from .plan.settings import PlanSettings
     from .plan.timeline import TimelineInfo, iter_timeline
 
     t_start = time.perf_counter()
@@ -301,7 +293,9 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
     if isinstance(start, str):
         start = parse_start(start, machine.axes, machine.start)
     machine = machine.with_start(start)
-    settings = plan_settings(opts.planner, opts.dt_s, opts.tol_mm, machine, opts.effort)
+    settings = PlanSettings.from_options(
+        planner=opts.planner, dt_s=opts.dt_s, tol_mm=opts.tol_mm, machine=machine, effort=opts.effort
+    )
     machine = machine.with_dt(settings.dt_s)
     _warm_kernels(settings.planner)
     dt = float(settings.dt_s)

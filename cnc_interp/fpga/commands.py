@@ -98,17 +98,17 @@ def plan_for_stream(opts: StreamOptions, formats=None, with_machine: bool = Fals
     from .limits import device_margin, with_margin
 
     from ..api import read_part, run
-    from ..fit.settings import FitSettings
     from ..machine.load import DEFAULT_PRESET, load_machine
-    from ..pipeline import plan_settings
+    from ..plan.settings import PlanSettings
 
     machine = load_machine(opts.machine_spec if opts.machine_spec is not None else DEFAULT_PRESET)
-    settings = plan_settings(opts.planner, opts.dt_s, opts.tol_mm, machine, opts.effort)
+    settings = PlanSettings.from_options(
+        planner=opts.planner, dt_s=opts.dt_s, tol_mm=opts.tol_mm, machine=machine, effort=opts.effort
+    )
     real = machine.with_dt(settings.dt_s)
     name, data = read_part(opts.part)
     margined = with_margin(real, device_margin(real, formats or FpgaFormats(), name))
-    fit_settings = FitSettings.from_options(tol_mm=opts.tol_mm, machine=margined, method=opts.fit_method)
-    res = run(data, margined, fit_settings=fit_settings, plan_settings=settings, name=name)
+    res = run(data, margined, tol_mm=opts.tol_mm, fit_method=opts.fit_method, plan_settings=settings, name=name)
     return (res.fit, res.trajectory, real) if with_machine else (res.fit, res.trajectory)
 
 

@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from typing import TYPE_CHECKING, Any
 
 from ..constants import DEFAULT_DT_S
@@ -162,8 +162,15 @@ class PlanSettings:
         optimal: OptimalOptions | None = None,
         vpop: VpopOptions | None = None,
         paper000: Paper000Options | None = None,
+        effort: str | None = None,
     ) -> "PlanSettings":
-        """Settings from CLI options: ``--dt`` wins over the machine's period, then the default."""
+        """Settings from CLI options: ``--dt`` wins over the machine's period, then the default;
+        ``effort`` (``--effort``) sets ``OptimalOptions.effort`` and is the optimal planner's
+        only (a ``UsageError`` with another)."""
+        if effort is not None:
+            if planner != "optimal":
+                raise UsageError(f"--effort applies to --planner optimal, not {planner}")
+            optimal = replace(optimal or OptimalOptions(), effort=effort)
         if dt_s is None:
             dt_s = float(machine.dt_s) if machine is not None and machine.dt_s else DEFAULT_DT_S
         if tol_mm is None and machine is not None and machine.tol_mm:
