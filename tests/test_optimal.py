@@ -426,6 +426,37 @@ def test_a_profile_that_only_dipped_is_planned_with_one_knot_spacing(monkeypatch
     assert spacings == [feedprofile.FEED_KNOT_TIME_S]
 
 
+def test_vpop_plans_a_path_for_comparison_only_where_it_took_over_early():
+    # after VPOp takes the profile's plan over, the plan is VPOp's own: its whole plan
+    # can only win where the hand-over came early (OPT_COMPARE_BEFORE of the samples)
+    from types import SimpleNamespace
+
+    import cnc_interp.plan.optimal as optimal
+
+    ctx = SimpleNamespace(dt=0.001, stats={})
+    n = 10_000
+    assert not optimal._vpop_may_win(ctx, n)  # the profile reached the end
+    share = optimal.OPT_COMPARE_BEFORE
+    for handover, want in ((0, True), (int(share * n) - 1, True), (int(share * n) + 1, False), (n - 100, False)):
+        ctx.stats["handover"] = handover
+        assert optimal._vpop_may_win(ctx, n) is want, handover
+
+
+@needs_corpus
+def test_vpop_is_kept_where_it_took_the_profile_over_early_and_plans_shorter():
+    # corpus trochoidal.ngc, the path ending at line 4766 on generic-mill: the profile is
+    # handed over to VPOp 598 samples in (of 43k); VPOp's own plan of the whole path is
+    # shorter and is kept
+    m, paths = _corpus_paths(os.path.join("performance", "trochoidal.ngc"))
+    path = next(p for p in paths if int(p.line[-1]) == 4766)
+    plan = plan_path_optimal(path, None, m, m.dt_s, PlanSettings.from_options(planner="optimal", machine=m))
+    check(plan, m, plan.q[0], plan.q[-1], m.dt_s)
+    assert plan.stats["route"] == "profile" and plan.stats["kept"] == "vpop"
+    assert 0 <= plan.stats["handover"] < 0.1 * periods(plan)
+    vpop = plan_path_vpop(path, None, m, m.dt_s)
+    assert periods(plan) == periods(vpop)
+
+
 # -- the paths routed to VPOp go through VPOp's compiled batch ------------------------
 def _mixed_paths():
     """Short lines (VPOp's route) around a curvature-limited circle (the profile's)."""

@@ -6,7 +6,16 @@ import pytest
 from numpy.testing import assert_allclose
 
 from cnc_interp.plan import _feed_kernels as FK
-from cnc_interp.plan._ipm import OK, _band_cholesky, _band_solve, band4_cholesky, band4_solve2, lp_solve
+from cnc_interp.plan._ipm import (
+    BREAKDOWN,
+    OK,
+    _band_cholesky,
+    _band_solve,
+    band4_cholesky,
+    band4_solve1,
+    band4_solve2,
+    lp_solve,
+)
 from cnc_interp.machine.model import Machine
 from cnc_interp.plan.safe import scurve
 from cnc_interp.plan.verify import verify_arrays
@@ -102,6 +111,60 @@ def test_unrolled_band4_is_the_general_band_solver_bit_for_bit(n):
         _band_solve(A, n, 4, wa)
         band4_solve2(B, n, y, w)
         assert np.array_equal(ya, y) and np.array_equal(wa, w)
+        yb = ya.copy()
+        _band_solve(A, n, 4, yb)
+        band4_solve1(B, n, ya)
+        assert np.array_equal(ya, yb)
+
+
+def test_the_lp_solver_takes_rows_of_four_only():
+    """The passes over the rows are compiled for W = 4 (``ROW_WIDTH``): other widths are
+    refused with BREAKDOWN, not solved wrongly."""
+    first, coef, b, c = _random_lp(np.random.default_rng(3), n=20, W=3)
+    status, it, _, _ = lp_solve(20, first, coef, b, c, np.zeros(20), 100, 1e-9)
+    assert status == BREAKDOWN and it == 0
+
+
+def test_the_lp_row_kernels_are_the_numpy_bookkeeping():
+    """``lp_fix`` moves the fixed variables to the right-hand side and drops rows left
+    without a free one, ``lp_take`` keeps the selected rows in order, ``lp_screen``
+    selects rows near their bound and then adds those a point violates: each as numpy
+    computes it (the feed profile's LPs are those it built before)."""
+    rng = np.random.default_rng(11)
+    for _ in range(50):
+        n, m = int(rng.integers(6, 40)), int(rng.integers(5, 300))
+        first = rng.integers(0, n - 3, m).astype(np.int64)
+        coef = rng.normal(size=(m, 4)) * (rng.uniform(size=(m, 4)) < 0.8)
+        b = rng.uniform(0.5, 2.0, m)
+        free = rng.uniform(size=n) < 0.7
+        fixed = np.where(free, 0.0, rng.normal(size=n))
+        idx = first[:, None] + np.arange(4)
+        want_b = b - np.sum(coef * fixed[idx], axis=1)
+        want_c = np.where(free[idx], coef, 0.0)
+        want_keep = np.any(want_c != 0.0, axis=1)
+        rows = FK.Rows(first.copy(), coef.copy(), b.copy())
+        keep = np.empty(m, dtype=np.bool_)
+        count = FK.lp_fix(rows, free, fixed, keep)
+        assert count == want_keep.sum() and np.array_equal(keep, want_keep)
+        assert np.array_equal(rows.b, want_b) and np.array_equal(rows.coef, want_c)
+        out = FK.Rows(np.empty(count, dtype=np.int64), np.empty((count, 4)), np.empty(count))
+        FK.lp_take(rows, keep, count, out)
+        assert np.array_equal(out.first, first[keep]) and np.array_equal(out.coef, want_c[keep])
+        assert np.array_equal(out.b, want_b[keep])
+        # screening at a point, then the rows another point violates
+        x0, x1 = rng.uniform(0.0, 1.0, n), rng.uniform(0.0, 1.5, n)
+        val0 = np.sum(want_c * x0[idx], axis=1)
+        active = np.empty(m, dtype=np.bool_)
+        _, n_active = FK.lp_screen(rows, x0, 0.3, active, True)
+        want_active = val0 >= 0.3 * np.abs(want_b) - 1e-12
+        assert np.array_equal(active, want_active) and n_active == want_active.sum()
+        val1 = np.sum(want_c * x1[idx], axis=1)
+        viol = (val1 > want_b + 1e-9 * np.maximum(np.abs(want_b), 1.0)) & ~want_active
+        n_viol, n_active = FK.lp_screen(rows, x1, 0.3, active, False)
+        if viol.any():
+            want_active |= viol | (val1 >= 0.3 * np.abs(want_b))
+        assert n_viol == viol.sum() and np.array_equal(active, want_active)
+        assert n_active == want_active.sum()
 
 
 def test_cubic_basis_matches_scipy():
@@ -153,6 +216,96 @@ def test_profile_holds_the_centripetal_limit_on_a_circle():
     T = _profile_time(p, MILL, 0.001)
     cruise = p.length / np.sqrt(2000.0 * 10.0)
     assert cruise < T < 1.25 * cruise
+
+
+def _start_curve_numpy(x, c, dt):
+    k = np.maximum(np.cbrt(6.0 * np.maximum(x, 0.0) / c) - 1.0, 0.0)
+    for _ in range(3):
+        f = c * k * (k + 1) * (k + 2) / 6.0 - x
+        k = np.maximum(k - f / np.maximum(c * (3 * k * k + 6 * k + 2) / 6.0, 1e-300), 0.0)
+    v = c * k * (k + 1) / (2.0 * dt)
+    return v * v
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_knot_placements_estimate_is_its_formula(seed):
+    """``point_estimates`` (the static speeds inflated, the sampled start and stop) and
+    ``reach_envelope`` (the speeds the tangent's acceleration and jerk reach from the
+    slow points, both ways, from a carried point) against numpy's arithmetic of the
+    feed profile's docstrings, on random curves with their ends."""
+    from cnc_interp.plan.feedprofile import FEED_EST_ACC_FACTOR, FEED_EST_JERK_FACTOR, FeedProfileBuilder
+    from cnc_interp.plan.vpop import JointTable
+
+    from ._vpop_paths import random_curve
+
+    rng = np.random.default_rng(40 + seed)
+    p = hermite_path(random_curve(rng, scale=15.0), 5, float(rng.uniform(20, 300)))
+    table = JointTable(p, None)
+    b = FeedProfileBuilder(table, p, MILL, 0.001)
+    L = table.length
+    x = np.sort(np.concatenate((rng.uniform(0.0, L, 400), [0.0, 1e-6, L - 1e-6, L], 2.0 ** -np.arange(1, 30))))
+    x = x[x <= L]
+    est = b._raw_estimate(x)
+    q1, q2, q3 = b.derivs(x)
+    with np.errstate(divide="ignore"):
+        wv = np.min(np.where(np.abs(q1) > 0, (b.vmax / np.abs(q1)) ** 2, np.inf), axis=1)
+        wa = np.min(np.where(np.abs(q2) > 0, b.amax / np.abs(q2), np.inf), axis=1)
+        wj = np.min(np.where(np.abs(q3) > 0, (b.jmax / np.abs(q3)) ** (2.0 / 3.0), np.inf), axis=1)
+        g = np.abs(q1)
+        at = np.min(np.where(g > 1e-12, b.amax / g, np.inf), axis=1)
+        jt = np.min(np.where(g > 1e-12, b.jmax / g, np.inf), axis=1)
+    f = b.feed_at(x)
+    w = np.minimum.reduce([wv, f * f, FEED_EST_ACC_FACTOR**2 * wa, FEED_EST_JERK_FACTOR**2 * wj])
+    w = np.minimum(w, _start_curve_numpy(x, b.jt0 * 0.001**3, 0.001))
+    w = np.minimum(w, _start_curve_numpy(L - x, b.jt1 * 0.001**3, 0.001))
+    assert_allclose(est.w, w, rtol=1e-12)
+    assert est.w[0] == 0.0 and est.w[-1] == 0.0  # rest at both ends
+    assert_allclose(est.w_jerk, FEED_EST_JERK_FACTOR**2 * wj, rtol=1e-12)
+    assert_allclose(est.k2, np.max(np.abs(q2), axis=1), rtol=1e-15)
+    assert_allclose(est.k3, np.max(np.abs(q3), axis=1), rtol=1e-15)
+    assert_allclose(est.at, at, rtol=1e-15) and assert_allclose(est.jt, jt, rtol=1e-15)
+    # the envelope of the points past a third of the path, from rest carried from there
+    sel = (x > L / 3) & (x < L)
+    xs, ws = x[sel], est.w[sel]
+    carry = (L / 3, 0.0)
+    A = FEED_EST_ACC_FACTOR * float(np.max(est.at[sel]))
+    J = FEED_EST_JERK_FACTOR**2 * float(np.max(est.jt[sel]))
+    xx, ww = np.concatenate(([carry[0]], xs)), np.minimum(np.concatenate(([carry[1]], ws)), 1e300)
+    ww = np.minimum(ww, np.minimum.accumulate(ww - 2 * A * xx) + 2 * A * xx)
+    ww = np.minimum(ww, (np.minimum.accumulate((ww + 2 * A * xx)[::-1]) - 2 * A * xx[::-1])[::-1])
+    c = 2.1213203435596424 * np.sqrt(J)
+    u = ww**0.75
+    u = np.minimum(u, np.minimum.accumulate(u - c * xx) + c * xx)
+    u = np.minimum(u, (np.minimum.accumulate((u + c * xx)[::-1]) - c * xx[::-1])[::-1])
+    want = np.minimum(ww, np.maximum(u, 0.0) ** (4.0 / 3.0))[1:]
+    sub = FK.Estimates(*(a[sel] for a in est))
+    got = b._envelope(xs, ws, sub, carry)
+    assert_allclose(got, want, rtol=1e-12)
+    assert np.all(got <= ws) and got[0] < 0.5 * ws[0]  # the rest carried in shows
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_time_law_integrates_one_over_the_speed(seed):
+    """``time_nodes``: each node interval's time is ∫ ds/√w (against scipy's adaptive
+    quadrature; an interval at rest by the substitution s = a + u²)."""
+    from scipy.integrate import quad
+    from scipy.interpolate import BSpline
+
+    from cnc_interp.plan.timelaw import time_law
+
+    rng = np.random.default_rng(seed)
+    br = np.linspace(0.0, 20.0, 11)
+    knots = np.concatenate(([0.0] * 3, br, [20.0] * 3))
+    coef = rng.uniform(100.0, 400.0, knots.shape[0] - 4)
+    coef[0] = 0.0  # rest at the start: w ~ s there
+    law = time_law(knots, coef, 0.0, 20.0)
+    spline = BSpline(knots, coef, 3)
+    for i in range(law.s.shape[0] - 1):
+        a, b = law.s[i], law.s[i + 1]
+        want = quad(lambda s: 1.0 / np.sqrt(max(spline(s), 1e-300)), a, b, limit=200)[0]
+        assert law.dt[i] == pytest.approx(want, rel=2e-6 if i == 0 else 1e-9)
+    assert_allclose(law.w, np.maximum(spline(law.s), 0.0), rtol=1e-12, atol=1e-9)
+    assert_allclose(law.a, 0.5 * spline.derivative()(law.s), rtol=1e-9, atol=1e-9)
 
 
 def test_time_law_hermite_is_consistent():

@@ -4,7 +4,11 @@
   power coefficients ``C`` (m, 6, n) in s - S[p]) at sorted arc lengths;
 * ``cubic_basis``: the four non-zero cubic B-spline basis functions and their first
   and second derivatives at sorted points (NURBS book, A2.3);
-* ``lp_rows``: the LP rows at the collocation points for one linearisation point.
+* ``lp_rows``: the LP rows at the collocation points for one linearisation point;
+* ``lp_fix``, ``lp_take`` and ``lp_screen``: the rows of one LP with the fixed
+  coefficients moved to the right-hand side, and the row screening of ``feedprofile``;
+* ``point_estimates`` and ``reach_envelope``: the knot placement's speed estimate;
+* ``time_nodes``: the time law's node intervals (``timelaw``).
 
 The profile is w(s) = ṡ² = Σ c_j B_j(s). Along the path, axis i has (Beudaert et al.
 2012, Eqs. 1-3, with ṡ = √w, s̈ = w'/2, s⃛ = √w w''/2)::
@@ -36,6 +40,17 @@ AxisLimits = namedtuple("AxisLimits", "moving amax jmax")
 #: the LP rows ``lp_rows`` fills, one per row: first column ``first`` int64, the four
 #: coefficients ``coef`` (rows, 4) and the right-hand side ``b``
 Rows = namedtuple("Rows", "first coef b")
+#: what the speed estimate of ``point_estimates`` reads: the axis limits (n,) of the
+#: knot placement (vmax mm/s, amax mm/s², jmax mm/s³), the feed (feed_values mm/s over
+#: feed_breaks, path mm), the factors (squared) the estimate may exceed the static
+#: acceleration and jerk speeds by, and the sampled start and stop: c0, c1 = J_t dt³ of
+#: the tangent at each end (mm), the period dt (s), the path length L (mm)
+EstimateInputs = namedtuple("EstimateInputs", "vmax amax jmax feed_breaks feed_values acc_f2 jerk_f2 c0 c1 dt L")
+#: per point (K,) of ``point_estimates``: the estimate w (mm²/s²), its jerk term w_jerk,
+#: the largest |q_ss| and |q_sss| over the axes (k2 /mm, k3 /mm²), and the tangent's path
+#: acceleration and jerk limits (at, jt: least of amax/|q_s|, jmax/|q_s| over the axes
+#: with |q_s| > 1e-12; inf where none)
+Estimates = namedtuple("Estimates", "w w_jerk k2 k3 at jt")
 
 
 @njit(cache=True, nogil=True)
@@ -258,3 +273,295 @@ def route_measures(S, C, FB, FV, vmax, amax, jmax, speed_share):
             lim += w
         t += w * 2.0 / (v[k] + v[k + 1])
     return lim / max(total, 1e-300), t
+
+
+@njit(cache=True, nogil=True)
+def _start_curve(x, c, dt):
+    """w of the sampled max-jerk start along a line at distance x: s_k = c k(k+1)(k+2)/6,
+    v_k = c k(k+1)/(2 dt), c = J_t dt³ (k from s by Newton)."""
+    k = max(np.cbrt(6.0 * max(x, 0.0) / c) - 1.0, 0.0)
+    for _ in range(3):
+        f = c * k * (k + 1.0) * (k + 2.0) / 6.0 - x
+        df = c * (3.0 * k * k + 6.0 * k + 2.0) / 6.0
+        k = max(k - f / max(df, 1e-300), 0.0)
+    v = c * k * (k + 1.0) / (2.0 * dt)
+    return v * v
+
+
+@njit(cache=True, nogil=True)
+def _start_reach(w, c, dt):
+    """The distance the sampled start of ``_start_curve`` takes to reach speed² w: the k
+    of v_k = √w, then s_k (inf for w = inf)."""
+    if not w < np.inf:
+        return np.inf
+    k = 0.5 * (np.sqrt(1.0 + 8.0 * np.sqrt(max(w, 0.0)) * dt / c) - 1.0)
+    return c * k * (k + 1.0) * (k + 2.0) / 6.0
+
+
+@njit(cache=True, nogil=True)
+def point_estimates(S, C, x, inp, out):
+    """The knot placement's speed estimate at sorted arc lengths x (K,) into ``out``
+    (``Estimates``): the least of the axis speeds and the feed, the static acceleration
+    and jerk speeds (times ``inp.acc_f2``, ``inp.jerk_f2``) and the sampled start and
+    stop from rest at either end (``feedprofile.FeedProfileBuilder._raw_estimate``)."""
+    K = x.shape[0]
+    n = C.shape[2]
+    q1 = np.empty((K, n))
+    q2 = np.empty((K, n))
+    q3 = np.empty((K, n))
+    table_derivs(S, C, x, q1, q2, q3)
+    fb = inp.feed_breaks
+    fv = inp.feed_values
+    nf = fv.shape[0]
+    for k in range(K):
+        wv = np.inf
+        wa = np.inf
+        wj = np.inf
+        k2 = 0.0
+        k3 = 0.0
+        at = np.inf
+        jt = np.inf
+        for a in range(n):
+            g1 = abs(q1[k, a])
+            g2 = abs(q2[k, a])
+            g3 = abs(q3[k, a])
+            if g1 > 0.0:
+                wv = min(wv, (inp.vmax[a] / g1) ** 2)
+                if g1 > 1e-12:
+                    at = min(at, inp.amax[a] / g1)
+                    jt = min(jt, inp.jmax[a] / g1)
+            if g2 > 0.0:
+                wa = min(wa, inp.amax[a] / g2)
+            if g3 > 0.0:
+                wj = min(wj, (inp.jmax[a] / g3) ** (2.0 / 3.0))
+            k2 = max(k2, g2)
+            k3 = max(k3, g3)
+        i = min(max(np.searchsorted(fb, x[k], side="right") - 1, 0), nf - 1)
+        f = fv[i]
+        w = min(min(wv, f * f), min(inp.acc_f2 * wa, inp.jerk_f2 * wj))
+        # the sampled start and stop where they can be below w (within twice the
+        # distance the start takes to reach it; beyond, they are far above it)
+        if x[k] < 2.0 * _start_reach(w, inp.c0, inp.dt):
+            w = min(w, _start_curve(x[k], inp.c0, inp.dt))
+        if inp.L - x[k] < 2.0 * _start_reach(w, inp.c1, inp.dt):
+            w = min(w, _start_curve(inp.L - x[k], inp.c1, inp.dt))
+        out.w[k] = w
+        out.w_jerk[k] = inp.jerk_f2 * wj
+        out.k2[k] = k2
+        out.k3[k] = k3
+        out.at[k] = at
+        out.jt[k] = jt
+
+
+@njit(cache=True, nogil=True)
+def reach_envelope(x, w, at, jt, acc_factor, jerk_f2, carry_x, carry_w, out):
+    """The reach envelope of w at sorted points x (K,) into ``out`` (K,): the speed² a
+    path acceleration of ``acc_factor`` times the largest tangent limit ``at`` (w grows
+    by 2 A ds) and a jerk-limited ramp (``jerk_f2`` times the largest ``jt``; w^3/4 grows
+    by 2.12 √J ds, exact from rest) reach from the other points, both ways. A finite
+    ``carry_x`` is a point (carry_x, carry_w) before x[0]: the envelope's last value of
+    the block before (``feedprofile.FeedProfileBuilder._envelope``)."""
+    K = x.shape[0]
+    A = 0.0
+    J = 0.0
+    for k in range(K):
+        if np.isfinite(at[k]):
+            A = max(A, at[k])
+        if np.isfinite(jt[k]):
+            J = max(J, jt[k])
+    A *= acc_factor
+    J *= jerk_f2
+    if not (A > 0.0 and J > 0.0):
+        for k in range(K):
+            out[k] = w[k]
+        return
+    c0 = 1 if np.isfinite(carry_x) else 0
+    N = K + c0
+    xx = np.empty(N)
+    ww = np.empty(N)
+    if c0:
+        xx[0] = carry_x
+        ww[0] = min(carry_w, 1e300)
+    for k in range(K):
+        xx[k + c0] = x[k]
+        ww[k + c0] = min(w[k], 1e300)
+    # the running minima of w -/+ 2 A x, each taken of the values before this pass
+    a2 = 2.0 * A
+    m = np.inf
+    for i in range(N):
+        m = min(m, ww[i] - a2 * xx[i])
+        ww[i] = min(ww[i], m + a2 * xx[i])
+    m = np.inf
+    for i in range(N - 1, -1, -1):
+        m = min(m, ww[i] + a2 * xx[i])
+        ww[i] = min(ww[i], m - a2 * xx[i])
+    c = 2.1213203435596424 * np.sqrt(J)
+    u = np.empty(N)
+    for i in range(N):
+        u[i] = ww[i] ** 0.75
+    m = np.inf
+    for i in range(N):
+        m = min(m, u[i] - c * xx[i])
+        u[i] = min(u[i], m + c * xx[i])
+    m = np.inf
+    for i in range(N - 1, -1, -1):
+        m = min(m, u[i] + c * xx[i])
+        u[i] = min(u[i], m - c * xx[i])
+    for k in range(K):
+        out[k] = min(ww[k + c0], max(u[k + c0], 0.0) ** (4.0 / 3.0))
+
+
+@njit(cache=True, nogil=True)
+def lp_fix(rows, free, fixed_vals, keep):
+    """Move the fixed variables' terms of the ``Rows`` (m of them, in place) to the
+    right-hand side: b -= Σ coef x_fixed, and zero their coefficients; ``keep[r]``: row r
+    still has a free variable. Returns how many rows do."""
+    first = rows.first
+    coef = rows.coef
+    b = rows.b
+    count = 0
+    for r in range(first.shape[0]):
+        f = first[r]
+        acc = 0.0
+        for k in range(4):
+            acc += coef[r, k] * fixed_vals[f + k]
+        b[r] = b[r] - acc
+        nz = False
+        for k in range(4):
+            if not free[f + k]:
+                coef[r, k] = 0.0
+            elif coef[r, k] != 0.0:
+                nz = True
+        keep[r] = nz
+        if nz:
+            count += 1
+    return count
+
+
+@njit(cache=True, nogil=True)
+def lp_take(rows, sel, count, out):
+    """Copy the ``count`` rows r of ``rows`` with ``sel[r]`` into ``out`` (``Rows``), in order."""
+    j = 0
+    for r in range(sel.shape[0]):
+        if sel[r]:
+            out.first[j] = rows.first[r]
+            for k in range(4):
+                out.coef[j, k] = rows.coef[r, k]
+            out.b[j] = rows.b[r]
+            j += 1
+            if j == count:
+                break
+
+
+@njit(cache=True, nogil=True)
+def lp_screen(rows, x, screen, active, first_pass):
+    """Row screening at x: the first pass (``first_pass``) marks ``active`` the rows whose
+    value is at least ``screen`` of |b| (1e-12 below counts); later passes add the rows
+    left out that x violates (beyond 1e-9 relative), and with them every row at least
+    ``screen`` of |b|. Returns (violated rows left out, active rows)."""
+    first = rows.first
+    coef = rows.coef
+    b = rows.b
+    viol = 0
+    count = 0
+    for r in range(first.shape[0]):
+        f = first[r]
+        val = 0.0
+        for k in range(4):
+            val += coef[r, k] * x[f + k]
+        if first_pass:
+            active[r] = val >= screen * abs(b[r]) - 1e-12
+        elif not active[r] and val > b[r] + 1e-9 * max(abs(b[r]), 1.0):
+            viol += 1
+            active[r] = True
+        if active[r]:
+            count += 1
+    if not first_pass and viol > 0:
+        count = 0
+        for r in range(first.shape[0]):
+            if not active[r]:
+                f = first[r]
+                val = 0.0
+                for k in range(4):
+                    val += coef[r, k] * x[f + k]
+                if val >= screen * abs(b[r]):
+                    active[r] = True
+            if active[r]:
+                count += 1
+    return viol, count
+
+
+@njit(cache=True, nogil=True)
+def _w_at(knots, coef, x, first, B, w):
+    """w of the cubic B-spline (knots, coef) at sorted x into ``w`` (``first``, ``B``:
+    scratch of x's size)."""
+    cubic_basis(knots, coef.shape[0], x, first, B)
+    for k in range(x.shape[0]):
+        f = first[k]
+        w[k] = B[k, 0, 0] * coef[f] + B[k, 0, 1] * coef[f + 1] + B[k, 0, 2] * coef[f + 2] + B[k, 0, 3] * coef[f + 3]
+
+
+@njit(cache=True, nogil=True)
+def time_nodes(knots, coef, x, gx, gw, min_dip, dt, w, w1):
+    """The time law at sorted nodes x (K,) of the cubic B-spline w(s) = ṡ² (knots, coef):
+    w (clipped at 0) and w' at the nodes into ``w``, ``w1`` (K,), and each node
+    interval's time ∫ ds/√w into ``dt`` (K-1,) by Gauss–Legendre (points ``gx``,
+    weights ``gw`` on [-1, 1]); an interval with w = 0 at an end is integrated in u with
+    s = a + u² (rest at a) or s = b - u² (rest at b). Each interval's numbers depend only
+    on its own two nodes. Returns False when w dips between two nodes below ``min_dip``
+    of the smaller node value (the profile nearly stops there)."""
+    K = x.shape[0]
+    G = gx.shape[0]
+    first = np.empty(K, dtype=np.int64)
+    B = np.empty((K, 3, 4))
+    cubic_basis(knots, coef.shape[0], x, first, B)
+    for k in range(K):
+        f = first[k]
+        v = B[k, 0, 0] * coef[f] + B[k, 0, 1] * coef[f + 1] + B[k, 0, 2] * coef[f + 2] + B[k, 0, 3] * coef[f + 3]
+        w[k] = max(v, 0.0)
+        w1[k] = B[k, 1, 0] * coef[f] + B[k, 1, 1] * coef[f + 1] + B[k, 1, 2] * coef[f + 2] + B[k, 1, 3] * coef[f + 3]
+    # every interval's Gauss points at once (sorted: the points of one interval lie
+    # strictly inside it)
+    n = (K - 1) * G
+    pts = np.empty(n)
+    for i in range(K - 1):
+        h = 0.5 * (x[i + 1] - x[i])
+        m = 0.5 * (x[i + 1] + x[i])
+        for g in range(G):
+            pts[i * G + g] = m + h * gx[g]
+    fp = np.empty(n, dtype=np.int64)
+    Bp = np.empty((n, 3, 4))
+    wp = np.empty(n)
+    _w_at(knots, coef, pts, fp, Bp, wp)
+    uu = np.empty(G)
+    ss = np.empty(G)
+    fr = np.empty(G, dtype=np.int64)
+    Br = np.empty((G, 3, 4))
+    wr = np.empty(G)
+    for i in range(K - 1):
+        h = 0.5 * (x[i + 1] - x[i])
+        if w[i] > 0.0 and w[i + 1] > 0.0:
+            lo = min(w[i], w[i + 1])
+            acc = 0.0
+            for g in range(G):
+                wg = wp[i * G + g]
+                if wg <= min_dip * lo:
+                    return False
+                acc += max(wg, 1e-300) ** -0.5 * gw[g]
+            dt[i] = h * acc
+            continue
+        # rest at an end: s = a + u² or b - u², u in [0, √(b - a)]
+        ub = np.sqrt(x[i + 1] - x[i])
+        at_start = not w[i] > 0.0
+        for g in range(G):
+            uu[g] = 0.5 * ub * (gx[g] + 1.0)
+        for g in range(G):  # sorted in s
+            j = g if at_start else G - 1 - g
+            ss[g] = x[i] + uu[j] * uu[j] if at_start else x[i + 1] - uu[j] * uu[j]
+        _w_at(knots, coef, ss, fr, Br, wr)
+        acc = 0.0
+        for g in range(G):
+            j = g if at_start else G - 1 - g
+            acc += 2.0 * uu[g] / np.sqrt(max(wr[j], 1e-300)) * gw[g]
+        dt[i] = 0.5 * ub * acc
+    return True

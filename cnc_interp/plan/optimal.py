@@ -99,6 +99,12 @@ OPT_COMPARE_SAMPLES = 1 << 18
 #: ... unless the profile reached the path's end (no hand-over to VPOp, or one within
 #: this much motion of the end): then it is kept as it is
 OPT_COMPARE_TAIL_S = 0.3
+#: ... and only when VPOp took the profile's plan over before this share of its samples
+#: (after the hand-over the plan is VPOp's own, and the profile's part before it is
+#: mostly shorter than VPOp's: on stellabee1, axis_mm.ini, VPOp's plan won on 37 of the
+#: 334 paths handed over before half their plan, by 1,167 periods, and on 1 of the 871
+#: handed over later, by 1 period; those runs cost ~8 % of the fast effort's CPU there)
+OPT_COMPARE_BEFORE = 0.5
 #: a profile-routed path lasting at least this long (at its static limits, s) is profiled and
 #: sampled by a thread of its own ahead of its refinement (``prefetch.Prefetch``: the two
 #: stages on two cores; the samples do not depend on it): a long path is otherwise one
@@ -722,13 +728,13 @@ def _better_of(ctx, stage, passes, targeted):
         raise failed  # neither spacing planned the path: VPOp does (the caller's fallback)
     s = np.concatenate([b[0] for b in blocks])
     q = np.concatenate([b[1] for b in blocks])
-    reached_end = not _handed_over_early(ctx, s.shape[0])
-    if "fallback" not in ctx.stats and reached_end:
-        # the profile ran to the end (VPOp at most finished its last stop): it is kept
-        # without running VPOp (over the corpus VPOp won on such paths by 351 periods in
-        # all against the profile's 22k; the runs cost as much as 4.6 s of planning).
-        # Also where the reference had to be lowered by dips: on the sweep (axis_mm.ini)
-        # VPOp won there by 51 periods in all (LHchips4) for ~7 % of stellabee1's CPU
+    if "fallback" not in ctx.stats and not _vpop_may_win(ctx, s.shape[0]):
+        # the profile ran to the end (VPOp at most finished its last stop), or far enough
+        # before VPOp took over: it is kept without running VPOp (over the corpus VPOp
+        # won on such paths by 351 periods in all against the profile's 22k; the runs
+        # cost as much as 4.6 s of planning). Also where the reference had to be lowered
+        # by dips: on the sweep (axis_mm.ini) VPOp won there by 51 periods in all
+        # (LHchips4) for ~7 % of stellabee1's CPU
         ctx.stats["kept"] = "profile"
         yield s, q
         return
@@ -743,6 +749,14 @@ def _better_of(ctx, stage, passes, targeted):
     else:
         ctx.stats["kept"] = "profile"
         yield s, q
+
+
+def _vpop_may_win(ctx, n_samples: int) -> bool:
+    """Is VPOp's own plan worth making for comparison with the profile's plan of
+    ``n_samples``: did VPOp take it over early (``_handed_over_early``), before
+    OPT_COMPARE_BEFORE of its samples?"""
+    ho = int(ctx.stats.get("handover", -1))
+    return _handed_over_early(ctx, n_samples) and ho < OPT_COMPARE_BEFORE * n_samples
 
 
 def _handed_over_early(ctx, n_samples: int) -> bool:

@@ -25,17 +25,6 @@ TIMELAW_MIN_DIP = 1e-3
 _GX, _GW = np.polynomial.legendre.leggauss(TIMELAW_GL)
 
 
-def _spline_w(knots, coef, x):
-    """w, w' at sorted x of the cubic B-spline (knots, coef)."""
-    x = np.ascontiguousarray(x, dtype=float)
-    first = np.empty(x.shape[0], dtype=np.int64)
-    B = np.empty((x.shape[0], 3, 4))
-    K.cubic_basis(knots, coef.shape[0], x, first, B)
-    cols = first[:, None] + np.arange(4)[None, :]
-    c = coef[cols]
-    return np.einsum("kj,kj->k", B[:, 0], c), np.einsum("kj,kj->k", B[:, 1], c)
-
-
 class TimeLaw:
     """A profile piece's time law: nodes ``s`` (K,), mm; the time of each node interval
     ``dt`` (K-1,), s; at the nodes w = ṡ² ``w`` (K,), mm²/s², its derivative ``w1`` (K,),
@@ -89,33 +78,14 @@ def time_law(knots, coef, s0: float, s1: float, old: TimeLaw | None = None, chan
 
 def _law(knots, coef, x):
     """(dt, w, w1) at sorted nodes x (K,): each node interval's time (K-1,), w = ṡ² and
-    w' at the nodes (w clipped at 0); None when w (nearly) reaches zero between two nodes."""
-    w, w1 = _spline_w(knots, coef, x)
-    w = np.maximum(w, 0.0)
-    rest_a = w <= 0.0
-    # plain intervals: Gauss–Legendre on 1/√w
-    a_, b_ = x[:-1], x[1:]
-    h = 0.5 * (b_ - a_)
-    m = 0.5 * (b_ + a_)
-    pts = (m[:, None] + h[:, None] * _GX[None, :]).ravel()
-    wp, _ = _spline_w(knots, coef, np.sort(pts))
-    wp = wp[np.argsort(np.argsort(pts))].reshape(-1, TIMELAW_GL)
-    plain = ~(rest_a[:-1] | rest_a[1:])
-    ends = np.minimum(w[:-1], w[1:])[plain]
-    if plain.any() and np.any(np.min(wp[plain], axis=1) <= TIMELAW_MIN_DIP * ends):
-        return None  # the profile (nearly) stops between two of its nodes
-    with np.errstate(divide="ignore"):
-        dt = h * (np.maximum(wp, 1e-300) ** -0.5 @ _GW)
-    # intervals touching rest: s = a + u² (rest at a) or s = b - u² (rest at b)
-    for i in np.flatnonzero(rest_a[:-1] | rest_a[1:]):
-        at_start = rest_a[i]
-        span = b_[i] - a_[i]
-        ub = np.sqrt(span)
-        uu = 0.5 * ub * (_GX + 1.0)
-        ss = a_[i] + uu * uu if at_start else b_[i] - uu * uu
-        order = np.argsort(ss)
-        wv, _ = _spline_w(knots, coef, ss[order])
-        wv = wv[np.argsort(order)]
-        f = 2.0 * uu / np.sqrt(np.maximum(wv, 1e-300))
-        dt[i] = 0.5 * ub * (f @ _GW)
+    w' at the nodes (w clipped at 0); None when w (nearly) reaches zero between two nodes
+    (``_feed_kernels.time_nodes``)."""
+    x = np.ascontiguousarray(x, dtype=float)
+    K_ = x.shape[0]
+    dt = np.empty(max(K_ - 1, 0))
+    w = np.empty(K_)
+    w1 = np.empty(K_)
+    coef = np.ascontiguousarray(coef, dtype=float)
+    if not K.time_nodes(knots, coef, x, _GX, _GW, TIMELAW_MIN_DIP, dt, w, w1):
+        return None
     return dt, w, w1
