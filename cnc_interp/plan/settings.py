@@ -15,9 +15,9 @@ if TYPE_CHECKING:
 
 #: the planner of ``plan`` and ``batch`` when none is named (``stream`` has its own).
 #: VPOp, not ``optimal``: optimal's cycles are 7.4 % shorter over the corpus
-#: (``benchmarks/plan.py --sweep``, axis_mm.ini), but it takes 7.4x VPOp's planning time
-#: there (315.4 s against 42.5 s; stellabee1 alone 279 s against 35 s; at ``effort="fast"``
-#: 4.4x, 187.0 s, for cycles 5.2 % shorter): a default must not make the user wait that
+#: (``benchmarks/plan.py --sweep``, axis_mm.ini), but it takes 6.8x VPOp's planning time
+#: there (264.8 s against 38.7 s; stellabee1 alone 231 s against 31 s; at ``effort="fast"``
+#: 2.3x, 87.1 s, for cycles 5.2 % shorter): a default must not make the user wait that
 #: long (issue 13; issue 17's stellabee1 end to end in < 30 s)
 DEFAULT_PLANNER = "vpop"
 
