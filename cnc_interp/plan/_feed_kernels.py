@@ -354,6 +354,22 @@ def point_estimates(S, C, x, inp, out):
 
 
 @njit(cache=True, nogil=True)
+def _slope_limit(x, v, slope):
+    """v (N,) at sorted x (N,) lowered in place to what it can reach from the other points
+    changing by at most ``slope`` per unit of x, both ways: the running minima of
+    v -/+ slope x, each pass taking the values before it."""
+    N = x.shape[0]
+    m = np.inf
+    for i in range(N):
+        m = min(m, v[i] - slope * x[i])
+        v[i] = min(v[i], m + slope * x[i])
+    m = np.inf
+    for i in range(N - 1, -1, -1):
+        m = min(m, v[i] + slope * x[i])
+        v[i] = min(v[i], m - slope * x[i])
+
+
+@njit(cache=True, nogil=True)
 def reach_envelope(x, w, at, jt, acc_factor, jerk_f2, carry_x, carry_w, out):
     """The reach envelope of w at sorted points x (K,) into ``out`` (K,): the speed² a
     path acceleration of ``acc_factor`` times the largest tangent limit ``at`` (w grows
@@ -385,28 +401,11 @@ def reach_envelope(x, w, at, jt, acc_factor, jerk_f2, carry_x, carry_w, out):
     for k in range(K):
         xx[k + c0] = x[k]
         ww[k + c0] = min(w[k], 1e300)
-    # the running minima of w -/+ 2 A x, each taken of the values before this pass
-    a2 = 2.0 * A
-    m = np.inf
-    for i in range(N):
-        m = min(m, ww[i] - a2 * xx[i])
-        ww[i] = min(ww[i], m + a2 * xx[i])
-    m = np.inf
-    for i in range(N - 1, -1, -1):
-        m = min(m, ww[i] + a2 * xx[i])
-        ww[i] = min(ww[i], m - a2 * xx[i])
-    c = 2.1213203435596424 * np.sqrt(J)
+    _slope_limit(xx, ww, 2.0 * A)  # w grows by at most 2 A ds
     u = np.empty(N)
     for i in range(N):
         u[i] = ww[i] ** 0.75
-    m = np.inf
-    for i in range(N):
-        m = min(m, u[i] - c * xx[i])
-        u[i] = min(u[i], m + c * xx[i])
-    m = np.inf
-    for i in range(N - 1, -1, -1):
-        m = min(m, u[i] + c * xx[i])
-        u[i] = min(u[i], m - c * xx[i])
+    _slope_limit(xx, u, 2.1213203435596424 * np.sqrt(J))  # w^3/4 by at most 2.12 √J ds
     for k in range(K):
         out[k] = min(ww[k + c0], max(u[k + c0], 0.0) ** (4.0 / 3.0))
 
