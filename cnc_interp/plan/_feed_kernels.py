@@ -30,6 +30,8 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
+from ._ipm import _ax
+
 #: the collocation points of ``lp_rows`` (K of them): each point's first basis index
 #: ``first`` (K,) int64, the basis B (K, 3, 4) of ``cubic_basis``, and the joint
 #: derivatives q_s, q_ss, q_sss (K, n) of ``table_derivs``
@@ -458,36 +460,32 @@ def lp_screen(rows, x, screen, active, first_pass):
     value is at least ``screen`` of |b| (1e-12 below counts); later passes add the rows
     left out that x violates (beyond 1e-9 relative), and with them every row at least
     ``screen`` of |b|. Returns (violated rows left out, active rows)."""
-    first = rows.first
-    coef = rows.coef
     b = rows.b
+    m = b.shape[0]
+    val = np.empty(m)
+    _ax(rows.first, rows.coef, x, val)
     viol = 0
-    count = 0
-    for r in range(first.shape[0]):
-        f = first[r]
-        val = 0.0
-        for k in range(4):
-            val += coef[r, k] * x[f + k]
+    for r in range(m):
         if first_pass:
-            active[r] = val >= screen * abs(b[r]) - 1e-12
-        elif not active[r] and val > b[r] + 1e-9 * max(abs(b[r]), 1.0):
+            active[r] = val[r] >= screen * abs(b[r]) - 1e-12
+        elif not active[r] and val[r] > b[r] + 1e-9 * max(abs(b[r]), 1.0):
             viol += 1
             active[r] = True
+    if not first_pass and viol > 0:
+        for r in range(m):
+            if val[r] >= screen * abs(b[r]):
+                active[r] = True
+    count = 0
+    for r in range(m):
         if active[r]:
             count += 1
-    if not first_pass and viol > 0:
-        count = 0
-        for r in range(first.shape[0]):
-            if not active[r]:
-                f = first[r]
-                val = 0.0
-                for k in range(4):
-                    val += coef[r, k] * x[f + k]
-                if val >= screen * abs(b[r]):
-                    active[r] = True
-            if active[r]:
-                count += 1
     return viol, count
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _basis_dot(B, k, d, coef, f):
+    """The d-th derivative of the spline at point k of ``cubic_basis``'s (B, first = f)."""
+    return B[k, d, 0] * coef[f] + B[k, d, 1] * coef[f + 1] + B[k, d, 2] * coef[f + 2] + B[k, d, 3] * coef[f + 3]
 
 
 @njit(cache=True, nogil=True)
@@ -496,8 +494,7 @@ def _w_at(knots, coef, x, first, B, w):
     scratch of x's size)."""
     cubic_basis(knots, coef.shape[0], x, first, B)
     for k in range(x.shape[0]):
-        f = first[k]
-        w[k] = B[k, 0, 0] * coef[f] + B[k, 0, 1] * coef[f + 1] + B[k, 0, 2] * coef[f + 2] + B[k, 0, 3] * coef[f + 3]
+        w[k] = _basis_dot(B, k, 0, coef, first[k])
 
 
 @njit(cache=True, nogil=True)
@@ -515,10 +512,8 @@ def time_nodes(knots, coef, x, gx, gw, min_dip, dt, w, w1):
     B = np.empty((K, 3, 4))
     cubic_basis(knots, coef.shape[0], x, first, B)
     for k in range(K):
-        f = first[k]
-        v = B[k, 0, 0] * coef[f] + B[k, 0, 1] * coef[f + 1] + B[k, 0, 2] * coef[f + 2] + B[k, 0, 3] * coef[f + 3]
-        w[k] = max(v, 0.0)
-        w1[k] = B[k, 1, 0] * coef[f] + B[k, 1, 1] * coef[f + 1] + B[k, 1, 2] * coef[f + 2] + B[k, 1, 3] * coef[f + 3]
+        w[k] = max(_basis_dot(B, k, 0, coef, first[k]), 0.0)
+        w1[k] = _basis_dot(B, k, 1, coef, first[k])
     # every interval's Gauss points at once (sorted: the points of one interval lie
     # strictly inside it)
     n = (K - 1) * G

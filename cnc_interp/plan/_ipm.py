@@ -76,7 +76,8 @@ def _cholesky_row(M, i, W):
 @njit(cache=True, nogil=True)
 def _band_cholesky(M, n, W):
     """In-place Cholesky of the SPD band matrix M (n, W): M[i, d] = M(i, i-d). False when
-    a pivot is not positive."""
+    a pivot is not positive. (The planners use its unrolled W = 4 form,
+    ``band4_cholesky``; this general one is the reference the tests hold it to.)"""
     for i in range(n):
         _cholesky_row(M, i, W)
     return True
@@ -158,7 +159,8 @@ def band4_solve1(M, n, y):
 
 @njit(cache=True, nogil=True)
 def _band_solve(M, n, W, y):
-    """Solve (L L^T) x = y in place with the band factor M of ``_band_cholesky``."""
+    """Solve (L L^T) x = y in place with the band factor M of ``_band_cholesky``. (The
+    planners use ``band4_solve1``/``band4_solve2``; this is their tests' reference.)"""
     for i in range(n):
         acc = y[i]
         for d in range(1, W):

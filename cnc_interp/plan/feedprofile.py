@@ -252,8 +252,7 @@ class FeedProfileBuilder:
         """Estimated speed² at sorted x (K,) from the geometry there (static limits
         inflated, sampled start and stop near the ends): ``_feed_kernels.Estimates``."""
         x = np.ascontiguousarray(x, dtype=float)
-        K_ = x.shape[0]
-        est = K.Estimates(*(np.empty(K_) for _ in K.Estimates._fields))
+        est = K.Estimates(*(np.empty(x.shape[0]) for _ in K.Estimates._fields))
         K.point_estimates(self.S, self.C, x, self._est_in, est)
         return est
 
@@ -540,7 +539,7 @@ class FeedProfileBuilder:
         """Solve the LP in the free variables (fixed ones moved to the right-hand side),
         with row screening after the first; returns (status, iterations, x)."""
         nc = free.shape[0]
-        rows = K.Rows(rf, np.ascontiguousarray(rc), rb.copy())
+        rows = K.Rows(rf, rc, rb)  # _end_rows' fresh arrays, changed in place
         m = rf.shape[0]
         keep = np.empty(m, dtype=np.bool_)
         n_keep = K.lp_fix(rows, free, np.where(free, 0.0, cfix / scale), keep)
