@@ -383,7 +383,8 @@ def test_a_window_that_cannot_brake_under_the_estimate_is_solved_again(monkeypat
     plan = plan_path_optimal(path, None, m, m.dt_s, settings)
     check(plan, m, plan.q[0], plan.q[-1], m.dt_s)
     assert plan.stats["route"] == "profile" and plan.stats.get("lp_restarts", 0) >= 1
-    assert plan.stats["handover"] < 0 and "crawl" not in plan.stats
+    # the profile reaches the last stop (VPOp finishes it at most)
+    assert not 0 <= plan.stats["handover"] < periods(plan) - 300 and "crawl" not in plan.stats
     # without the second solve the profile ends at the first such window
     solve_from = feedprofile.FeedProfileBuilder._solve_from
 
@@ -400,14 +401,14 @@ def test_a_window_that_cannot_brake_under_the_estimate_is_solved_again(monkeypat
 
 @needs_corpus
 def test_a_profile_that_only_dipped_is_planned_with_one_knot_spacing(monkeypatch):
-    # corpus stellabee-violation-spirals.ngc, the path ending at line 548: its profile dips
+    # corpus stellabee-violation-spirals.ngc, the path ending at line 814: its profile dips
     # once and reaches the end. The second knot spacing gained 0.2 % on such paths for 9 %
     # of the CPU; it runs only where VPOp took the plan over early
     # (test_the_shorter_of_two_knot_spacings_is_kept)
     from cnc_interp.plan import feedprofile
 
     m, paths = _corpus_paths(os.path.join("violation_checks", "stellabee-violation-spirals.ngc"))
-    path = next(p for p in paths if int(p.line[-1]) == 548)
+    path = next(p for p in paths if int(p.line[-1]) == 814)
     spacings = []
     builder = feedprofile.FeedProfileBuilder
 
@@ -445,14 +446,14 @@ def test_vpop_plans_a_path_for_comparison_only_where_it_took_over_early():
 @needs_corpus
 def test_vpop_is_kept_where_it_took_the_profile_over_early_and_plans_shorter():
     # corpus trochoidal.ngc, the path ending at line 4766 on generic-mill: the profile is
-    # handed over to VPOp 598 samples in (of 43k); VPOp's own plan of the whole path is
-    # shorter and is kept
+    # handed over to VPOp 5,749 samples in (of 43k; 598 with knots half a radius of
+    # curvature apart); VPOp's own plan of the whole path is shorter and is kept
     m, paths = _corpus_paths(os.path.join("performance", "trochoidal.ngc"))
     path = next(p for p in paths if int(p.line[-1]) == 4766)
     plan = plan_path_optimal(path, None, m, m.dt_s, PlanSettings.from_options(planner="optimal", machine=m))
     check(plan, m, plan.q[0], plan.q[-1], m.dt_s)
     assert plan.stats["route"] == "profile" and plan.stats["kept"] == "vpop"
-    assert 0 <= plan.stats["handover"] < 0.1 * periods(plan)
+    assert 0 <= plan.stats["handover"] < 0.2 * periods(plan)
     vpop = plan_path_vpop(path, None, m, m.dt_s)
     assert periods(plan) == periods(vpop)
 
@@ -546,3 +547,61 @@ def test_the_effort_trades_planning_time_for_cycle_time():
     assert plan.stats["refined_periods"] > 0
     with pytest.raises(UsageError, match="effort"):
         OptimalOptions(effort="fastest")
+
+
+def _zigzag_path(machine):
+    """corpus zigzag_0.002_0.001.ngc with ``G64 P0.001`` first (issue 13's LinuxCNC
+    comparison): its 4-inch zigzag of 2000 G1 lines, fitted for ``machine``."""
+    from cnc_interp.fit import FitSettings, fit_program
+    from cnc_interp.gcode import read_program
+
+    src = os.path.join(CORPUS, "performance", "zigzag_0.002_0.001.ngc")
+    prog = read_program(b"G64 P0.001\n" + open(src, "rb").read(), src, axes=machine.axes, start=machine.start)
+    fitted = fit_program(prog, FitSettings.from_options(machine=machine))
+    return max((p for p in fitted.items if hasattr(p, "coef") and not p.rapid), key=lambda p: p.length)
+
+
+#: issue 13's LinuxCNC machine: XYZ, 203.2 mm/s, 762 mm/s², the jerk out of the way
+LINUXCNC_XYZ = Machine(name="linuxcnc-xyz", axes="XYZ", vmax=[203.2] * 3, amax=[762.0] * 3, jmax=[1e6] * 3, dt_s=DT)
+
+
+@needs_corpus
+def test_a_curvature_limited_path_gets_dips_for_its_whole_duration(monkeypatch):
+    # the zigzag lasts ~1 s at its feed (F9999 in/min) but 33 s at its curvature limit: the
+    # dips of the reference were budgeted on the feed's duration, ran out after 40, and
+    # VPOp planned the last 42 % of the path (35.4 s for the program, slower than
+    # LinuxCNC's 34.3 s); budgeted on its static duration, the profile plans it all. With
+    # knots half a radius of curvature apart (the spacing then) it needs ~85 dips; 0.35
+    # needs 3
+    from cnc_interp.plan import feedprofile
+    from cnc_interp.plan.optimal import OPT_RETRY_DEPTHS, OPT_RETRY_PER_S, OPT_RETRY_PLACES, _RouteInputs
+
+    monkeypatch.setattr(feedprofile, "FEED_KNOT_GEO", 0.5)
+
+    m = LINUXCNC_XYZ
+    path = _zigzag_path(m)
+    plan = plan_path_optimal(path, None, m, DT, PlanSettings.from_options(planner="optimal", machine=m, effort="fast"))
+    check(plan, m, plan.q[0], plan.q[-1], DT)
+    feed_budget = OPT_RETRY_PLACES * len(OPT_RETRY_DEPTHS) + int(_RouteInputs(path, None, m).rough_s / OPT_RETRY_PER_S)
+    assert plan.stats["route"] == "profile"
+    assert not 0 <= plan.stats["handover"] < periods(plan) - 300  # VPOp finishes the last stop at most
+    assert plan.stats["retries"] > feed_budget
+    # LinuxCNC ran the whole program (this path and the rapid back, ~0.77 s) in 34.3 s
+    assert periods(plan) * DT < 34.3 - 0.77
+
+
+@pytest.mark.slow
+@needs_corpus
+def test_a_short_crawl_of_the_profile_is_kept_rather_than_handed_to_vpop():
+    # axis_mm.ini: windows solved again from the previous window's terminal rest crawl
+    # there for a few hundredths of a second; refusing such a piece handed 96 % of the
+    # 150 s path to VPOp
+    from cnc_interp.machine.load import load_machine
+
+    m = load_machine(os.path.join(CORPUS, "configs", "axis_mm.ini"))
+    path = _zigzag_path(m)
+    plan = plan_path_optimal(path, None, m, DT, PlanSettings.from_options(planner="optimal", machine=m, effort="fast"))
+    check(plan, m, plan.q[0], plan.q[-1], DT)
+    assert plan.stats["handover"] < 0 and "crawl" not in plan.stats and plan.stats.get("lp_restarts", 0) > 0
+    vpop = plan_path_vpop(path, None, m, DT)
+    assert periods(plan) < 0.85 * periods(vpop), (periods(plan), periods(vpop))

@@ -43,18 +43,15 @@ from ._ipm import OK as LP_OK, lp_solve
 
 #: knot spacing in time of motion at the estimated speed, s (the profile's resolution)
 FEED_KNOT_TIME_S = 0.006
-#: knot spacing at most this share of the geometry's length scale (radius of curvature,
-#: and that of its change): a rounded corner gets several knots
-FEED_KNOT_GEO = 0.5
-#: ... and this share of the length scale of q_sss where the jerk limits the speed (the
-#: jerk term of the estimate is within FEED_KNOT_JERK_NEAR of the estimate, in w). Where
-#: the jerk binds, finer knots follow CAM paths' short features: fewer places where the
-#: exact sampler gets stuck, so fewer dips, hand-overs to VPOp and refinement solves
-#: (stellabee1's first 139 profile-routed paths: 0.5 -> 0.35 cost a third less planning
-#: CPU for 0.13 % less cycle); everywhere, it cost LinuxCNC's XYZ machine of issue 13
-#: (jerk out of the way) up to 0.8 % of cycle on stellabee-violation-spirals
-FEED_KNOT_GEO_JERK = 0.35
-FEED_KNOT_JERK_NEAR = 2.0
+#: knot spacing at most this share of the geometry's length scales (radius of curvature,
+#: and that of q_sss): a rounded corner gets several knots, a CAM path's short features
+#: several where the jerk binds (fewer places where the exact sampler gets stuck). 0.35
+#: (0.5 before for curvature, and for q_sss where the jerk did not bind): at --effort fast,
+#: LinuxCNC's XYZ machine of issue 13 (jerk out of the way) zigzag_0.002_0.001 34.217 ->
+#: 33.754 s, stellabee-kink-test -1.0 %, stellabee-violation-spirals -1.0 %; the axis_mm.ini
+#: sweep's cycle the same (+0.003 %) and its planning time too; 0.3 gained 0.07 % more
+#: there for 6 % more CPU
+FEED_KNOT_GEO = 0.35
 #: collocation points per knot interval (constraints are imposed there; 2 before: three
 #: leave fewer stuck places for the sampler, the same 139 paths 20 % less planning CPU)
 FEED_COLLOCATION = 3
@@ -282,10 +279,8 @@ class FeedProfileBuilder:
     def _spacing(self, x, w, est):
         """Knot spacing wanted at x: time of motion at the estimated speed (w), geometry
         (``est``: ``_raw_estimate``'s at x)."""
-        # the length scale of q_sss matters where the jerk limits the speed (the jerk
-        # term of the estimate is within FEED_KNOT_JERK_NEAR of it): finer knots there
-        g3 = np.where(est.w_jerk <= FEED_KNOT_JERK_NEAR * w, FEED_KNOT_GEO_JERK, FEED_KNOT_GEO)
-        geo = np.minimum(FEED_KNOT_GEO / np.maximum(est.k2, 1e-300), g3 / np.sqrt(np.maximum(est.k3, 1e-300)))
+        k2, k3 = np.maximum(est.k2, 1e-300), np.maximum(est.k3, 1e-300)
+        geo = np.minimum(FEED_KNOT_GEO / k2, FEED_KNOT_GEO / np.sqrt(k3))
         v = np.sqrt(np.maximum(w, 0.0))
         hmin = np.where(x < 0.5 * self.L, self.hmin0, self.hmin1)
         return np.maximum(np.minimum(self.knot_time_s * v, geo), hmin)

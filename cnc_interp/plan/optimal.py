@@ -117,10 +117,18 @@ OPT_AHEAD_S = 10.0
 OPT_AHEAD_BLOCKS = 8
 #: samples per chunk of ``iter_path_plan_optimal`` (the plan does not depend on it)
 OPT_CHUNK = 4096
-#: a profile piece whose time law spends more than this many times the estimated time
-#: on a node interval is refused (the profile nearly stops where nothing asks for it:
-#: VPOp finishes the path from there)
+#: a profile piece whose time law spends more than OPT_CRAWL times the estimated time on
+#: node intervals (the profile nearly stops where nothing asks for it) is refused, and VPOp
+#: finishes the path from there, unless those intervals take at most OPT_CRAWL_SHARE of
+#: the rest of the path's duration (at its static limits) beyond the estimate: less than
+#: VPOp's plan of the rest would lose (its cycle is 5.3 % longer over the corpus sweep at
+#: --effort fast, 25 % on zigzag_0.002_0.001). There, on axis_mm.ini, windows solved again
+#: from the previous one's terminal rest dip to ~0.01 mm/s at it for 0.02-0.25 s; refusing
+#: them handed 96 % of the 150 s path to VPOp (153.3 s; kept: 120.4 s). After the sharp
+#: corner of test_a_profile_that_would_crawl_after_a_sharp_corner_plans a crawl of 0.22 s
+#: on a path of 0.44 s at its static limits is refused
 OPT_CRAWL = 50.0
+OPT_CRAWL_SHARE = 0.02
 
 
 def _step_limits(machine, dt, table):
@@ -198,6 +206,12 @@ class _RouteInputs:
         #: jerk; ``_route``), s: unlike ``rough_s``, it sees a curvature-limited path's length
         self.static_s = 0.0
 
+    @property
+    def duration_s(self) -> float:
+        """The longer of the rough and the static duration, s (``rough_s`` alone is the
+        feed's: zigzag_0.002_0.001's 4-inch zigzag, ~1 s at F9999, lasts 34-150 s)."""
+        return max(self.rough_s, self.static_s)
+
 
 class _Path(_RouteInputs):
     """What every stage needs about one path."""
@@ -268,16 +282,17 @@ class _Nodes:
         self.v = np.zeros(0)
         self.a = np.zeros(0)
 
-    def append(self, knots, coef, s0, s1, estimate=None) -> bool:
+    def append(self, knots, coef, s0, s1, estimate=None, crawl_s: float = 0.0) -> bool:
         """Append a profile piece's nodes; False (nothing appended) if its time law is
-        not finite or, given the profile's speed estimate, crawls somewhere (takes more
-        than OPT_CRAWL times the estimate's time over a node interval)."""
+        not finite or, given the profile's speed estimate, crawls (node intervals taking
+        more than OPT_CRAWL times the estimate's time, more than ``crawl_s`` beyond it in
+        all)."""
         from .timelaw import time_law
 
         law = time_law(knots, coef, s0, s1)
-        return law is not None and self._add(knots, coef, s0, s1, law, estimate)
+        return law is not None and self._add(knots, coef, s0, s1, law, estimate, crawl_s)
 
-    def _add(self, knots, coef, s0, s1, law, estimate=None) -> bool:
+    def _add(self, knots, coef, s0, s1, law, estimate=None, crawl_s: float = 0.0) -> bool:
         """``append`` with the piece's time law known."""
         t0 = float(self.t[-1]) if self.t.size else 0.0
         ns, nt, nv, na = law.nodes(t0)
@@ -287,7 +302,9 @@ class _Nodes:
             ve = np.sqrt(np.maximum(estimate(ns), 0.0))
             with np.errstate(divide="ignore"):
                 t_est = np.diff(ns) / np.maximum(ve[:-1], ve[1:])
-            if np.any(np.diff(nt) > OPT_CRAWL * t_est):
+            dt_law = np.diff(nt)
+            crawl = dt_law > OPT_CRAWL * t_est
+            if crawl.any() and np.sum(dt_law[crawl] - t_est[crawl]) > crawl_s:
                 return False
         self.parts.append([knots, coef.copy(), s0, s1, law])
         if self.s.size:
@@ -365,11 +382,14 @@ def _sampled(ctx, knot_time_s: float | None = None):
     retries_here = 0
     dip_hi = -1.0  # the end of the last dip: a stuck place beyond it is a new one
     # dips per path at most (each re-samples a stretch): a path stuck that often goes to VPOp
-    dip_budget = OPT_RETRY_PLACES * len(OPT_RETRY_DEPTHS) + int(ctx.rough_s / OPT_RETRY_PER_S)
+    # (per second of its duration at the static limits too: zigzag_0.002_0.001 on issue
+    # 13's LinuxCNC machine, 34 s of motion but ~1 s at its feed, ran out after 40 dips and
+    # VPOp planned its last 42 %: 35.405 s against 34.217 s with 85 dips)
+    dip_budget = OPT_RETRY_PLACES * len(OPT_RETRY_DEPTHS) + int(ctx.duration_s / OPT_RETRY_PER_S)
     final_handover = False
-    # a sane bound on the samples: ten times travel at the lowest feed and axis speed
-    # plus ramps (the profile is never that slow unless something went wrong)
-    max_samples = int(10.0 * ctx.rough_s / dt) + 100_000
+    # a sane bound on the samples: ten times the path's duration at its feed or static
+    # limits, plus ramps (the profile is never that slow unless something went wrong)
+    max_samples = int(10.0 * ctx.duration_s / dt) + 100_000
     while True:
         if base + k > max_samples and not final_handover:
             # the reference crawls (a bug, or a profile the crawl check let through):
@@ -479,7 +499,8 @@ def _append_piece(ctx, nodes, piece, builder) -> bool:
     ctx.stats["lp_iterations"] += piece.lp_iters
     if builder.restarts:
         ctx.stats["lp_restarts"] = builder.restarts
-    if nodes.append(piece.knots, piece.coef, piece.s0, piece.s1, builder.estimate):
+    rest_s = ctx.duration_s * max(ctx.L - piece.s0, 0.0) / ctx.L
+    if nodes.append(piece.knots, piece.coef, piece.s0, piece.s1, builder.estimate, OPT_CRAWL_SHARE * rest_s):
         return True
     ctx.stats["crawl"] = ctx.stats.get("crawl", 0) + 1
     return False
@@ -653,7 +674,7 @@ def _iter(path, joint_map, machine, dt_s, settings, stats, window):
     limit_s = float(_or(opts.compare_s, OPT_COMPARE_SAMPLES * dt))
     ctx.whole = route == "profile" and ctx.rough_s <= limit_s
     stage = _sampled(ctx) if route == "profile" else _vpop_stage(ctx, window)
-    if route == "profile" and passes and max(ctx.rough_s, ctx.static_s) >= OPT_AHEAD_S:
+    if route == "profile" and passes and ctx.duration_s >= OPT_AHEAD_S:
         # the refinement of one stretch while the next is profiled
         stage = Prefetch(stage, ahead=OPT_AHEAD_BLOCKS, name="cnc-interp-profile")
     for _ in range(passes):
