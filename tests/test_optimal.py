@@ -388,10 +388,10 @@ def test_a_window_that_cannot_brake_under_the_estimate_is_solved_again(monkeypat
     # without the second solve the profile ends at the first such window
     solve_from = feedprofile.FeedProfileBuilder._solve_from
 
-    def no_restart(self, b0, b1, at_end, fixed, prev, s_prev, ccp_max):
+    def no_restart(self, b0, b1, at_end, fixed, prev, s_prev, ccp_max, *first_max_iter):
         if s_prev is not None and prev is not None and s_prev == prev.s_end:
             raise feedprofile.ProfileError("no restart")
-        return solve_from(self, b0, b1, at_end, fixed, prev, s_prev, ccp_max)
+        return solve_from(self, b0, b1, at_end, fixed, prev, s_prev, ccp_max, *first_max_iter)
 
     monkeypatch.setattr(feedprofile.FeedProfileBuilder, "_solve_from", no_restart)
     without = plan_path_optimal(path, None, m, m.dt_s, settings)
@@ -605,3 +605,38 @@ def test_a_short_crawl_of_the_profile_is_kept_rather_than_handed_to_vpop():
     assert plan.stats["handover"] < 0 and "crawl" not in plan.stats and plan.stats.get("lp_restarts", 0) > 0
     vpop = plan_path_vpop(path, None, m, DT)
     assert periods(plan) < 0.85 * periods(vpop), (periods(plan), periods(vpop))
+
+
+@needs_corpus
+def test_a_windows_first_lp_without_a_solution_gives_up_early_for_the_same_plan(monkeypatch):
+    # the interior-point solver has no infeasibility test: a window's first LP without a
+    # solution ran to FEED_LP_MAX_ITER before the window was solved again. Capped at
+    # FEED_LP_FIRST_MAX_ITER (the first LPs that solve take ~9-23 iterations), the same
+    # samples for fewer iterations (corpus spiral_tangent_test.ngc, one such window)
+    import dataclasses
+
+    from cnc_interp.plan import feedprofile
+
+    m, paths = _corpus_paths(os.path.join("quick-tests", "spiral_tangent_test.ngc"))
+    path = max((p for p in paths if not p.rapid), key=lambda p: p.length)
+    settings = dataclasses.replace(
+        PlanSettings.from_options(planner="optimal", machine=m), optimal=OptimalOptions(compare_s=0.0, refine_passes=0)
+    )
+    spent = []  # every LP's iterations, those without a solution too
+    lp_solve = feedprofile.lp_solve
+
+    def counting(*args):
+        out = lp_solve(*args)
+        spent.append(out[1])
+        return out
+
+    monkeypatch.setattr(feedprofile, "lp_solve", counting)
+    capped = plan_path_optimal(path, None, m, m.dt_s, settings)
+    capped_spent, spent[:] = sum(spent), []
+    saved = feedprofile.FEED_LP_MAX_ITER - feedprofile.FEED_LP_FIRST_MAX_ITER
+    monkeypatch.setattr(feedprofile, "FEED_LP_FIRST_MAX_ITER", feedprofile.FEED_LP_MAX_ITER)
+    uncapped = plan_path_optimal(path, None, m, m.dt_s, settings)
+    assert capped.stats["lp_restarts"] >= 1
+    assert_array_equal(capped.s, uncapped.s)
+    assert_array_equal(capped.q, uncapped.q)
+    assert capped_spent <= sum(spent) - capped.stats["lp_restarts"] * saved, (capped_spent, sum(spent))

@@ -83,6 +83,12 @@ FEED_WEIGHT_FLOOR = 0.01
 #: within ±2 at every effort, the corpus sweep's cycle within 0.05 %)
 FEED_LP_MAX_ITER = 150
 FEED_LP_TOL = 1e-4
+#: ... and at most this many for a window's first LP, linearised at the estimate: the
+#: solver has no infeasibility test, and such an LP without a solution (the window is then
+#: solved again from the previous one's, ``_solve``) ran to FEED_LP_MAX_ITER, 2.5 of
+#: zigzag_0.002_0.001's 6.9 CPU-s on axis_mm.ini; those that solve took at most 23
+#: iterations over five corpus programs' 650 windows (median 9)
+FEED_LP_FIRST_MAX_ITER = 50
 #: acceleration and jerk limits used by the LP, relative (the sampler checks the exact
 #: ones; the LP's collocation leaves small excursions between its points). Velocity and
 #: feed bound w directly and are used whole.
@@ -436,15 +442,17 @@ class FeedProfileBuilder:
         then rest, meets every row, so this LP is feasible.
         """
         try:
-            return self._solve_from(b0, b1, at_end, fixed, prev, None if prev is None else prev.s_brake, FEED_CCP_MAX)
+            s_brake = None if prev is None else prev.s_brake
+            return self._solve_from(b0, b1, at_end, fixed, prev, s_brake, FEED_CCP_MAX, FEED_LP_FIRST_MAX_ITER)
         except ProfileError:
             if prev is None:
                 raise
             self.restarts += 1
             return self._solve_from(b0, b1, at_end, fixed, prev, prev.s_end, FEED_CCP_MAX_RESTART)
 
-    def _solve_from(self, b0, b1, at_end, fixed, prev, s_prev, ccp_max):
-        """``_solve`` with the rows linearised at ``prev`` up to ``s_prev``."""
+    def _solve_from(self, b0, b1, at_end, fixed, prev, s_prev, ccp_max, first_max_iter=FEED_LP_MAX_ITER):
+        """``_solve`` with the rows linearised at ``prev`` up to ``s_prev``; the first LP
+        gets at most ``first_max_iter`` interior-point iterations."""
         tk = self._knot_slice(b0, b1 + 7)
         nc = b1 - b0 + 3
         x, q1, q2, q3 = self._collocation(b0, b1)
@@ -511,7 +519,8 @@ class FeedProfileBuilder:
             c = np.bincount(cols.ravel(), weights=-(wts[:, None] * B[:, 0, :] * scale[cols]).ravel(), minlength=nc)
             c[~free] = 0.0
             c /= max(np.max(np.abs(c)), 1e-300)
-            status, it, xv_new = self._lp(rf, rc, rb, c, xv, free, cfix, scale, screen=ccp > 0)
+            max_iter = first_max_iter if ccp == 0 else FEED_LP_MAX_ITER
+            status, it, xv_new = self._lp(rf, rc, rb, c, xv, free, cfix, scale, ccp > 0, max_iter)
             iters += it
             if status != LP_OK or not np.all(np.isfinite(xv_new)):
                 if best is None:
@@ -530,7 +539,7 @@ class FeedProfileBuilder:
             prev_T = T
         return best, tk, iters
 
-    def _lp(self, rf, rc, rb, c, xv, free, cfix, scale, screen: bool):
+    def _lp(self, rf, rc, rb, c, xv, free, cfix, scale, screen: bool, max_iter: int = FEED_LP_MAX_ITER):
         """Solve the LP in the free variables (fixed ones moved to the right-hand side),
         with row screening after the first; returns (status, iterations, x)."""
         nc = free.shape[0]
@@ -553,7 +562,7 @@ class FeedProfileBuilder:
             sub = K.Rows(np.empty(count, dtype=np.int64), np.empty((count, 4)), np.empty(count))
             K.lp_take(rows, active, count, sub)
             x_try = x.copy()
-            status, it, _, _ = lp_solve(nc, sub.first, sub.coef, sub.b, c, x_try, FEED_LP_MAX_ITER, FEED_LP_TOL)
+            status, it, _, _ = lp_solve(nc, sub.first, sub.coef, sub.b, c, x_try, max_iter, FEED_LP_TOL)
             iters += it
             if status != LP_OK:
                 return status, iters, x_try
