@@ -365,21 +365,28 @@ def _corpus_paths(rel: str):
     return m, [p for p in fitted.items if hasattr(p, "coef")]
 
 
-@needs_corpus
-def test_a_window_that_cannot_brake_under_the_estimate_is_solved_again(monkeypatch):
-    # corpus spiral_tangent_test.ngc, its 21 mm spiral, planned window by window
-    # (compare_s = 0): a window's LP linearised at the speed estimate past where the
-    # previous window brakes has no solution (that window's speed is more than three
-    # times the estimate there); it used to end the profile, and VPOp planned the rest
+def _spiral_window_by_window():
+    """generic-mill, corpus spiral_tangent_test.ngc's 21 mm spiral, and settings that plan
+    it window by window, unrefined (compare_s = 0): some windows are solved again."""
     import dataclasses
-
-    from cnc_interp.plan import feedprofile
 
     m, paths = _corpus_paths(os.path.join("quick-tests", "spiral_tangent_test.ngc"))
     path = max((p for p in paths if not p.rapid), key=lambda p: p.length)
     settings = dataclasses.replace(
         PlanSettings.from_options(planner="optimal", machine=m), optimal=OptimalOptions(compare_s=0.0, refine_passes=0)
     )
+    return m, path, settings
+
+
+@needs_corpus
+def test_a_window_that_cannot_brake_under_the_estimate_is_solved_again(monkeypatch):
+    # corpus spiral_tangent_test.ngc, its 21 mm spiral, planned window by window
+    # (compare_s = 0): a window's LP linearised at the speed estimate past where the
+    # previous window brakes has no solution (that window's speed is more than three
+    # times the estimate there); it used to end the profile, and VPOp planned the rest
+    from cnc_interp.plan import feedprofile
+
+    m, path, settings = _spiral_window_by_window()
     plan = plan_path_optimal(path, None, m, m.dt_s, settings)
     check(plan, m, plan.q[0], plan.q[-1], m.dt_s)
     assert plan.stats["route"] == "profile" and plan.stats.get("lp_restarts", 0) >= 1
@@ -613,15 +620,9 @@ def test_a_windows_first_lp_without_a_solution_gives_up_early_for_the_same_plan(
     # solution ran to FEED_LP_MAX_ITER before the window was solved again. Capped at
     # FEED_LP_FIRST_MAX_ITER (the first LPs that solve take ~9-23 iterations), the same
     # samples for fewer iterations (corpus spiral_tangent_test.ngc, one such window)
-    import dataclasses
-
     from cnc_interp.plan import feedprofile
 
-    m, paths = _corpus_paths(os.path.join("quick-tests", "spiral_tangent_test.ngc"))
-    path = max((p for p in paths if not p.rapid), key=lambda p: p.length)
-    settings = dataclasses.replace(
-        PlanSettings.from_options(planner="optimal", machine=m), optimal=OptimalOptions(compare_s=0.0, refine_passes=0)
-    )
+    m, path, settings = _spiral_window_by_window()
     spent = []  # every LP's iterations, those without a solution too
     lp_solve = feedprofile.lp_solve
 
