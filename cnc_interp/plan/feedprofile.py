@@ -19,9 +19,11 @@ Windows: ``FEED_COMMIT_S`` of motion plus two braking times; each fixes the
 coefficients the committed part uses, ends at rest (w = 0: a brake-safe end, the
 window's solution can always stop) and commits all but the braking part. The profile on
 [0, s] therefore depends only on the path up to s plus one window: the streaming
-contract of ``optimal.iter_path_plan``. A window whose LP has no solution (the state it
-inherits cannot brake under rows linearised at the estimate) is solved again linearised
-at the previous window's whole solution, which is then a feasible point (``_solve``).
+contract of ``optimal.iter_path_plan``. Past its committed part, a window's first LP is
+linearised at the estimate lowered to the previous window's level (``FEED_EST_RATIO_MIN``).
+A window whose LP has no solution (the state it inherits cannot brake under those rows)
+is solved again linearised at the previous window's whole solution, which is then a
+feasible point (``_solve``).
 
 Collocation: ``FEED_COLLOCATION`` points per knot interval, plus the path's segment
 joins, where q_sss jumps (paths are G2): there both one-sided values are imposed.
@@ -99,6 +101,21 @@ FEED_LIMIT_SHARE = 0.998
 FEED_ROW_SCREEN = 0.3
 #: a path of at most this many knot intervals is solved as one window (``windows``)
 FEED_WHOLE_KNOTS = 1500
+#: a window's first LP is linearised past the committed part at the estimate times the
+#: previous window's ratio of its solution to the estimate (median over what it committed),
+#: at most 1 and at least this: the estimate is static limits inflated and lies well above
+#: the solution on CAM paths (w ratio ~0.2 on axis_mm.ini, ~0.4 on issue 13's LinuxCNC
+#: machine; the tangent rows of a point linearised that high hold the jerk ~2x too tight
+#: there, and the committed state often could not brake under them). zigzag_0.002_0.001
+#: on axis_mm.ini, fast: 151 -> 79 windows solved again, 64k -> 40k LP iterations, cycle
+#: 120.4 -> 118.8 s; the sweep's planning 0.87x, cycle -0.1 %. The floor only keeps a
+#: crawling window's ratio from pinning the next window's rows near zero
+FEED_EST_RATIO_MIN = 0.05
+#: ... and a ratio above this counts as 1: the estimate is then right (a line's feed), and
+#: a lower point only moves where the convex-concave steps stop within FEED_CCP_TOL (a
+#: 100 mm line at ratios 0.994, 0.993: 0.15 % slower than its S-curve); the corpus's
+#: ratios are 0.13-0.62
+FEED_EST_RATIO_KEEP = 0.9
 #: table pieces per block of the knot placement
 FEED_KNOT_BLOCK = 256
 
@@ -106,12 +123,14 @@ FEED_KNOT_BLOCK = 256
 class _Window(NamedTuple):
     """A window's whole solution, as the next window sees it: the B-spline of w
     (``knots`` (nc + 4,), ``coef`` (nc,)), where it starts braking for its terminal rest
-    and where that rest is (``s_brake``, ``s_end``, mm)."""
+    and where that rest is (``s_brake``, ``s_end``, mm), and how far below the estimate
+    it ran (``ratio``: ``FeedProfileBuilder._ratio``)."""
 
     knots: np.ndarray
     coef: np.ndarray
     s_brake: float
     s_end: float
+    ratio: float = 1.0
 
 
 class ProfileError(Exception):
@@ -399,7 +418,7 @@ class FeedProfileBuilder:
             n_keep = bc - b0 + 3
             yield FeedPiece(tk[: n_keep + 4].copy(), coef[:n_keep].copy(), self._br[b0], self._br[bc], it)
             fixed = coef[commit : commit + 3].copy()
-            prev = _Window(tk, coef, self._br[max(b1 - self.brake, bc)], self._br[b1])
+            prev = _Window(tk, coef, self._br[max(b1 - self.brake, bc)], self._br[b1], self._ratio(tk, coef, b0, bc))
             b0 = bc
             # forget the estimate's probes before the next window (bounded memory)
             i = max(int(np.searchsorted(self._ex, self._br[b0], side="right")) - 2, 0)
@@ -431,15 +450,29 @@ class FeedProfileBuilder:
             x, q1, q2, q3 = x[order], q1[order], q2[order], q3[order]
         return x, np.ascontiguousarray(q1), np.ascontiguousarray(q2), np.ascontiguousarray(q3)
 
+    def _ratio(self, tk, coef, b0, bc) -> float:
+        """The median ratio of the solution (knots ``tk``, ``coef``) to the estimate at the
+        midpoints of the committed knot intervals b0..bc: at least FEED_EST_RATIO_MIN, 1
+        above FEED_EST_RATIO_KEEP."""
+        xs = np.asarray(self._br[b0 : bc + 1])
+        xs = 0.5 * (xs[1:] + xs[:-1])
+        w = spline_values(tk, coef, np.clip(xs, tk[3], tk[-4]))
+        est = self.estimate(xs)
+        ok = est > 0.0
+        if not ok.any():
+            return 1.0
+        ratio = float(np.median(w[ok] / est[ok]))
+        return 1.0 if ratio > FEED_EST_RATIO_KEEP else max(ratio, FEED_EST_RATIO_MIN)
+
     def _solve(self, b0, b1, at_end, fixed, prev):
         """The LPs of the window [b0, b1]: coefficients b0 .. b1+2, their knots, iterations.
 
         The rows are linearised at the previous window's solution up to where it brakes
-        for its terminal rest (``prev.s_brake``). When that LP has no solution (the committed
-        coefficients cannot brake under rows linearised at the estimate beyond: the
-        tangent bound is exact only at its own point), the window is solved again
-        linearised at the previous solution up to its end (``prev.s_end``): that solution,
-        then rest, meets every row, so this LP is feasible.
+        for its terminal rest (``prev.s_brake``), at the estimate lowered by ``prev.ratio``
+        beyond. When that LP has no solution (the committed coefficients cannot brake
+        under rows linearised there: the tangent bound is exact only at its own point),
+        the window is solved again linearised at the previous solution up to its end
+        (``prev.s_end``): that solution, then rest, meets every row, so this LP is feasible.
         """
         try:
             s_brake = None if prev is None else prev.s_brake
@@ -465,7 +498,9 @@ class FeedProfileBuilder:
         W0 = float(np.max(wmax[finite])) if finite.any() else 1.0
         wmax = np.minimum(wmax, 1e3 * W0)
         w_est = np.minimum(np.maximum(self.estimate(x), 1e-12 * W0), wmax)
-        w_hat = np.maximum(w_est, 1e-9 * W0)
+        # the first LP's linearisation: the estimate, lowered to the previous window's
+        # level (FEED_EST_RATIO_MIN)
+        w_hat = np.maximum(w_est * (1.0 if prev is None else prev.ratio), 1e-9 * W0)
         if prev is not None:
             # linearise at the previous window's solution where it is not braking for its
             # terminal rest: where fixed coefficients act its rows are then exactly those
