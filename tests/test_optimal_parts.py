@@ -210,6 +210,36 @@ def test_profile_of_a_line_is_the_s_curve():
     assert t_cont - 0.004 <= T <= t_cont * 1.002, (T, t_cont)
 
 
+@pytest.mark.parametrize(
+    ("level", "expected"),
+    [(0.3, 0.3), (0.95, 1.0), (0.01, 0.05), (1.7, 1.0)],
+)
+def test_the_windows_ratio_is_the_solutions_median_level_under_the_estimate(level, expected):
+    # _ratio: median of w / estimate over the committed knot intervals, floored at
+    # FEED_EST_RATIO_MIN, 1 above FEED_EST_RATIO_KEEP (a solution above the estimate too)
+    from cnc_interp.plan.feedprofile import FEED_EST_RATIO_KEEP, FEED_EST_RATIO_MIN, FeedProfileBuilder
+    from cnc_interp.plan.vpop import JointTable
+
+    assert FEED_EST_RATIO_MIN == 0.05 and FEED_EST_RATIO_KEEP == 0.9
+    p = line_path([0, 0, 0], [100.0, 0, 0], 83.3)
+    b = FeedProfileBuilder(JointTable(p, None), p, MILL, 0.001)
+    b._br = list(np.linspace(0.0, 100.0, 21))
+    est = 1000.0 + 100.0 * np.sin(np.linspace(0.0, 100.0, 1001))  # any positive estimate
+    b.estimate = lambda x: np.interp(x, np.linspace(0.0, 100.0, 1001), est)
+    tk = np.concatenate(([0.0] * 3, b._br, [100.0] * 3))
+    # a constant spline (w = c everywhere) set to `level` of the estimate's median on 2..12
+    mids = 0.5 * (np.asarray(b._br[2:12]) + np.asarray(b._br[3:13]))
+    c = level * float(np.median(b.estimate(mids)))
+    coef = np.full(tk.shape[0] - 4, c)
+    got = b._ratio(tk, coef, 2, 12)
+    if expected == level:
+        # the median of c / est is c / median(est) only for an odd count: compare with it
+        assert_allclose(got, float(np.median(c / b.estimate(mids))), rtol=1e-12)
+        assert 0.25 < got < 0.35
+    else:
+        assert got == expected
+
+
 def test_profile_holds_the_centripetal_limit_on_a_circle():
     # r = 10 mm, no feed limit: the profile cruises near sqrt(A r) = 141 mm/s
     p = hermite_path(circle_fun(10.0, turns=1.0), 16, 1000.0)

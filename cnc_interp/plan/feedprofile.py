@@ -458,7 +458,7 @@ class FeedProfileBuilder:
         xs = 0.5 * (xs[1:] + xs[:-1])
         w = spline_values(tk, coef, np.clip(xs, tk[3], tk[-4]))
         est = self.estimate(xs)
-        ok = est > 0.0
+        ok = np.isfinite(est) & (est > 0.0)
         if not ok.any():
             return 1.0
         ratio = float(np.median(w[ok] / est[ok]))
