@@ -108,8 +108,9 @@ FEED_WHOLE_KNOTS = 1500
 #: machine; the tangent rows of a point linearised that high hold the jerk ~2x too tight
 #: there, and the committed state often could not brake under them). zigzag_0.002_0.001
 #: on axis_mm.ini, fast: 151 -> 79 windows solved again, 64k -> 40k LP iterations, cycle
-#: 120.4 -> 118.8 s; the sweep's planning 0.87x, cycle -0.1 %. The floor only keeps a
-#: crawling window's ratio from pinning the next window's rows near zero
+#: 120.4 -> 118.8 s; the sweep's cycle -0.1 % (its planning time within the machine's
+#: noise). The floor only keeps a crawling window's ratio from pinning the next window's
+#: rows near zero
 FEED_EST_RATIO_MIN = 0.05
 #: ... and a ratio above this counts as 1: the estimate is then right (a line's feed), and
 #: a lower point only moves where the convex-concave steps stop within FEED_CCP_TOL (a
