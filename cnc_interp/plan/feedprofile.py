@@ -131,7 +131,7 @@ class _Window(NamedTuple):
     coef: np.ndarray
     s_brake: float
     s_end: float
-    ratio: float = 1.0
+    ratio: float
 
 
 class ProfileError(Exception):

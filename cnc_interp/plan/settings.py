@@ -14,10 +14,10 @@ if TYPE_CHECKING:
     from ..machine.model import Machine
 
 #: the planner of ``plan`` and ``batch`` when none is named (``stream`` has its own).
-#: VPOp, not ``optimal``: optimal's cycles are 7.5 % shorter over the corpus
+#: VPOp, not ``optimal``: optimal's cycles are 7.6 % shorter over the corpus
 #: (``benchmarks/plan.py --sweep``, axis_mm.ini), but it takes ~6.5x VPOp's planning time
-#: there (275 s against 42 s; stellabee1 alone ~245 s against ~33 s; at ``effort="fast"``
-#: ~2.5x, 97-106 s, for cycles 5.3 % shorter): a default must not make the user wait that
+#: there (277 s against 44 s; stellabee1 alone ~245 s against ~34 s; at ``effort="fast"``
+#: ~2-2.5x, 89-112 s, for cycles 5.4 % shorter): a default must not make the user wait that
 #: long (issue 13; issue 17's stellabee1 end to end in < 30 s)
 DEFAULT_PLANNER = "vpop"
 
