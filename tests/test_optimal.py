@@ -533,6 +533,40 @@ def test_the_paths_routed_to_vpop_are_planned_by_vpops_batch_byte_for_byte():
     assert all(m is not None for m in every)
 
 
+def test_a_streamed_paths_joint_table_and_route_come_from_the_batchs_routing(monkeypatch):
+    # batched_optimal builds each path's joint table to route it; the path it leaves to
+    # the stream (the circle) takes that table and route over in the same thread: one
+    # table per path, and the same plan and stats as routing it again
+    from cnc_interp.plan import optimal
+    from cnc_interp.plan.vpop import table as vpop_table
+
+    paths = _mixed_paths()
+    circle = paths[2]
+    built = []
+    init = vpop_table.JointTable.__init__
+
+    def counted(self, path, *args, **kwargs):
+        built.append(path)
+        init(self, path, *args, **kwargs)
+
+    monkeypatch.setattr(vpop_table.JointTable, "__init__", counted)
+    marks = batched_optimal(paths, None, MILL, DT)
+    assert marks[2] is None and sum(m is not None for m in marks) == 4
+    assert built.count(circle) == 1
+    kept = plan_path_optimal(circle, None, MILL, DT)
+    assert built.count(circle) == 1  # taken over, not built again
+    again = plan_path_optimal(circle, None, MILL, DT)  # nothing held now: routed again
+    assert built.count(circle) == 2
+    assert kept.q.tobytes() == again.q.tobytes() and kept.s.tobytes() == again.s.tobytes()
+    assert kept.stats == again.stats and kept.stats["route"] == "profile" and "limited_share" in kept.stats
+    # another job's batch drops what the last one held; a path in joint space never takes it
+    batched_optimal(paths, None, MILL, DT)
+    batched_optimal(paths[:2], None, MILL, DT)
+    assert optimal._ROUTED.take(circle, None) is None
+    batched_optimal(paths, None, MILL, DT)
+    assert optimal._ROUTED.take(circle, object()) is None
+
+
 def test_the_timeline_gives_the_same_plan_and_route_counts_with_the_batch(monkeypatch):
     import cnc_interp as ci
     from cnc_interp.plan import optimal

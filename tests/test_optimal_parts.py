@@ -314,6 +314,26 @@ def test_the_knot_placements_estimate_is_its_formula(seed):
     assert np.all(got <= ws) and got[0] < 0.5 * ws[0]  # the rest carried in shows
 
 
+def test_the_estimates_of_known_probes_are_kept_bit_for_bit():
+    # the knot placement's refinement evaluates only its new probes: every field at every
+    # point is the bits of evaluating all of them
+    from cnc_interp.plan.feedprofile import FeedProfileBuilder
+    from cnc_interp.plan.vpop import JointTable
+
+    from ._vpop_paths import random_curve
+
+    rng = np.random.default_rng(7)
+    p = hermite_path(random_curve(rng, scale=15.0), 5, 120.0)
+    table = JointTable(p, None)
+    b = FeedProfileBuilder(table, p, MILL, 0.001)
+    x = np.unique(np.concatenate((rng.uniform(0.0, table.length, 300), [0.0, table.length])))
+    x0 = np.sort(rng.choice(x, 120, replace=False))
+    got = b._raw_estimate_over(x, (x0, b._raw_estimate(x0)))
+    for name, g, w in zip(FK.Estimates._fields, got, b._raw_estimate(x)):
+        assert g.tobytes() == w.tobytes(), name
+    assert all(g.tobytes() == w.tobytes() for g, w in zip(b._raw_estimate_over(x, None), b._raw_estimate(x)))
+
+
 @pytest.mark.parametrize("seed", range(3))
 def test_the_time_law_integrates_one_over_the_speed(seed):
     """``time_nodes``: each node interval's time is ∫ ds/√w (against scipy's adaptive

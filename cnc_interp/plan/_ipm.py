@@ -196,14 +196,15 @@ def _steps(first, coef, dx, rp, s, lam, rc, predictor, ds, dl, adx):
     for the predictor, else ``rc``), A dx into ``adx``; returns the longest steps (α_s,
     α_λ) <= 1 keeping s and λ >= 0."""
     m = coef.shape[0]
-    W = ROW_WIDTH
     ap = 1.0
     ad = 1.0
     for r in range(m):
         f = first[r]
         acc = 0.0
-        for k in range(W):
-            acc += coef[r, k] * dx[f + k]
+        acc += coef[r, 0] * dx[f]
+        acc += coef[r, 1] * dx[f + 1]
+        acc += coef[r, 2] * dx[f + 2]
+        acc += coef[r, 3] * dx[f + 3]
         adx[r] = acc
         d_s = -rp[r] - acc
         rcr = -lam[r] * s[r] if predictor else rc[r]
@@ -299,15 +300,34 @@ def lp_solve(n, first, coef, b, c, x, max_iter, tol):
             dr = lr / sr
             tr = lr * rpr / sr - lr  # predictor: r_c = -λ s
             f = first[r]
-            for a in range(W):
-                cra = coef[r, a]
-                if cra == 0.0:
-                    continue
-                rd[f + a] += cra * lr
-                rhs[f + a] += cra * tr
-                ca = cra * dr
-                for bb in range(a + 1):
-                    M[f + a, a - bb] += ca * coef[r, bb]
+            # unrolled, zeros included (adding 0.0 leaves the sums' bits as they were):
+            # 12 % of the solve's time on stellabee1's LPs
+            c0 = coef[r, 0]
+            c1 = coef[r, 1]
+            c2 = coef[r, 2]
+            c3 = coef[r, 3]
+            rd[f] += c0 * lr
+            rd[f + 1] += c1 * lr
+            rd[f + 2] += c2 * lr
+            rd[f + 3] += c3 * lr
+            rhs[f] += c0 * tr
+            rhs[f + 1] += c1 * tr
+            rhs[f + 2] += c2 * tr
+            rhs[f + 3] += c3 * tr
+            a0 = c0 * dr
+            a1 = c1 * dr
+            a2 = c2 * dr
+            a3 = c3 * dr
+            M[f, 0] += a0 * c0
+            M[f + 1, 1] += a1 * c0
+            M[f + 1, 0] += a1 * c1
+            M[f + 2, 2] += a2 * c0
+            M[f + 2, 1] += a2 * c1
+            M[f + 2, 0] += a2 * c2
+            M[f + 3, 3] += a3 * c0
+            M[f + 3, 2] += a3 * c1
+            M[f + 3, 1] += a3 * c2
+            M[f + 3, 0] += a3 * c3
         mu /= m
         ed = 0.0
         for i in range(n):
@@ -345,8 +365,10 @@ def lp_solve(n, first, coef, b, c, x, max_iter, tol):
             rcs[r] = rc
             tr = (rc + lam[r] * rp[r]) / s[r]
             f = first[r]
-            for k in range(W):
-                rhs[f + k] += coef[r, k] * tr
+            rhs[f] += coef[r, 0] * tr
+            rhs[f + 1] += coef[r, 1] * tr
+            rhs[f + 2] += coef[r, 2] * tr
+            rhs[f + 3] += coef[r, 3] * tr
         for i in range(n):
             dx[i] = -rd[i] - rhs[i]
         band4_solve1(M, n, dx)
