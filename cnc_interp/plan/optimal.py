@@ -207,6 +207,8 @@ class _RouteInputs:
         #: the path's duration at its static speed limits (feed, axis speeds, curvature,
         #: jerk; ``_route``), s: unlike ``rough_s``, it sees a curvature-limited path's length
         self.static_s = 0.0
+        #: the path's route once ``_route`` has measured it ("profile" or "vpop")
+        self.route: str | None = None
 
     @property
     def duration_s(self) -> float:
@@ -226,15 +228,15 @@ class _Routed(threading.local):
         self.held: dict = {}
 
     def keep(self, held: dict) -> None:
-        """Hold ``held`` ({id(path): (path, _RouteInputs, route)}), dropping the last job's."""
+        """Hold ``held`` ({id(path): (path, its _RouteInputs)}), dropping the last job's."""
         self.held = held
 
     def take(self, path, joint_map):
-        """(inputs, route) kept for ``path`` in program space, or None."""
+        """The ``_RouteInputs`` kept for ``path`` in program space, or None."""
         got = self.held.pop(id(path), None)
         if got is None or got[0] is not path or joint_map is not None:
             return None
-        return got[1], got[2]
+        return got[1]
 
 
 _ROUTED = _Routed()
@@ -681,7 +683,7 @@ def batched_optimal(paths, joint_map, machine, dt_s: float, settings=None) -> li
         if route == "vpop":
             out[i] = {"route": "vpop"}
         else:
-            held[id(path)] = (path, inputs, route)
+            held[id(path)] = (path, inputs)
     return out
 
 
@@ -703,11 +705,10 @@ def _iter(path, joint_map, machine, dt_s, settings, stats, window):
         stats["samples_total"] = 1
         yield np.zeros(1), _positions(path, path.breaks[:1], joint_map)
         return
-    routed = _ROUTED.take(path, joint_map)
-    ctx = _Path(path, joint_map, machine, dt, settings, routed[0] if routed else None)
+    ctx = _Path(path, joint_map, machine, dt, settings, _ROUTED.take(path, joint_map))
     ctx.window = window
     targeted = _targeted(opts, dt)
-    route = routed[1] if routed else opts.route or _route(ctx)
+    route = opts.route or _route(ctx)
     ctx.stats["route"] = route
     passes = _refine_passes(opts, dt, route)
     limit_s = float(_or(opts.compare_s, OPT_COMPARE_SAMPLES * dt))
@@ -828,7 +829,15 @@ def _handed_over_early(ctx, n_samples: int) -> bool:
 
 def _route(ctx) -> str:
     """ "profile" where curvature or jerk limit the speed on a good part of a path that
-    lasts long enough to gain from it, else "vpop" (see OPT_ROUTE_*)."""
+    lasts long enough to gain from it, else "vpop" (see OPT_ROUTE_*); measured once per
+    ``_RouteInputs`` (kept in ``ctx.route``)."""
+    if ctx.route is None:
+        ctx.route = _measured_route(ctx)
+    return ctx.route
+
+
+def _measured_route(ctx) -> str:
+    """``_route``'s measurement (``ctx.static_s`` and the stat "limited_share" with it)."""
     if ctx.rough_s < OPT_ROUTE_TINY_S:
         return "vpop"  # travel at the feed and ramps: far below the threshold anyway
     from . import _feed_kernels as K
