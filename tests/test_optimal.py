@@ -378,6 +378,31 @@ def _spiral_window_by_window():
     return m, path, settings
 
 
+def _linearised_at_the_estimate(monkeypatch, near_previous: bool = False):
+    """Past where the previous window brakes, a window's first LP linearised at the speed
+    estimate itself (not lowered to the previous window's level), and unless
+    ``near_previous`` not held near the previous solution either (``_feasible_hat``): the
+    rows some windows of ``_spiral_window_by_window`` have no solution under."""
+    from cnc_interp.plan import feedprofile
+
+    monkeypatch.setattr(feedprofile.FeedProfileBuilder, "_ratio", lambda *args: 1.0)
+    if not near_previous:
+        monkeypatch.setattr(feedprofile.FeedProfileBuilder, "_feasible_hat", lambda self, *a: a[-2])
+
+
+def _recorded(monkeypatch, cls, name: str) -> list:
+    """Every value the method ``cls.name`` returns from now on, in a list."""
+    values = []
+    method = getattr(cls, name)
+
+    def recording(self, *args):
+        values.append(method(self, *args))
+        return values[-1]
+
+    monkeypatch.setattr(cls, name, recording)
+    return values
+
+
 @needs_corpus
 def test_a_window_that_cannot_brake_under_the_estimate_is_solved_again(monkeypatch):
     # corpus spiral_tangent_test.ngc, its 21 mm spiral, planned window by window
@@ -385,10 +410,11 @@ def test_a_window_that_cannot_brake_under_the_estimate_is_solved_again(monkeypat
     # the previous window brakes has no solution (the estimate lies ~4x above the
     # solution in w there, and the state inherited cannot brake under rows that tight);
     # it used to end the profile, and VPOp planned the rest. (Lowered to the previous
-    # window's level, no window there needs it: the next test)
+    # window's level, or held near the previous solution, no window there needs it: the
+    # next tests)
     from cnc_interp.plan import feedprofile
 
-    monkeypatch.setattr(feedprofile.FeedProfileBuilder, "_ratio", lambda *args: 1.0)
+    _linearised_at_the_estimate(monkeypatch)
     m, path, settings = _spiral_window_by_window()
     plan = plan_path_optimal(path, None, m, m.dt_s, settings)
     check(plan, m, plan.q[0], plan.q[-1], m.dt_s)
@@ -417,24 +443,36 @@ def test_a_windows_first_lp_is_linearised_at_the_estimate_lowered_to_the_previou
     # itself (12 windows solved again)
     from cnc_interp.plan import feedprofile
 
-    ratios = []
-    ratio = feedprofile.FeedProfileBuilder._ratio
-
-    def recorded(self, *args):
-        ratios.append(ratio(self, *args))
-        return ratios[-1]
-
-    monkeypatch.setattr(feedprofile.FeedProfileBuilder, "_ratio", recorded)
+    ratios = _recorded(monkeypatch, feedprofile.FeedProfileBuilder, "_ratio")
     m, path, settings = _spiral_window_by_window()
     plan = plan_path_optimal(path, None, m, m.dt_s, settings)
     check(plan, m, plan.q[0], plan.q[-1], m.dt_s)
     assert len(ratios) >= 5 and all(0.1 < r < 0.5 for r in ratios)
     assert plan.stats.get("lp_restarts", 0) == 0 and "crawl" not in plan.stats
-    monkeypatch.setattr(feedprofile.FeedProfileBuilder, "_ratio", lambda *args: 1.0)
+    _linearised_at_the_estimate(monkeypatch)
     at_estimate = plan_path_optimal(path, None, m, m.dt_s, settings)
     assert at_estimate.stats.get("lp_restarts", 0) >= 5
     assert 3 * plan.stats["lp_iterations"] < at_estimate.stats["lp_iterations"]
     assert periods(plan) <= periods(at_estimate)
+
+
+@needs_corpus
+def test_a_windows_first_lp_held_near_the_previous_solution_always_has_one(monkeypatch):
+    # the same spiral linearised at the estimate itself (12 windows solved again), but
+    # where the previous window brakes only as far from its solution as leaves it within
+    # the rows (``_feasible_hat``): no window is solved again, for a plan no longer
+    from cnc_interp.plan import feedprofile
+
+    _linearised_at_the_estimate(monkeypatch, near_previous=True)
+    m, path, settings = _spiral_window_by_window()
+    held = _recorded(monkeypatch, feedprofile.FeedProfileBuilder, "_feasible_hat")
+    plan = plan_path_optimal(path, None, m, m.dt_s, settings)
+    check(plan, m, plan.q[0], plan.q[-1], m.dt_s)
+    assert len(held) >= 5 and plan.stats.get("lp_restarts", 0) == 0 and "crawl" not in plan.stats
+    _linearised_at_the_estimate(monkeypatch)
+    unheld = plan_path_optimal(path, None, m, m.dt_s, settings)
+    assert unheld.stats.get("lp_restarts", 0) >= 5
+    assert periods(plan) <= periods(unheld)
 
 
 @needs_corpus
@@ -482,18 +520,27 @@ def test_vpop_plans_a_path_for_comparison_only_where_it_took_over_early():
 
 
 @needs_corpus
-def test_vpop_is_kept_where_it_took_the_profile_over_early_and_plans_shorter():
-    # corpus trochoidal.ngc, the path ending at line 4766 on generic-mill: the profile is
-    # handed over to VPOp 5,749 samples in (of 43k; 598 with knots half a radius of
-    # curvature apart); VPOp's own plan of the whole path is shorter and is kept
+def test_vpop_is_kept_where_the_profile_dipped_often_and_vpop_plans_shorter(monkeypatch):
+    # corpus trochoidal.ngc, the path ending at line 4766 on generic-mill: the profile
+    # reaches the end through OPT_COMPARE_DIPS dips or more (44,471 periods with 124);
+    # VPOp's own plan of the whole path (42,864) is shorter and is kept. Before a
+    # window's first LP was held near the previous solution (``_feasible_hat``), the
+    # profile was handed over to VPOp 5,749 samples in: VPOp was compared for that
+    from cnc_interp.plan import optimal
+
     m, paths = _corpus_paths(os.path.join("performance", "trochoidal.ngc"))
     path = next(p for p in paths if int(p.line[-1]) == 4766)
-    plan = plan_path_optimal(path, None, m, m.dt_s, PlanSettings.from_options(planner="optimal", machine=m))
+    settings = PlanSettings.from_options(planner="optimal", machine=m)
+    plan = plan_path_optimal(path, None, m, m.dt_s, settings)
     check(plan, m, plan.q[0], plan.q[-1], m.dt_s)
     assert plan.stats["route"] == "profile" and plan.stats["kept"] == "vpop"
-    assert 0 <= plan.stats["handover"] < 0.2 * periods(plan)
+    assert plan.stats["retries"] >= optimal.OPT_COMPARE_DIPS
     vpop = plan_path_vpop(path, None, m, m.dt_s)
     assert periods(plan) == periods(vpop)
+    # without the dips' rule the profile's longer plan is kept
+    monkeypatch.setattr(optimal, "OPT_COMPARE_DIPS", 10**9)
+    kept = plan_path_optimal(path, None, m, m.dt_s, settings)
+    assert kept.stats["kept"] == "profile" and periods(kept) > periods(vpop)
 
 
 # -- the paths routed to VPOp go through VPOp's compiled batch ------------------------
@@ -664,12 +711,17 @@ def test_a_curvature_limited_path_gets_dips_for_its_whole_duration(monkeypatch):
 
 @pytest.mark.slow
 @needs_corpus
-def test_a_short_crawl_of_the_profile_is_kept_rather_than_handed_to_vpop():
+def test_a_short_crawl_of_the_profile_is_kept_rather_than_handed_to_vpop(monkeypatch):
     # axis_mm.ini: windows solved again from the previous window's terminal rest crawl
     # there for a few hundredths of a second; refusing such a piece handed 96 % of the
     # 150 s path to VPOp
     from cnc_interp.machine.load import load_machine
 
+    from cnc_interp.plan import feedprofile
+
+    # windows solved again happen only with the first LP not held near the previous
+    # solution (``_feasible_hat``)
+    monkeypatch.setattr(feedprofile.FeedProfileBuilder, "_feasible_hat", lambda self, *a: a[-2])
     m = load_machine(os.path.join(CORPUS, "configs", "axis_mm.ini"))
     path = _zigzag_path(m)
     plan = plan_path_optimal(path, None, m, DT, PlanSettings.from_options(planner="optimal", machine=m, effort="fast"))
@@ -688,7 +740,7 @@ def test_a_windows_first_lp_without_a_solution_gives_up_early_for_the_same_plan(
     # estimate itself: windows without a solution, see the tests above)
     from cnc_interp.plan import feedprofile
 
-    monkeypatch.setattr(feedprofile.FeedProfileBuilder, "_ratio", lambda *args: 1.0)
+    _linearised_at_the_estimate(monkeypatch)
     m, path, settings = _spiral_window_by_window()
     spent = []  # every LP's iterations, those without a solution too
     lp_solve = feedprofile.lp_solve

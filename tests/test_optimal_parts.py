@@ -334,6 +334,69 @@ def test_the_estimates_of_known_probes_are_kept_bit_for_bit():
     assert all(g.tobytes() == w.tobytes() for g, w in zip(b._raw_estimate_over(x, None), b._raw_estimate(x)))
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_a_windows_first_lp_is_linearised_where_the_previous_solution_meets_its_rows(seed):
+    # _feasible_hat, against the LP's own rows (lp_rows): a window's solution ending at
+    # rest meets every jerk row linearised at the points it returns over its braking
+    # part; each point is the target where that allows it, else as near it as allows it
+    from cnc_interp.plan.feedprofile import FEED_HAT_MARGIN, FeedProfileBuilder, _Window
+    from cnc_interp.plan.vpop import JointTable
+
+    from ._vpop_paths import random_curve
+
+    rng = np.random.default_rng(50 + seed)
+    p = hermite_path(random_curve(rng, scale=15.0), 5, float(rng.uniform(40, 300)))
+    b = FeedProfileBuilder(JointTable(p, None), p, MILL, 0.001)
+    b._breaks_upto(60)
+    b1 = min(40, len(b._br) - 4)
+    coef, tk, _ = b._solve(0, b1, False, np.zeros(0), None)
+    prev = _Window(tk, coef, b._br[b1 - 12], b._br[b1], 1.0)
+    x, q1, q2, q3 = b._collocation(b1 - 12, b1)
+    x, q1, q2, q3 = x[:-1], q1[:-1], q2[:-1], q3[:-1]  # the rest itself has no jerk row
+    target = b.estimate(x) * rng.uniform(0.5, 20.0, x.shape[0])
+    floor = 1e-9 * float(np.max(target))
+    hat = b._feasible_hat(prev, x, q1, q2, q3, target, floor)
+
+    def jerk_rows(w_hat):
+        # each point's largest jerk row at the solution (scale 1: the variables are coef)
+        nc = coef.shape[0]
+        first = np.empty(x.shape[0], dtype=np.int64)
+        B = np.empty((x.shape[0], 3, 4))
+        FK.cubic_basis(tk, nc, x, first, B)
+        n, K = int(b.moving.sum()), x.shape[0]
+        m = K * (1 + 4 * n)
+        rows = FK.Rows(np.empty(m, dtype=np.int64), np.empty((m, 4)), np.empty(m))
+        pts = FK.Collocation(first, B, q1, q2, q3)
+        lim = FK.AxisLimits(b.moving, b.amax, b.jmax)
+        r = FK.lp_rows(pts, lim, np.full(K, np.inf), w_hat, np.ones(K, dtype=np.bool_), np.ones(nc), rows)
+        assert r == m
+        at = coef[rows.first[:, None] + np.arange(4)[None, :]]
+        vals = np.einsum("kj,kj->k", rows.coef, at).reshape(K, -1)
+        # per point: the velocity row, then per axis two acceleration and two jerk rows
+        return vals[:, 1:].reshape(x.shape[0], n, 4)[:, :, 2:].max(axis=(1, 2))
+
+    own = jerk_rows(np.maximum(spline_values_of(prev, x), floor))
+    fits = own <= 1.0 - FEED_HAT_MARGIN
+    assert fits.mean() > 0.5
+    at_hat = jerk_rows(hat)
+    assert np.all(at_hat[fits] <= 1.0 - FEED_HAT_MARGIN + 1e-9)
+    at_target = jerk_rows(np.maximum(target, floor))
+    free = at_target <= 1.0 - FEED_HAT_MARGIN
+    assert_allclose(hat[free], np.maximum(target, floor)[free], rtol=0, atol=0)
+    cut = fits & ~free
+    assert cut.sum() >= 3  # the target's rows cut the solution off somewhere
+    # held at the edge: a step further towards the target leaves the solution outside
+    step = hat + 1e-6 * (np.maximum(target, floor) - hat)
+    assert np.all(jerk_rows(step)[cut] > 1.0 - FEED_HAT_MARGIN - 1e-12)
+
+
+def spline_values_of(window, x):
+    from cnc_interp.plan.feedprofile import spline_values
+
+    xc = np.clip(x, window.knots[3], window.knots[-4])
+    return np.maximum(spline_values(window.knots, window.coef, xc), 0.0)
+
+
 @pytest.mark.parametrize("seed", range(3))
 def test_the_time_law_integrates_one_over_the_speed(seed):
     """``time_nodes``: each node interval's time is ∫ ds/√w (against scipy's adaptive

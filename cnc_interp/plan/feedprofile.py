@@ -20,10 +20,11 @@ coefficients the committed part uses, ends at rest (w = 0: a brake-safe end, the
 window's solution can always stop) and commits all but the braking part. The profile on
 [0, s] therefore depends only on the path up to s plus one window: the streaming
 contract of ``optimal.iter_path_plan``. Past its committed part, a window's first LP is
-linearised at the estimate lowered to the previous window's level (``FEED_EST_RATIO_MIN``).
-A window whose LP has no solution (the state it inherits cannot brake under those rows)
-is solved again linearised at the previous window's whole solution, which is then a
-feasible point (``_solve``).
+linearised at the estimate lowered to the previous window's level (``FEED_EST_RATIO_MIN``),
+and where the previous window brakes for its terminal rest, only as far towards it as
+leaves that solution within the rows (``_feasible_hat``): the previous solution, then
+rest, is a feasible point of the LP. Should it still have no solution (round-off), the
+window is solved again linearised at the previous window's whole solution (``_solve``).
 
 Collocation: ``FEED_COLLOCATION`` points per knot interval, plus the path's segment
 joins, where q_sss jumps (paths are G2): there both one-sided values are imposed.
@@ -119,6 +120,20 @@ FEED_EST_RATIO_MIN = 0.05
 FEED_EST_RATIO_KEEP = 0.9
 #: table pieces per block of the knot placement
 FEED_KNOT_BLOCK = 256
+#: where the previous window brakes, a window's first LP is linearised at most so far
+#: from the estimate that the previous solution keeps this share of each jerk row's
+#: bound free (``_feasible_hat``; it met them to the solver's tolerance, FEED_LP_TOL).
+#: Before, the rows there were linearised at the estimate: a third of
+#: zigzag_0.002_0.001's windows had no solution under them (their first LP ran to
+#: FEED_LP_FIRST_MAX_ITER) and were solved again from the previous solution, crawling out
+#: of its rest. Now 0 of 271: on axis_mm.ini, fast, its cycle 118.84 -> 114.51 s and its
+#: planning 4.5 -> 2.2 s; 1e-2 and 1e-4 gave 114.57 and 114.49 s
+FEED_HAT_MARGIN = 1e-3
+
+
+#: bisection steps of ``_feasible_hat`` (the interval shrinks 2^-30: far below what moves
+#: the LP's rows)
+_HAT_BISECTIONS = 30
 
 
 class _Window(NamedTuple):
@@ -492,10 +507,10 @@ class FeedProfileBuilder:
 
         The rows are linearised at the previous window's solution up to where it brakes
         for its terminal rest (``prev.s_brake``), at the estimate lowered by ``prev.ratio``
-        beyond. When that LP has no solution (the committed coefficients cannot brake
-        under rows linearised there: the tangent bound is exact only at its own point),
-        the window is solved again linearised at the previous solution up to its end
-        (``prev.s_end``): that solution, then rest, meets every row, so this LP is feasible.
+        beyond, held near enough to the previous solution up to its rest that it meets
+        them (``_feasible_hat``). Should that LP still have no solution (the previous one
+        met its rows only to the solver's tolerance), the window is solved again
+        linearised at the previous solution up to its end (``prev.s_end``).
         """
         try:
             s_brake = None if prev is None else prev.s_brake
@@ -505,6 +520,40 @@ class FeedProfileBuilder:
                 raise
             self.restarts += 1
             return self._solve_from(b0, b1, at_end, fixed, prev, prev.s_end, FEED_CCP_MAX_RESTART)
+
+    def _feasible_hat(self, prev, x, q1, q2, q3, target, floor):
+        """Linearisation points (K,) at the sorted x (K,) where the previous window brakes:
+        each as near ``target`` (K,) as keeps its solution p within the jerk rows there.
+
+        With E_i the jerk's linear part at p (``_feed_kernels``), p meets the row of axis i
+        linearised at ŵ when h(ŵ) = e √ŵ + p / (3 ŵ) <= 1, e = max_i |E_i| / (3/2 J_i);
+        h(p) <= 1 is p's own jerk bound, and h is convex in √ŵ, so the allowed ŵ form an
+        interval around p: the target where h(target) <= 1 - FEED_HAT_MARGIN, else its end
+        towards the target (bisection in √ŵ), else p. ``q1``..``q3`` (K, n) are the joint
+        derivatives at x; ``floor`` (mm²/s²) the least ŵ.
+        """
+        xc = np.clip(x, prev.knots[3], prev.knots[-4])
+        p = np.maximum(spline_values(prev.knots, prev.coef, xc), 0.0)
+        dp = spline_values(prev.knots, prev.coef, xc, 1)
+        ddp = spline_values(prev.knots, prev.coef, xc, 2)
+        E = q3 * p[:, None] + 1.5 * q2 * dp[:, None] + 0.5 * q1 * ddp[:, None]
+        mv = self.moving
+        e = np.max(np.abs(E[:, mv]) / (1.5 * self.jmax[mv]), axis=1, initial=0.0)
+        bound = 1.0 - FEED_HAT_MARGIN
+        t = np.maximum(target, floor)
+        p_hat = np.maximum(p, floor)
+        out = np.where(e * np.sqrt(t) + p / (3.0 * t) <= bound, t, p_hat)
+        todo = np.flatnonzero((out != t) & (e * np.sqrt(p_hat) + p / (3.0 * p_hat) <= bound))
+        if todo.size:
+            ok_u, bad_u = np.sqrt(p_hat[todo]), np.sqrt(t[todo])
+            ek, pk = e[todo], p[todo]
+            for _ in range(_HAT_BISECTIONS):
+                u = 0.5 * (ok_u + bad_u)
+                fits = ek * u + pk / (3.0 * u * u) <= bound
+                ok_u = np.where(fits, u, ok_u)
+                bad_u = np.where(fits, bad_u, u)
+            out[todo] = ok_u * ok_u
+        return out
 
     def _solve_from(self, b0, b1, at_end, fixed, prev, s_prev, ccp_max, first_max_iter=FEED_LP_MAX_ITER):
         """``_solve`` with the rows linearised at ``prev`` up to ``s_prev``; the first LP
@@ -532,6 +581,10 @@ class FeedProfileBuilder:
             near = x <= max(self._br[min(b0 + 3, len(self._br) - 1)], s_prev)
             wc = spline_values(prev.knots, prev.coef, np.clip(x[near], prev.knots[3], prev.knots[-4]))
             w_hat[near] = np.maximum(wc, 1e-9 * W0)
+            # on to its rest: as near the estimate as keeps it a solution
+            far = ~near & (x < prev.s_end)
+            if far.any():
+                w_hat[far] = self._feasible_hat(prev, x[far], q1[far], q2[far], q3[far], w_hat[far], 1e-9 * W0)
         # fixed coefficients: the committed three (b0 > 0), w(0) = 0, w(L) = 0
         free = np.ones(nc, dtype=bool)
         cfix = np.zeros(nc)

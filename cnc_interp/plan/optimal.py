@@ -107,6 +107,12 @@ OPT_COMPARE_TAIL_S = 0.3
 #: 334 paths handed over before half their plan, by 1,167 periods, and on 1 of the 871
 #: handed over later, by 1 period; those runs cost ~8 % of the fast effort's CPU there)
 OPT_COMPARE_BEFORE = 0.5
+#: ... or when the profile's plan reached its end through at least this many dips (each
+#: lowers the reference around a stuck place). Over the axis_mm.ini sweep (fast) VPOp's
+#: plan was shorter on 11 of the 3,199 paths with dips, by 2,051 periods, 1,847 of them on
+#: trochoidal's path to line 11370 (356 dips: 94,232 against 92,385); 12 paths have 50
+#: dips or more (335k samples to plan again), and that path is among them
+OPT_COMPARE_DIPS = 50
 #: a profile-routed path lasting at least this long (at its static limits, s) is profiled and
 #: sampled by a thread of its own ahead of its refinement (``prefetch.Prefetch``: the two
 #: stages on two cores; the samples do not depend on it): a long path is otherwise one
@@ -794,8 +800,8 @@ def _better_of(ctx, stage, passes, targeted):
         # before VPOp took over: it is kept without running VPOp (over the corpus VPOp
         # won on such paths by 351 periods in all against the profile's 22k; the runs
         # cost as much as 4.6 s of planning). Also where the reference had to be lowered
-        # by dips: on the sweep (axis_mm.ini) VPOp won there by 51 periods in all
-        # (LHchips4) for ~7 % of stellabee1's CPU
+        # by a few dips (OPT_COMPARE_DIPS): on the sweep (axis_mm.ini) VPOp won there by
+        # 51 periods in all (LHchips4) for ~7 % of stellabee1's CPU
         ctx.stats["kept"] = "profile"
         yield s, q
         return
@@ -815,8 +821,10 @@ def _better_of(ctx, stage, passes, targeted):
 def _vpop_may_win(ctx, n_samples: int) -> bool:
     """Is VPOp's own plan worth making for comparison with the profile's plan of
     ``n_samples``: did VPOp take it over early (``_handed_over_early``), before
-    OPT_COMPARE_BEFORE of its samples?"""
+    OPT_COMPARE_BEFORE of its samples, or did the profile need OPT_COMPARE_DIPS dips?"""
     ho = int(ctx.stats.get("handover", -1))
+    if int(ctx.stats.get("retries", 0)) >= OPT_COMPARE_DIPS:
+        return True
     return _handed_over_early(ctx, n_samples) and ho < OPT_COMPARE_BEFORE * n_samples
 
 
