@@ -610,3 +610,45 @@ def test_a_crawl_is_refused_only_when_it_costs_more_than_its_bound(spacing_mm):
     assert kept == (spacing_mm < 1.0)  # both outcomes are met
     assert (nodes.s.shape[0] > 0) == kept
     assert not _Nodes().append(knots, coef, 0.0, s1, estimate=lambda s: np.ones_like(s))  # no allowance
+
+
+def test_the_chunks_of_a_stream_are_its_samples_cut_once_per_block():
+    # _rechunk: chunks of exactly ``chunk`` samples (the last shorter) whose concatenation
+    # is the stream; a block many chunks long is copied once, not once per chunk (a path
+    # planned as one block was copied again for every chunk cut from it: O(n²))
+    from cnc_interp.plan.optimal import _rechunk
+
+    rng = np.random.default_rng(3)
+    sizes = [1, 7, 2500, 3, 64, 0, 999, 5]
+    blocks = []
+    start = 0
+    for n in sizes:
+        s = np.arange(start, start + n, dtype=float)
+        blocks.append((s, np.stack((s, -s, rng.uniform(size=n)), axis=1)))
+        start += n
+    chunks = list(_rechunk(iter(blocks), 64))
+    assert [c[0].shape[0] for c in chunks[:-1]] == [64] * (len(chunks) - 1)
+    assert 0 < chunks[-1][0].shape[0] <= 64
+    assert_allclose(np.concatenate([c[0] for c in chunks]), np.arange(start, dtype=float), rtol=0, atol=0)
+    assert_allclose(np.concatenate([c[1] for c in chunks]), np.concatenate([b[1] for b in blocks]), rtol=0, atol=0)
+    # the 2500-sample block's chunks (samples 8..2508) are cut from one copy
+    inside = [c for c in chunks if c[0][0] >= 64 and c[0][-1] < 2450]
+    assert len(inside) > 30 and all(c[1].base is not None and c[1].base is inside[0][1].base for c in inside)
+    assert not any(np.shares_memory(blocks[2][1], c[1]) for c in chunks)  # copies, not the producer's
+
+
+def test_a_windows_knots_are_the_clamped_breakpoints():
+    # _knot_slice: t[j0 : j1] of the clamped knot vector (t_{i+3} = breakpoint i, three-fold
+    # ends), read from the breakpoints it needs only
+    from cnc_interp.plan.feedprofile import FeedProfileBuilder
+    from cnc_interp.plan.vpop import JointTable
+
+    p = line_path([0, 0, 0], [40.0, 0, 0], 83.3)
+    b = FeedProfileBuilder(JointTable(p, None), p, MILL, 0.001)
+    b._breaks_upto(10**6)
+    br = np.asarray(b._br)
+    nb = br.shape[0] - 1
+    full = np.concatenate(([br[0]] * 3, br, [br[-1]] * 3))
+    assert nb > 20
+    for j0, j1 in [(0, 7), (0, nb + 7), (5, 30), (nb, nb + 7), (nb - 2, nb + 7), (3, 4), (0, 1)]:
+        assert_allclose(b._knot_slice(j0, j1), full[j0:j1], rtol=0, atol=0)

@@ -420,9 +420,12 @@ class FeedProfileBuilder:
     def _knot_slice(self, j0: int, j1: int):
         """Global clamped knots t[j0 : j1] (t_{i+3} = breakpoint i, three-fold ends)."""
         nb = len(self._br) - 1
-        idx = np.arange(j0, j1) - 3
-        t = np.asarray(self._br)[np.clip(idx, 0, nb)]
-        return t
+        lo = min(max(j0 - 3, 0), nb)
+        hi = min(max(j1 - 4, 0), nb)
+        # only the breakpoints used: the list grows with the path (a window far along a
+        # long path would otherwise convert all of it: O(n²) over its windows)
+        part = np.asarray(self._br[lo : hi + 1])
+        return part[np.clip(np.arange(j0, j1) - 3, 0, nb) - lo]
 
     # -- the LP of one window -------------------------------------------------------
     def windows(self):

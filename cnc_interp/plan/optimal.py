@@ -633,11 +633,17 @@ def _rechunk(blocks, chunk: int):
         buf_s.append(bs)
         buf_q.append(bq)
         held += bs.shape[0]
-        while held >= chunk:
-            s = np.concatenate(buf_s)
-            q = np.concatenate(buf_q)
-            yield s[:chunk], q[:chunk]
-            buf_s, buf_q, held = [s[chunk:]], [q[chunk:]], s.shape[0] - chunk
+        if held < chunk:
+            continue
+        # one copy per block, then chunks cut from it (joining the rest again for each
+        # chunk copied a whole path planned as one block once per chunk: O(n²))
+        s = np.concatenate(buf_s)
+        q = np.concatenate(buf_q)
+        start = 0
+        while held - start >= chunk:
+            yield s[start : start + chunk], q[start : start + chunk]
+            start += chunk
+        buf_s, buf_q, held = [s[start:]], [q[start:]], held - start
     if held:
         yield np.concatenate(buf_s), np.concatenate(buf_q)
 
