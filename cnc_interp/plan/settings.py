@@ -39,7 +39,7 @@ class OptimalOptions:
             ``effort``); it overrides the effort's number of passes, not which windows.
         compare_s: a profile-routed path whose rough duration is at most this long, s, is
             planned whole (one LP window when short), and also by VPOp, the shorter plan
-            kept, when the profile got stuck before its end (default
+            kept, when the profile got stuck before its end or needed many dips (default
             ``OPT_COMPARE_SAMPLES`` periods); 0: neither (every sample then depends on at
             most one profile window ahead).
         chunk_samples: samples per streamed chunk (default ``OPT_CHUNK``; the plan does
