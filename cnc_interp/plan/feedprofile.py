@@ -173,11 +173,24 @@ class FeedPiece:
 
 def spline_values(knots, coef, x, nu: int = 0):
     """The nu-th derivative (nu <= 2) of the cubic B-spline (knots, coef) at sorted x."""
+    B, at = _basis_at(knots, coef, x)
+    return np.einsum("kj,kj->k", B[:, nu], at)
+
+
+def spline_derivs(knots, coef, x):
+    """The cubic B-spline (knots, coef) and its first two derivatives at sorted x (each
+    (K,), the bits of ``spline_values``), from one evaluation of the basis."""
+    B, at = _basis_at(knots, coef, x)
+    return tuple(np.einsum("kj,kj->k", B[:, nu], at) for nu in range(3))
+
+
+def _basis_at(knots, coef, x):
+    """``cubic_basis`` at sorted x (B (K, 3, 4)) and the coefficients each point uses (K, 4)."""
     x = np.ascontiguousarray(x, dtype=float)
     first = np.empty(x.shape[0], dtype=np.int64)
     B = np.empty((x.shape[0], 3, 4))
     K.cubic_basis(knots, coef.shape[0], x, first, B)
-    return np.einsum("kj,kj->k", B[:, nu], coef[first[:, None] + np.arange(4)[None, :]])
+    return B, coef[first[:, None] + np.arange(4)[None, :]]
 
 
 class FeedProfileBuilder:
@@ -535,10 +548,8 @@ class FeedProfileBuilder:
         towards the target (bisection in √ŵ), else p. ``q1``..``q3`` (K, n) are the joint
         derivatives at x; ``floor`` (mm²/s²) the least ŵ.
         """
-        xc = np.clip(x, prev.knots[3], prev.knots[-4])
-        p = np.maximum(spline_values(prev.knots, prev.coef, xc), 0.0)
-        dp = spline_values(prev.knots, prev.coef, xc, 1)
-        ddp = spline_values(prev.knots, prev.coef, xc, 2)
+        p, dp, ddp = spline_derivs(prev.knots, prev.coef, np.clip(x, prev.knots[3], prev.knots[-4]))
+        p = np.maximum(p, 0.0)
         E = q3 * p[:, None] + 1.5 * q2 * dp[:, None] + 0.5 * q1 * ddp[:, None]
         mv = self.moving
         e = np.max(np.abs(E[:, mv]) / (1.5 * self.jmax[mv]), axis=1, initial=0.0)

@@ -828,9 +828,9 @@ def _vpop_may_win(ctx, n_samples: int) -> bool:
     """Is VPOp's own plan worth making for comparison with the profile's plan of
     ``n_samples``: did VPOp take it over early (``_handed_over_early``), before
     OPT_COMPARE_BEFORE of its samples, or did the profile need OPT_COMPARE_DIPS dips?"""
-    ho = int(ctx.stats.get("handover", -1))
     if int(ctx.stats.get("retries", 0)) >= OPT_COMPARE_DIPS:
         return True
+    ho = int(ctx.stats.get("handover", -1))
     return _handed_over_early(ctx, n_samples) and ho < OPT_COMPARE_BEFORE * n_samples
 
 
