@@ -457,9 +457,9 @@ def lp_take(rows, sel, count, out):
 @njit(cache=True, nogil=True)
 def lp_screen(rows, x, screen, active, first_pass):
     """Row screening at x: the first pass (``first_pass``) marks ``active`` the rows whose
-    value is at least ``screen`` of |b| (1e-12 below counts); later passes add the rows
-    left out that x violates (beyond 1e-9 relative), and with them every row at least
-    ``screen`` of |b|. Returns (violated rows left out, active rows)."""
+    slack b - a·x is at most 1 - ``screen`` of max(|b|, 1) (1e-12 above counts); later
+    passes add the rows left out that x violates (beyond 1e-9 relative), and with them
+    every row within that slack. Returns (violated rows left out, active rows)."""
     b = rows.b
     m = b.shape[0]
     val = np.empty(m)
@@ -467,13 +467,13 @@ def lp_screen(rows, x, screen, active, first_pass):
     viol = 0
     for r in range(m):
         if first_pass:
-            active[r] = val[r] >= screen * abs(b[r]) - 1e-12
+            active[r] = b[r] - val[r] <= (1.0 - screen) * max(abs(b[r]), 1.0) + 1e-12
         elif not active[r] and val[r] > b[r] + 1e-9 * max(abs(b[r]), 1.0):
             viol += 1
             active[r] = True
     if not first_pass and viol > 0:
         for r in range(m):
-            if val[r] >= screen * abs(b[r]):
+            if b[r] - val[r] <= (1.0 - screen) * max(abs(b[r]), 1.0):
                 active[r] = True
     count = 0
     for r in range(m):

@@ -59,7 +59,11 @@ FEED_KNOT_GEO = 0.35
 #: leave fewer stuck places for the sampler, the same 139 paths 20 % less planning CPU)
 FEED_COLLOCATION = 3
 #: a window commits this much motion (estimated) and looks two braking times further, s
-FEED_COMMIT_S = 0.5
+#: (0.5 before: on axis_mm.ini, whose braking part is ~62 knots, the windows of
+#: zigzag_0.002_0.001 then solved every knot 1.7 times; at 1.0, 1.4 times: its LP work
+#: (rows x iterations) -23 %, stellabee1's the same, the fast sweep's cycle +0.003 %;
+#: at 1.5 zigzag -28 %)
+FEED_COMMIT_S = 1.0
 #: iterations of the convex-concave procedure, and the relative change of the traversal
 #: time below which it stops (1e-3 before: a third LP for < 1 % of the profile's time
 #: changed no period of benchmarks/optimality.py; the corpus +0.003 %, 10 % less planning)
@@ -96,10 +100,18 @@ FEED_LP_FIRST_MAX_ITER = 50
 #: ones; the LP's collocation leaves small excursions between its points). Velocity and
 #: feed bound w directly and are used whole.
 FEED_LIMIT_SHARE = 0.998
-#: after the first LP of a window, only rows whose value at the current solution is
-#: above this share of their bound take part; rows left out are checked after each
-#: solve and added back if violated (the answer is the same, the solve smaller)
+#: after the first LP of a window, only rows whose slack at the current solution is
+#: at most 1 - this of their scale (max(|b|, 1): the limit rows' bound before the fixed
+#: coefficients moved to the right-hand side) take part; rows left out are checked after
+#: each solve and added back if violated (the answer is the same, the solve smaller).
+#: By slack, not by value >= this share of |b| as before: rows with b <= 0 (coefficients
+#: >= 0, the window's terminal rest, rows the fixed coefficients shifted) were then left
+#: out while their slack was ~0, and one of them violated cost a solve from scratch:
+#: zigzag_0.002_0.001 (axis_mm.ini) 3.0 -> 1.3 solves per screened LP
 FEED_ROW_SCREEN = 0.3
+#: solves per LP at most with screened rows: the last one takes every row (with the
+#: screen by slack, zigzag_0.002_0.001's LPs needed at most two)
+FEED_SCREEN_ROUNDS = 4
 #: a path of at most this many knot intervals is solved as one window (``windows``)
 FEED_WHOLE_KNOTS = 1500
 #: a window's first LP is linearised past the committed part at the estimate times the
@@ -683,7 +695,10 @@ class FeedProfileBuilder:
             _, count = K.lp_screen(rows, x, FEED_ROW_SCREEN, active, True)
         c = np.ascontiguousarray(c)
         iters = 0
-        for _ in range(4):
+        for attempt in range(FEED_SCREEN_ROUNDS):
+            if attempt == FEED_SCREEN_ROUNDS - 1 and count < m:
+                active[:] = True  # the last solve takes every row: never a point outside one
+                count = m
             sub = K.Rows(np.empty(count, dtype=np.int64), np.empty((count, 4)), np.empty(count))
             K.lp_take(rows, active, count, sub)
             x_try = x.copy()
