@@ -62,7 +62,7 @@ FEED_COLLOCATION = 3
 #: (0.5 before: on axis_mm.ini, whose braking part is ~62 knots, the windows of
 #: zigzag_0.002_0.001 then solved every knot 1.7 times; at 1.0, 1.4 times: its LP work
 #: (rows x iterations) -23 %, stellabee1's the same (most of its paths are one window),
-#: the fast sweep's cycle +0.003 %. 1.5: zigzag's LP work -28 % and 15 % less CPU than at
+#: the fast sweep's cycle -0.002 %. 1.5: zigzag's LP work -28 % and 15 % less CPU than at
 #: 1.0, but issue 13's LinuxCNC zigzag +0.4 % at fast (33.997 s against 33.860 s) and
 #: stellabee-kink-test +0.02 %; 2.0: stellabee-kink-test +0.8 %)
 FEED_COMMIT_S = 1.0
