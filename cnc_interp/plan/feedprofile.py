@@ -697,8 +697,9 @@ class FeedProfileBuilder:
             _, count = K.lp_screen(rows, x, FEED_ROW_SCREEN, active, True)
         c = np.ascontiguousarray(c)
         iters = 0
-        for attempt in range(FEED_SCREEN_ROUNDS):
-            if attempt == FEED_SCREEN_ROUNDS - 1 and count < m:
+        attempt = 1
+        while True:
+            if attempt >= FEED_SCREEN_ROUNDS:
                 active[:] = True  # the last solve takes every row: never a point outside one
                 count = m
             sub = K.Rows(np.empty(count, dtype=np.int64), np.empty((count, 4)), np.empty(count))
@@ -706,12 +707,12 @@ class FeedProfileBuilder:
             x_try = x.copy()
             status, it, _, _ = lp_solve(nc, sub.first, sub.coef, sub.b, c, x_try, max_iter, FEED_LP_TOL)
             iters += it
-            if status != LP_OK:
+            if status != LP_OK or count == m:  # every row solved: nothing left out to check
                 return status, iters, x_try
             viol, count = K.lp_screen(rows, x_try, FEED_ROW_SCREEN, active, False)
             if not viol:
                 return status, iters, x_try
-        return status, iters, x_try
+            attempt += 1
 
     def _end_rows(self, r, row_first, row_coef, row_b, tk, nc, scale, b0, b1, at_end):
         """The collocation rows plus the end conditions of the window (in local indices)."""
