@@ -5,7 +5,7 @@ import os
 
 import numpy as np
 import pytest
-from numpy.testing import assert_array_equal
+from numpy.testing import assert_allclose, assert_array_equal
 
 from cnc_interp.machine.kinematics import make_kinematics
 from cnc_interp.machine.model import Machine
@@ -388,9 +388,14 @@ def _linearised_at_the_estimate(monkeypatch, near_previous: bool = False):
     """Past where the previous window brakes, a window's first LP linearised at the speed
     estimate itself (not lowered to the previous window's level), and unless
     ``near_previous`` not held near the previous solution either (``_feasible_hat``): the
-    rows some windows of ``_spiral_window_by_window`` have no solution under."""
+    rows some windows of ``_spiral_window_by_window`` have no solution under. Without the
+    points where q_sss peaks (``FEED_PEAK_SHARE``), as when these cases were found: with
+    them the first window solved again there crawls (the restart is then not what is
+    measured); planned as it is, the spiral needs no restart either way and the points
+    gain 3 periods of 3,824."""
     from cnc_interp.plan import feedprofile
 
+    monkeypatch.setattr(feedprofile, "FEED_PEAK_SHARE", np.inf)
     monkeypatch.setattr(feedprofile.FeedProfileBuilder, "_ratio", lambda *args: 1.0)
     if not near_previous:
         monkeypatch.setattr(feedprofile.FeedProfileBuilder, "_feasible_hat", lambda self, *a: a[-2])
@@ -558,9 +563,11 @@ def test_a_profile_that_only_dipped_is_planned_with_one_knot_spacing(monkeypatch
     # corpus stellabee-violation-spirals.ngc, the path ending at line 814: its profile dips
     # once and reaches the end. The second knot spacing gained 0.2 % on such paths for 9 %
     # of the CPU; it runs only where VPOp took the plan over early
-    # (test_the_shorter_of_two_knot_spacings_is_kept)
+    # (test_the_shorter_of_two_knot_spacings_is_kept). Without the points where q_sss
+    # peaks (FEED_PEAK_SHARE): with them this profile reaches the end without a dip
     from cnc_interp.plan import feedprofile
 
+    monkeypatch.setattr(feedprofile, "FEED_PEAK_SHARE", np.inf)
     m, paths = _corpus_paths(os.path.join("violation_checks", "stellabee-violation-spirals.ngc"))
     path = next(p for p in paths if int(p.line[-1]) == 814)
     spacings = []
@@ -603,8 +610,13 @@ def test_vpop_is_kept_where_the_profile_dipped_often_and_vpop_plans_shorter(monk
     # reaches the end through OPT_COMPARE_DIPS dips or more (44,471 periods with 124);
     # VPOp's own plan of the whole path (42,864) is shorter and is kept. Before a
     # window's first LP was held near the previous solution (``_feasible_hat``), the
-    # profile was handed over to VPOp 5,749 samples in: VPOp was compared for that
-    from cnc_interp.plan import optimal
+    # profile was handed over to VPOp 5,749 samples in: VPOp was compared for that.
+    # Without the points where q_sss peaks (FEED_PEAK_SHARE): with them the profile
+    # reaches the end without a dip, and its 44,463 periods are kept without comparing
+    # (the continuous profile is slower than VPOp on this G1 trochoid: see the README)
+    from cnc_interp.plan import feedprofile, optimal
+
+    monkeypatch.setattr(feedprofile, "FEED_PEAK_SHARE", np.inf)
 
     m, paths = _corpus_paths(os.path.join("performance", "trochoidal.ngc"))
     path = next(p for p in paths if int(p.line[-1]) == 4766)
@@ -619,6 +631,62 @@ def test_vpop_is_kept_where_the_profile_dipped_often_and_vpop_plans_shorter(monk
     monkeypatch.setattr(optimal, "OPT_COMPARE_DIPS", 10**9)
     kept = plan_path_optimal(path, None, m, m.dt_s, settings)
     assert kept.stats["kept"] == "profile" and periods(kept) > periods(vpop)
+
+
+def _profile_jerk_share(builder, pieces, end_mm=0.05):
+    """The largest |axis jerk| / J of the committed continuous profile on a grid of 20
+    points per knot interval (the sampled start and stop, ``end_mm`` at each end, left
+    out: they may break the continuous limit by design)."""
+    from cnc_interp.plan.feedprofile import spline_derivs
+
+    worst = 0.0
+    for p in pieces:
+        kn = p.knots
+        t = np.unique(kn[(kn >= p.s0) & (kn <= p.s1)])
+        x = (t[:-1, None] + np.diff(t)[:, None] * (np.arange(20) / 20.0)[None, :]).ravel()
+        x = x[(x > end_mm) & (x < builder.L - end_mm)]
+        w, dw, ddw = spline_derivs(kn, p.coef, np.clip(x, kn[3], kn[-4]))
+        q1, q2, q3 = builder.derivs(x)
+        v = np.sqrt(np.maximum(w, 0.0))[:, None]
+        jerk = (q3 * w[:, None] + 1.5 * q2 * dw[:, None] + 0.5 * q1 * ddw[:, None]) * v
+        mv = builder.moving
+        worst = max(worst, float(np.max(np.abs(jerk[:, mv]) / builder.jmax[mv], initial=0.0)))
+    return worst
+
+
+@needs_corpus
+def test_the_profile_holds_the_jerk_where_a_g1_contours_q_sss_peaks_between_its_points(monkeypatch):
+    # corpus line-contouring-xz.ngc, the path ending at line 51 on generic-mill (G1 lines,
+    # G64 Q0.03): the fitted q_sss bumps inside the segments, between the collocation
+    # points. Without a point at those peaks (FEED_PEAK_SHARE) the continuous profile broke
+    # the jerk limit there by 44 % (1.4389) and the sampler clamped a third of the samples
+    from cnc_interp.plan import feedprofile
+    from cnc_interp.plan.vpop import JointTable
+
+    m, paths = _corpus_paths(os.path.join("performance", "line-contouring-xz.ngc"))
+    path = next(p for p in paths if int(p.line[-1]) == 51)
+
+    def worst():
+        b = feedprofile.FeedProfileBuilder(JointTable(path, None), path, m, m.dt_s)
+        return _profile_jerk_share(b, list(b.windows()))
+
+    assert worst() < 1.05  # 1.0338; the rows' own share is 0.998 at the points
+    monkeypatch.setattr(feedprofile, "FEED_PEAK_SHARE", np.inf)
+    assert worst() > 1.3
+
+
+def test_a_table_pieces_jerk_peaks_are_its_breaks_and_its_vertices_of_q_sss():
+    from cnc_interp.plan.feedprofile import jerk_peak_points
+
+    S = np.array([0.0, 1.0, 3.0])
+    C = np.zeros((2, 6, 2))
+    C[0, 3:, 0] = [0.2, -1.0, 0.5]  # q_sss = 1.2 - 24 τ + 30 τ²: vertex at τ = 0.4
+    C[1, 3:, 0] = [0.0, 1.0, 1.0]  # vertex at τ = -0.2: outside its piece
+    C[0, 3:, 1] = [0.0, -1.0, 1.0]  # vertex at τ = 0.2, but the axis does not move
+    got = jerk_peak_points(S, C, np.array([True, False]))
+    assert_allclose(got, [0.4, 1.0], rtol=1e-15)
+    tau = got[0] - S[0]
+    assert_allclose(24.0 * C[0, 4, 0] + 120.0 * C[0, 5, 0] * tau, 0.0, atol=1e-12)  # d q_sss / ds = 0
 
 
 # -- the paths routed to VPOp go through VPOp's compiled batch ------------------------

@@ -58,6 +58,16 @@ FEED_KNOT_GEO = 0.35
 #: collocation points per knot interval (constraints are imposed there; 2 before: three
 #: leave fewer stuck places for the sampler, the same 139 paths 20 % less planning CPU)
 FEED_COLLOCATION = 3
+#: ... and a point of its own where the path's q_sss peaks between them: each inner break
+#: of the joint table and each piece's vertex of q_sss whose max_i |q_sss,i| / J_i exceeds
+#: the collocation points' either side by more than this share. G1 contours' fitted
+#: q_sss bumps inside their segments (~0.01 mm wide), and a profile met at three points
+#: per knot interval broke the jerk limit by up to 35 % between them: the sampler
+#: clamped a third of line-contouring-xz's samples and VPOp took over 33 of its 43 paths.
+#: With them (axis_mm.ini, fast): line-contouring-xz 89.72 -> 88.54 s of cycle for 45 %
+#: less CPU, the sweep -0.29 % (stellabee1 -60 s) for 4 % less CPU; 0.1 gained a fifth
+#: of that, -0.1 cost zigzag_0.002_0.001 0.25 % of cycle and 25 % more CPU
+FEED_PEAK_SHARE = 0.0
 #: a window commits this much motion (estimated) and looks two braking times further, s
 #: (0.5 before: on axis_mm.ini, whose braking part is ~62 knots, the windows of
 #: zigzag_0.002_0.001 then solved every knot 1.7 times; at 1.0, 1.4 times: its LP work
@@ -185,6 +195,20 @@ class FeedPiece:
     lp_iters: int
 
 
+def jerk_peak_points(S, C, moving):
+    """Arc lengths (sorted, unique) where the path's q_sss may peak between collocation
+    points: the joint table's inner breaks (S (m+1,)) and, for each moving axis
+    (``moving`` (n,)), each piece's interior vertex of q_sss. A quintic piece's q_sss is
+    quadratic in τ = s - S[p] (C (m, 6, n): coefficients of τ^k): 6 c3 + 24 c4 τ +
+    60 c5 τ², with its vertex at τ = -c4 / (5 c5)."""
+    h = np.diff(S)[:, None]
+    c4, c5 = C[:, 4, :], C[:, 5, :]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tau = -c4 / (5.0 * c5)
+    inside = (c5 != 0.0) & (tau > 0.0) & (tau < h) & moving[None, :]
+    return np.unique(np.concatenate((S[1:-1], (S[:-1, None] + np.where(inside, tau, 0.0))[inside])))
+
+
 def spline_values(knots, coef, x, nu: int = 0):
     """The nu-th derivative (nu <= 2) of the cubic B-spline (knots, coef) at sorted x."""
     B, at = _basis_at(knots, coef, x)
@@ -242,6 +266,10 @@ class FeedProfileBuilder:
             self.joins = np.unique(self.S[np.clip(near, 1, self.S.shape[0] - 2)])
         else:
             self.joins = np.zeros(0)
+        # where q_sss may peak between collocation points (FEED_PEAK_SHARE; joins are
+        # collocated anyway), and max over the moving axes of |q_sss| / J there
+        self.peaks = np.setdiff1d(jerk_peak_points(self.S, self.C, self.moving), self.joins)
+        self.peak_g = self._jerk_share(self.derivs(self.peaks)[2])
         # segment feeds (path s) as a step function
         fb = np.asarray(path.s_breaks, dtype=float).copy()
         fb[-1] = self.L
@@ -301,6 +329,11 @@ class FeedProfileBuilder:
     def feed_at(self, x):
         i = np.clip(np.searchsorted(self.feed_breaks, x, side="right") - 1, 0, self.feed_values.shape[0] - 1)
         return self.feed_values[i]
+
+    def _jerk_share(self, q3):
+        """max over the moving axes of |q_sss| / J at each row of q3 (K, n)."""
+        mv = self.moving
+        return np.max(np.abs(q3[:, mv]) / self.jmax[mv], axis=1, initial=0.0)
 
     def _tangent_jerk(self, q1row):
         g = np.abs(q1row)
@@ -497,11 +530,23 @@ class FeedProfileBuilder:
         u = np.arange(FEED_COLLOCATION) / FEED_COLLOCATION
         x = (br[:-1, None] + np.diff(br)[:, None] * u[None, :]).ravel()
         x = np.concatenate((x, br[-1:]))
+        q1, q2, q3 = self.derivs(x)
+        parts = [(x, q1, q2, q3)]
+        # where the path's q_sss peaks between them: a point of its own (FEED_PEAK_SHARE)
+        P = self.peaks
+        p0 = int(np.searchsorted(P, x[0], side="right"))
+        p1 = int(np.searchsorted(P, x[-1], side="left"))
+        if p1 > p0:
+            g = self._jerk_share(q3)
+            xp = P[p0:p1]
+            i = np.searchsorted(x, xp)  # x[i - 1] < xp <= x[i]
+            xp = xp[self.peak_g[p0:p1] > (1.0 + FEED_PEAK_SHARE) * np.maximum(g[i - 1], g[i])]
+            if xp.size:
+                parts.append((xp, *self.derivs(xp)))
         # segment joins: both one-sided third derivatives (duplicated points)
         J = self.joins
         i0 = int(np.searchsorted(J, x[0], side="right"))
         i1 = int(np.searchsorted(J, x[-1], side="left"))
-        q1, q2, q3 = self.derivs(x)
         if i1 > i0:
             xj = J[i0:i1]
             nk = xj.shape[0]
@@ -510,10 +555,9 @@ class FeedProfileBuilder:
             k3l = np.empty_like(k1)
             k3r = np.empty_like(k1)
             K.join_derivs(self.S, self.C, xj, k1, k2, k3l, k3r)
-            x = np.concatenate((x, xj, xj))
-            q1 = np.concatenate((q1, k1, k1))
-            q2 = np.concatenate((q2, k2, k2))
-            q3 = np.concatenate((q3, k3l, k3r))
+            parts += [(xj, k1, k2, k3l), (xj, k1, k2, k3r)]
+        if len(parts) > 1:
+            x, q1, q2, q3 = (np.concatenate(u) for u in zip(*parts))
             order = np.argsort(x, kind="stable")
             x, q1, q2, q3 = x[order], q1[order], q2[order], q3[order]
         return x, np.ascontiguousarray(q1), np.ascontiguousarray(q2), np.ascontiguousarray(q3)
