@@ -627,8 +627,10 @@ def test_vpop_is_kept_where_the_profile_dipped_often_and_vpop_plans_shorter(monk
     assert plan.stats["retries"] >= optimal.OPT_COMPARE_DIPS
     vpop = plan_path_vpop(path, None, m, m.dt_s)
     assert periods(plan) == periods(vpop)
-    # without the dips' rule the profile's longer plan is kept
+    # without the dips' rule (nor the probe of the next test) the profile's longer plan
+    # is kept
     monkeypatch.setattr(optimal, "OPT_COMPARE_DIPS", 10**9)
+    monkeypatch.setattr(optimal, "OPT_PROBE_AHEAD", np.inf)
     kept = plan_path_optimal(path, None, m, m.dt_s, settings)
     assert kept.stats["kept"] == "profile" and periods(kept) > periods(vpop)
 
@@ -687,6 +689,48 @@ def test_a_table_pieces_jerk_peaks_are_its_breaks_and_its_vertices_of_q_sss():
     assert_allclose(got, [0.4, 1.0], rtol=1e-15)
     tau = got[0] - S[0]
     assert_allclose(24.0 * C[0, 4, 0] + 120.0 * C[0, 5, 0] * tau, 0.0, atol=1e-12)  # d q_sss / ds = 0
+
+
+@needs_corpus
+def test_vpop_is_kept_where_its_first_seconds_run_ahead_of_the_profile(monkeypatch):
+    # the same trochoid, as planned: the profile reaches the end without a dip, and VPOp,
+    # faster over the first OPT_PROBE_S, plans the whole path too; its shorter plan is kept
+    from cnc_interp.plan import optimal
+
+    m, paths = _corpus_paths(os.path.join("performance", "trochoidal.ngc"))
+    path = next(p for p in paths if int(p.line[-1]) == 4766)
+    settings = PlanSettings.from_options(planner="optimal", machine=m)
+    plan = plan_path_optimal(path, None, m, m.dt_s, settings)
+    check(plan, m, plan.q[0], plan.q[-1], m.dt_s)
+    assert plan.stats["probe"] == "vpop ahead" and plan.stats["kept"] == "vpop"
+    assert plan.stats["retries"] < optimal.OPT_COMPARE_DIPS and plan.stats["handover"] < 0
+    assert periods(plan) == periods(plan_path_vpop(path, None, m, m.dt_s))  # 42,864
+    monkeypatch.setattr(optimal, "OPT_PROBE_AHEAD", np.inf)  # no probe: the profile's plan
+    kept = plan_path_optimal(path, None, m, m.dt_s, settings)
+    assert kept.stats["kept"] == "profile" and periods(kept) > 1.03 * periods(plan)
+
+
+def test_a_probe_that_finds_the_profile_ahead_stops_vpop_after_its_first_seconds(monkeypatch):
+    # fifty turns of a circle at the acceleration limit (22 s): the profile's plan is ahead
+    # of VPOp's from the start, so VPOp stops after its first samples handed out (its
+    # buffers of OPT_PROBE_S and the braking distance, twice)
+    from cnc_interp.plan import optimal, vpop
+
+    counted = []
+    iter_prepared = vpop.iter_prepared
+
+    def counting(*args, **kwargs):
+        for c in iter_prepared(*args, **kwargs):
+            counted.append(c.s.shape[0])
+            yield c
+
+    monkeypatch.setattr(vpop, "iter_prepared", counting)
+    path = hermite_path(circle_fun(10.0, turns=50.0), 800, 1000.0)
+    plan = plan_path_optimal(path, None, MILL, DT)
+    check(plan, MILL, plan.q[0], plan.q[-1], DT)
+    assert periods(plan) * DT >= optimal.OPT_PROBE_MIN_S
+    assert plan.stats["probe"] == "profile" and plan.stats["kept"] == "profile"
+    assert optimal.OPT_PROBE_S / DT <= sum(counted) < 0.5 * periods(plan)
 
 
 # -- the paths routed to VPOp go through VPOp's compiled batch ------------------------

@@ -113,6 +113,20 @@ OPT_COMPARE_BEFORE = 0.5
 #: trochoidal's path to line 11370 (356 dips: 94,232 against 92,385); 12 paths have 50
 #: dips or more (335k samples to plan again), and that path is among them
 OPT_COMPARE_DIPS = 50
+#: ... or, for a profile's plan of at least OPT_PROBE_MIN_S (s), when VPOp's plan reaches
+#: the arc length of its first OPT_PROBE_S (s) OPT_PROBE_AHEAD sooner than the profile's
+#: (VPOp's stream stops there otherwise: the probe costs that much of VPOp's planning).
+#: The continuous profile runs slower than VPOp on G1 trochoids (trochoidal's path to
+#: line 4766 on generic-mill: 44,463 periods against 42,865), and once the profile met
+#: the jerk where q_sss peaks (feedprofile.FEED_PEAK_SHARE) it no longer dipped there.
+#: VPOp hands samples out only after a checkpoint, so the probe runs with checkpoints every
+#: OPT_PROBE_S (its buffers then hold about twice that plus the braking distance). Over
+#: the axis_mm.ini sweep (fast): trochoidal -3.1 s, spiral_lines -2.0 s, -5.1 s of cycle
+#: in all for 1.7 CPU-s (trochoidal's VPOp runs); with paths from 4 s on, the same cycle
+#: and stellabee1 +15 CPU-s (measured beside a CI run): its many shorter paths' probes
+OPT_PROBE_S = 2.0
+OPT_PROBE_MIN_S = 20.0
+OPT_PROBE_AHEAD = 0.01
 #: a profile-routed path lasting at least this long (at its static limits, s) is profiled and
 #: sampled by a thread of its own ahead of its refinement (``prefetch.Prefetch``: the two
 #: stages on two cores; the samples do not depend on it): a long path is otherwise one
@@ -801,7 +815,7 @@ def _better_of(ctx, stage, passes, targeted):
         raise failed  # neither spacing planned the path: VPOp does (the caller's fallback)
     s = np.concatenate([b[0] for b in blocks])
     q = np.concatenate([b[1] for b in blocks])
-    if "fallback" not in ctx.stats and not _vpop_may_win(ctx, s.shape[0]):
+    if "fallback" not in ctx.stats and not _vpop_may_win(ctx, s.shape[0]) and not _vpop_ahead(ctx, s):
         # the profile ran to the end (VPOp at most finished its last stop), or far enough
         # before VPOp took over: it is kept without running VPOp (over the corpus VPOp
         # won on such paths by 351 periods in all against the profile's 22k; the runs
@@ -822,6 +836,33 @@ def _better_of(ctx, stage, passes, targeted):
     else:
         ctx.stats["kept"] = "profile"
         yield s, q
+
+
+def _vpop_ahead(ctx, s) -> bool:
+    """Does VPOp's plan reach the arc length of its first OPT_PROBE_S OPT_PROBE_AHEAD
+    sooner than the profile's plan of samples at arc lengths s (N,)? (False for a plan
+    shorter than OPT_PROBE_MIN_S, or where VPOp fails.)"""
+    from .vpop import VpopFailed, iter_prepared
+
+    if s.shape[0] * ctx.dt < OPT_PROBE_MIN_S:
+        return False
+    n_probe = int(OPT_PROBE_S / ctx.dt)
+    got, s_at = 0, 0.0
+    try:
+        # checkpoints (hence samples handed out) every n_probe: only counted here
+        stream = iter_prepared(
+            ctx.prepared(), ctx.joint_map, ctx.machine, ctx.settings, n_probe, safe_fallback=False, checkpoint=n_probe
+        )
+        for c in stream:
+            got += c.s.shape[0]
+            s_at = float(c.s[-1])
+            if got >= n_probe:
+                break
+    except VpopFailed:
+        return False
+    ahead = got < (1.0 - OPT_PROBE_AHEAD) * (int(np.searchsorted(s, s_at)) + 1)
+    ctx.stats["probe"] = "vpop ahead" if ahead else "profile"
+    return ahead
 
 
 def _vpop_may_win(ctx, n_samples: int) -> bool:

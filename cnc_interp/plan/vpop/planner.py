@@ -231,9 +231,10 @@ class VpopFailed(PlanError):
 
 class _Loop:
     """The step loop of one path (``drive.drive``): buffers that grow, or slide when
-    ``window`` (samples) is set, checkpoints every ``VPOP_CHECKPOINT_SAMPLES``."""
+    ``window`` (samples) is set, checkpoints every ``checkpoint`` samples
+    (``VPOP_CHECKPOINT_SAMPLES`` when None)."""
 
-    def __init__(self, prep: _Prepared, window: int | None):
+    def __init__(self, prep: _Prepared, window: int | None, checkpoint: int | None = None):
         from .. import precompile as _precompile
         from . import drive as D
 
@@ -241,6 +242,8 @@ class _Loop:
 
         self.D = D
         self.p = prep
+        if checkpoint is None:
+            checkpoint = VPOP_CHECKPOINT_SAMPLES
         room = prep.brake_cap + 8
         (self.sh, self.qh, self.st, self.runs, self.ds, self.ck, self.max_cap) = D.new_loop(
             prep.n,
@@ -250,17 +253,18 @@ class _Loop:
             prep.cfg.floor_h,
             room,
             0 if window is None else max(1, int(window)),
-            VPOP_CHECKPOINT_SAMPLES,
+            int(checkpoint),
         )
         self.stats = self.runs.stats
-        self.ds[D.DS_NEXT_CK] = VPOP_CHECKPOINT_SAMPLES
+        self.ds[D.DS_NEXT_CK] = int(checkpoint)
+        self.checkpoint = int(checkpoint)
         self.ds[D.DS_FAST] = 1 if prep.fast else 0
         D.checkpoint(self.sh, self.qh, self.st, self.runs, self.ds, self.ck, True)
 
     def run(self) -> int:
         D, p = self.D, self.p
         res, self.sh, self.qh = D.drive(
-            p.pb, p.cfg, VPOP_CHECKPOINT_SAMPLES, self.sh, self.qh, self.st, self.runs, self.ds, self.ck, self.max_cap
+            p.pb, p.cfg, self.checkpoint, self.sh, self.qh, self.st, self.runs, self.ds, self.ck, self.max_cap
         )
         if res == D.FAILED:
             core = _core()
@@ -314,14 +318,26 @@ def iter_path_plan_vpop(path, joint_map, machine, dt_s: float, settings=None, wi
     yield from iter_prepared(prep, joint_map, machine, settings, window)
 
 
-def iter_prepared(prep: "_Prepared", joint_map, machine, settings, window: int | None, safe_fallback: bool = True):
+def iter_prepared(
+    prep: "_Prepared",
+    joint_map,
+    machine,
+    settings,
+    window: int | None,
+    safe_fallback: bool = True,
+    checkpoint: int | None = None,
+):
     """``iter_path_plan_vpop`` on a prepared path (``_Prepared``); without
-    ``safe_fallback`` a failure raises ``VpopFailed`` (the caller chooses the fallback)."""
+    ``safe_fallback`` a failure raises ``VpopFailed`` (the caller chooses the fallback).
+    Samples are handed out after each ``checkpoint`` samples at the soonest
+    (``VPOP_CHECKPOINT_SAMPLES`` when None) (after a
+    fast-mode failure the loop re-plans exactly from the last checkpoint, so with another
+    interval the samples after one may differ: the default is the planner's)."""
     path = prep.path
     if prep.trivial:
         yield PathPlan(s=np.zeros(1), q=prep.q0, stats={"samples": 1})
         return
-    loop = _Loop(prep, window)
+    loop = _Loop(prep, window, checkpoint)
     D = loop.D
     handed = False
     while True:
