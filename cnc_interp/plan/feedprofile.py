@@ -27,7 +27,8 @@ rest, is a feasible point of the LP. Should it still have no solution (round-off
 window is solved again linearised at the previous window's whole solution (``_solve``).
 
 Collocation: ``FEED_COLLOCATION`` points per knot interval, plus the path's segment
-joins, where q_sss jumps (paths are G2): there both one-sided values are imposed.
+joins, where q_sss jumps (paths are G2): there both one-sided values are imposed; plus
+the places between them where q_sss peaks (``jerk_peak_points``, ``FEED_PEAK_SHARE``).
 
 Sampled start and stop: a sampled plan may start with an acceleration of up to J dt
 (its first third difference is the jerk limit), so w'(0) <= 2 J_t dt and

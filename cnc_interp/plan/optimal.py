@@ -21,6 +21,11 @@ that only ever looks a bounded distance ahead:
    discrete problem allows it (averaging over a few periods: short geometric features,
    jumps of q_sss at segment joins, the start and the stop).
 
+Where a path is planned whole (``OPT_COMPARE_SAMPLES``), one the profile planned with
+trouble (VPOp took over early, or many dips), or a long one on which VPOp's first seconds
+run ahead of the profile's (``OPT_PROBE_*``), is also planned by VPOp and the shorter plan
+kept (``_better_of``).
+
 Every sample is exact at every stage. Memory: the samples held back are those a
 later stage may still change (``OPT_HOLD_S`` of motion plus a window).
 """
