@@ -604,6 +604,17 @@ def test_vpop_plans_a_path_for_comparison_only_where_it_took_over_early():
         assert optimal._vpop_may_win(ctx, n) is want, handover
 
 
+def _trochoid_planned():
+    """generic-mill, corpus trochoidal.ngc's path to line 4766 (a G1 trochoid), default
+    settings, and its plan (checked within every limit, rest to rest)."""
+    m, paths = _corpus_paths(os.path.join("performance", "trochoidal.ngc"))
+    path = next(p for p in paths if int(p.line[-1]) == 4766)
+    settings = PlanSettings.from_options(planner="optimal", machine=m)
+    plan = plan_path_optimal(path, None, m, m.dt_s, settings)
+    check(plan, m, plan.q[0], plan.q[-1], m.dt_s)
+    return m, path, settings, plan
+
+
 @needs_corpus
 def test_vpop_is_kept_where_the_profile_dipped_often_and_vpop_plans_shorter(monkeypatch):
     # corpus trochoidal.ngc, the path ending at line 4766 on generic-mill: the profile
@@ -617,12 +628,7 @@ def test_vpop_is_kept_where_the_profile_dipped_often_and_vpop_plans_shorter(monk
     from cnc_interp.plan import feedprofile, optimal
 
     monkeypatch.setattr(feedprofile, "FEED_PEAK_SHARE", np.inf)
-
-    m, paths = _corpus_paths(os.path.join("performance", "trochoidal.ngc"))
-    path = next(p for p in paths if int(p.line[-1]) == 4766)
-    settings = PlanSettings.from_options(planner="optimal", machine=m)
-    plan = plan_path_optimal(path, None, m, m.dt_s, settings)
-    check(plan, m, plan.q[0], plan.q[-1], m.dt_s)
+    m, path, settings, plan = _trochoid_planned()
     assert plan.stats["route"] == "profile" and plan.stats["kept"] == "vpop"
     assert plan.stats["retries"] >= optimal.OPT_COMPARE_DIPS
     vpop = plan_path_vpop(path, None, m, m.dt_s)
@@ -697,11 +703,7 @@ def test_vpop_is_kept_where_its_first_seconds_run_ahead_of_the_profile(monkeypat
     # faster over the first OPT_PROBE_S, plans the whole path too; its shorter plan is kept
     from cnc_interp.plan import optimal
 
-    m, paths = _corpus_paths(os.path.join("performance", "trochoidal.ngc"))
-    path = next(p for p in paths if int(p.line[-1]) == 4766)
-    settings = PlanSettings.from_options(planner="optimal", machine=m)
-    plan = plan_path_optimal(path, None, m, m.dt_s, settings)
-    check(plan, m, plan.q[0], plan.q[-1], m.dt_s)
+    m, path, settings, plan = _trochoid_planned()
     assert plan.stats["probe"] == "vpop ahead" and plan.stats["kept"] == "vpop"
     assert plan.stats["retries"] < optimal.OPT_COMPARE_DIPS and plan.stats["handover"] < 0
     assert periods(plan) == periods(plan_path_vpop(path, None, m, m.dt_s))  # 42,864
