@@ -63,7 +63,8 @@ FEED_COLLOCATION = 3
 #: of the joint table and each piece's vertex of q_sss whose max_i |q_sss,i| / J_i exceeds
 #: the collocation points' either side by more than this share. G1 contours' fitted
 #: q_sss bumps inside their segments (~0.01 mm wide), and a profile met at three points
-#: per knot interval broke the jerk limit by up to 35 % between them: the sampler
+#: per knot interval broke the jerk limit by up to 35 % between them (44 % on
+#: generic-mill, line-contouring-xz's path to line 51; now 3 %): the sampler
 #: clamped a third of line-contouring-xz's samples and VPOp took over 33 of its 43 paths.
 #: With them (axis_mm.ini, fast): line-contouring-xz 89.72 -> 88.54 s of cycle for 45 %
 #: less CPU, the sweep -0.29 % (stellabee1 -60 s) for 4 % less CPU; 0.1 gained a fifth
