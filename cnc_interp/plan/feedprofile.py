@@ -67,8 +67,9 @@ FEED_COLLOCATION = 3
 #: generic-mill, line-contouring-xz's path to line 51; now 3 %): the sampler
 #: clamped a third of line-contouring-xz's samples and VPOp took over 33 of its 43 paths.
 #: With them (axis_mm.ini, fast): line-contouring-xz 89.72 -> 88.54 s of cycle for 45 %
-#: less CPU, the sweep -0.29 % (stellabee1 -60 s) for 4 % less CPU; 0.1 gained a fifth
-#: of that, -0.1 cost zigzag_0.002_0.001 0.25 % of cycle and 25 % more CPU
+#: less CPU, the sweep -0.29 % (stellabee1 -60 s) for 4 % less CPU. On line-contouring-xz
+#: 0.1 gained a fifth of that (89.51 s) and 0.05 88.79 s; -0.1 88.33 s, but it cost
+#: zigzag_0.002_0.001 0.25 % of cycle and 25 % more CPU
 FEED_PEAK_SHARE = 0.0
 #: a window commits this much motion (estimated) and looks two braking times further, s
 #: (0.5 before: on axis_mm.ini, whose braking part is ~62 knots, the windows of
