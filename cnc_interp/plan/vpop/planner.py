@@ -242,8 +242,7 @@ class _Loop:
 
         self.D = D
         self.p = prep
-        if checkpoint is None:
-            checkpoint = VPOP_CHECKPOINT_SAMPLES
+        self.checkpoint = VPOP_CHECKPOINT_SAMPLES if checkpoint is None else int(checkpoint)
         room = prep.brake_cap + 8
         (self.sh, self.qh, self.st, self.runs, self.ds, self.ck, self.max_cap) = D.new_loop(
             prep.n,
@@ -253,11 +252,10 @@ class _Loop:
             prep.cfg.floor_h,
             room,
             0 if window is None else max(1, int(window)),
-            int(checkpoint),
+            self.checkpoint,
         )
         self.stats = self.runs.stats
-        self.ds[D.DS_NEXT_CK] = int(checkpoint)
-        self.checkpoint = int(checkpoint)
+        self.ds[D.DS_NEXT_CK] = self.checkpoint
         self.ds[D.DS_FAST] = 1 if prep.fast else 0
         D.checkpoint(self.sh, self.qh, self.st, self.runs, self.ds, self.ck, True)
 
@@ -329,10 +327,10 @@ def iter_prepared(
 ):
     """``iter_path_plan_vpop`` on a prepared path (``_Prepared``); without
     ``safe_fallback`` a failure raises ``VpopFailed`` (the caller chooses the fallback).
-    Samples are handed out after each ``checkpoint`` samples at the soonest
-    (``VPOP_CHECKPOINT_SAMPLES`` when None) (after a
+    Samples are handed out after a checkpoint at the soonest, one every ``checkpoint``
+    samples (``VPOP_CHECKPOINT_SAMPLES`` when None, the planner's own). After a
     fast-mode failure the loop re-plans exactly from the last checkpoint, so with another
-    interval the samples after one may differ: the default is the planner's)."""
+    interval the samples after a failure may differ."""
     path = prep.path
     if prep.trivial:
         yield PathPlan(s=np.zeros(1), q=prep.q0, stats={"samples": 1})
