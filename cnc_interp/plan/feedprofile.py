@@ -189,6 +189,10 @@ class FeedPiece:
         coef: (nc,) coefficients of w (mm²/s² or deg²/s²).
         s0, s1: the arc-length range this piece is final on, mm.
         lp_iters: interior-point iterations spent (statistics).
+        restarts: windows solved again so far, this one included (statistics).
+        envelope: (x (K,), w (K,)) the estimate's reach-envelope probes when the piece
+            was committed (``FeedProfileBuilder.estimate``'s ``envelope``): the estimate
+            a consumer sees does not depend on how far ahead the builder has run.
     """
 
     knots: np.ndarray
@@ -196,6 +200,8 @@ class FeedPiece:
     s0: float
     s1: float
     lp_iters: int
+    restarts: int = 0
+    envelope: tuple = (np.zeros(0), np.zeros(0))
 
 
 def jerk_peak_points(S, C, moving):
@@ -308,10 +314,7 @@ class FeedProfileBuilder:
         self.window = self.commit + self.brake
         # incremental knot placement state
         self._br = [0.0]
-        self._cum = 0.0
-        self._piece = 0  # next table piece to probe
-        self._last_probe = (0.0, None)  # (s, density) of the last probe point
-        self._carry = None  # (x, w) of the reach envelope's last probe
+        self._knots = self._knot_blocks()
         self._ex = np.zeros(0)  # probes (x, enveloped w) from the current window on
         self._ew = np.zeros(0)
         self.knots_done = False
@@ -375,13 +378,14 @@ class FeedProfileBuilder:
             o[new] = b
         return out
 
-    def estimate(self, x):
+    def estimate(self, x, envelope=None):
         """Estimated speed² at sorted x (K,): ``_raw_estimate`` under the reach envelope
         of the knot placement's probes (a speed the tangent's acceleration and jerk can
-        reach from the slow points around, see ``_envelope``)."""
+        reach from the slow points around, see ``_envelope``): the current ones, or
+        ``envelope`` = (x, w) kept from earlier (``FeedPiece.envelope``)."""
         x = np.ascontiguousarray(x, dtype=float)
         w = self._raw_estimate(x).w
-        ex, ew = self._ex, self._ew
+        ex, ew = (self._ex, self._ew) if envelope is None else envelope
         if ex.shape[0] >= 2:
             inside = (x >= ex[0]) & (x <= ex[-1])
             w = np.where(inside, np.minimum(w, np.interp(x, ex, ew)), w)
@@ -408,64 +412,73 @@ class FeedProfileBuilder:
         return np.maximum(np.minimum(self.knot_time_s * v, geo), hmin)
 
     # -- knots, block by block ----------------------------------------------------
-    def _extend_knots(self):
-        """Place the knots over the next block of table pieces."""
+    def _knot_blocks(self):
+        """The knot placement, one block of FEED_KNOT_BLOCK table pieces after the other:
+        yields (breakpoints placed in the block (list), its probes x (K,), their enveloped
+        speed² w (K,), last block?); ``_extend_knots`` takes them as the windows need."""
         S, L = self.S, self.L
         m = S.shape[0] - 1
-        p0 = self._piece
-        p1 = min(p0 + FEED_KNOT_BLOCK, m)
-        a, b = float(S[p0]), float(S[p1])
-        pts = [S[p0 : p1 + 1], 0.5 * (S[p0:p1] + S[p0 + 1 : p1 + 1]), np.linspace(a, b, 9)]
-        end = min(L / 2, 1.0)
-        geo = end * 2.0 ** -np.arange(1, 40)
-        pts.append(geo[(geo > a) & (geo < b)])
-        pts.append((L - geo)[((L - geo) > a) & ((L - geo) < b)])
-        probe = np.unique(np.concatenate(pts))
-        # the next block's table points: the envelope looks that far ahead (slow points
-        # just after this block lower the estimate before them)
-        p2 = min(p1 + FEED_KNOT_BLOCK, m)
-        ahead = np.concatenate((S[p1 + 1 : p2 + 1], 0.5 * (S[p1:p2] + S[p1 + 1 : p2 + 1])))
-        ahead.sort()
-        ea = self._raw_estimate(ahead)
+        p0, cum0, carry = 0, 0.0, None
+        while True:
+            p1 = min(p0 + FEED_KNOT_BLOCK, m)
+            a, b = float(S[p0]), float(S[p1])
+            pts = [S[p0 : p1 + 1], 0.5 * (S[p0:p1] + S[p0 + 1 : p1 + 1]), np.linspace(a, b, 9)]
+            end = min(L / 2, 1.0)
+            geo = end * 2.0 ** -np.arange(1, 40)
+            pts.append(geo[(geo > a) & (geo < b)])
+            pts.append((L - geo)[((L - geo) > a) & ((L - geo) < b)])
+            probe = np.unique(np.concatenate(pts))
+            # the next block's table points: the envelope looks that far ahead (slow points
+            # just after this block lower the estimate before them)
+            p2 = min(p1 + FEED_KNOT_BLOCK, m)
+            ahead = np.concatenate((S[p1 + 1 : p2 + 1], 0.5 * (S[p1:p2] + S[p1 + 1 : p2 + 1])))
+            ahead.sort()
+            ea = self._raw_estimate(ahead)
 
-        known = None  # the last probes and their raw estimates (each point's own: kept)
+            known = None  # the last probes and their raw estimates (each point's own: kept)
 
-        def enveloped_spacing(probe):
-            nonlocal known
-            ep = self._raw_estimate_over(probe, known)
-            known = (probe, ep)
-            both = K.Estimates(*(np.concatenate((u, v)) for u, v in zip(ep, ea)))
-            w = self._envelope(np.concatenate((probe, ahead)), both.w, both, self._carry)[: probe.shape[0]]
-            return w, self._spacing(probe, w, ep)
+            def enveloped_spacing(probe):
+                nonlocal known
+                ep = self._raw_estimate_over(probe, known)
+                known = (probe, ep)
+                both = K.Estimates(*(np.concatenate((u, v)) for u, v in zip(ep, ea)))
+                w = self._envelope(np.concatenate((probe, ahead)), both.w, both, carry)[: probe.shape[0]]
+                return w, self._spacing(probe, w, ep)
 
-        for _ in range(3):
-            w, h = enveloped_spacing(probe)
-            gap = np.diff(probe)
-            need = np.ceil(gap / (0.25 * np.minimum(h[:-1], h[1:]))).astype(np.int64)
-            if not np.any(need > 1):
-                break
-            # need[i] - 1 points evenly inside each such gap, all at once (the same
-            # arithmetic as one gap at a time: probe + gap * k / need)
-            sel = np.flatnonzero(need > 1)
-            cnt = need[sel] - 1
-            at = np.repeat(sel, cnt)
-            k = np.arange(at.shape[0]) - np.repeat(np.cumsum(cnt) - cnt, cnt) + 1
-            probe = np.unique(np.concatenate((probe, probe[at] + gap[at] * k / need[at])))
-        else:
-            w, h = enveloped_spacing(probe)
-        self._carry = (float(probe[-1]), float(w[-1]))
+            for _ in range(3):
+                w, h = enveloped_spacing(probe)
+                gap = np.diff(probe)
+                need = np.ceil(gap / (0.25 * np.minimum(h[:-1], h[1:]))).astype(np.int64)
+                if not np.any(need > 1):
+                    break
+                # need[i] - 1 points evenly inside each such gap, all at once (the same
+                # arithmetic as one gap at a time: probe + gap * k / need)
+                sel = np.flatnonzero(need > 1)
+                cnt = need[sel] - 1
+                at = np.repeat(sel, cnt)
+                k = np.arange(at.shape[0]) - np.repeat(np.cumsum(cnt) - cnt, cnt) + 1
+                probe = np.unique(np.concatenate((probe, probe[at] + gap[at] * k / need[at])))
+            else:
+                w, h = enveloped_spacing(probe)
+            carry = (float(probe[-1]), float(w[-1]))
+            dens = 1.0 / h
+            cum = cum0 + np.concatenate(([0.0], np.cumsum(0.5 * (dens[1:] + dens[:-1]) * np.diff(probe))))
+            marks = np.arange(np.floor(cum0) + 1.0, np.floor(cum[-1]) + 1.0)
+            br = [float(v) for v in np.interp(marks, cum, probe) if 0.0 < v < L] if marks.size else []
+            cum0 = float(cum[-1])
+            yield br, probe, w, p1 == m
+            if p1 == m:
+                return
+            p0 = p1
+
+    def _extend_knots(self):
+        """Take the knot placement's next block (``_knot_blocks``)."""
+        br, probe, w, last = next(self._knots)
         self._ex = np.concatenate((self._ex, probe))
         self._ew = np.concatenate((self._ew, w))
-        dens = 1.0 / h
-        cum = self._cum + np.concatenate(([0.0], np.cumsum(0.5 * (dens[1:] + dens[:-1]) * np.diff(probe))))
-        lo = np.floor(self._cum) + 1.0
-        marks = np.arange(lo, np.floor(cum[-1]) + 1.0)
-        if marks.size:
-            br = np.interp(marks, cum, probe)
-            self._br.extend(float(v) for v in br if 0.0 < v < L)
-        self._cum = float(cum[-1])
-        self._piece = p1
-        if p1 == m:
+        self._br.extend(br)
+        if last:
+            L = self.L
             br = self._br
             if br[-1] >= L:
                 br.pop()
@@ -515,12 +528,20 @@ class FeedProfileBuilder:
             coef, tk, it = self._solve(b0, b1, at_end, fixed, prev)
             # coef / tk: coefficients b0 .. b1+2 and their knots t[b0 : b1+7]
             if at_end:
-                yield FeedPiece(tk, coef, self._br[b0], self.L, it)
+                yield FeedPiece(tk, coef, self._br[b0], self.L, it, self.restarts, (self._ex, self._ew))
                 return
             commit = min(self.commit, max(b1 - b0 - self.brake, 1))
             bc = b0 + commit
             n_keep = bc - b0 + 3
-            yield FeedPiece(tk[: n_keep + 4].copy(), coef[:n_keep].copy(), self._br[b0], self._br[bc], it)
+            yield FeedPiece(
+                tk[: n_keep + 4].copy(),
+                coef[:n_keep].copy(),
+                self._br[b0],
+                self._br[bc],
+                it,
+                self.restarts,
+                (self._ex, self._ew),  # replaced, never changed in place: a snapshot
+            )
             fixed = coef[commit : commit + 3].copy()
             prev = _Window(tk, coef, self._br[max(b1 - self.brake, bc)], self._br[b1], self._ratio(tk, coef, b0, bc))
             b0 = bc

@@ -143,6 +143,9 @@ OPT_PROBE_AHEAD = 0.01
 OPT_AHEAD_S = 10.0
 #: ... and that thread runs at most this many sampled blocks ahead
 OPT_AHEAD_BLOCKS = 8
+#: without refinement (effort fast) the thread solves the profile's windows instead, at
+#: most this many pieces ahead of the sampling (a piece is FEED_COMMIT_S of motion)
+OPT_AHEAD_PIECES = 2
 #: samples per chunk of ``iter_path_plan_optimal`` (the plan does not depend on it)
 OPT_CHUNK = 4096
 #: a profile piece whose time law spends more than OPT_CRAWL times the estimated time on
@@ -418,17 +421,32 @@ class _Nodes:
         return True
 
 
-def _sampled(ctx, knot_time_s: float | None = None):
+def _sampled(ctx, knot_time_s: float | None = None, ahead: bool = False):
     """Stage 2: yields (s, q) blocks of final samples (see module docstring); the profile's
-    knots ``knot_time_s`` of motion apart (default ``feedprofile.FEED_KNOT_TIME_S``)."""
+    knots ``knot_time_s`` of motion apart (default ``feedprofile.FEED_KNOT_TIME_S``).
+    ``ahead``: the profile's windows are solved by a thread of their own, ahead of the
+    sampling (the samples do not depend on it)."""
+    from .feedprofile import FEED_KNOT_TIME_S, FeedProfileBuilder
+
+    builder = FeedProfileBuilder(
+        ctx.table, ctx.path, ctx.machine, ctx.dt, whole=ctx.whole, knot_time_s=knot_time_s or FEED_KNOT_TIME_S
+    )
+    if not ahead:
+        yield from _sampled_from(ctx, builder, builder.windows())
+        return
+    pieces = Prefetch(builder.windows(), ahead=OPT_AHEAD_PIECES, name="cnc-interp-feed")
+    try:
+        yield from _sampled_from(ctx, builder, iter(pieces))
+    finally:
+        pieces.close()  # the sampling may stop before the last piece (VPOp finishes)
+
+
+def _sampled_from(ctx, builder, pieces):
+    """``_sampled`` on the profile's ``FeedPiece``s from the iterator ``pieces``."""
     from . import _track_kernels as TK
-    from .feedprofile import FEED_KNOT_TIME_S, FeedProfileBuilder, ProfileError
+    from .feedprofile import ProfileError
 
     dt, n, L = ctx.dt, ctx.n, ctx.L
-    builder = FeedProfileBuilder(
-        ctx.table, ctx.path, ctx.machine, dt, whole=ctx.whole, knot_time_s=knot_time_s or FEED_KNOT_TIME_S
-    )
-    pieces = builder.windows()
     nodes = _Nodes()
     final = False
     hold = int(OPT_HOLD_S / dt) + OPT_HANDOVER_BACK[-1] + 8
@@ -558,10 +576,14 @@ def _sampled(ctx, knot_time_s: float | None = None):
 
 def _append_piece(ctx, nodes, piece, builder) -> bool:
     ctx.stats["lp_iterations"] += piece.lp_iters
-    if builder.restarts:
-        ctx.stats["lp_restarts"] = builder.restarts
+    if piece.restarts:
+        ctx.stats["lp_restarts"] = piece.restarts
+
+    def estimate(x):  # the builder's estimate as it was when the piece was committed
+        return builder.estimate(x, piece.envelope)
+
     rest_s = ctx.duration_s * max(ctx.L - piece.s0, 0.0) / ctx.L
-    if nodes.append(piece.knots, piece.coef, piece.s0, piece.s1, builder.estimate, OPT_CRAWL_SHARE * rest_s):
+    if nodes.append(piece.knots, piece.coef, piece.s0, piece.s1, estimate, OPT_CRAWL_SHARE * rest_s):
         return True
     ctx.stats["crawl"] = ctx.stats.get("crawl", 0) + 1
     return False
@@ -745,8 +767,11 @@ def _iter(path, joint_map, machine, dt_s, settings, stats, window):
     passes = _refine_passes(opts, dt, route)
     limit_s = float(_or(opts.compare_s, OPT_COMPARE_SAMPLES * dt))
     ctx.whole = route == "profile" and ctx.rough_s <= limit_s
-    stage = _sampled(ctx) if route == "profile" else _vpop_stage(ctx, window)
-    if route == "profile" and passes and ctx.duration_s >= OPT_AHEAD_S:
+    long_path = route == "profile" and ctx.duration_s >= OPT_AHEAD_S
+    # a long path's second thread: the profile's windows ahead of the sampling without
+    # refinement, else the profile and its sampling ahead of the refinement
+    stage = _sampled(ctx, ahead=long_path and not passes) if route == "profile" else _vpop_stage(ctx, window)
+    if long_path and passes:
         # the refinement of one stretch while the next is profiled
         stage = Prefetch(stage, ahead=OPT_AHEAD_BLOCKS, name="cnc-interp-profile")
     for _ in range(passes):
