@@ -285,10 +285,12 @@ def test_a_profile_that_would_crawl_after_a_sharp_corner_plans(tmp_path, monkeyp
         assert out.report.ok
         cycles[planner] = out.trajectory.duration_s
     assert cycles["optimal"] <= cycles["vpop"]
-    # without the envelope the crawl check refuses the profile (VPOp plans the path)
+    # without the envelope (no acceleration to reach with: ``reach_envelope`` returns w)
+    # the crawl check refuses the profile (VPOp plans the path)
     from cnc_interp.plan.feedprofile import FeedProfileBuilder
 
-    monkeypatch.setattr(FeedProfileBuilder, "_envelope", lambda self, x, w, q1, carry: w)
+    inputs = FeedProfileBuilder._knot_inputs
+    monkeypatch.setattr(FeedProfileBuilder, "_knot_inputs", lambda self: inputs(self)._replace(acc_factor=0.0))
     out = plan_part(str(part), str(mach), "optimal")
     assert out.report.ok and out.trajectory.duration_s <= 1.001 * cycles["vpop"]
 

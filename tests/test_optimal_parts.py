@@ -310,7 +310,8 @@ def test_the_knot_placements_estimate_is_its_formula(seed):
     u = np.minimum(u, (np.minimum.accumulate((u + c * xx)[::-1]) - c * xx[::-1])[::-1])
     want = np.minimum(ww, np.maximum(u, 0.0) ** (4.0 / 3.0))[1:]
     sub = FK.Estimates(*(a[sel] for a in est))
-    got = b._envelope(xs, ws, sub, carry)
+    got = np.empty(xs.shape[0])
+    FK.reach_envelope(xs, ws, sub.at, sub.jt, FEED_EST_ACC_FACTOR, FEED_EST_JERK_FACTOR**2, *carry, got)
     assert_allclose(got, want, rtol=1e-12)
     assert np.all(got <= ws) and got[0] < 0.5 * ws[0]  # the rest carried in shows
 
@@ -329,10 +330,52 @@ def test_the_estimates_of_known_probes_are_kept_bit_for_bit():
     b = FeedProfileBuilder(table, p, MILL, 0.001)
     x = np.unique(np.concatenate((rng.uniform(0.0, table.length, 300), [0.0, table.length])))
     x0 = np.sort(rng.choice(x, 120, replace=False))
-    got = b._raw_estimate_over(x, (x0, b._raw_estimate(x0)))
-    for name, g, w in zip(FK.Estimates._fields, got, b._raw_estimate(x)):
-        assert g.tobytes() == w.tobytes(), name
-    assert all(g.tobytes() == w.tobytes() for g, w in zip(b._raw_estimate_over(x, None), b._raw_estimate(x)))
+    e0 = b._raw_estimate(x0)
+    # a known point that is no probe is ignored (its "estimate" here is garbage)
+    stray = 0.5 * (x[3] + x[4])
+    at = int(np.searchsorted(x0, stray))
+    x0_more = np.insert(x0, at, stray)
+    e0_more = FK.Estimates(*(np.insert(f, at, -7.0) for f in e0))
+    for known in ((x0, e0), (x0_more, e0_more)):
+        got = FK._estimates_kept(b.S, b.C, x, b._est_in, *known)
+        for name, g, w in zip(FK.Estimates._fields, got, b._raw_estimate(x)):
+            assert g.tobytes() == w.tobytes(), name
+    none = b._raw_estimate(np.zeros(0))
+    got = FK._estimates_kept(b.S, b.C, x, b._est_in, np.zeros(0), none)
+    assert all(g.tobytes() == w.tobytes() for g, w in zip(got, b._raw_estimate(x)))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_a_knot_blocks_probes_are_as_dense_as_the_spacing_the_estimate_wants(seed):
+    # _feed_kernels.knot_probes on a path's first block: every table point and midpoint
+    # of the block is a probe, the spacing wanted is its formula of the enveloped
+    # estimate (time of motion at that speed, geometry, the least step from rest), and
+    # no two probes are further apart than a quarter of the spacing at either
+    from cnc_interp.plan.feedprofile import FEED_KNOT_BLOCK, FEED_KNOT_GEO, FeedProfileBuilder
+    from cnc_interp.plan.vpop import JointTable
+
+    from ._vpop_paths import random_curve
+
+    rng = np.random.default_rng(90 + seed)
+    p = hermite_path(random_curve(rng, scale=15.0), 9, float(rng.uniform(50, 300)))
+    table = JointTable(p, None)
+    b = FeedProfileBuilder(table, p, MILL, 0.001)
+    S, m = b.S, b.S.shape[0] - 1
+    p1, p2 = min(FEED_KNOT_BLOCK, m), min(2 * FEED_KNOT_BLOCK, m)
+    no_known = (np.zeros(0), b._raw_estimate(np.zeros(0)))
+    probe, w, h, ahead, ea = FK.knot_probes(S, b.C, b._est_in, b._knot_inputs(), 0, p1, p2, np.inf, 0.0, *no_known)
+    assert np.all(np.diff(probe) > 0) and probe[0] == S[0] and probe[-1] == S[p1]
+    assert np.all(np.isin(S[: p1 + 1], probe)) and np.all(np.isin(0.5 * (S[:p1] + S[1 : p1 + 1]), probe))
+    est = b._raw_estimate(probe)
+    assert np.all(w <= est.w) and w[0] == 0.0  # an envelope only lowers; rest at the start
+    want = np.minimum(b.knot_time_s * np.sqrt(np.maximum(w, 0.0)), FEED_KNOT_GEO / np.maximum(est.k2, 1e-300))
+    want = np.minimum(want, FEED_KNOT_GEO / np.sqrt(np.maximum(est.k3, 1e-300)))
+    want = np.maximum(want, np.where(probe < 0.5 * b.L, b.hmin0, b.hmin1))
+    assert_allclose(h, want, rtol=1e-15)
+    assert np.all(np.diff(probe) <= 0.25 * np.minimum(h[:-1], h[1:]) * (1 + 1e-12))
+    # the look-ahead: the next block's table points and midpoints, with their estimates
+    assert_allclose(ahead, np.sort(np.concatenate((S[p1 + 1 : p2 + 1], 0.5 * (S[p1:p2] + S[p1 + 1 : p2 + 1])))), rtol=0)
+    assert all(g.tobytes() == e.tobytes() for g, e in zip(ea, b._raw_estimate(ahead)))
 
 
 @pytest.mark.parametrize("seed", range(4))

@@ -412,6 +412,183 @@ def reach_envelope(x, w, at, jt, acc_factor, jerk_f2, carry_x, carry_w, out):
         out[k] = min(ww[k + c0], max(u[k + c0], 0.0) ** (4.0 / 3.0))
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _nan_min(a, b):
+    """np.minimum of two floats (NaN if either is)."""
+    if a != a or b != b:
+        return np.nan
+    return a if a <= b else b
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _nan_max(a, b):
+    """np.maximum of two floats (NaN if either is)."""
+    if a != a or b != b:
+        return np.nan
+    return a if a >= b else b
+
+
+@njit(cache=True, nogil=True)
+def _estimates_of(S, C, x, inp):
+    """``point_estimates`` at sorted x (K,) into new arrays."""
+    K = x.shape[0]
+    out = Estimates(np.empty(K), np.empty(K), np.empty(K), np.empty(K), np.empty(K), np.empty(K))
+    point_estimates(S, C, x, inp, out)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _estimates_kept(S, C, x, inp, x0, e0):
+    """``_estimates_of`` at sorted x (K,) given ``e0`` at sorted x0: the points of x also
+    in x0 are taken from there, the others evaluated (a point's estimate is its own)."""
+    K = x.shape[0]
+    src = np.full(K, -1, dtype=np.int64)
+    n_new = K
+    for i in range(x0.shape[0]):
+        k = np.searchsorted(x, x0[i])
+        if k < K and x[k] == x0[i] and src[k] < 0:
+            src[k] = i
+            n_new -= 1
+    xn = np.empty(n_new)
+    j = 0
+    for k in range(K):
+        if src[k] < 0:
+            xn[j] = x[k]
+            j += 1
+    en = _estimates_of(S, C, xn, inp)
+    out = Estimates(np.empty(K), np.empty(K), np.empty(K), np.empty(K), np.empty(K), np.empty(K))
+    j = 0
+    for k in range(K):
+        e, i = (en, j) if src[k] < 0 else (e0, src[k])
+        out.w[k] = e.w[i]
+        out.w_jerk[k] = e.w_jerk[i]
+        out.k2[k] = e.k2[i]
+        out.k3[k] = e.k3[i]
+        out.at[k] = e.at[i]
+        out.jt[k] = e.jt[i]
+        if src[k] < 0:
+            j += 1
+    return out
+
+
+#: what ``knot_probes`` reads besides the table and the estimate's inputs: the factors
+#: of ``reach_envelope``, the knot spacing's time (s) and geometric constant, the least
+#: spacing at either end (mm), the probe rounds and the points 2^-k of motion from the
+#: path's ends (``feedprofile.FeedProfileBuilder._knot_blocks``)
+KnotInputs = namedtuple("KnotInputs", "acc_factor jerk_f2 knot_time knot_geo hmin0 hmin1 rounds geo")
+
+
+@njit(cache=True, nogil=True)
+def _enveloped_spacing(S, C, inp, kin, probe, ep, ahead, ea, carry_x, carry_w):
+    """The reach envelope w (K,) at the probes (its estimates ``ep``; ``ahead``/``ea``:
+    the points after them it looks at) and the knot spacing h (K,) wanted there."""
+    K = probe.shape[0]
+    N = K + ahead.shape[0]
+    x = np.empty(N)
+    w = np.empty(N)
+    at = np.empty(N)
+    jt = np.empty(N)
+    x[:K] = probe
+    x[K:] = ahead
+    w[:K] = ep.w
+    w[K:] = ea.w
+    at[:K] = ep.at
+    at[K:] = ea.at
+    jt[:K] = ep.jt
+    jt[K:] = ea.jt
+    env = np.empty(N)
+    reach_envelope(x, w, at, jt, kin.acc_factor, kin.jerk_f2, carry_x, carry_w, env)
+    we = env[:K].copy()
+    h = np.empty(K)
+    half = 0.5 * inp.L
+    for k in range(K):
+        k2 = _nan_max(ep.k2[k], 1e-300)
+        k3 = _nan_max(ep.k3[k], 1e-300)
+        geo = _nan_min(kin.knot_geo / k2, kin.knot_geo / np.sqrt(k3))
+        v = np.sqrt(_nan_max(we[k], 0.0))
+        hmin = kin.hmin0 if probe[k] < half else kin.hmin1
+        h[k] = _nan_max(_nan_min(kin.knot_time * v, geo), hmin)
+    return we, h
+
+
+@njit(cache=True, nogil=True)
+def knot_probes(S, C, inp, kin, p0, p1, p2, carry_x, carry_w, known_x, known_e):
+    """One block of the knot placement: table pieces p0..p1 probed (their ends and
+    midpoints, nine even points, the points ``kin.geo`` from either end), the probes
+    refined until no gap exceeds a quarter of the spacing wanted at its ends (at most
+    ``kin.rounds`` rounds), under the reach envelope of the estimate that also looks at
+    pieces p1..p2 and starts from (carry_x, carry_w). ``known_e`` are the estimates at
+    ``known_x``, points among this block's first probes (the last block's look-ahead).
+    Returns the probes x (K,), their enveloped speed² w (K,) and knot spacing h (K,), mm,
+    and the look-ahead's points and estimates. The arithmetic is numpy's of
+    ``feedprofile``'s placement before it was compiled, bit for bit."""
+    L = inp.L
+    a = S[p0]
+    b = S[p1]
+    geo = kin.geo
+    buf = np.empty(2 * (p1 - p0) + 10 + 2 * geo.shape[0])
+    c = 0
+    for i in range(p0, p1 + 1):
+        buf[c] = S[i]
+        c += 1
+    for i in range(p0, p1):
+        buf[c] = 0.5 * (S[i] + S[i + 1])
+        c += 1
+    step = (b - a) / 8.0  # np.linspace(a, b, 9)
+    for i in range(8):
+        buf[c] = float(i) * step + a
+        c += 1
+    buf[c] = b
+    c += 1
+    for i in range(geo.shape[0]):
+        if geo[i] > a and geo[i] < b:
+            buf[c] = geo[i]
+            c += 1
+    for i in range(geo.shape[0]):
+        e = L - geo[i]
+        if e > a and e < b:
+            buf[c] = e
+            c += 1
+    probe = np.unique(buf[:c])
+    # the next block's table points: the envelope looks that far ahead (slow points just
+    # after this block lower the estimate before them)
+    na = p2 - p1
+    ahead = np.empty(2 * na)
+    for i in range(na):
+        ahead[i] = S[p1 + 1 + i]
+        ahead[na + i] = 0.5 * (S[p1 + i] + S[p1 + 1 + i])
+    ahead = np.sort(ahead)
+    ea = _estimates_of(S, C, ahead, inp)
+    ep = _estimates_kept(S, C, probe, inp, known_x, known_e)
+    w, h = _enveloped_spacing(S, C, inp, kin, probe, ep, ahead, ea, carry_x, carry_w)
+    for _ in range(kin.rounds):
+        K = probe.shape[0]
+        need = np.empty(K - 1, dtype=np.int64)
+        extra = 0
+        for i in range(K - 1):
+            gap = probe[i + 1] - probe[i]
+            need[i] = np.int64(np.ceil(gap / (0.25 * _nan_min(h[i], h[i + 1]))))
+            if need[i] > 1:
+                extra += need[i] - 1
+        if extra == 0:
+            return probe, w, h, ahead, ea
+        # need[i] - 1 points evenly inside each such gap
+        grown = np.empty(K + extra)
+        grown[:K] = probe
+        c = K
+        for i in range(K - 1):
+            if need[i] > 1:
+                gap = probe[i + 1] - probe[i]
+                for k in range(1, need[i]):
+                    grown[c] = probe[i] + gap * float(k) / float(need[i])
+                    c += 1
+        old, e_old = probe, ep
+        probe = np.unique(grown)
+        ep = _estimates_kept(S, C, probe, inp, old, e_old)
+        w, h = _enveloped_spacing(S, C, inp, kin, probe, ep, ahead, ea, carry_x, carry_w)
+    return probe, w, h, ahead, ea
+
+
 @njit(cache=True, nogil=True)
 def lp_fix(rows, free, fixed_vals, keep):
     """Move the fixed variables' terms of the ``Rows`` (m of them, in place) to the

@@ -147,6 +147,8 @@ FEED_EST_RATIO_MIN = 0.05
 FEED_EST_RATIO_KEEP = 0.9
 #: table pieces per block of the knot placement
 FEED_KNOT_BLOCK = 256
+#: rounds of probes added where they are further apart than a quarter of the spacing wanted
+_KNOT_ROUNDS = 3
 #: where the previous window brakes, a window's first LP is linearised at most so far
 #: from the estimate that the previous solution keeps this share of each jerk row's
 #: bound free (``_feasible_hat``; it met them to the solver's tolerance, FEED_LP_TOL).
@@ -360,28 +362,10 @@ class FeedProfileBuilder:
         K.point_estimates(self.S, self.C, x, self._est_in, est)
         return est
 
-    def _raw_estimate_over(self, x, known):
-        """``_raw_estimate`` at sorted x (K,) given ``known`` = (x0, its Estimates) with x0
-        a subset of x, or None: only the points not in x0 are evaluated (the knot
-        placement's probes grow by refinement, and a point's estimate is its own: on
-        stellabee1's first 20k lines 26 % of the points evaluated were such repeats)."""
-        if known is None:
-            return self._raw_estimate(x)
-        x0, e0 = known
-        at = np.searchsorted(x, x0)
-        new = np.ones(x.shape[0], dtype=bool)
-        new[at] = False
-        en = self._raw_estimate(x[new])
-        out = K.Estimates(*(np.empty(x.shape[0]) for _ in K.Estimates._fields))
-        for o, a, b in zip(out, e0, en):
-            o[at] = a
-            o[new] = b
-        return out
-
     def estimate(self, x, envelope=None):
         """Estimated speed² at sorted x (K,): ``_raw_estimate`` under the reach envelope
         of the knot placement's probes (a speed the tangent's acceleration and jerk can
-        reach from the slow points around, see ``_envelope``): the current ones, or
+        reach from the slow points around, see ``_feed_kernels.knot_probes``): the current ones, or
         ``envelope`` = (x, w) kept from earlier (``FeedPiece.envelope``)."""
         x = np.ascontiguousarray(x, dtype=float)
         w = self._raw_estimate(x).w
@@ -391,75 +375,35 @@ class FeedProfileBuilder:
             w = np.where(inside, np.minimum(w, np.interp(x, ex, ew)), w)
         return w
 
-    def _envelope(self, x, w, est, carry):
-        """The reach envelope of w at sorted probes x (``_feed_kernels.reach_envelope``):
-        speed² a path acceleration of ``FEED_EST_ACC_FACTOR`` times the tangent's and a
-        jerk-limited ramp can reach from the other probes, both ways; the slopes are the
-        largest of the probes' tangents (``est``: their ``Estimates``; generous: an
-        estimate). ``carry`` (x, w) is the envelope's last value before x[0]."""
-        out = np.empty(x.shape[0])
-        cx, cw = carry if carry is not None else (np.inf, 0.0)
-        K.reach_envelope(x, w, est.at, est.jt, FEED_EST_ACC_FACTOR, FEED_EST_JERK_FACTOR**2, cx, cw, out)
-        return out
-
-    def _spacing(self, x, w, est):
-        """Knot spacing wanted at x: time of motion at the estimated speed (w), geometry
-        (``est``: ``_raw_estimate``'s at x)."""
-        k2, k3 = np.maximum(est.k2, 1e-300), np.maximum(est.k3, 1e-300)
-        geo = np.minimum(FEED_KNOT_GEO / k2, FEED_KNOT_GEO / np.sqrt(k3))
-        v = np.sqrt(np.maximum(w, 0.0))
-        hmin = np.where(x < 0.5 * self.L, self.hmin0, self.hmin1)
-        return np.maximum(np.minimum(self.knot_time_s * v, geo), hmin)
-
     # -- knots, block by block ----------------------------------------------------
+    def _knot_inputs(self):
+        """``_feed_kernels.KnotInputs`` of this path."""
+        return K.KnotInputs(
+            FEED_EST_ACC_FACTOR,
+            FEED_EST_JERK_FACTOR**2,
+            self.knot_time_s,
+            FEED_KNOT_GEO,
+            self.hmin0,
+            self.hmin1,
+            _KNOT_ROUNDS,
+            min(self.L / 2, 1.0) * 2.0 ** -np.arange(1, 40),  # geometric points from either end
+        )
+
     def _knot_blocks(self):
         """The knot placement, one block of FEED_KNOT_BLOCK table pieces after the other:
         yields (breakpoints placed in the block (list), its probes x (K,), their enveloped
-        speed² w (K,), last block?); ``_extend_knots`` takes them as the windows need."""
+        speed² w (K,), last block?); ``_extend_knots`` takes them as the windows need.
+        The probes of a block and the spacing wanted there are ``_feed_kernels.knot_probes``'s;
+        a breakpoint falls wherever the integral of 1 / spacing crosses an integer."""
         S, L = self.S, self.L
         m = S.shape[0] - 1
-        p0, cum0, carry = 0, 0.0, None
+        kin = self._knot_inputs()
+        p0, cum0, carry = 0, 0.0, (np.inf, 0.0)
+        known = (np.zeros(0), self._raw_estimate(np.zeros(0)))  # the last look-ahead's estimates
         while True:
             p1 = min(p0 + FEED_KNOT_BLOCK, m)
-            a, b = float(S[p0]), float(S[p1])
-            pts = [S[p0 : p1 + 1], 0.5 * (S[p0:p1] + S[p0 + 1 : p1 + 1]), np.linspace(a, b, 9)]
-            end = min(L / 2, 1.0)
-            geo = end * 2.0 ** -np.arange(1, 40)
-            pts.append(geo[(geo > a) & (geo < b)])
-            pts.append((L - geo)[((L - geo) > a) & ((L - geo) < b)])
-            probe = np.unique(np.concatenate(pts))
-            # the next block's table points: the envelope looks that far ahead (slow points
-            # just after this block lower the estimate before them)
             p2 = min(p1 + FEED_KNOT_BLOCK, m)
-            ahead = np.concatenate((S[p1 + 1 : p2 + 1], 0.5 * (S[p1:p2] + S[p1 + 1 : p2 + 1])))
-            ahead.sort()
-            ea = self._raw_estimate(ahead)
-
-            known = None  # the last probes and their raw estimates (each point's own: kept)
-
-            def enveloped_spacing(probe):
-                nonlocal known
-                ep = self._raw_estimate_over(probe, known)
-                known = (probe, ep)
-                both = K.Estimates(*(np.concatenate((u, v)) for u, v in zip(ep, ea)))
-                w = self._envelope(np.concatenate((probe, ahead)), both.w, both, carry)[: probe.shape[0]]
-                return w, self._spacing(probe, w, ep)
-
-            for _ in range(3):
-                w, h = enveloped_spacing(probe)
-                gap = np.diff(probe)
-                need = np.ceil(gap / (0.25 * np.minimum(h[:-1], h[1:]))).astype(np.int64)
-                if not np.any(need > 1):
-                    break
-                # need[i] - 1 points evenly inside each such gap, all at once (the same
-                # arithmetic as one gap at a time: probe + gap * k / need)
-                sel = np.flatnonzero(need > 1)
-                cnt = need[sel] - 1
-                at = np.repeat(sel, cnt)
-                k = np.arange(at.shape[0]) - np.repeat(np.cumsum(cnt) - cnt, cnt) + 1
-                probe = np.unique(np.concatenate((probe, probe[at] + gap[at] * k / need[at])))
-            else:
-                w, h = enveloped_spacing(probe)
+            probe, w, h, *known = K.knot_probes(S, self.C, self._est_in, kin, p0, p1, p2, *carry, *known)
             carry = (float(probe[-1]), float(w[-1]))
             dens = 1.0 / h
             cum = cum0 + np.concatenate(([0.0], np.cumsum(0.5 * (dens[1:] + dens[:-1]) * np.diff(probe))))
