@@ -271,6 +271,9 @@ class _Routed(threading.local):
 _ROUTED = _Routed()
 
 
+_NOT_PROBED = object()
+
+
 class _Path(_RouteInputs):
     """What every stage needs about one path (``inputs``: its ``_RouteInputs`` already
     made, whose table and measures it takes over)."""
@@ -307,6 +310,8 @@ class _Path(_RouteInputs):
             self.stats.update(inputs.stats)  # the route's measures, as ``_route`` left them
         self._vrun = None
         self._prep = None
+        #: ``_probe_progress``'s outcome, once made
+        self.probe = _NOT_PROBED
         self._refine = None
         #: the whole path is held before any sample leaves (``_better_of``)
         self.whole = False
@@ -436,6 +441,10 @@ def _sampled(ctx, knot_time_s: float | None = None, ahead: bool = False):
         return
     pieces = Prefetch(builder.windows(), ahead=OPT_AHEAD_PIECES, name="cnc-interp-feed")
     try:
+        if ctx.whole and ctx.duration_s >= OPT_PROBE_MIN_S:
+            # a plan this long at least is probed at its end (``_better_of``): VPOp's
+            # first samples while the thread solves the first windows, not after
+            _probe_progress(ctx)
         yield from _sampled_from(ctx, builder, iter(pieces))
     finally:
         pieces.close()  # the sampling may stop before the last piece (VPOp finishes)
@@ -873,10 +882,24 @@ def _vpop_ahead(ctx, s) -> bool:
     """Does VPOp's plan reach the arc length of its first OPT_PROBE_S OPT_PROBE_AHEAD
     sooner than the profile's plan of samples at arc lengths s (N,)? (False for a plan
     shorter than OPT_PROBE_MIN_S, or where VPOp fails.)"""
-    from .vpop import VpopFailed, iter_prepared
-
     if s.shape[0] * ctx.dt < OPT_PROBE_MIN_S:
         return False
+    progress = _probe_progress(ctx)
+    if progress is None:
+        return False
+    got, s_at = progress
+    ahead = got < (1.0 - OPT_PROBE_AHEAD) * (int(np.searchsorted(s, s_at)) + 1)
+    ctx.stats["probe"] = "vpop ahead" if ahead else "profile"
+    return ahead
+
+
+def _probe_progress(ctx):
+    """VPOp's first samples of the path: (how many, the arc length of the last), at least
+    OPT_PROBE_S worth; None where VPOp fails. Made once per path (``ctx.probe``)."""
+    from .vpop import VpopFailed, iter_prepared
+
+    if ctx.probe is not _NOT_PROBED:
+        return ctx.probe
     n_probe = int(OPT_PROBE_S / ctx.dt)
     got, s_at = 0, 0.0
     try:
@@ -889,11 +912,10 @@ def _vpop_ahead(ctx, s) -> bool:
             s_at = float(c.s[-1])
             if got >= n_probe:
                 break
+        ctx.probe = (got, s_at)
     except VpopFailed:
-        return False
-    ahead = got < (1.0 - OPT_PROBE_AHEAD) * (int(np.searchsorted(s, s_at)) + 1)
-    ctx.stats["probe"] = "vpop ahead" if ahead else "profile"
-    return ahead
+        ctx.probe = None
+    return ctx.probe
 
 
 def _vpop_may_win(ctx, n_samples: int) -> bool:
