@@ -737,6 +737,33 @@ def test_a_probe_that_finds_the_profile_ahead_stops_vpop_after_its_first_seconds
     assert optimal.OPT_PROBE_S / DT <= sum(counted) < 0.5 * periods(plan)
 
 
+def test_a_long_paths_windows_solved_in_a_thread_of_their_own_give_the_same_samples(monkeypatch):
+    # at effort fast a long path's windows are solved by a thread ahead of the sampling,
+    # and VPOp's probe runs meanwhile; the samples, stats and probe are those of one
+    # thread (the 50-turn circle of the probe test: 22 s, probed, the profile kept)
+    from cnc_interp.plan import optimal, prefetch
+
+    threads = []
+    init = prefetch.Prefetch.__init__
+
+    def counting(self, *args, **kwargs):
+        threads.append(kwargs.get("name"))
+        init(self, *args, **kwargs)
+
+    monkeypatch.setattr(prefetch.Prefetch, "__init__", counting)
+    path = hermite_path(circle_fun(10.0, turns=50.0), 800, 1000.0)
+    fast = PlanSettings(planner="optimal", optimal=OptimalOptions(effort="fast"))
+    plans = {}
+    for ahead_s in (optimal.OPT_AHEAD_S, np.inf):
+        monkeypatch.setattr(optimal, "OPT_AHEAD_S", ahead_s)
+        plans[ahead_s] = plan_path_optimal(path, None, MILL, DT, fast)
+    assert threads == ["cnc-interp-feed"]  # the first plan only
+    threaded, alone = plans[optimal.OPT_AHEAD_S], plans[np.inf]
+    check(threaded, MILL, path.start, path.end, DT)
+    assert threaded.s.tobytes() == alone.s.tobytes() and threaded.q.tobytes() == alone.q.tobytes()
+    assert threaded.stats == alone.stats and threaded.stats["probe"] == "profile"
+
+
 # -- the paths routed to VPOp go through VPOp's compiled batch ------------------------
 def _mixed_paths():
     """Short lines (VPOp's route) around a curvature-limited circle (the profile's)."""
