@@ -1,8 +1,9 @@
 """Run an iterable ahead of its consumer in a thread of its own (``Prefetch``).
 
-Two users: the streamed pipeline fits the program while the timeline hands out samples,
-and the optimal planner profiles a long path while it refines the stretch before (the
-planners' compiled loops release the GIL, so both stages run at once). The items, their
+Three users: the streamed pipeline fits the program while the timeline hands out samples,
+and the optimal planner profiles a long path while it refines the stretch before or,
+without refinement, solves a long path's profile windows while it samples the ones
+before (the planners' compiled loops release the GIL, so both stages run at once). The items, their
 order and where an exception is raised do not depend on the thread: the output is the
 same bytes as without it.
 """
