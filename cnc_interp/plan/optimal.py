@@ -436,7 +436,8 @@ def _sampled(ctx, knot_time_s: float | None = None, ahead: bool = False):
     """Stage 2: yields (s, q) blocks of final samples (see module docstring); the profile's
     knots ``knot_time_s`` of motion apart (default ``feedprofile.FEED_KNOT_TIME_S``).
     ``ahead``: the profile's windows are solved by a thread of their own, ahead of the
-    sampling (the samples do not depend on it)."""
+    sampling, and a whole path's VPOp probe (``_probe_progress``) is made meanwhile (the
+    samples do not depend on it)."""
     from .feedprofile import FEED_KNOT_TIME_S, FeedProfileBuilder
 
     builder = FeedProfileBuilder(
