@@ -7,7 +7,9 @@
 * ``lp_rows``: the LP rows at the collocation points for one linearisation point;
 * ``lp_fix``, ``lp_take`` and ``lp_screen``: the rows of one LP with the fixed
   coefficients moved to the right-hand side, and the row screening of ``feedprofile``;
-* ``point_estimates`` and ``reach_envelope``: the knot placement's speed estimate;
+* ``point_estimates`` and ``reach_envelope``: the knot placement's speed estimate, and
+  ``knot_probes``: one block of the knot placement (its probes, their enveloped estimate
+  and the knot spacing wanted there);
 * ``time_nodes``: the time law's node intervals (``timelaw``).
 
 The profile is w(s) = ṡ² = Σ c_j B_j(s). Along the path, axis i has (Beudaert et al.
@@ -479,7 +481,7 @@ KnotInputs = namedtuple("KnotInputs", "acc_factor jerk_f2 knot_time knot_geo hmi
 
 
 @njit(cache=True, nogil=True)
-def _enveloped_spacing(S, C, inp, kin, probe, ep, ahead, ea, carry_x, carry_w):
+def _enveloped_spacing(inp, kin, probe, ep, ahead, ea, carry_x, carry_w):
     """The reach envelope w (K,) at the probes (its estimates ``ep``; ``ahead``/``ea``:
     the points after them it looks at) and the knot spacing h (K,) wanted there."""
     K = probe.shape[0]
@@ -560,7 +562,7 @@ def knot_probes(S, C, inp, kin, p0, p1, p2, carry_x, carry_w, known_x, known_e):
     ahead = np.sort(ahead)
     ea = _estimates_of(S, C, ahead, inp)
     ep = _estimates_kept(S, C, probe, inp, known_x, known_e)
-    w, h = _enveloped_spacing(S, C, inp, kin, probe, ep, ahead, ea, carry_x, carry_w)
+    w, h = _enveloped_spacing(inp, kin, probe, ep, ahead, ea, carry_x, carry_w)
     for _ in range(kin.rounds):
         K = probe.shape[0]
         need = np.empty(K - 1, dtype=np.int64)
@@ -585,7 +587,7 @@ def knot_probes(S, C, inp, kin, p0, p1, p2, carry_x, carry_w, known_x, known_e):
         old, e_old = probe, ep
         probe = np.unique(grown)
         ep = _estimates_kept(S, C, probe, inp, old, e_old)
-        w, h = _enveloped_spacing(S, C, inp, kin, probe, ep, ahead, ea, carry_x, carry_w)
+        w, h = _enveloped_spacing(inp, kin, probe, ep, ahead, ea, carry_x, carry_w)
     return probe, w, h, ahead, ea
 
 
