@@ -714,6 +714,11 @@ def test_vpop_is_kept_where_its_first_seconds_run_ahead_of_the_profile(monkeypat
     assert kept.stats["kept"] == "profile" and periods(kept) > 1.03 * periods(plan)
 
 
+def _fifty_turns():
+    """Fifty turns of a circle of 10 mm at F1000: 22 s at MILL's acceleration limit."""
+    return hermite_path(circle_fun(10.0, turns=50.0), 800, 1000.0)
+
+
 def test_a_probe_that_finds_the_profile_ahead_stops_vpop_after_its_first_seconds(monkeypatch):
     # fifty turns of a circle at the acceleration limit (22 s): the profile's plan is ahead
     # of VPOp's from the start, so VPOp stops after its first samples handed out (its
@@ -729,7 +734,7 @@ def test_a_probe_that_finds_the_profile_ahead_stops_vpop_after_its_first_seconds
             yield c
 
     monkeypatch.setattr(vpop, "iter_prepared", counting)
-    path = hermite_path(circle_fun(10.0, turns=50.0), 800, 1000.0)
+    path = _fifty_turns()
     plan = plan_path_optimal(path, None, MILL, DT)
     check(plan, MILL, plan.q[0], plan.q[-1], DT)
     assert periods(plan) * DT >= optimal.OPT_PROBE_MIN_S
@@ -751,7 +756,7 @@ def test_a_long_paths_windows_solved_in_a_thread_of_their_own_give_the_same_samp
         init(self, *args, **kwargs)
 
     monkeypatch.setattr(prefetch.Prefetch, "__init__", counting)
-    path = hermite_path(circle_fun(10.0, turns=50.0), 800, 1000.0)
+    path = _fifty_turns()
     fast = PlanSettings(planner="optimal", optimal=OptimalOptions(effort="fast"))
     plans = {}
     for ahead_s in (optimal.OPT_AHEAD_S, np.inf):

@@ -431,8 +431,8 @@ def _nan_max(a, b):
 
 
 @njit(cache=True, nogil=True)
-def _estimates_of(S, C, x, inp):
-    """``point_estimates`` at sorted x (K,) into new arrays."""
+def estimates_of(S, C, x, inp):
+    """``point_estimates`` at sorted x (K,) into new arrays (an ``Estimates``)."""
     K = x.shape[0]
     out = Estimates(np.empty(K), np.empty(K), np.empty(K), np.empty(K), np.empty(K), np.empty(K))
     point_estimates(S, C, x, inp, out)
@@ -441,7 +441,7 @@ def _estimates_of(S, C, x, inp):
 
 @njit(cache=True, nogil=True)
 def _estimates_kept(S, C, x, inp, x0, e0):
-    """``_estimates_of`` at sorted x (K,) given ``e0`` at sorted x0: the points of x also
+    """``estimates_of`` at sorted x (K,) given ``e0`` at sorted x0: the points of x also
     in x0 are taken from there, the others evaluated (a point's estimate is its own)."""
     K = x.shape[0]
     src = np.full(K, -1, dtype=np.int64)
@@ -457,20 +457,27 @@ def _estimates_kept(S, C, x, inp, x0, e0):
         if src[k] < 0:
             xn[j] = x[k]
             j += 1
-    en = _estimates_of(S, C, xn, inp)
+    en = estimates_of(S, C, xn, inp)
     out = Estimates(np.empty(K), np.empty(K), np.empty(K), np.empty(K), np.empty(K), np.empty(K))
     j = 0
     for k in range(K):
-        e, i = (en, j) if src[k] < 0 else (e0, src[k])
-        out.w[k] = e.w[i]
-        out.w_jerk[k] = e.w_jerk[i]
-        out.k2[k] = e.k2[i]
-        out.k3[k] = e.k3[i]
-        out.at[k] = e.at[i]
-        out.jt[k] = e.jt[i]
         if src[k] < 0:
+            _copy_estimate(out, k, en, j)
             j += 1
+        else:
+            _copy_estimate(out, k, e0, src[k])
     return out
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _copy_estimate(out, k, e, i):
+    """Every field of ``Estimates`` e at point i into ``out`` at point k."""
+    out.w[k] = e.w[i]
+    out.w_jerk[k] = e.w_jerk[i]
+    out.k2[k] = e.k2[i]
+    out.k3[k] = e.k3[i]
+    out.at[k] = e.at[i]
+    out.jt[k] = e.jt[i]
 
 
 #: what ``knot_probes`` reads besides the table and the estimate's inputs: the factors
@@ -560,7 +567,7 @@ def knot_probes(S, C, inp, kin, p0, p1, p2, carry_x, carry_w, known_x, known_e):
         ahead[i] = S[p1 + 1 + i]
         ahead[na + i] = 0.5 * (S[p1 + i] + S[p1 + 1 + i])
     ahead = np.sort(ahead)
-    ea = _estimates_of(S, C, ahead, inp)
+    ea = estimates_of(S, C, ahead, inp)
     ep = _estimates_kept(S, C, probe, inp, known_x, known_e)
     w, h = _enveloped_spacing(inp, kin, probe, ep, ahead, ea, carry_x, carry_w)
     for _ in range(kin.rounds):

@@ -357,10 +357,7 @@ class FeedProfileBuilder:
     def _raw_estimate(self, x):
         """Estimated speed² at sorted x (K,) from the geometry there (static limits
         inflated, sampled start and stop near the ends): ``_feed_kernels.Estimates``."""
-        x = np.ascontiguousarray(x, dtype=float)
-        est = K.Estimates(*(np.empty(x.shape[0]) for _ in K.Estimates._fields))
-        K.point_estimates(self.S, self.C, x, self._est_in, est)
-        return est
+        return K.estimates_of(self.S, self.C, np.ascontiguousarray(x, dtype=float), self._est_in)
 
     def estimate(self, x, envelope=None):
         """Estimated speed² at sorted x (K,): ``_raw_estimate`` under the reach envelope
