@@ -501,10 +501,11 @@ def _screened_lps(monkeypatch) -> list:
         solves[-1] += 1
         return lp_solve(*args)
 
-    def recording(self, rf, rc, rb, c, xv, free, cfix, scale, screen, *rest):
+    def recording(self, rows, c, xv, free, screen, *rest):
         solves.append(0)
-        status, it, x = lp(self, rf, rc, rb, c, xv, free, cfix, scale, screen, *rest)
-        # rf, rc, rb now hold the LP's rows (the fixed coefficients moved to b)
+        status, it, x = lp(self, rows, c, xv, free, screen, *rest)
+        # the LP's rows, the fixed coefficients moved to b (lp_gather)
+        rf, rc, rb = rows
         live = np.any(rc != 0.0, axis=1)
         val = np.sum(rc * x[rf[:, None] + np.arange(4)], axis=1)
         excess = np.max((val - rb)[live]) / max(np.max(np.abs(rb[live])), 1.0)

@@ -126,10 +126,11 @@ def test_the_lp_solver_takes_rows_of_four_only():
 
 
 def test_the_lp_row_kernels_are_the_numpy_bookkeeping():
-    """``lp_fix`` moves the fixed variables to the right-hand side and drops rows left
-    without a free one, ``lp_take`` keeps the selected rows in order, ``lp_screen``
-    selects rows near their bound and then adds those a point violates: each as numpy
-    computes it (the feed profile's LPs are those it built before)."""
+    """``lp_gather`` joins two sets of rows, moves the fixed variables to the right-hand
+    side and drops rows left without a free one, ``lp_take`` keeps the selected rows in
+    order, ``lp_screen`` selects rows near their bound and then adds those a point
+    violates: each as numpy computes it (the feed profile's LPs are those it built
+    before)."""
     rng = np.random.default_rng(11)
     for _ in range(50):
         n, m = int(rng.integers(6, 40)), int(rng.integers(5, 300))
@@ -142,15 +143,28 @@ def test_the_lp_row_kernels_are_the_numpy_bookkeeping():
         want_b = b - np.sum(coef * fixed[idx], axis=1)
         want_c = np.where(free[idx], coef, 0.0)
         want_keep = np.any(want_c != 0.0, axis=1)
-        rows = FK.Rows(first.copy(), coef.copy(), b.copy())
-        keep = np.empty(m, dtype=np.bool_)
-        count = FK.lp_fix(rows, free, fixed, keep)
-        assert count == want_keep.sum() and np.array_equal(keep, want_keep)
-        assert np.array_equal(rows.b, want_b) and np.array_equal(rows.coef, want_c)
-        out = FK.Rows(np.empty(count, dtype=np.int64), np.empty((count, 4)), np.empty(count))
-        FK.lp_take(rows, keep, count, out)
-        assert np.array_equal(out.first, first[keep]) and np.array_equal(out.coef, want_c[keep])
-        assert np.array_equal(out.b, want_b[keep])
+        # the first `split` rows from one array (of which `count` are used), the rest from another
+        split = int(rng.integers(0, m + 1))
+        junk = int(rng.integers(0, 5))
+        head = FK.Rows(
+            np.concatenate((first[:split], np.zeros(junk, dtype=np.int64))),
+            np.concatenate((coef[:split], rng.normal(size=(junk, 4)))),
+            np.concatenate((b[:split], np.ones(junk))),
+        )
+        tail = FK.Rows(first[split:].copy(), coef[split:].copy(), b[split:].copy())
+        got = FK.Rows(np.empty(m, dtype=np.int64), np.empty((m, 4)), np.empty(m))
+        count = FK.lp_gather(head, split, tail, free, fixed, got)
+        assert count == want_keep.sum()
+        rows = FK.Rows(got.first[:count], got.coef[:count], got.b[:count])
+        assert np.array_equal(rows.first, first[want_keep])
+        assert np.array_equal(rows.b, want_b[want_keep]) and np.array_equal(rows.coef, want_c[want_keep])
+        sel = rng.uniform(size=count) < 0.5
+        out = FK.Rows(np.empty(sel.sum(), dtype=np.int64), np.empty((sel.sum(), 4)), np.empty(sel.sum()))
+        FK.lp_take(rows, sel, int(sel.sum()), out)
+        assert np.array_equal(out.first, rows.first[sel]) and np.array_equal(out.coef, rows.coef[sel])
+        assert np.array_equal(out.b, rows.b[sel])
+        first, want_b, want_c, idx = first[want_keep], want_b[want_keep], want_c[want_keep], idx[want_keep]
+        m = count
         # screening at a point, then the rows another point violates
         x0, x1 = rng.uniform(0.0, 1.0, n), rng.uniform(0.0, 1.5, n)
         val0 = np.sum(want_c * x0[idx], axis=1)

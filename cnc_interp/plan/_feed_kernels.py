@@ -5,8 +5,10 @@
 * ``cubic_basis``: the four non-zero cubic B-spline basis functions and their first
   and second derivatives at sorted points (NURBS book, A2.3);
 * ``lp_rows``: the LP rows at the collocation points for one linearisation point;
-* ``lp_fix``, ``lp_take`` and ``lp_screen``: the rows of one LP with the fixed
+* ``lp_gather``, ``lp_take`` and ``lp_screen``: the rows of one LP with the fixed
   coefficients moved to the right-hand side, and the row screening of ``feedprofile``;
+* ``lp_objective`` and ``lp_profile_time``: a window LP's objective, and its solution's
+  coefficients, next linearisation point and traversal time;
 * ``point_estimates`` and ``reach_envelope``: the knot placement's speed estimate, and
   ``knot_probes``: one block of the knot placement (its probes, their enveloped estimate
   and the knot spacing wanted there);
@@ -198,6 +200,25 @@ def lp_rows(pts, lim, wmax, w_hat, inner, scale, rows):
                 row_b[r + 1] = 1.0
                 r += 2
     return r
+
+
+@njit(cache=True, nogil=True)
+def wmax_of(x, q1, vmax, feed_breaks, feed_values, out):
+    """The bound on w = ṡ² at sorted arc lengths x (K,) with joint tangents q1 (K, n):
+    min over the axes with q_s != 0 of (vmax / |q_s|)² and the segment's feed² (a step
+    function: ``feed_values`` over ``feed_breaks``), into ``out`` (K,)."""
+    nf = feed_values.shape[0]
+    for k in range(x.shape[0]):
+        wv = np.inf
+        for i in range(q1.shape[1]):
+            a = abs(q1[k, i])
+            if a > 0.0:
+                v = vmax[i] / a
+                wv = _nan_min(wv, v * v)
+        i = np.searchsorted(feed_breaks, x[k], side="right") - 1
+        i = min(max(i, 0), nf - 1)
+        f = feed_values[i]
+        out[k] = _nan_min(wv, f * f)
 
 
 @njit(cache=True, nogil=True)
@@ -599,30 +620,138 @@ def knot_probes(S, C, inp, kin, p0, p1, p2, carry_x, carry_w, known_x, known_e):
 
 
 @njit(cache=True, nogil=True)
-def lp_fix(rows, free, fixed_vals, keep):
-    """Move the fixed variables' terms of the ``Rows`` (m of them, in place) to the
-    right-hand side: b -= Σ coef x_fixed, and zero their coefficients; ``keep[r]``: row r
-    still has a free variable. Returns how many rows do."""
-    first = rows.first
-    coef = rows.coef
-    b = rows.b
-    count = 0
-    for r in range(first.shape[0]):
-        f = first[r]
-        acc = 0.0
-        for k in range(4):
-            acc += coef[r, k] * fixed_vals[f + k]
-        b[r] = b[r] - acc
-        nz = False
-        for k in range(4):
-            if not free[f + k]:
-                coef[r, k] = 0.0
-            elif coef[r, k] != 0.0:
-                nz = True
-        keep[r] = nz
-        if nz:
-            count += 1
-    return count
+def feasible_hat(p, dp, ddp, q1, q2, q3, lim, target, floor, bound, bisections, out):
+    """``feedprofile.FeedProfileBuilder._feasible_hat`` at K points: the previous window's
+    solution p and its first two derivatives (K,), the joint derivatives q1..q3 (K, n)
+    there, the ``AxisLimits`` lim (jerk limits as the LP uses them), the wanted
+    linearisation points ``target`` (K,), the least one ``floor``, the jerk rows' share
+    ``bound`` p must keep and the bisection steps; the points into ``out`` (K,).
+
+    Per point: e = max over the moving axes of |E_i| / (3/2 J_i), E = q_sss p + 3/2 q_ss p'
+    + 1/2 q_s p''; the target where e √t + p / (3 t) <= bound, else the end towards it of
+    the interval around p where that holds (bisection in √ŵ), else p (at least ``floor``).
+    The float operations of the numpy version it replaced, in its order."""
+    moving = lim.moving
+    jmax = lim.jmax
+    n = q1.shape[1]
+    for k in range(p.shape[0]):
+        pk = p[k]
+        if pk < 0.0:
+            pk = 0.0
+        e = 0.0
+        for i in range(n):
+            if not moving[i]:
+                continue
+            E = (q3[k, i] * pk + 1.5 * q2[k, i] * dp[k]) + 0.5 * q1[k, i] * ddp[k]
+            v = abs(E) / (1.5 * jmax[i])
+            e = _nan_max(e, v)
+        t = target[k]
+        if not t >= floor:
+            t = floor if t == t else t
+        p_hat = _nan_max(pk, floor)
+        if e * np.sqrt(t) + pk / (3.0 * t) <= bound:
+            out[k] = t
+            continue
+        out[k] = p_hat
+        if p_hat == t or not e * np.sqrt(p_hat) + pk / (3.0 * p_hat) <= bound:
+            continue
+        ok_u = np.sqrt(p_hat)
+        bad_u = np.sqrt(t)
+        for _ in range(bisections):
+            u = 0.5 * (ok_u + bad_u)
+            if e * u + pk / (3.0 * u * u) <= bound:
+                ok_u = u
+            else:
+                bad_u = u
+        out[k] = ok_u * ok_u
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _fixed_row(first, coef, b, r, free, fixed_vals, out, j):
+    """Row r of (first, coef, b) into row j of ``out`` with the fixed variables' terms on
+    the right-hand side; True when a free variable is left in it."""
+    f = first[r]
+    acc = 0.0
+    for k in range(4):
+        acc += coef[r, k] * fixed_vals[f + k]
+    out.b[j] = b[r] - acc
+    out.first[j] = f
+    nz = False
+    for k in range(4):
+        v = coef[r, k]
+        if not free[f + k]:
+            v = 0.0
+        elif v != 0.0:
+            nz = True
+        out.coef[j, k] = v
+    return nz
+
+
+@njit(cache=True, nogil=True)
+def lp_gather(rows, count, more, free, fixed_vals, out):
+    """The LP's rows into ``out`` (``Rows``): the first ``count`` of ``rows``, then every
+    row of ``more``, with the fixed variables' terms moved to the right-hand side
+    (b -= Σ coef x_fixed, their coefficients zero, ``fixed_vals`` (n,) zero where free)
+    and the rows left without a free variable dropped. Returns how many were kept."""
+    j = 0
+    for r in range(count):
+        if _fixed_row(rows.first, rows.coef, rows.b, r, free, fixed_vals, out, j):
+            j += 1
+    for r in range(more.first.shape[0]):
+        if _fixed_row(more.first, more.coef, more.b, r, free, fixed_vals, out, j):
+            j += 1
+    return j
+
+
+@njit(cache=True, nogil=True)
+def lp_objective(first, B, scale, weights, free, c):
+    """The window LP's objective c (nc,) in the scaled variables: the time
+    Σ_k weight_k w_k, the weights (K,) the trapezoid cells times ŵ^-3/2 (the linearisation
+    point) at the collocation points (``first`` (K,), basis B (K, 3, 4)), negated (the LP
+    minimises), zero on the fixed variables and scaled to max |c| = 1."""
+    nc = c.shape[0]
+    for j in range(nc):
+        c[j] = 0.0
+    for k in range(first.shape[0]):
+        wt = weights[k]
+        f = first[k]
+        for j in range(4):
+            c[f + j] += -((wt * B[k, 0, j]) * scale[f + j])
+    big = 0.0
+    for j in range(nc):
+        if not free[j]:
+            c[j] = 0.0
+        big = _nan_max(big, abs(c[j]))
+    if not big >= 1e-300:
+        big = big if big != big else 1e-300
+    for j in range(nc):
+        c[j] /= big
+
+
+@njit(cache=True, nogil=True)
+def lp_profile_time(first, B, xv, scale, free, cfix, x, w_floor, coef, w_hat):
+    """From an LP's solution ``xv`` (nc,, scaled): its coefficients into ``coef`` (nc,,
+    ``cfix`` where fixed), w at the collocation points x (K,) floored at ``w_floor``
+    into ``w_hat`` (the next linearisation point), and the traversal time of x by the
+    trapezoid rule in 1/√w. Returns (every xv finite, time s)."""
+    finite = True
+    for j in range(coef.shape[0]):
+        v = xv[j]
+        if not np.isfinite(v):
+            finite = False
+        coef[j] = v * scale[j] if free[j] else cfix[j]
+    T = 0.0
+    v_prev = 0.0
+    for k in range(first.shape[0]):
+        f = first[k]
+        w = (B[k, 0, 0] * coef[f] + B[k, 0, 2] * coef[f + 2]) + (B[k, 0, 1] * coef[f + 1] + B[k, 0, 3] * coef[f + 3])
+        w = _nan_max(w, 0.0)
+        v = np.sqrt(w)
+        if k > 0:
+            T += 2.0 * (x[k] - x[k - 1]) / _nan_max(v + v_prev, 1e-300)
+        v_prev = v
+        w_hat[k] = _nan_max(w, w_floor)
+    return finite, T
 
 
 @njit(cache=True, nogil=True)

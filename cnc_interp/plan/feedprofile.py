@@ -349,10 +349,11 @@ class FeedProfileBuilder:
         return float(np.min(self.jmax[ok] / g[ok])) if ok.any() else float(np.min(self.jmax))
 
     def wmax_at(self, x, q1):
-        with np.errstate(divide="ignore"):
-            wv = np.min(np.where(np.abs(q1) > 0, (self.vmax / np.abs(q1)) ** 2, np.inf), axis=1)
-        f = self.feed_at(x)
-        return np.minimum(wv, f * f)
+        """The bound on w at sorted x (K,) with joint tangents q1 (K, n): axis speeds and
+        the feed (``_feed_kernels.wmax_of``)."""
+        out = np.empty(x.shape[0])
+        K.wmax_of(np.ascontiguousarray(x, dtype=float), q1, self.vmax, self.feed_breaks, self.feed_values, out)
+        return out
 
     def _raw_estimate(self, x):
         """Estimated speed² at sorted x (K,) from the geometry there (static limits
@@ -572,24 +573,9 @@ class FeedProfileBuilder:
         derivatives at x; ``floor`` (mm²/s²) the least ŵ.
         """
         p, dp, ddp = spline_derivs(prev.knots, prev.coef, np.clip(x, prev.knots[3], prev.knots[-4]))
-        p = np.maximum(p, 0.0)
-        E = q3 * p[:, None] + 1.5 * q2 * dp[:, None] + 0.5 * q1 * ddp[:, None]
-        mv = self.moving
-        e = np.max(np.abs(E[:, mv]) / (1.5 * self.jmax[mv]), axis=1, initial=0.0)
-        bound = 1.0 - FEED_HAT_MARGIN
-        t = np.maximum(target, floor)
-        p_hat = np.maximum(p, floor)
-        out = np.where(e * np.sqrt(t) + p / (3.0 * t) <= bound, t, p_hat)
-        todo = np.flatnonzero((out != t) & (e * np.sqrt(p_hat) + p / (3.0 * p_hat) <= bound))
-        if todo.size:
-            ok_u, bad_u = np.sqrt(p_hat[todo]), np.sqrt(t[todo])
-            ek, pk = e[todo], p[todo]
-            for _ in range(_HAT_BISECTIONS):
-                u = 0.5 * (ok_u + bad_u)
-                fits = ek * u + pk / (3.0 * u * u) <= bound
-                ok_u = np.where(fits, u, ok_u)
-                bad_u = np.where(fits, bad_u, u)
-            out[todo] = ok_u * ok_u
+        out = np.empty(x.shape[0])
+        limits = K.AxisLimits(self.moving, self.amax, self.jmax)
+        K.feasible_hat(p, dp, ddp, q1, q2, q3, limits, target, floor, 1.0 - FEED_HAT_MARGIN, _HAT_BISECTIONS, out)
         return out
 
     def _solve_from(self, b0, b1, at_end, fixed, prev, s_prev, ccp_max, first_max_iter=FEED_LP_MAX_ITER):
@@ -647,8 +633,14 @@ class FeedProfileBuilder:
         dx = np.diff(x)
         cell[:-1] += 0.5 * dx
         cell[1:] += 0.5 * dx
-        cols = first[:, None] + np.arange(4)[None, :]
-        xv = np.where(free, 0.0, cfix / scale)
+        fixed_vals = np.where(free, 0.0, cfix / scale)
+        xv = fixed_vals
+        end = self._end_rows(tk, nc, scale, b0, b1, at_end)
+        # an LP's rows, the fixed coefficients' terms on the right-hand side
+        size = rows_max + end.b.shape[0]
+        lp = K.Rows(np.empty(size, dtype=np.int64), np.empty((size, 4)), np.empty(size))
+        c = np.empty(nc)
+        coef = np.empty(nc)
         prev_T = np.inf
         best = None
         iters = 0
@@ -662,57 +654,47 @@ class FeedProfileBuilder:
                 scale,
                 K.Rows(row_first, row_coef, row_b),
             )
-            rf, rc, rb = self._end_rows(r, row_first, row_coef, row_b, tk, nc, scale, b0, b1, at_end)
+            m = K.lp_gather(K.Rows(row_first, row_coef, row_b), r, end, free, fixed_vals, lp)
+            # the weights in numpy: its power's last bits are not libm's (a kernel's)
             wts = cell * np.maximum(w_hat, FEED_WEIGHT_FLOOR * w_est) ** -1.5
-            c = np.bincount(cols.ravel(), weights=-(wts[:, None] * B[:, 0, :] * scale[cols]).ravel(), minlength=nc)
-            c[~free] = 0.0
-            c /= max(np.max(np.abs(c)), 1e-300)
+            K.lp_objective(first, B, scale, wts, free, c)
             max_iter = first_max_iter if ccp == 0 else FEED_LP_MAX_ITER
-            status, it, xv_new = self._lp(rf, rc, rb, c, xv, free, cfix, scale, ccp > 0, max_iter)
+            rows = K.Rows(lp.first[:m], lp.coef[:m], lp.b[:m])
+            status, it, xv_new = self._lp(rows, c, xv, free, ccp > 0, max_iter)
             iters += it
-            if status != LP_OK or not np.all(np.isfinite(xv_new)):
+            finite, T = K.lp_profile_time(first, B, xv_new, scale, free, cfix, x, 1e-9 * W0, coef, w_hat)
+            if status != LP_OK or not finite:
                 if best is None:
                     raise ProfileError(f"feed-profile LP failed (status {status})")
                 break  # keep the last solved iterate (feasible for the true limits)
             xv = xv_new
-            coef = xv * scale
-            coef[~free] = cfix[~free]
-            best = coef
-            w = np.maximum(np.einsum("kj,kj->k", B[:, 0, :], coef[cols]), 0.0)
-            v = np.sqrt(w)
-            T = float(np.sum(2.0 * dx / np.maximum(v[1:] + v[:-1], 1e-300)))
-            w_hat = np.maximum(w, 1e-9 * W0)
+            best = coef.copy()
             if abs(prev_T - T) <= FEED_CCP_TOL * T:
                 break
             prev_T = T
         return best, tk, iters
 
-    def _lp(self, rf, rc, rb, c, xv, free, cfix, scale, screen: bool, max_iter: int = FEED_LP_MAX_ITER):
-        """Solve the LP in the free variables (fixed ones moved to the right-hand side),
-        with row screening after the first; returns (status, iterations, x)."""
+    def _lp(self, rows, c, xv, free, screen: bool, max_iter: int = FEED_LP_MAX_ITER):
+        """Solve the LP of ``rows`` (``Rows``: ``_feed_kernels.lp_gather``'s) in the free
+        variables, from ``xv`` (nc,), with row screening when ``screen``; returns (status,
+        iterations, x)."""
         nc = free.shape[0]
-        rows = K.Rows(rf, rc, rb)  # _end_rows' fresh arrays, changed in place
-        m = rf.shape[0]
-        keep = np.empty(m, dtype=np.bool_)
-        n_keep = K.lp_fix(rows, free, np.where(free, 0.0, cfix / scale), keep)
-        if n_keep < m:
-            kept = K.Rows(np.empty(n_keep, dtype=np.int64), np.empty((n_keep, 4)), np.empty(n_keep))
-            K.lp_take(rows, keep, n_keep, kept)
-            rows, m = kept, n_keep
+        m = rows.b.shape[0]
         x = np.where(free, xv, 0.0)
         active = np.ones(m, dtype=np.bool_)
         count = m
         if screen:
             _, count = K.lp_screen(rows, x, FEED_ROW_SCREEN, active, True)
-        c = np.ascontiguousarray(c)
         iters = 0
         attempt = 1
         while True:
             if attempt >= FEED_SCREEN_ROUNDS:
                 active[:] = True  # the last solve takes every row: never a point outside one
                 count = m
-            sub = K.Rows(np.empty(count, dtype=np.int64), np.empty((count, 4)), np.empty(count))
-            K.lp_take(rows, active, count, sub)
+            sub = rows
+            if count < m:
+                sub = K.Rows(np.empty(count, dtype=np.int64), np.empty((count, 4)), np.empty(count))
+                K.lp_take(rows, active, count, sub)
             x_try = x.copy()
             status, it, _, _ = lp_solve(nc, sub.first, sub.coef, sub.b, c, x_try, max_iter, FEED_LP_TOL)
             iters += it
@@ -723,8 +705,10 @@ class FeedProfileBuilder:
                 return status, iters, x_try
             attempt += 1
 
-    def _end_rows(self, r, row_first, row_coef, row_b, tk, nc, scale, b0, b1, at_end):
-        """The collocation rows plus the end conditions of the window (in local indices)."""
+    def _end_rows(self, tk, nc, scale, b0, b1, at_end):
+        """The window's rows besides the collocation rows (``Rows``, local indices): its end
+        conditions and every coefficient >= 0. They do not depend on the linearisation:
+        made once per window, appended to each LP's collocation rows."""
         ef, ec, eb = [], [], []
         if b0 == 0:  # w'(0) = 3 c1 / t[4] <= 2 J_t dt
             ef.append(0)
@@ -750,14 +734,15 @@ class FeedProfileBuilder:
         nf = np.minimum(jj, nc - 4)
         nn = np.zeros((nc, 4))
         nn[jj, jj - nf] = -1.0
-        rf = np.concatenate((row_first[:r], np.asarray(ef, dtype=np.int64), nf))
-        rc = np.concatenate((row_coef[:r], np.asarray(ec, dtype=float).reshape(-1, 4), nn))
-        rb = np.concatenate((row_b[:r], np.asarray(eb, dtype=float), np.zeros(nc)))
-        # a band must fit in [0, nc): shift rows that start too late (zero-padded)
+        rf = np.concatenate((np.asarray(ef, dtype=np.int64), nf))
+        rc = np.concatenate((np.asarray(ec, dtype=float).reshape(-1, 4), nn))
+        rb = np.concatenate((np.asarray(eb, dtype=float), np.zeros(nc)))
+        # a band must fit in [0, nc): shift rows that start too late (zero-padded; the
+        # collocation rows never do, ``cubic_basis`` keeps first <= nc - 4)
         over = rf + 4 - nc
         for i in np.flatnonzero(over > 0):
             sft = over[i]
             rc[i, sft:] = rc[i, : 4 - sft].copy()
             rc[i, :sft] = 0.0
             rf[i] -= sft
-        return rf, rc, rb
+        return K.Rows(rf, rc, rb)
