@@ -710,3 +710,99 @@ def test_a_windows_knots_are_the_clamped_breakpoints():
     assert nb > 20
     for j0, j1 in [(0, 7), (0, nb + 7), (5, 30), (nb, nb + 7), (nb - 2, nb + 7), (3, 4), (0, 1)]:
         assert_allclose(b._knot_slice(j0, j1), full[j0:j1], rtol=0, atol=0)
+
+
+def _collocation_numpy(b, br, n_per, share):
+    """``FeedProfileBuilder._collocation`` as numpy computed it before the kernel."""
+    u = np.arange(n_per) / n_per
+    x = np.concatenate(((br[:-1, None] + np.diff(br)[:, None] * u[None, :]).ravel(), br[-1:]))
+    q1, q2, q3 = b.derivs(x)
+    parts = [(x, q1, q2, q3)]
+    P = b.peaks
+    p0, p1 = int(np.searchsorted(P, x[0], side="right")), int(np.searchsorted(P, x[-1], side="left"))
+    if p1 > p0:
+        g = b._jerk_share(q3)
+        xp = P[p0:p1]
+        i = np.searchsorted(x, xp)
+        xp = xp[b.peak_g[p0:p1] > share * np.maximum(g[i - 1], g[i])]
+        parts.append((xp, *b.derivs(xp)))
+    J = b.joins
+    xj = J[(J > x[0]) & (J < x[-1])]
+    k = [np.empty((xj.shape[0], b.n)) for _ in range(4)]
+    FK.join_derivs(b.S, b.C, xj, *k)
+    parts += [(xj, k[0], k[1], k[2]), (xj, k[0], k[1], k[3])]
+    x, q1, q2, q3 = (np.concatenate(u) for u in zip(*parts))
+    order = np.argsort(x, kind="stable")
+    return x[order], q1[order], q2[order], q3[order]
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_a_windows_compiled_bookkeeping_is_numpys_arithmetic(seed):
+    """The window's collocation points (``collocation``: the grid, the peaks of q_sss
+    above the points either side, both sides of each join, merged in order), the knot
+    placement's breakpoints (``knot_breaks``), the bound on w (``wmax_of``), the LP's
+    objective (``lp_objective``) and its solution's time (``lp_profile_time``), as numpy
+    computes them (bit for bit but for sums numpy orders its own way), on curves of
+    several segments."""
+    from cnc_interp.plan.feedprofile import FeedProfileBuilder
+    from cnc_interp.plan.vpop import JointTable
+
+    from ._vpop_paths import random_curve
+
+    rng = np.random.default_rng(70 + seed)
+    p = hermite_path(random_curve(rng, scale=15.0), 6, float(rng.uniform(40, 300)))
+    b = FeedProfileBuilder(JointTable(p, None), p, MILL, 0.001)
+    b._breaks_upto(80)
+    assert b.joins.size >= 3 and b.peaks.size >= 3
+    br = np.asarray(b._br[: min(60, len(b._br))])
+    lim = FK.AxisLimits(b.moving, b.amax, b.jmax)
+    for n_per, share in ((3, 1.0), (2, 0.7), (4, 1.3)):
+        got = FK.collocation(b.S, b.C, br, n_per, b.peaks, b.peak_g, share, b.joins, lim)
+        want = _collocation_numpy(b, br, n_per, share)
+        assert all(np.array_equal(g, w) for g, w in zip(got, want))
+        assert np.sum(np.isin(got[0], b.joins)) == 2 * np.sum((b.joins > br[0]) & (b.joins < br[-1]))
+    # the breakpoints where the integral of 1 / h crosses an integer
+    probe = np.sort(rng.uniform(0.0, 50.0, 300))
+    h = rng.uniform(0.05, 2.0, 300)
+    dens = 1.0 / h
+    for cum0 in (0.0, 3.7, 12.0):
+        cum = cum0 + np.concatenate(([0.0], np.cumsum(0.5 * (dens[1:] + dens[:-1]) * np.diff(probe))))
+        marks = np.arange(np.floor(cum0) + 1.0, np.floor(cum[-1]) + 1.0)
+        want = [v for v in np.interp(marks, cum, probe) if 0.0 < v < 40.0]
+        got, end = FK.knot_breaks(probe, h, cum0, 40.0)
+        assert got.tolist() == want and end == cum[-1] and len(want) > 10
+    # the bound on w: axis speeds and the feed's step function
+    x, q1, q2, q3 = _collocation_numpy(b, br, 3, 1.0)
+    q1[::7, 0] = 0.0  # an axis at rest at some points
+    want = np.minimum(
+        np.min(np.where(np.abs(q1) > 0, (b.vmax / np.where(q1 != 0, np.abs(q1), 1.0)) ** 2, np.inf), axis=1),
+        b.feed_at(x) ** 2,
+    )
+    assert np.array_equal(b.wmax_at(x, q1), want)
+    # the objective and the solution's time
+    nc = len(br) + 2
+    tk = np.concatenate(([br[0]] * 3, br, [br[-1]] * 3))
+    first = np.empty(x.shape[0], dtype=np.int64)
+    B = np.empty((x.shape[0], 3, 4))
+    FK.cubic_basis(tk, nc, x, first, B)
+    cols = first[:, None] + np.arange(4)
+    scale = rng.uniform(0.5, 2.0, nc)
+    free = rng.uniform(size=nc) < 0.8
+    wts = rng.uniform(0.1, 3.0, x.shape[0])
+    want_c = np.bincount(cols.ravel(), weights=-(wts[:, None] * B[:, 0, :] * scale[cols]).ravel(), minlength=nc)
+    want_c[~free] = 0.0
+    want_c /= np.max(np.abs(want_c))
+    c = np.empty(nc)
+    FK.lp_objective(first, B, scale, wts, free, c)
+    assert np.array_equal(c, want_c)
+    xv, cfix = rng.uniform(0.0, 500.0, nc), rng.uniform(0.0, 500.0, nc)
+    coef, w_hat = np.empty(nc), np.empty(x.shape[0])
+    finite, T = FK.lp_profile_time(first, B, xv, scale, free, cfix, x, 1e-3, coef, w_hat)
+    want_coef = np.where(free, xv * scale, cfix)
+    w = np.maximum(np.einsum("kj,kj->k", B[:, 0, :], want_coef[cols]), 0.0)
+    v = np.sqrt(w)
+    assert finite and np.array_equal(coef, want_coef)
+    assert_allclose(w_hat, np.maximum(w, 1e-3), rtol=1e-14)  # (einsum's order of the sum is its own)
+    assert_allclose(T, np.sum(2.0 * np.diff(x) / np.maximum(v[1:] + v[:-1], 1e-300)), rtol=1e-13)
+    xv[3] = np.nan
+    assert not FK.lp_profile_time(first, B, xv, scale, free, cfix, x, 1e-3, coef, w_hat)[0]

@@ -221,6 +221,96 @@ def wmax_of(x, q1, vmax, feed_breaks, feed_values, out):
         out[k] = _nan_min(wv, f * f)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _copy_point(x, q1, q2, q3, k, xv, p1, p2, p3, i):
+    """Point k of (x, q1, q2, q3) from point i of (p1, p2, p3) at xv."""
+    x[k] = xv
+    for a in range(q1.shape[1]):
+        q1[k, a] = p1[i, a]
+        q2[k, a] = p2[i, a]
+        q3[k, a] = p3[i, a]
+
+
+@njit(cache=True, nogil=True)
+def collocation(S, C, br, n_per, peaks, peak_g, share, joins, lim):
+    """A window's collocation points and the joint derivatives there (see
+    ``feedprofile.FeedProfileBuilder._collocation``): ``n_per`` points per interval of
+    the breakpoints br (K0,) and the last breakpoint; the path's q_sss peaks (sorted
+    ``peaks`` (P,), max_i |q_sss,i| / J_i there ``peak_g``) inside, where that exceeds
+    ``share`` times the points' either side; each segment join inside twice, with the
+    third derivative from the left and then from the right. Returns x (K,) sorted (equal
+    points in that order) and q_s, q_ss, q_sss (K, n)."""
+    n = C.shape[2]
+    kg = (br.shape[0] - 1) * n_per + 1
+    xg = np.empty(kg)
+    for i in range(br.shape[0] - 1):
+        h = br[i + 1] - br[i]
+        for j in range(n_per):
+            xg[i * n_per + j] = br[i] + h * (j / n_per)
+    xg[kg - 1] = br[br.shape[0] - 1]
+    g1 = np.empty((kg, n))
+    g2 = np.empty((kg, n))
+    g3 = np.empty((kg, n))
+    table_derivs(S, C, xg, g1, g2, g3)
+    # the peaks of q_sss above the points either side (x[i - 1] < xp <= x[i])
+    p0 = np.searchsorted(peaks, xg[0], side="right")
+    p1 = np.searchsorted(peaks, xg[kg - 1], side="left")
+    xp = np.empty(max(p1 - p0, 0))
+    npk = 0
+    if p1 > p0:
+        g = np.empty(kg)
+        for k in range(kg):
+            v = 0.0
+            for a in range(n):
+                if lim.moving[a]:
+                    v = _nan_max(v, abs(g3[k, a]) / lim.jmax[a])
+            g[k] = v
+        for r in range(p0, p1):
+            i = np.searchsorted(xg, peaks[r], side="left")
+            if peak_g[r] > share * _nan_max(g[i - 1], g[i]):
+                xp[npk] = peaks[r]
+                npk += 1
+    xp = xp[:npk]
+    e1 = np.empty((npk, n))
+    e2 = np.empty((npk, n))
+    e3 = np.empty((npk, n))
+    table_derivs(S, C, xp, e1, e2, e3)
+    i0 = np.searchsorted(joins, xg[0], side="right")
+    i1 = np.searchsorted(joins, xg[kg - 1], side="left")
+    xj = joins[i0:i1] if i1 > i0 else joins[:0]
+    nj = xj.shape[0]
+    j1 = np.empty((nj, n))
+    j2 = np.empty((nj, n))
+    j3l = np.empty((nj, n))
+    j3r = np.empty((nj, n))
+    join_derivs(S, C, xj, j1, j2, j3l, j3r)
+    # merge the three sorted sets; equal points: grid, peak, join (left, right)
+    K = kg + npk + 2 * nj
+    x = np.empty(K)
+    q1 = np.empty((K, n))
+    q2 = np.empty((K, n))
+    q3 = np.empty((K, n))
+    k = 0
+    a = 0
+    b = 0
+    c = 0
+    while k < K:
+        if a < kg and (b == npk or xg[a] <= xp[b]) and (c == nj or xg[a] <= xj[c]):
+            _copy_point(x, q1, q2, q3, k, xg[a], g1, g2, g3, a)
+            a += 1
+            k += 1
+        elif b < npk and (c == nj or xp[b] <= xj[c]):
+            _copy_point(x, q1, q2, q3, k, xp[b], e1, e2, e3, b)
+            b += 1
+            k += 1
+        else:
+            _copy_point(x, q1, q2, q3, k, xj[c], j1, j2, j3l, c)
+            _copy_point(x, q1, q2, q3, k + 1, xj[c], j1, j2, j3r, c)
+            c += 1
+            k += 2
+    return x, q1, q2, q3
+
+
 @njit(cache=True, nogil=True)
 def join_derivs(S, C, xj, q1, q2, q3l, q3r):
     """At table knots xj (sorted, interior): q_s, q_ss (continuous there) and the third
@@ -664,6 +754,32 @@ def feasible_hat(p, dp, ddp, q1, q2, q3, lim, target, floor, bound, bisections, 
             else:
                 bad_u = u
         out[k] = ok_u * ok_u
+
+
+@njit(cache=True, nogil=True)
+def knot_breaks(probe, h, cum0, L):
+    """The breakpoints of a block of the knot placement: where the integral of 1 / h
+    (the knot spacing wanted at the probes (K,), by the trapezoid rule) crosses an
+    integer, counted on from ``cum0`` (the integral before the block), strictly inside
+    (0, L). Returns (breakpoints, the integral at the block's end)."""
+    K = probe.shape[0]
+    cum = np.empty(K)
+    cum[0] = cum0
+    acc = 0.0
+    for k in range(1, K):
+        acc += (0.5 * (1.0 / h[k] + 1.0 / h[k - 1])) * (probe[k] - probe[k - 1])
+        cum[k] = cum0 + acc
+    lo = np.floor(cum0) + 1.0
+    hi = np.floor(cum[K - 1]) + 1.0
+    marks = np.arange(lo, hi) if hi > lo else np.empty(0)
+    x = np.interp(marks, cum, probe)
+    out = np.empty(x.shape[0])
+    j = 0
+    for v in x:
+        if 0.0 < v < L:
+            out[j] = v
+            j += 1
+    return out[:j], cum[K - 1]
 
 
 @njit(cache=True, nogil=True, inline="always")

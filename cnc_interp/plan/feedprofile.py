@@ -403,11 +403,8 @@ class FeedProfileBuilder:
             p2 = min(p1 + FEED_KNOT_BLOCK, m)
             probe, w, h, *known = K.knot_probes(S, self.C, self._est_in, kin, p0, p1, p2, *carry, *known)
             carry = (float(probe[-1]), float(w[-1]))
-            dens = 1.0 / h
-            cum = cum0 + np.concatenate(([0.0], np.cumsum(0.5 * (dens[1:] + dens[:-1]) * np.diff(probe))))
-            marks = np.arange(np.floor(cum0) + 1.0, np.floor(cum[-1]) + 1.0)
-            br = [float(v) for v in np.interp(marks, cum, probe) if 0.0 < v < L] if marks.size else []
-            cum0 = float(cum[-1])
+            brk, cum0 = K.knot_breaks(probe, h, cum0, L)
+            br = brk.tolist()
             yield br, probe, w, p1 == m
             if p1 == m:
                 return
@@ -492,41 +489,15 @@ class FeedProfileBuilder:
             self._ex, self._ew = self._ex[i:], self._ew[i:]
 
     def _collocation(self, b0, b1):
+        """The collocation points of the window [b0, b1] and the joint derivatives there
+        (``_feed_kernels.collocation``): FEED_COLLOCATION per knot interval, the points
+        where q_sss peaks (FEED_PEAK_SHARE) and both sides of each segment join. Returns
+        x (K,) and q1, q2, q3 (K, n)."""
         br = np.asarray(self._br[b0 : b1 + 1])
-        u = np.arange(FEED_COLLOCATION) / FEED_COLLOCATION
-        x = (br[:-1, None] + np.diff(br)[:, None] * u[None, :]).ravel()
-        x = np.concatenate((x, br[-1:]))
-        q1, q2, q3 = self.derivs(x)
-        parts = [(x, q1, q2, q3)]
-        # where the path's q_sss peaks between them: a point of its own (FEED_PEAK_SHARE)
-        P = self.peaks
-        p0 = int(np.searchsorted(P, x[0], side="right"))
-        p1 = int(np.searchsorted(P, x[-1], side="left"))
-        if p1 > p0:
-            g = self._jerk_share(q3)
-            xp = P[p0:p1]
-            i = np.searchsorted(x, xp)  # x[i - 1] < xp <= x[i]
-            xp = xp[self.peak_g[p0:p1] > (1.0 + FEED_PEAK_SHARE) * np.maximum(g[i - 1], g[i])]
-            if xp.size:
-                parts.append((xp, *self.derivs(xp)))
-        # segment joins: both one-sided third derivatives (duplicated points)
-        J = self.joins
-        i0 = int(np.searchsorted(J, x[0], side="right"))
-        i1 = int(np.searchsorted(J, x[-1], side="left"))
-        if i1 > i0:
-            xj = J[i0:i1]
-            nk = xj.shape[0]
-            k1 = np.empty((nk, self.n))
-            k2 = np.empty_like(k1)
-            k3l = np.empty_like(k1)
-            k3r = np.empty_like(k1)
-            K.join_derivs(self.S, self.C, xj, k1, k2, k3l, k3r)
-            parts += [(xj, k1, k2, k3l), (xj, k1, k2, k3r)]
-        if len(parts) > 1:
-            x, q1, q2, q3 = (np.concatenate(u) for u in zip(*parts))
-            order = np.argsort(x, kind="stable")
-            x, q1, q2, q3 = x[order], q1[order], q2[order], q3[order]
-        return x, np.ascontiguousarray(q1), np.ascontiguousarray(q2), np.ascontiguousarray(q3)
+        limits = K.AxisLimits(self.moving, self.amax, self.jmax)
+        return K.collocation(
+            self.S, self.C, br, FEED_COLLOCATION, self.peaks, self.peak_g, 1.0 + FEED_PEAK_SHARE, self.joins, limits
+        )
 
     def _ratio(self, tk, coef, b0, bc) -> float:
         """The median ratio of the solution (knots ``tk``, ``coef``) to the estimate at the
