@@ -593,7 +593,8 @@ def test_a_profile_that_only_dipped_is_planned_with_one_knot_spacing(monkeypatch
 
 def test_vpop_plans_a_path_for_comparison_only_where_it_took_over_early():
     # after VPOp takes the profile's plan over, the plan is VPOp's own: its whole plan
-    # can only win where the hand-over came early (OPT_COMPARE_BEFORE of the samples)
+    # can only win where the hand-over came early (OPT_COMPARE_BEFORE of the samples),
+    # but not so early that the profile's part is a mere start (OPT_COMPARE_AFTER)
     from types import SimpleNamespace
 
     import cnc_interp.plan.optimal as optimal
@@ -601,8 +602,10 @@ def test_vpop_plans_a_path_for_comparison_only_where_it_took_over_early():
     ctx = SimpleNamespace(dt=0.001, stats={})
     n = 10_000
     assert not optimal._vpop_may_win(ctx, n)  # the profile reached the end
-    share = optimal.OPT_COMPARE_BEFORE
-    for handover, want in ((0, True), (int(share * n) - 1, True), (int(share * n) + 1, False), (n - 100, False)):
+    share, least = optimal.OPT_COMPARE_BEFORE, optimal.OPT_COMPARE_AFTER
+    assert 0.0 < least < share
+    cases = ((0, False), (int(least * n) - 1, False), (int(least * n), True), (int(share * n) - 1, True))
+    for handover, want in (*cases, (int(share * n) + 1, False), (n - 100, False)):
         ctx.stats["handover"] = handover
         assert optimal._vpop_may_win(ctx, n) is want, handover
 
@@ -713,6 +716,21 @@ def test_vpop_is_kept_where_its_first_seconds_run_ahead_of_the_profile(monkeypat
     monkeypatch.setattr(optimal, "OPT_PROBE_AHEAD", np.inf)  # no probe: the profile's plan
     kept = plan_path_optimal(path, None, m, m.dt_s, settings)
     assert kept.stats["kept"] == "profile" and periods(kept) > 1.03 * periods(plan)
+
+
+@needs_corpus
+def test_a_probe_decided_early_keeps_vpops_plan_without_the_profiles_rest(monkeypatch):
+    # the same trochoid: VPOp's lead over its first OPT_PROBE_S is decided once the
+    # profile's plan is OPT_PROBE_MIN_S long (OPT_PROBE_EARLY), and the profile's rest is
+    # not planned; the plan is the one kept after planning the profile to its end
+    from cnc_interp.plan import optimal
+
+    m, path, settings, plan = _trochoid_planned()
+    monkeypatch.setattr(optimal, "OPT_PROBE_EARLY", False)
+    late = plan_path_optimal(path, None, m, m.dt_s, settings)
+    assert late.stats["kept"] == plan.stats["kept"] == "vpop"
+    assert late.s.tobytes() == plan.s.tobytes() and late.q.tobytes() == plan.q.tobytes()
+    assert plan.stats["lp_iterations"] < 0.9 * late.stats["lp_iterations"]  # 949 against 1,113
 
 
 def _fifty_turns():

@@ -112,6 +112,13 @@ OPT_COMPARE_TAIL_S = 0.3
 #: 334 paths handed over before half their plan, by 1,167 periods, and on 1 of the 871
 #: handed over later, by 1 period; those runs cost ~8 % of the fast effort's CPU there)
 OPT_COMPARE_BEFORE = 0.5
+#: ... and after this share: a plan handed over within its first 5 % is VPOp's own but
+#: for its start, and VPOp's plan from the start gains little more than that start could.
+#: Over the axis_mm.ini sweep (fast) three paths were handed over that soon; VPOp's plans
+#: of them were longer (13,606 against 13,594 samples on stellabee1, 59,412 and 118,387
+#: against 59,409 and 118,379 on trochoidal), and planning them again cost 191k VPOp
+#: samples, about 2 of trochoidal's 7 planning CPU-s
+OPT_COMPARE_AFTER = 0.05
 #: ... or when the profile's plan reached its end through at least this many dips (each
 #: lowers the reference around a stuck place). Over the axis_mm.ini sweep (fast) VPOp's
 #: plan was shorter on 11 of the 3,199 paths with dips, by 2,051 periods, 1,847 of them on
@@ -133,6 +140,13 @@ OPT_COMPARE_DIPS = 50
 OPT_PROBE_S = 2.0
 OPT_PROBE_MIN_S = 20.0
 OPT_PROBE_AHEAD = 0.01
+#: decide the probe as soon as the profile's plan is OPT_PROBE_MIN_S long and past the
+#: probe's arc length (``_profile_unless_vpop_ahead``), and when VPOp is ahead keep its
+#: plan without planning the profile's rest. Over the axis_mm.ini sweep VPOp was ahead
+#: on two paths (trochoidal's, at fast and normal) and its plan won both at the end
+#: (92,368 and 92,385 samples against 93,881 and 93,893 at fast); the profile's rest of
+#: them cost ~1 of trochoidal's 7 planning CPU-s
+OPT_PROBE_EARLY = True
 #: a profile-routed path lasting at least this long (at its static limits, s) is profiled and
 #: sampled by a thread of its own ahead of its refinement (``prefetch.Prefetch``: the two
 #: stages on two cores; the samples do not depend on it): a long path is otherwise one
@@ -828,10 +842,15 @@ def _better_of(ctx, stage, passes, targeted):
     from .feedprofile import FEED_KNOT_TIME_S
 
     try:
-        blocks: list | None = list(stage)
+        blocks, vpop_ahead = _profile_unless_vpop_ahead(ctx, stage)
         failed = None
     except _Fallback as why:
-        blocks, failed = None, why
+        blocks, failed, vpop_ahead = None, why, False
+    if vpop_ahead:
+        # VPOp's plan is kept without the profile's rest (OPT_PROBE_EARLY)
+        ctx.stats["kept"] = "vpop"
+        yield from _vpop_plan(ctx, passes, targeted)
+        return
     # where the profile's tracking gave up early (VPOp took over before the last stop, or
     # nothing planned), its outcome moves by up to ±15 % with the knot spacing: a second
     # spacing is the hedge (a profile that reached the end is kept: the second plan would
@@ -872,10 +891,7 @@ def _better_of(ctx, stage, passes, targeted):
         ctx.stats["kept"] = "profile"
         yield s, q
         return
-    alt = _vpop_stage(ctx, None)
-    for _ in range(passes if not targeted else 0):
-        alt = _refined(ctx, alt, targeted)
-    alt = list(alt)
+    alt = list(_vpop_plan(ctx, passes, targeted))
     sv = np.concatenate([b[0] for b in alt])
     if sv.shape[0] < s.shape[0]:
         ctx.stats["kept"] = "vpop"
@@ -883,6 +899,40 @@ def _better_of(ctx, stage, passes, targeted):
     else:
         ctx.stats["kept"] = "profile"
         yield s, q
+
+
+def _vpop_plan(ctx, passes, targeted):
+    """VPOp's whole plan of the path to compare with the profile's: (s, q) blocks, refined
+    by ``passes`` where the refinement is not targeted."""
+    alt = _vpop_stage(ctx, None)
+    for _ in range(passes if not targeted else 0):
+        alt = _refined(ctx, alt, targeted)
+    return alt
+
+
+def _profile_unless_vpop_ahead(ctx, stage):
+    """The profile's (s, q) blocks from ``stage`` and False; or, with OPT_PROBE_EARLY,
+    those up to where VPOp's probe is decided ahead and True (``stage`` is closed, the
+    rest not planned). The test is ``_vpop_ahead``'s, made on the first
+    OPT_PROBE_MIN_S of the plan once they reach past the probe: the plan is then at least
+    that long and its first samples are those the test reads at its end."""
+    blocks: list = []
+    need = int(np.ceil(OPT_PROBE_MIN_S / ctx.dt))
+    count = 0
+    undecided = OPT_PROBE_EARLY
+    for block in stage:
+        blocks.append(block)
+        count += block[0].shape[0]
+        if undecided and count >= need:
+            progress = _probe_progress(ctx)
+            if progress is None:
+                undecided = False
+            elif float(block[0][-1]) >= progress[1]:
+                undecided = False
+                if _vpop_ahead(ctx, np.concatenate([b[0] for b in blocks])):
+                    stage.close()
+                    return blocks, True
+    return blocks, False
 
 
 def _vpop_ahead(ctx, s) -> bool:
@@ -927,12 +977,13 @@ def _probe_progress(ctx):
 
 def _vpop_may_win(ctx, n_samples: int) -> bool:
     """Is VPOp's own plan worth making for comparison with the profile's plan of
-    ``n_samples``: did VPOp take it over early (``_handed_over_early``), before
-    OPT_COMPARE_BEFORE of its samples, or did the profile need OPT_COMPARE_DIPS dips?"""
+    ``n_samples``: did VPOp take it over early (``_handed_over_early``), after
+    OPT_COMPARE_AFTER and before OPT_COMPARE_BEFORE of its samples, or did the profile
+    need OPT_COMPARE_DIPS dips?"""
     if int(ctx.stats.get("retries", 0)) >= OPT_COMPARE_DIPS:
         return True
     ho = int(ctx.stats.get("handover", -1))
-    return _handed_over_early(ctx, n_samples) and ho < OPT_COMPARE_BEFORE * n_samples
+    return _handed_over_early(ctx, n_samples) and OPT_COMPARE_AFTER * n_samples <= ho < OPT_COMPARE_BEFORE * n_samples
 
 
 def _handed_over_early(ctx, n_samples: int) -> bool:
