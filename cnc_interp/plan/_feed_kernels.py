@@ -221,6 +221,17 @@ def wmax_of(x, q1, vmax, feed_breaks, feed_values, out):
         out[k] = _nan_min(wv, f * f)
 
 
+@njit(cache=True, nogil=True)
+def _derivs_at(S, C, x):
+    """``table_derivs`` at sorted x (K,) into new arrays (K, n)."""
+    n = C.shape[2]
+    q1 = np.empty((x.shape[0], n))
+    q2 = np.empty((x.shape[0], n))
+    q3 = np.empty((x.shape[0], n))
+    table_derivs(S, C, x, q1, q2, q3)
+    return q1, q2, q3
+
+
 @njit(cache=True, nogil=True, inline="always")
 def _copy_point(x, q1, q2, q3, k, xv, p1, p2, p3, i):
     """Point k of (x, q1, q2, q3) from point i of (p1, p2, p3) at xv."""
@@ -248,10 +259,7 @@ def collocation(S, C, br, n_per, peaks, peak_g, share, joins, lim):
         for j in range(n_per):
             xg[i * n_per + j] = br[i] + h * (j / n_per)
     xg[kg - 1] = br[br.shape[0] - 1]
-    g1 = np.empty((kg, n))
-    g2 = np.empty((kg, n))
-    g3 = np.empty((kg, n))
-    table_derivs(S, C, xg, g1, g2, g3)
+    g1, g2, g3 = _derivs_at(S, C, xg)
     # the peaks of q_sss above the points either side (x[i - 1] < xp <= x[i])
     p0 = np.searchsorted(peaks, xg[0], side="right")
     p1 = np.searchsorted(peaks, xg[kg - 1], side="left")
@@ -271,10 +279,7 @@ def collocation(S, C, br, n_per, peaks, peak_g, share, joins, lim):
                 xp[npk] = peaks[r]
                 npk += 1
     xp = xp[:npk]
-    e1 = np.empty((npk, n))
-    e2 = np.empty((npk, n))
-    e3 = np.empty((npk, n))
-    table_derivs(S, C, xp, e1, e2, e3)
+    e1, e2, e3 = _derivs_at(S, C, xp)
     i0 = np.searchsorted(joins, xg[0], side="right")
     i1 = np.searchsorted(joins, xg[kg - 1], side="left")
     xj = joins[i0:i1] if i1 > i0 else joins[:0]
