@@ -761,10 +761,12 @@ def test_a_probe_that_finds_the_profile_ahead_stops_vpop_after_its_first_seconds
     assert optimal.OPT_PROBE_S / DT <= sum(counted) < 0.5 * periods(plan)
 
 
-def test_a_long_paths_windows_solved_in_a_thread_of_their_own_give_the_same_samples(monkeypatch):
-    # at effort fast a long path's windows are solved by a thread ahead of the sampling,
-    # and VPOp's probe runs meanwhile; the samples, stats and probe are those of one
-    # thread (the 50-turn circle of the probe test: 22 s, probed, the profile kept)
+@pytest.mark.parametrize("turns", [50.0, 12.0])
+def test_a_long_paths_windows_solved_in_a_thread_of_their_own_give_the_same_samples(monkeypatch, turns):
+    # at effort fast a path's windows are solved by a thread ahead of the sampling from
+    # OPT_FEED_AHEAD_S on, and a whole path's VPOp probe runs meanwhile; the samples,
+    # stats and probe are those of one thread (the 50-turn circle of the probe test: 22 s,
+    # probed, the profile kept; 12 turns: ~5 s, under OPT_AHEAD_S, not probed)
     from cnc_interp.plan import optimal, prefetch
 
     threads = []
@@ -775,17 +777,22 @@ def test_a_long_paths_windows_solved_in_a_thread_of_their_own_give_the_same_samp
         init(self, *args, **kwargs)
 
     monkeypatch.setattr(prefetch.Prefetch, "__init__", counting)
-    path = _fifty_turns()
+    path = hermite_path(circle_fun(10.0, turns=turns), int(16 * turns), 1000.0)
     fast = PlanSettings(planner="optimal", optimal=OptimalOptions(effort="fast"))
     plans = {}
-    for ahead_s in (optimal.OPT_AHEAD_S, np.inf):
-        monkeypatch.setattr(optimal, "OPT_AHEAD_S", ahead_s)
+    least = optimal.OPT_FEED_AHEAD_S
+    for ahead_s in (least, np.inf):
+        monkeypatch.setattr(optimal, "OPT_FEED_AHEAD_S", ahead_s)
         plans[ahead_s] = plan_path_optimal(path, None, MILL, DT, fast)
     assert threads == ["cnc-interp-feed"]  # the first plan only
-    threaded, alone = plans[optimal.OPT_AHEAD_S], plans[np.inf]
+    threaded, alone = plans[least], plans[np.inf]
     check(threaded, MILL, path.start, path.end, DT)
     assert threaded.s.tobytes() == alone.s.tobytes() and threaded.q.tobytes() == alone.q.tobytes()
-    assert threaded.stats == alone.stats and threaded.stats["probe"] == "profile"
+    assert threaded.stats == alone.stats
+    if turns == 50.0:
+        assert threaded.stats["probe"] == "profile"
+    else:
+        assert least * 1.2 < periods(threaded) * DT < optimal.OPT_AHEAD_S and "probe" not in threaded.stats
 
 
 # -- the paths routed to VPOp go through VPOp's compiled batch ------------------------

@@ -155,6 +155,14 @@ OPT_PROBE_EARLY = True
 #: of many (stellabee1 whole: 5:02 wall and 529 user-s with no thread, 5:39 and 582 with
 #: 1 s here, 5:20 and 551 with 10 s)
 OPT_AHEAD_S = 10.0
+#: ... and, without refinement (effort fast), its LP windows are solved by a thread ahead
+#: of its sampling from this long on, s: the sampling is lighter than a refinement, and a
+#: path of a few seconds was one core's work (arceye-circle-slowdown, one 9.6 s path, the
+#: corpus's slowest at fast after the zigzag: 132 -> 149x and 127 -> 144x real time in two
+#: pairs of sweeps). The axis_mm.ini sweep at fast, 3 s against 10 s: 66.1 against 68.3 s of
+#: planning, then 70.0 against 68.2 s (124.3 / 129.7, then 131.2 / 129.7 CPU-s): the same
+#: within this machine's noise
+OPT_FEED_AHEAD_S = 3.0
 #: ... and that thread runs at most this many sampled blocks ahead
 OPT_AHEAD_BLOCKS = 8
 #: without refinement (effort fast) the thread solves the profile's windows instead, at
@@ -797,7 +805,7 @@ def _iter(path, joint_map, machine, dt_s, settings, stats, window):
     passes = _refine_passes(opts, dt, route)
     limit_s = float(_or(opts.compare_s, OPT_COMPARE_SAMPLES * dt))
     ctx.whole = route == "profile" and ctx.rough_s <= limit_s
-    long_path = route == "profile" and ctx.duration_s >= OPT_AHEAD_S
+    long_path = route == "profile" and ctx.duration_s >= (OPT_AHEAD_S if passes else OPT_FEED_AHEAD_S)
     # a long path's second thread: the profile's windows ahead of the sampling without
     # refinement, else the profile and its sampling ahead of the refinement
     stage = _sampled(ctx, ahead=long_path and not passes) if route == "profile" else _vpop_stage(ctx, window)
