@@ -155,18 +155,17 @@ OPT_PROBE_EARLY = True
 #: of many (stellabee1 whole: 5:02 wall and 529 user-s with no thread, 5:39 and 582 with
 #: 1 s here, 5:20 and 551 with 10 s)
 OPT_AHEAD_S = 10.0
-#: ... and, without refinement (effort fast), its LP windows are solved by a thread ahead
-#: of its sampling from this long on, s: the sampling is lighter than a refinement, and a
-#: path of a few seconds was one core's work (arceye-circle-slowdown, one 9.6 s path, the
-#: corpus's slowest at fast after the zigzag: 132 -> 149x and 127 -> 144x real time in two
-#: pairs of sweeps). The axis_mm.ini sweep at fast, 3 s against 10 s: 66.1 against 68.3 s of
-#: planning, then 70.0 against 68.2 s (124.3 / 129.7, then 131.2 / 129.7 CPU-s): the same
-#: within this machine's noise
-OPT_FEED_AHEAD_S = 3.0
 #: ... and that thread runs at most this many sampled blocks ahead
 OPT_AHEAD_BLOCKS = 8
-#: without refinement (effort fast) the thread solves the profile's windows instead, at
-#: most this many pieces ahead of the sampling (a piece is FEED_COMMIT_S of motion), and
+#: without refinement (effort fast) a profile-routed path's LP windows are solved by a
+#: thread ahead of its sampling from this long on (at its static limits), s: the sampling
+#: is lighter than a refinement, and a path of a few seconds was one core's work
+#: (arceye-circle-slowdown, one 9.6 s path, the corpus's slowest at fast after the
+#: zigzag: 132 -> 149x and 127 -> 144x real time in two pairs of sweeps). The axis_mm.ini
+#: sweep at fast, 3 s against 10 s: 66.1 against 68.3 s of planning, then 70.0 against
+#: 68.2 s (124.3 / 129.7, then 131.2 / 129.7 CPU-s): the same within this machine's noise
+OPT_FEED_AHEAD_S = 3.0
+#: ... at most this many pieces ahead of the sampling (a piece is FEED_COMMIT_S of motion), and
 #: a whole path's VPOp probe (OPT_PROBE_*) runs meanwhile. zigzag_0.002_0.001 (axis_mm.ini,
 #: one 114 s path), the same process alternating: 1.149 -> 1.064 s of planning (median
 #: of 10) with the thread, 1.281 -> 1.080 s with the probe as well (the solver's thread
