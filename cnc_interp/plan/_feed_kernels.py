@@ -202,23 +202,51 @@ def lp_rows(pts, lim, wmax, w_hat, inner, scale, rows):
     return r
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _axis_speed2(q1, k, vmax):
+    """min over the axes with q_s != 0 of (vmax / |q_s|)² at point k of q1 (K, n): the
+    bound the axis speeds put on w = ṡ²."""
+    wv = np.inf
+    for a in range(q1.shape[1]):
+        g1 = abs(q1[k, a])
+        if g1 > 0.0:
+            v = vmax[a] / g1
+            wv = min(wv, v * v)
+    return wv
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _feed_at(xk, feed_breaks, feed_values):
+    """The programmed feed (mm/s) at arc length xk: a step function, ``feed_values``
+    over ``feed_breaks``."""
+    i = np.searchsorted(feed_breaks, xk, side="right") - 1
+    return feed_values[min(max(i, 0), feed_values.shape[0] - 1)]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _jerk_share_at(q3, k, lim):
+    """max over the moving axes of |q_sss| / J at point k of q3 (K, n)."""
+    v = 0.0
+    for a in range(q3.shape[1]):
+        if lim.moving[a]:
+            v = _nan_max(v, abs(q3[k, a]) / lim.jmax[a])
+    return v
+
+
+@njit(cache=True, nogil=True)
+def jerk_shares(q3, lim, out):
+    """``_jerk_share_at`` at every point of q3 (K, n) into ``out`` (K,)."""
+    for k in range(q3.shape[0]):
+        out[k] = _jerk_share_at(q3, k, lim)
+
+
 @njit(cache=True, nogil=True)
 def wmax_of(x, q1, vmax, feed_breaks, feed_values, out):
     """The bound on w = ṡ² at sorted arc lengths x (K,) with joint tangents q1 (K, n):
-    min over the axes with q_s != 0 of (vmax / |q_s|)² and the segment's feed² (a step
-    function: ``feed_values`` over ``feed_breaks``), into ``out`` (K,)."""
-    nf = feed_values.shape[0]
+    the axis speeds' (``_axis_speed2``) and the segment's feed², into ``out`` (K,)."""
     for k in range(x.shape[0]):
-        wv = np.inf
-        for i in range(q1.shape[1]):
-            a = abs(q1[k, i])
-            if a > 0.0:
-                v = vmax[i] / a
-                wv = _nan_min(wv, v * v)
-        i = np.searchsorted(feed_breaks, x[k], side="right") - 1
-        i = min(max(i, 0), nf - 1)
-        f = feed_values[i]
-        out[k] = _nan_min(wv, f * f)
+        f = _feed_at(x[k], feed_breaks, feed_values)
+        out[k] = min(_axis_speed2(q1, k, vmax), f * f)
 
 
 @njit(cache=True, nogil=True)
@@ -267,12 +295,7 @@ def collocation(S, C, br, n_per, peaks, peak_g, share, joins, lim):
     npk = 0
     if p1 > p0:
         g = np.empty(kg)
-        for k in range(kg):
-            v = 0.0
-            for a in range(n):
-                if lim.moving[a]:
-                    v = _nan_max(v, abs(g3[k, a]) / lim.jmax[a])
-            g[k] = v
+        jerk_shares(g3, lim, g)
         for r in range(p0, p1):
             i = np.searchsorted(xg, peaks[r], side="left")
             if peak_g[r] > share * _nan_max(g[i - 1], g[i]):
@@ -430,11 +453,8 @@ def point_estimates(S, C, x, inp, out):
     q2 = np.empty((K, n))
     q3 = np.empty((K, n))
     table_derivs(S, C, x, q1, q2, q3)
-    fb = inp.feed_breaks
-    fv = inp.feed_values
-    nf = fv.shape[0]
     for k in range(K):
-        wv = np.inf
+        wv = _axis_speed2(q1, k, inp.vmax)
         wa = np.inf
         wj = np.inf
         k2 = 0.0
@@ -445,19 +465,16 @@ def point_estimates(S, C, x, inp, out):
             g1 = abs(q1[k, a])
             g2 = abs(q2[k, a])
             g3 = abs(q3[k, a])
-            if g1 > 0.0:
-                wv = min(wv, (inp.vmax[a] / g1) ** 2)
-                if g1 > 1e-12:
-                    at = min(at, inp.amax[a] / g1)
-                    jt = min(jt, inp.jmax[a] / g1)
+            if g1 > 1e-12:
+                at = min(at, inp.amax[a] / g1)
+                jt = min(jt, inp.jmax[a] / g1)
             if g2 > 0.0:
                 wa = min(wa, inp.amax[a] / g2)
             if g3 > 0.0:
                 wj = min(wj, (inp.jmax[a] / g3) ** (2.0 / 3.0))
             k2 = max(k2, g2)
             k3 = max(k3, g3)
-        i = min(max(np.searchsorted(fb, x[k], side="right") - 1, 0), nf - 1)
-        f = fv[i]
+        f = _feed_at(x[k], inp.feed_breaks, inp.feed_values)
         w = min(min(wv, f * f), min(inp.acc_f2 * wa, inp.jerk_f2 * wj))
         # the sampled start and stop where they can be below w (within twice the
         # distance the start takes to reach it; beyond, they are far above it)

@@ -280,7 +280,8 @@ class FeedProfileBuilder:
         # where q_sss may peak between collocation points (FEED_PEAK_SHARE; joins are
         # collocated anyway), and max over the moving axes of |q_sss| / J there
         self.peaks = np.setdiff1d(jerk_peak_points(self.S, self.C, self.moving), self.joins)
-        self.peak_g = self._jerk_share(self.derivs(self.peaks)[2])
+        self.peak_g = np.empty(self.peaks.shape[0])
+        K.jerk_shares(self.derivs(self.peaks)[2], K.AxisLimits(self.moving, self.amax, self.jmax), self.peak_g)
         # segment feeds (path s) as a step function
         fb = np.asarray(path.s_breaks, dtype=float).copy()
         fb[-1] = self.L
@@ -333,15 +334,6 @@ class FeedProfileBuilder:
         q3 = np.empty_like(q1)
         K.table_derivs(self.S, self.C, x, q1, q2, q3)
         return q1, q2, q3
-
-    def feed_at(self, x):
-        i = np.clip(np.searchsorted(self.feed_breaks, x, side="right") - 1, 0, self.feed_values.shape[0] - 1)
-        return self.feed_values[i]
-
-    def _jerk_share(self, q3):
-        """max over the moving axes of |q_sss| / J at each row of q3 (K, n)."""
-        mv = self.moving
-        return np.max(np.abs(q3[:, mv]) / self.jmax[mv], axis=1, initial=0.0)
 
     def _tangent_jerk(self, q1row):
         g = np.abs(q1row)
