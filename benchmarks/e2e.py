@@ -139,11 +139,6 @@ def warm_up(machine: str) -> None:
         p = os.path.join(d, "w.ngc")
         with open(p, "w") as fh:
             fh.write("G21 G90\nG0 X1 Y1\nG1 X5 Y3 F600\nG2 X7 Y5 I1 J1\nG1 X5 Z-1\nM2\n")
-        # the first run's background job first (VPOp's batch driver and the batch fitter's
-        # kernels, plan/precompile.py), so that no child is left compiling during the runs
-        subprocess.run(
-            [sys.executable, "-m", "cnc_interp.plan.precompile", "batch"], check=True, stdin=subprocess.DEVNULL
-        )
         subprocess.run(
             [console_script(), "plan", p, "-m", machine, "-o", os.path.join(d, "w.csv"), "-q"],
             check=True,

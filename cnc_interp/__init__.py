@@ -17,7 +17,8 @@ with the public calls in ``api`` (re-exported here) and the command line (``cli`
 top. Importing the package is cheap: the API's names are loaded on first use (PEP 562),
 and nothing heavy (matplotlib, USB, numba) is imported here. It only checks (about
 20 ms) that numba's cached kernels are not older than a module they call
-(``_kernel_cache``).
+(``_kernel_cache``), and asks numba for LLVM optimisation level ``NUMBA_OPT_LEVEL``
+unless ``NUMBA_OPT`` is set or numba is already imported.
 """
 
 __version__ = "0.1.0"
@@ -86,4 +87,20 @@ def _refresh_kernel_cache() -> None:
         pass
 
 
+#: numba's LLVM optimisation level for the package's kernels (``NUMBA_OPT``). Level 1
+#: compiles them in ~12 % less time than numba's default 3 (a first run's ~95 CPU-s) and
+#: the plans are the same bytes; the planners ran no slower at level 1 on the project's
+#: 2-core machine (zigzag_0.002_0.001 and stellabee1)
+NUMBA_OPT_LEVEL = "1"
+
+
+def _numba_opt_level() -> None:
+    import os
+    import sys
+
+    if "numba" not in sys.modules:  # numba reads it once, at its import
+        os.environ.setdefault("NUMBA_OPT", NUMBA_OPT_LEVEL)
+
+
+_numba_opt_level()
 _refresh_kernel_cache()

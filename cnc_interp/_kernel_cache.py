@@ -145,21 +145,7 @@ def _drop_cache(root: str, mod: str, is_pkg: bool) -> bool:
     return dropped
 
 
-#: the compiled modules every plan runs through (the arc-length tables of the fit and the
-#: VPOp planner); the fit's other kernels compile only for the curves that need them
-PLAN_KERNEL_MODULES = (
-    "fit._arclen",
-    "plan._table_kernels",
-    "plan.vpop.step",
-    "plan.vpop.drive",
-)
-#: what compiling them from scratch takes, measured on the project's 2-core machine
-#: (quick-start plan of mill-contour.ngc, idle: 44 s with VPOp's step loop compiled by
-#: a child process, ``plan.precompile``)
-FIRST_COMPILE_ESTIMATE = "about 40 s"
-
-
-def missing_kernels(root: str, modules=PLAN_KERNEL_MODULES) -> list[str]:
+def missing_kernels(root: str, modules) -> list[str]:
     """The ``modules`` (dotted, relative to the package folder ``root``) with no cached
     compiled kernel yet: their first call compiles them."""
     import glob
@@ -171,18 +157,6 @@ def missing_kernels(root: str, modules=PLAN_KERNEL_MODULES) -> list[str]:
         if not glob.glob(os.path.join(glob.escape(folder), f"{name}.*.nbi")):
             out.append(mod)
     return out
-
-
-#: set by ``plan.precompile`` while a child process of its compiles kernels in the
-#: background: a call that says whether it still does (the fit then keeps its Python
-#: fitter rather than compile the same kernels a second time)
-background_check = None
-
-
-def compiling_elsewhere() -> bool:
-    """Whether a child process is compiling the background kernels now."""
-    check = background_check
-    return bool(check is not None and check())
 
 
 def kernel_cached(root: str, module: str, function: str) -> bool:
@@ -216,24 +190,3 @@ def _cache_folder(source_dir: str) -> str:
         return pycache
     xdg = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
     return os.path.join(xdg, "numba", sub)
-
-
-def announce_first_compile(stream=None, root: str | None = None) -> bool:
-    """On a terminal, say once that the kernels will be compiled now (minutes, silently
-    otherwise); nothing in a pipe or a log. Returns whether it spoke."""
-    import sys
-
-    stream = stream or sys.stderr
-    try:
-        if not stream.isatty():
-            return False
-    except (AttributeError, ValueError):
-        return False
-    root = root or os.path.dirname(os.path.abspath(__file__))
-    if not missing_kernels(root):
-        return False
-    stream.write(
-        f"cnc-interp: first run: compiling planner kernels, {FIRST_COMPILE_ESTIMATE} on 2 cores, cached for next time\n"
-    )
-    stream.flush()
-    return True

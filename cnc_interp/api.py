@@ -300,17 +300,20 @@ def run(
 
     from .errors import PlanError, SourceLocation
 
+    from .precompile import ensure
+
     t0 = time.perf_counter()
     m = load_machine(machine).with_start(start)
     program = read_program(source, m, name=name, tool_table=tool_table)
+    plan_tol_mm = tol_mm if plan_settings is None else None
+    settings = _plan_settings(m, planner, dt_s, plan_tol_mm, plan_settings)
+    ensure(settings.planner)  # a first run: the kernels compiled once, on two cores
     t1 = time.perf_counter()
     if fit_settings is None:
         fitted = fit(program, tol_mm, machine=m, method=fit_method)
     else:
         fitted = fit(program, method=fit_method, settings=fit_settings)
     t2 = time.perf_counter()
-    plan_tol_mm = tol_mm if plan_settings is None else None
-    settings = _plan_settings(m, planner, dt_s, plan_tol_mm, plan_settings)
     traj, settings = _plan(fitted, m, settings, progress)
     m = m.with_dt(settings.dt_s)
     t3 = time.perf_counter()

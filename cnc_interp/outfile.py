@@ -257,9 +257,7 @@ def watch_interrupts() -> None:
         _INTERRUPTED.set()
         _thread.interrupt_main()
         time.sleep(INTERRUPT_GRACE_S)
-        precompile = sys.modules.get(f"{__package__}.plan.precompile")
-        if precompile is not None:  # a first run's compiling children end with the plan
-            precompile.stop()
+        # (a first run's compiling worker ends with this process: its input closes)
         remove_temporaries()  # an unnamed (O_TMPFILE) output vanishes with the process
         if not _REPORTED.is_set():
             os.write(2, b"cnc-interp: interrupted\n")

@@ -407,22 +407,18 @@ def _few_malloc_arenas() -> None:
 
 
 def _warm_kernels(planner: str) -> None:
-    """Load the planner's and the CSV formatter's compiled kernels in a thread while the
-    program is read: loading them takes about a second, and the first rows wait for it.
-    On a first run of VPOp, a child process compiles its step loop and the formatter
-    meanwhile (``plan.precompile``); the thread compiles the preparation, waits for the
-    child and then loads what it cached."""
+    """Compile the kernel groups the planner needs that are not cached yet (a first run,
+    ``precompile.ensure``), then load the planner's and the CSV formatter's kernels in a
+    thread while the program is read: loading them takes about a second, and the first
+    rows wait for it."""
     import threading
 
-    from .plan import precompile as _precompile
+    from .precompile import ensure
 
-    children = planner in ("vpop", "optimal") and _precompile.start(also=("export._repr:warm_up",))
+    ensure(planner)
 
     def load():
         try:
-            if children:  # this process's share, then the child's
-                _precompile.compile_preparation()
-                _precompile.wait()
             from .export._repr import format_table
             from .plan.vpop import drive as vpop_drive
 
@@ -451,6 +447,13 @@ def _violation(report, name: str, error) -> None:
     )
 
 
+def _is_terminal(stream) -> bool:
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError):
+        return False
+
+
 def run_plan(opts: PlanOptions) -> None:
     """``cnc-interp plan``: plan, verify and write CSV or MCAP as a stream; summary on
     stderr (``stream_plan``)."""
@@ -462,10 +465,10 @@ def run_plan(opts: PlanOptions) -> None:
 
     out = opts.out or "-"
     check_writable(out, inputs=(opts.part, opts.machine_spec))
-    if not opts.quiet:
-        from ._kernel_cache import announce_first_compile
+    if not opts.quiet and _is_terminal(sys.stderr):
+        from .precompile import ensure
 
-        announce_first_compile()
+        ensure(opts.planner or DEFAULT_PLANNER, stream=sys.stderr)  # said on a terminal only
     with progress_bar(None, "plan", enabled=not opts.quiet, unit="mm") as tick:
         summary = stream_plan(opts, progress=tick)
     if opts.summary_json:

@@ -20,7 +20,32 @@ CORPUS = os.environ.get("CNC_CORPUS") or os.path.normpath(os.path.join(REPO, "..
 CORPUS_ROOT = os.path.dirname(CORPUS)  # holds ``linuxcnc/`` (names in reports start there)
 HAVE_CORPUS = os.path.isdir(CORPUS)
 
-needs_corpus = pytest.mark.skipif(not HAVE_CORPUS, reason=f"corpus not found at {CORPUS}")
+#: the corpus lane: tests that read the external corpus. Marked ``corpus`` (by hand, or
+#: here for a parametrized case whose arguments name a corpus file) and skipped, with
+#: CORPUS_SKIP_REASON, where the corpus is absent; ``-m corpus`` runs the lane
+needs_corpus = pytest.mark.corpus
+CORPUS_SKIP_REASON = (
+    f"needs LinuxCNC's G-code corpus at {CORPUS} (../shared beside the clone, or CNC_CORPUS): the corpus lane"
+)
+
+
+def _names_corpus(value) -> bool:
+    if isinstance(value, str | os.PathLike):
+        return os.path.abspath(os.fspath(value)).startswith(CORPUS_ROOT + os.sep)
+    if isinstance(value, tuple | list):
+        return any(_names_corpus(v) for v in value)
+    return False
+
+
+@pytest.hookimpl(tryfirst=True)  # before ``-m`` selects by marker
+def pytest_collection_modifyitems(config, items):
+    skip = pytest.mark.skip(reason=CORPUS_SKIP_REASON)
+    for item in items:
+        spec = getattr(item, "callspec", None)
+        if spec is not None and any(_names_corpus(v) for v in spec.params.values()):
+            item.add_marker(pytest.mark.corpus)
+        if not HAVE_CORPUS and item.get_closest_marker("corpus") is not None:
+            item.add_marker(skip)
 
 
 def program_of(text: str, source: str = "t.ngc", **kw):

@@ -442,7 +442,7 @@ def _writes_into(pid: int, folder) -> bool:
     return False
 
 
-@pytest.mark.parametrize("phase", ["plan", "write"])
+@pytest.mark.parametrize("phase", [pytest.param("plan", marks=pytest.mark.corpus), "write"])
 def test_ctrl_c_leaves_no_output_and_no_temp_file(tmp_path, phase):
     """SIGINT to a running ``plan -o out.csv``: no output and no temporary file left.
 

@@ -52,7 +52,7 @@ def _files():
     return SUBSET
 
 
-pytestmark = pytest.mark.skipif(not os.path.isdir(CORPUS), reason="corpus not available")
+pytestmark = pytest.mark.corpus
 
 
 @pytest.mark.parametrize("name", _files())

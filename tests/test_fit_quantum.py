@@ -108,7 +108,7 @@ def test_g64_p_sets_the_tolerance_and_tol_caps_it():
     assert plain.stats["max_tol_mm"] == pytest.approx(0.001, rel=1e-3)
 
 
-@pytest.mark.skipif(not os.path.isdir(CORPUS), reason="corpus not available")
+@pytest.mark.corpus
 def test_circle_small_segments_plans_near_its_limits_on_the_xyza_machine():
     """The issue's case: 1-inch circle in 15 µm chords at 0.0001 in, plain G64, F9999, on the
     corpus XYZA machine: 65.9 s before issue 14 (the fit traced the rounding); the circle's

@@ -74,6 +74,7 @@ def _xz_part(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.corpus  # the corpus's XZ.ini
 def test_stream_dry_run_round_trip_matches_plan(tmp_path):
     part = _xz_part(tmp_path)
     frames = tmp_path / "p.bin"
@@ -95,6 +96,7 @@ def test_stream_dry_run_round_trip_matches_plan(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.corpus  # the corpus's XZ.ini
 def test_stream_fit_method_nodes_round_trips(tmp_path):
     # a lathe profile of G1 moves in XZ: planar segments by default, N-axis ones on request
     part = tmp_path / "polyline.ngc"
@@ -120,6 +122,7 @@ def test_stream_fit_method_nodes_round_trips(tmp_path):
 
 
 @pytest.mark.parametrize("planner", ["constant", "vpop"])
+@pytest.mark.corpus  # the corpus's XZ.ini
 def test_stream_other_planners_round_trip(tmp_path, planner):
     from cnc_interp.fpga.commands import StreamOptions, build_stream, emulate_frames, plan_for_stream
     from cnc_interp.fpga.frames import decode_frame
@@ -135,6 +138,7 @@ def test_stream_other_planners_round_trip(tmp_path, planner):
     assert prog.stats["segments"] > 0
 
 
+@pytest.mark.corpus  # the corpus's XZ.ini
 def test_stream_passes_the_effort_to_the_optimal_planner(tmp_path):
     from cnc_interp.errors import UsageError
     from cnc_interp.fpga.commands import StreamOptions, plan_for_stream
@@ -146,6 +150,7 @@ def test_stream_passes_the_effort_to_the_optimal_planner(tmp_path):
         plan_for_stream(StreamOptions(part=str(part), machine_spec=XZ_INI, effort="fast"))
 
 
+@pytest.mark.corpus  # the corpus's XZ.ini
 def test_stream_to_emulated_device_with_faults(tmp_path, capsys):
     from cnc_interp.fpga.commands import StreamOptions, build_stream, run_stream
     from cnc_interp.fpga.device import DeviceCore
@@ -161,6 +166,7 @@ def test_stream_to_emulated_device_with_faults(tmp_path, capsys):
     assert "usb: sent frames 1.." in capsys.readouterr().err
 
 
+@pytest.mark.corpus  # the corpus's XZ.ini
 def test_stream_errors(tmp_path):
     from cnc_interp.errors import DeviceError, UsageError
     from cnc_interp.fpga.commands import StreamOptions, run_stream

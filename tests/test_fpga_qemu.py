@@ -17,6 +17,7 @@ from cnc_interp.fpga.model import run_program
 
 pytestmark = [
     pytest.mark.qemu,
+    pytest.mark.corpus,
     pytest.mark.skipif(
         os.environ.get("CNC_INTERP_QEMU") != "1", reason="QEMU USB integration test is opt-in (CNC_INTERP_QEMU=1)"
     ),

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import pytest
@@ -13,7 +12,9 @@ from cnc_interp.gcode import oword
 from cnc_interp.gcode.blocks import iter_blocks
 from cnc_interp.gcode.params import ParamStore
 
-CORPUS = Path(os.environ.get("CNC_CORPUS", Path(__file__).resolve().parents[2] / "shared" / "corpus" / "linuxcnc"))
+from .conftest import CORPUS as CORPUS_DIR
+
+CORPUS = Path(CORPUS_DIR)
 
 
 def run(src: str, params: ParamStore | None = None):
@@ -312,7 +313,7 @@ def _corpus_files() -> list[Path]:
     return out
 
 
-@pytest.mark.skipif(not CORPUS.is_dir(), reason="LinuxCNC corpus not present")
+@pytest.mark.corpus
 def test_corpus_reads_without_traceback():
     """Every corpus program reads through the block layer or ends in a clean GCodeError."""
     files = _corpus_files()

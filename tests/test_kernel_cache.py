@@ -81,40 +81,14 @@ def test_unwritable_cache_folder_is_left_alone(tmp_path, monkeypatch):
     assert len(_left(root)) == 6
 
 
-def test_first_compile_notice_only_on_a_terminal_and_only_when_kernels_are_missing(tmp_path, monkeypatch):
-    import io
-
-    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
-
-    from cnc_interp._kernel_cache import PLAN_KERNEL_MODULES, announce_first_compile, missing_kernels
-
-    class Tty(io.StringIO):
-        def isatty(self):
-            return True
-
-    root = tmp_path / "pkg"
-    assert missing_kernels(str(root)) == list(PLAN_KERNEL_MODULES)
-    pipe, tty = io.StringIO(), Tty()
-    assert not announce_first_compile(pipe, root=str(root)) and pipe.getvalue() == ""
-    assert announce_first_compile(tty, root=str(root))
-    assert tty.getvalue().startswith("cnc-interp: first run: compiling") and tty.getvalue().count("\n") == 1
-    for mod in PLAN_KERNEL_MODULES:  # every module cached: silent
-        *pkg, name = mod.split(".")
-        d = root.joinpath(*pkg, "__pycache__")
-        d.mkdir(parents=True, exist_ok=True)
-        (d / f"{name}.kernel-1.py311.nbi").write_bytes(b"")
-    tty2 = Tty()
-    assert missing_kernels(str(root)) == [] and not announce_first_compile(tty2, root=str(root))
-    assert tty2.getvalue() == ""
-
-
 def test_numba_cache_dir_is_where_the_kernels_are_looked_for(tmp_path, monkeypatch):
     # numba's own rule (``_UserProvidedCacheLocator``): <NUMBA_CACHE_DIR>/<folder>_<sha1 of
     # the folder's path>; a cache there counts, one in the package's __pycache__ does not
     import hashlib
 
-    from cnc_interp._kernel_cache import PLAN_KERNEL_MODULES, missing_kernels
+    from cnc_interp._kernel_cache import missing_kernels
 
+    PLAN_KERNEL_MODULES = ("fit._arclen", "plan.vpop.step")
     root = tmp_path / "pkg"
     cache = tmp_path / "cache"
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(cache))
@@ -126,6 +100,6 @@ def test_numba_cache_dir_is_where_the_kernels_are_looked_for(tmp_path, monkeypat
         (d / f"{name}.kernel-1.py311.nbi").write_bytes(b"")
         pyc = root.joinpath(*pkg, "__pycache__")
         pyc.mkdir(parents=True, exist_ok=True)
-    assert missing_kernels(str(root)) == []
+    assert missing_kernels(str(root), PLAN_KERNEL_MODULES) == []
     monkeypatch.delenv("NUMBA_CACHE_DIR")
-    assert missing_kernels(str(root)) == list(PLAN_KERNEL_MODULES)
+    assert missing_kernels(str(root), PLAN_KERNEL_MODULES) == list(PLAN_KERNEL_MODULES)

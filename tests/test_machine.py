@@ -151,6 +151,7 @@ def test_mikron_preset_is_paper_table1():
     assert load_machine("xz-lathe").axes == "XZ"
 
 
+@pytest.mark.corpus
 def test_corpus_ini_files_load():
     paths = sorted(glob.glob(os.path.join(CORPUS_CONFIGS, "*.ini")))
     assert len(paths) >= 4
@@ -160,6 +161,7 @@ def test_corpus_ini_files_load():
         assert np.all(m.vmax > 0) and np.all(m.jmax > 0)
 
 
+@pytest.mark.corpus
 def test_ini_units_inch_to_mm():
     m = load_machine(os.path.join(CORPUS_CONFIGS, "XYZ.ini"))
     assert m.axes == "XYZA" and m.name == "LinuxCNC-Circular-Blend-Tester-XYZ"

@@ -2,8 +2,12 @@
 
 import math
 
+from pathlib import Path
+
 import numpy as np
 import pytest
+
+from .conftest import CORPUS as CORPUS_DIR
 from numpy.testing import assert_allclose
 
 from cnc_interp.constants import VERIFY_RATIO_SLACK
@@ -325,7 +329,7 @@ def test_constant_feed_ignores_a_peak_inside_the_start_ramp():
     assert plan.profiles.v_cruise.max() > 99.0
 
 
-CORPUS = __import__("pathlib").Path(__file__).resolve().parents[2] / "shared" / "corpus" / "linuxcnc"
+CORPUS = Path(CORPUS_DIR)
 
 
 @pytest.mark.parametrize("planner", ["constant", "variable"])

@@ -16,7 +16,8 @@ import pytest
 from cnc_interp.errors import CncInterpError
 from cnc_interp.gcode import Run, read_program
 
-CORPUS = os.path.normpath(os.path.join(os.path.dirname(__file__), "..", "..", "shared", "corpus"))
+from .conftest import CORPUS_ROOT as CORPUS  # noqa: E402
+
 FILES = sorted(glob.glob(os.path.join(CORPUS, "**", "*.ngc"), recursive=True))
 
 #: program (relative to the corpus) -> text its error message must contain
@@ -35,7 +36,7 @@ def _rel(path: str) -> str:
     return os.path.relpath(path, CORPUS).replace(os.sep, "/")
 
 
-@pytest.mark.skipif(not FILES, reason=f"corpus not found at {CORPUS}")
+@pytest.mark.corpus
 def test_corpus_is_there():
     assert len(FILES) >= 100
 

@@ -1,182 +1,244 @@
-"""First run: VPOp's step loop compiled by a child process (``plan.precompile``)."""
+"""First run: the kernel groups a planner needs, compiled once per cache (``precompile``)."""
 
 from __future__ import annotations
 
+import io
 import os
+import subprocess
 import sys
+import textwrap
 import time
 
 import pytest
 
-from cnc_interp.plan import precompile
+from cnc_interp import precompile
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
-@pytest.fixture
-def sleeping_children(monkeypatch):
-    """Children that sleep instead of compiling, on a cache that looks cold."""
-    monkeypatch.setattr(
-        precompile, "_command", lambda job, also=(): [sys.executable, "-c", "import time; time.sleep(60)"]
-    )
-    monkeypatch.setattr("cnc_interp._kernel_cache.missing_kernels", lambda root, modules=None: ["plan.vpop.step"])
-    yield
-    precompile.stop()
+class _Tty(io.StringIO):
+    def isatty(self):
+        return True
 
 
-def test_no_children_when_the_planner_kernels_are_cached(monkeypatch):
-    # (a fit kernel of the plan missing: no child; the batch fitter's: cached)
-    monkeypatch.setattr(
-        "cnc_interp._kernel_cache.missing_kernels", lambda root, modules=None: [] if modules else ["fit._arclen"]
-    )
-    monkeypatch.setattr("cnc_interp._kernel_cache.kernel_cached", lambda root, module, function: True)
-    assert not precompile.start()
-    assert precompile._children == []
-    t0 = time.perf_counter()
-    precompile.wait()  # nothing to wait for
-    assert time.perf_counter() - t0 < 0.1
+@pytest.mark.parametrize("planner", sorted(precompile.PLANNER_GROUPS))
+def test_the_schedule_compiles_each_group_once_after_what_it_links(planner):
+    names = list(precompile.PLANNER_GROUPS[planner])
+    costs = {n: precompile.GROUPS[n].cost_s for n in names}
+    shares, total = precompile._schedule(names, costs)
+    assert sorted(shares[0] + shares[1]) == sorted(names)
+    # two processes: never faster than half the work (plus the worker's start), never
+    # slower than one process doing everything
+    assert sum(costs.values()) / 2 <= total <= sum(costs.values()) + precompile.WORKER_START_S
+    for share in shares:  # within one process a group comes after its dependencies there
+        for i, g in enumerate(share):
+            assert not set(precompile.GROUPS[g].after) & set(share[i + 1 :])
 
 
-def test_one_child_per_job_and_stop_kills_them(sleeping_children):
-    assert precompile.start()
-    assert precompile.start()  # a second call starts no more
-    procs = list(precompile._children)
-    assert len(procs) == len(precompile.JOBS) and all(p.poll() is None for p in procs)
-    precompile.stop()
-    assert all(p.poll() is not None for p in procs) and precompile._children == []
-
-
-def test_wait_gives_up_on_a_child_that_hangs(sleeping_children):
-    assert precompile.start()
-    procs = list(precompile._children)
-    t0 = time.perf_counter()
-    precompile.wait(timeout_s=0.2)
-    assert time.perf_counter() - t0 < 5
-    assert all(p.poll() is not None for p in procs) and precompile._children == []
-
-
-def _ready_then_sleep(job, also=()):
-    return [sys.executable, "-c", "import os, time; os.write(1, b'ready\\n'); time.sleep(60)"]
-
-
-def test_a_ready_child_is_waited_for_only_until_its_line(monkeypatch):
-    """The parent waits for the step loop (the ready line), not for the batch driver the
-    child compiles next; it plans path by path meanwhile, and leaves the child to finish
-    when the command ends (Ctrl-C or an error still kill it: ``stop``)."""
-    monkeypatch.setattr(precompile, "_command", _ready_then_sleep)
-    monkeypatch.setattr("cnc_interp._kernel_cache.missing_kernels", lambda root, modules=None: ["plan.vpop.step"])
+def test_the_schedule_in_closed_form():
+    # a, b ready at once: the worker takes the costlier (b, from WORKER_START_S), this
+    # process a; c needs both, so it starts when b ends, at the worker (idle first)
+    groups = {
+        "a": precompile.KernelGroup("a", (), "", 10.0),
+        "b": precompile.KernelGroup("b", (), "", 20.0),
+        "c": precompile.KernelGroup("c", (), "", 5.0, ("a", "b")),
+    }
+    saved = dict(precompile.GROUPS)
     try:
-        assert precompile.start()
-        (proc,) = precompile._children
-        t0 = time.perf_counter()
-        assert precompile.wait(timeout_s=30) == [0]
-        assert time.perf_counter() - t0 < 20 and proc.poll() is None
-        assert precompile.batch_pending()
-        precompile._at_exit()
-        assert proc.poll() is None  # still compiling the batch driver
+        precompile.GROUPS.update(groups)
+        shares, total = precompile._schedule(["a", "b", "c"], {n: g.cost_s for n, g in groups.items()})
     finally:
-        precompile.stop()
-    assert proc.poll() is not None and not precompile.batch_pending()
+        precompile.GROUPS.clear()
+        precompile.GROUPS.update(saved)
+    assert shares == [["a"], ["b", "c"]]
+    assert total == pytest.approx(precompile.WORKER_START_S + 20.0 + 5.0)
 
 
-def test_only_the_batch_missing_starts_a_child_nobody_waits_for(monkeypatch):
-    monkeypatch.setattr(
-        precompile,
-        "_command",
-        lambda job, also=(): [sys.executable, "-c", f"import time; assert {job!r} == 'batch'; time.sleep(60)"],
+def test_nothing_missing_takes_no_lock_and_compiles_nothing(monkeypatch, tmp_path):
+    monkeypatch.setattr(precompile, "missing_groups", lambda planner, root=None: [])
+    monkeypatch.setattr(precompile, "_CacheLock", None)  # would raise if used
+    tty = _Tty()
+    assert precompile.ensure("vpop", stream=tty, root=str(tmp_path)) == []
+    assert tty.getvalue() == ""
+
+
+def test_a_process_that_finds_the_cache_locked_waits_and_then_compiles_nothing(monkeypatch, tmp_path):
+    # another process holds the lock while it compiles; when it lets go, the groups are
+    # cached and this one has nothing left to do
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    root = tmp_path / "pkg"
+    (root / "__pycache__").mkdir(parents=True)
+    lock = root / "__pycache__" / precompile.LOCK_NAME
+    holder = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            "import fcntl, os, sys, time\n"
+            f"fd = os.open({str(lock)!r}, os.O_RDWR | os.O_CREAT)\n"
+            "fcntl.flock(fd, fcntl.LOCK_EX)\nprint('locked', flush=True)\ntime.sleep(1.5)\n",
+        ],
+        stdout=subprocess.PIPE,
     )
-    monkeypatch.setattr("cnc_interp._kernel_cache.missing_kernels", lambda root, modules=None: [])
-    monkeypatch.setattr("cnc_interp._kernel_cache.kernel_cached", lambda root, module, function: False)
     try:
-        assert precompile.start()
+        assert holder.stdout.readline() == b"locked\n"
+        calls = []
+
+        def missing(planner, root=None):
+            calls.append(time.perf_counter())
+            return ["csv"] if len(calls) == 1 else []
+
+        compiled = []
+        monkeypatch.setattr(precompile, "missing_groups", missing)
+        monkeypatch.setattr(precompile, "_compile", lambda names, stream: compiled.append(names))
+        tty = _Tty()
         t0 = time.perf_counter()
-        assert precompile.wait() == []
-        assert time.perf_counter() - t0 < 0.5 and precompile.batch_pending()
+        assert precompile.ensure("vpop", stream=tty, root=str(root)) == []
+        assert time.perf_counter() - t0 > 0.5  # it waited for the holder
+        assert "waiting for another cnc-interp process" in tty.getvalue()
+        assert compiled == [] and len(calls) == 2
     finally:
-        precompile.stop()
+        holder.kill()
+        holder.wait()
 
 
-@pytest.mark.parametrize("planner", ["vpop", "optimal"])
-def test_paths_planned_one_at_a_time_while_the_batch_compiles(monkeypatch, planner):
-    """While a child compiles the batch driver, VPOp plans each path on its own (and the
-    optimal planner each path it routes to VPOp): the same samples as the batch (the
-    first run's output is the next runs')."""
-    import numpy as np
-
-    from cnc_interp import api
-
-    m = api.load_machine("generic-mill")
-    fitted = api.fit(api.read_program("samples/gcode/mill-contour.ngc", machine=m))
-    batch = api.plan(fitted, m, planner=planner)
-    monkeypatch.setattr(precompile, "batch_pending", lambda: True)
-    one_by_one = api.plan(fitted, m, planner=planner)
-    assert one_by_one.settings["stats"].get("routes") == batch.settings["stats"].get("routes")
-    np.testing.assert_array_equal(one_by_one.q, batch.q)
-    np.testing.assert_array_equal(one_by_one.s, batch.s)
-    np.testing.assert_array_equal(one_by_one.line, batch.line)
-
-
-def test_unknown_job_is_a_usage_error(capsys):
-    assert precompile.main(["everything"]) == 2
-    assert "usage" in capsys.readouterr().err
-    assert precompile.main(["loop", "export._repr.warm_up"]) == 2  # not module:function
-    assert "usage" in capsys.readouterr().err
+def test_a_first_run_says_its_estimate_and_each_group_compiled(monkeypatch, tmp_path):
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    done = []
+    names = ["fit", "csv", "vpop-prep"]
+    monkeypatch.setattr(precompile, "missing_groups", lambda planner, root=None: [] if done else list(names))
+    monkeypatch.setattr(precompile, "warm_up", lambda name: done.append(name))
+    monkeypatch.setattr(precompile._Worker, "start", classmethod(lambda cls: None))  # all here
+    tty = _Tty()
+    assert precompile.ensure("constant", stream=tty, root=str(tmp_path)) == names
+    lines = tty.getvalue().splitlines()
+    est = precompile.estimate_s(names)
+    assert lines[0] == (
+        f"cnc-interp: first run: compiling the constant planner's kernels, about {est:.0f} s "
+        "on 2 cores, cached for next time"
+    )
+    assert [line.split()[2] for line in lines[1:]] == sorted(names, key=lambda n: -precompile.GROUPS[n].cost_s)
+    assert sorted(done) == sorted(names) and lines[-1].startswith("cnc-interp: compiled ") and "3 of 3" in lines[-1]
 
 
-def test_the_child_command_names_its_job_and_the_callers_warm_ups():
-    cmd = precompile._command("loop", ("export._repr:warm_up",))
-    assert cmd[1:] == ["-m", "cnc_interp.plan.precompile", "loop", "export._repr:warm_up"]
+def test_a_worker_that_fails_leaves_its_group_to_this_process(monkeypatch):
+    class Failing:
+        sent: list = []
+        closed = False
+
+        def send(self, name):
+            self.sent.append(name)
+            return True
+
+        def word(self, name, timeout_s=None):
+            return False if timeout_s is None else None
+
+        def close(self):
+            Failing.closed = True
+
+    done = []
+    monkeypatch.setattr(precompile._Worker, "start", classmethod(lambda cls: Failing()))
+    monkeypatch.setattr(precompile, "warm_up", lambda name: done.append(name))
+    names = list(precompile.PLANNER_GROUPS["vpop"])
+    precompile._compile(names, None)
+    assert sorted(done) == sorted(names) and Failing.closed
+    assert Failing.sent and Failing.sent[0] in done  # the worker's group, done here after all
+
+
+def test_the_worker_compiles_what_it_is_sent_and_ends_with_its_input():
+    worker = precompile._Worker.start()
+    assert worker is not None
+    try:
+        assert worker.send("csv")
+        assert worker.word("csv") is True
+        assert worker.send("no-such-group")
+        assert worker.word("no-such-group") is False
+        assert worker.proc.poll() is None
+    finally:
+        worker.close()
+    assert worker.proc.returncode is not None
+
+
+def test_the_worker_ends_when_the_command_that_started_it_dies():
+    # the command is killed (SIGKILL: no clean-up of its own): the worker's input closes
+    # and it ends at once, even in the middle of a compile
+    code = textwrap.dedent(
+        """
+        import os, sys
+        from cnc_interp import precompile
+        w = precompile._Worker.start()
+        w.send("optimal")
+        print(w.proc.pid, flush=True)
+        sys.stdin.read()
+        """
+    )
+    parent = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE, cwd=REPO)
+    pid = int(parent.stdout.readline())
+    parent.kill()
+    parent.wait()
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline and _alive(pid):
+        time.sleep(0.05)
+    assert not _alive(pid), "the worker outlived the command"
+
+
+def _alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().split(")")[-1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def test_the_worker_command_without_its_flag_is_a_usage_error():
+    r = subprocess.run([sys.executable, "-m", "cnc_interp.precompile"], capture_output=True, text=True, cwd=REPO)
+    assert r.returncode == 2 and "usage" in r.stderr
 
 
 @pytest.mark.slow
-def test_the_child_leaves_the_step_loop_cached(tmp_path, monkeypatch):
-    """On an empty cache, after the child, this process loads the batch driver (with the
-    step loop below it) from the cache and does not compile it (a signature that differs
-    from the real call's would make it compile the tree again: the work would be done
-    twice)."""
-    import subprocess
-
+def test_after_a_first_run_the_plans_compile_nothing(tmp_path):
+    """On an empty cache, ``ensure`` compiles every group of the optimal planner (in this
+    process and the worker), leaves no process behind, and plans of samples with both
+    planners then load every grouped kernel from the cache: a warm-up signature that
+    differed from a real call's would compile it again."""
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
-    code = (
-        "from cnc_interp.plan import precompile\n"
-        "from cnc_interp.plan.vpop import drive as D\n"
-        "from cnc_interp import api\n"
-        "assert precompile.start(also=('export._repr:warm_up',))\n"
-        "precompile.compile_preparation()\n"
-        "assert precompile.wait() == [0], 'the child failed'\n"
-        "assert precompile.finish() == [0], 'the batch job failed'\n"
-        "from cnc_interp.export import _repr\n"
-        "_repr.warm_up()\n"
-        "assert sum(_repr._format_table.stats.cache_hits.values()) == 1, _repr._format_table.stats\n"
-        "m = api.load_machine('generic-mill')\n"
-        "api.run('samples/gcode/mill-contour.ngc', machine=m)\n"
-        "assert sum(D.drive.stats.cache_misses.values()) == 0, D.drive.stats\n"
-        "assert sum(D.prepare_identity.stats.cache_misses.values()) == 1\n"
-        "assert sum(D.plan_identity_batch.stats.cache_hits.values()) == 1, D.plan_identity_batch.stats\n"
-        "assert sum(D.plan_identity_batch.stats.cache_misses.values()) == 0\n"
+    first = subprocess.run(
+        [sys.executable, "-c", "from cnc_interp import precompile; print(precompile.ensure('optimal'))"],
+        env=env,
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=900,
     )
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    r = subprocess.run([sys.executable, "-c", code], cwd=root, env=env, capture_output=True, text=True, timeout=900)
-    assert r.returncode == 0, r.stderr[-3000:]
-
-
-def test_the_fit_does_not_compile_what_a_child_compiles(monkeypatch):
-    """While a first run's child compiles the batch fitter's kernels, even a long run
-    keeps the Python fitter (the same paths) instead of compiling them a second time."""
-    from cnc_interp import _kernel_cache
-    from cnc_interp.fit import fitter
-
-    monkeypatch.setattr(fitter, "_kernels_ready", False)
-    monkeypatch.setattr(_kernel_cache, "background_check", lambda: True)
-    assert not fitter._batch_kernels_ready(10 * fitter.FIT_KERNEL_COMPILE_NODES)
-    assert not fitter._kernels_ready
-    monkeypatch.setattr(_kernel_cache, "background_check", lambda: False)
-    assert fitter._batch_kernels_ready(10 * fitter.FIT_KERNEL_COMPILE_NODES)
-
-
-@pytest.mark.parametrize("planner,child", [("vpop", True), ("optimal", True), ("constant", False)])
-def test_a_first_run_of_the_planners_that_use_vpops_step_loop_starts_the_child(monkeypatch, planner, child):
-    from cnc_interp import pipeline
-
-    started = []
-    monkeypatch.setattr(precompile, "start", lambda also=(): started.append(also) or False)
-    pipeline._warm_kernels(planner)
-    assert bool(started) == child
+    assert first.returncode == 0, first.stderr[-3000:]
+    assert "optimal" in first.stdout
+    code = textwrap.dedent(
+        """
+        import sys
+        from numba.core.registry import CPUDispatcher
+        from cnc_interp import api, precompile
+        assert precompile.missing_groups("optimal") == [], precompile.missing_groups("optimal")
+        m = api.load_machine("generic-mill")
+        for part in ("samples/gcode/mill-contour.ngc", "samples/gcode/nurbs-trident.ngc"):
+            for planner in ("vpop", "optimal"):
+                api.run(part, m, planner=planner)
+        api.run(precompile.WARM_PROGRAM, m, planner="optimal")
+        compiled = []
+        for name, mod in list(sys.modules.items()):
+            if not name.startswith("cnc_interp."):
+                continue
+            for attr, f in vars(mod).items():
+                if isinstance(f, CPUDispatcher) and sum(f.stats.cache_misses.values()):
+                    compiled.append(f"{name}.{attr}")
+        grouped = [
+            e.partition(":")[0] for g in precompile.PLANNER_GROUPS["optimal"] for e in precompile.GROUPS[g].cached
+        ]
+        print(sorted(c for c in compiled if any(c.startswith("cnc_interp." + m + ".") for m in grouped)))
+        """
+    )
+    second = subprocess.run(
+        [sys.executable, "-c", code], env=env, cwd=REPO, capture_output=True, text=True, timeout=900
+    )
+    assert second.returncode == 0, second.stderr[-3000:]
+    assert second.stdout.strip().splitlines()[-1] == "[]"
+    left = subprocess.run(["pgrep", "-f", "cnc_interp.precompile --worker"], capture_output=True, text=True)
+    assert left.stdout == ""

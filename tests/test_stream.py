@@ -238,6 +238,7 @@ def _written_bytes(pid: int, folder) -> int:
 
 
 @pytest.mark.slow
+@pytest.mark.corpus
 def test_ctrl_c_after_rows_were_written_leaves_no_file(tmp_path):
     """SIGINT once rows are in the (unnamed) output file: no output file, no temporary."""
     part = os.path.join(CORPUS, "performance", "stellabee1.ngc")

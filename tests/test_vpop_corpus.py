@@ -24,7 +24,7 @@ SUBSET = [
     "examples/daisy.ngc",  # an A word on an XYZ machine: clear error
 ]
 
-pytestmark = pytest.mark.skipif(not os.path.isdir(CORPUS), reason="corpus not available")
+pytestmark = pytest.mark.corpus
 
 
 @pytest.mark.parametrize("rel", SUBSET)

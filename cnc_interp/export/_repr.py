@@ -358,8 +358,7 @@ def format_table(cols: np.ndarray) -> bytes:
 
 
 def warm_up() -> None:
-    """Compile (or load) the formatter: a first run's child process calls it
-    (``plan.precompile``)."""
+    """Compile (or load) the formatter (a first run's ``precompile`` group ``csv``)."""
     format_table(np.zeros((1, 1)))
 
 

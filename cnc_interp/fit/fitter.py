@@ -551,11 +551,8 @@ if hasattr(os, "register_at_fork"):
     os.register_at_fork(after_in_child=lambda: globals().update(_pools={}, _pools_lock=threading.Lock()))
 
 #: nodes of a run from which the batch fitter's kernels are compiled when numba has not
-#: cached them yet: they cost ~40 CPU-s to compile (first run after an install or update)
-#: and save ~70 µs a node, so a shorter run is fitted by the Python fitter (the same
-#: paths) until a long one, or any earlier process, has compiled them — the quick
-#: start's first run keeps its compile time, and its precompile child compiles them
-#: afterwards (``plan.precompile``)
+#: cached them yet: they cost ~40 CPU-s to compile and save ~70 µs a node, so a shorter
+#: run is fitted by the Python fitter (the same paths) until a long one has compiled them
 FIT_KERNEL_COMPILE_NODES = 50_000
 
 _kernels_ready = False
@@ -565,10 +562,8 @@ def _batch_kernels_ready(n_nodes: int) -> bool:
     """Whether the batch fitter fits a run of ``n_nodes`` (see FIT_KERNEL_COMPILE_NODES)."""
     global _kernels_ready
     if not _kernels_ready:
-        from .._kernel_cache import compiling_elsewhere, missing_kernels
+        from .._kernel_cache import missing_kernels
 
-        if compiling_elsewhere():  # a first run's child compiles them: not twice
-            return False
         root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
         _kernels_ready = n_nodes >= FIT_KERNEL_COMPILE_NODES or not missing_kernels(root, ("fit._subrun",))
     return _kernels_ready

@@ -235,10 +235,7 @@ class _Loop:
     (``VPOP_CHECKPOINT_SAMPLES`` when None)."""
 
     def __init__(self, prep: _Prepared, window: int | None, checkpoint: int | None = None):
-        from .. import precompile as _precompile
         from . import drive as D
-
-        _precompile.wait()  # a first run's child compiling the step loop (else at once)
 
         self.D = D
         self.p = prep
@@ -419,16 +416,11 @@ def plan_many_vpop(paths, machine, dt_s: float, settings=None, long_samples: int
     rapids), in one compiled call: the same samples as ``iter_path_plan_vpop`` for each.
     Returns one ``PathPlan`` per path, or ``None`` for a path left to
     ``iter_path_plan_vpop`` (a long one, which should stream, or one whose preparation
-    fails, so that the right error is raised there; every path while a first run's child
-    compiles this batch driver, ``precompile.batch_pending``)."""
-    from .. import precompile as _precompile
+    fails, so that the right error is raised there)."""
     from . import drive as D
 
     if not paths:
         return []
-    _precompile.wait()  # a first run's child compiling the step loop (else at once)
-    if _precompile.batch_pending():  # the child compiles the batch: one path at a time
-        return [None] * len(paths)
     dt = float(dt_s)
     mc = _machine_consts(machine, dt)
     n_seg = np.array([p.n_seg for p in paths], dtype=np.int64)
