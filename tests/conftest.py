@@ -48,6 +48,16 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(skip)
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _kernels_compiled():
+    """A first run's compile, once for the session (``precompile.ensure``): on a fresh
+    clone the pytest-xdist workers would each compile every kernel on its first call; under
+    the cache's lock one compiles them on both cores and the others wait, then load them."""
+    from cnc_interp import precompile
+
+    precompile.ensure("optimal")
+
+
 def program_of(text: str, source: str = "t.ngc", **kw):
     """The ``Program`` of G-code ``text`` (``read_program(text, source, **kw)``: ``axes``,
     ``start``, ``tool_table``)."""
