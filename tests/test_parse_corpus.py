@@ -41,6 +41,7 @@ def test_corpus_is_there():
     assert len(FILES) >= 100
 
 
+@pytest.mark.corpus
 @pytest.mark.parametrize("path", FILES, ids=[_rel(f) for f in FILES])
 def test_corpus_program(path):
     rel = _rel(path)

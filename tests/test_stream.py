@@ -63,11 +63,10 @@ def test_window_size_does_not_change_the_bytes_samples(tmp_path, name):
     _invariant(tmp_path, os.path.join(SAMPLES, name), SAMPLE_MACHINES.get(name, "generic-mill"))
 
 
+@pytest.mark.corpus
 @pytest.mark.parametrize("rel", CORPUS_PROGRAMS)
 def test_window_size_does_not_change_the_bytes_corpus(tmp_path, rel):
     part = os.path.join(CORPUS, rel)
-    if not os.path.exists(part):
-        pytest.skip("corpus not beside the repository")
     _invariant(tmp_path, part, "generic-mill")
 
 

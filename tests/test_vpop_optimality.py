@@ -10,6 +10,7 @@ from cnc_interp.plan.optimality import line_min_samples, path_lower_bound
 from cnc_interp.plan.vpop import plan_path_vpop
 
 from ._vpop_paths import circle_fun, hermite_path, line_path, random_curve
+from .conftest import CORPUS
 
 DT = 0.001
 MILL = Machine(
@@ -62,12 +63,10 @@ def test_lower_bound_is_below_the_plan(make):
     assert t / lb < 2.0
 
 
-TRIDENT = os.path.join(
-    os.path.dirname(__file__), "..", "..", "shared", "corpus", "linuxcnc", "nurbs-g5", "trident-xy.ngc"
-)
+TRIDENT = os.path.join(CORPUS, "nurbs-g5", "trident-xy.ngc")
 
 
-@pytest.mark.skipif(not os.path.exists(TRIDENT), reason="corpus not available")
+@pytest.mark.corpus
 def test_trident_on_the_mikron_is_within_3_percent_of_a_lower_bound():
     from cnc_interp.pipeline import plan_part
     from cnc_interp.plan.optimality import program_lower_bound
