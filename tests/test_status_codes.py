@@ -14,6 +14,7 @@ KERNEL_MODULES = [
     "cnc_interp.plan._track_kernels",
     "cnc_interp.plan._table_kernels",
     "cnc_interp.plan._refine_kernels",
+    "cnc_interp.plan._ipm",
 ]
 
 

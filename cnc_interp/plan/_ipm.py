@@ -21,10 +21,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-# status codes
-OK = 0
-MAX_ITER = 1
-BREAKDOWN = 2
+from .status import BREAKDOWN, MAX_ITER, OK  # the planning stage's shared codes
 
 #: fraction of the distance to the boundary a step may go (s, λ stay positive)
 _TO_BOUNDARY = 0.995

@@ -44,6 +44,10 @@ class Status(IntEnum):
     JERK_TOO_SMALL = 11
     #: the path is shorter than VPOP_MIN_LENGTH: one sample, no table
     TRIVIAL = 12
+    #: the LP solver reached its iteration limit before its tolerance
+    MAX_ITER = 13
+    #: the LP solver's factorisation broke down (or its rows have the wrong width)
+    BREAKDOWN = 14
 
 
 # the same values as plain ints, for the kernels
@@ -60,3 +64,5 @@ NOT_FINITE = Status.NOT_FINITE.value
 NOT_FINITE_PATH = Status.NOT_FINITE_PATH.value
 JERK_TOO_SMALL = Status.JERK_TOO_SMALL.value
 TRIVIAL = Status.TRIVIAL.value
+MAX_ITER = Status.MAX_ITER.value
+BREAKDOWN = Status.BREAKDOWN.value
