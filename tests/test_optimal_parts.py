@@ -812,3 +812,34 @@ def test_a_windows_compiled_bookkeeping_is_numpys_arithmetic(seed):
     assert_allclose(T, np.sum(2.0 * np.diff(x) / np.maximum(v[1:] + v[:-1], 1e-300)), rtol=1e-13)
     xv[3] = np.nan
     assert not FK.lp_profile_time(first, B, xv, scale, free, cfix, x, 1e-3, coef, w_hat)[0]
+
+
+def test_step_limits_keep_the_shrink_and_the_rounding_margin():
+    from numpy.testing import assert_allclose
+
+    from cnc_interp.constants import VPOP_LIMIT_SHRINK, VPOP_ROUNDING_ULPS
+    from cnc_interp.errors import PlanError
+    from cnc_interp.plan.step_limits import position_scale, step_limits
+
+    m = Machine(
+        name="t",
+        axes="XY",
+        vmax=np.array([100.0, 50.0]),
+        amax=np.array([1e3, 2e3]),
+        jmax=np.array([1e4, 3e4]),
+        dt_s=0.001,
+    )
+    C = np.zeros((4, 3, 2))
+    C[2, 0, 1] = -250.0
+    q_scale = position_scale(C)
+    assert q_scale == 251.0
+    margin = VPOP_ROUNDING_ULPS * np.finfo(float).eps * q_scale
+    vl, al, jl = step_limits(m, 0.002, q_scale)
+    shrink = 1.0 - VPOP_LIMIT_SHRINK
+    assert_allclose(vl, m.vmax * 0.002 * shrink - 2 * margin, rtol=0, atol=0)
+    assert_allclose(al, m.amax * 0.002**2 * shrink - 4 * margin, rtol=0, atol=0)
+    assert_allclose(jl, m.jmax * 0.002**3 * shrink - 8 * margin, rtol=0, atol=0)
+    assert np.all(jl < m.jmax * 0.002**3)
+    # positions so far out that float64 cannot resolve the jerk limit's step: refused
+    with pytest.raises(PlanError, match="jerk limits are too small"):
+        step_limits(m, 1e-5, 1e9)

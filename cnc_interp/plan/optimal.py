@@ -36,11 +36,12 @@ import threading
 
 import numpy as np
 
-from ..constants import VPOP_LIMIT_SHRINK, VPOP_MIN_LENGTH, VPOP_ROUNDING_ULPS
+from ..constants import VPOP_LIMIT_SHRINK, VPOP_MIN_LENGTH
 from ..errors import PlanError
 from .base import PathPlan, collect_path_plan
 from .prefetch import Prefetch
 from .settings import OptimalOptions
+from .step_limits import position_scale, step_limits
 
 #: depths of the successive dips of w around a place where the sampler got stuck
 OPT_RETRY_DEPTHS = (0.04, 0.1, 0.2, 0.4)
@@ -189,22 +190,6 @@ OPT_CRAWL = 50.0
 OPT_CRAWL_SHARE = 0.02
 
 
-def _step_limits(machine, dt, table):
-    """vl, al, jl in step units with VPOp's margins (rounding, shrink)."""
-    shrink = 1.0 - VPOP_LIMIT_SHRINK
-    q_scale = 1.0 + float(np.max(np.abs(table.C[:, 0, :])))
-    margin = VPOP_ROUNDING_ULPS * np.finfo(float).eps * q_scale
-    vl = np.ascontiguousarray(machine.vmax * dt * shrink - 2.0 * margin, dtype=float)
-    al = np.ascontiguousarray(machine.amax * dt * dt * shrink - 4.0 * margin, dtype=float)
-    jl = np.ascontiguousarray(machine.jmax * dt**3 * shrink - 8.0 * margin, dtype=float)
-    if np.any(jl <= 0.5 * machine.jmax * dt**3):
-        raise PlanError(
-            f"the jerk limits are too small for dt = {dt:g} s at positions of "
-            f"{q_scale:g} mm/deg: float64 cannot resolve them"
-        )
-    return vl, al, jl
-
-
 def _options(settings) -> OptimalOptions:
     """The planner's knobs (``PlanSettings.optimal``; ``None``: the defaults)."""
     return OptimalOptions() if settings is None else settings.optimal
@@ -317,7 +302,7 @@ class _Path(_RouteInputs):
         self.joint_map = joint_map
         self.dt = dt
         self.settings = settings
-        self.vl, self.al, self.jl = _step_limits(machine, dt, table)
+        self.vl, self.al, self.jl = step_limits(machine, dt, position_scale(table.C))
         self.n = path.n_axes
         # the exact sampler's inputs (``_track_kernels.track``)
         self.joints = Table(table.S, np.ascontiguousarray(table.C.transpose(0, 2, 1)), table.qend)

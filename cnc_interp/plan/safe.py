@@ -145,7 +145,7 @@ def _stretches(g1, g2, g3, V, A, J):
 
 def plan_path_safe(path, joint_map, machine, dt_s: float, settings=None) -> PathPlan:
     """Plan one path from rest to rest, slowly but always (see module docstring)."""
-    from .optimal import _step_limits
+    from .step_limits import position_scale, step_limits
     from .verify import verify_arrays
     from .vpop import JointTable, _eval_table, _positions
 
@@ -157,7 +157,7 @@ def plan_path_safe(path, joint_map, machine, dt_s: float, settings=None) -> Path
     if not L > 0.0:
         q0 = _positions(path, path.breaks[:1], joint_map)
         return PathPlan(s=np.zeros(1), q=q0, stats={"samples": 1, "planner": "safe"})
-    vl, al, jl = _step_limits(machine, dt, table)  # exact step limits (checked below)
+    vl, al, jl = step_limits(machine, dt, position_scale(table.C))  # exact step limits (checked below)
     g1, g2, g3 = _bounds(table)
     feeds = path.feed_mm_s[np.isfinite(path.feed_mm_s) & (path.feed_mm_s > 0)]
     feed = float(np.min(feeds)) if feeds.size else math.inf

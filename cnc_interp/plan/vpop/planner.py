@@ -13,6 +13,7 @@ import numpy as np
 from ...constants import VPOP_LIMIT_SHRINK, VPOP_MIN_LENGTH, VPOP_ROUNDING_ULPS
 from ...errors import PlanError
 from ..base import PathPlan, collect_path_plan
+from ..step_limits import position_scale, step_limits
 from .table import (
     _GL_W,
     _GL_X,
@@ -166,20 +167,7 @@ class _Prepared:
             return
         if table is None:
             table = JointTable(path, joint_map)
-        # Absolute margin for float rounding: a few ulps of the positions, times the 8 of
-        # the jerk stencil (1, 3, 3, 1), so that one-ulp differences between what the loop
-        # checked and what reaches verify (joins between paths, re-evaluated end points)
-        # cannot push a low limit (jmax * dt**3 ~ 1e-6 mm) past its ratio slack.
-        q_scale = 1.0 + float(np.max(np.abs(table.C[:, 0, :])))
-        margin = VPOP_ROUNDING_ULPS * np.finfo(float).eps * q_scale
-        vl = np.ascontiguousarray(mc.vl0 - 2.0 * margin)
-        al = np.ascontiguousarray(mc.al0 - 4.0 * margin)
-        jl = np.ascontiguousarray(mc.jl0 - 8.0 * margin)
-        if np.any(jl <= mc.jl_floor):
-            raise PlanError(
-                f"the jerk limits are too small for dt = {dt:g} s at positions of "
-                f"{q_scale:g} mm/deg: float64 cannot resolve them"
-            )
+        vl, al, jl = step_limits(machine, dt, position_scale(table.C))
         L = table.length
         self.L = L
         FB = np.ascontiguousarray(path.s_breaks, dtype=float).copy()
