@@ -47,14 +47,16 @@ LOCK_NAME = "cnc-interp-compile.lock"
 #: before it compiles (measured on the project's 2-core machine: 1.5-2 s)
 WORKER_START_S = 2.0
 
-#: a program whose fit and plan run through every grouped kernel: lines, a corner, a
-#: contour of lines and tangent arcs (I J and R), an arc of 1 mm radius at a feed its
-#: curvature limits for 8 turns (the optimal planner's feed-profile route) and rapids
+#: a program whose fit runs through every grouped fit kernel: lines, a corner, a contour
+#: of lines and tangent arcs (I J and R), and rapids
 WARM_PROGRAM = (
-    b"G21 G90 G17\nG0 X0 Y0 Z1\nG1 Z0 F600\nG2 X0 Y0 I1 J0 P8 F6000\n"
-    b"G1 X20 Y5 F6000\nG1 X21 Y-3\nG0 Z5\nG0 X0 Y-3\nG1 Z-2 F300\nG1 X35 F900\n"
-    b"G3 X43 Y5 I0 J8\nG1 Y25\nG3 X35 Y33 R8\nG1 X5\nG0 Z5\nM2\n"
+    b"G21 G90 G17\nG0 X0 Y0 Z1\nG1 Z0 F600\nG1 X20 Y5 F6000\nG1 X21 Y-3\nG0 Z5\n"
+    b"G0 X0 Y-3\nG1 Z-2 F300\nG1 X35 F900\nG3 X43 Y5 I0 J8\nG1 Y25\nG3 X35 Y33 R8\nG1 X5\n"
+    b"G0 Z5\nM2\n"
 )
+#: an arc of 1 mm radius for 8 turns at a feed its curvature limits: the optimal planner
+#: plans it through its feed profile, sampler and refinement
+WARM_ARC_PROGRAM = b"G21 G90 G17\nG0 X0 Y0 Z0\nG2 X0 Y0 I1 J0 P8 F6000\nM2\n"
 
 
 @dataclass(frozen=True)
@@ -81,15 +83,15 @@ GROUPS = {
     for g in (
         KernelGroup(
             "fit",
-            ("fit._arclen", "fit._project", "fit._bspline", "fit._npexact", "fit._section", "fit._arcs"),
+            ("fit._arclen", "fit._project", "fit._bspline", "fit._npexact", "fit.corners", "fit.blends"),
             "_warm_fit",
-            16.7,
+            30.3,
         ),
-        KernelGroup("csv", ("export._repr",), "_warm_csv", 5.5),
-        KernelGroup("vpop-prep", ("plan._table_kernels", "plan.vpop.drive:prepare_identity"), "_warm_vpop_prep", 19.1),
-        KernelGroup("vpop-loop", ("plan.vpop.step", "plan.vpop.drive:drive"), "_warm_vpop_loop", 31.7),
+        KernelGroup("csv", ("export._repr",), "_warm_csv", 3.5),
+        KernelGroup("vpop-prep", ("plan._table_kernels", "plan.vpop.drive:prepare_identity"), "_warm_vpop_prep", 15.5),
+        KernelGroup("vpop-loop", ("plan.vpop.step", "plan.vpop.drive:drive"), "_warm_vpop_loop", 33.7),
         KernelGroup(
-            "vpop-batch", ("plan.vpop.drive:plan_identity_batch",), "_warm_vpop_batch", 10.2, ("vpop-prep", "vpop-loop")
+            "vpop-batch", ("plan.vpop.drive:plan_identity_batch",), "_warm_vpop_batch", 11.5, ("vpop-prep", "vpop-loop")
         ),
         # the feed profile uses the preparation's arc-length table kernels (13 CPU-s of
         # vpop-prep's 19): compiled after them, not a second time beside them
@@ -97,7 +99,7 @@ GROUPS = {
             "optimal",
             ("plan._feed_kernels", "plan._ipm", "plan._refine_kernels", "plan._track_kernels"),
             "_warm_optimal",
-            31.4,
+            34.2,
             ("fit", "vpop-prep"),
         ),
     )
@@ -125,41 +127,59 @@ def missing_groups(planner: str, root: str | None = None) -> list[str]:
     return out
 
 
-def _schedule(names: list[str], costs: dict[str, float], worker: bool = True) -> tuple[list[list[str]], float]:
-    """What ``_compile`` does with ``names`` when each group takes ``costs[name]`` seconds:
-    the groups this process and the worker compile, in order, and the wall time (s). A
-    group is ready once the groups of its ``after`` that are among ``names`` are done;
-    the idle worker takes the costliest ready group, this process the costliest of the
-    rest, and waits for the worker when none is left for it."""
-    todo, done = list(names), set()
+def _schedule(
+    names: list[str], costs: dict[str, float], order: list[str] | None = None
+) -> tuple[list[list[str]], float]:
+    """What ``_compile`` does with ``names`` when each group takes ``costs[name]`` seconds
+    and ``order`` ranks them (default: ``names``' order): the groups this process and the
+    worker compile, in order, and the wall time (s). Whenever a process is free (the
+    worker from WORKER_START_S on) it takes the first-ranked group whose ``after`` groups
+    among ``names`` are done, or waits for the next one to finish."""
+    rank = {n: i for i, n in enumerate(order or names)}
+    todo = sorted(names, key=rank.__getitem__)
+    free = [0.0, WORKER_START_S] if len(names) > 1 else [0.0, float("inf")]
+    done_at: dict[str, float] = {}
     shares: list[list[str]] = [[], []]
-    t, worker_free, worker_end, at_worker = 0.0, WORKER_START_S, 0.0, None
-    use_worker = worker and len(names) > 1
-    while todo or at_worker:
-        ready = [g for g in todo if all(d in done or d not in names for d in GROUPS[g].after)]
-        if use_worker and at_worker is None and ready:
-            at_worker = max(ready, key=lambda n: costs[n])
-            todo.remove(at_worker)
-            ready.remove(at_worker)
-            worker_end = max(worker_free, t) + costs[at_worker]
-            shares[1].append(at_worker)
-        if ready or (todo and at_worker is None):
-            name = max(ready, key=lambda n: costs[n]) if ready else todo[0]
-            todo.remove(name)
-            t += costs[name]
-            done.add(name)
-            shares[0].append(name)
-        else:
-            t = max(t, worker_end)
-        if at_worker is not None and worker_end <= t:
-            done.add(at_worker)
-            worker_free, at_worker = worker_end, None
-    return shares, t
+    while todo:
+        p = 0 if free[0] <= free[1] else 1
+        t = free[p]
+        ready = [g for g in todo if all(d not in names or done_at.get(d, float("inf")) <= t for d in GROUPS[g].after)]
+        if not ready:
+            later = [e for e in done_at.values() if e > t]
+            if not later:  # (an inconsistent table) the first-ranked group regardless
+                ready = todo[:1]
+            else:
+                free[p] = min(later)
+                continue
+        name = ready[0]
+        todo.remove(name)
+        done_at[name] = free[p] = t + costs[name]
+        shares[p].append(name)
+    return shares, max(done_at.values(), default=0.0)
+
+
+def _ready(name: str, names: list[str], done: set[str]) -> bool:
+    return all(d in done or d not in names for d in GROUPS[name].after)
+
+
+def best_order(names: list[str]) -> tuple[list[str], float]:
+    """The ranking of ``names`` whose ``_schedule`` is shortest with the groups' costs
+    (every permutation is tried: a planner needs at most a handful of groups), and that
+    schedule's wall time (s); the first such ranking on ties."""
+    from itertools import permutations
+
+    costs = {n: GROUPS[n].cost_s for n in names}
+    best: tuple[float, list[str]] = (float("inf"), list(names))
+    for order in permutations(names):
+        total = _schedule(names, costs, list(order))[1]
+        if total < best[0] - 1e-9:
+            best = (total, list(order))
+    return best[1], best[0]
 
 
 def estimate_s(names: list[str]) -> float:
-    """Wall seconds to compile the groups ``names`` on two cores (``_schedule``)."""
-    return _schedule(names, {n: GROUPS[n].cost_s for n in names})[1]
+    """Wall seconds to compile the groups ``names`` on two cores (``best_order``)."""
+    return best_order(names)[1]
 
 
 def ensure(planner: str, stream=None, root: str | None = None) -> list[str]:
@@ -223,53 +243,76 @@ class _CacheLock:
 
 
 def _compile(names: list[str], stream) -> None:
-    """Compile ``names`` here and in one worker process, as ``_schedule`` lays out."""
-    t0 = time.perf_counter()
-    worker = _Worker.start() if len(names) > 1 else None
-    todo = list(names)
-    done: set[str] = set()
-    at_worker: str | None = None
+    """Compile ``names`` here and in one worker process, in ``best_order``'s ranking: a
+    thread feeds the worker its next group as soon as it is free (as ``_schedule`` plays
+    it out) while this thread compiles."""
+    import threading
 
-    def finished(name: str) -> None:
+    order, _ = best_order(names)
+    todo = sorted(names, key=order.index)
+    done: set[str] = set()
+    busy: set[str] = set()  # groups being compiled
+    cond = threading.Condition()
+    t0 = time.perf_counter()
+
+    def next_ready() -> str | None:
+        for g in todo:
+            if _ready(g, names, done):
+                todo.remove(g)
+                busy.add(g)
+                return g
+        return None
+
+    def finished(name: str) -> None:  # with cond held
+        busy.discard(name)
         done.add(name)
+        cond.notify_all()
         _say(stream, f"compiled {name} kernels ({len(done)} of {len(names)}, {time.perf_counter() - t0:.0f} s)")
 
+    def feed(worker: _Worker) -> None:
+        while True:
+            with cond:
+                name = next_ready()
+                while name is None and todo:
+                    cond.wait()
+                    name = next_ready()
+                if name is None:
+                    return
+            ok = worker.send(name) and worker.word(name)
+            with cond:
+                if ok:
+                    finished(name)
+                else:  # the worker failed or ended: this thread's share from now on
+                    busy.discard(name)
+                    todo.insert(0, name)
+                    cond.notify_all()
+                    return
+
+    worker = _Worker.start() if len(names) > 1 else None
+    feeder = threading.Thread(target=feed, args=(worker,), daemon=True) if worker is not None else None
     try:
-        while todo or at_worker:
-            ready = [g for g in todo if all(d in done or d not in names for d in GROUPS[g].after)]
-            if worker is not None and at_worker is None and ready:
-                name = max(ready, key=lambda n: GROUPS[n].cost_s)
-                if worker.send(name):
-                    at_worker = name
-                    todo.remove(name)
-                    ready.remove(name)
-                else:  # the worker is gone: everything here
-                    worker = None
-            word: bool | None = None
-            if ready or (todo and at_worker is None):
-                name = max(ready, key=lambda n: GROUPS[n].cost_s) if ready else todo[0]
-                todo.remove(name)
-                warm_up(name)
+        if feeder is not None:
+            feeder.start()
+        while True:
+            with cond:
+                name = next_ready()
+                while name is None and (todo or busy):
+                    if not busy:  # (an inconsistent table) the first group regardless
+                        name = todo.pop(0)
+                        busy.add(name)
+                        break
+                    cond.wait()
+                    name = next_ready()
+                if name is None:
+                    break
+            warm_up(name)
+            with cond:
                 finished(name)
-            elif at_worker is not None:
-                assert worker is not None
-                word = worker.word(at_worker)
-            else:
-                continue
-            if at_worker is not None and worker is not None:
-                if word is None:
-                    word = worker.word(at_worker, timeout_s=0.0)
-                if word:
-                    finished(at_worker)
-                elif word is False:  # the worker failed or ended: this process compiles it
-                    todo.insert(0, at_worker)
-                    worker.close()
-                    worker = None
-                if word is not None:
-                    at_worker = None
     finally:
         if worker is not None:
             worker.close()
+        if feeder is not None:
+            feeder.join(timeout=5.0)
 
 
 def warm_up(name: str) -> None:
@@ -364,12 +407,12 @@ def _worker_main() -> int:
 # --- the warm-up calls: the real code on tiny inputs (the signatures of real runs) -------
 
 
-def _warm_machine_program():
+def _warm_machine_program(text: bytes = WARM_PROGRAM):
     from .gcode import read_program
     from .machine.load import DEFAULT_PRESET, load_machine
 
     m = load_machine(DEFAULT_PRESET)
-    return m, read_program(WARM_PROGRAM, "precompile", axes=m.axes, start=m.start)
+    return m, read_program(text, "precompile", axes=m.axes, start=m.start)
 
 
 def _tiny_path():
@@ -437,16 +480,16 @@ def _warm_vpop_batch() -> None:
 
 
 def _warm_optimal() -> None:
-    """The optimal planner's feed profile, sampler and refinement, on the warm program's
-    arc (the path its curvature limits)."""
+    """The optimal planner's feed profile, sampler and refinement, on ``WARM_ARC_PROGRAM``."""
     from .fit import FitSettings, fit_program
     from .plan.optimal import plan_path_optimal
     from .plan.settings import PlanSettings
 
-    m, prog = _warm_machine_program()
-    paths = fit_program(prog, FitSettings.from_options(machine=m)).paths
-    arc = max(paths, key=lambda p: p.length / max(float(p.feed_mm_s.min()), 1e-9))
-    plan_path_optimal(arc, None, m, m.dt_s, PlanSettings.from_options(planner="optimal", machine=m))
+    m, prog = _warm_machine_program(WARM_ARC_PROGRAM)
+    (arc,) = fit_program(prog, FitSettings.from_options(machine=m)).paths
+    plan = plan_path_optimal(arc, None, m, m.dt_s, PlanSettings.from_options(planner="optimal", machine=m))
+    if plan.stats.get("route") != "profile":  # the warm-up would miss the profile's kernels
+        raise RuntimeError(f"the warm-up arc took the {plan.stats.get('route')!r} route")
 
 
 if __name__ == "__main__":

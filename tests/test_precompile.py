@@ -36,8 +36,8 @@ def test_the_schedule_compiles_each_group_once_after_what_it_links(planner):
 
 
 def test_the_schedule_in_closed_form():
-    # a, b ready at once: the worker takes the costlier (b, from WORKER_START_S), this
-    # process a; c needs both, so it starts when b ends, at the worker (idle first)
+    # ranked a, b, c: this process takes a at 0, the worker b once started
+    # (WORKER_START_S); c needs both, so this process waits for b and then compiles it
     groups = {
         "a": precompile.KernelGroup("a", (), "", 10.0),
         "b": precompile.KernelGroup("b", (), "", 20.0),
@@ -46,12 +46,18 @@ def test_the_schedule_in_closed_form():
     saved = dict(precompile.GROUPS)
     try:
         precompile.GROUPS.update(groups)
-        shares, total = precompile._schedule(["a", "b", "c"], {n: g.cost_s for n, g in groups.items()})
+        costs = {n: g.cost_s for n, g in groups.items()}
+        shares, total = precompile._schedule(["a", "b", "c"], costs)
+        # ranked b first: this process takes b at 0, the worker a at WORKER_START_S
+        shares_b, total_b = precompile._schedule(["a", "b", "c"], costs, ["b", "a", "c"])
+        order, best = precompile.best_order(["a", "b", "c"])
     finally:
         precompile.GROUPS.clear()
         precompile.GROUPS.update(saved)
-    assert shares == [["a"], ["b", "c"]]
+    assert shares == [["a", "c"], ["b"]]
     assert total == pytest.approx(precompile.WORKER_START_S + 20.0 + 5.0)
+    assert shares_b == [["b", "c"], ["a"]] and total_b == pytest.approx(25.0)
+    assert order == ["b", "a", "c"] and best == pytest.approx(25.0)
 
 
 def test_nothing_missing_takes_no_lock_and_compiles_nothing(monkeypatch, tmp_path):
@@ -116,7 +122,7 @@ def test_a_first_run_says_its_estimate_and_each_group_compiled(monkeypatch, tmp_
         f"cnc-interp: first run: compiling the constant planner's kernels, about {est:.0f} s "
         "on 2 cores, cached for next time"
     )
-    assert [line.split()[2] for line in lines[1:]] == sorted(names, key=lambda n: -precompile.GROUPS[n].cost_s)
+    assert [line.split()[2] for line in lines[1:]] == precompile.best_order(names)[0]
     assert sorted(done) == sorted(names) and lines[-1].startswith("cnc-interp: compiled ") and "3 of 3" in lines[-1]
 
 
