@@ -13,12 +13,14 @@ run calls. ``ensure(planner)`` compiles the groups the planner needs that are mi
 - under a cross-process lock (``fcntl.flock`` on a file in the kernel cache's folder):
   one process compiles, any other that needs the same cache waits for it and then loads
   what it cached;
-- on two cores: this process and one worker process take the groups in dependency order,
-  the worker the costlier of the ready ones (``_schedule``). The worker reads group names
-  on its standard input and ends when that closes: with the command, whichever way the
-  command ends (nothing outlives it);
-- with a message on a terminal that gives the estimate (the schedule's length with the
-  groups' measured costs, ``KernelGroup.cost_s``) and one line per group compiled.
+- on two cores: this process compiles in its main thread while a second thread hands one
+  worker process its next group as soon as it is free, each taking the first-ranked group
+  whose dependencies are done; the ranking is the one whose schedule (``_schedule``, with
+  the groups' measured costs ``KernelGroup.cost_s``) is shortest (``best_order``). The
+  worker reads group names on its standard input and ends when that closes: with the
+  command, whichever way the command ends (nothing outlives it);
+- with a message on a terminal that gives the estimate (that schedule's length) and one
+  line per group compiled.
 
 Kernels outside the groups (curves that few programs use, the batch fitter of very long
 runs) still compile on their first call.
