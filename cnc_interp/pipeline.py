@@ -273,6 +273,7 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
     (wall time). Raises ``PlanError`` (exit 1) when a block violates a limit (a bug),
     before that block is written.
     """
+    import sys
     import time
 
     from .errors import PlanError
@@ -297,7 +298,7 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
         planner=opts.planner, dt_s=opts.dt_s, tol_mm=opts.tol_mm, machine=machine, effort=opts.effort
     )
     machine = machine.with_dt(settings.dt_s)
-    _warm_kernels(settings.planner)
+    _warm_kernels(settings.planner, sys.stderr if not opts.quiet and _is_terminal(sys.stderr) else None)
     dt = float(settings.dt_s)
     name, data = read_part(opts.part)
     input_meta = _input_meta(name, data)
@@ -406,32 +407,21 @@ def _few_malloc_arenas() -> None:
         pass
 
 
-def _warm_kernels(planner: str) -> None:
+def _warm_kernels(planner: str, stream=None) -> None:
     """Compile the kernel groups the planner needs that are not cached yet (a first run,
-    ``precompile.ensure``), then load the planner's and the CSV formatter's kernels in a
-    thread while the program is read: loading them takes about a second, and the first
-    rows wait for it."""
+    ``precompile.ensure``, saying so on ``stream``), then load the CSV formatter's and
+    VPOp's kernels in a thread while the program is read: loading them takes about a
+    second, and the first rows wait for it."""
     import threading
 
-    from .precompile import ensure
+    from .precompile import ensure, warm_up
 
-    ensure(planner)
+    ensure(planner, stream=stream)
 
     def load():
         try:
-            from .export._repr import format_table
-            from .plan.vpop import drive as vpop_drive
-
-            format_table(np.zeros((1, 1)))
-            vpop_drive.plan_identity_batch  # noqa: B018 - the import loads the module
-            from .machine.load import DEFAULT_PRESET, load_machine
-            from .plan.vpop import plan_many_vpop
-            from .fit import fit_run
-            from .gcode import read_program
-
-            m = load_machine(DEFAULT_PRESET)
-            prog = read_program(b"G21 G90\nG0 X1\n", "warm", axes=m.axes, start=m.start)
-            plan_many_vpop(fit_run(prog.runs[0]), m, m.dt_s)
+            for group in ("csv", "vpop-batch"):
+                warm_up(group)
         except Exception:  # noqa: BLE001 - only a head start; the real call reports errors
             pass
 
@@ -465,10 +455,6 @@ def run_plan(opts: PlanOptions) -> None:
 
     out = opts.out or "-"
     check_writable(out, inputs=(opts.part, opts.machine_spec))
-    if not opts.quiet and _is_terminal(sys.stderr):
-        from .precompile import ensure
-
-        ensure(opts.planner or DEFAULT_PLANNER, stream=sys.stderr)  # said on a terminal only
     with progress_bar(None, "plan", enabled=not opts.quiet, unit="mm") as tick:
         summary = stream_plan(opts, progress=tick)
     if opts.summary_json:

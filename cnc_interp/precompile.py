@@ -35,9 +35,10 @@ import time
 from dataclasses import dataclass
 
 #: the planners whose kernels are grouped here, and what each needs (in compile order)
+_VPOP_GROUPS = ("fit", "csv", "vpop-prep", "vpop-loop", "vpop-batch")
 PLANNER_GROUPS = {
-    "vpop": ("fit", "csv", "vpop-prep", "vpop-loop", "vpop-batch"),
-    "optimal": ("fit", "csv", "vpop-prep", "vpop-loop", "vpop-batch", "optimal"),
+    "vpop": _VPOP_GROUPS,
+    "optimal": (*_VPOP_GROUPS, "optimal"),  # VPOp plans the paths the profile does not
     "constant": ("fit", "csv"),
     "variable": ("fit", "csv"),
 }
@@ -420,11 +421,8 @@ def _warm_machine_program(text: bytes = WARM_PROGRAM):
 def _tiny_path():
     """A 1 mm rapid move of the default machine, fitted."""
     from .fit.fitter import fit_run
-    from .gcode import read_program
-    from .machine.load import DEFAULT_PRESET, load_machine
 
-    m = load_machine(DEFAULT_PRESET)
-    prog = read_program(b"G21 G90\nG0 X1\n", "precompile", axes=m.axes, start=m.start)
+    m, prog = _warm_machine_program(b"G21 G90\nG0 X1\n")
     return fit_run(prog.runs[0])[0], m
 
 
