@@ -3,7 +3,7 @@
 Usage: .venv/bin/python benchmarks/fit.py [FILE.ngc ...] [--tol MM] [--method nodes|planar|auto] [--repeat N]
                                           [--threads N]
 
-Defaults to the two corpus files of issue 3 (circle_small_segments_ncd.ngc and
+Defaults to two corpus files of dense CAM segments (circle_small_segments_ncd.ngc and
 3D_Chips.ngc). Parsing is excluded from the timing; building the Paths (their
 arc-length tables) is included. Numba kernels are compiled (or loaded from the
 cache) by one warm-up run that is not timed. Wall time and CPU time (process_time)

@@ -1,4 +1,4 @@
-"""The HDL datapath against the golden model, then synthesized for an ECP5 (issue 18).
+"""The HDL datapath against the golden model, then synthesized for an ECP5.
 
     .venv/bin/python benchmarks/hdl.py --sim-only   # last line: hdl sim: N mismatches in M samples
     .venv/bin/python benchmarks/hdl.py              # then: hdl synth: Fmax F MHz, MULT18X18D K, ...

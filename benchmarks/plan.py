@@ -11,7 +11,7 @@ its own (numba compiled beforehand; the selection keeps the fastest of ``--repea
 The sweep plans every corpus program that parses on a LinuxCNC configuration
 (corpus ``configs/*.ini``, default jerk where the INI has none), checks every limit,
 and lists failures with their error message. Every run ends with the programs below
-issue 13's 100x real time (and their share of the cycle); ``--baseline`` an earlier
+the 100x real-time target (and their share of the cycle); ``--baseline`` an earlier
 run's ``--json`` (VPOp's sweep, or one from an older checkout) compares the total plan time
 and cycle of the programs both planned.
 """
@@ -31,7 +31,7 @@ CORPUS = os.environ.get(
     "CNC_CORPUS", os.path.join(os.path.dirname(__file__), "..", "..", "shared", "corpus", "linuxcnc")
 )
 TRIDENT = os.path.join(CORPUS, "nurbs-g5", "trident-xy.ngc")
-#: issue 13's planning-speed target per 3-axis corpus program, x real time at 1 kHz
+#: the planning-speed target per 3-axis corpus program, x real time at 1 kHz
 TARGET_X_REAL_TIME = 100.0
 SELECTION = [
     ("nurbs-g5/trident-xy.ngc", "mikron-ucp710"),

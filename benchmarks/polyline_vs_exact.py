@@ -1,4 +1,4 @@
-"""Polyline vs exact (issue 14): cycle time of a CAM polyline against the same curve given
+"""Polyline vs exact: cycle time of a CAM polyline against the same curve given
 exactly, under one machine.
 
     .venv/bin/python benchmarks/polyline_vs_exact.py                    # mikron-ucp710

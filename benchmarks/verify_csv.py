@@ -3,7 +3,7 @@
 Usage: python benchmarks/verify_csv.py [ROWS]   (default 1,000,000 rows, 6 axes)
 Prints samples/s for verify and rows/s + MB/s for CSV write and read, then the wall time of
 the whole `cnc-interp verify` and `cnc-interp plot` commands on that file (the figures a user
-waits for; issue 16 asks for under 10 s each at 5.6 M rows).
+waits for; the target is under 10 s each at 5.6 M rows).
 """
 
 from __future__ import annotations

@@ -61,7 +61,7 @@ def fit_loaded(program, settings):
     return require_within_tolerance(fit_program(program, settings))
 
 
-# --- batch: one program from bytes to a result record (H3a, issue 7) ----------
+# --- batch: one program from bytes to a result record ----------
 def process_program(
     name: str,
     data: bytes,

@@ -1,4 +1,4 @@
-"""Corner blends (issue 14): a corner sharper than the smooth-fit range is rounded by a
+"""Corner blends: a corner sharper than the smooth-fit range is rounded by a
 G2 quintic within the tolerance instead of stopping the machine (as LinuxCNC's
 ``G64 P`` and Siemens' G642 round corners).
 

@@ -1,4 +1,4 @@
-"""The printed precision of a program's coordinates (issue 14).
+"""The printed precision of a program's coordinates.
 
 CAM output rounds every coordinate to a fixed number of decimals (0.0001 in is
 2.54 µm). A printed point is only known to ±½ of that quantum, so a fit held to a

@@ -51,7 +51,7 @@ FEED_KNOT_TIME_S = 0.006
 #: and that of q_sss): a rounded corner gets several knots, a CAM path's short features
 #: several where the jerk binds (fewer places where the exact sampler gets stuck). 0.35
 #: (0.5 before for curvature, and for q_sss where the jerk did not bind): at --effort fast,
-#: LinuxCNC's XYZ machine of issue 13 (jerk out of the way) zigzag_0.002_0.001 34.217 ->
+#: LinuxCNC's XYZ machine (jerk out of the way) zigzag_0.002_0.001 34.217 ->
 #: 33.754 s, stellabee-kink-test -1.0 %, stellabee-violation-spirals -1.0 %; the axis_mm.ini
 #: sweep's cycle the same (+0.003 %) and its planning time too; 0.3 gained 0.07 % more
 #: there for 6 % more CPU
@@ -76,7 +76,7 @@ FEED_PEAK_SHARE = 0.0
 #: zigzag_0.002_0.001 then solved every knot 1.7 times; at 1.0, 1.4 times: its LP work
 #: (rows x iterations) -23 %, stellabee1's the same (most of its paths are one window),
 #: the fast sweep's cycle -0.002 %. 1.5: zigzag's LP work -28 % and 15 % less CPU than at
-#: 1.0, but issue 13's LinuxCNC zigzag +0.4 % at fast (33.997 s against 33.860 s) and
+#: 1.0, but the LinuxCNC comparison's zigzag +0.4 % at fast (33.997 s against 33.860 s) and
 #: stellabee-kink-test +0.02 %; 2.0: stellabee-kink-test +0.8 %)
 FEED_COMMIT_S = 1.0
 #: iterations of the convex-concave procedure, and the relative change of the traversal
@@ -132,7 +132,7 @@ FEED_WHOLE_KNOTS = 1500
 #: a window's first LP is linearised past the committed part at the estimate times the
 #: previous window's ratio of its solution to the estimate (median over what it committed),
 #: at most 1 and at least this: the estimate is static limits inflated and lies well above
-#: the solution on CAM paths (w ratio ~0.2 on axis_mm.ini, ~0.4 on issue 13's LinuxCNC
+#: the solution on CAM paths (w ratio ~0.2 on axis_mm.ini, ~0.4 on the LinuxCNC comparison's
 #: machine; the tangent rows of a point linearised that high hold the jerk ~2x too tight
 #: there, and the committed state often could not brake under them). zigzag_0.002_0.001
 #: on axis_mm.ini, fast: 151 -> 79 windows solved again, 64k -> 40k LP iterations, cycle

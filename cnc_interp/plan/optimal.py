@@ -68,8 +68,8 @@ OPT_FULL_REFINE_DT = 0.002
 #: solves: a block that gained less than OPT_REFINE_RATE periods per solve pauses it for
 #: OPT_REFINE_PAUSE strides (each solve costs ~0.4-3 ms of CPU: refining every dip of
 #: stellabee1's short CAM paths cost ~0.25 s a path; zigzag_0.002_0.001 gains 0.89
-#: period per solve on axis_mm.ini, 27 % of its cycle, and on LinuxCNC's XYZ machine of
-#: issue 13 blocks of 0.4-0.6, 10 % of its cycle: 0.6 left it slower than LinuxCNC)
+#: period per solve on axis_mm.ini, 27 % of its cycle, and on LinuxCNC's XYZ machine
+#: (the LinuxCNC comparison) blocks of 0.4-0.6, 10 % of its cycle: 0.6 left it slower than LinuxCNC)
 OPT_REFINE_PROBE = 30
 OPT_REFINE_RATE = 0.4
 OPT_REFINE_PAUSE = 50
@@ -1034,7 +1034,7 @@ def _vpop_stage(ctx, window):
     except VpopFailed:
         if handed:
             raise
-    # VPOp got stuck (issue 13's A+Z moves): the profile if this path did not come
+    # VPOp got stuck (a Vectric file's A+Z moves): the profile if this path did not come
     # from it, else the safe S-curve, which cannot fail
     ctx.stats["vpop_failed"] = True
     if ctx.stats.get("route") == "vpop" and "fallback" not in ctx.stats:

@@ -15,7 +15,7 @@ from .base import IterPathPlanner, PathPlanner, one_chunk
 _ENTRIES = {
     # placeholder for H3b to merge: VPOp's per-path planner
     "vpop": "cnc_interp.plan.vpop:plan_path_vpop",
-    # near-time-optimal: feed-profile LP + exact sampler (issue 13)
+    # near-time-optimal: feed-profile LP + exact sampler
     "optimal": "cnc_interp.plan.optimal:plan_path_optimal",
     # paper 000 (de Santiago-Perez et al. 2010)
     "constant": "cnc_interp.plan.paper000.constant:plan_path_constant",

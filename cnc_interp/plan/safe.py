@@ -1,7 +1,7 @@
 """The planner that cannot fail: jerk-limited S-curves under local bounds of the path.
 
 VPOp and the optimal planner fall back to ``plan_path_safe`` when they cannot plan a
-path (issue 13: four A+Z moves of a Vectric file made VPOp report "made no
+path (four A+Z moves of a Vectric file made VPOp report "made no
 progress"). It is slow but always valid. The path is cut into stretches of table
 pieces whose bounds differ by at most ``SAFE_SPREAD`` (a short stretch around a
 spike of curvature, long ones elsewhere); each stretch is run rest to rest:

@@ -14,11 +14,10 @@ if TYPE_CHECKING:
     from ..machine.model import Machine
 
 #: the planner of ``plan`` and ``batch`` when none is named (``stream`` has its own).
-#: VPOp, not ``optimal``: optimal's cycles are 7.6 % shorter over the corpus
-#: (``benchmarks/plan.py --sweep``, axis_mm.ini), but it takes ~6.5x VPOp's planning time
-#: there (277 s against 44 s; stellabee1 alone ~245 s against ~34 s; at ``effort="fast"``
-#: ~2-2.5x, 89-112 s, for cycles 5.4 % shorter): a default must not make the user wait that
-#: long (issue 13; issue 17's stellabee1 end to end in < 30 s)
+#: VPOp, not ``optimal``: over the corpus (``benchmarks/plan.py --sweep``, axis_mm.ini)
+#: optimal's cycles are 7.98 % shorter for 6.3x VPOp's planning time (285 s against 45 s),
+#: and at ``effort="fast"`` 5.82 % shorter for 1.96x, with 3 programs a few samples
+#: longer than VPOp's; its first run also compiles ~34 CPU-s more kernels
 DEFAULT_PLANNER = "vpop"
 
 

@@ -293,7 +293,7 @@ def iter_path_plan_vpop(path, joint_map, machine, dt_s: float, settings=None, wi
     worth) however long the path. ``window=None`` keeps the whole path and yields one
     chunk. The chunks' concatenation does not depend on ``window``.
 
-    VPOp can get stuck (issue 13: rotary moves with almost no linear motion); when it
+    VPOp can get stuck (rotary moves with almost no linear motion); when it
     does before handing out a sample, the safe planner (``plan.safe``), which cannot,
     plans the path (its stats carry ``fallback``).
     """
