@@ -801,16 +801,26 @@ def _iter(path, joint_map, machine, dt_s, settings, stats, window):
     if ctx.whole:
         stage = _better_of(ctx, stage, passes, targeted)
     produced = 0
+    tail_s = tail_q = None  # the last three samples out (a rescue brakes from them)
     try:
         for s, q in _rechunk(stage, chunk):
             produced += s.shape[0]
+            tail_s, tail_q = _tail(tail_s, tail_q, s, q)
             yield s, q
     except _Fallback as why:
         if produced:
-            raise PlanError(
-                f"bug: the optimal planner gave up on the path ending at line "
-                f"{int(path.line[-1])} after emitting samples ({why})"
-            ) from None
+            # samples are out: brake to rest from the last one, the safe planner for
+            # the rest (a stall is an outcome, not an error)
+            from .vpop.planner import rescue
+
+            what = f"the optimal planner gave up on the path ending at line {int(path.line[-1])} ({why})"
+            plan = rescue(ctx.prepared(), tail_s, tail_q, ctx.joint_map, machine, settings, what)
+            ctx.stats.update({k: plan.stats[k] for k in ("fallback", "safe", "rescued_at")})
+            produced += plan.s.shape[0]
+            yield plan.s, plan.q
+            stats.update(ctx.stats)
+            stats["samples_total"] = produced
+            return
         ctx.stats["fallback"] = str(why)
         passes = _refine_passes(opts, dt, "vpop")
         stage = _vpop_stage(ctx, window)
@@ -821,6 +831,13 @@ def _iter(path, joint_map, machine, dt_s, settings, stats, window):
             yield s, q
     stats.update(ctx.stats)
     stats["samples_total"] = produced
+
+
+def _tail(tail_s, tail_q, s, q):
+    """The last three samples of those out before and ``s``, ``q``."""
+    if tail_s is not None and s.shape[0] < 3:
+        s, q = np.concatenate((tail_s, s)), np.concatenate((tail_q, q))
+    return s[-3:].copy(), q[-3:].copy()
 
 
 def _samples(blocks) -> int:

@@ -19,6 +19,8 @@ spike of curvature, long ones elsewhere); each stretch is run rest to rest:
   exact check still failed they would be halved again (it does not, in the tests).
 
 Stretches meet at rest: the join sample is held for three periods, as between paths.
+With ``s_start`` it plans only the rest of a path from rest there (``vpop.planner.rescue``,
+after a stall once samples are out).
 """
 
 from __future__ import annotations
@@ -143,8 +145,16 @@ def _stretches(g1, g2, g3, V, A, J):
     return out
 
 
-def plan_path_safe(path, joint_map, machine, dt_s: float, settings=None) -> PathPlan:
-    """Plan one path from rest to rest, slowly but always (see module docstring)."""
+def plan_path_safe(
+    path, joint_map, machine, dt_s: float, settings=None, *, table=None, s_start: float = 0.0
+) -> PathPlan:
+    """Plan one path from rest to rest, slowly but always (see module docstring).
+
+    ``s_start`` > 0 plans only the rest of the path, from rest at arc length ``s_start``
+    (VPOp's rescue after a stall mid-path: ``vpop.planner``); the samples then start at
+    s_start. ``table``: the joint table to follow (a ``JointTable`` or anything with its
+    ``S``, ``C``, ``length`` and ``qend``), so that the samples meet another planner's on
+    the same table exactly; by default the path's own ``JointTable``."""
     from .step_limits import position_scale, step_limits
     from .verify import verify_arrays
     from .vpop import JointTable, _eval_table, _positions
@@ -152,26 +162,35 @@ def plan_path_safe(path, joint_map, machine, dt_s: float, settings=None) -> Path
     if path.rapid:
         joint_map = None
     dt = float(dt_s)
-    table = JointTable(path, joint_map)
+    if table is None:
+        table = JointTable(path, joint_map)
     L = float(table.length)
-    if not L > 0.0:
+    s_start = float(s_start)
+    if not L > s_start:
+        if s_start > 0.0:
+            q0 = np.asarray(table.qend, dtype=float).reshape(1, -1).copy()
+            return PathPlan(s=np.full(1, L), q=q0, stats={"samples": 1, "planner": "safe"})
         q0 = _positions(path, path.breaks[:1], joint_map)
         return PathPlan(s=np.zeros(1), q=q0, stats={"samples": 1, "planner": "safe"})
     vl, al, jl = step_limits(machine, dt, position_scale(table.C))  # exact step limits (checked below)
-    g1, g2, g3 = _bounds(table)
+    S = table.S
+    m = int(S.shape[0]) - 1
+    # the first table piece with anything left after s_start
+    first = min(max(int(np.searchsorted(S, s_start, side="right")) - 1, 0), m - 1)
+    g1, g2, g3 = (g[first:] for g in _bounds(table))
     feeds = path.feed_mm_s[np.isfinite(path.feed_mm_s) & (path.feed_mm_s > 0)]
     feed = float(np.min(feeds)) if feeds.size else math.inf
-    S = table.S
     share = SAFE_SHARE
     for _ in range(SAFE_TRIES):
         V, A, J = machine.vmax * share, machine.amax * share, machine.jmax * share
-        parts_s = [np.zeros(1)]
+        parts_s = [np.full(1, s_start)]
         for p0, p1, G1, G2, G3 in _stretches(g1, g2, g3, V, A, J):
             v, a, j = _path_limits(G1, G2, G3, V, A, J)
             v = min(v, feed * share)
             if not (v > 0 and a > 0 and j > 0 and math.isfinite(a) and math.isfinite(j)):
                 raise PlanError(f"bug: no safe limits for the path ending at line {int(path.line[-1])}")
-            s0, s1 = float(S[p0]), (L if p1 == g1.shape[0] else float(S[p1]))
+            s0 = max(float(S[first + p0]), s_start)
+            s1 = L if p1 == g1.shape[0] else float(S[first + p1])
             phases = scurve(s1 - s0, v, a, j)
             T = sum(d for d, _ in phases)
             N = max(int(math.ceil(T / dt)), 1)

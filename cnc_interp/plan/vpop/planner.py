@@ -45,6 +45,13 @@ VPOP_AIM_GAP_JERK_STEPS = 4.0
 VPOP_CHAIN_SEQUENTIAL = 2
 
 
+#: equal samples short of the end (VPOp standing still) that count as a stall when
+#: samples are handed out (``_standstill``): VPOp's own stops last three samples
+VPOP_STANDSTILL_SAMPLES = 4096
+
+#: the largest first buffer of a path's step loop (samples; it grows as needed)
+VPOP_FIRST_BUFFER = 1 << 20
+
 #: a checkpoint of the step loop is kept every this many samples; after a fast-mode failure
 #: the path is re-planned exactly from the last one (the start for shorter paths), so
 #: samples before it are final and can be handed out (1 min at 1 kHz)
@@ -232,7 +239,9 @@ class _Loop:
         (self.sh, self.qh, self.st, self.runs, self.ds, self.ck, self.max_cap) = D.new_loop(
             prep.n,
             prep.qstart,
-            prep.est,
+            # the first buffer's size: the rough estimate, at most VPOP_FIRST_BUFFER (the
+            # buffers grow): a G93 move's tiny feed on one segment made it 5e8 samples
+            min(prep.est, VPOP_FIRST_BUFFER),
             prep.brake_cap,
             prep.cfg.floor_h,
             room,
@@ -323,25 +332,136 @@ def iter_prepared(
     loop = _Loop(prep, window, checkpoint)
     D = loop.D
     handed = False
+    tail_s = tail_q = None  # the last three samples handed out (the state to brake from)
     while True:
         try:
             res = loop.run()
         except VpopFailed as exc:
-            if handed or not safe_fallback:
+            if handed:
+                # samples are out: a stall mid-path is not an error either (a crawl past
+                # the window, then "made no progress"): brake to rest from the last
+                # sample handed out, then the safe planner for the rest
+                yield rescue(prep, tail_s, tail_q, joint_map, machine, settings, str(exc))
+                return
+            if not safe_fallback:
                 raise
             yield _safe_fallback(path, joint_map, machine, prep.dt, settings, str(exc))
             return
         if res != D.HAND_OUT:
             break
-        s, q = loop.take(int(loop.ds[D.DS_CK_LO]))
+        upto = int(loop.ds[D.DS_CK_LO])
+        held = _standstill(loop, upto, prep.L)
+        if held is not None:
+            # VPOp stands still short of the end: a stall that max_steps would only
+            # report after hours of samples (a G93 A+Z move of 0.9 µm crawls, then
+            # stands for millions of samples before "made no progress")
+            why = (
+                f"VPOp stood still for {VPOP_STANDSTILL_SAMPLES} samples on the path ending at line "
+                f"{int(path.line[-1])} (s = {loop.sh[held - int(loop.ds[D.DS_BASE])]:.6g} of {prep.L:.6g})"
+            )
+            if not handed:
+                yield _safe_fallback(path, joint_map, machine, prep.dt, settings, why)
+                return
+            s, q = loop.take(held + 3)  # up to the stop: the machine is at rest there
+            tail_s, tail_q = _tail(tail_s, tail_q, s, q)
+            if s.size:
+                yield PathPlan(s=s, q=q, last=False)
+            yield rescue(prep, tail_s, tail_q, joint_map, machine, settings, why)
+            return
+        s, q = loop.take(upto)
         if s.size:
             handed = True
+            tail_s, tail_q = _tail(tail_s, tail_q, s, q)
             yield PathPlan(s=s, q=q, last=False)
     ds = loop.ds
     last = D.end_index(loop.sh, ds[D.DS_BASE], ds[D.DS_HANDED], ds[D.DS_END], prep.L)
     s, q = loop.take(int(last) + 1)
     q[-1] = prep.qend
     yield PathPlan(s=s, q=q, stats=_final_stats(last + 1, loop.stats, ds[D.DS_FAST] == 0, prep.pieces, prep.max_err))
+
+
+def _standstill(loop, upto: int, L: float) -> int | None:
+    """The global index of the first sample of a standstill of at least
+    ``VPOP_STANDSTILL_SAMPLES`` equal samples short of the end ``L`` among the samples
+    about to be handed out (up to global ``upto``), or None. VPOp stops mid-path only for
+    the three samples of a stop; a long standstill is a stall."""
+    D = loop.D
+    base, handed = int(loop.ds[D.DS_BASE]), int(loop.ds[D.DS_HANDED])
+    a = max(handed - base - 2, 0)
+    s = loop.sh[a : upto - base]
+    if s.shape[0] < VPOP_STANDSTILL_SAMPLES:
+        return None
+    same = np.concatenate(([False], s[1:] == s[:-1])) & (s < L)
+    # run lengths of equal samples: a run of VPOP_STANDSTILL_SAMPLES - 1 equalities
+    c = np.cumsum(~same)
+    idx = np.flatnonzero(~same)
+    runs = np.bincount(c - 1) if c.size else np.zeros(0, dtype=np.int64)
+    long_runs = np.flatnonzero(runs >= VPOP_STANDSTILL_SAMPLES)
+    if long_runs.size == 0:
+        return None
+    return base + a + int(idx[long_runs[0]])
+
+
+def _tail(tail_s, tail_q, s, q):
+    """The last three samples of what was handed out before and ``s``, ``q``."""
+    if tail_s is not None:
+        s = np.concatenate((tail_s, s))
+        q = np.concatenate((tail_q, q))
+    return s[-3:].copy(), q[-3:].copy()
+
+
+class _TableView:
+    """A compiled ``step.Table`` seen as a ``JointTable`` (S, C (m, 6, n), length, qend)
+    for the safe planner, so that its samples follow the very table VPOp's did."""
+
+    def __init__(self, table, L: float):
+        self.S = np.ascontiguousarray(table.S, dtype=float)
+        self.C = np.ascontiguousarray(np.transpose(table.C, (0, 2, 1)), dtype=float)
+        self.qend = np.ascontiguousarray(table.QEND, dtype=float)
+        self.length = float(L)
+
+
+def rescue(prep: "_Prepared", tail_s, tail_q, joint_map, machine, settings, why: str) -> PathPlan:
+    """The rest of a path after its samples up to ``tail_s[-1]`` are out (final) and the
+    planner that made them stalled: VPOp's brake run to rest from the state of the last
+    three samples ``tail_s`` (3,), ``tail_q`` (3, n) (exact mode, no early end: a stop is
+    reachable from every sample VPOp commits), then ``safe.plan_path_safe`` from there, on
+    the same joint table. The samples after ``tail_s[-1]``, as the path's last chunk
+    (stats: ``fallback``, ``safe``, ``rescued_at``)."""
+    from ..safe import plan_path_safe
+
+    core = _core()
+    path = prep.path
+    n = prep.n
+    cap = prep.brake_cap + 8
+    sh = np.zeros(cap)
+    qh = np.zeros((cap, n))
+    sh[:3] = tail_s
+    qh[:3] = tail_q
+    runs = core.Runs(
+        np.zeros(prep.brake_cap), np.zeros((prep.brake_cap, n)), np.zeros(prep.brake_cap),
+        np.zeros((prep.brake_cap, n)), np.zeros(5, dtype=np.int64),
+    )  # fmt: skip
+    sc = core.Scratch(np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty((3, n)))
+    c = prep.cfg
+    cfg = core.Settings(c.tol, c.max_steps, 0.0, c.gap_tol, False, c.chain_seq, c.floor_h)
+    ok, kk, _ = core._brake_run(prep.pb, sh, qh, np.int64(3), runs, sc, cfg, np.int64(1), 0.0, np.int64(0))
+    if not ok:
+        raise PlanError(f"{why}; no stop is reachable from the samples already handed out (a bug)")
+    bs, bq = runs.bs[3:kk].copy(), runs.bq[3:kk].copy()
+    s_stop = float(bs[-1]) if bs.size else float(tail_s[-1])
+    table = _TableView(prep.pb.table, prep.L)
+    rest = plan_path_safe(path, joint_map, machine, prep.dt, settings, table=table, s_start=s_stop)
+    # the safe plan's first sample is the stop itself (already three times in bs)
+    s = np.concatenate((bs, rest.s[1:]))
+    q = np.concatenate((bq, rest.q[1:]))
+    if s.size == 0 or s[-1] != prep.L:
+        s = np.concatenate((s, [prep.L]))
+        q = np.concatenate((q, np.asarray(prep.qend, dtype=float).reshape(1, -1)))
+    q[-1] = prep.qend
+    stats = dict(rest.stats or {})
+    stats.update({"samples": int(s.shape[0]), "fallback": why, "safe": True, "rescued_at": float(tail_s[-1])})
+    return PathPlan(s=s, q=q, stats=stats)
 
 
 def _safe_fallback(path, joint_map, machine, dt, settings, why: str) -> PathPlan:
