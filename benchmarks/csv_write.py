@@ -1,21 +1,25 @@
 """CSV writing speed: the plan writer's compiled ``repr`` formatter on plan-like columns.
 
-    .venv/bin/python benchmarks/csv_write.py [ROWS] [OUT]
+    .venv/bin/python benchmarks/csv_write.py [ROWS] [OUT] [--no-write]
 
 Builds ROWS (default 4,000,000) samples of a 3-axis plan (t = k*dt, s, feed, X and Y
 moving along arcs, Z mostly at rest, as in a 2.5D program) and writes them with
 ``CsvPlanWriter`` (blocks of 65,536 rows, as ``cnc-interp plan`` does) to OUT
 (default /dev/null), then checks a sample of rows against Python's ``repr``. Prints
-MB/s on wall and CPU time (the CPU figure is the steadier one on a shared machine).
+MB/s on wall and CPU time (the CPU figure is the steadier one on a shared machine) and
+writes them to ``benchmarks/RESULTS.md`` (its "CSV writer" section) unless ``--no-write``.
 """
 
 from __future__ import annotations
 
+import argparse
 import os
 import sys
 import time
 
 import numpy as np
+
+from _results import command_line, md_table, write_section
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
@@ -33,11 +37,15 @@ def columns(rows: int, dt: float = 0.001):
     return t, s, feed, np.stack([x, y, z], axis=1)
 
 
-def main() -> int:
+def main(argv=None) -> int:
     from cnc_interp.export.csv_io import CsvPlanWriter
 
-    rows = int(sys.argv[1]) if len(sys.argv) > 1 else 4_000_000
-    out = sys.argv[2] if len(sys.argv) > 2 else os.devnull
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("rows", nargs="?", type=int, default=4_000_000, help="samples (default 4,000,000)")
+    ap.add_argument("out", nargs="?", default=os.devnull, help="output file (default /dev/null)")
+    ap.add_argument("--no-write", action="store_true", help="print only; leave RESULTS.md alone")
+    args = ap.parse_args(argv)
+    rows, out = args.rows, args.out
     t, s, feed, q = columns(rows)
     # compile / load the formatter outside the measurement
     with open(os.devnull, "wb") as fh:
@@ -70,6 +78,23 @@ def main() -> int:
         text = format_rows(np.array([[t[i]], [s[i]], [feed[i]], *q[i : i + 1].T])).decode()
         want = ",".join(repr(float(v)) for v in (t[i], s[i], feed[i], *q[i])) + "\n"
         assert text == want, (text, want)
+    if not args.no_write:
+        table = md_table(
+            ["rows", "axes", "MB", "target", "MB/s wall", "M rows/s wall", "MB/s CPU", "200 rows as repr"],
+            [
+                [
+                    f"{rows:,}",
+                    "XYZ",
+                    f"{size / 1e6:.0f}",
+                    "/dev/null" if out == os.devnull else "file",
+                    f"{size / wall / 1e6:.0f}",
+                    f"{rows / wall / 1e6:.2f}",
+                    f"{size / cpu / 1e6:.0f}",
+                    "same",
+                ]
+            ],
+        )
+        write_section("CSV writer", "csv_write.py", command_line("csv_write.py", argv), table)
     return 0
 
 

@@ -3,6 +3,7 @@
     .venv/bin/python benchmarks/e2e.py                      # stellabee1, then the 10x program
     .venv/bin/python benchmarks/e2e.py --only stellabee1 --json out.json
     .venv/bin/python benchmarks/e2e.py PART.ngc [-m MACHINE]
+    .venv/bin/python benchmarks/e2e.py --no-write           # print only
 
 For each program, two runs of the installed console script (numba kernels compiled
 beforehand by a short plan):
@@ -17,7 +18,8 @@ The 10x program is stellabee1's body repeated ten times (generated into --work);
 file run writes ~8 GB, so it is skipped unless --file-10x is given (the pipe run gives
 its memory and time). The machine's load average before and after each run is printed:
 figures taken while other jobs load the machine are provisional (CPU time is the steadier
-figure).
+figure). The table goes to ``benchmarks/RESULTS.md`` (its "End to end" section) unless
+``--no-write``.
 """
 
 from __future__ import annotations
@@ -29,6 +31,8 @@ import subprocess
 import sys
 import tempfile
 import time
+
+from _results import command_line, md_table, write_section
 
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 CORPUS = os.environ.get("CNC_CORPUS", os.path.join(ROOT, "..", "shared", "corpus", "linuxcnc"))
@@ -154,6 +158,7 @@ def main(argv=None) -> int:
     ap.add_argument("--work", default=None, help="folder for outputs and the 10x program")
     ap.add_argument("--file-10x", action="store_true", help="also write the 10x plan to a file")
     ap.add_argument("--json", default=None, help="write the figures here")
+    ap.add_argument("--no-write", action="store_true", help="print only; leave RESULTS.md alone")
     args = ap.parse_args(argv)
     work = args.work or tempfile.mkdtemp(prefix="cnc-e2e-")
     os.makedirs(work, exist_ok=True)
@@ -193,7 +198,42 @@ def main(argv=None) -> int:
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(results, fh, indent=2)
+    if not args.no_write:
+        write_section(
+            "End to end",
+            "e2e.py",
+            command_line("e2e.py", argv),
+            table(results),
+            f"`cnc-interp plan PART -m {args.machine}`, kernels compiled beforehand. Load is the one-minute "
+            "load average before and after the run; CPU time is the steadier figure on a shared machine.",
+        )
     return 0
+
+
+def table(results: list[dict]) -> str:
+    rows = []
+    for rec in results:
+        for mode in ("file", "pipe"):
+            r = rec.get(mode)
+            if r is None:
+                continue
+            rows.append(
+                [
+                    rec["program"],
+                    "`-o file.csv`" if mode == "file" else "`-o -` into a pipe",
+                    f"{r['wall_s']:.1f} s",
+                    f"{r['cpu_s']:.1f} s",
+                    f"{r['peak_rss_mb']:.0f} MB",
+                    f"{r['first_row_s']:.2f} s" if r.get("first_row_s") is not None else "",
+                    f"{r.get('samples', r.get('rows')):,}",
+                    f"{r['bytes'] / 1e6:.0f} MB",
+                    f"{r['load_before']:.1f} → {r['load_after']:.1f}",
+                ]
+            )
+    return md_table(
+        ["program", "output", "wall", "CPU", "peak RSS", "first row", "samples", "size", "load"],
+        rows,
+    )
 
 
 if __name__ == "__main__":

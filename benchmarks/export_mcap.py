@@ -7,7 +7,8 @@ Usage:
                                                         (a CSV has no source lines: no segments)
 
 Prints, for CSV and MCAP (with /limits when a machine is known): seconds, samples/s,
-messages/s and file size; then MCAP read-back time.
+messages/s and file size; then MCAP read-back time. Writes them to ``benchmarks/RESULTS.md``
+(its "MCAP against CSV" section) unless ``--no-write``.
 """
 
 from __future__ import annotations
@@ -23,6 +24,8 @@ from cnc_interp.export.csv_io import read_csv, write_csv
 from cnc_interp.export.mcap_io import read_mcap, write_mcap
 from cnc_interp.machine.model import Machine
 from cnc_interp.plan.trajectory import Trajectory
+
+from _results import command_line, md_table, write_section
 
 
 def synthetic(k: int) -> tuple[Trajectory, Machine]:
@@ -49,22 +52,24 @@ def timed(fn):
 
 
 def main() -> None:
-    arg = sys.argv[1] if len(sys.argv) > 1 else "1000000"
+    no_write = "--no-write" in sys.argv
+    argv = [a for a in sys.argv if a != "--no-write"]
+    arg = argv[1] if len(argv) > 1 else "1000000"
     if arg.isdigit():
         traj, machine = synthetic(int(arg))
         name = f"synthetic helix, {traj.n_samples:,} samples"
     elif arg.lower().endswith(".csv"):
         traj = read_csv(arg)
         machine = None
-        if len(sys.argv) > 2:
+        if len(argv) > 2:
             from cnc_interp.machine.load import load_machine
 
-            machine = load_machine(sys.argv[2])
+            machine = load_machine(argv[2])
         name = f"{os.path.basename(arg)}, {traj.n_samples:,} samples, axes {traj.axes}"
     else:
         from cnc_interp.pipeline import plan_part
 
-        outcome, tp = timed(lambda: plan_part(arg, sys.argv[2] if len(sys.argv) > 2 else None))
+        outcome, tp = timed(lambda: plan_part(arg, argv[2] if len(argv) > 2 else None))
         traj, machine = outcome.trajectory, outcome.machine
         name = (
             f"{os.path.basename(arg)} on {machine.name}: {traj.n_samples:,} samples, "
@@ -76,6 +81,7 @@ def main() -> None:
         csv_path, mcap_path = os.path.join(d, "p.csv"), os.path.join(d, "p.mcap")
         _, tc = timed(lambda: write_csv(traj, csv_path))
         print(f"  CSV : {tc:6.2f} s  {k / tc:>10,.0f} rows/s  {os.path.getsize(csv_path) / 1e6:8.1f} MB")
+        table = [["CSV write", f"{tc:.2f} s", f"{k / tc:,.0f}", "", f"{os.path.getsize(csv_path) / 1e6:.1f} MB"]]
         for m, label in ((None, "MCAP (setpoints + segments)"), (machine, "MCAP (+ /limits)")):
             if label.endswith("limits)") and machine is None:
                 continue
@@ -84,8 +90,19 @@ def main() -> None:
                 f"  {label}: {tm:6.2f} s  {k / tm:>10,.0f} samples/s  {n / tm:>10,.0f} msg/s  "
                 f"{os.path.getsize(mcap_path) / 1e6:8.1f} MB  ({n:,} messages)"
             )
+            mb = os.path.getsize(mcap_path) / 1e6
+            table.append([f"{label} write", f"{tm:.2f} s", f"{k / tm:,.0f}", f"{n / tm:,.0f}", f"{mb:.1f} MB"])
         _, tr = timed(lambda: read_mcap(mcap_path))
         print(f"  MCAP read back: {tr:6.2f} s  {k / tr:>10,.0f} samples/s")
+        table.append(["MCAP read back", f"{tr:.2f} s", f"{k / tr:,.0f}", "", ""])
+    if not no_write:
+        write_section(
+            "MCAP against CSV",
+            "export_mcap.py",
+            command_line("export_mcap.py"),
+            md_table(["step", "wall", "samples/s", "messages/s", "size"], table),
+            f"Plan: {name}.",
+        )
 
 
 if __name__ == "__main__":

@@ -18,11 +18,12 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import subprocess
 import sys
 import tempfile
 import time
+
+from _results import command_line, md_table, write_section
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(HERE)
@@ -80,41 +81,36 @@ def measure(planner: str, concurrent: int) -> dict:
     return out
 
 
-def _commit() -> str:
-    r = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO, capture_output=True, text=True)
-    return r.stdout.strip() or "unknown"
-
-
-def write_results(rows: list[dict], command: str) -> None:
-    path = os.path.join(HERE, "RESULTS.md")
-    text = open(path, encoding="utf-8").read() if os.path.exists(path) else "# Benchmark results\n"
-    lines = [
-        "## First run (`benchmarks/first_run.py`)",
-        "",
-        f"commit {_commit()}, {platform.machine()} with {os.cpu_count()} cores, load {os.getloadavg()[0]:.2f} "
-        f"before; command `{command}`",
-        "",
-        "| planner | estimate | cold plan | workers left | second run | kernels compiled by it | same bytes "
-        "| N cold at once | all N | ratio to one |",
-        "|---|---|---|---|---|---|---|---|---|---|",
-    ]
-    for r in rows:
-        lines.append(
-            f"| {r['planner']} | {r['estimate_s']:.0f} s | {r['cold_s']:.1f} s | {r['workers_left']} "
-            f"| {r['second_s']:.1f} s | {r['second_cache_files_added']} files | {r['same_bytes']} "
-            f"| {r['concurrent']} | {r['concurrent_s']:.1f} s | {r['concurrent_s'] / r['cold_s']:.2f} |"
-        )
-    section = "\n".join(lines) + "\n"
-    start = text.find("## First run")
-    if start < 0:
-        text = text.rstrip() + "\n\n" + section
-    else:
-        end = text.find("\n## ", start + 1)
-        text = text[:start] + section + (text[end + 1 :] if end >= 0 else "")
-    tmp = path + ".tmp"
-    with open(tmp, "w", encoding="utf-8") as fh:
-        fh.write(text)
-    os.replace(tmp, path)
+def table(rows: list[dict]) -> str:
+    return md_table(
+        [
+            "planner",
+            "estimate",
+            "cold plan",
+            "workers left",
+            "second run",
+            "kernels compiled by it",
+            "same bytes",
+            "N cold at once",
+            "all N",
+            "ratio to one",
+        ],
+        [
+            [
+                r["planner"],
+                f"{r['estimate_s']:.0f} s",
+                f"{r['cold_s']:.1f} s",
+                r["workers_left"],
+                f"{r['second_s']:.1f} s",
+                f"{r['second_cache_files_added']} files",
+                r["same_bytes"],
+                r["concurrent"],
+                f"{r['concurrent_s']:.1f} s",
+                f"{r['concurrent_s'] / r['cold_s']:.2f}",
+            ]
+            for r in rows
+        ],
+    )
 
 
 def main(argv=None) -> int:
@@ -127,7 +123,7 @@ def main(argv=None) -> int:
     for r in rows:
         print(r)
     if not args.no_write:
-        write_results(rows, "python benchmarks/first_run.py " + " ".join(argv if argv is not None else sys.argv[1:]))
+        write_section("First run", "first_run.py", command_line("first_run.py", argv), table(rows))
     return 0
 
 

@@ -1,7 +1,7 @@
 """Fit-stage throughput: nodes fitted per second (best of several runs).
 
 Usage: .venv/bin/python benchmarks/fit.py [FILE.ngc ...] [--tol MM] [--method nodes|planar|auto] [--repeat N]
-                                          [--threads N]
+                                          [--threads N] [--no-write]
 
 Defaults to two corpus files of dense CAM segments (circle_small_segments_ncd.ngc and
 3D_Chips.ngc). Parsing is excluded from the timing; building the Paths (their
@@ -12,6 +12,7 @@ steadier one. ``--threads``: the batch fitter's worker threads (default: ``fit_p
 the CPUs this process may use, at most 4).
 ``path/tol`` is the largest distance of the programmed path (moves and exact
 curves, sampled densely) from the fitted path over its tolerance: <= 1 is within.
+Writes the table to ``benchmarks/RESULTS.md`` (its "Fit" section) unless ``--no-write``.
 """
 
 from __future__ import annotations
@@ -20,6 +21,8 @@ import argparse
 import os
 import sys
 import time
+
+from _results import command_line, md_table, write_section
 
 CORPUS = os.environ.get(
     "CNC_CORPUS",
@@ -44,7 +47,9 @@ def main(argv=None) -> int:
     ap.add_argument("--method", default="nodes", choices=("nodes", "planar", "auto"))
     ap.add_argument("--repeat", type=int, default=10)
     ap.add_argument("--threads", type=int, default=None)
+    ap.add_argument("--no-write", action="store_true", help="print only; leave RESULTS.md alone")
     args = ap.parse_args(argv)
+    table = []
     settings = FitSettings.from_options(tol_mm=args.tol, method=args.method)
     from cnc_interp.fit import fitter
 
@@ -72,6 +77,45 @@ def main(argv=None) -> int:
             f"{os.path.basename(f)[:40]:40s} {n:8d} {st['segments_out']:7d} {st['segments_per_node']:8.3f} "
             f"{best:8.3f} {n / best:10.0f} {median:8.3f} {best_cpu:8.3f} {n / best_cpu:11.0f} "
             f"{st['max_node_dev_mm']:10.2e} {st['max_path_dev_ratio']:8.4f}"
+        )
+        table.append(
+            [
+                os.path.basename(f),
+                n,
+                st["segments_out"],
+                f"{st['segments_per_node']:.3f}",
+                f"{best:.3f}",
+                f"{n / best:,.0f}",
+                f"{median:.3f}",
+                f"{best_cpu:.3f}",
+                f"{n / best_cpu:,.0f}",
+                f"{st['max_node_dev_mm']:.2e}",
+                f"{st['max_path_dev_ratio']:.4f}",
+            ]
+        )
+    if not args.no_write:
+        write_section(
+            "Fit",
+            "fit.py",
+            command_line("fit.py", argv),
+            md_table(
+                [
+                    "file",
+                    "nodes",
+                    "segments",
+                    "seg/node",
+                    "best s",
+                    "nodes/s",
+                    "median s",
+                    "CPU s",
+                    "nodes/CPU-s",
+                    "max dev mm",
+                    "path/tol",
+                ],
+                table,
+            ),
+            f"Method {args.method}, tolerance {args.tol or 0.001} mm, {args.repeat} runs (parsing excluded); "
+            "path/tol <= 1 is within the tolerance.",
         )
     return 0
 

@@ -5,9 +5,12 @@ frame bytes per sample, segments re-sent as setpoints for the limits, worst devi
 the device's setpoints from the float plan (µm), verify's worst ratio of the device's
 setpoints against the real machine (must be <= 1 + 1e-9), wall times. The last line sums
 it up: ``fpga round trip: R runs, V verify failures, worst ratio X, worst deviation D µm``.
+The table goes to ``benchmarks/RESULTS.md`` (its "FPGA round trip" section) unless
+``--no-write``.
 
+    .venv/bin/python benchmarks/fpga_roundtrip.py               # the sample programs
     .venv/bin/python benchmarks/fpga_roundtrip.py [--planner all|vpop|...] [-m MACHINE] PART...
-    .venv/bin/python benchmarks/fpga_roundtrip.py --done-when   # samples + 20 corpus programs
+    .venv/bin/python benchmarks/fpga_roundtrip.py --done-when   # samples + 21 corpus programs
 """
 
 from __future__ import annotations
@@ -18,6 +21,8 @@ import sys
 import time
 
 import numpy as np
+
+from _results import command_line, write_section
 
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 sys.path.insert(0, ROOT)
@@ -91,24 +96,27 @@ def run_one(part: str, machine: str, planner: str) -> dict:
     }
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser()
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("parts", nargs="*")
     ap.add_argument("-m", "--machine", default=XYZ_INI)
     ap.add_argument("--planner", default="all", help="vpop, constant, variable or all")
     ap.add_argument(
         "--done-when", action="store_true", help="every sample program (own machine) and 21 corpus programs (XYZ.ini)"
     )
-    args = ap.parse_args()
+    ap.add_argument("--no-write", action="store_true", help="print only; leave RESULTS.md alone")
+    args = ap.parse_args(argv)
     planners = ("vpop", "constant", "variable") if args.planner == "all" else (args.planner,)
     jobs = [(p, args.machine) for p in args.parts]
-    if args.done_when:
+    if not jobs or args.done_when:
         jobs = [(os.path.join(ROOT, "samples", "gcode", n), m) for n, m in SAMPLES]
+    if args.done_when:
         jobs += [(os.path.join(CORPUS, n), XYZ_INI) for n in CORPUS_20]
-    print(
-        "| program | planner | samples | on segments | bytes/sample | re-sent | max dev µm | device verify ratio | s |"
-    )
-    print("|---|---|---|---|---|---|---|---|---|")
+    lines = [
+        "| program | planner | samples | on segments | bytes/sample | re-sent | max dev µm | device verify ratio | s |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    print("\n".join(lines))
     runs = fails = errors = 0
     worst_ratio = worst_dev = 0.0
     for part, machine in jobs:
@@ -118,22 +126,34 @@ def main() -> int:
                 r = run_one(part, machine, planner)
             except CncInterpError as exc:
                 errors += 1
-                print(f"| {name} | {planner} | error: {exc.format()[:100]} |", flush=True)
+                lines.append(f"| {name} | {planner} | error: {exc.format()[:100]} |||||||")
+                print(lines[-1], flush=True)
                 continue
             runs += 1
             fails += not r["ok"]
             worst_ratio = max(worst_ratio, r["ratio"])
             worst_dev = max(worst_dev, r["dev_um"])
-            print(
+            lines.append(
                 f"| {name} | {planner} | {r['samples']} | {100 * r['share']:.1f} % | "
                 f"{r['bytes_per_sample']:.2f} | {r['repaired']} | {r['dev_um']:.4f} | "
-                f"{r['ratio']:.12f} | {r['t']:.1f} |",
-                flush=True,
+                f"{r['ratio']:.12f} | {r['t']:.1f} |"
             )
-    print(
+            print(lines[-1], flush=True)
+    summary = (
         f"fpga round trip: {runs} runs, {fails} verify failures, {errors} errors, worst ratio "
         f"{worst_ratio:.12f}, worst deviation {worst_dev:.4f} µm"
     )
+    print(summary)
+    if not args.no_write:
+        write_section(
+            "FPGA round trip",
+            "fpga_roundtrip.py",
+            command_line("fpga_roundtrip.py", argv),
+            "\n".join(lines),
+            "Plan as `stream` does, fixed point, frames, device model, then `verify` of the device's "
+            "setpoints against the real machine (ratio must be <= 1 + 1e-9); max dev is the device's "
+            "worst deviation from the float plan. " + summary[0].upper() + summary[1:] + ".",
+        )
     return 1 if fails else 0
 
 

@@ -8,7 +8,10 @@ candidate: the device margin δ, the worst deviation from the float plan (µm), 
 verify ratio of the device's setpoints against the real machine, the share of samples
 the segments carry (the rest needed exact setpoints), and overflows.
 
-    .venv/bin/python benchmarks/fpga_widths.py [--quick]
+    .venv/bin/python benchmarks/fpga_widths.py [--quick] [--no-write]
+
+The table goes to ``benchmarks/RESULTS.md`` (its "FPGA word widths" section; "FPGA word widths,
+quick" for ``--quick``) unless ``--no-write``.
 """
 
 from __future__ import annotations
@@ -17,6 +20,8 @@ import argparse
 import os
 import sys
 import time
+
+from _results import command_line, write_section
 
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 sys.path.insert(0, ROOT)
@@ -46,19 +51,23 @@ def formats(pos_frac: int, mult: int, int_bits: int = 14):
     )
 
 
-def main() -> int:
+def main(argv=None) -> int:
     from cnc_interp.errors import CncInterpError
     from cnc_interp.fpga.commands import StreamOptions, plan_for_stream
     from cnc_interp.fpga.program import build_program
 
-    ap = argparse.ArgumentParser()
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="two programs, fewer candidates")
-    args = ap.parse_args()
+    ap.add_argument("--no-write", action="store_true", help="print only; leave RESULTS.md alone")
+    args = ap.parse_args(argv)
     parts = PARTS[:2] if args.quick else PARTS
     pos_fracs = (24, 28, 32) if args.quick else (22, 24, 26, 28, 30, 32)
     mults = (18, 27, 35) if args.quick else (18, 24, 27, 31, 35)
-    print("| pos format | operand word | margin δ | max dev µm | worst device ratio | on segments | notes |")
-    print("|---|---|---|---|---|---|---|")
+    lines = [
+        "| pos format | operand word | margin δ | max dev µm | worst device ratio | on segments | notes |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    print("\n".join(lines))
     plans = {}
     for pf in pos_fracs:
         for mw in mults:
@@ -91,11 +100,20 @@ def main() -> int:
             dev = f"{max(devs) * 1e3:.4f}" if devs else "—"
             rat = f"{max(ratios):.9f}" if ratios else "—"
             share = f"{100 * seg_s / max(1, tot_s):.1f} %"
-            print(
+            lines.append(
                 f"| Q{14}.{pf} ({pf + 14} bits) | {mw} | {margin:.2e} | {dev} | {rat} | {share} | "
-                f"{'; '.join(notes) or ''} ({time.perf_counter() - t0:.0f} s) |",
-                flush=True,
+                f"{'; '.join(notes) or ''} ({time.perf_counter() - t0:.0f} s) |"
             )
+            print(lines[-1], flush=True)
+    if not args.no_write:
+        write_section(
+            "FPGA word widths" + (", quick" if args.quick else ""),
+            "fpga_widths.py",
+            command_line("fpga_widths.py", argv),
+            "\n".join(lines),
+            "Programs: " + ", ".join(p[0] for p in parts) + " (variable planner). Per candidate the worst over "
+            "the programs; the seconds in the notes column are the candidate's wall time.",
+        )
     return 0
 
 

