@@ -79,13 +79,22 @@ def machine_for(traj: Trajectory, margin: float, name: str = "synthetic") -> Mac
     (``margin`` > 1: the plan respects it; < 1: it violates every limit)."""
     worst = np.maximum(worst_ratio_limits(traj), 1e-3) * margin
     return Machine(
-        name=name, axes=traj.axes, vmax=worst[0], amax=worst[1], jmax=worst[2], dt_s=traj.dt_s, source="synthetic"
+        name=name,
+        axes=traj.axes,
+        vmax=worst[0],
+        amax=worst[1],
+        jmax=worst[2],
+        dt_s=traj.dt_s,
+        source="synthetic",
+        start=traj.q[0].copy(),  # the machine starts where its plan does
     )
 
 
 def machine_toml(machine: Machine) -> str:
     """The TOML text of ``machine`` (for the CLI tests)."""
     lines = [f'name = "{machine.name}"', f"dt = {machine.dt_s!r}"]
+    start = ", ".join(f"{a} = {float(x)!r}" for a, x in zip(machine.axes, machine.start))
+    lines.append(f"start = {{{start}}}")
     for i, a in enumerate(machine.axes):
         lines += [
             f"[axes.{a}]",

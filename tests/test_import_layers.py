@@ -25,7 +25,7 @@ FLOORS = {"base": 0, "machine": 1, "gcode": 2, "fit": 3, "plan": 4, "export": 5,
 #: the floor of siblings that must not import each other
 SIBLINGS = 5
 TOP = {"api", "pipeline", "precompile", "batch", "batch_workers", "cli", "fpga.commands"}
-BASE = {"", "errors", "constants", "outfile", "_kernel_cache", "_stage_call"}
+BASE = {"", "errors", "constants", "outfile", "inputfile", "_kernel_cache", "_stage_call"}
 #: deliberate upward edges, each with its reason
 ALLOWED = {
     # calling ``cnc_interp.fit(...)`` / ``cnc_interp.plan(...)`` runs the API function

@@ -6,6 +6,8 @@ import os
 import subprocess
 import sys
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -41,6 +43,7 @@ def plan_files(tmp_path_factory):
     traj = arc_trajectory(duration_s=1.0, axes="XYZ")
     machine = machine_for(traj, 1.25)
     (d / "m.toml").write_text(machine_toml(machine))
+    machine = replace(machine, source=str(d / "m.toml"))  # the MCAP names this file
     write_csv(traj, str(d / "p.csv"))
     write_mcap(traj, str(d / "p.mcap"), None, machine)
     return d, traj, machine
@@ -65,15 +68,51 @@ def test_plot_without_machine(plan_files):
     assert recorded.shape == with_machine.shape
 
 
-def test_recorded_machine(plan_files):
-    from cnc_interp.export.mcap_io import read_mcap_machine
+def test_an_mcap_plan_is_checked_against_the_file_it_names_not_its_copied_limits(plan_files, tmp_path):
+    from cnc_interp.errors import UsageError
+    from cnc_interp.export.verify_file import plan_machine
 
     d, _, machine = plan_files
-    rec = read_mcap_machine(str(d / "p.mcap"))
-    assert rec.axes == machine.axes and rec.name == machine.name
+    named = plan_machine(str(d / "p.mcap"), None)
+    assert named.axes == machine.axes and named.source == str(d / "m.toml")
     for lim in ("vmax", "amax", "jmax"):
-        np.testing.assert_array_equal(getattr(rec, lim), getattr(machine, lim))
-    assert read_mcap_machine(str(d / "p.csv")) is None
+        np.testing.assert_allclose(getattr(named, lim), getattr(machine, lim), rtol=1e-15)
+    assert plan_machine(str(d / "p.csv"), None, required=False) is None
+    with pytest.raises(UsageError, match="-m MACHINE"):
+        plan_machine(str(d / "p.csv"), None)
+    # limits edited inside the file change nothing: the named file decides
+    traj = arc_trajectory(duration_s=1.0, axes="XYZ")
+    loose = replace(machine, vmax=machine.vmax * 8, amax=machine.amax * 8, jmax=machine.jmax * 8)
+    write_mcap(traj, str(tmp_path / "loose.mcap"), None, loose)
+    np.testing.assert_allclose(plan_machine(str(tmp_path / "loose.mcap"), None).vmax, machine.vmax, rtol=1e-15)
+    # a named file that is gone is an error that asks for -m
+    gone = replace(machine, source=str(tmp_path / "gone.toml"))
+    write_mcap(traj, str(tmp_path / "gone.mcap"), None, gone)
+    with pytest.raises(UsageError, match="not found; give the machine with -m"):
+        plan_machine(str(tmp_path / "gone.mcap"), None)
+
+
+@pytest.mark.parametrize("how", ["symlink", "same-name"])
+def test_plot_never_writes_over_its_input(plan_files, tmp_path, how):
+    import shutil
+
+    from cnc_interp.errors import UsageError
+
+    d, _, _ = plan_files
+    if how == "symlink":
+        src = tmp_path / "plan.csv"
+        shutil.copy(d / "p.csv", src)
+        out = tmp_path / "out.png"
+        out.symlink_to(src)
+        args = (str(src), str(d / "m.toml"), str(out))
+    else:  # a plan named .png plotted onto its default output, itself
+        src = tmp_path / "plan.png"
+        shutil.copy(d / "p.csv", src)
+        args = (str(src), str(d / "m.toml"), None)
+    before = src.read_bytes()
+    with pytest.raises(UsageError, match="refusing to overwrite"):
+        plot_file(*args)
+    assert src.read_bytes() == before
 
 
 def test_plot_is_reproducible(plan_files, tmp_path):

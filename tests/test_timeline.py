@@ -48,7 +48,7 @@ def test_program_with_rapids_dwell_and_stop():
     settings = PlanSettings(planner="vpop", dt_s=DT)
     done = []
     traj = plan_program(fit, MILL, settings, progress=done.append)
-    rep = verify(traj, MILL)
+    rep = verify(traj, MILL.with_start(fit.program.start))  # the machine is where the program starts
     assert rep.ok, rep.format()
     k = traj.n_samples
     assert_allclose(traj.t, np.arange(k) * DT, rtol=0, atol=0)
@@ -112,7 +112,7 @@ def test_path_not_starting_where_the_machine_is_is_a_bug():
 def test_paper000_planners_share_the_timeline(planner):
     fit, _ = build()
     traj = plan_program(fit, MILL, PlanSettings(planner=planner, dt_s=DT))
-    rep = verify(traj, MILL)
+    rep = verify(traj, MILL.with_start(fit.program.start))  # the machine is where the program starts
     assert rep.ok, rep.format()
     assert traj.planner == planner
     assert_array_equal(traj.q[-1], [0.0, 0.0, 10.0])

@@ -134,3 +134,22 @@ def test_empty_and_single_sample():
     assert r.ok and r.worst_ratio == 0.0
     r0 = verify_arrays(np.zeros((0, 2)), 1e-3, 1, 1, 1)
     assert r0.ok
+
+
+def test_a_report_mid_stream_leaves_the_stream_as_it_was():
+    """``StreamVerifier.report`` can be asked at any block (a batch keeps planning past a
+    violation): the final report is the whole array's, start check included."""
+    from cnc_interp.plan.verify import StreamVerifier
+
+    rng = np.random.default_rng(3)
+    q = np.cumsum(np.cumsum(rng.normal(size=(500, 2)), axis=0), axis=0) * 1e-6
+    q[0] += 5e-6  # off the start by more than the tolerance
+    whole = verify_arrays(q, 1e-3, 1.0, 2.0, 3.0, axes="XY", start=np.zeros(2))
+    sv = StreamVerifier(1e-3, 1.0, 2.0, 3.0, "XY", start=np.zeros(2))
+    for a in range(0, q.shape[0], 64):
+        sv.add(q[a : a + 64])
+        sv.report()
+    rep = sv.report()
+    assert_allclose(rep.ratios, whole.ratios, rtol=1e-15)
+    assert np.array_equal(rep.where, whole.where)
+    assert not rep.start_ok and not whole.start_ok and rep.ok == whole.ok is False

@@ -28,6 +28,7 @@ for looking at, carry 9 significant digits.
 from __future__ import annotations
 
 import hashlib
+import itertools
 import json
 import math
 import operator
@@ -47,6 +48,13 @@ MCAP_SEGMENT_MAX_SAMPLES = 1 << 16
 
 #: samples formatted per batch (bounds memory for very long plans)
 _BATCH = 65536
+
+#: a setpoint's log time may differ from its ``t`` by this much, ns: the writer rounds
+#: t·1e9 to the nearest integer ns
+LOG_TIME_TOL_NS = 1.0
+
+#: what a setpoint field may hold once parsed: a JSON number, or null for a non-finite one
+_NUMBER_TYPES = {int, float, type(None)}
 
 SETPOINTS_TOPIC = "/setpoints"
 SEGMENTS_TOPIC = "/segments"
@@ -382,12 +390,29 @@ def read_mcap(path: str):
     try:
         rows = json.loads(b"[" + b",".join(datas) + b"]")
         pick = operator.itemgetter("t", "s", "feed", *axes)
-        table = np.array(list(map(pick, rows)), dtype=float).reshape(len(rows), 3 + len(axes))
+        picked = list(map(pick, rows))
+        # JSON numbers only (null: a non-finite value as written, read as NaN): a string
+        # or a boolean would pass numpy's float conversion
+        kinds = set(map(type, itertools.chain.from_iterable(picked)))
+        if not kinds <= _NUMBER_TYPES:
+            odd = sorted(k.__name__ for k in kinds - _NUMBER_TYPES)
+            raise UsageError(f"a {SETPOINTS_TOPIC} message holds a {', '.join(odd)} where a number belongs", loc)
+        table = np.array(picked, dtype=float).reshape(len(rows), 3 + len(axes))
+        del picked
         line = np.array([r.get("line") or 0 for r in rows], dtype=np.int64)
     except KeyError as exc:
         raise UsageError(f"a {SETPOINTS_TOPIC} message lacks the field {exc}", loc) from None
     except (ValueError, TypeError, AttributeError) as exc:
         raise UsageError(f"bad {SETPOINTS_TOPIC} message: {exc}", loc) from None
+    # the log time is what a player schedules by: it must be the sample's own t
+    log_ns = times[order].astype(np.float64)
+    t_ns = table[:, 0] * 1e9
+    off = np.abs(log_ns - t_ns) > LOG_TIME_TOL_NS + np.spacing(np.abs(t_ns))
+    if off.any():
+        k = int(np.argmax(off))
+        raise UsageError(
+            f"{SETPOINTS_TOPIC} message {k}: log time {int(times[order][k])} ns is not its t = {table[k, 0]!r} s", loc
+        )
     planner = meta.get("planner", {})
     try:
         settings = json.loads(planner.get("settings", "{}"))
@@ -409,34 +434,15 @@ def read_mcap(path: str):
     )
 
 
-def read_mcap_machine(path: str):
-    """The ``Machine`` recorded in an MCAP plan's ``machine`` metadata, or ``None``."""
+def read_mcap_machine_record(path: str) -> dict[str, str] | None:
+    """The ``machine`` metadata record of an MCAP plan (name, source, axes, limits as
+    written), or ``None`` when the file has none or cannot be read."""
     from mcap.reader import make_reader
-
-    from ..errors import MachineError
-    from ..machine.model import Machine
 
     try:
         with open(path, "rb") as fh:
-            rec = next((dict(m.metadata) for m in make_reader(fh).iter_metadata() if m.name == "machine"), None)
+            return next((dict(m.metadata) for m in make_reader(fh).iter_metadata() if m.name == "machine"), None)
     except Exception:  # noqa: BLE001 - unreadable: read_mcap reports it properly
-        return None
-    if not rec or "axes" not in rec:
-        return None
-    axes = rec["axes"]
-    try:
-        limits = [[float(rec[f"{a}.{lim}"]) for a in axes] for lim in ("vmax", "amax", "jmax")]
-        return Machine(
-            name=rec.get("name", "machine"),
-            axes=axes,
-            vmax=limits[0],
-            amax=limits[1],
-            jmax=limits[2],
-            dt_s=float(rec.get("dt_s", "nan")),
-            kinematics=rec.get("kinematics", "trivial"),
-            source=f"{path} (recorded machine)",
-        )
-    except (KeyError, ValueError, MachineError):  # incomplete or insane: not a usable machine
         return None
 
 

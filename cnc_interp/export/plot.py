@@ -36,23 +36,19 @@ _KIND_LABELS = (("velocity", "v / vmax"), ("acceleration", "a / amax"), ("jerk",
 def plot_file(path: str, machine_spec: str | None, out: str | None = None) -> str:
     """Plot the plan at ``path`` (CSV or MCAP) to ``out`` (default: ``path`` with ``.png``).
 
-    Without ``machine_spec`` an MCAP plan's recorded machine gives the limits. The image
-    format follows ``out``'s extension (png, svg, pdf). Returns the file written.
+    Without ``machine_spec`` the machine an MCAP plan names gives the limits (see
+    ``verify_file.plan_machine``). The image format follows ``out``'s extension (png,
+    svg, pdf); ``out`` is never one of the inputs. Returns the file written.
     """
-    from .verify_file import read_plan
+    from ..outfile import check_writable
+    from .verify_file import plan_machine, read_plan
 
-    machine = None
-    if machine_spec:
-        from ..machine.load import load_machine
-
-        machine = load_machine(machine_spec)
-    traj = read_plan(path)
-    if machine is None and os.fspath(path).lower().endswith(".mcap"):
-        from .mcap_io import read_mcap_machine
-
-        machine = read_mcap_machine(path)
     if out is None:
         out = os.path.splitext(os.fspath(path))[0] + ".png"
+    check_writable(out, inputs=(os.fspath(path), machine_spec))
+    machine = plan_machine(path, machine_spec, required=False)
+    # a one-sample plan shows no period; any period draws its single point
+    traj = read_plan(path, machine.dt_s if machine is not None else 1.0)
     title = os.path.basename(os.fspath(path))
     plot_trajectory(traj, machine, out, title=title)
     return out
@@ -135,7 +131,8 @@ def _figure(plt, traj, machine, title):
     ax_feed.fill_between(t_f, f_lo[:, 0], f_hi[:, 0], color="tab:blue", lw=0.6, alpha=0.9)
     ax_feed.plot(t_f, f_hi[:, 0], color="tab:blue", lw=0.6)
     ax_feed.set_ylabel("feed (mm/s)")
-    ax_feed.set_xlim(traj.t[0] if traj.t.size else 0, traj.t[-1] if traj.t.size else 1)
+    t_end = float(traj.t[-1]) if traj.t.size > 1 else float(traj.dt_s)  # one sample: one period wide
+    ax_feed.set_xlim(float(traj.t[0]) if traj.t.size else 0.0, t_end)
     _scale_to_cutting_feeds(ax_feed, traj.feed)
     if z_axis is not None:
         ax_z = fig.add_subplot(gs[-1, 0])
@@ -290,7 +287,7 @@ def _draw_ratios(fig, gs, traj, machine, share):
             color="red" if worst > 1.0 else "black",
             bbox={"facecolor": "white", "alpha": 0.75, "lw": 0},
         )
-        if kind == 0:
+        if kind == 0 and ax.get_legend_handles_labels()[0]:
             ax.legend(loc="upper left", ncol=len(axes), framealpha=0.8)
         out.append(ax)
     return out

@@ -23,7 +23,8 @@ _END = object()
 
 
 class PlanSink:
-    """Verify-then-write of a sample stream into ``fh`` as CSV or MCAP (``mcap``)."""
+    """Verify-then-write of a sample stream into ``fh`` as CSV or MCAP (``mcap``); with
+    ``fh = None``, verify only (the plan summarised, no setpoints written)."""
 
     def __init__(self, fh, machine, dt_s: float, mcap: bool, on_violation):
         from ..plan.verify import StreamVerifier
@@ -67,6 +68,11 @@ class PlanSink:
         self.verify_s += t1 - t0
         if not ok:
             self.on_violation(self.verifier.report())
+        if self.fh is None:
+            self.last_s = float(block.s[-1])
+            if self.first_row_at is None:
+                self.first_row_at = time.perf_counter()
+            return
         if self.writer is None:
             self.writer = self._open()
         t = np.arange(block.k0, block.k0 + block.n) * self.dt
@@ -121,6 +127,8 @@ class PlanSink:
         report = self.verifier.report()
         if not report.ok:
             self.on_violation(report)
+        if self.fh is None:
+            return report
         if self.writer is None:
             self.writer = self._open()
         if self.mcap:

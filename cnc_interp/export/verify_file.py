@@ -7,48 +7,80 @@ import os
 from ..errors import SourceLocation, UsageError
 
 
-def read_plan(path: str):
-    """Read a plan file into a ``Trajectory``: ``.mcap`` as MCAP, anything else as CSV."""
+def read_plan(path: str, dt_s: float | None = None):
+    """Read a plan file into a ``Trajectory``: ``.mcap`` as MCAP, anything else as CSV.
+
+    ``dt_s`` is the period of a one-sample CSV (the plan of a program without motion: the
+    machine held at its start), whose rows cannot show one."""
+    from ..inputfile import require_regular_file
+
+    require_regular_file(os.fspath(path), "plan file")
     if os.fspath(path).lower().endswith(".mcap"):
         from .mcap_io import read_mcap
 
         return read_mcap(path)
     from .csv_io import read_csv
 
-    return read_csv(path)
+    return read_csv(path, dt_s)
 
 
-#: samples' times may differ from t0 + k·dt by this share of the plan's duration (the CSV
-#: writer prints k·dt exactly; an MCAP stores integer nanoseconds)
-TIME_BASE_REL_TOL = 1e-9
-#: absolute allowance for the MCAP's nanosecond log times, s
-TIME_BASE_ABS_TOL_S = 1e-9
+#: every sample's time may differ from k·dt by this share of dt: far above the rounding of
+#: a written k·dt (the CSV prints it exactly; an MCAP's ``t`` is the same float64), far
+#: below anything that changes a finite difference the check reads
+TIME_REL_DT_TOL = 1e-6
+#: the recorded period may differ from the data's by this share (the data's period is a
+#: mean over the plan, exact to a few ulps)
+DT_REL_TOL = 1e-9
 
 
-def verify_file(path: str, machine_spec: str | None):
+def verify_file(path: str, machine_spec: str | None, start: str | None = None):
     """Read the plan at ``path`` and verify it against ``machine_spec`` (file or preset;
-    ``None`` takes the machine an MCAP plan records).
+    ``None``: the machine an MCAP plan names, see ``plan_machine``), starting at the
+    machine's start position or ``start`` (``--start`` syntax, ``"X=1,Y=2"``).
 
     Returns the ``VerifyReport`` (its ``ok`` is false when any ratio exceeds 1 + the
-    documented slack, or a setpoint is not finite). Before that, the plan itself must be
-    checkable (``check_plan``). Raises ``MachineError`` for a bad machine, ``UsageError`` for
-    an unreadable plan or one that cannot be checked against the machine.
+    documented slack, a setpoint is not finite, or the first sample is not the start
+    position). Before that, the plan itself must be checkable (``check_plan``). Raises
+    ``MachineError`` for a bad machine, ``UsageError`` for an unreadable plan or one that
+    cannot be checked against the machine.
     """
-    from ..machine.load import load_machine
+    from ..machine.model import parse_start
     from ..plan.verify import verify
 
-    machine = None
-    if machine_spec:
-        machine = load_machine(machine_spec)
-    elif os.fspath(path).lower().endswith(".mcap"):
-        from .mcap_io import read_mcap_machine
-
-        machine = read_mcap_machine(path)
-    if machine is None:
-        raise UsageError("verify needs a machine (-m MACHINE); this plan records none", SourceLocation(file=str(path)))
-    traj = read_plan(path)
+    machine = plan_machine(path, machine_spec)
+    machine = machine.with_start(parse_start(start, machine.axes, machine.start))
+    traj = read_plan(path, machine.dt_s)
     check_plan(traj, machine, str(path))
     return verify(traj, machine)
+
+
+def plan_machine(path: str, machine_spec: str | None, required: bool = True):
+    """The machine a plan file is checked or drawn against: ``machine_spec`` when given;
+    else, for an MCAP plan, the preset or machine file its ``machine`` record names, loaded
+    from that file now (the limits copied into the plan are never trusted). ``None`` when
+    there is none and ``required`` is false; otherwise raises ``UsageError``."""
+    from ..machine.load import load_machine
+
+    if machine_spec:
+        return load_machine(machine_spec)
+    loc = SourceLocation(file=str(path))
+    source = None
+    if os.fspath(path).lower().endswith(".mcap"):
+        from .mcap_io import read_mcap_machine_record
+
+        rec = read_mcap_machine_record(path) or {}
+        source = rec.get("source") or None
+        if source:
+            spec = source.removeprefix("preset:")
+            if spec != source or os.path.isfile(spec):
+                return load_machine(spec)
+    if not required:
+        return None
+    if source:
+        raise UsageError(
+            f"the plan names machine file {source!r}, which is not found; give the machine with -m MACHINE", loc
+        )
+    raise UsageError("give the machine to check against with -m MACHINE (this plan names none)", loc)
 
 
 def check_plan(traj, machine, path: str) -> None:
@@ -74,12 +106,18 @@ def check_plan(traj, machine, path: str) -> None:
     t = np.asarray(traj.t, dtype=float)
     if t.size < 2:
         return
-    dt_data = (t[-1] - t[0]) / (t.size - 1)
-    tol = TIME_BASE_REL_TOL * max(1.0, abs(float(t[-1]))) + TIME_BASE_ABS_TOL_S
-    off = np.abs(t - (t[0] + np.arange(t.size) * dt_data))
-    if not dt_data > 0 or (off > tol).any():
+    dt_data = float(t[-1] - t[0]) / (t.size - 1)
+    if not dt_data > 0:
+        raise UsageError("t does not increase from the first sample to the last", loc)
+    # tolerances relative to the period, never to the clock: a time far from 0 cannot
+    # resolve a period at all, so a plan starts at t = 0 as every writer here writes it
+    tol = TIME_REL_DT_TOL * dt_data
+    if abs(float(t[0])) > tol:
+        raise UsageError(f"the plan's time starts at t = {float(t[0])!r} s; a plan starts at t = 0", loc)
+    off = np.abs(t - np.arange(t.size) * dt_data)
+    if (off > tol).any():
         raise UsageError(f"t is not sampled at a fixed period (sample {int(np.argmax(off > tol))})", loc)
-    if not abs(traj.dt_s - dt_data) <= tol / max(1, t.size - 1) + TIME_BASE_REL_TOL * dt_data:
+    if not abs(traj.dt_s - dt_data) <= DT_REL_TOL * dt_data:
         raise UsageError(
             f"the recorded sample period dt_s = {traj.dt_s!r} s disagrees with the samples' period {dt_data!r} s", loc
         )

@@ -84,8 +84,12 @@ from .codes import (
 )
 from .program import Dwell, Program, Stop
 from .runs import RunBuilder, finish_run
-from .splines import bezier, make_nurbs, sample_nurbs
+from .splines import bezier, bezier_cusps, make_nurbs, sample_nurbs, split_bezier
 
+
+#: closed items a streamed interpreter lets wait inside one block before it hands them on
+#: (``on_items``): ``G81 ... L1000000`` is two million runs from one block (8 kB each)
+ITEMS_WAITING_MAX = 4096
 
 #: largest G2/G3 P (full turns) accepted; more is treated as a runaway expression
 ARC_MAX_TURNS = 10_000
@@ -191,6 +195,9 @@ class Interpreter:
         self.g5_tangent: tuple[float, float] | None = None
         # output
         self.items: list = []
+        #: a stream's hook, called inside a block once ``ITEMS_WAITING_MAX`` items wait
+        #: (it takes them from ``items``); between blocks the stream looks by itself
+        self.on_items = None
         self.rb: RunBuilder | None = None
         self.block_count = 0
         self.line_count = 0
@@ -329,6 +336,8 @@ class Interpreter:
         self.rb = None
         if rb is not None and rb.n > 1:
             self.items.append(("run", rb, reason))
+            if self.on_items is not None and len(self.items) >= ITEMS_WAITING_MAX:
+                self.on_items()
 
     def _feed_value(self, start9, end9, length_mm: float | None, col: int) -> float:
         """Feed limit (mm/s, or deg/s for rotary-only moves) of one feed move."""
@@ -1259,12 +1268,23 @@ class Interpreter:
         if end == start and all(c == start for c in ctrl):
             self._zero_length(line)
             return
-        curve = bezier(line, np.array(ctrl, dtype=float))
+        # a cusp (the curve stops and turns back) is a corner of the path: each arc of
+        # the curve between cusps is a curve of its own, the block's feed on all of them
+        pieces = [np.array(ctrl, dtype=float)]
+        done = 0.0
+        for t in bezier_cusps(pieces[0]):
+            head, tail = split_bezier(pieces[-1], (t - done) / (1.0 - done))
+            pieces[-1:] = [head, tail]
+            done = t
         try:
-            pts = sample_nurbs(curve)
+            curves = [bezier(line, c) for c in pieces]
+            samples = [sample_nurbs(c) for c in curves]
         except GeometryError as exc:
             raise self.error(str(exc), col) from None
-        self._curve(curve, pts, end, line, col, self._curve_feed(pts, start))
+        feed = self._curve_feed(np.vstack(samples), start)
+        for curve, pts in zip(curves, samples):
+            self._curve(curve, pts, list(curve.control[-1]), line, col, feed)
+        self.pos = list(end)  # the exact end point, not the last piece's float copy
 
     def _nurbs_point(self, col: int, d: dict, axis_words: list, line: int) -> None:
         a, b, _ = PLANES[self.plane]

@@ -33,6 +33,10 @@ SPLINE_MIN_SEGMENTS_PER_SPAN = 8
 #: (CURVE_MAX_NODES bounds the work)
 SPLINE_REFINE_PASSES = 48
 
+#: a Bézier whose parameter speed falls to this share of its control polygon's largest
+#: leg has a cusp there (the path reverses): it is cut into curves that meet at a stop
+BEZIER_CUSP_REL_SPEED = 1e-7
+
 
 def clamped_uniform_knots(n_control: int, order: int) -> np.ndarray:
     """LinuxCNC's knot vector for ``n_control`` points of ``order`` (length n_control + order)."""
@@ -68,6 +72,50 @@ def bezier(line: int, control9: np.ndarray) -> Nurbs:
         knots=np.array([0.0] * m + [1.0] * m),
         order=m,
     )
+
+
+def bezier_cusps(control: np.ndarray) -> np.ndarray:
+    """Parameters t in (0, 1), ascending, where the Bézier with ``control`` (m, d) points
+    has a cusp: its derivative vanishes (to ``BEZIER_CUSP_REL_SPEED``), so the curve stops
+    and turns back there, as ``G5 I10 J0 P-10 Q0 X0 Y0`` does twice."""
+    ctrl = np.asarray(control, dtype=float)
+    deg = ctrl.shape[0] - 1
+    if deg < 2:
+        return np.zeros(0)
+    legs = deg * np.diff(ctrl, axis=0)  # the derivative's control points (deg, d)
+    scale = float(np.abs(legs).max()) if legs.size else 0.0
+    if scale == 0.0:
+        return np.zeros(0)
+    # B'(t) in the power basis, per coordinate: c[k] t^k
+    n = legs.shape[0] - 1
+    from math import comb
+
+    power = np.zeros((n + 1, ctrl.shape[1]))
+    for i in range(n + 1):
+        for k in range(i, n + 1):
+            power[k] += comb(n, i) * comb(n - i, k - i) * (-1) ** (k - i) * legs[i]
+    # stationary points of |B'(t)|^2: roots of B'(t) . B''(t)
+    dot = np.zeros(2 * n)
+    for a in range(n + 1):
+        for b in range(1, n + 1):
+            dot[a + b - 1] += b * float(power[a] @ power[b])
+    cands = np.polynomial.polynomial.polyroots(dot) if np.any(dot) else np.zeros(0)
+    t = np.real(cands[np.abs(np.imag(cands)) <= 1e-9])
+    t = np.unique(t[(t > 1e-9) & (t < 1.0 - 1e-9)])
+    speed = np.abs(np.stack([np.polynomial.polynomial.polyval(t, power[:, c]) for c in range(ctrl.shape[1])]))
+    return t[np.sqrt((speed**2).sum(axis=0)) <= BEZIER_CUSP_REL_SPEED * scale] if t.size else t
+
+
+def split_bezier(control: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
+    """The Bézier with ``control`` (m, d) cut at ``t`` into two (de Casteljau): the
+    control points of [0, t] and of [t, 1]."""
+    pts = np.asarray(control, dtype=float)
+    left, right = [pts[0]], [pts[-1]]
+    while pts.shape[0] > 1:
+        pts = (1.0 - t) * pts[:-1] + t * pts[1:]
+        left.append(pts[0])
+        right.append(pts[-1])
+    return np.array(left), np.array(right[::-1])
 
 
 def sample_nurbs(curve: Nurbs) -> np.ndarray:

@@ -32,6 +32,10 @@ if TYPE_CHECKING:
     from ..machine.model import Machine
     from .trajectory import Trajectory
 
+#: a plan's first sample may differ from the machine's start position by this much, mm or
+#: deg: far above the device's fixed-point quantum (2^-28), far below any real move
+VERIFY_START_TOL = 1e-6
+
 _KINDS = ("velocity", "acceleration", "jerk")
 _UNITS = ("/s", "/s^2", "/s^3")
 
@@ -48,8 +52,12 @@ class VerifyReport:
         values: (n, 3) the worst |v|, |a|, |j| themselves (mm or deg per s, s^2, s^3).
         limits: (n, 3) vmax, amax, jmax.
         where: (n, 3) int, sample index where each worst value occurs (see module doc).
-        ok: every ratio <= 1 + VERIFY_RATIO_SLACK and no NaN/inf.
+        ok: every ratio <= 1 + VERIFY_RATIO_SLACK, no NaN/inf, and the plan starts at the
+            start position (when one is given).
         nan_found: the setpoints contain NaN or inf.
+        machine: the machine checked against, ``"NAME (SOURCE)"`` ("" for bare arrays).
+        start_offset: (n,) |q_0 - start| per axis, mm or deg; ``None`` when no start
+            position was given.
     """
 
     axes: str
@@ -61,6 +69,8 @@ class VerifyReport:
     where: np.ndarray
     ok: bool
     nan_found: bool
+    machine: str = ""
+    start_offset: np.ndarray | None = None
 
     @property
     def worst_ratio(self) -> float:
@@ -68,6 +78,14 @@ class VerifyReport:
         if self.nan_found:
             return float("inf")
         return float(self.ratios.max()) if self.ratios.size else 0.0
+
+    def _limits_ok(self) -> bool:
+        return bool(np.all(self.ratios <= 1.0 + VERIFY_RATIO_SLACK))
+
+    @property
+    def start_ok(self) -> bool:
+        """The first sample is the start position (true when none was given)."""
+        return self.start_offset is None or bool(np.all(self.start_offset <= VERIFY_START_TOL))
 
     def worst(self) -> tuple[str, str, float, int]:
         """(axis, kind, ratio, sample index) of the worst ratio."""
@@ -105,12 +123,16 @@ class VerifyReport:
             "dt_s": float(self.dt_s),
             "n_samples": int(self.n_samples),
             "slack": VERIFY_RATIO_SLACK,
+            "machine": self.machine,
+            "start_ok": self.start_ok,
+            "start_offset": None if self.start_offset is None else dict(zip(self.axes, map(float, self.start_offset))),
             "axes": per_axis,
         }
 
     def format(self) -> str:
         """Human-readable table: one row per axis, worst ratio per limit."""
-        lines = [f"{'axis':>4}  {'v/vmax':>12} {'a/amax':>12} {'j/jmax':>12}   worst at"]
+        lines = [f"machine: {self.machine}"] if self.machine else []
+        lines.append(f"{'axis':>4}  {'v/vmax':>12} {'a/amax':>12} {'j/jmax':>12}   worst at")
         for i, a in enumerate(self.axes):
             k = int(np.nanargmax(self.ratios[i])) if np.isfinite(self.ratios[i]).any() else 0
             cells = " ".join(f"{r:>12.9f}" for r in self.ratios[i])
@@ -120,17 +142,32 @@ class VerifyReport:
             lines.append(
                 f"{a:>4}  {cells}   {_KINDS[k]} t={self.where[i, k] * self.dt_s:.6g} s (sample {self.where[i, k]})"
             )
+        if not self.start_ok:
+            assert self.start_offset is not None
+            i = int(np.argmax(self.start_offset))
+            lines.append(
+                f"FAIL: the plan does not start at the machine's start position ({self.axes[i]} off by "
+                f"{self.start_offset[i]:.9g}; at most {VERIFY_START_TOL:g} passes; plan --start moves it)"
+            )
         if self.nan_found:
             lines.append("FAIL: the setpoints contain NaN or inf")
         else:
             axis, kind, ratio, idx = self.worst()
-            verdict = "ok" if self.ok else "FAIL: limit exceeded"
+            verdict = "ok" if self.ok else ("FAIL: limit exceeded" if not self._limits_ok() else "FAIL")
             lines.append(
                 f"{verdict}: worst {ratio:.12f} ({axis} {kind}, sample {idx}); "
                 f"{self.n_samples} samples at dt = {self.dt_s:g} s; a ratio passes up "
                 f"to 1 + {VERIFY_RATIO_SLACK:g} (float rounding)"
             )
         return "\n".join(lines)
+
+
+def _start_offset(q: np.ndarray, start: ArrayLike | None) -> np.ndarray | None:
+    """(n,) |q_0 - start|, or ``None`` without a start position or samples."""
+    if start is None or not q.shape[0]:
+        return None
+    off = np.abs(q[0] - np.asarray(start, dtype=float).reshape(q.shape[1]))
+    return np.where(np.isfinite(off), off, np.inf)
 
 
 def _axis_extremes(col: np.ndarray, pad: int) -> tuple[np.ndarray, np.ndarray]:
@@ -150,9 +187,17 @@ def _axis_extremes(col: np.ndarray, pad: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def verify_arrays(
-    q: np.ndarray, dt_s: float, vmax: ArrayLike, amax: ArrayLike, jmax: ArrayLike, axes: str | None = None
+    q: np.ndarray,
+    dt_s: float,
+    vmax: ArrayLike,
+    amax: ArrayLike,
+    jmax: ArrayLike,
+    axes: str | None = None,
+    start: ArrayLike | None = None,
+    machine: str = "",
 ) -> VerifyReport:
-    """Verify setpoints ``q`` (K, n) at period ``dt_s`` against per-axis limits (n,) each."""
+    """Verify setpoints ``q`` (K, n) at period ``dt_s`` against per-axis limits (n,) each;
+    with ``start`` (n,), also that the first sample is that position."""
     q = np.asarray(q, dtype=float)
     if q.ndim == 1:
         q = q[:, None]
@@ -177,7 +222,9 @@ def verify_arrays(
             where[i] = w
     with np.errstate(invalid="ignore", divide="ignore"):
         ratios = values / limits
+    start_offset = _start_offset(q, start)
     ok = (not nan_found) and bool(np.all(ratios <= 1.0 + VERIFY_RATIO_SLACK))
+    ok = ok and (start_offset is None or bool(np.all(start_offset <= VERIFY_START_TOL)))
     return VerifyReport(
         axes=axes,
         dt_s=float(dt_s),
@@ -188,11 +235,14 @@ def verify_arrays(
         where=where,
         ok=ok,
         nan_found=nan_found,
+        machine=machine,
+        start_offset=start_offset,
     )
 
 
 def verify(traj: "Trajectory", machine: "Machine") -> VerifyReport:
-    """Verify a ``Trajectory`` against a ``Machine``'s limits (axes matched by letter)."""
+    """Verify a ``Trajectory`` against a ``Machine``'s limits (axes matched by letter) and
+    that it starts at the machine's start position."""
     from ..errors import MachineError, SourceLocation
 
     for a in traj.axes:
@@ -202,7 +252,21 @@ def verify(traj: "Trajectory", machine: "Machine") -> VerifyReport:
                 SourceLocation(machine.source or "<machine>"),
             )
     idx = np.array([machine.axes.index(a) for a in traj.axes], dtype=int)
-    return verify_arrays(traj.q, traj.dt_s, machine.vmax[idx], machine.amax[idx], machine.jmax[idx], axes=traj.axes)
+    return verify_arrays(
+        traj.q,
+        traj.dt_s,
+        machine.vmax[idx],
+        machine.amax[idx],
+        machine.jmax[idx],
+        axes=traj.axes,
+        start=np.asarray(machine.start, dtype=float)[idx],
+        machine=machine_label(machine),
+    )
+
+
+def machine_label(machine: "Machine") -> str:
+    """``NAME (SOURCE)``: how a report names the machine it checked against."""
+    return f"{machine.name} ({machine.source})" if machine.source else machine.name
 
 
 class StreamVerifier:
@@ -215,8 +279,20 @@ class StreamVerifier:
     a caller can stop before writing it.
     """
 
-    def __init__(self, dt_s: float, vmax: ArrayLike, amax: ArrayLike, jmax: ArrayLike, axes: str):
+    def __init__(
+        self,
+        dt_s: float,
+        vmax: ArrayLike,
+        amax: ArrayLike,
+        jmax: ArrayLike,
+        axes: str,
+        start: ArrayLike | None = None,
+        machine: str = "",
+    ):
         n = len(axes)
+        self.start = None if start is None else np.asarray(start, dtype=float).reshape(n)
+        self.start_offset: np.ndarray | None = None
+        self.machine = machine
         self.axes = axes
         self.dt_s = float(dt_s)
         self.limits = np.stack(
@@ -232,7 +308,15 @@ class StreamVerifier:
 
     @classmethod
     def for_machine(cls, machine: "Machine", dt_s: float) -> "StreamVerifier":
-        return cls(dt_s, machine.vmax, machine.amax, machine.jmax, machine.axes)
+        return cls(
+            dt_s,
+            machine.vmax,
+            machine.amax,
+            machine.jmax,
+            machine.axes,
+            start=machine.start,
+            machine=machine_label(machine),
+        )
 
     def _scan(self, x: np.ndarray, e0: int, skip: int) -> None:
         """Differences of the padded run ``x`` (m, n) whose first stencil of order 1 ends
@@ -269,6 +353,7 @@ class StreamVerifier:
             q = np.where(finite, q, 0.0)  # the rest of the axis is reported as NaN anyway
         if self.tail is None:
             self.tail = np.repeat(q[:1], pad, axis=0)
+            self.start_offset = _start_offset(q, self.start)
         x = np.concatenate([self.tail, q], axis=0)
         # x[0] is padded index self.k (the sample k - pad); the first diff ends at +1
         self._scan(x, self.k + 1, pad - 1)
@@ -282,16 +367,21 @@ class StreamVerifier:
         return ratios
 
     def ok_so_far(self) -> bool:
-        return bool((self.first_bad < 0).all()) and bool(np.all(self.ratios() <= 1.0 + VERIFY_RATIO_SLACK))
+        start_ok = self.start_offset is None or bool(np.all(self.start_offset <= VERIFY_START_TOL))
+        return start_ok and bool((self.first_bad < 0).all()) and bool(np.all(self.ratios() <= 1.0 + VERIFY_RATIO_SLACK))
 
     def report(self) -> VerifyReport:
-        """The report of everything added, with the rest padding after the last sample."""
+        """The report of everything added, with the rest padding after the last sample.
+        It leaves the stream as it was: more samples may be added after it."""
         pad = VERIFY_REST_PADDING
+        stream_best, stream_where = self.best.copy(), self.where.copy()
         if self.tail is not None:
             x = np.concatenate([self.tail, np.repeat(self.tail[-1:], pad, axis=0)], axis=0)
             self._scan(x, self.k + 1, pad - 1)
-        values = self.best / self.scale
-        where = self.where.copy()
+        # the padded extremes are the report's; the stream keeps its own
+        best, where = self.best, self.where
+        self.best, self.where = stream_best, stream_where
+        values = best / self.scale
         where[values == 0] = 0  # an axis that never moves has no "worst" sample
         nan_found = bool((self.first_bad >= 0).any())
         for i in np.flatnonzero(self.first_bad >= 0):
@@ -300,7 +390,7 @@ class StreamVerifier:
         with np.errstate(invalid="ignore", divide="ignore"):
             ratios = values / self.limits
         ok = (not nan_found) and bool(np.all(ratios <= 1.0 + VERIFY_RATIO_SLACK))
-        self.tail = None  # the padding is added once
+        ok = ok and (self.start_offset is None or bool(np.all(self.start_offset <= VERIFY_START_TOL)))
         return VerifyReport(
             axes=self.axes,
             dt_s=self.dt_s,
@@ -311,4 +401,6 @@ class StreamVerifier:
             where=where,
             ok=ok,
             nan_found=nan_found,
+            machine=self.machine,
+            start_offset=self.start_offset,
         )
