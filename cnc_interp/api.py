@@ -64,6 +64,7 @@ def load_machine(spec: "str | os.PathLike[str] | Machine") -> "Machine":
 
     if isinstance(spec, Machine):
         return spec
+    _expect(spec, (str, os.PathLike), "machine", "a preset name, a machine file's path or a Machine")
     return _load(os.fspath(spec))
 
 
@@ -91,8 +92,12 @@ def read_program(
     """
     from .gcode import read_program as _read
 
+    _expect(source, (str, bytes, os.PathLike), "source", "a path, G-code bytes or G-code text")
+    _expect(name, (str, type(None)), "name", "a string")
+    _expect(tool_table, (str, os.PathLike, dict, type(None)), "tool_table", "a tool table's path or a ToolTable")
     data, name = _source_bytes(source, name)
     m = load_machine(machine) if machine is not None else None
+    start = _position(start, "start")
     if m is not None:
         start = m.start if start is None else start
         tool_table = m.tool_table if tool_table is None else tool_table
@@ -133,7 +138,12 @@ def fit(
     from .fit import fit_program
     from .fit.result import require_within_tolerance
     from .fit.settings import FitSettings
+    from .gcode.program import Program
 
+    _expect(program, Program, "program", "a Program (from read_program)", "fit")
+    _expect(settings, (FitSettings, type(None)), "settings", "a FitSettings", "fit")
+    for value, what in ((tol_mm, "tol_mm"), (corner_deg, "corner_deg")):
+        _expect_number(value, what, "fit")
     if settings is None:
         m = load_machine(machine) if machine is not None else _MACHINE_OF.get(id(program))
         settings = FitSettings.from_options(tol_mm=tol_mm, corner_deg=corner_deg, machine=m, method=method)
@@ -182,6 +192,22 @@ def plan(
     return traj
 
 
+def _check_plan_args(fitted: object, machine: "Machine", progress: object) -> None:
+    """``plan``'s arguments of the right kinds, the program read for ``machine``'s axes."""
+    from .errors import UsageError
+    from .fit.result import FitResult
+
+    _expect(fitted, FitResult, "fitted", "a FitResult (from fit)", "plan")
+    if progress is not None and not callable(progress):
+        raise UsageError(f"plan: progress must be a function of the millimetres planned, not {_kind(progress)}")
+    axes = fitted.program.axes  # type: ignore[attr-defined]
+    if axes != machine.axes:
+        raise UsageError(
+            f"plan: the program was read for axes {axes}, machine '{machine.name}' has {machine.axes}: "
+            "read it with this machine (read_program(..., machine=...))"
+        )
+
+
 def _plan_settings(
     machine: "Machine",
     planner: str | None,
@@ -193,6 +219,10 @@ def _plan_settings(
     from .errors import UsageError
     from .plan.settings import PlanSettings
 
+    _expect(settings, (PlanSettings, type(None)), "settings", "a PlanSettings", "plan")
+    _expect(planner, (str, type(None)), "planner", "a planner's name", "plan")
+    for value, what in ((dt_s, "dt_s"), (tol_mm, "tol_mm")):
+        _expect_number(value, what, "plan")
     if settings is None:
         return PlanSettings.from_options(planner=planner or DEFAULT_PLANNER, dt_s=dt_s, tol_mm=tol_mm, machine=machine)
     if planner is not None or dt_s is not None or tol_mm is not None:
@@ -210,9 +240,17 @@ def _plan(
     from .plan.budget import check_sample_budget, held_time_s
     from .plan.timeline import plan_program
 
+    _check_plan_args(fitted, machine, progress)
     machine = machine.with_dt(settings.dt_s)
     source = fitted.program.source
-    check_sample_budget(fitted.paths, machine, settings.dt_s, source, held_s=held_time_s(fitted.items))
+    check_sample_budget(
+        fitted.paths,
+        machine,
+        settings.dt_s,
+        source,
+        held_s=held_time_s(fitted.items),
+        tables=settings.planner in ("vpop", "optimal"),  # the planners that build VPOp's tables
+    )
     try:
         traj: Trajectory = plan_program(fitted, machine, settings, progress=progress)
         return traj, settings
@@ -223,8 +261,10 @@ def _plan(
 def verify(traj: "Trajectory", machine: "Machine | str") -> "VerifyReport":
     """The independent check: per-axis finite-difference velocity, acceleration and jerk
     of the samples against ``machine``'s limits (``VerifyReport.ok``, ``worst()``)."""
+    from .plan.trajectory import Trajectory
     from .plan.verify import verify as _verify
 
+    _expect(traj, Trajectory, "traj", "a Trajectory (from plan)", "verify")
     report: VerifyReport = _verify(traj, load_machine(machine))
     return report
 
@@ -238,11 +278,21 @@ def write(
     """Write the samples to ``path``: MCAP when it ends in ``.mcap`` (with ``machine``'s
     limits and ``metadata`` records), else CSV; ``"-"`` is standard output. The file
     appears only complete (written to a temporary file, then renamed)."""
+    from .plan.trajectory import Trajectory
+
+    _expect(traj, Trajectory, "traj", "a Trajectory (from plan)", "write")
+    _expect(path, (str, os.PathLike), "path", "a file name", "write")
+    _expect(metadata, (dict, type(None)), "metadata", "a dict", "write")
     path = os.fspath(path)
     if path.lower().endswith(".mcap"):
         from .export.mcap_io import write_mcap
 
-        write_mcap(traj, path, metadata=metadata, machine=load_machine(machine) if machine is not None else None)
+        m = load_machine(machine) if machine is not None else None
+        if m is not None and not set(traj.axes) <= set(m.axes):
+            from .errors import UsageError
+
+            raise UsageError(f"write: the plan has axes {traj.axes}, machine '{m.name}' has {m.axes}")
+        write_mcap(traj, path, metadata=metadata, machine=m)
     else:
         from .export.csv_io import write_csv
 
@@ -303,7 +353,14 @@ def run(
     from .precompile import ensure
 
     t0 = time.perf_counter()
-    m = load_machine(machine).with_start(start)
+    from .fit.settings import FitSettings
+    from .plan.settings import PlanSettings
+
+    _expect(fit_settings, (FitSettings, type(None)), "fit_settings", "a FitSettings", "run")
+    _expect(plan_settings, (PlanSettings, type(None)), "plan_settings", "a PlanSettings", "run")
+    m = load_machine(machine)
+    start = _position(start, "start", m)
+    m = m.with_start(start)
     program = read_program(source, m, name=name, tool_table=tool_table)
     plan_tol_mm = tol_mm if plan_settings is None else None
     settings = _plan_settings(m, planner, dt_s, plan_tol_mm, plan_settings)
@@ -348,15 +405,60 @@ def _source_bytes(source: "str | bytes | os.PathLike[str]", name: str | None) ->
 
 
 def read_part(part: str) -> tuple[str, bytes]:
-    """Read a part program given as a path or ``-`` (stdin): (display name, raw bytes)."""
+    """Read a part program given as a path or ``-`` (stdin): (display name, raw bytes),
+    bounded (``inputfile.read_bounded``)."""
     import sys
 
     from .errors import SourceLocation, UsageError
 
+    from .inputfile import read_bounded
+
     if part == "-":
-        return "<stdin>", sys.stdin.buffer.read()
+        return "<stdin>", read_bounded(sys.stdin.buffer, "<stdin>")
     try:
         with open(part, "rb") as fh:
-            return part, fh.read()
+            return part, read_bounded(fh, part)
     except OSError as exc:
         raise UsageError(f"cannot read part program: {exc.strerror}", SourceLocation(file=part)) from None
+
+
+# -- arguments of the wrong kind: a UsageError naming the argument, not a TypeError inside ------
+def _kind(value: object) -> str:
+    return "None" if value is None else type(value).__name__
+
+
+def _expect(value: object, types: "type | tuple[type, ...]", what: str, want: str, call: str = "") -> None:
+    """``UsageError`` unless ``value`` is one of ``types`` (``want`` says what is expected)."""
+    if not isinstance(value, types):
+        from .errors import UsageError
+
+        raise UsageError(f"{call + ': ' if call else ''}{what} must be {want}, not {_kind(value)}")
+
+
+def _expect_number(value: object, what: str, call: str) -> None:
+    """``UsageError`` unless ``value`` is ``None`` or a real number (not a bool)."""
+    import numbers
+
+    if value is not None and (isinstance(value, bool) or not isinstance(value, numbers.Real)):
+        from .errors import UsageError
+
+        raise UsageError(f"{call}: {what} must be a number, not {_kind(value)}")
+
+
+def _position(value: object, what: str, machine: "Machine | None" = None) -> "np.ndarray | None":
+    """``value`` (a position, one number per axis of ``machine``) as a float array, or a
+    ``UsageError`` naming ``what``; ``None`` passes."""
+    if value is None:
+        return None
+    import numpy as np
+
+    from .errors import UsageError
+
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise UsageError(f"{what} must be a sequence of numbers, one per axis, not {_kind(value)}") from None
+    if arr.ndim != 1 or (machine is not None and arr.size != machine.n_axes):
+        n = f"{machine.n_axes} numbers, one per axis {machine.axes}" if machine is not None else "one number per axis"
+        raise UsageError(f"{what} must be {n}; got shape {arr.shape}")
+    return arr

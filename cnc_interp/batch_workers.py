@@ -58,8 +58,10 @@ def _run_job(job: dict) -> dict:
         from .pipeline import process_program
 
         if data is None:
+            from .inputfile import read_bounded
+
             with open(job["path"], "rb") as fh:
-                data = fh.read()
+                data = read_bounded(fh, job["path"])
         return process_program(
             job["path"],
             data,

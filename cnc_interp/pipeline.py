@@ -7,10 +7,13 @@ algorithm of its own.
 
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 
-from .errors import SourceLocation, UsageError
+from .errors import SourceLocation
 from .api import read_part  # noqa: F401  (re-exported: the CLI and batch read parts here)
+from .machine.model import parse_start  # noqa: F401  (re-exported: the plan and stream commands' --start)
 from .plan.settings import DEFAULT_PLANNER
 
 
@@ -52,6 +55,25 @@ def load_program_for(
     return program, machine
 
 
+def summarise_part(part: str, machine_spec: str | None, tool_table: str | None = None) -> dict:
+    """``cnc-interp parse``: the program summary (``gcode.summary``) of ``part`` for the
+    machine named by ``machine_spec`` (without one, the program's own axes), read as a
+    stream: each run is counted and dropped, so a 50-byte ``G81 ... L1000000`` (a million
+    holes, 8 kB each in a ``Program``) is summarised in bounded memory."""
+    from .gcode.stream import ProgramStream
+    from .gcode.summary import stream_summary
+
+    machine = load_machine_spec(machine_spec)
+    name, data = read_part(part)
+    if machine is not None:
+        table = tool_table if tool_table is not None else machine.tool_table
+        stream = ProgramStream(data, name, machine.axes, machine.start, table)
+    else:
+        stream = ProgramStream(data, name, None, None, tool_table)
+    del data
+    return stream_summary(stream)
+
+
 def fit_loaded(program, settings):
     """Fit every run of a parsed program (see ``cnc_interp.fit.fit_program``); a fit outside
     its tolerance that could not be repaired is a ``FitError`` (exit 1) naming its line."""
@@ -79,29 +101,33 @@ def process_program(
     ``nodes``, ``segments``, ``path_length_mm`` (rapids included), ``cycle_time_s``,
     ``worst_ratio`` (verify), ``worst`` (axis/limit/sample of it), ``max_fit_dev_mm``.
     """
-    from .api import load_machine, run
-    from .plan.settings import PlanSettings
+    from .api import load_machine
 
+    # the plan streams through verify and the summary as `plan`'s does, writing nothing:
+    # memory is a window of the program, whatever its cycle
     m = load_machine(machine)
-    settings = PlanSettings.from_options(planner=planner, dt_s=dt_s, tol_mm=tol_mm, machine=m, effort=effort)
-    res = run(data, m, tol_mm=tol_mm, fit_method=fit_method, plan_settings=settings, name=name, check=False)
-    program, result, traj, report = res.program, res.fit, res.trajectory, res.report
-    axis, kind, ratio, sample = report.worst()
+    opts = PlanOptions(
+        part=name, planner=planner, dt_s=dt_s, tol_mm=tol_mm, fit_method=fit_method, out=None, effort=effort
+    )
+    summary = stream_plan(opts, threads=1, data=data, machine=m, on_violation=lambda report: None)
+    w = summary["worst"]
+    ratio = summary["worst_ratio"]
+    fit = summary["fit"]
     return {
-        "status": "ok" if report.ok else "violation",
-        "message": "" if report.ok else f"{axis} {kind} ratio {ratio:.9f} at sample {sample}",
+        "status": "ok" if summary["ok"] else "violation",
+        "message": "" if summary["ok"] else f"{w['axis']} {w['limit']} ratio {ratio:.9f} at sample {w['sample']}",
         "error_line": 0,
-        "lines": int(program.line_count),
+        "lines": summary["lines"],
         # one definition with `parse` and `fit`: nodes of feed runs, fitted feed segments
-        "nodes": int(result.stats["nodes_in"]),
-        "segments": int(result.stats["segments_out"]),
-        "path_length_mm": float(traj.s[-1]) if traj.s.size else 0.0,
-        "cycle_time_s": float(traj.duration_s),
-        "samples": int(traj.n_samples),
-        "worst_ratio": None if report.nan_found else float(report.worst_ratio),
-        "worst": {"axis": axis, "limit": kind, "sample": sample},
-        "max_fit_dev_mm": _max_fit_deviation(result.stats),
-        "plan_status": traj.status,
+        "nodes": int(fit["nodes_in"] or 0),
+        "segments": int(fit["segments_out"] or 0),
+        "path_length_mm": float(summary["path_length_mm"]),
+        "cycle_time_s": float(summary["cycle_time_s"]),
+        "samples": int(summary["samples"]),
+        "worst_ratio": None if summary["nan_found"] else float(ratio),
+        "worst": w,
+        "max_fit_dev_mm": _max_fit_deviation(fit),
+        "plan_status": summary["status"],
     }
 
 
@@ -130,7 +156,7 @@ class PlanOptions:
     fit_method: str | None = None
     start: str | None = None
     tool_table: str | None = None
-    out: str = "-"
+    out: str | None = "-"  # None: nothing written (the plan verified and summarised)
     quiet: bool = False
     summary_json: bool = False
     effort: str | None = None
@@ -173,31 +199,6 @@ class PlanOutcome:
             "fit_method": self.fit_stats.get("method"),
             "x_real_time": (traj.duration_s / plan_s) if plan_s > 0 else None,
         }
-
-
-def parse_start(spec: str | None, axes: str, base: np.ndarray | None = None) -> np.ndarray | None:
-    """``--start "X=1,Y=2"`` -> (n,) position on ``axes``; the axes it does not name keep
-    ``base`` (the machine's start position; 0 without one). ``None`` passes."""
-    from .machine.model import START_MAX
-
-    if spec is None:
-        return None
-    out = np.zeros(len(axes)) if base is None else np.array(base, dtype=float).reshape(len(axes))
-    for part in spec.replace(" ", "").split(","):
-        if not part:
-            continue
-        name, sep, value = part.partition("=")
-        name = name.upper()
-        if not sep or len(name) != 1 or name not in axes:
-            raise UsageError(f"bad --start item '{part}': expected AXIS=VALUE with AXIS in {axes}")
-        try:
-            v = float(value)
-        except ValueError:
-            raise UsageError(f"bad --start value in '{part}': not a number") from None
-        if not np.isfinite(v) or abs(v) > START_MAX:
-            raise UsageError(f"bad --start value in '{part}': not a finite coordinate within ±{START_MAX:g}")
-        out[axes.index(name)] = v
-    return out
 
 
 def plan_part(
@@ -256,7 +257,16 @@ def _input_meta(name: str, data: bytes) -> dict:
     return input_metadata(name, data)
 
 
-def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | None = None) -> dict:
+def stream_plan(
+    opts: PlanOptions,
+    progress=None,
+    window=None,
+    threads: int | None = None,
+    *,
+    data: bytes | None = None,
+    machine=None,
+    on_violation=None,
+) -> dict:
     """Parse, fit, plan, verify and write ``opts.out`` as one stream (``cnc-interp plan``).
 
     The stages overlap: the parse runs in a thread, the fit hands over each run's paths as
@@ -270,8 +280,16 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
     (the parse thread's CPU time), ``fit`` (the fit
     thread's CPU time), ``plan`` (the planning threads' CPU time), ``verify``, ``write``,
     ``first_row`` (from the start until the first samples were written) and ``total``
-    (wall time). Raises ``PlanError`` (exit 1) when a block violates a limit (a bug),
-    before that block is written.
+    (wall time), ``ok`` (every limit held and the plan starts at the start position),
+    ``lines`` (of the program) and ``fit`` (the fit's ``nodes_in``, ``segments_out`` and
+    ``max_node_dev_mm``). Raises ``PlanError`` (exit 1) when a block violates a limit (a
+    bug), before that block is written.
+
+    ``opts.out = None`` writes no setpoints: the plan is verified and summarised only, in
+    the same bounded memory (``batch``). ``data`` is the program's text when it is not
+    read from ``opts.part``; ``machine`` a loaded ``Machine`` instead of
+    ``opts.machine_spec``; ``on_violation(report)`` replaces the ``PlanError`` (it may
+    return: the plan then goes on and the summary says it is not ``ok``).
     """
     import sys
     import time
@@ -287,9 +305,14 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
     from .plan.timeline import TimelineInfo, iter_timeline
 
     t_start = time.perf_counter()
-    out = opts.out or "-"
+    out = opts.out
     _few_malloc_arenas()
-    machine = load_machine(opts.machine_spec if opts.machine_spec is not None else DEFAULT_PRESET)
+    if machine is None:
+        machine = load_machine(opts.machine_spec if opts.machine_spec is not None else DEFAULT_PRESET)
+    if machine.tool_table is not None:  # an INI's [EMCIO] TOOL_TABLE is an input too
+        from .outfile import check_writable
+
+        check_writable(out, inputs=(machine.tool_table,))
     start = opts.start
     if isinstance(start, str):
         start = parse_start(start, machine.axes, machine.start)
@@ -300,7 +323,10 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
     machine = machine.with_dt(settings.dt_s)
     _warm_kernels(settings.planner, sys.stderr if not opts.quiet and _is_terminal(sys.stderr) else None)
     dt = float(settings.dt_s)
-    name, data = read_part(opts.part)
+    if data is None:
+        name, data = read_part(opts.part)
+    else:
+        name = opts.part
     input_meta = _input_meta(name, data)
     tool_table = opts.tool_table if opts.tool_table is not None else machine.tool_table
     program = ProgramStream(data, name, machine.axes, machine.start, tool_table)
@@ -316,14 +342,16 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
     blocks = iter_timeline(
         fitted, machine, settings, start_pos, window=window, info=info, progress=progress, source=name, threads=threads
     )
-    mcap = out.lower().endswith(".mcap")
+    mcap = out is not None and out.lower().endswith(".mcap")
 
     def violation(report):
+        if on_violation is not None:
+            return on_violation(report)
         _violation(report, name, PlanError)
 
     sink = None
     try:
-        with atomic_write(out) as fh:
+        with atomic_write(out) if out is not None else contextlib.nullcontext() as fh:
             from .export.sink import PlanSink
 
             sink = PlanSink(fh, machine, dt, mcap, violation)
@@ -380,6 +408,10 @@ def stream_plan(opts: PlanOptions, progress=None, window=None, threads: int | No
         "timings_s": timings,
         "fit_method": fit_stats.get("method"),
         "x_real_time": (cycle / total) if total > 0 else None,
+        "ok": bool(report.ok),
+        "nan_found": bool(report.nan_found),
+        "lines": int(program.line_count),
+        "fit": {k: fit_stats.get(k) for k in ("nodes_in", "segments_out", "max_node_dev_mm")},
     }
 
 
@@ -454,7 +486,7 @@ def run_plan(opts: PlanOptions) -> None:
     from .export.progress import progress as progress_bar
 
     out = opts.out or "-"
-    check_writable(out, inputs=(opts.part, opts.machine_spec))
+    check_writable(out, inputs=(opts.part, opts.machine_spec, opts.tool_table))
     with progress_bar(None, "plan", enabled=not opts.quiet, unit="mm") as tick:
         summary = stream_plan(opts, progress=tick)
     if opts.summary_json:
@@ -465,8 +497,10 @@ def run_plan(opts: PlanOptions) -> None:
         return
     if opts.quiet:
         return
+    from .errors import printable
+
     sys.stderr.write(
-        f"{summary['part']}: {summary['planner']} on {summary['machine']}: "
+        f"{printable(summary['part'])}: {summary['planner']} on {printable(summary['machine'])}: "
         f"cycle time {summary['cycle_time_s']:.6g} s, {summary['samples']} samples at "
         f"dt = {summary['dt_s']:g} s, path {summary['path_length_mm']:.6g} mm, "
         f"worst limit ratio {summary['worst_ratio']:.9f} "

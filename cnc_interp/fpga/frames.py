@@ -404,7 +404,9 @@ def control_frame(kind: FrameType, command_id: int) -> bytes:
 def read_frame_file(path: str) -> list[Frame]:
     """All frames of a ``--dry-run`` file, strictly (any damage is a DeviceError naming the offset)."""
     from ..errors import SourceLocation, UsageError
+    from ..inputfile import require_regular_file
 
+    require_regular_file(path, "frame file")
     try:
         with open(path, "rb") as fh:
             data = fh.read()

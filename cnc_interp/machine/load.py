@@ -26,6 +26,10 @@ Where the INI has no jerk limit the axis gets
 0.1 s, a common S-curve setting for small machines; LinuxCNC's own trajectory
 planner is not jerk-limited, so the INI files usually have none).
 
+Every value the source leaves out and the reader fills in (the jerk above, dt, the
+name, the start, ...) is named with its value and reason in ``Machine.defaults``;
+``describe_machine`` / ``format_machine`` (``cnc-interp machines FILE``) show them.
+
 Every error is a ``MachineError`` with the file, line and column of the
 offending key where it can be found.
 """
@@ -45,14 +49,23 @@ import numpy as np
 from ..constants import ALL_AXES, DEFAULT_DT_S, MM_PER_INCH, ROTARY_AXES
 from ..errors import MachineError, SourceLocation
 from .kinematics import KINEMATICS, normalise_params
-from .model import DT_MAX_S, DT_MIN_S, LIMIT_MAX, START_MAX, TOL_MAX_MM, Machine
+from .model import DT_MAX_S, DT_MIN_S, LIMIT_MAX, LIMIT_MIN, START_MAX, TOL_MAX_MM, Machine, ramp_problem
 from .presets import DEFAULT_PRESET, PRESETS
 
 
 #: default jerk (per axis, as a multiple of amax per second) when a LinuxCNC INI has none
 DEFAULT_JERK_PER_ACCEL_1_S = 10.0
 
-__all__ = ["load_machine", "machine_from_data", "preset_table", "format_presets", "DEFAULT_PRESET", "PRESETS"]
+__all__ = [
+    "load_machine",
+    "machine_from_data",
+    "preset_table",
+    "format_presets",
+    "describe_machine",
+    "format_machine",
+    "DEFAULT_PRESET",
+    "PRESETS",
+]
 
 _TOP_KEYS = ("name", "dt", "kinematics", "tol", "start", "axes", "description")
 _AXIS_KEYS = ("vmax", "amax", "jmax")
@@ -61,6 +74,9 @@ _LIMIT_NAMES = {"vmax": "velocity", "amax": "acceleration", "jmax": "jerk"}
 _MAX_DT_S = DT_MAX_S
 #: largest machine file read, bytes (real TOML/INI machine files are a few kB)
 MACHINE_FILE_MAX_BYTES = 1 << 20
+#: digits of the longest integer Python's int() converts (sys.int_info.default_max_str_digits):
+#: a longer TOML integer makes tomllib raise a plain ValueError
+_INT_MAX_DIGITS = 4300
 
 
 # --- entry point -------------------------------------------------------------
@@ -75,16 +91,25 @@ def load_machine(spec: str) -> Machine:
             f"no machine file or preset named '{spec}' (presets: {', '.join(sorted(PRESETS))})",
             SourceLocation(file=spec),
         )
-    raw = _read_machine_file(spec)
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        line = raw[: exc.start].count(b"\n") + 1
-        raise MachineError("machine file is not UTF-8 text", SourceLocation(file=spec, line=line)) from None
-    ext = os.path.splitext(spec)[1].lower()
-    if ext == ".ini" or (ext != ".toml" and _looks_like_ini(text)):
+    text = _machine_text(spec)
+    if _is_ini(spec, text):
         return _load_ini(text, spec)
     return _load_toml(text, spec)
+
+
+def _machine_text(path: str) -> str:
+    raw = _read_machine_file(path)
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = raw[: exc.start].count(b"\n") + 1
+        raise MachineError("machine file is not UTF-8 text", SourceLocation(file=path, line=line)) from None
+
+
+def _is_ini(path: str, text: str) -> bool:
+    """Whether ``load_machine`` reads ``path`` as a LinuxCNC INI (else as TOML)."""
+    ext = os.path.splitext(path)[1].lower()
+    return ext == ".ini" or (ext != ".toml" and _looks_like_ini(text))
 
 
 def _read_machine_file(path: str) -> bytes:
@@ -95,10 +120,11 @@ def _read_machine_file(path: str) -> bytes:
         fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)  # a FIFO must not block the open
     except OSError as exc:
         raise MachineError(f"cannot read machine file: {exc.strerror}", loc) from None
+    if not stat.S_ISREG(os.fstat(fd).st_mode):  # before fdopen, which refuses a folder itself
+        os.close(fd)
+        raise MachineError("machine file is not a regular file", loc)
     with os.fdopen(fd, "rb") as fh:
         st = os.fstat(fh.fileno())
-        if not stat.S_ISREG(st.st_mode):
-            raise MachineError("machine file is not a regular file", loc)
         if st.st_size > MACHINE_FILE_MAX_BYTES:
             raise MachineError(f"machine file is larger than {MACHINE_FILE_MAX_BYTES} bytes", loc)
         try:
@@ -142,6 +168,12 @@ def _load_toml(text: str, path: str) -> Machine:
         line = line or 0
         src = _line_text(text, line)
         raise MachineError(f"invalid TOML: {msg}", SourceLocation(path, line, col or 1, src)) from None
+    except ValueError:  # int() refuses an integer of more digits than Python's limit (4300)
+        m = re.search(r"\d{%d,}" % _INT_MAX_DIGITS, text)
+        line = text.count("\n", 0, m.start()) + 1 if m else 0
+        col = m.start() - text.rfind("\n", 0, m.start()) if m else 1
+        loc = SourceLocation(path, line, col, _line_text(text, line))
+        raise MachineError("invalid TOML: a number of thousands of digits", loc) from None
     locator = _TomlLocator(text, path)
     return machine_from_data(data, source=path, locate=locator, default_name=_stem(path))
 
@@ -208,7 +240,14 @@ def _stem(path: str) -> str:
 
 
 # --- validation shared by TOML files and presets ----------------------------
-def _number(value: object, what: str, loc: SourceLocation, positive: bool = True, most: float | None = None) -> float:
+def _number(
+    value: object,
+    what: str,
+    loc: SourceLocation,
+    positive: bool = True,
+    most: float | None = None,
+    least: float | None = None,
+) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise MachineError(f"{what} must be a number, not {type(value).__name__}", loc)
     try:
@@ -221,6 +260,8 @@ def _number(value: object, what: str, loc: SourceLocation, positive: bool = True
         raise MachineError(f"{what} must be positive, not {value}", loc)
     if most is not None and abs(v) > most:
         raise MachineError(f"{what} = {value} is out of range (at most {most:g})", loc)
+    if least is not None and v < least:
+        raise MachineError(f"{what} = {value} is out of range (at least {least:g})", loc)
     return v
 
 
@@ -237,12 +278,17 @@ def machine_from_data(
     unknown = [k for k in data if k not in _TOP_KEYS]
     if unknown:
         raise MachineError(f"unknown key '{unknown[0]}' (allowed: {', '.join(_TOP_KEYS)})", locate((), unknown[0]))
+    defaults: dict[str, str] = {}  # Machine.defaults: what this source leaves out
     name = data.get("name", default_name)
     if not isinstance(name, str):
         raise MachineError("name must be a string", locate((), "name"))
+    if "name" not in data:
+        defaults["name"] = f"'{name}', the file name (no name key)"
 
     dt_s = DEFAULT_DT_S
-    if "dt" in data:
+    if "dt" not in data:
+        defaults["dt"] = f"{DEFAULT_DT_S:g} s (no dt key)"
+    else:
         dt_s = _number(data["dt"], "dt (sample period, s)", locate((), "dt"))
         if dt_s < DT_MIN_S:
             raise MachineError(f"dt = {dt_s} s is shorter than {DT_MIN_S:g} s", locate((), "dt"))
@@ -250,6 +296,8 @@ def machine_from_data(
             raise MachineError(f"dt = {dt_s} s is longer than {_MAX_DT_S} s (dt is in seconds)", locate((), "dt"))
 
     kind, params = "trivial", {}
+    if "kinematics" not in data:
+        defaults["kinematics"] = "trivial (no kinematics key)"
     kin = data.get("kinematics", "trivial")
     if isinstance(kin, str):
         kind = kin
@@ -264,11 +312,15 @@ def machine_from_data(
         raise MachineError("kinematics must be a name or a table", locate((), "kinematics"))
     if kind not in KINEMATICS:
         raise MachineError(f"unknown kinematics '{kind}' (known: {', '.join(KINEMATICS)})", kin_loc)
+    given = {key.replace("-", "_").lower() for key in params}
     try:
         params = normalise_params(kind, params)
     except MachineError as exc:
         bad = re.search(r"'([^']+)'", exc.message)
         raise MachineError(exc.message, locate(("kinematics",), bad.group(1) if bad else None)) from None
+    for key in params:
+        if key not in given:
+            defaults[f"kinematics.{key}"] = f"{params[key]:g} mm (not in the [kinematics] table)"
 
     axes_data = data.get("axes")
     if axes_data is None:
@@ -296,9 +348,11 @@ def machine_from_data(
             if key not in table:
                 raise MachineError(f"axis {letter} has no {key} ({_LIMIT_NAMES[key]} limit)", locate(where, None))
             power = "/s" if key == "vmax" else "/s^2" if key == "amax" else "/s^3"
-            limits[key].append(
-                _number(table[key], f"axis {letter} {key} ({unit}{power})", locate(where, key), most=LIMIT_MAX[key])
-            )
+            what = f"axis {letter} {key} ({unit}{power})"
+            limits[key].append(_number(table[key], what, locate(where, key), most=LIMIT_MAX[key], least=LIMIT_MIN[key]))
+        _, why = ramp_problem(limits["vmax"][-1], limits["amax"][-1], limits["jmax"][-1], dt_s)
+        if why:
+            raise MachineError(f"axis {letter} {why}", locate(where, None))
         letters.append(letter)
     axes = "".join(letters)
     if kind == "xyzac-trt":
@@ -309,7 +363,9 @@ def machine_from_data(
             )
 
     start = np.zeros(len(axes))
-    if "start" in data:
+    if "start" not in data:
+        defaults["start"] = "0 on every axis (no [start] table)"
+    else:
         st = data["start"]
         if not isinstance(st, dict):
             raise MachineError("start must be a table of axis positions, e.g. start = {Z = 50}", locate((), "start"))
@@ -322,9 +378,14 @@ def machine_from_data(
             start[axes.index(key.upper())] = _number(
                 value, f"start {key}", locate(("start",), key), positive=False, most=START_MAX
             )
+        unnamed = [a for a in axes if a not in {key.upper() for key in st}]
+        if unnamed:
+            defaults["start"] = f"0 on {', '.join(unnamed)} (not in the [start] table)"
 
     tol_mm = None
-    if "tol" in data:
+    if "tol" not in data:
+        defaults["tol"] = "none: the fit's default tolerance or --tol (no tol key)"
+    else:
         tol_mm = _number(data["tol"], "tol (mm)", locate((), "tol"), most=TOL_MAX_MM)
     if "description" in data and not isinstance(data["description"], str):
         raise MachineError("description must be a string", locate((), "description"))
@@ -341,6 +402,7 @@ def machine_from_data(
         start=start,
         tol_mm=tol_mm,
         source=source,
+        defaults=defaults,
     )
 
 
@@ -466,6 +528,11 @@ def _load_ini(text: str, path: str) -> Machine:
 
     lin = _units(ini, "LINEAR_UNITS", _LINEAR_UNITS)
     ang = _units(ini, "ANGULAR_UNITS", _ANGULAR_UNITS)
+    defaults: dict[str, str] = {}  # Machine.defaults: what the INI leaves out
+    if ini.get("TRAJ", "LINEAR_UNITS") is None and any(a not in ROTARY_AXES for a in axes):
+        defaults["linear_units"] = "mm (no [TRAJ] LINEAR_UNITS)"
+    if ini.get("TRAJ", "ANGULAR_UNITS") is None and any(a in ROTARY_AXES for a in axes):
+        defaults["angular_units"] = "degree (no [TRAJ] ANGULAR_UNITS)"
 
     vmax, amax, jmax = [], [], []
     for letter in axes:
@@ -487,6 +554,11 @@ def _load_ini(text: str, path: str) -> Machine:
         amax.append(a * scale)
         # documented default: full acceleration reached in 1/DEFAULT_JERK_PER_ACCEL_1_S s
         jmax.append(j * scale if j is not None else DEFAULT_JERK_PER_ACCEL_1_S * a * scale)
+        if j is None:
+            unit = "deg" if letter in ROTARY_AXES else "mm"
+            defaults[f"jmax.{letter}"] = (
+                f"{DEFAULT_JERK_PER_ACCEL_1_S:g}/s x amax = {jmax[-1]:g} {unit}/s^3 (no MAX_JERK in [{section}])"
+            )
 
     period = ini.number("EMCMOT", "SERVO_PERIOD")
     dt_s = period * 1e-9 if period is not None else DEFAULT_DT_S
@@ -494,9 +566,20 @@ def _load_ini(text: str, path: str) -> Machine:
         item = ini.get("EMCMOT", "SERVO_PERIOD")
         line = item[1] if item is not None else 0  # period is not None: the key is there
         raise MachineError("[EMCMOT] SERVO_PERIOD is in nanoseconds; this is longer than 1 s", ini.loc(line))
+    if period is None:
+        defaults["dt"] = f"{DEFAULT_DT_S:g} s (no [EMCMOT] SERVO_PERIOD)"
     name_item = ini.get("EMC", "MACHINE")
     name = name_item[0] if name_item else _stem(path)
+    if not name_item:
+        defaults["name"] = f"'{name}', the file name (no [EMC] MACHINE)"
     kind = _ini_kinematics(ini, axes)
+    if ini.get("KINS", "KINEMATICS") is None:
+        defaults["kinematics"] = "trivial (no [KINS] KINEMATICS)"
+    params = normalise_params(kind, {})
+    for key in params:
+        defaults[f"kinematics.{key}"] = "0 mm (LinuxCNC sets pivot offsets by HAL pins, not in the INI)"
+    defaults["start"] = "0 on every axis (an INI gives no start position)"
+    defaults["tol"] = "none: the fit's default tolerance or --tol (an INI gives no tolerance)"
     table = ini.get("EMCIO", "TOOL_TABLE")
     tool_table = None
     if table is not None and table[0].strip():  # relative to the INI file, as LinuxCNC reads it
@@ -509,9 +592,10 @@ def _load_ini(text: str, path: str) -> Machine:
         jmax=np.asarray(jmax, dtype=float),
         dt_s=dt_s,
         kinematics=kind,
-        kinematics_params=normalise_params(kind, {}),
+        kinematics_params=params,
         source=path,
         tool_table=tool_table,
+        defaults=defaults,
     )
 
 
@@ -564,11 +648,63 @@ def format_presets(table: list[dict[str, Any]]) -> str:
         tag = " (default)" if row.get("default") else ""
         out.append(f"{row['preset']}{tag}: {row['name']} - {row['description']}")
         out.append(f"  axes {row['axes']}, dt {row['dt_s'] * 1000:g} ms, kinematics {row['kinematics']}")
-        out.append(f"  {'axis':>4} {'vmax':>10} {'amax':>10} {'jmax':>10}  unit")
-        for axis, lim in row["limits"].items():
-            u = lim["unit"]
-            out.append(
-                f"  {axis:>4} {lim['vmax']:>10.6g} {lim['amax']:>10.6g} {lim['jmax']:>10.6g}  {u}/s, {u}/s^2, {u}/s^3"
-            )
+        out.extend(_limit_lines(row["limits"]))
         out.append("")
     return "\n".join(out).rstrip()
+
+
+def _limit_lines(limits: dict[str, dict[str, Any]]) -> list[str]:
+    out = [f"  {'axis':>4} {'vmax':>10} {'amax':>10} {'jmax':>10}  unit"]
+    for axis, lim in limits.items():
+        u = lim["unit"]
+        out.append(
+            f"  {axis:>4} {lim['vmax']:>10.6g} {lim['amax']:>10.6g} {lim['jmax']:>10.6g}  {u}/s, {u}/s^2, {u}/s^3"
+        )
+    return out
+
+
+# --- one machine, as read ----------------------------------------------------
+def describe_machine(spec: str) -> dict[str, Any]:
+    """How ``load_machine(spec)`` reads ``spec``, JSON-able: ``Machine.to_dict()`` plus
+    ``spec``, ``format`` (``preset``, ``toml`` or ``ini``), ``description`` (a preset's),
+    ``tool_table`` and ``defaults`` (``Machine.defaults``: what the reader filled in).
+    Raises ``MachineError`` as ``load_machine`` does."""
+    m = load_machine(spec)
+    if spec in PRESETS:
+        fmt, description = "preset", PRESETS[spec][0]
+    else:
+        fmt, description = ("ini" if _is_ini(spec, _machine_text(spec)) else "toml"), None
+    return {
+        **m.to_dict(),
+        "spec": spec,
+        "format": fmt,
+        "description": description,
+        "tool_table": m.tool_table,
+        "defaults": dict(m.defaults),
+    }
+
+
+_FORMAT_NAMES = {"preset": "built-in preset", "toml": "TOML machine file", "ini": "LinuxCNC INI file"}
+
+
+def format_machine(desc: dict[str, Any]) -> str:
+    """Human-readable form of ``describe_machine(spec)``."""
+    about = f" - {desc['description']}" if desc["description"] else ""
+    out = [f"{desc['spec']}: {desc['name']} ({_FORMAT_NAMES[desc['format']]}){about}"]
+    out.append(f"  axes {desc['axes']}, dt {desc['dt_s'] * 1000:g} ms, kinematics {desc['kinematics']}")
+    if desc["kinematics_params"]:
+        params = ", ".join(f"{k} {v:g} mm" for k, v in desc["kinematics_params"].items())
+        out.append(f"  kinematics parameters: {params}")
+    tol = "not set" if desc["tol_mm"] is None else f"{desc['tol_mm']:g} mm"
+    out.append(f"  tol {tol}")
+    units = {a: lim["unit"] for a, lim in desc["limits"].items()}
+    out.append("  start " + ", ".join(f"{a} {v:g} {units[a]}" for a, v in desc["start"].items()))
+    if desc["tool_table"]:
+        out.append(f"  tool table {desc['tool_table']}")
+    out.extend(_limit_lines(desc["limits"]))
+    if desc["defaults"]:
+        out.append("  defaults applied (not given by the source):")
+        out.extend(f"    {key}: {why}" for key, why in desc["defaults"].items())
+    else:
+        out.append("  defaults applied: none")
+    return "\n".join(out)

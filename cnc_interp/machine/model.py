@@ -10,20 +10,45 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..constants import ROTARY_AXES
-from ..errors import MachineError, SourceLocation
+from ..errors import MachineError, SourceLocation, UsageError
 
 #: accepted limit ranges (exclusive of 0), mm or deg per s, s², s³: far beyond any machine,
 #: far below where the planner's products (v·dt, j·dt³ and their squares) lose precision
 #: or overflow float64
 LIMIT_MAX = {"vmax": 1e6, "amax": 1e9, "jmax": 1e13}
+#: smallest accepted limits, mm or deg per s, s², s³ (0.06 mm/min; real machines are
+#: thousands of times faster): 1e-20 overflowed the planners' step sizes, 1e-9 planned for
+#: hours a move of millimetres
+LIMIT_MIN = {"vmax": 1e-3, "amax": 1e-3, "jmax": 1e-3}
+#: most sample periods an axis may take from rest to its vmax (vmax/amax + amax/jmax s):
+#: VPOp's brake buffers hold eight such ramps of samples (~100 bytes each, 1 GB at this
+#: bound; measured at amax = 0.1 mm/s², vmax = 100 mm/s, dt = 1 ms: 0.86 GB). Real machines
+#: take under a second (under 500 periods at 1 ms); 2^20 periods is 17 minutes at 1 ms
+RAMP_MAX_PERIODS = 1 << 20
 #: accepted sample periods, s: a 1 MHz servo rate to 1 s
 DT_MIN_S, DT_MAX_S = 1e-6, 1.0
 #: largest default fit tolerance, mm (a tolerance is a deviation from the part, not a size)
 TOL_MAX_MM = 10.0
 #: largest start coordinate, mm or deg (the G-code front end's coordinate bound)
 START_MAX = 1e9
+
+
+def ramp_problem(vmax: ArrayLike, amax: ArrayLike, jmax: ArrayLike, dt_s: float) -> tuple[int, str]:
+    """(axis index, message) of the first axis that takes more than ``RAMP_MAX_PERIODS``
+    sample periods from rest to its vmax, else (0, "")."""
+    ramp = np.atleast_1d(np.asarray(vmax, dtype=float) / amax + np.asarray(amax, dtype=float) / jmax)
+    bad = ~(ramp <= RAMP_MAX_PERIODS * dt_s)
+    if not bad.any():
+        return 0, ""
+    k = int(np.argmax(bad))
+    return k, (
+        f"takes {ramp[k]:.6g} s from rest to its vmax (vmax/amax + amax/jmax), more than "
+        f"{RAMP_MAX_PERIODS} sample periods of dt = {dt_s:g} s; its amax or jmax is far too low "
+        "(or use a longer --dt)"
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -43,6 +68,11 @@ class Machine:
         tol_mm: default path tolerance for the fit, mm.
         source: where it was loaded from (file name or ``preset:NAME``).
         tool_table: path of the LinuxCNC tool table (an INI's ``[EMCIO] TOOL_TABLE``), or None.
+        defaults: what the reader filled in because the source did not give it, as
+            ``{what: the value and why}`` (e.g. ``{"jmax.X": "10/s x amax ..."}``; keys
+            ``name``, ``dt``, ``kinematics``, ``kinematics.<param>``, ``jmax.<axis>``,
+            ``start``, ``tol``, ``linear_units``, ``angular_units``); ``cnc-interp machines
+            FILE`` prints them. It describes the source: ``with_dt`` and ``with_start`` keep it.
     """
 
     name: str
@@ -58,6 +88,7 @@ class Machine:
     tol_mm: float | None = None
     source: str = ""
     tool_table: str | None = None
+    defaults: dict[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         n = len(self.axes)
@@ -75,14 +106,18 @@ class Machine:
         loc = SourceLocation(file=self.source or "machine")
         for name, hi in LIMIT_MAX.items():
             arr = getattr(self, name)
-            bad = ~((arr > 0) & (arr <= hi))
+            lo = LIMIT_MIN[name]
+            bad = ~((arr >= lo) & (arr <= hi))
             if bad.any():
                 k = int(np.argmax(bad))
-                raise MachineError(f"axis {self.axes[k]} {name} = {arr[k]:g} is out of range (0, {hi:g}]", loc)
+                raise MachineError(f"axis {self.axes[k]} {name} = {arr[k]:g} is out of range [{lo:g}, {hi:g}]", loc)
         if not DT_MIN_S <= self.dt_s <= DT_MAX_S:
             raise MachineError(
                 f"sample period dt = {self.dt_s:g} s is out of range [{DT_MIN_S:g}, {DT_MAX_S:g}] s", loc
             )
+        k, why = ramp_problem(self.vmax, self.amax, self.jmax, self.dt_s)
+        if why:
+            raise MachineError(f"axis {self.axes[k]} {why}", loc)
         if self.tol_mm is not None and not 0 <= self.tol_mm <= TOL_MAX_MM:
             raise MachineError(f"tol = {self.tol_mm:g} mm is out of range [0, {TOL_MAX_MM:g}] mm", loc)
         if not (np.abs(self.start) <= START_MAX).all():
@@ -129,3 +164,26 @@ class Machine:
                 for a, v, acc, j in zip(self.axes, self.vmax, self.amax, self.jmax)
             },
         }
+
+
+def parse_start(spec: str | None, axes: str, base: np.ndarray | None = None) -> np.ndarray | None:
+    """``--start "X=1,Y=2"`` -> (n,) position on ``axes``; the axes it does not name keep
+    ``base`` (the machine's start position; 0 without one). ``None`` passes."""
+    if spec is None:
+        return None
+    out = np.zeros(len(axes)) if base is None else np.array(base, dtype=float).reshape(len(axes))
+    for part in spec.replace(" ", "").split(","):
+        if not part:
+            continue
+        name, sep, value = part.partition("=")
+        name = name.upper()
+        if not sep or len(name) != 1 or name not in axes:
+            raise UsageError(f"bad --start item '{part}': expected AXIS=VALUE with AXIS in {axes}")
+        try:
+            v = float(value)
+        except ValueError:
+            raise UsageError(f"bad --start value in '{part}': not a number") from None
+        if not np.isfinite(v) or abs(v) > START_MAX:
+            raise UsageError(f"bad --start value in '{part}': not a finite coordinate within ±{START_MAX:g}")
+        out[axes.index(name)] = v
+    return out
