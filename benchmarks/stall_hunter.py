@@ -6,13 +6,14 @@ Usage: python benchmarks/stall_hunter.py [--count N] [--seed S] [--planner P] [-
 A stall of the step loop ("VPOp made no progress", met on a Vectric 4-axis XZA file) must
 end in the safe fallback, never in an error. This generates ``--count`` short programs
 (``generate(seed, index)``: the same program for the same seed and index, whatever the
-count) of the moves that make the step loop stall: tiny linear moves with large rotary steps, rotary-only moves, axis reversals,
-moves of 1e-6..1e-3 mm (some below the printed quantum: zero length after the fit),
-repeated points, G0/G1 mixes with F from 1 to 100,000 mm/min and inverse-time feeds, on
-machines whose limits are those of real ones (``MACHINES``: a Vectric 4-axis job's XZA and XYZA
-machines, the XYZA and XYZAC example files, the presets). Each program is planned through
-the public API (``cnc_interp.run``) and must plan (no exception), hold every limit
-(``report.ok``) and end on its last programmed point.
+count) of the moves that make the step loop stall: tiny linear moves with large rotary
+steps, rotary-only moves, axis reversals, moves of 1e-6..1e-3 mm (some below the printed
+quantum: zero length after the fit), repeated points, G0/G1 mixes with F from 1 to 100,000
+mm/min and inverse-time feeds, on machines whose limits are those of real ones
+(``MACHINES``: a Vectric 4-axis job's XZA and XYZA machines, the XYZA and XYZAC example
+files, the presets). Each program is planned through the public API (``cnc_interp.run``) and
+must plan (no exception), hold every limit (``report.ok``) and end on its last programmed
+point.
 
 Prints the counts (ok, failed, violations, off the end point, safe fallbacks) and writes
 the first ``--keep`` failing programs to ``--out`` (each with its machine as a TOML file
