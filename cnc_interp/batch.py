@@ -31,7 +31,7 @@ import sys
 import time
 from dataclasses import dataclass
 
-from .errors import SourceLocation, UsageError
+from .errors import SourceLocation, UsageError, printable
 from .plan.settings import DEFAULT_PLANNER
 
 #: file name endings taken as part programs when a directory is given
@@ -134,8 +134,12 @@ def collect_programs(paths) -> list[tuple[str, str]]:
 
 def load_baseline(path: str) -> dict:
     """A previous ``--report`` JSON: ``{key: result}``; errors are ``UsageError`` with location."""
+    import stat
+
     try:
         with open(path, "rb") as fh:
+            if not stat.S_ISREG(os.fstat(fh.fileno()).st_mode):  # /dev/zero would never end
+                raise UsageError("baseline is not a regular file", SourceLocation(file=path))
             text = fh.read().decode("utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise UsageError(
@@ -145,6 +149,8 @@ def load_baseline(path: str) -> dict:
         data = json.loads(text)
     except json.JSONDecodeError as exc:
         raise UsageError(f"baseline is not JSON: {exc.msg}", SourceLocation(path, exc.lineno, exc.colno)) from None
+    except RecursionError:  # arrays or objects nested thousands deep
+        raise UsageError("baseline is not a batch report: nested too deeply", SourceLocation(path, 1, 1)) from None
     programs = data.get("programs") if isinstance(data, dict) else None
     if not isinstance(programs, list) or not all(
         isinstance(p, dict) and isinstance(p.get("key"), str) for p in programs
@@ -412,12 +418,20 @@ def build_report(opts: BatchOptions) -> dict:
     from .machine.load import load_machine
     from .plan.settings import PlanSettings
 
+    if not isinstance(opts.machine_spec, str):
+        raise UsageError("batch needs a machine: -m MACHINE (a TOML or INI file, or a preset name)")
     machine = load_machine(opts.machine_spec)
     # a usage error before any job
     PlanSettings.from_options(planner=opts.planner, dt_s=opts.dt_s, machine=machine, effort=opts.effort)
     slowdown = parse_slowdown(opts.max_slowdown)
     baseline = load_baseline(opts.baseline) if opts.baseline else None
     programs = collect_programs(opts.paths)
+    if opts.report:
+        from .outfile import check_writable
+
+        # every file the batch reads is an input the report must not replace
+        inputs = (opts.machine_spec, machine.tool_table, opts.baseline, *(path for _, path in programs))
+        check_writable(opts.report, inputs=inputs)
 
     from .export.progress import progress
 
@@ -450,6 +464,6 @@ def run_batch(opts: BatchOptions) -> int:
     if opts.as_json:
         sys.stdout.write(json.dumps(report, indent=2, sort_keys=True, allow_nan=False) + "\n")
     else:
-        sys.stdout.write(format_table(report) + "\n")
+        sys.stdout.write(printable(format_table(report), lines=True) + "\n")
     sys.stdout.flush()
     return 1 if report["comparison"]["regressions"] else 0

@@ -16,7 +16,7 @@ import sys
 import click
 
 from . import __version__
-from .errors import CncInterpError
+from .errors import CncInterpError, printable
 from .plan.settings import DEFAULT_PLANNER, OPTIMAL_EFFORTS
 
 PLANNERS = ("optimal", "vpop", "constant", "variable")
@@ -24,6 +24,12 @@ PLANNERS = ("optimal", "vpop", "constant", "variable")
 
 def _emit_json(obj) -> None:
     click.echo(json.dumps(obj, indent=2, sort_keys=True, allow_nan=False))
+
+
+def _echo_text(text: str) -> None:
+    """A human-readable summary on stdout, its control characters escaped (a machine or a
+    file named with ESC or BEL must not drive the terminal)."""
+    click.echo(printable(text, lines=True))
 
 
 class _Finite(click.FloatRange):
@@ -78,7 +84,7 @@ def _tol_option(f):
         "tol_mm",
         type=_Finite(min=0, max=10.0),
         default=None,
-        help="Maximum permissible fit error in mm, 0 to 10 (default 0.001, or the machine's).",
+        help="Maximum permissible fit error in mm: 0 (the exact path) or 1e-6 to 10 (default 0.001, or the machine's).",
     )(f)
 
 
@@ -108,13 +114,17 @@ def _tool_table_option(f):
 
 
 def _machine_option(required: bool = False):
+    # no ``default`` with ``required``: click (8.2 and later) counts an explicit default,
+    # even None, as a value, and `batch` without -m reached the machine loader with None
+    extra = {} if required else {"default": None}
+
     def deco(f):
         return click.option(
             "-m",
             "--machine",
             "machine_spec",
             required=required,
-            default=None,
+            **extra,
             metavar="MACHINE",
             help="Machine: TOML file, LinuxCNC INI file or preset name (see `cnc-interp machines`).",
         )(f)
@@ -154,15 +164,14 @@ def main() -> None:
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable summary on stdout.")
 def parse(part: str, machine_spec: str | None, tool_table: str | None, as_json: bool) -> None:
     """Read PART (a file or - for stdin) and summarise its runs and nodes."""
-    from .gcode.summary import format_summary, program_summary
-    from .pipeline import load_program_for
+    from .gcode.summary import format_summary
+    from .pipeline import summarise_part
 
-    program, _ = load_program_for(part, machine_spec, require_machine=False, tool_table=tool_table)
-    summary = program_summary(program)
+    summary = summarise_part(part, machine_spec, tool_table)
     if as_json:
         _emit_json(summary)
     else:
-        click.echo(format_summary(summary))
+        _echo_text(format_summary(summary))
 
 
 # -- fit ----------------------------------------------------------------------
@@ -190,8 +199,10 @@ def fit(part, machine_spec, tool_table, tol_mm, corner_deg, fit_method, out, as_
     if out:
         from .outfile import check_writable
 
-        check_writable(out, inputs=(part, machine_spec))
+        check_writable(out, inputs=(part, machine_spec, tool_table))
     program, machine = load_program_for(part, machine_spec, require_machine=False, tool_table=tool_table)
+    if out and machine is not None and machine.tool_table is not None:
+        check_writable(out, inputs=(machine.tool_table,))  # an INI's [EMCIO] TOOL_TABLE
     settings = FitSettings.from_options(tol_mm=tol_mm, corner_deg=corner_deg, machine=machine, method=fit_method)
     result = fit_loaded(program, settings)
     if out:
@@ -200,10 +211,19 @@ def fit(part, machine_spec, tool_table, tol_mm, corner_deg, fit_method, out, as_
     if as_json:
         _emit_json(stats)
     else:
-        click.echo(format_statistics(stats))
+        _echo_text(format_statistics(stats))
 
 
 # -- plan ---------------------------------------------------------------------
+_start_option = click.option(
+    "--start",
+    "start",
+    default=None,
+    metavar="X=..,Y=..",
+    help="Machine position before the program (default: the machine's, else all 0); axes not named keep the machine's.",
+)
+
+
 @main.command()
 @click.argument("part", type=click.Path(allow_dash=True, dir_okay=False))
 @_machine_option()
@@ -213,13 +233,7 @@ def fit(part, machine_spec, tool_table, tol_mm, corner_deg, fit_method, out, as_
 @_dt_option
 @_tol_option
 @_fit_method_option
-@click.option(
-    "--start",
-    "start",
-    default=None,
-    metavar="X=..,Y=..",
-    help="Machine position before the program (default: the machine's, else all 0); axes not named keep the machine's.",
-)
+@_start_option
 @click.option(
     "-o", "--output", "out", default="-", metavar="OUT", help="OUT.csv or OUT.mcap; - (default) writes CSV to stdout."
 )
@@ -258,30 +272,43 @@ def plan(part, machine_spec, tool_table, planner, effort, dt_s, tol_mm, fit_meth
 
 # -- machines -----------------------------------------------------------------
 @main.command()
-@click.option("--json", "as_json", is_flag=True, help="Machine-readable list.")
-def machines(as_json: bool) -> None:
-    """List the built-in machine presets and their limits."""
-    from .machine.load import format_presets, preset_table
+@click.argument("machine_spec", metavar="[MACHINE]", required=False, default=None)
+@click.option("--json", "as_json", is_flag=True, help="Machine-readable list or description.")
+def machines(machine_spec: str | None, as_json: bool) -> None:
+    """List the built-in machine presets and their limits, or show how MACHINE (a TOML
+    file, a LinuxCNC INI file or a preset name) is read: its axes, limits, sample
+    period, tolerance, start, kinematics and the defaults applied."""
+    from .machine.load import describe_machine, format_machine, format_presets, preset_table
 
-    table = preset_table()
+    if machine_spec is None:
+        table = preset_table()
+        if as_json:
+            _emit_json(table)
+        else:
+            _echo_text(format_presets(table))
+        return
+    desc = describe_machine(machine_spec)
     if as_json:
-        _emit_json(table)
+        _emit_json(desc)
     else:
-        click.echo(format_presets(table))
+        _echo_text(format_machine(desc))
 
 
 # -- verify -------------------------------------------------------------------
 @main.command()
 @click.argument("plan_file", metavar="OUT", type=click.Path(exists=True, dir_okay=False))
 @_machine_option()
+@_start_option
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable report.")
-def verify(plan_file, machine_spec, as_json) -> None:
-    """Check a CSV or MCAP plan against MACHINE's limits (exit 1 on a violation).
+def verify(plan_file, machine_spec, start, as_json) -> None:
+    """Check a CSV or MCAP plan against MACHINE's limits and start position (exit 1 on a
+    violation).
 
-    An MCAP plan records its machine, so -m is optional there."""
+    An MCAP plan names its machine (a preset or a file, loaded now), so -m is optional
+    there; a CSV needs -m."""
     from .export.verify_file import verify_file
 
-    report = verify_file(plan_file, machine_spec)
+    report = verify_file(plan_file, machine_spec, start)
     if as_json:
         _emit_json(report.to_dict())
     else:
@@ -449,6 +476,9 @@ def batch(
 
 def run() -> None:
     """Console-script entry point: map errors to exit codes, never a traceback for bad input."""
+    from .outfile import guard_standard_streams
+
+    guard_standard_streams()  # `>&-`, `2>&-`: one clear line, or a quiet success
     _warnings_as_lines()
     try:
         main.main(standalone_mode=False)
@@ -508,7 +538,7 @@ def _warnings_as_lines() -> None:
 
     def show(message, category, filename, lineno, file=None, line=None):
         if issubclass(category, CncInterpWarning):
-            _stderr(str(message))
+            _stderr(printable(str(message)))
         else:
             shown(message, category, filename, lineno, file, line)
 
@@ -547,6 +577,9 @@ def _flush_stdout() -> None:
         sys.stdout.flush()
     except BrokenPipeError:
         _silence_stdout()
+    except CncInterpError as exc:  # standard output closed (outfile.guard_standard_streams)
+        _stderr(exc.format())
+        sys.exit(exc.exit_code)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -58,12 +58,20 @@ class CncInterpError(Exception):
 
 
 _CONTROL = {c: f"\\x{c:02x}" for c in (*range(0x20), 0x7F)}
+_CONTROL_BUT_LINES = {c: v for c, v in _CONTROL.items() if c not in (0x09, 0x0A)}
 
 
 def _printable(text: str) -> str:
     """``text`` with control characters (ESC, BEL, CR, ...) escaped as ``\\xNN``: a file
     name or source text must not drive the user's terminal."""
     return text.translate(_CONTROL)
+
+
+def printable(text: str, lines: bool = False) -> str:
+    """``text`` as it may reach a terminal: control characters escaped as ``\\xNN``
+    (a machine's name or a file name holding ESC or BEL must not drive the terminal);
+    with ``lines``, newlines and tabs are kept (a multi-line summary)."""
+    return text.translate(_CONTROL_BUT_LINES if lines else _CONTROL)
 
 
 class CncInterpWarning(UserWarning):

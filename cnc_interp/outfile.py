@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import io
 import os
 import stat
 import sys
@@ -69,6 +70,8 @@ def check_writable(path: str, inputs: Iterable[str] = ()) -> None:
     command's ``inputs`` (the same file, by inode). Planning a long program first and
     failing at the end would waste the run; writing over the input would destroy it."""
     if path == "-":
+        if stdout_closed():
+            raise UsageError(_STDOUT_CLOSED)
         return
     loc = SourceLocation(file=path)
     st = _stat(path)
@@ -278,3 +281,68 @@ def remove_temporaries() -> None:
         with contextlib.suppress(OSError):
             os.unlink(name)
     _TEMPS.clear()
+
+
+# -- standard streams closed by the caller (``cnc-interp plan p.ngc >&-``) --------------------
+_STDOUT_CLOSED = "cannot write output: standard output is closed"
+_STDIN_CLOSED = "cannot read the part program: standard input is closed"
+
+
+class _ClosedStd(io.RawIOBase):
+    """Stands for a standard stream that was closed when the command started: the first
+    write (or any read) raises a ``UsageError`` saying so; writes after that first one are
+    dropped, so that the flush at exit does not report the same failure again."""
+
+    def __init__(self, message: str, loc: SourceLocation):
+        super().__init__()
+        self.message, self.loc, self.failed = message, loc, False
+
+    def readable(self) -> bool:
+        return True
+
+    def writable(self) -> bool:
+        return True
+
+    def readinto(self, buf) -> int:  # type: ignore[no-untyped-def,override]
+        raise UsageError(self.message, self.loc)
+
+    def write(self, data) -> int:  # type: ignore[no-untyped-def,override]
+        if self.failed:
+            return len(data)
+        self.failed = True
+        raise UsageError(self.message, self.loc)
+
+
+def stdout_closed() -> bool:
+    """Standard output was closed when the command started (``>&-``): nothing written
+    there can arrive, so a command writing to it fails with one clear line."""
+    out = sys.stdout
+    return out is None or isinstance(getattr(getattr(out, "buffer", None), "raw", None), _ClosedStd)
+
+
+def guard_standard_streams() -> None:
+    """Make the process safe to run with standard input, output or error closed.
+
+    A closed descriptor 0, 1 or 2 gets ``/dev/null`` (so no file the command opens takes
+    its number: a library's ``printf`` would write into it); Python's ``sys.stdin`` and
+    ``sys.stdout`` become streams that fail with a ``UsageError`` on use (reading a part
+    program from ``-``, writing a plan or a summary), and ``sys.stderr`` one that discards
+    (a complete plan stays a success when nobody reads its summary)."""
+    closed = []
+    for fd in (0, 1, 2):
+        try:
+            os.fstat(fd)
+        except OSError:
+            nul = os.open(os.devnull, os.O_RDWR)
+            if nul != fd:
+                os.dup2(nul, fd)
+                os.close(nul)
+            closed.append(fd)
+    if 0 in closed or sys.stdin is None:
+        raw = _ClosedStd(_STDIN_CLOSED, SourceLocation(file="<stdin>"))
+        sys.stdin = io.TextIOWrapper(io.BufferedReader(raw), encoding="utf-8")
+    if 1 in closed or sys.stdout is None:
+        raw = _ClosedStd(_STDOUT_CLOSED, SourceLocation())
+        sys.stdout = io.TextIOWrapper(io.BufferedWriter(raw), encoding="utf-8", write_through=True)
+    if 2 in closed or sys.stderr is None:
+        sys.stderr = open(2, "w", encoding="utf-8", errors="backslashreplace", closefd=False)

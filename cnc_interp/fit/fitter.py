@@ -59,6 +59,12 @@ FIT_REPAIR_ROUNDS = 4
 
 FIT_REPAIR_SPLITS = 8
 
+#: a fitted path ends on its programmed point: an end off by at most this share of its
+#: last segment's length (rounding: an arc of radius 1e9 mm ends 1.4e-7 mm off, its centre
+#: a billion mm away) is moved there by a quintic blend over that segment, which keeps the
+#: segment's start and its end tangent and curvature; a larger gap is left as fitted
+FIT_END_SNAP_MAX_REL = 1e-6
+
 
 @dataclass
 class _Raw:
@@ -449,6 +455,7 @@ def _iter_run_raws(run: Run, settings: FitSettings, info: dict, threads: int = 1
 
     def emit(sub: SubRun, results: list, where: PreparedRun):
         for m in results:
+            _snap_end(m.raw, where.nodes[m.i1])
             methods.add(m.method)
             info["max_node_dev_mm"] = max(info["max_node_dev_mm"], m.dev_mm)
             info["max_node_dev_deg"] = max(info["max_node_dev_deg"], m.dev_deg)
@@ -903,7 +910,32 @@ def _rapid_raws(run: Run, lin: np.ndarray) -> list[_Raw]:
             continue
         pf = straight_piece(nodes[j - 1], nodes[j], length, int(run.line[j]), np.inf)
         out.append(_Raw(run.axes, pf.breaks, pf.coef, pf.line, pf.feed_mm_s, _weights(lin, rotary), rapid=True))
+        _snap_end(out[-1], nodes[j])
     return out
+
+
+def _snap_end(raw: _Raw, target: np.ndarray) -> None:
+    """Make ``raw`` end on ``target`` (its programmed end point), in place, when rounding
+    left it off by at most ``FIT_END_SNAP_MAX_REL`` of its last segment: the gap d is
+    added to that segment as d (10x³ - 15x⁴ + 6x⁵), x = τ/h, which is 0 with its first
+    and second derivatives at τ = 0 and d, 0, 0 at τ = h (the path stays G2; no point
+    moves by more than |d|). Paths that carry paper 000's planar form are left alone
+    (the FPGA stage evaluates that form)."""
+    if raw.planar is not None or raw.coef.shape[0] == 0:
+        return
+    h = float(raw.breaks[-1] - raw.breaks[-2])
+    c = raw.coef[-1]
+    end = c[5] * 1.0
+    for i in range(4, -1, -1):  # Path.end's arithmetic
+        end = end * h + c[i]
+    gap = np.asarray(target, dtype=float) - end
+    if not gap.any() or not (h > 0 and np.abs(gap).max() <= FIT_END_SNAP_MAX_REL * h):
+        return
+    coef = raw.coef.copy()
+    coef[-1, 3] += 10.0 * gap / h**3
+    coef[-1, 4] -= 15.0 * gap / h**4
+    coef[-1, 5] += 6.0 * gap / h**5
+    raw.coef = coef
 
 
 def _fit_sub(pr: PreparedRun, sub: SubRun, settings: FitSettings, evals: dict | None = None, tol_share: float = 1.0):

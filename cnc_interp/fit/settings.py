@@ -21,6 +21,12 @@ DEFAULT_TOL_MM = 0.001
 #: default tolerance for rotary axes (deg)
 DEFAULT_TOL_DEG = 0.001
 
+#: the finest tolerance a user may ask for other than 0 (the exact path), mm or deg: the
+#: tolerance the fit gives exact curves (``FIT_EXACT_CURVE_TOL_MM``, 1 nm), a thousandth of
+#: a fine machine's resolution. A finer one is no closer to the part, only past the fit's
+#: float precision: ``--tol 1e-300`` sampled arcs into gigabytes of nodes, then divided by 0
+FIT_TOL_MIN_MM = 1e-6
+
 #: a turn sharper than this (deg) between consecutive moves splits the path; the planner stops there
 DEFAULT_CORNER_DEG = 30.0
 
@@ -67,15 +73,23 @@ class FitSettings:
     blend_corners: bool = True
 
     def __post_init__(self) -> None:
+        from ..machine.model import TOL_MAX_MM
+
         for name in ("tol_mm", "tol_deg"):
             v = getattr(self, name)
-            if not (math.isfinite(v) and v > 0):
-                raise UsageError(f"fit tolerance {name} must be a positive number, got {v!r}")
+            if not (_is_number(v) and math.isfinite(v) and 0 < v <= TOL_MAX_MM):
+                raise UsageError(f"fit tolerance {name} must be a number from 0 to {TOL_MAX_MM:g}, got {v!r}")
+            if v < FIT_TOL_MIN_MM:
+                raise UsageError(
+                    f"fit tolerance {name} = {v!r} is below {FIT_TOL_MIN_MM:g}, the finest the fit works to"
+                )
         if not (0.0 <= self.corner_deg <= 180.0):
             raise UsageError(f"corner angle must be within [0, 180] deg, got {self.corner_deg!r}")
         cap = self.tol_cap_mm
-        if cap is not None and not (math.isfinite(cap) and cap >= 0):
-            raise UsageError(f"fit tolerance cap must be a number >= 0, got {cap!r}")
+        if cap is not None and not (_is_number(cap) and math.isfinite(cap) and 0 <= cap <= TOL_MAX_MM):
+            raise UsageError(f"fit tolerance cap must be a number from 0 to {TOL_MAX_MM:g}, got {cap!r}")
+        if cap is not None and 0 < cap < FIT_TOL_MIN_MM:
+            raise UsageError(_below_min(cap))
         for name in ("quantum_mm", "quantum_deg"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):
@@ -103,9 +117,15 @@ class FitSettings:
         at every corner as under G61.
         """
         from ..constants import FIT_EXACT_CURVE_TOL_MM
+        from ..machine.model import TOL_MAX_MM
 
         kw: dict[str, Any] = {}
         user_tol = tol_mm
+        if user_tol is not None:  # the API's fit(tol_mm=-1) as --tol -1: refused, not "exact"
+            if not (_is_number(user_tol) and 0 <= user_tol <= TOL_MAX_MM):
+                raise UsageError(f"fit tolerance must be a number of mm from 0 to {TOL_MAX_MM:g}, got {user_tol!r}")
+            if 0 < user_tol < FIT_TOL_MIN_MM:
+                raise UsageError(_below_min(user_tol))
         if tol_mm is None and machine is not None and machine.tol_mm:
             tol_mm = float(machine.tol_mm)
         if user_tol is not None:
@@ -146,7 +166,23 @@ class FitSettings:
             out[p] = t[p]
         if self.tol_cap_mm is not None:
             np.minimum(out, self.tol_cap_mm, out=out)
+        # a G64 P finer than the finest tolerance works to it (P0.0000000000000001 made the
+        # fit sample and refine for 23 GB); 0 stays the exact path
+        np.maximum(out, FIT_TOL_MIN_MM, out=out, where=out > 0)
         out[np.isfinite(t) & (t == 0)] = 0.0
         if self.quantum_mm > 0:
             out[out > 0] += 0.5 * self.quantum_mm
         return out
+
+
+def _is_number(v: object) -> bool:
+    import numbers
+
+    return isinstance(v, numbers.Real) and not isinstance(v, bool)
+
+
+def _below_min(tol: float) -> str:
+    return (
+        f"fit tolerance {tol!r} mm is below {FIT_TOL_MIN_MM:g} mm, the finest the fit works to "
+        "(0 asks for the exact path)"
+    )

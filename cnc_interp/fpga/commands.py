@@ -34,12 +34,14 @@ def _say(quiet: bool, msg: str) -> None:
 
 
 # -- emulate ---------------------------------------------------------------------------------
-def emulate_frames(frames, source: str = "<frames>"):
-    """Feed decoded frames to a device core in order; returns the core (raises UsageError on a reject)."""
+def emulate_frames(frames, source: str = "<frames>", sink=None):
+    """Feed decoded frames to a device core in order; returns the core (raises UsageError on
+    a reject). ``sink(q, line)``, if given, takes the samples as they are computed (see
+    ``model.DatapathState``) instead of the core keeping them."""
     from .device import DONE, DeviceCore
     from .frames import CONTROL_TYPES, ErrorFlag
 
-    core = DeviceCore(buffer_bytes=1 << 62)
+    core = DeviceCore(buffer_bytes=1 << 62, sink=sink)
     for i, f in enumerate(frames):
         if f.type in CONTROL_TYPES:  # a host request, never part of a program's stream
             raise UsageError(
@@ -76,14 +78,68 @@ def trajectory_from_device(core, planner: str = "fpga-emulate"):
 
 def emulate_file(frames_path: str, out: str) -> None:
     """Replay a frame file through the bit-exact model and write its setpoints as plan CSV."""
-    from ..export.csv_io import write_csv
-    from ..outfile import check_writable
+    from ..outfile import atomic_write, check_writable
     from .frames import read_frame_file
 
     check_writable(out, inputs=(frames_path,))
     frames = read_frame_file(frames_path)
-    core = emulate_frames(frames, frames_path)
-    write_csv(trajectory_from_device(core), out)
+    with atomic_write(out) as fh:  # nothing is left behind when a frame is refused
+        sink = _CsvSink(fh, frames)
+        emulate_frames(frames, frames_path, sink=sink)
+        sink.finish()
+
+
+class _CsvSink:
+    """The emulated samples written as plan CSV as they are computed (``emulate``): the
+    same bytes as ``write_csv(trajectory_from_device(core))``, in memory a block at a time
+    (a frame file of 500 bytes may ask for 2^24 samples). s is the chord length, carried
+    over blocks in the order ``np.cumsum`` adds; feed the chord over dt."""
+
+    def __init__(self, fh, frames):
+        from .frames import FrameError, FrameType, decode_config
+
+        self.fh = fh
+        self.writer = None
+        cfg = None
+        if frames and frames[0].type == FrameType.CONFIG:
+            try:
+                cfg = decode_config(frames[0].payload)
+            except FrameError:  # the device model refuses the frame and says why
+                pass
+        self.axes = cfg.axes if cfg is not None else ""
+        self.formats = cfg.formats if cfg is not None else None
+        self.dt = float(cfg.dt_s) if cfg is not None else 0.0
+        self.k = 0
+        self.s = 0.0
+        self.last = None  # the previous sample (mm), for the first chord of a block
+
+    def finish(self) -> None:
+        """The header alone when the program had no samples."""
+        if self.writer is None:
+            from ..export.csv_io import CsvPlanWriter
+
+            self.writer = CsvPlanWriter(self.fh, self.axes)
+
+    def __call__(self, q_int: np.ndarray, line: int) -> None:
+        from ..gcode.program import move_lengths
+        from .model import to_mm
+
+        self.finish()
+        m = q_int.shape[0]
+        if m == 0:
+            return
+        q = to_mm(q_int, self.formats)
+        if self.last is None:
+            step = np.concatenate(([0.0], move_lengths(q, self.axes)))
+        else:
+            step = move_lengths(np.vstack((self.last[None, :], q)), self.axes)
+        s = np.cumsum(np.concatenate(([self.s], step)))[1:]
+        feed = step / self.dt
+        t = np.arange(self.k, self.k + m) * self.dt
+        self.writer.write(t, s, feed, q)
+        self.k += m
+        self.s = float(s[-1])
+        self.last = q[-1].copy()
 
 
 # -- stream ----------------------------------------------------------------------------------
@@ -159,7 +215,11 @@ def run_stream(opts: StreamOptions, backend=None) -> None:
     if opts.dry_run and opts.resume_from is not None:
         raise UsageError("--resume-from applies to a device, not to --dry-run")
     if opts.dry_run:
-        check_writable(opts.dry_run, inputs=(opts.part, opts.machine_spec))
+        from ..machine.load import DEFAULT_PRESET, load_machine
+
+        # the machine's tool table (an INI's [EMCIO] TOOL_TABLE) is an input too
+        table = load_machine(opts.machine_spec if opts.machine_spec is not None else DEFAULT_PRESET).tool_table
+        check_writable(opts.dry_run, inputs=(opts.part, opts.machine_spec, table))
     prog, frames, infos = build_stream(opts)
     _say(opts.quiet, summary_line(prog, frames))
     for why in prog.stats.get("fallback_paths", []):

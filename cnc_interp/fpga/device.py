@@ -21,6 +21,8 @@ from __future__ import annotations
 
 from collections import deque
 
+import numpy as np
+
 from .fixed import FixedPointOverflow
 from .frames import (
     ErrorFlag,
@@ -64,8 +66,10 @@ class DeviceCore:
         drain_per_poll: int | None = None,
         clocked: bool = False,
         samples_per_poll: int = 0,
+        sink=None,
     ):
         self.buffer_bytes = buffer_bytes
+        self.sink = sink  # the datapath's sink (``DatapathState``): samples handed on as computed
         self.drain_per_poll = drain_per_poll
         self.clocked = clocked
         self.samples_per_poll = samples_per_poll  # sample periods that pass per status poll
@@ -240,7 +244,9 @@ class DeviceCore:
             if f.seq != 1:
                 raise FrameError("CONFIG must be the first frame")
             cfg = decode_config(f.payload)
-            self.datapath = DatapathState(cfg.axes, cfg.formats, cfg.start, cfg.source)
+            if not _fits(np.array(cfg.start, dtype=np.int64), cfg.formats.pos):
+                raise FrameError("CONFIG start position outside the position format")
+            self.datapath = DatapathState(cfg.axes, cfg.formats, cfg.start, cfg.source, sink=self.sink)
             self._start = tuple(int(v) for v in cfg.start)
             self._last_out = self._start if self.clocked else None
             self.n_samples = cfg.n_samples
@@ -291,6 +297,8 @@ class DeviceCore:
                 raise FrameError("SETPOINTS run past the program's sample count")
             if blk.q.shape[1] != len(self.datapath.axes):
                 raise FrameError("SETPOINTS axis count differs from CONFIG")
+            if not _fits(blk.q, self.datapath.formats.pos):
+                raise FrameError("SETPOINTS position outside the position format")
             self.datapath.apply(blk)
         elif t == FrameType.STOP:
             total, _n_items = STOP.unpack(f.payload)
@@ -301,3 +309,11 @@ class DeviceCore:
                 self.state = DONE
         else:
             raise FrameError(f"unexpected frame type {t.name}")
+
+
+def _fits(q: np.ndarray, fmt) -> bool:
+    """Every int64 of ``q`` within the signed fixed-point format ``fmt`` (its ``word`` bits):
+    a frame may carry any 64-bit value, the device's position registers hold ``word``."""
+    if fmt.word >= 64 or q.size == 0:
+        return True
+    return bool(q.min() >= fmt.min_int and q.max() <= fmt.max_int)

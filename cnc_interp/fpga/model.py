@@ -151,13 +151,21 @@ def horner_rows(
     return ((a + half) >> shp) << shn
 
 
-def profile_xi(pieces, fmts: FpgaFormats, where: Where | None = None) -> np.ndarray:
-    """ξ (ints, param format) at every sample of a segment's profile pieces."""
+#: samples of a segment the model evaluates at once: its arithmetic is on arrays of
+#: Python ints (~200 bytes a sample), so a frame's piece of 2^24 samples took 3.8 GB whole;
+#: any size gives the same numbers
+FPGA_MODEL_CHUNK_SAMPLES = 1 << 16
+
+
+def profile_xi(pieces, fmts: FpgaFormats, where: Where | None = None, lo: int = 0, hi: int | None = None) -> np.ndarray:
+    """ξ (ints, param format) at samples ``lo`` to ``hi`` (default: every sample) of a
+    segment's profile pieces."""
     counts = np.array([p.n_samples for p in pieces], dtype=np.int64)
-    total = int(counts.sum())
     starts = np.cumsum(counts) - counts
-    j = np.arange(total, dtype=np.int64) - np.repeat(starts, counts)
-    rep = np.repeat(np.arange(len(pieces)), counts)
+    hi = int(counts.sum()) if hi is None else hi
+    k = np.arange(lo, hi, dtype=np.int64)
+    rep = np.searchsorted(starts + counts, k, side="right")  # the piece of each sample
+    j = k - starts[rep]
     dtau = obj(np.array([p.dtau for p in pieces], dtype=object))[rep]
     tau = obj(j) * dtau
     mant = np.array([p.mant for p in pieces], dtype=object)[rep]
@@ -183,37 +191,65 @@ def x_star(xi, seg: FixedSegment, fmts: FpgaFormats):
     return round_shift(xi * seg.x_mant, fmts.param.frac + seg.x_exp - fmts.pos.frac)
 
 
-def run_segment(seg: FixedSegment, fmts: FpgaFormats, file: str = "<input>") -> SegmentRun:
-    """Evaluate one segment exactly as the hardware does (see module docstring)."""
+def segment_chunks(seg: FixedSegment, fmts: FpgaFormats, file: str = "<input>", chunk: int | None = None):
+    """One segment through the datapath (see module docstring), ``chunk`` samples at a
+    time (default ``FPGA_MODEL_CHUNK_SAMPLES``): (xi, x, z, q) of each chunk in order, q
+    (m, 2) object ints (pos format). The
+    increments and integrators carry over from one chunk to the next, so the numbers do
+    not depend on ``chunk``."""
     where = Where(seg.index, seg.line, file)
     fp, ft, fx = fmts.pos.frac, fmts.trig.frac, fmts.param.frac
-    xi = profile_xi(seg.pieces, fmts, where)
-    x = x_star(xi, seg, fmts)
-    pm = np.array([seg.p_mant], dtype=object).repeat(xi.shape[0], axis=0)
-    pe = np.full(xi.shape[0], seg.p_exp, dtype=np.int64)
-    z = horner_rows(pm, pe, xi, fx, fp, fmts.horner, "path polynomial accumulator", where)
-    zero = np.zeros(1, dtype=object)
-    dx = np.diff(np.concatenate((zero, x)))
-    dz = np.diff(np.concatenate((zero, z)))
-    fmts.operand.check(dx, "abscissa increment Δx*", where)
-    fmts.operand.check(dz, "ordinate increment Δz*", where)
     c, s = seg.cos, seg.sin
-    ih = np.cumsum(c * dx - s * dz)
-    iv = np.cumsum(s * dx + c * dz)
-    fmts.integ.check(ih, "horizontal integrator", where)
-    fmts.integ.check(iv, "vertical integrator", where)
-    out = np.empty((xi.shape[0], 2), dtype=object)
-    out[:, 0] = seg.origin[0] + round_shift(ih, ft)
-    out[:, 1] = seg.origin[1] + round_shift(iv, ft)
-    fmts.pos.check(out, "position", where)
-    # diagnostic: the integrators carried on to ξ = 1 (the segment's exact end)
-    one = 1 << fx
+    last_x = last_z = 0  # Δx*, Δz* start at 0 on the segment
+    ih0 = iv0 = 0
+    total = seg.n_samples
+    step = max(1, int(chunk or FPGA_MODEL_CHUNK_SAMPLES))
+    for lo in range(0, total, step):
+        hi = min(total, lo + step)
+        xi = profile_xi(seg.pieces, fmts, where, lo, hi)
+        x = x_star(xi, seg, fmts)
+        pm = np.array([seg.p_mant], dtype=object).repeat(xi.shape[0], axis=0)
+        pe = np.full(xi.shape[0], seg.p_exp, dtype=np.int64)
+        z = horner_rows(pm, pe, xi, fx, fp, fmts.horner, "path polynomial accumulator", where)
+        dx = np.diff(np.concatenate((np.array([last_x], dtype=object), x)))
+        dz = np.diff(np.concatenate((np.array([last_z], dtype=object), z)))
+        last_x, last_z = x[-1], z[-1]
+        fmts.operand.check(dx, "abscissa increment Δx*", where)
+        fmts.operand.check(dz, "ordinate increment Δz*", where)
+        ih = ih0 + np.cumsum(c * dx - s * dz)
+        iv = iv0 + np.cumsum(s * dx + c * dz)
+        ih0, iv0 = ih[-1], iv[-1]
+        fmts.integ.check(ih, "horizontal integrator", where)
+        fmts.integ.check(iv, "vertical integrator", where)
+        out = np.empty((xi.shape[0], 2), dtype=object)
+        out[:, 0] = seg.origin[0] + round_shift(ih, ft)
+        out[:, 1] = seg.origin[1] + round_shift(iv, ft)
+        fmts.pos.check(out, "position", where)
+        yield xi, x, z, out
+
+
+def segment_end(seg: FixedSegment, fmts: FpgaFormats) -> tuple[int, int]:
+    """Diagnostic: where the integrators would be carried on to ξ = 1 (the segment's
+    exact end), pos format."""
     from .fixed import horner
 
+    fp, ft, fx = fmts.pos.frac, fmts.trig.frac, fmts.param.frac
+    c, s = seg.cos, seg.sin
+    one = 1 << fx
     z1 = horner(list(seg.p_mant), seg.p_exp, one, fx, fp, fmts.horner)
     x1 = x_star(one, seg, fmts)
-    end = (seg.origin[0] + round_shift(c * x1 - s * z1, ft), seg.origin[1] + round_shift(s * x1 + c * z1, ft))
-    return SegmentRun(out, end, xi, x, z)
+    return (seg.origin[0] + round_shift(c * x1 - s * z1, ft), seg.origin[1] + round_shift(s * x1 + c * z1, ft))
+
+
+def run_segment(seg: FixedSegment, fmts: FpgaFormats, file: str = "<input>") -> SegmentRun:
+    """Evaluate one segment exactly as the hardware does (see module docstring)."""
+    parts = list(segment_chunks(seg, fmts, file))
+    if parts:
+        xi, x, z, out = (np.concatenate(a) for a in zip(*parts))
+    else:
+        xi = x = z = np.zeros(0, dtype=object)
+        out = np.empty((0, 2), dtype=object)
+    return SegmentRun(out, segment_end(seg, fmts), xi, x, z)
 
 
 @dataclass
@@ -232,8 +268,11 @@ class DatapathState:
     Items are applied in order with ``apply``; samples accumulate in ``q_blocks``.
     """
 
-    def __init__(self, axes: str, formats: FpgaFormats, start, file: str = "<input>"):
+    def __init__(self, axes: str, formats: FpgaFormats, start, file: str = "<input>", sink=None):
         self.axes = axes
+        #: ``sink(q, line)``, if given, takes the samples as they are computed (q (m,
+        #: n_axes) int64, the source line) instead of ``q_blocks``: ``emulate`` writes them
+        self.sink = sink
         self.formats = formats
         self.file = file
         self.pos = [int(v) for v in start]
@@ -250,23 +289,39 @@ class DatapathState:
             raise ValueError(f"item starts at sample {item.start_sample}, expected {self.next_sample}")
         n = item.n_samples
         if isinstance(item, SetpointBlock):
-            q = np.asarray(item.q, dtype=np.int64).reshape(n, len(self.axes))
             self._last_end = None
+            self._emit(np.asarray(item.q, dtype=np.int64).reshape(n, len(self.axes)), item.line)
         else:
-            run = run_segment(item, self.formats, self.file)
+            end = segment_end(item, self.formats)
             if self._last_end is not None and self._last_plane == item.plane:
                 self.segment_end_gap.append((item.origin[0] - self._last_end[0], item.origin[1] - self._last_end[1]))
-            self._last_end, self._last_plane = run.end, item.plane
-            q = np.empty((n, len(self.axes)), dtype=np.int64)
-            q[:] = np.array(self.pos, dtype=np.int64)
+            self._last_end, self._last_plane = end, item.plane
             h, v = item.plane
-            q[:, h] = run.q[:, 0].astype(np.int64)
-            q[:, v] = run.q[:, 1].astype(np.int64)
-        if n:
-            self.pos = [int(v) for v in q[-1]]
-        self.q_blocks.append(q)
-        self.line_blocks.append(np.full(n, item.line, dtype=np.int64))
+            held = np.array(self.pos, dtype=np.int64)  # the axes off the plane stay put
+            blocks = []
+            for _xi, _x, _z, part in segment_chunks(item, self.formats, self.file):
+                q = np.empty((part.shape[0], len(self.axes)), dtype=np.int64)
+                q[:] = held
+                q[:, h] = part[:, 0].astype(np.int64)
+                q[:, v] = part[:, 1].astype(np.int64)
+                blocks.append(q)
+                if self.sink is not None:  # handed on as computed: bounded memory
+                    self._emit(blocks.pop(), item.line)
+            if blocks:
+                self._emit(np.concatenate(blocks) if len(blocks) > 1 else blocks[0], item.line)
+            elif self.sink is None:
+                self._emit(np.empty((0, len(self.axes)), dtype=np.int64), item.line)
         self.next_sample += n
+
+    def _emit(self, q: np.ndarray, line: int) -> None:
+        """Samples q (m, n_axes) computed: kept in ``q_blocks``, or handed to ``sink``."""
+        if q.shape[0]:
+            self.pos = [int(v) for v in q[-1]]
+        if self.sink is not None:
+            self.sink(q, line)
+            return
+        self.q_blocks.append(q)
+        self.line_blocks.append(np.full(q.shape[0], line, dtype=np.int64))
 
     def output(self) -> ModelOutput:
         n_axes = len(self.axes)

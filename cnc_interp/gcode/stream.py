@@ -86,13 +86,18 @@ class _Channel:
 
 class ProgramStream:
     """Iterate over it for the items; after the end, ``program`` holds a ``Program`` with
-    the counts and metadata (its ``items`` empty: they were handed out)."""
+    the counts and metadata (its items empty: they were handed out).
+
+    ``axes=None`` reads the program for its own axes as ``read_program(axes=None)`` does,
+    which are known only at its end: the items then come on all nine axes (XYZABCUVW, an
+    axis the program never names held at its start) and ``program.axes`` says which the
+    program uses (``cnc-interp parse`` summarises a program so, in bounded memory)."""
 
     def __init__(
         self,
         data: bytes | str,
         source: str,
-        axes: str,
+        axes: str | None,
         start=None,
         tool_table=None,
         nodes_ahead: int = STREAM_NODES_AHEAD,
@@ -100,16 +105,20 @@ class ProgramStream:
         from . import _LiveParams, _count_lines
         from .interp import Interpreter
 
-        axes = axes.upper()
-        bad = [a for a in axes if a not in ALL_AXES]
-        if not axes or bad or len(set(axes)) != len(axes):
-            raise UsageError(f"bad axis list {axes!r} (letters from {ALL_AXES}, each once)")
+        names = ALL_AXES
+        if axes is not None:
+            names = axes = axes.upper()
+            bad = [a for a in axes if a not in ALL_AXES]
+            if not axes or bad or len(set(axes)) != len(axes):
+                raise UsageError(f"bad axis list {axes!r} (letters from {ALL_AXES}, each once)")
         start9 = [0.0] * 9
         if start is not None:
             st = np.asarray(start, dtype=float).ravel()
-            if st.size != len(axes) or not np.all(np.isfinite(st)):
-                raise UsageError(f"start position needs {len(axes)} finite values for axes {axes}")
-            for a, v in zip(axes, st):
+            if axes is None and st.size == 3:
+                names = "XYZ"
+            if st.size != len(names) or not np.all(np.isfinite(st)):
+                raise UsageError(f"start position needs {len(names)} finite values for axes {names}")
+            for a, v in zip(names, st):
                 start9[ALL_AXES.index(a)] = float(v)
         self.data = data
         self.source = source
@@ -123,14 +132,15 @@ class ProgramStream:
             interp.tool_table = ToolTable(tool_table)
             interp.tool_table.source = getattr(tool_table, "source", "")
         params.interp = interp
+        interp.on_items = self._hand_on
         self.params = params
         self.line_count = _count_lines(data)
         self.channel = _Channel(nodes_ahead)
         self.program: Program | None = None
         self.thread_cpu_s = 0.0
         self.wait_s = 0.0  # time the consumer waited for the parse
-        self._order = interp.out_order
-        self._axes = axes
+        self._order = interp.out_order if axes is not None else tuple(range(len(ALL_AXES)))
+        self._axes = axes if axes is not None else ALL_AXES
         self._sel = list(self._order)
 
     # -- the parse thread --------------------------------------------------------------
@@ -157,6 +167,12 @@ class ProgramStream:
             if not self.channel.put(item, weight):
                 return False
         return True
+
+    def _hand_on(self) -> None:
+        """``Interpreter.on_items``: many items closed inside one block (a canned cycle's
+        L repeats) go to the consumer now."""
+        if not self._drain():
+            raise _Stopped()
 
     def _blocks(self):
         from .blocks import iter_blocks

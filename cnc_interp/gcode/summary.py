@@ -19,64 +19,97 @@ def program_summary(program: Program) -> dict:
     dwells. Rapids are excluded (their speed is the machine's, not the program's), so
     it is a lower bound of the cycle time; ``cnc-interp plan`` gives the real one.
     """
-    axes = program.axes
-    n_axes = len(axes)
-    lo = np.array(program.start, dtype=float)
-    hi = lo.copy()
-    feed_len = rapid_len = feed_time = dwell_time = 0.0
-    n_nodes = n_rapid_moves = n_feed_runs = n_rapid_runs = n_arcs = n_nurbs = n_dwell = 0
-    stops: dict[str, int] = {}
-    end_reasons: dict[str, int] = {}
+    acc = SummaryAccumulator(program.start)
     for it in program.items:
+        acc.add(it)
+    return acc.result(program)
+
+
+def stream_summary(stream) -> dict:
+    """``program_summary`` of a ``ProgramStream``'s program, item by item as it is read
+    (the items are dropped once counted: a 50-byte ``G81 ... L1000000`` is a million holes).
+    A stream read without axes gives items on all nine axes; the bounds are reported for
+    the axes the program uses, as ``read_program`` would have given them."""
+    from ..constants import ALL_AXES
+
+    start9 = np.array(stream.interp.start9, dtype=float)
+    acc = SummaryAccumulator(start9[list(stream._order)])
+    for it in stream:
+        acc.add(it)
+    program = stream.program
+    if stream._axes != program.axes:  # read without axes: keep the program's own
+        sel = [ALL_AXES.index(a) for a in program.axes]
+        acc.lo, acc.hi = acc.lo[sel], acc.hi[sel]
+    return acc.result(program)
+
+
+class SummaryAccumulator:
+    """The running sums of ``program_summary``, one item at a time (``add``)."""
+
+    def __init__(self, start: np.ndarray):
+        self.lo = np.array(start, dtype=float)
+        self.hi = self.lo.copy()
+        self.feed_len = self.rapid_len = self.feed_time = self.dwell_time = 0.0
+        self.n_nodes = self.n_rapid_moves = self.n_feed_runs = self.n_rapid_runs = 0
+        self.n_arcs = self.n_nurbs = self.n_dwell = 0
+        self.stops: dict[str, int] = {}
+        self.end_reasons: dict[str, int] = {}
+
+    def add(self, it) -> None:
         if isinstance(it, Run):
-            lo = np.minimum(lo, it.nodes.min(axis=0))
-            hi = np.maximum(hi, it.nodes.max(axis=0))
+            self.lo = np.minimum(self.lo, it.nodes.min(axis=0))
+            self.hi = np.maximum(self.hi, it.nodes.max(axis=0))
             seg = _segment_lengths(it)
-            end_reasons[it.end_reason] = end_reasons.get(it.end_reason, 0) + 1
+            self.end_reasons[it.end_reason] = self.end_reasons.get(it.end_reason, 0) + 1
             if it.kind == "feed":
-                n_nodes += it.n_nodes  # one definition with fit and batch: feed-run nodes
-                n_feed_runs += 1
-                feed_len += float(seg.sum())
-                feed_time += float((seg / it.feed_mm_s[1:]).sum())
+                self.n_nodes += it.n_nodes  # one definition with fit and batch: feed-run nodes
+                self.n_feed_runs += 1
+                self.feed_len += float(seg.sum())
+                self.feed_time += float((seg / it.feed_mm_s[1:]).sum())
             else:
-                n_rapid_runs += 1
-                n_rapid_moves += max(it.n_nodes - 1, 0)
-                rapid_len += float(seg.sum())
+                self.n_rapid_runs += 1
+                self.n_rapid_moves += max(it.n_nodes - 1, 0)
+                self.rapid_len += float(seg.sum())
             for cp in it.curves:
                 if isinstance(cp.curve, Arc):
-                    n_arcs += 1
+                    self.n_arcs += 1
                 else:
-                    n_nurbs += 1
+                    self.n_nurbs += 1
         elif isinstance(it, Dwell):
-            n_dwell += 1
-            dwell_time += it.seconds
+            self.n_dwell += 1
+            self.dwell_time += it.seconds
         elif isinstance(it, Stop):
-            stops[it.code] = stops.get(it.code, 0) + 1
-    bounds = {a: [float(lo[k]), float(hi[k])] for k, a in enumerate(axes)} if n_axes else {}
-    return {
-        "source": program.source,
-        "axes": axes,
-        "lines": int(program.line_count),
-        "blocks": int(program.block_count),
-        "runs": n_feed_runs + n_rapid_runs,
-        "feed_runs": n_feed_runs,
-        "rapid_runs": n_rapid_runs,
-        "run_end_reasons": end_reasons,
-        "nodes": int(n_nodes),
-        "rapid_moves": int(n_rapid_moves),
-        "arcs": n_arcs,
-        "splines": n_nurbs,
-        "dwells": n_dwell,
-        "stops": stops,
-        "zero_length_moves": int(program.metadata.get("zero_length_moves", 0)),
-        "bounds": bounds,
-        "feed_length_mm": feed_len,
-        "rapid_length_mm": rapid_len,
-        "feed_time_s": feed_time,
-        "dwell_time_s": dwell_time,
-        "time_estimate_s": feed_time + dwell_time,
-        "time_estimate_note": "programmed feed moves and dwells only; rapids excluded",
-    }
+            self.stops[it.code] = self.stops.get(it.code, 0) + 1
+
+    def result(self, program: Program) -> dict:
+        """The summary, with the counts of ``program`` (its items need not be there)."""
+        axes = program.axes
+        lo, hi = self.lo, self.hi
+        bounds = {a: [float(lo[k]), float(hi[k])] for k, a in enumerate(axes)} if axes else {}
+        return {
+            "source": program.source,
+            "axes": axes,
+            "lines": int(program.line_count),
+            "blocks": int(program.block_count),
+            "runs": self.n_feed_runs + self.n_rapid_runs,
+            "feed_runs": self.n_feed_runs,
+            "rapid_runs": self.n_rapid_runs,
+            "run_end_reasons": self.end_reasons,
+            "nodes": int(self.n_nodes),
+            "rapid_moves": int(self.n_rapid_moves),
+            "arcs": self.n_arcs,
+            "splines": self.n_nurbs,
+            "dwells": self.n_dwell,
+            "stops": self.stops,
+            "zero_length_moves": int(program.metadata.get("zero_length_moves", 0)),
+            "bounds": bounds,
+            "feed_length_mm": self.feed_len,
+            "rapid_length_mm": self.rapid_len,
+            "feed_time_s": self.feed_time,
+            "dwell_time_s": self.dwell_time,
+            "time_estimate_s": self.feed_time + self.dwell_time,
+            "time_estimate_note": "programmed feed moves and dwells only; rapids excluded",
+        }
 
 
 def _fmt_time(s: float) -> str:
