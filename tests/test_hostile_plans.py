@@ -259,3 +259,27 @@ def test_a_part_read_from_a_stream_is_capped(monkeypatch):
     assert err.value.location.line == 1
     text = b"G21\nG1 X1 F100\nM2\n"
     assert inputfile.read_bounded(io.BytesIO(text), "p.ngc") == text
+
+
+def test_verify_escapes_control_bytes_in_the_machine_name(tmp_path):
+    from cnc_interp.plan.trajectory import Trajectory
+    from cnc_interp.export.csv_io import write_csv
+
+    (tmp_path / "m.toml").write_text(
+        'name = "evil\\u001b[2Jname\\u0007"\n'
+        + "".join(f"[axes.{a}]\nvmax = 100.0\namax = 1000.0\njmax = 10000.0\n" for a in "XYZ")
+    )
+    traj = Trajectory(
+        axes="XYZ",
+        dt_s=0.001,
+        t=np.arange(3) * 0.001,
+        s=np.zeros(3),
+        feed=np.zeros(3),
+        q=np.zeros((3, 3)),
+        line=np.zeros(3, dtype=np.int64),
+        planner="csv",
+    )
+    write_csv(traj, str(tmp_path / "p.csv"))
+    res = run_inproc("verify", tmp_path / "p.csv", "-m", tmp_path / "m.toml")
+    out = res.out.decode()
+    assert res.code == 0 and "\x1b" not in out and "\x07" not in out and "evil\\x1b" in out

@@ -131,7 +131,9 @@ class VerifyReport:
 
     def format(self) -> str:
         """Human-readable table: one row per axis, worst ratio per limit."""
-        lines = [f"machine: {self.machine}"] if self.machine else []
+        from ..errors import printable
+
+        lines = [f"machine: {printable(self.machine)}"] if self.machine else []
         lines.append(f"{'axis':>4}  {'v/vmax':>12} {'a/amax':>12} {'j/jmax':>12}   worst at")
         for i, a in enumerate(self.axes):
             k = int(np.nanargmax(self.ratios[i])) if np.isfinite(self.ratios[i]).any() else 0
