@@ -85,7 +85,7 @@ class VerifyReport:
     @property
     def start_ok(self) -> bool:
         """The first sample is the start position (true when none was given)."""
-        return self.start_offset is None or bool(np.all(self.start_offset <= VERIFY_START_TOL))
+        return _start_within(self.start_offset)
 
     def worst(self) -> tuple[str, str, float, int]:
         """(axis, kind, ratio, sample index) of the worst ratio."""
@@ -164,6 +164,11 @@ class VerifyReport:
         return "\n".join(lines)
 
 
+def _start_within(offset: np.ndarray | None) -> bool:
+    """The first sample is the start position (true when no start was given)."""
+    return offset is None or bool(np.all(offset <= VERIFY_START_TOL))
+
+
 def _start_offset(q: np.ndarray, start: ArrayLike | None) -> np.ndarray | None:
     """(n,) |q_0 - start|, or ``None`` without a start position or samples."""
     if start is None or not q.shape[0]:
@@ -226,7 +231,7 @@ def verify_arrays(
         ratios = values / limits
     start_offset = _start_offset(q, start)
     ok = (not nan_found) and bool(np.all(ratios <= 1.0 + VERIFY_RATIO_SLACK))
-    ok = ok and (start_offset is None or bool(np.all(start_offset <= VERIFY_START_TOL)))
+    ok = ok and _start_within(start_offset)
     return VerifyReport(
         axes=axes,
         dt_s=float(dt_s),
@@ -369,7 +374,7 @@ class StreamVerifier:
         return ratios
 
     def ok_so_far(self) -> bool:
-        start_ok = self.start_offset is None or bool(np.all(self.start_offset <= VERIFY_START_TOL))
+        start_ok = _start_within(self.start_offset)
         return start_ok and bool((self.first_bad < 0).all()) and bool(np.all(self.ratios() <= 1.0 + VERIFY_RATIO_SLACK))
 
     def report(self) -> VerifyReport:
@@ -392,7 +397,7 @@ class StreamVerifier:
         with np.errstate(invalid="ignore", divide="ignore"):
             ratios = values / self.limits
         ok = (not nan_found) and bool(np.all(ratios <= 1.0 + VERIFY_RATIO_SLACK))
-        ok = ok and (self.start_offset is None or bool(np.all(self.start_offset <= VERIFY_START_TOL)))
+        ok = ok and _start_within(self.start_offset)
         return VerifyReport(
             axes=self.axes,
             dt_s=self.dt_s,
