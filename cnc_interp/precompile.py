@@ -453,7 +453,7 @@ def _warm_vpop_loop() -> None:
     ``vpop-prep`` group."""
     from .machine.kinematics import Kinematics
     from .plan.vpop import planner
-    from .plan.vpop.table import JointTable
+    from .plan.joint_table import JointTable
 
     class _MappedIdentity(Kinematics):
         """The identity, presented as a joint map: VPOp prepares it in Python."""

@@ -121,3 +121,52 @@ def test_the_machine_floor_is_below_every_stage(tmp_path):
     assert set(found) == {"gcode.program", "errors"}
     for stage in ("gcode", "fit", "plan", "export", "fpga", "top"):
         assert FLOORS[stage] > FLOORS["machine"]
+
+
+#: the sampled planners: none imports another's package for what they share (the step
+#: limits, ``plan.step_limits``; the joint table, ``plan.joint_table``), only to call it
+PLANNERS = ("plan.vpop", "plan.optimal", "plan.safe")
+
+
+def _component(mod: str) -> str:
+    """The planning stage's unit ``mod`` belongs to: ``plan.X`` (a module or a package)."""
+    parts = mod.split(".")
+    return ".".join(parts[:2]) if parts[0] == "plan" and len(parts) > 1 else mod
+
+
+def _plan_graph() -> dict:
+    """{unit: units it imports} over the planning stage's modules and packages."""
+    graph: dict = {}
+    for name, is_pkg, path in _modules():
+        src = _component(name)
+        if not src.startswith("plan."):
+            continue
+        for target, _ in _imports(name, is_pkg, path):
+            dst = _component(target)
+            if dst.startswith("plan.") and dst != src:
+                graph.setdefault(src, set()).add(dst)
+    return graph
+
+
+def _reaches(graph: dict, a: str, b: str) -> bool:
+    seen, todo = set(), [a]
+    while todo:
+        for nxt in graph.get(todo.pop(), ()):
+            if nxt == b:
+                return True
+            if nxt not in seen:
+                seen.add(nxt)
+                todo.append(nxt)
+    return False
+
+
+def test_no_planner_imports_another_that_imports_it_back():
+    # VPOp falls back on the safe planner and the optimal planner on both: the edges go
+    # one way only (optimal -> vpop, optimal -> safe, vpop -> safe), so no planner needs
+    # another's package imported first
+    graph = _plan_graph()
+    assert _reaches(graph, "plan.optimal", "plan.vpop") and _reaches(graph, "plan.vpop", "plan.safe")
+    cycles = [(a, b) for a in PLANNERS for b in PLANNERS if a < b and _reaches(graph, a, b) and _reaches(graph, b, a)]
+    assert not cycles, cycles
+    for shared in ("plan.step_limits", "plan.joint_table"):
+        assert not any(_reaches(graph, shared, p) for p in PLANNERS), shared

@@ -1,6 +1,7 @@
 """The near-time-optimal planner: limits hold exactly, ends are exact, it is faster than
 VPOp where VPOp is weak, its chunks are the one-shot plan, and nothing makes it fail."""
 
+import dataclasses
 import os
 
 import numpy as np
@@ -14,6 +15,7 @@ from cnc_interp.plan.optimal import batched_optimal, iter_path_plan_optimal, pla
 from cnc_interp.plan.optimality import line_min_samples
 from cnc_interp.plan.safe import plan_path_safe
 from cnc_interp.plan.settings import OptimalOptions, PlanSettings
+from cnc_interp.plan.tuning import OptimalTuning
 from cnc_interp.plan.verify import verify_arrays
 from cnc_interp.plan.vpop import plan_path_vpop
 
@@ -43,6 +45,19 @@ def check(plan, machine, q_start, q_end, dt):
 
 def periods(plan):
     return plan.s.shape[0] - 1
+
+
+#: the optimal planner's default tunables
+TUNING = OptimalTuning()
+
+
+def tuned(settings: PlanSettings | None = None, **changes) -> PlanSettings:
+    """``settings`` (default: the defaults) with the optimal planner's tunables ``changes``."""
+    settings = settings or PlanSettings(planner="optimal")
+    opt = settings.optimal
+    return dataclasses.replace(
+        settings, optimal=dataclasses.replace(opt, tuning=dataclasses.replace(opt.tuning, **changes))
+    )
 
 
 # -- closed form: a straight line against its exact discrete minimum ------------------
@@ -287,7 +302,7 @@ def test_a_profile_that_would_crawl_after_a_sharp_corner_plans(tmp_path, monkeyp
     assert cycles["optimal"] <= cycles["vpop"]
     # without the envelope (no acceleration to reach with: ``reach_envelope`` returns w)
     # the crawl check refuses the profile (VPOp plans the path)
-    from cnc_interp.plan.feedprofile import FeedProfileBuilder
+    from cnc_interp.plan.optimal.profile import FeedProfileBuilder
 
     inputs = FeedProfileBuilder._knot_inputs
     monkeypatch.setattr(FeedProfileBuilder, "_knot_inputs", lambda self: inputs(self)._replace(acc_factor=0.0))
@@ -335,27 +350,29 @@ def test_random_sweep_slow(seed):
             check(plan, machine, p.start, p.end, dt)
 
 
-def test_the_shorter_of_two_knot_spacings_is_kept(monkeypatch):
-    # a path planned whole is planned with the profile's knots FEED_KNOT_TIME_S and half
-    # that apart, and the shorter plan kept: never longer than either alone, every limit held
-    import cnc_interp.plan.feedprofile as fp
-    import cnc_interp.plan.optimal as optimal
-
+def test_the_shorter_of_two_knot_spacings_is_kept():
+    # a path planned whole is planned with the profile's knots ``knot_time_s`` and
+    # ``alt_knot_share`` of that apart, and the shorter plan kept: never longer than either
+    # alone, every limit held
     p = hermite_path(_trident_like, 24, 60.0)
     dt = 0.001
     hedged = plan_path_optimal(p, None, UCP, dt)
     check(hedged, UCP, p.start, p.end, dt)
-    monkeypatch.setattr(optimal, "OPT_ALT_KNOT_SHARE", 1.0)  # the second plan is the first
-    plain = plan_path_optimal(p, None, UCP, dt)
-    monkeypatch.setattr(fp, "FEED_KNOT_TIME_S", fp.FEED_KNOT_TIME_S * 0.5)
-    halved = plan_path_optimal(p, None, UCP, dt)
+    plain = plan_path_optimal(p, None, UCP, dt, tuned(alt_knot_share=1.0))  # the second plan is the first
+    alt_s = TUNING.knot_time_s * TUNING.alt_knot_share
+    halved = plan_path_optimal(p, None, UCP, dt, tuned(alt_knot_share=1.0, knot_time_s=alt_s))
     assert periods(plain) != periods(halved)  # the case tells the two spacings apart
     assert periods(hedged) == min(periods(plain), periods(halved)), (periods(plain), periods(halved))
 
 
+#: the fit tolerance (mm) the corpus scenarios below were found at: a coarser one fits
+#: other paths, which no longer make the planner take the branch a test is about
+SCENARIO_TOL_MM = 0.001
+
+
 def _corpus_paths(rel: str):
     """generic-mill and the fitted paths (feed moves and rapids) of the corpus program at
-    ``rel``."""
+    ``rel``, fitted to ``SCENARIO_TOL_MM``."""
     from cnc_interp.fit import FitSettings, fit_program
     from cnc_interp.gcode import read_program
     from cnc_interp.machine.load import load_machine
@@ -363,44 +380,39 @@ def _corpus_paths(rel: str):
     src = os.path.join(CORPUS, rel)
     m = load_machine("generic-mill")
     prog = read_program(open(src, "rb").read(), src, axes=m.axes, start=m.start)
-    fitted = fit_program(prog, FitSettings.from_options(machine=m))
+    fitted = fit_program(prog, FitSettings.from_options(tol_mm=SCENARIO_TOL_MM, machine=m))
     return m, [p for p in fitted.items if hasattr(p, "coef")]
 
 
-def _spiral_window_by_window(monkeypatch):
+def _spiral_window_by_window(**tuning):
     """generic-mill, corpus spiral_tangent_test.ngc's 21 mm spiral, and settings that plan
-    it window by window, unrefined (compare_s = 0): some windows are solved again. The
-    windows commit 0.5 s each (FEED_COMMIT_S when these cases were found; at 1.0 the
+    it window by window, unrefined (compare_s = 0), with the tunables ``tuning``: some
+    windows are solved again. The windows commit 0.5 s each (``commit_s``; at 1.0 the
     spiral is five windows, too few for the counts the tests make)."""
-    import dataclasses
-
-    from cnc_interp.plan import feedprofile
-
-    monkeypatch.setattr(feedprofile, "FEED_COMMIT_S", 0.5)
-
     m, paths = _corpus_paths(os.path.join("quick-tests", "spiral_tangent_test.ngc"))
     path = max((p for p in paths if not p.rapid), key=lambda p: p.length)
     settings = dataclasses.replace(
-        PlanSettings.from_options(planner="optimal", machine=m), optimal=OptimalOptions(compare_s=0.0, refine_passes=0)
+        PlanSettings.from_options(planner="optimal", machine=m),
+        optimal=OptimalOptions(
+            compare_s=0.0, refine_passes=0, tuning=dataclasses.replace(TUNING, commit_s=0.5, **tuning)
+        ),
     )
     return m, path, settings
 
 
-def _linearised_at_the_estimate(monkeypatch, near_previous: bool = False):
+def _linearised_at_the_estimate(monkeypatch, near_previous: bool = False) -> dict:
     """Past where the previous window brakes, a window's first LP linearised at the speed
     estimate itself (not lowered to the previous window's level), and unless
     ``near_previous`` not held near the previous solution either (``_feasible_hat``): the
-    rows some windows of ``_spiral_window_by_window`` have no solution under. Without the
-    points where q_sss peaks (``FEED_PEAK_SHARE``), as when these cases were found: with
-    them the first window solved again there crawls (the restart is then not what is
-    measured); planned as it is, the spiral needs no restart either way and the points
-    gain 3 periods of 3,824."""
-    from cnc_interp.plan import feedprofile
+    rows some windows of ``_spiral_window_by_window`` have no solution under. Returns the
+    tunables that go with it: no points where q_sss peaks (``peak_share``), with which the
+    first window solved again there crawls (the restart is then not what is measured)."""
+    from cnc_interp.plan.optimal import profile
 
-    monkeypatch.setattr(feedprofile, "FEED_PEAK_SHARE", np.inf)
-    monkeypatch.setattr(feedprofile.FeedProfileBuilder, "_ratio", lambda *args: 1.0)
+    monkeypatch.setattr(profile.FeedProfileBuilder, "_ratio", lambda *args: 1.0)
     if not near_previous:
-        monkeypatch.setattr(feedprofile.FeedProfileBuilder, "_feasible_hat", lambda self, *a: a[-2])
+        monkeypatch.setattr(profile.FeedProfileBuilder, "_feasible_hat", lambda self, *a: a[-2])
+    return {"peak_share": np.inf}
 
 
 def _recorded(monkeypatch, cls, name: str) -> list:
@@ -425,24 +437,23 @@ def test_a_window_that_cannot_brake_under_the_estimate_is_solved_again(monkeypat
     # it used to end the profile, and VPOp planned the rest. (Lowered to the previous
     # window's level, or held near the previous solution, no window there needs it: the
     # next tests)
-    from cnc_interp.plan import feedprofile
+    from cnc_interp.plan.optimal import profile
 
-    _linearised_at_the_estimate(monkeypatch)
-    m, path, settings = _spiral_window_by_window(monkeypatch)
+    m, path, settings = _spiral_window_by_window(**_linearised_at_the_estimate(monkeypatch))
     plan = plan_path_optimal(path, None, m, m.dt_s, settings)
     check(plan, m, plan.q[0], plan.q[-1], m.dt_s)
     assert plan.stats["route"] == "profile" and plan.stats.get("lp_restarts", 0) >= 1
     # the profile reaches the last stop (VPOp finishes it at most)
     assert not 0 <= plan.stats["handover"] < periods(plan) - 300 and "crawl" not in plan.stats
     # without the second solve the profile ends at the first such window
-    solve_from = feedprofile.FeedProfileBuilder._solve_from
+    solve_from = profile.FeedProfileBuilder._solve_from
 
     def no_restart(self, b0, b1, at_end, fixed, prev, s_prev, ccp_max, *first_max_iter):
         if s_prev is not None and prev is not None and s_prev == prev.s_end:
-            raise feedprofile.ProfileError("no restart")
+            raise profile.ProfileError("no restart")
         return solve_from(self, b0, b1, at_end, fixed, prev, s_prev, ccp_max, *first_max_iter)
 
-    monkeypatch.setattr(feedprofile.FeedProfileBuilder, "_solve_from", no_restart)
+    monkeypatch.setattr(profile.FeedProfileBuilder, "_solve_from", no_restart)
     without = plan_path_optimal(path, None, m, m.dt_s, settings)
     assert 0 <= without.stats["handover"] < 0.5 * without.s.shape[0]
     assert periods(plan) < periods(without)
@@ -451,18 +462,18 @@ def test_a_window_that_cannot_brake_under_the_estimate_is_solved_again(monkeypat
 @needs_corpus
 def test_a_windows_first_lp_is_linearised_at_the_estimate_lowered_to_the_previous_windows_level(monkeypatch):
     # the same spiral: the solution runs at ~0.25 of the estimate's w, and the first LP
-    # of each window linearised there (FEED_EST_RATIO_MIN) solves: no window is solved
+    # of each window linearised there (``est_ratio_min``) solves: no window is solved
     # again, a fifth of the LP iterations, and no slower a plan than with the estimate
     # itself (12 windows solved again)
-    from cnc_interp.plan import feedprofile
+    from cnc_interp.plan.optimal import profile
 
-    ratios = _recorded(monkeypatch, feedprofile.FeedProfileBuilder, "_ratio")
-    m, path, settings = _spiral_window_by_window(monkeypatch)
+    ratios = _recorded(monkeypatch, profile.FeedProfileBuilder, "_ratio")
+    m, path, settings = _spiral_window_by_window()
     plan = plan_path_optimal(path, None, m, m.dt_s, settings)
     check(plan, m, plan.q[0], plan.q[-1], m.dt_s)
     assert len(ratios) >= 5 and all(0.1 < r < 0.5 for r in ratios)
     assert plan.stats.get("lp_restarts", 0) == 0 and "crawl" not in plan.stats
-    _linearised_at_the_estimate(monkeypatch)
+    m, path, settings = _spiral_window_by_window(**_linearised_at_the_estimate(monkeypatch))
     at_estimate = plan_path_optimal(path, None, m, m.dt_s, settings)
     assert at_estimate.stats.get("lp_restarts", 0) >= 5
     assert 3 * plan.stats["lp_iterations"] < at_estimate.stats["lp_iterations"]
@@ -474,15 +485,14 @@ def test_a_windows_first_lp_held_near_the_previous_solution_always_has_one(monke
     # the same spiral linearised at the estimate itself (12 windows solved again), but
     # where the previous window brakes only as far from its solution as leaves it within
     # the rows (``_feasible_hat``): no window is solved again, for a plan no longer
-    from cnc_interp.plan import feedprofile
+    from cnc_interp.plan.optimal import profile
 
-    _linearised_at_the_estimate(monkeypatch, near_previous=True)
-    m, path, settings = _spiral_window_by_window(monkeypatch)
-    held = _recorded(monkeypatch, feedprofile.FeedProfileBuilder, "_feasible_hat")
+    m, path, settings = _spiral_window_by_window(**_linearised_at_the_estimate(monkeypatch, near_previous=True))
+    held = _recorded(monkeypatch, profile.FeedProfileBuilder, "_feasible_hat")
     plan = plan_path_optimal(path, None, m, m.dt_s, settings)
     check(plan, m, plan.q[0], plan.q[-1], m.dt_s)
     assert len(held) >= 5 and plan.stats.get("lp_restarts", 0) == 0 and "crawl" not in plan.stats
-    _linearised_at_the_estimate(monkeypatch)
+    m, path, settings = _spiral_window_by_window(**_linearised_at_the_estimate(monkeypatch))
     unheld = plan_path_optimal(path, None, m, m.dt_s, settings)
     assert unheld.stats.get("lp_restarts", 0) >= 5
     assert periods(plan) <= periods(unheld)
@@ -492,10 +502,10 @@ def _screened_lps(monkeypatch) -> list:
     """Every feed-profile LP from now on: (screened, solves it took, the largest excess
     of its solution over its rows relative to the largest |b|, at least 1: the
     interior-point solver's measure of its primal residual)."""
-    from cnc_interp.plan import feedprofile
+    from cnc_interp.plan.optimal import profile
 
     calls, solves = [], []
-    lp, lp_solve = feedprofile.FeedProfileBuilder._lp, feedprofile.lp_solve
+    lp, lp_solve = profile.FeedProfileBuilder._lp, profile.lp_solve
 
     def counting(*args):
         solves[-1] += 1
@@ -512,8 +522,8 @@ def _screened_lps(monkeypatch) -> list:
         calls.append((screen, solves[-1], float(excess)))
         return status, it, x
 
-    monkeypatch.setattr(feedprofile, "lp_solve", counting)
-    monkeypatch.setattr(feedprofile.FeedProfileBuilder, "_lp", recording)
+    monkeypatch.setattr(profile, "lp_solve", counting)
+    monkeypatch.setattr(profile.FeedProfileBuilder, "_lp", recording)
     return calls
 
 
@@ -524,15 +534,14 @@ def test_a_screened_lp_finds_its_rows_in_about_one_solve(monkeypatch):
     # by value >= 0.3 |b| were left out at zero slack, and each one violated cost a solve
     # from scratch (the spiral: 2.9 solves per screened LP, four rounds and then a
     # solution outside some rows, by 3e-4)
-    from cnc_interp.plan import feedprofile
 
     calls = _screened_lps(monkeypatch)
-    m, path, settings = _spiral_window_by_window(monkeypatch)
+    m, path, settings = _spiral_window_by_window()
     plan = plan_path_optimal(path, None, m, m.dt_s, settings)
     check(plan, m, plan.q[0], plan.q[-1], m.dt_s)
     screened = [n for screen, n, _ in calls if screen]
     assert len(screened) >= 20 and np.mean(screened) <= 1.5, screened
-    assert max(e for _, _, e in calls) <= feedprofile.FEED_LP_TOL  # the solver's own
+    assert max(e for _, _, e in calls) <= settings.optimal.tuning.lp_tol  # the solver's own
 
 
 @needs_corpus
@@ -540,9 +549,9 @@ def test_a_screened_lp_that_keeps_finding_rows_takes_every_row_last(monkeypatch)
     # a screen that leaves out every other row it would keep, and two solves at most:
     # where the first solve violates rows left out, the second takes every row, so no
     # solution lies outside a row of its LP (they used to after the last solve)
-    from cnc_interp.plan import feedprofile
+    from cnc_interp.plan.optimal import profile
 
-    screen_rows = feedprofile.K.lp_screen
+    screen_rows = profile.K.lp_screen
 
     def thinned(rows, x, screen, active, first_pass):
         out = screen_rows(rows, x, screen, active, first_pass)
@@ -551,14 +560,13 @@ def test_a_screened_lp_that_keeps_finding_rows_takes_every_row_last(monkeypatch)
         active[::2] = False
         return out[0], int(np.count_nonzero(active))
 
-    monkeypatch.setattr(feedprofile.K, "lp_screen", thinned)
-    monkeypatch.setattr(feedprofile, "FEED_SCREEN_ROUNDS", 2)
+    monkeypatch.setattr(profile.K, "lp_screen", thinned)
     calls = _screened_lps(monkeypatch)
-    m, path, settings = _spiral_window_by_window(monkeypatch)
+    m, path, settings = _spiral_window_by_window(screen_rounds=2)
     plan = plan_path_optimal(path, None, m, m.dt_s, settings)
     check(plan, m, plan.q[0], plan.q[-1], m.dt_s)
     assert sum(n == 2 for screen, n, _ in calls if screen) >= 5
-    assert max(e for _, _, e in calls) <= feedprofile.FEED_LP_TOL
+    assert max(e for _, _, e in calls) <= settings.optimal.tuning.lp_tol
 
 
 @needs_corpus
@@ -567,83 +575,78 @@ def test_a_profile_that_only_dipped_is_planned_with_one_knot_spacing(monkeypatch
     # once and reaches the end. The second knot spacing gained 0.2 % on such paths for 9 %
     # of the CPU; it runs only where VPOp took the plan over early
     # (test_the_shorter_of_two_knot_spacings_is_kept). Without the points where q_sss
-    # peaks (FEED_PEAK_SHARE): with them this profile reaches the end without a dip
-    from cnc_interp.plan import feedprofile
+    # peaks (``peak_share``): with them this profile reaches the end without a dip
+    from cnc_interp.plan.optimal import profile
 
-    monkeypatch.setattr(feedprofile, "FEED_PEAK_SHARE", np.inf)
     m, paths = _corpus_paths(os.path.join("violation_checks", "stellabee-violation-spirals.ngc"))
     path = next(p for p in paths if int(p.line[-1]) == 814)
     spacings = []
-    builder = feedprofile.FeedProfileBuilder
+    builder = profile.FeedProfileBuilder
 
     class Recording(builder):
-        def __init__(self, *args, knot_time_s=feedprofile.FEED_KNOT_TIME_S, **kwargs):
+        def __init__(self, *args, knot_time_s=None, **kwargs):
             spacings.append(knot_time_s)
             super().__init__(*args, knot_time_s=knot_time_s, **kwargs)
 
-    monkeypatch.setattr(feedprofile, "FeedProfileBuilder", Recording)
-    settings = PlanSettings.from_options(planner="optimal", machine=m)
+    monkeypatch.setattr(profile, "FeedProfileBuilder", Recording)
+    settings = tuned(PlanSettings.from_options(planner="optimal", machine=m), peak_share=np.inf)
     plan = plan_path_optimal(path, None, m, m.dt_s, settings)
     check(plan, m, plan.q[0], plan.q[-1], m.dt_s)
     assert plan.stats["route"] == "profile"
     assert plan.stats["retries"] > 0  # the profile dipped ...
     assert plan.stats["handover"] < 0  # ... and reached the end
-    assert spacings == [feedprofile.FEED_KNOT_TIME_S]
+    assert spacings == [TUNING.knot_time_s]
 
 
 def test_vpop_plans_a_path_for_comparison_only_where_it_took_over_early():
     # after VPOp takes the profile's plan over, the plan is VPOp's own: its whole plan
-    # can only win where the hand-over came early (OPT_COMPARE_BEFORE of the samples),
-    # but not so early that the profile's part is a mere start (OPT_COMPARE_AFTER)
+    # can only win where the hand-over came early (``compare_before`` of the samples),
+    # but not so early that the profile's part is a mere start (``compare_after``)
     from types import SimpleNamespace
 
-    import cnc_interp.plan.optimal as optimal
+    from cnc_interp.plan.optimal import context, select
 
-    ctx = SimpleNamespace(dt=0.001, stats={})
+    ctx = SimpleNamespace(dt=0.001, tuning=TUNING, sampling=context.Sampling())
     n = 10_000
-    assert not optimal._vpop_may_win(ctx, n)  # the profile reached the end
-    share, least = optimal.OPT_COMPARE_BEFORE, optimal.OPT_COMPARE_AFTER
+    assert not select._vpop_may_win(ctx, n)  # the profile reached the end
+    share, least = TUNING.compare_before, TUNING.compare_after
     assert 0.0 < least < share
     cases = ((0, False), (int(least * n) - 1, False), (int(least * n), True), (int(share * n) - 1, True))
     for handover, want in (*cases, (int(share * n) + 1, False), (n - 100, False)):
-        ctx.stats["handover"] = handover
-        assert optimal._vpop_may_win(ctx, n) is want, handover
+        ctx.sampling = context.Sampling(handover=handover)
+        assert select._vpop_may_win(ctx, n) is want, handover
 
 
-def _trochoid_planned():
+def _trochoid_planned(**tuning):
     """generic-mill, corpus trochoidal.ngc's path to line 4766 (a G1 trochoid), default
-    settings, and its plan (checked within every limit, rest to rest)."""
+    settings but for the tunables ``tuning``, and its plan (checked within every limit,
+    rest to rest)."""
     m, paths = _corpus_paths(os.path.join("performance", "trochoidal.ngc"))
     path = next(p for p in paths if int(p.line[-1]) == 4766)
-    settings = PlanSettings.from_options(planner="optimal", machine=m)
+    settings = tuned(PlanSettings.from_options(planner="optimal", machine=m), **tuning)
     plan = plan_path_optimal(path, None, m, m.dt_s, settings)
     check(plan, m, plan.q[0], plan.q[-1], m.dt_s)
     return m, path, settings, plan
 
 
 @needs_corpus
-def test_vpop_is_kept_where_the_profile_dipped_often_and_vpop_plans_shorter(monkeypatch):
+def test_vpop_is_kept_where_the_profile_dipped_often_and_vpop_plans_shorter():
     # corpus trochoidal.ngc, the path ending at line 4766 on generic-mill: the profile
-    # reaches the end through OPT_COMPARE_DIPS dips or more (44,471 periods with 124);
+    # reaches the end through ``compare_dips`` dips or more (44,471 periods with 124);
     # VPOp's own plan of the whole path (42,864) is shorter and is kept. Before a
     # window's first LP was held near the previous solution (``_feasible_hat``), the
     # profile was handed over to VPOp 5,749 samples in: VPOp was compared for that.
-    # Without the points where q_sss peaks (FEED_PEAK_SHARE): with them the profile
+    # Without the points where q_sss peaks (``peak_share``): with them the profile
     # reaches the end without a dip, and its 44,463 periods are kept without comparing
     # (the continuous profile is slower than VPOp on this G1 trochoid: see the README)
-    from cnc_interp.plan import feedprofile, optimal
-
-    monkeypatch.setattr(feedprofile, "FEED_PEAK_SHARE", np.inf)
-    m, path, settings, plan = _trochoid_planned()
+    m, path, settings, plan = _trochoid_planned(peak_share=np.inf)
     assert plan.stats["route"] == "profile" and plan.stats["kept"] == "vpop"
-    assert plan.stats["retries"] >= optimal.OPT_COMPARE_DIPS
+    assert plan.stats["retries"] >= TUNING.compare_dips
     vpop = plan_path_vpop(path, None, m, m.dt_s)
     assert periods(plan) == periods(vpop)
     # without the dips' rule (nor the probe of the next test) the profile's longer plan
     # is kept
-    monkeypatch.setattr(optimal, "OPT_COMPARE_DIPS", 10**9)
-    monkeypatch.setattr(optimal, "OPT_PROBE_AHEAD", np.inf)
-    kept = plan_path_optimal(path, None, m, m.dt_s, settings)
+    kept = plan_path_optimal(path, None, m, m.dt_s, tuned(settings, compare_dips=10**9, probe_ahead=np.inf))
     assert kept.stats["kept"] == "profile" and periods(kept) > periods(vpop)
 
 
@@ -651,7 +654,7 @@ def _profile_jerk_share(builder, pieces, end_mm=0.05):
     """The largest |axis jerk| / J of the committed continuous profile on a grid of 20
     points per knot interval (the sampled start and stop, ``end_mm`` at each end, left
     out: they may break the continuous limit by design)."""
-    from cnc_interp.plan.feedprofile import spline_derivs
+    from cnc_interp.plan.optimal.profile import spline_derivs
 
     worst = 0.0
     for p in pieces:
@@ -669,28 +672,27 @@ def _profile_jerk_share(builder, pieces, end_mm=0.05):
 
 
 @needs_corpus
-def test_the_profile_holds_the_jerk_where_a_g1_contours_q_sss_peaks_between_its_points(monkeypatch):
+def test_the_profile_holds_the_jerk_where_a_g1_contours_q_sss_peaks_between_its_points():
     # corpus line-contouring-xz.ngc, the path ending at line 51 on generic-mill (G1 lines,
     # G64 Q0.03): the fitted q_sss bumps inside the segments, between the collocation
-    # points. Without a point at those peaks (FEED_PEAK_SHARE) the continuous profile broke
+    # points. Without a point at those peaks (``peak_share``) the continuous profile broke
     # the jerk limit there by 44 % (1.4389) and the sampler clamped a third of the samples
-    from cnc_interp.plan import feedprofile
+    from cnc_interp.plan.optimal import profile
     from cnc_interp.plan.vpop import JointTable
 
     m, paths = _corpus_paths(os.path.join("performance", "line-contouring-xz.ngc"))
     path = next(p for p in paths if int(p.line[-1]) == 51)
 
-    def worst():
-        b = feedprofile.FeedProfileBuilder(JointTable(path, None), path, m, m.dt_s)
+    def worst(tuning):
+        b = profile.FeedProfileBuilder(JointTable(path, None), path, m, m.dt_s, tuning)
         return _profile_jerk_share(b, list(b.windows()))
 
-    assert worst() < 1.05  # 1.0338; the rows' own share is 0.998 at the points
-    monkeypatch.setattr(feedprofile, "FEED_PEAK_SHARE", np.inf)
-    assert worst() > 1.3
+    assert worst(TUNING) < 1.05  # the rows' own share is limit_share at the points
+    assert worst(dataclasses.replace(TUNING, peak_share=np.inf)) > 1.3
 
 
 def test_a_table_pieces_jerk_peaks_are_its_breaks_and_its_vertices_of_q_sss():
-    from cnc_interp.plan.feedprofile import jerk_peak_points
+    from cnc_interp.plan.optimal.profile import jerk_peak_points
 
     S = np.array([0.0, 1.0, 3.0])
     C = np.zeros((2, 6, 2))
@@ -704,30 +706,24 @@ def test_a_table_pieces_jerk_peaks_are_its_breaks_and_its_vertices_of_q_sss():
 
 
 @needs_corpus
-def test_vpop_is_kept_where_its_first_seconds_run_ahead_of_the_profile(monkeypatch):
+def test_vpop_is_kept_where_its_first_seconds_run_ahead_of_the_profile():
     # the same trochoid, as planned: the profile reaches the end without a dip, and VPOp,
-    # faster over the first OPT_PROBE_S, plans the whole path too; its shorter plan is kept
-    from cnc_interp.plan import optimal
-
+    # faster over the first ``probe_s``, plans the whole path too; its shorter plan is kept
     m, path, settings, plan = _trochoid_planned()
     assert plan.stats["probe"] == "vpop ahead" and plan.stats["kept"] == "vpop"
-    assert plan.stats["retries"] < optimal.OPT_COMPARE_DIPS and plan.stats["handover"] < 0
-    assert periods(plan) == periods(plan_path_vpop(path, None, m, m.dt_s))  # 42,864
-    monkeypatch.setattr(optimal, "OPT_PROBE_AHEAD", np.inf)  # no probe: the profile's plan
-    kept = plan_path_optimal(path, None, m, m.dt_s, settings)
+    assert plan.stats["retries"] < TUNING.compare_dips and plan.stats["handover"] < 0
+    assert periods(plan) == periods(plan_path_vpop(path, None, m, m.dt_s))
+    kept = plan_path_optimal(path, None, m, m.dt_s, tuned(settings, probe_ahead=np.inf))  # no probe
     assert kept.stats["kept"] == "profile" and periods(kept) > 1.03 * periods(plan)
 
 
 @needs_corpus
-def test_a_probe_decided_early_keeps_vpops_plan_without_the_profiles_rest(monkeypatch):
-    # the same trochoid: VPOp's lead over its first OPT_PROBE_S is decided once the
-    # profile's plan is OPT_PROBE_MIN_S long (OPT_PROBE_EARLY), and the profile's rest is
+def test_a_probe_decided_early_keeps_vpops_plan_without_the_profiles_rest():
+    # the same trochoid: VPOp's lead over its first ``probe_s`` is decided once the
+    # profile's plan is ``probe_min_s`` long (``probe_early``), and the profile's rest is
     # not planned; the plan is the one kept after planning the profile to its end
-    from cnc_interp.plan import optimal
-
     m, path, settings, plan = _trochoid_planned()
-    monkeypatch.setattr(optimal, "OPT_PROBE_EARLY", False)
-    late = plan_path_optimal(path, None, m, m.dt_s, settings)
+    late = plan_path_optimal(path, None, m, m.dt_s, tuned(settings, probe_early=False))
     assert late.stats["kept"] == plan.stats["kept"] == "vpop"
     assert late.s.tobytes() == plan.s.tobytes() and late.q.tobytes() == plan.q.tobytes()
     assert plan.stats["lp_iterations"] < 0.9 * late.stats["lp_iterations"]  # 949 against 1,113
@@ -741,8 +737,8 @@ def _fifty_turns():
 def test_a_probe_that_finds_the_profile_ahead_stops_vpop_after_its_first_seconds(monkeypatch):
     # fifty turns of a circle at the acceleration limit (22 s): the profile's plan is ahead
     # of VPOp's from the start, so VPOp stops after its first samples handed out (its
-    # buffers of OPT_PROBE_S and the braking distance, twice)
-    from cnc_interp.plan import optimal, vpop
+    # buffers of ``probe_s`` and the braking distance, twice)
+    from cnc_interp.plan import vpop
 
     counted = []
     iter_prepared = vpop.iter_prepared
@@ -756,18 +752,18 @@ def test_a_probe_that_finds_the_profile_ahead_stops_vpop_after_its_first_seconds
     path = _fifty_turns()
     plan = plan_path_optimal(path, None, MILL, DT)
     check(plan, MILL, plan.q[0], plan.q[-1], DT)
-    assert periods(plan) * DT >= optimal.OPT_PROBE_MIN_S
+    assert periods(plan) * DT >= TUNING.probe_min_s
     assert plan.stats["probe"] == "profile" and plan.stats["kept"] == "profile"
-    assert optimal.OPT_PROBE_S / DT <= sum(counted) < 0.5 * periods(plan)
+    assert TUNING.probe_s / DT <= sum(counted) < 0.5 * periods(plan)
 
 
 @pytest.mark.parametrize("turns", [50.0, 12.0])
 def test_a_long_paths_windows_solved_in_a_thread_of_their_own_give_the_same_samples(monkeypatch, turns):
     # at effort fast a path's windows are solved by a thread ahead of the sampling from
-    # OPT_FEED_AHEAD_S on, and a whole path's VPOp probe runs meanwhile; the samples,
+    # ``feed_ahead_s`` on, and a whole path's VPOp probe runs meanwhile; the samples,
     # stats and probe are those of one thread (the 50-turn circle of the probe test: 22 s,
-    # probed, the profile kept; 12 turns: ~5 s, under OPT_AHEAD_S, not probed)
-    from cnc_interp.plan import optimal, prefetch
+    # probed, the profile kept; 12 turns: ~5 s, under ``ahead_s``, not probed)
+    from cnc_interp.plan import prefetch
 
     threads = []
     init = prefetch.Prefetch.__init__
@@ -780,10 +776,9 @@ def test_a_long_paths_windows_solved_in_a_thread_of_their_own_give_the_same_samp
     path = hermite_path(circle_fun(10.0, turns=turns), int(16 * turns), 1000.0)
     fast = PlanSettings(planner="optimal", optimal=OptimalOptions(effort="fast"))
     plans = {}
-    least = optimal.OPT_FEED_AHEAD_S
+    least = TUNING.feed_ahead_s
     for ahead_s in (least, np.inf):
-        monkeypatch.setattr(optimal, "OPT_FEED_AHEAD_S", ahead_s)
-        plans[ahead_s] = plan_path_optimal(path, None, MILL, DT, fast)
+        plans[ahead_s] = plan_path_optimal(path, None, MILL, DT, tuned(fast, feed_ahead_s=ahead_s))
     assert threads == ["cnc-interp-feed"]  # the first plan only
     threaded, alone = plans[least], plans[np.inf]
     check(threaded, MILL, path.start, path.end, DT)
@@ -792,7 +787,7 @@ def test_a_long_paths_windows_solved_in_a_thread_of_their_own_give_the_same_samp
     if turns == 50.0:
         assert threaded.stats["probe"] == "profile"
     else:
-        assert least * 1.2 < periods(threaded) * DT < optimal.OPT_AHEAD_S and "probe" not in threaded.stats
+        assert least * 1.2 < periods(threaded) * DT < TUNING.ahead_s and "probe" not in threaded.stats
 
 
 # -- the paths routed to VPOp go through VPOp's compiled batch ------------------------
@@ -836,8 +831,8 @@ def test_a_streamed_paths_joint_table_and_route_come_from_the_batchs_routing(mon
     # batched_optimal builds each path's joint table to route it; the path it leaves to
     # the stream (the circle) takes that table and route over in the same thread: one
     # table per path, and the same plan and stats as routing it again
-    from cnc_interp.plan import optimal
-    from cnc_interp.plan.vpop import table as vpop_table
+    from cnc_interp.plan.optimal import route
+    from cnc_interp.plan import joint_table as vpop_table
 
     paths = _mixed_paths()
     circle = paths[2]
@@ -861,9 +856,9 @@ def test_a_streamed_paths_joint_table_and_route_come_from_the_batchs_routing(mon
     # another job's batch drops what the last one held; a path in joint space never takes it
     batched_optimal(paths, None, MILL, DT)
     batched_optimal(paths[:2], None, MILL, DT)
-    assert optimal._ROUTED.take(circle, None) is None
+    assert route._ROUTED.take(circle, None) is None
     batched_optimal(paths, None, MILL, DT)
-    assert optimal._ROUTED.take(circle, object()) is None
+    assert route._ROUTED.take(circle, object()) is None
 
 
 def test_the_timeline_gives_the_same_plan_and_route_counts_with_the_batch(monkeypatch):
@@ -928,7 +923,7 @@ def _zigzag_path(machine):
 
     src = os.path.join(CORPUS, "performance", "zigzag_0.002_0.001.ngc")
     prog = read_program(b"G64 P0.001\n" + open(src, "rb").read(), src, axes=machine.axes, start=machine.start)
-    fitted = fit_program(prog, FitSettings.from_options(machine=machine))
+    fitted = fit_program(prog, FitSettings.from_options(tol_mm=SCENARIO_TOL_MM, machine=machine))
     return max((p for p in fitted.items if hasattr(p, "coef") and not p.rapid), key=lambda p: p.length)
 
 
@@ -937,23 +932,22 @@ LINUXCNC_XYZ = Machine(name="linuxcnc-xyz", axes="XYZ", vmax=[203.2] * 3, amax=[
 
 
 @needs_corpus
-def test_a_curvature_limited_path_gets_dips_for_its_whole_duration(monkeypatch):
+def test_a_curvature_limited_path_gets_dips_for_its_whole_duration():
     # the zigzag lasts ~1 s at its feed (F9999 in/min) but 33 s at its curvature limit: the
     # dips of the reference were budgeted on the feed's duration, ran out after 40, and
     # VPOp planned the last 42 % of the path (35.4 s for the program, slower than
     # LinuxCNC's 34.3 s); budgeted on its static duration, the profile plans it all. With
     # knots half a radius of curvature apart (the spacing then) it needs ~85 dips; 0.35
     # needs 3
-    from cnc_interp.plan import feedprofile
-    from cnc_interp.plan.optimal import OPT_RETRY_DEPTHS, OPT_RETRY_PER_S, OPT_RETRY_PLACES, _RouteInputs
-
-    monkeypatch.setattr(feedprofile, "FEED_KNOT_GEO", 0.5)
+    from cnc_interp.plan.optimal.route import _RouteInputs
 
     m = LINUXCNC_XYZ
     path = _zigzag_path(m)
-    plan = plan_path_optimal(path, None, m, DT, PlanSettings.from_options(planner="optimal", machine=m, effort="fast"))
+    settings = tuned(PlanSettings.from_options(planner="optimal", machine=m, effort="fast"), knot_geo=0.5)
+    plan = plan_path_optimal(path, None, m, DT, settings)
     check(plan, m, plan.q[0], plan.q[-1], DT)
-    feed_budget = OPT_RETRY_PLACES * len(OPT_RETRY_DEPTHS) + int(_RouteInputs(path, None, m).rough_s / OPT_RETRY_PER_S)
+    T = settings.optimal.tuning
+    feed_budget = T.retry_places * len(T.retry_depths) + int(_RouteInputs(path, None, m, T).rough_s / T.retry_per_s)
     assert plan.stats["route"] == "profile"
     assert not 0 <= plan.stats["handover"] < periods(plan) - 300  # VPOp finishes the last stop at most
     assert plan.stats["retries"] > feed_budget
@@ -972,17 +966,17 @@ def test_a_short_crawl_of_the_profile_is_kept_rather_than_handed_to_vpop(monkeyp
     # 150 s path to VPOp
     from cnc_interp.machine.load import load_machine
 
-    from cnc_interp.plan import feedprofile
+    from cnc_interp.plan.optimal import profile
 
     # windows solved again happen only with the first LP not held near the previous
-    # solution (``_feasible_hat``), and windows committing 0.5 s each (FEED_COMMIT_S when
-    # the case was found; at 1.0 the crawl falls late in the path, where the rest's
-    # duration allows less of one, and it is refused)
-    monkeypatch.setattr(feedprofile.FeedProfileBuilder, "_feasible_hat", lambda self, *a: a[-2])
-    monkeypatch.setattr(feedprofile, "FEED_COMMIT_S", 0.5)
+    # solution (``_feasible_hat``), and windows committing 0.5 s each (``commit_s``; at
+    # 1.0 the crawl falls late in the path, where the rest's duration allows less of one,
+    # and it is refused)
+    monkeypatch.setattr(profile.FeedProfileBuilder, "_feasible_hat", lambda self, *a: a[-2])
     m = load_machine(os.path.join(CORPUS, "configs", "axis_mm.ini"))
     path = _zigzag_path(m)
-    plan = plan_path_optimal(path, None, m, DT, PlanSettings.from_options(planner="optimal", machine=m, effort="fast"))
+    settings = tuned(PlanSettings.from_options(planner="optimal", machine=m, effort="fast"), commit_s=0.5)
+    plan = plan_path_optimal(path, None, m, DT, settings)
     check(plan, m, plan.q[0], plan.q[-1], DT)
     assert plan.stats["handover"] < 0 and "crawl" not in plan.stats and plan.stats.get("lp_restarts", 0) > 0
     vpop = plan_path_vpop(path, None, m, DT)
@@ -992,28 +986,27 @@ def test_a_short_crawl_of_the_profile_is_kept_rather_than_handed_to_vpop(monkeyp
 @needs_corpus
 def test_a_windows_first_lp_without_a_solution_gives_up_early_for_the_same_plan(monkeypatch):
     # the interior-point solver has no infeasibility test: a window's first LP without a
-    # solution ran to FEED_LP_MAX_ITER before the window was solved again. Capped at
-    # FEED_LP_FIRST_MAX_ITER (the first LPs that solve take ~9-23 iterations), the same
+    # solution ran to ``lp_max_iter`` before the window was solved again. Capped at
+    # ``lp_first_max_iter`` (below what the first LPs that solve take), the same
     # samples for fewer iterations (corpus spiral_tangent_test.ngc linearised at the
     # estimate itself: windows without a solution, see the tests above)
-    from cnc_interp.plan import feedprofile
+    from cnc_interp.plan.optimal import profile
 
-    _linearised_at_the_estimate(monkeypatch)
-    m, path, settings = _spiral_window_by_window(monkeypatch)
+    m, path, settings = _spiral_window_by_window(**_linearised_at_the_estimate(monkeypatch))
     spent = []  # every LP's iterations, those without a solution too
-    lp_solve = feedprofile.lp_solve
+    lp_solve = profile.lp_solve
 
     def counting(*args):
         out = lp_solve(*args)
         spent.append(out[1])
         return out
 
-    monkeypatch.setattr(feedprofile, "lp_solve", counting)
+    monkeypatch.setattr(profile, "lp_solve", counting)
     capped = plan_path_optimal(path, None, m, m.dt_s, settings)
     capped_spent, spent[:] = sum(spent), []
-    saved = feedprofile.FEED_LP_MAX_ITER - feedprofile.FEED_LP_FIRST_MAX_ITER
-    monkeypatch.setattr(feedprofile, "FEED_LP_FIRST_MAX_ITER", feedprofile.FEED_LP_MAX_ITER)
-    uncapped = plan_path_optimal(path, None, m, m.dt_s, settings)
+    T = settings.optimal.tuning
+    saved = T.lp_max_iter - T.lp_first_max_iter
+    uncapped = plan_path_optimal(path, None, m, m.dt_s, tuned(settings, lp_first_max_iter=T.lp_max_iter))
     assert capped.stats["lp_restarts"] >= 1
     assert_array_equal(capped.s, uncapped.s)
     assert_array_equal(capped.q, uncapped.q)

@@ -201,7 +201,7 @@ def test_cubic_basis_matches_scipy():
 
 
 def _profile_time(path, machine, dt):
-    from cnc_interp.plan.feedprofile import FeedProfileBuilder, spline_values
+    from cnc_interp.plan.optimal.profile import FeedProfileBuilder, spline_values
     from cnc_interp.plan.vpop import JointTable
 
     b = FeedProfileBuilder(JointTable(path, None), path, machine, dt)
@@ -231,13 +231,14 @@ def test_profile_of_a_line_is_the_s_curve():
 )
 def test_the_windows_ratio_is_the_solutions_median_level_under_the_estimate(level, expected):
     # _ratio: median of w / estimate over the committed knot intervals, floored at
-    # FEED_EST_RATIO_MIN, 1 above FEED_EST_RATIO_KEEP (a solution above the estimate too)
-    from cnc_interp.plan.feedprofile import FEED_EST_RATIO_KEEP, FEED_EST_RATIO_MIN, FeedProfileBuilder
+    # est_ratio_min, 1 above est_ratio_keep (a solution above the estimate too)
+    from cnc_interp.plan.optimal.profile import FeedProfileBuilder
+    from cnc_interp.plan.tuning import OptimalTuning
     from cnc_interp.plan.vpop import JointTable
 
-    assert FEED_EST_RATIO_MIN == 0.05 and FEED_EST_RATIO_KEEP == 0.9
+    tuning = OptimalTuning(est_ratio_min=0.05, est_ratio_keep=0.9)  # the cases' floor and ceiling
     p = line_path([0, 0, 0], [100.0, 0, 0], 83.3)
-    b = FeedProfileBuilder(JointTable(p, None), p, MILL, 0.001)
+    b = FeedProfileBuilder(JointTable(p, None), p, MILL, 0.001, tuning)
     b._br = list(np.linspace(0.0, 100.0, 21))
     est = 1000.0 + 100.0 * np.sin(np.linspace(0.0, 100.0, 1001))  # any positive estimate
     b.estimate = lambda x: np.interp(x, np.linspace(0.0, 100.0, 1001), est)
@@ -284,7 +285,7 @@ def test_the_knot_placements_estimate_is_its_formula(seed):
     ``reach_envelope`` (the speeds the tangent's acceleration and jerk reach from the
     slow points, both ways, from a carried point) against numpy's arithmetic of the
     feed profile's docstrings, on random curves with their ends."""
-    from cnc_interp.plan.feedprofile import FEED_EST_ACC_FACTOR, FEED_EST_JERK_FACTOR, FeedProfileBuilder
+    from cnc_interp.plan.optimal.profile import FeedProfileBuilder
     from cnc_interp.plan.vpop import JointTable
 
     from ._vpop_paths import random_curve
@@ -306,12 +307,12 @@ def test_the_knot_placements_estimate_is_its_formula(seed):
         at = np.min(np.where(g > 1e-12, b.amax / g, np.inf), axis=1)
         jt = np.min(np.where(g > 1e-12, b.jmax / g, np.inf), axis=1)
     f = _feed_numpy(b, x)
-    w = np.minimum.reduce([wv, f * f, FEED_EST_ACC_FACTOR**2 * wa, FEED_EST_JERK_FACTOR**2 * wj])
+    w = np.minimum.reduce([wv, f * f, b.tuning.est_acc_factor**2 * wa, b.tuning.est_jerk_factor**2 * wj])
     w = np.minimum(w, _start_curve_numpy(x, b.jt0 * 0.001**3, 0.001))
     w = np.minimum(w, _start_curve_numpy(L - x, b.jt1 * 0.001**3, 0.001))
     assert_allclose(est.w, w, rtol=1e-12)
     assert est.w[0] == 0.0 and est.w[-1] == 0.0  # rest at both ends
-    assert_allclose(est.w_jerk, FEED_EST_JERK_FACTOR**2 * wj, rtol=1e-12)
+    assert_allclose(est.w_jerk, b.tuning.est_jerk_factor**2 * wj, rtol=1e-12)
     assert_allclose(est.k2, np.max(np.abs(q2), axis=1), rtol=1e-15)
     assert_allclose(est.k3, np.max(np.abs(q3), axis=1), rtol=1e-15)
     assert_allclose(est.at, at, rtol=1e-15) and assert_allclose(est.jt, jt, rtol=1e-15)
@@ -319,8 +320,8 @@ def test_the_knot_placements_estimate_is_its_formula(seed):
     sel = (x > L / 3) & (x < L)
     xs, ws = x[sel], est.w[sel]
     carry = (L / 3, 0.0)
-    A = FEED_EST_ACC_FACTOR * float(np.max(est.at[sel]))
-    J = FEED_EST_JERK_FACTOR**2 * float(np.max(est.jt[sel]))
+    A = b.tuning.est_acc_factor * float(np.max(est.at[sel]))
+    J = b.tuning.est_jerk_factor**2 * float(np.max(est.jt[sel]))
     xx, ww = np.concatenate(([carry[0]], xs)), np.minimum(np.concatenate(([carry[1]], ws)), 1e300)
     ww = np.minimum(ww, np.minimum.accumulate(ww - 2 * A * xx) + 2 * A * xx)
     ww = np.minimum(ww, (np.minimum.accumulate((ww + 2 * A * xx)[::-1]) - 2 * A * xx[::-1])[::-1])
@@ -331,7 +332,7 @@ def test_the_knot_placements_estimate_is_its_formula(seed):
     want = np.minimum(ww, np.maximum(u, 0.0) ** (4.0 / 3.0))[1:]
     sub = FK.Estimates(*(a[sel] for a in est))
     got = np.empty(xs.shape[0])
-    FK.reach_envelope(xs, ws, sub.at, sub.jt, FEED_EST_ACC_FACTOR, FEED_EST_JERK_FACTOR**2, *carry, got)
+    FK.reach_envelope(xs, ws, sub.at, sub.jt, b.tuning.est_acc_factor, b.tuning.est_jerk_factor**2, *carry, got)
     assert_allclose(got, want, rtol=1e-12)
     assert np.all(got <= ws) and got[0] < 0.5 * ws[0]  # the rest carried in shows
 
@@ -339,7 +340,7 @@ def test_the_knot_placements_estimate_is_its_formula(seed):
 def test_the_estimates_of_known_probes_are_kept_bit_for_bit():
     # the knot placement's refinement evaluates only its new probes: every field at every
     # point is the bits of evaluating all of them
-    from cnc_interp.plan.feedprofile import FeedProfileBuilder
+    from cnc_interp.plan.optimal.profile import FeedProfileBuilder
     from cnc_interp.plan.vpop import JointTable
 
     from ._vpop_paths import random_curve
@@ -371,7 +372,7 @@ def test_a_knot_blocks_probes_are_as_dense_as_the_spacing_the_estimate_wants(see
     # of the block is a probe, the spacing wanted is its formula of the enveloped
     # estimate (time of motion at that speed, geometry, the least step from rest), and
     # no two probes are further apart than a quarter of the spacing at either
-    from cnc_interp.plan.feedprofile import FEED_KNOT_BLOCK, FEED_KNOT_GEO, FeedProfileBuilder
+    from cnc_interp.plan.optimal.profile import FeedProfileBuilder
     from cnc_interp.plan.vpop import JointTable
 
     from ._vpop_paths import random_curve
@@ -381,15 +382,15 @@ def test_a_knot_blocks_probes_are_as_dense_as_the_spacing_the_estimate_wants(see
     table = JointTable(p, None)
     b = FeedProfileBuilder(table, p, MILL, 0.001)
     S, m = b.S, b.S.shape[0] - 1
-    p1, p2 = min(FEED_KNOT_BLOCK, m), min(2 * FEED_KNOT_BLOCK, m)
+    p1, p2 = min(b.tuning.knot_block, m), min(2 * b.tuning.knot_block, m)
     no_known = (np.zeros(0), b._raw_estimate(np.zeros(0)))
     probe, w, h, ahead, ea = FK.knot_probes(S, b.C, b._est_in, b._knot_inputs(), 0, p1, p2, np.inf, 0.0, *no_known)
     assert np.all(np.diff(probe) > 0) and probe[0] == S[0] and probe[-1] == S[p1]
     assert np.all(np.isin(S[: p1 + 1], probe)) and np.all(np.isin(0.5 * (S[:p1] + S[1 : p1 + 1]), probe))
     est = b._raw_estimate(probe)
     assert np.all(w <= est.w) and w[0] == 0.0  # an envelope only lowers; rest at the start
-    want = np.minimum(b.knot_time_s * np.sqrt(np.maximum(w, 0.0)), FEED_KNOT_GEO / np.maximum(est.k2, 1e-300))
-    want = np.minimum(want, FEED_KNOT_GEO / np.sqrt(np.maximum(est.k3, 1e-300)))
+    want = np.minimum(b.knot_time_s * np.sqrt(np.maximum(w, 0.0)), b.tuning.knot_geo / np.maximum(est.k2, 1e-300))
+    want = np.minimum(want, b.tuning.knot_geo / np.sqrt(np.maximum(est.k3, 1e-300)))
     want = np.maximum(want, np.where(probe < 0.5 * b.L, b.hmin0, b.hmin1))
     assert_allclose(h, want, rtol=1e-15)
     assert np.all(np.diff(probe) <= 0.25 * np.minimum(h[:-1], h[1:]) * (1 + 1e-12))
@@ -403,7 +404,7 @@ def test_a_windows_first_lp_is_linearised_where_the_previous_solution_meets_its_
     # _feasible_hat, against the LP's own rows (lp_rows): a window's solution ending at
     # rest meets every jerk row linearised at the points it returns over its braking
     # part; each point is the target where that allows it, else as near it as allows it
-    from cnc_interp.plan.feedprofile import FEED_HAT_MARGIN, FeedProfileBuilder, _Window
+    from cnc_interp.plan.optimal.profile import FeedProfileBuilder, _Window
     from cnc_interp.plan.vpop import JointTable
 
     from ._vpop_paths import random_curve
@@ -440,22 +441,22 @@ def test_a_windows_first_lp_is_linearised_where_the_previous_solution_meets_its_
         return vals[:, 1:].reshape(x.shape[0], n, 4)[:, :, 2:].max(axis=(1, 2))
 
     own = jerk_rows(np.maximum(spline_values_of(prev, x), floor))
-    fits = own <= 1.0 - FEED_HAT_MARGIN
+    fits = own <= 1.0 - b.tuning.hat_margin
     assert fits.mean() > 0.5
     at_hat = jerk_rows(hat)
-    assert np.all(at_hat[fits] <= 1.0 - FEED_HAT_MARGIN + 1e-9)
+    assert np.all(at_hat[fits] <= 1.0 - b.tuning.hat_margin + 1e-9)
     at_target = jerk_rows(np.maximum(target, floor))
-    free = at_target <= 1.0 - FEED_HAT_MARGIN
+    free = at_target <= 1.0 - b.tuning.hat_margin
     assert_allclose(hat[free], np.maximum(target, floor)[free], rtol=0, atol=0)
     cut = fits & ~free
     assert cut.sum() >= 3  # the target's rows cut the solution off somewhere
     # held at the edge: a step further towards the target leaves the solution outside
     step = hat + 1e-6 * (np.maximum(target, floor) - hat)
-    assert np.all(jerk_rows(step)[cut] > 1.0 - FEED_HAT_MARGIN - 1e-12)
+    assert np.all(jerk_rows(step)[cut] > 1.0 - b.tuning.hat_margin - 1e-12)
 
 
 def spline_values_of(window, x):
-    from cnc_interp.plan.feedprofile import spline_values
+    from cnc_interp.plan.optimal.profile import spline_values
 
     xc = np.clip(x, window.knots[3], window.knots[-4])
     return np.maximum(spline_values(window.knots, window.coef, xc), 0.0)
@@ -468,14 +469,15 @@ def test_the_time_law_integrates_one_over_the_speed(seed):
     from scipy.integrate import quad
     from scipy.interpolate import BSpline
 
-    from cnc_interp.plan.timelaw import time_law
+    from cnc_interp.plan.optimal.sampling import time_law
+    from cnc_interp.plan.tuning import OptimalTuning
 
     rng = np.random.default_rng(seed)
     br = np.linspace(0.0, 20.0, 11)
     knots = np.concatenate(([0.0] * 3, br, [20.0] * 3))
     coef = rng.uniform(100.0, 400.0, knots.shape[0] - 4)
     coef[0] = 0.0  # rest at the start: w ~ s there
-    law = time_law(knots, coef, 0.0, 20.0)
+    law = time_law(knots, coef, 0.0, 20.0, OptimalTuning())
     spline = BSpline(knots, coef, 3)
     for i in range(law.s.shape[0] - 1):
         a, b = law.s[i], law.s[i + 1]
@@ -501,8 +503,10 @@ def test_time_law_hermite_is_consistent():
 
 @pytest.mark.parametrize("seed", range(6))
 def test_a_time_law_recomputed_where_coefficients_changed_is_the_full_one_bit_for_bit(seed):
-    from cnc_interp.plan.timelaw import time_law
+    from cnc_interp.plan.optimal.sampling import time_law
+    from cnc_interp.plan.tuning import OptimalTuning
 
+    tuning = OptimalTuning()
     rng = np.random.default_rng(seed)
     br = np.concatenate(([0.0], np.sort(rng.uniform(0.0, 30.0, 40)), [30.0]))
     knots = np.concatenate(([0.0] * 3, br, [30.0] * 3))
@@ -514,14 +518,14 @@ def test_a_time_law_recomputed_where_coefficients_changed_is_the_full_one_bit_fo
     if seed % 3 == 1:
         coef[-1] = 0.0
     s0, s1 = (0.0, 30.0) if seed < 3 else (float(br[5]), float(br[-8]))
-    old = time_law(knots, coef, s0, s1)
+    old = time_law(knots, coef, s0, s1, tuning)
     for _ in range(5):
         j0 = int(rng.integers(0, n_coef))
         j1 = min(n_coef - 1, j0 + int(rng.integers(0, 6)))
         new = coef.copy()
         new[j0 : j1 + 1] *= rng.uniform(0.5, 0.99, j1 - j0 + 1)
-        full = time_law(knots, new, s0, s1)
-        part = time_law(knots, new, s0, s1, old=old, changed=(j0, j1))
+        full = time_law(knots, new, s0, s1, tuning)
+        part = time_law(knots, new, s0, s1, tuning, old=old, changed=(j0, j1))
         for name in ("s", "dt", "w", "w1", "v", "a"):
             assert getattr(part, name).tobytes() == getattr(full, name).tobytes(), name
         # and something did change (the test would pass on an unchanged law otherwise)
@@ -533,8 +537,8 @@ def test_a_time_law_recomputed_where_coefficients_changed_is_the_full_one_bit_fo
 
 @pytest.mark.parametrize("machine", [MILL, UCP])
 def test_refine_keeps_plans_exact_and_never_longer(machine):
-    from cnc_interp.plan.optimal import _Path
-    from cnc_interp.plan.refine import Refiner
+    from cnc_interp.plan.optimal.context import _Path
+    from cnc_interp.plan.optimal.refine import Refiner
     from cnc_interp.plan.vpop import plan_path_vpop
 
     dt = machine.dt_s
@@ -542,7 +546,7 @@ def test_refine_keeps_plans_exact_and_never_longer(machine):
     plan = plan_path_vpop(p, None, machine, dt)
     ctx = _Path(p, None, machine, dt, None)
     table = ctx.table
-    ref = Refiner(ctx.refine_problem())
+    ref = Refiner(ctx.refine_problem(), ctx.tuning)
     s, q = plan.s, plan.q
     saved = 0
     for a in range(1, s.shape[0] - 4, 20):
@@ -648,39 +652,41 @@ def test_refine_kernels_match_numpy_bit_for_bit():
 @pytest.mark.parametrize("spacing_mm", [0.002, 2.0])
 def test_a_crawl_is_refused_only_when_it_costs_more_than_its_bound(spacing_mm):
     # w = 1 (mm/s)² with a dip to ~1e-6 over one knot: node intervals there take far more
-    # than OPT_CRAWL times the estimate's time; the piece is kept unless those intervals
+    # than ``crawl`` times the estimate's time; the piece is kept unless those intervals
     # cost more than the allowance beyond the estimate in all (zigzag_0.002_0.001 on
     # axis_mm.ini: a refused short crawl handed 96 % of its path to VPOp)
-    from cnc_interp.plan.optimal import OPT_CRAWL, _Nodes
+    from cnc_interp.plan.optimal.sampling import _Nodes
+    from cnc_interp.plan.optimal.sampling import time_law
+    from cnc_interp.plan.tuning import OptimalTuning
 
     allow_s = 0.25
-    from cnc_interp.plan.timelaw import time_law
+    tuning = OptimalTuning()
 
     br = spacing_mm * np.arange(21.0)
     knots = np.concatenate(([0.0] * 3, br, [br[-1]] * 3))
     coef = np.ones(knots.shape[0] - 4)
     coef[10:13] = 1e-6
     s1 = float(br[-1])
-    law = time_law(knots, coef, 0.0, s1)
+    law = time_law(knots, coef, 0.0, s1, tuning)
     assert law is not None
     ns, nt, _, _ = law.nodes(0.0)
     t_est = np.diff(ns)  # the estimate: 1 mm/s everywhere
-    crawl = np.diff(nt) > OPT_CRAWL * t_est
+    crawl = np.diff(nt) > tuning.crawl * t_est
     excess = float(np.sum(np.diff(nt)[crawl] - t_est[crawl]))
     assert crawl.any()
-    nodes = _Nodes()
+    nodes = _Nodes(tuning)
     kept = nodes.append(knots, coef, 0.0, s1, estimate=lambda s: np.ones_like(s), crawl_s=allow_s)
     assert kept == (excess <= allow_s), excess
     assert kept == (spacing_mm < 1.0)  # both outcomes are met
     assert (nodes.s.shape[0] > 0) == kept
-    assert not _Nodes().append(knots, coef, 0.0, s1, estimate=lambda s: np.ones_like(s))  # no allowance
+    assert not _Nodes(tuning).append(knots, coef, 0.0, s1, estimate=lambda s: np.ones_like(s))  # no allowance
 
 
 def test_the_chunks_of_a_stream_are_its_samples_cut_once_per_block():
     # _rechunk: chunks of exactly ``chunk`` samples (the last shorter) whose concatenation
     # is the stream; a block many chunks long is copied once, not once per chunk (a path
     # planned as one block was copied again for every chunk cut from it: O(n²))
-    from cnc_interp.plan.optimal import _rechunk
+    from cnc_interp.plan.optimal.planner import _rechunk
 
     rng = np.random.default_rng(3)
     sizes = [1, 7, 2500, 3, 64, 0, 999, 5]
@@ -704,7 +710,7 @@ def test_the_chunks_of_a_stream_are_its_samples_cut_once_per_block():
 def test_a_windows_knots_are_the_clamped_breakpoints():
     # _knot_slice: t[j0 : j1] of the clamped knot vector (t_{i+3} = breakpoint i, three-fold
     # ends), read from the breakpoints it needs only
-    from cnc_interp.plan.feedprofile import FeedProfileBuilder
+    from cnc_interp.plan.optimal.profile import FeedProfileBuilder
     from cnc_interp.plan.vpop import JointTable
 
     p = line_path([0, 0, 0], [40.0, 0, 0], 83.3)
@@ -750,7 +756,7 @@ def test_a_windows_compiled_bookkeeping_is_numpys_arithmetic(seed):
     objective (``lp_objective``) and its solution's time (``lp_profile_time``), as numpy
     computes them (bit for bit but for sums numpy orders its own way), on curves of
     several segments."""
-    from cnc_interp.plan.feedprofile import FeedProfileBuilder
+    from cnc_interp.plan.optimal.profile import FeedProfileBuilder
     from cnc_interp.plan.vpop import JointTable
 
     from ._vpop_paths import random_curve
@@ -843,3 +849,57 @@ def test_step_limits_keep_the_shrink_and_the_rounding_margin():
     # positions so far out that float64 cannot resolve the jerk limit's step: refused
     with pytest.raises(PlanError, match="jerk limits are too small"):
         step_limits(m, 1e-5, 1e9)
+
+
+# -- the tunables: one frozen record, checked, recorded, passed down ------------------
+def test_a_tuning_is_checked_on_construction_and_frozen():
+    import dataclasses
+
+    from cnc_interp.errors import UsageError
+    from cnc_interp.plan.settings import OptimalOptions
+    from cnc_interp.plan.tuning import OptimalTuning
+
+    t = OptimalTuning()
+    for bad in ({"knot_time_s": -0.1}, {"crawl": float("nan")}, {"retry_depths": ()}, {"handover_back": (2, -6)}):
+        with pytest.raises(UsageError):
+            OptimalTuning(**bad)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        t.knot_time_s = 1.0  # type: ignore[misc]
+    with pytest.raises(UsageError):
+        OptimalOptions(tuning={"knot_time_s": 0.01})  # type: ignore[arg-type]
+    assert t.changed() == {} and OptimalTuning(commit_s=t.commit_s * 2).changed() == {"commit_s": t.commit_s * 2}
+
+
+def test_a_changed_tuning_is_recorded_with_the_settings_and_a_default_one_is_not():
+    import json
+
+    from cnc_interp.plan.settings import OptimalOptions, PlanSettings
+    from cnc_interp.plan.tuning import OptimalTuning
+
+    plain = PlanSettings(planner="optimal")
+    assert "tuning" not in plain.to_dict()["options"]
+    tuned = PlanSettings(planner="optimal", optimal=OptimalOptions(tuning=OptimalTuning(peak_share=np.inf, ccp_max=5)))
+    got = tuned.to_dict()["options"]["tuning"]
+    assert got == {"peak_share": np.inf, "ccp_max": 5}
+    json.dumps(tuned.to_dict())  # the record stays JSON-able
+
+
+def test_every_stage_reads_the_tuning_it_is_given():
+    # the builder, the time law's nodes, the refiner and the sampler's nodes take the
+    # tuning passed down (``_Path.tuning`` from ``OptimalOptions.tuning``), not a global
+    from cnc_interp.plan.optimal.context import _Path
+    from cnc_interp.plan.optimal.profile import FeedProfileBuilder
+    from cnc_interp.plan.optimal.refine import Refiner
+    from cnc_interp.plan.optimal.sampling import _Nodes, time_law
+    from cnc_interp.plan.settings import OptimalOptions, PlanSettings
+    from cnc_interp.plan.tuning import OptimalTuning
+
+    t = OptimalTuning(commit_s=0.25, knot_time_s=0.004, timelaw_nodes=3, refine_skip=0.5)
+    p = hermite_path(circle_fun(15.0, turns=0.6), 8, 150.0)
+    ctx = _Path(p, None, MILL, 0.001, PlanSettings(planner="optimal", optimal=OptimalOptions(tuning=t)))
+    assert ctx.tuning is t and Refiner(ctx.refine_problem(), ctx.tuning).tuning is t and _Nodes(t).tuning is t
+    b = FeedProfileBuilder(ctx.table, p, MILL, 0.001, ctx.tuning)
+    assert b.knot_time_s == t.knot_time_s and b.commit == max(8, int(np.ceil(t.commit_s / t.knot_time_s)))
+    knots = np.concatenate(([0.0] * 3, np.linspace(0.0, 10.0, 6), [10.0] * 3))
+    law = time_law(knots, np.full(knots.shape[0] - 4, 100.0), 0.0, 10.0, t)
+    assert law.s.shape[0] == 5 * t.timelaw_nodes + 1  # nodes per knot interval, plus the end

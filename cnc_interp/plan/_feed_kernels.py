@@ -1,4 +1,4 @@
-"""Numba kernels of the feed-profile LP (``feedprofile``).
+"""Numba kernels of the feed-profile LP (``optimal.profile``).
 
 * ``table_derivs``: q_s, q_ss, q_sss of a joint table (``vpop.JointTable``: knots ``S``,
   power coefficients ``C`` (m, 6, n) in s - S[p]) at sorted arc lengths;
@@ -6,13 +6,13 @@
   and second derivatives at sorted points (NURBS book, A2.3);
 * ``lp_rows``: the LP rows at the collocation points for one linearisation point;
 * ``lp_gather``, ``lp_take`` and ``lp_screen``: the rows of one LP with the fixed
-  coefficients moved to the right-hand side, and the row screening of ``feedprofile``;
+  coefficients moved to the right-hand side, and the row screening of ``optimal.profile``;
 * ``lp_objective`` and ``lp_profile_time``: a window LP's objective, and its solution's
   coefficients, next linearisation point and traversal time;
 * ``point_estimates`` and ``reach_envelope``: the knot placement's speed estimate, and
   ``knot_probes``: one block of the knot placement (its probes, their enveloped estimate
   and the knot spacing wanted there);
-* ``time_nodes``: the time law's node intervals (``timelaw``).
+* ``time_nodes``: the time law's node intervals (``optimal.sampling``).
 
 The profile is w(s) = ṡ² = Σ c_j B_j(s). Along the path, axis i has (Beudaert et al.
 2012, Eqs. 1-3, with ṡ = √w, s̈ = w'/2, s⃛ = √w w''/2)::
@@ -273,7 +273,7 @@ def _copy_point(x, q1, q2, q3, k, xv, p1, p2, p3, i):
 @njit(cache=True, nogil=True)
 def collocation(S, C, br, n_per, peaks, peak_g, share, joins, lim):
     """A window's collocation points and the joint derivatives there (see
-    ``feedprofile.FeedProfileBuilder._collocation``): ``n_per`` points per interval of
+    ``optimal.profile.FeedProfileBuilder._collocation``): ``n_per`` points per interval of
     the breakpoints br (K0,) and the last breakpoint; the path's q_sss peaks (sorted
     ``peaks`` (P,), max_i |q_sss,i| / J_i there ``peak_g``) inside, where that exceeds
     ``share`` times the points' either side; each segment join inside twice, with the
@@ -365,7 +365,7 @@ def join_derivs(S, C, xj, q1, q2, q3l, q3r):
 
 @njit(cache=True, nogil=True)
 def route_measures(S, C, FB, FV, vmax, amax, jmax, speed_share):
-    """The optimal planner's route test on a joint table (``optimal._route``), at its
+    """The optimal planner's route test on a joint table (``optimal.route._route``), at its
     knots and piece midpoints x: the share of the length where the curvature speed
     (√(amax/|q_ss|), ∛(jmax/|q_sss|), least over the axes) is below ``speed_share`` of
     the cap (the feed FV over breaks FB, vmax/|q_s|), and the duration (s) at the least
@@ -446,7 +446,7 @@ def point_estimates(S, C, x, inp, out):
     """The knot placement's speed estimate at sorted arc lengths x (K,) into ``out``
     (``Estimates``): the least of the axis speeds and the feed, the static acceleration
     and jerk speeds (times ``inp.acc_f2``, ``inp.jerk_f2``) and the sampled start and
-    stop from rest at either end (``feedprofile.FeedProfileBuilder._raw_estimate``)."""
+    stop from rest at either end (``optimal.profile.FeedProfileBuilder._raw_estimate``)."""
     K = x.shape[0]
     n = C.shape[2]
     q1 = np.empty((K, n))
@@ -513,7 +513,7 @@ def reach_envelope(x, w, at, jt, acc_factor, jerk_f2, carry_x, carry_w, out):
     by 2 A ds) and a jerk-limited ramp (``jerk_f2`` times the largest ``jt``; w^3/4 grows
     by 2.12 √J ds, exact from rest) reach from the other points, both ways. A finite
     ``carry_x`` is a point (carry_x, carry_w) before x[0]: the envelope's last value of
-    the block before (``feedprofile.FeedProfileBuilder._envelope``)."""
+    the block before (``optimal.profile.FeedProfileBuilder._envelope``)."""
     K = x.shape[0]
     A = 0.0
     J = 0.0
@@ -616,7 +616,7 @@ def _copy_estimate(out, k, e, i):
 #: what ``knot_probes`` reads besides the table and the estimate's inputs: the factors
 #: of ``reach_envelope``, the knot spacing's time (s) and geometric constant, the least
 #: spacing at either end (mm), the probe rounds and the points 2^-k of motion from the
-#: path's ends (``feedprofile.FeedProfileBuilder._knot_blocks``)
+#: path's ends (``optimal.profile.FeedProfileBuilder._knot_blocks``)
 KnotInputs = namedtuple("KnotInputs", "acc_factor jerk_f2 knot_time knot_geo hmin0 hmin1 rounds geo")
 
 
@@ -663,7 +663,7 @@ def knot_probes(S, C, inp, kin, p0, p1, p2, carry_x, carry_w, known_x, known_e):
     ``known_x``, points among this block's first probes (the last block's look-ahead).
     Returns the probes x (K,), their enveloped speed² w (K,) and knot spacing h (K,), mm,
     and the look-ahead's points and estimates. The arithmetic is numpy's of
-    ``feedprofile``'s placement before it was compiled, bit for bit."""
+    ``optimal.profile``'s placement before it was compiled, bit for bit."""
     L = inp.L
     a = S[p0]
     b = S[p1]
@@ -733,7 +733,7 @@ def knot_probes(S, C, inp, kin, p0, p1, p2, carry_x, carry_w, known_x, known_e):
 
 @njit(cache=True, nogil=True)
 def feasible_hat(p, dp, ddp, q1, q2, q3, lim, target, floor, bound, bisections, out):
-    """``feedprofile.FeedProfileBuilder._feasible_hat`` at K points: the previous window's
+    """``optimal.profile.FeedProfileBuilder._feasible_hat`` at K points: the previous window's
     solution p and its first two derivatives (K,), the joint derivatives q1..q3 (K, n)
     there, the ``AxisLimits`` lim (jerk limits as the LP uses them), the wanted
     linearisation points ``target`` (K,), the least one ``floor``, the jerk rows' share

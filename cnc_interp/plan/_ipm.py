@@ -4,7 +4,7 @@
 
 Every row of A touches at most ``W`` consecutive variables: row r is
 ``sum_k coef[r, k] * x[first[r] + k] <= b[r]`` (k < W; ``first[r] + W <= n``, unused
-entries zero). The feed-profile LP of ``optimal_ref`` has this shape (a B-spline's
+entries zero). The feed-profile LP of ``optimal.profile`` has this shape (a B-spline's
 basis functions overlap on ``W = degree + 1`` coefficients), so the Newton system
 ``A^T D A`` is a band matrix of half-width ``W - 1`` and one iteration costs
 O(rows · W² + n · W²): the solve is linear in the length of the path.

@@ -21,7 +21,7 @@ two band solves per step. The negative part of the rows' curvature is dropped (a
 Gauss–Newton-like matrix, always positive definite), and every iterate stays strictly
 inside (u > 0): the method never leaves the region where the barrier is defined.
 
-``shorten`` is one visit of a window (``refine.Refiner.window``): one fewer sample at a time,
+``shorten`` is one visit of a window (``optimal.refine.Refiner.window``): one fewer sample at a time,
 each solve followed by ``exact_ok``, while the tries succeed; a try starts from the window
 retimed so that each period gives up time in proportion to its room (``_room_shares``,
 ``_start``). ``loose`` and ``dip_or_end`` are the refinement's tests of which windows to
@@ -564,7 +564,7 @@ def _start(cur, share, m):
 
 @njit(cache=True, nogil=True)
 def shorten(prob, sh, qh, a, b, max_cut, max_newton, counts):
-    """One window visit of ``refine.Refiner.window`` on the ``RefineProblem`` prob:
+    """One window visit of ``optimal.refine.Refiner.window`` on the ``RefineProblem`` prob:
     samples a..b-1 of (sh, qh) (1 <= a, b < len(sh)) with one fewer at a time
     (``solve_window``, then ``exact_ok`` with the three samples after the window, rest at L
     past the end) while each try succeeds, at most ``max_cut``. Returns (dropped, solves, x, qx): the last
@@ -620,7 +620,7 @@ def shorten(prob, sh, qh, a, b, max_cut, max_newton, counts):
 
 @njit(cache=True, nogil=True)
 def loose(sh, qh, a, b, moving, lim, fdt, skip):
-    """``refine.Refiner.loose`` with numpy's arithmetic: has some sample of the window
+    """``optimal.refine.Refiner.loose`` with numpy's arithmetic: has some sample of the window
     a..b-1 every limit ratio below ``skip`` (velocity, acceleration and jerk of the moving
     axes against lim (3, n), the step against the feed fdt)? Needs the three samples before a (copies of the
     first sample at the path's start)."""
@@ -647,7 +647,7 @@ def loose(sh, qh, a, b, moving, lim, fdt, skip):
 
 @njit(cache=True, nogil=True)
 def dip_or_end(sh, la, b, W, done, dip):
-    """The targeted refinement's window test (``optimal._refined``): does the window
+    """The targeted refinement's window test (``optimal.refine._refined``): does the window
     la..b-1 hold the path's start, its end (``done``: no sample follows the buffer), or a
     step below ``dip`` times the largest step within W samples around?"""
     N = sh.shape[0]

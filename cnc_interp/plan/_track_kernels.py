@@ -9,7 +9,7 @@ collocation points, and sampled — the nearest allowed position is taken instea
 (``vpop.step._search`` on the per-axis intervals). An empty allowed set is reported
 to the caller (``STUCK``), which then lowers the reference locally and retries.
 
-Reference nodes (s, t, v, a) come from ``timelaw.TimeLaw.nodes``; between nodes s(t) is the
+Reference nodes (s, t, v, a) come from ``optimal.sampling.TimeLaw.nodes``; between nodes s(t) is the
 quintic Hermite interpolant of (s, v, a).
 """
 

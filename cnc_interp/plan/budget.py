@@ -76,7 +76,7 @@ def table_bytes(paths, n_axes: int) -> tuple[float, object]:
     """A lower bound (bytes) of the memory VPOp's joint table of the longest of ``paths``
     needs while it is built, and that path (None without paths): it has at least one piece
     per ``VPOP_TABLE_MAX_PIECE`` of the path's arc length."""
-    from .vpop.table import VPOP_TABLE_MAX_PIECE
+    from .joint_table import VPOP_TABLE_MAX_PIECE
 
     longest = max(paths, key=lambda p: float(p.length), default=None)
     if longest is None:

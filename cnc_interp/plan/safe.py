@@ -157,7 +157,7 @@ def plan_path_safe(
     the same table exactly; by default the path's own ``JointTable``."""
     from .step_limits import position_scale, step_limits
     from .verify import verify_arrays
-    from .vpop import JointTable, _eval_table, _positions
+    from .joint_table import JointTable, _eval_table, _positions
 
     if path.rapid:
         joint_map = None

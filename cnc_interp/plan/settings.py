@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any
 
 from ..constants import DEFAULT_DT_S
 from ..errors import UsageError
+from .tuning import OptimalTuning
 
 if TYPE_CHECKING:
     from ..machine.model import Machine
@@ -28,21 +29,23 @@ class OptimalOptions:
     Attributes:
         effort: how much planning time buys cycle time (``OPTIMAL_EFFORTS``).
             ``"fast"``: the feed profile sampled exactly, unrefined at fine periods (below
-            ``OPT_FULL_REFINE_DT``), one pass of window refinement at coarse ones.
+            ``OptimalTuning.full_refine_dt``), one pass of window refinement at coarse ones.
             ``"normal"`` (``None``): every window refined at coarse periods; at fine ones
             the profile's dips and ends while that pays (the pause rule). ``"max"``:
             every window of every path refined at every period.
         route: ``"profile"`` (the feed-profile LP) or ``"vpop"`` for every path;
-            ``None``: the planner chooses per path (``OPT_ROUTE_*``).
+            ``None``: the planner chooses per path (``OptimalTuning.route_*``).
         refine_passes: passes of the window refinement over the sampled plan (default: by
             ``effort``); it overrides the effort's number of passes, not which windows.
         compare_s: a profile-routed path whose rough duration is at most this long, s, is
             planned whole (one LP window when short), and also by VPOp, the shorter plan
             kept, when the profile got stuck before its end or needed many dips (default
-            ``OPT_COMPARE_SAMPLES`` periods); 0: neither (every sample then depends on at
+            ``OptimalTuning.compare_samples`` periods); 0: neither (every sample then depends on at
             most one profile window ahead).
-        chunk_samples: samples per streamed chunk (default ``OPT_CHUNK``; the plan does
-            not depend on it).
+        chunk_samples: samples per streamed chunk (default ``OPTIMAL_CHUNK``; the plan
+            does not depend on it).
+        tuning: the planner's internal tunables (``OptimalTuning``; tests and benchmarks
+            set them, a user sets the knobs above).
     """
 
     effort: str | None = None
@@ -50,8 +53,11 @@ class OptimalOptions:
     refine_passes: int | None = None
     compare_s: float | None = None
     chunk_samples: int | None = None
+    tuning: OptimalTuning = field(default_factory=OptimalTuning)
 
     def __post_init__(self) -> None:
+        if not isinstance(self.tuning, OptimalTuning):
+            raise UsageError(f"optimal tuning must be an OptimalTuning, got {type(self.tuning).__name__}")
         if self.effort not in (None, *OPTIMAL_EFFORTS):
             raise UsageError(f"optimal effort must be one of {OPTIMAL_EFFORTS}, got {self.effort!r}")
         if self.route not in (None, *OPTIMAL_ROUTES):
@@ -111,6 +117,8 @@ class Paper000Options:
                 raise UsageError(f"{name} out of range: {v!r}")
 
 
+#: samples per chunk the optimal planner streams (``OptimalOptions.chunk_samples``)
+OPTIMAL_CHUNK = 4096
 #: ``optimal``'s routes (``OptimalOptions.route``)
 OPTIMAL_ROUTES = ("profile", "vpop")
 #: ``optimal``'s planning efforts (``OptimalOptions.effort``, ``--effort``)
@@ -191,7 +199,10 @@ class PlanSettings:
             default = type(group)()
             for f in fields(group):
                 v = getattr(group, f.name)
-                if v != getattr(default, f.name):
+                if isinstance(v, OptimalTuning):
+                    if v.changed():
+                        out["tuning"] = v.changed()
+                elif v != getattr(default, f.name):
                     out[prefix + f.name] = v
         return out
 

@@ -25,11 +25,13 @@ collected.
 
 The package, one concept a module:
 
-* ``table``: the joint table (``JointTable``) and its tolerances;
 * ``step``: the step loop (numba), its argument bundles and its state;
 * ``drive``: the compiled driver, the identity preparation and the batch of paths;
 * ``planner``: the Python planner on top (``plan_path_vpop``, ``iter_path_plan_vpop``,
   ``plan_many_vpop``, ``VpopRun``).
+
+The joint table the step loop follows (``JointTable``) is ``plan.joint_table``, shared
+with the optimal and the safe planners.
 
 Importing the package imports neither numba nor the kernels (``step``, ``drive``):
 they load when a path is planned.
@@ -54,7 +56,7 @@ from .planner import (
     plan_many_vpop,
     plan_path_vpop,
 )
-from .table import (
+from ..joint_table import (
     _GL_W,
     _GL_X,
     VPOP_TABLE_GL_ORDER,

@@ -14,7 +14,7 @@ from ...constants import VPOP_LIMIT_SHRINK, VPOP_MIN_LENGTH, VPOP_ROUNDING_ULPS
 from ...errors import PlanError
 from ..base import PathPlan, collect_path_plan
 from ..step_limits import position_scale, step_limits
-from .table import (
+from ..joint_table import (
     _GL_W,
     _GL_X,
     VPOP_TABLE_MAX_PIECE,

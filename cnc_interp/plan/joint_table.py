@@ -1,16 +1,19 @@
-"""VPOp's joint table: the joint positions along a path as quintic Hermite pieces in
-arc length (``JointTable``), built to ``VPOP_TABLE_TOL`` of the true path.
+"""The joint table every sampled planner follows: the joint positions along a path as
+quintic Hermite pieces in arc length (``JointTable``), built to ``VPOP_TABLE_TOL`` of the
+true path.
 
-The knots are exact path points and the last one is the exact programmed end; the
-compiled build for identity kinematics is ``plan._table_kernels`` (through
-``drive.prepare_identity``), the build through a joint map is here.
+VPOp, the optimal planner and the safe planner sample the same table (so that one
+planner can finish another's plan exactly); it lives outside each of them so that none
+imports another for it. The knots are exact path points and the last one is the exact
+programmed end; the compiled build for identity kinematics is ``plan._table_kernels``
+(through ``vpop.drive.prepare_identity``), the build through a joint map is here.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ...errors import PlanError
+from ..errors import PlanError
 
 #: largest deviation of VPOp's arc-length joint table from the true path (mm or deg)
 VPOP_TABLE_TOL = 1e-9
@@ -56,7 +59,7 @@ _GL_X, _GL_W = np.polynomial.legendre.leggauss(VPOP_TABLE_GL_ORDER)
 
 
 def _kernels():
-    from .. import _table_kernels
+    from . import _table_kernels
 
     return _table_kernels
 

@@ -1,4 +1,4 @@
-"""The feed profile: a near-time-optimal w(s) = ṡ² along one path, as linear programs.
+"""Feed profile LP: a near-time-optimal w(s) = ṡ² along one path, as linear programs.
 
 ``FeedProfileBuilder(table, path, machine, dt_s).windows()`` yields the profile piece by
 piece (``FeedPiece``: a cubic B-spline of w on [s0, s1]). Each piece comes from a
@@ -9,26 +9,26 @@ collocation points, the segments' feeds, and w = 0 at the ends. The jerk bound i
 not convex; the convex-concave procedure of ``_feed_kernels`` makes it a few LPs,
 solved by the banded interior-point method of ``_ipm``.
 
-Knots: a spacing of ``FEED_KNOT_TIME_S`` of motion at an estimated speed (static
+Knots: a spacing of ``tuning.knot_time_s`` of motion at an estimated speed (static
 limits of velocity, curvature and jerk, and the sampled start and stop near the ends)
-and at most ``FEED_KNOT_GEO`` of the geometry's length scale, placed by counting
+and at most ``tuning.knot_geo`` of the geometry's length scale, placed by counting
 ∫ ds / spacing from the path's start, block by block of the joint table: a knot
 depends only on the path up to it (and the end region on the end).
 
-Windows: ``FEED_COMMIT_S`` of motion plus two braking times; each fixes the
+Windows: ``tuning.commit_s`` of motion plus two braking times; each fixes the
 coefficients the committed part uses, ends at rest (w = 0: a brake-safe end, the
 window's solution can always stop) and commits all but the braking part. The profile on
 [0, s] therefore depends only on the path up to s plus one window: the streaming
-contract of ``optimal.iter_path_plan``. Past its committed part, a window's first LP is
-linearised at the estimate lowered to the previous window's level (``FEED_EST_RATIO_MIN``),
+contract of ``iter_path_plan_optimal``. Past its committed part, a window's first LP is
+linearised at the estimate lowered to the previous window's level (``tuning.est_ratio_min``),
 and where the previous window brakes for its terminal rest, only as far towards it as
 leaves that solution within the rows (``_feasible_hat``): the previous solution, then
 rest, is a feasible point of the LP. Should it still have no solution (round-off), the
 window is solved again linearised at the previous window's whole solution (``_solve``).
 
-Collocation: ``FEED_COLLOCATION`` points per knot interval, plus the path's segment
+Collocation: ``tuning.collocation`` points per knot interval, plus the path's segment
 joins, where q_sss jumps (paths are G2): there both one-sided values are imposed; plus
-the places between them where q_sss peaks (``jerk_peak_points``, ``FEED_PEAK_SHARE``).
+the places between them where q_sss peaks (``jerk_peak_points``, ``tuning.peak_share``).
 
 Sampled start and stop: a sampled plan may start with an acceleration of up to J dt
 (its first third difference is the jerk limit), so w'(0) <= 2 J_t dt and
@@ -42,124 +42,12 @@ from typing import NamedTuple
 
 import numpy as np
 
-from . import _feed_kernels as K
-from ._ipm import OK as LP_OK, lp_solve
+from .. import _feed_kernels as K
+from .._ipm import OK as LP_OK, lp_solve
+from ..tuning import OptimalTuning
 
-#: knot spacing in time of motion at the estimated speed, s (the profile's resolution)
-FEED_KNOT_TIME_S = 0.006
-#: knot spacing at most this share of the geometry's length scales (radius of curvature,
-#: and that of q_sss): a rounded corner gets several knots, a CAM path's short features
-#: several where the jerk binds (fewer places where the exact sampler gets stuck). 0.35
-#: (0.5 before for curvature, and for q_sss where the jerk did not bind): at --effort fast,
-#: LinuxCNC's XYZ machine (jerk out of the way) zigzag_0.002_0.001 34.217 ->
-#: 33.754 s, stellabee-kink-test -1.0 %, stellabee-violation-spirals -1.0 %; the axis_mm.ini
-#: sweep's cycle the same (+0.003 %) and its planning time too; 0.3 gained 0.07 % more
-#: there for 6 % more CPU
-FEED_KNOT_GEO = 0.35
-#: collocation points per knot interval (constraints are imposed there; 2 before: three
-#: leave fewer stuck places for the sampler, the same 139 paths 20 % less planning CPU)
-FEED_COLLOCATION = 3
-#: ... and a point of its own where the path's q_sss peaks between them: each inner break
-#: of the joint table and each piece's vertex of q_sss whose max_i |q_sss,i| / J_i exceeds
-#: the collocation points' either side by more than this share. G1 contours' fitted
-#: q_sss bumps inside their segments (~0.01 mm wide), and a profile met at three points
-#: per knot interval broke the jerk limit by up to 35 % between them (44 % on
-#: generic-mill, line-contouring-xz's path to line 51; now 3 %): the sampler
-#: clamped a third of line-contouring-xz's samples and VPOp took over 33 of its 43 paths.
-#: With them (axis_mm.ini, fast): line-contouring-xz 89.72 -> 88.54 s of cycle for 45 %
-#: less CPU, the sweep -0.29 % (stellabee1 -60 s) for 4 % less CPU. On line-contouring-xz
-#: 0.1 gained a fifth of that (89.51 s) and 0.05 88.79 s; -0.1 88.33 s, but it cost
-#: zigzag_0.002_0.001 0.25 % of cycle and 25 % more CPU
-FEED_PEAK_SHARE = 0.0
-#: a window commits this much motion (estimated) and looks two braking times further, s
-#: (0.5 before: on axis_mm.ini, whose braking part is ~62 knots, the windows of
-#: zigzag_0.002_0.001 then solved every knot 1.7 times; at 1.0, 1.4 times: its LP work
-#: (rows x iterations) -23 %, stellabee1's the same (most of its paths are one window),
-#: the fast sweep's cycle -0.002 %. 1.5: zigzag's LP work -28 % and 15 % less CPU than at
-#: 1.0, but the LinuxCNC comparison's zigzag +0.4 % at fast (33.997 s against 33.860 s) and
-#: stellabee-kink-test +0.02 %; 2.0: stellabee-kink-test +0.8 %)
-FEED_COMMIT_S = 1.0
-#: iterations of the convex-concave procedure, and the relative change of the traversal
-#: time below which it stops (1e-3 before: a third LP for < 1 % of the profile's time
-#: changed no period of benchmarks/optimality.py; the corpus +0.003 %, 10 % less planning)
-FEED_CCP_MAX = 3
-FEED_CCP_TOL = 1e-2
-#: ... when a window is solved again linearised at the previous window's whole solution
-#: (``_solve``): its rows then allow w up to about three times that solution's near its
-#: terminal rest, and each iteration can triple it again, so it takes more iterations to
-#: climb out of that rest (with FEED_CCP_MAX the profile crawls there)
-FEED_CCP_MAX_RESTART = 12
-#: the estimated speed of the knot placement may exceed the static limits by these
-#: factors (the dynamic terms can cancel the static ones: measured up to ~1.6 at the
-#: tips of the paper-001 trident)
-FEED_EST_ACC_FACTOR = 1.5
-FEED_EST_JERK_FACTOR = 2.0
-#: the time weights ŵ^-3/2 of the objective use ŵ >= this share of the estimate at the
-#: point: where the profile must reach zero (a window's terminal rest) or an iterate
-#: dipped, the weights would otherwise dwarf the rest of the objective below the
-#: solver's tolerance
-FEED_WEIGHT_FLOOR = 0.01
-#: interior-point iterations per LP and its tolerance (scaled problem; 1e-6 before: 11.3
-#: iterations per solve on stellabee1's paths, 8.6 at 1e-4, the profile's time changing
-#: far less than the convex-concave steps move it: benchmarks/optimality.py's periods
-#: within ±2 at every effort, the corpus sweep's cycle within 0.05 %)
-FEED_LP_MAX_ITER = 150
-FEED_LP_TOL = 1e-4
-#: ... and at most this many for a window's first LP, linearised at the estimate: the
-#: solver has no infeasibility test, and such an LP without a solution (the window is then
-#: solved again from the previous one's, ``_solve``) ran to FEED_LP_MAX_ITER, 2.5 of
-#: zigzag_0.002_0.001's 6.9 CPU-s on axis_mm.ini; those that solve took at most 23
-#: iterations over five corpus programs' 650 windows (median 9)
-FEED_LP_FIRST_MAX_ITER = 50
-#: acceleration and jerk limits used by the LP, relative (the sampler checks the exact
-#: ones; the LP's collocation leaves small excursions between its points). Velocity and
-#: feed bound w directly and are used whole.
-FEED_LIMIT_SHARE = 0.998
-#: after the first LP of a window, only rows whose slack at the current solution is
-#: at most 1 - this of their scale (max(|b|, 1): the limit rows' bound before the fixed
-#: coefficients moved to the right-hand side) take part; rows left out are checked after
-#: each solve and added back if violated (the answer is the same, the solve smaller).
-#: By slack, not by value >= this share of |b| as before: rows with b <= 0 (coefficients
-#: >= 0, the window's terminal rest, rows the fixed coefficients shifted) were then left
-#: out while their slack was ~0, and one of them violated cost a solve from scratch:
-#: zigzag_0.002_0.001 (axis_mm.ini) 3.0 -> 1.3 solves per screened LP
-FEED_ROW_SCREEN = 0.3
-#: solves per LP at most with screened rows: the last one takes every row (with the
-#: screen by slack, zigzag_0.002_0.001's LPs needed at most two)
-FEED_SCREEN_ROUNDS = 4
-#: a path of at most this many knot intervals is solved as one window (``windows``)
-FEED_WHOLE_KNOTS = 1500
-#: a window's first LP is linearised past the committed part at the estimate times the
-#: previous window's ratio of its solution to the estimate (median over what it committed),
-#: at most 1 and at least this: the estimate is static limits inflated and lies well above
-#: the solution on CAM paths (w ratio ~0.2 on axis_mm.ini, ~0.4 on the LinuxCNC comparison's
-#: machine; the tangent rows of a point linearised that high hold the jerk ~2x too tight
-#: there, and the committed state often could not brake under them). zigzag_0.002_0.001
-#: on axis_mm.ini, fast: 151 -> 79 windows solved again, 64k -> 40k LP iterations, cycle
-#: 120.4 -> 118.8 s; the sweep's cycle -0.1 % (its planning time within the machine's
-#: noise). The floor only keeps a crawling window's ratio from pinning the next window's
-#: rows near zero
-FEED_EST_RATIO_MIN = 0.05
-#: ... and a ratio above this counts as 1: the estimate is then right (a line's feed), and
-#: a lower point only moves where the convex-concave steps stop within FEED_CCP_TOL (a
-#: 100 mm line at ratios 0.994, 0.993: 0.15 % slower than its S-curve); the corpus's
-#: ratios are 0.13-0.62
-FEED_EST_RATIO_KEEP = 0.9
-#: table pieces per block of the knot placement
-FEED_KNOT_BLOCK = 256
 #: rounds of probes added where they are further apart than a quarter of the spacing wanted
 _KNOT_ROUNDS = 3
-#: where the previous window brakes, a window's first LP is linearised at most so far
-#: from the estimate that the previous solution keeps this share of each jerk row's
-#: bound free (``_feasible_hat``; it met them to the solver's tolerance, FEED_LP_TOL).
-#: Before, the rows there were linearised at the estimate: a third of
-#: zigzag_0.002_0.001's windows had no solution under them (their first LP ran to
-#: FEED_LP_FIRST_MAX_ITER) and were solved again from the previous solution, crawling out
-#: of its rest. Now 0 of 271: on axis_mm.ini, fast, its cycle 118.84 -> 114.51 s and its
-#: planning 4.5 -> 2.2 s; 1e-2 and 1e-4 gave 114.57 and 114.49 s
-FEED_HAT_MARGIN = 1e-3
-
-
 #: bisection steps of ``_feasible_hat`` (the interval shrinks 2^-30: far below what moves
 #: the LP's rows)
 _HAT_BISECTIONS = 30
@@ -251,15 +139,18 @@ class FeedProfileBuilder:
         path,
         machine,
         dt_s: float,
-        limit_share: float = FEED_LIMIT_SHARE,
+        tuning: OptimalTuning | None = None,
+        limit_share: float | None = None,
         whole: bool = False,
-        knot_time_s: float = FEED_KNOT_TIME_S,
+        knot_time_s: float | None = None,
     ):
-        self.knot_time_s = float(knot_time_s)
+        #: the planner's tunables (``OptimalTuning``; default: the defaults)
+        self.tuning = tuning = OptimalTuning() if tuning is None else tuning
+        self.knot_time_s = float(tuning.knot_time_s if knot_time_s is None else knot_time_s)
         self.L = float(table.length)
         self.dt = float(dt_s)
         self.n = table.C.shape[2]
-        share = float(limit_share)
+        share = float(tuning.limit_share if limit_share is None else limit_share)
         # velocity and feed are bounds on w itself, exact at every point: only the shrink
         # every planner keeps; acceleration and jerk get the collocation's margin
         keep = 1.0 - 1e-9
@@ -277,7 +168,7 @@ class FeedProfileBuilder:
             self.joins = np.unique(self.S[np.clip(near, 1, self.S.shape[0] - 2)])
         else:
             self.joins = np.zeros(0)
-        # where q_sss may peak between collocation points (FEED_PEAK_SHARE; joins are
+        # where q_sss may peak between collocation points (tuning.peak_share; joins are
         # collocated anyway), and max over the moving axes of |q_sss| / J there
         self.peaks = np.setdiff1d(jerk_peak_points(self.S, self.C, self.moving), self.joins)
         self.peak_g = np.empty(self.peaks.shape[0])
@@ -301,18 +192,17 @@ class FeedProfileBuilder:
             self.jmax,
             np.ascontiguousarray(self.feed_breaks),
             np.ascontiguousarray(self.feed_values),
-            FEED_EST_ACC_FACTOR**2,
-            FEED_EST_JERK_FACTOR**2,
+            self.tuning.est_acc_factor**2,
+            self.tuning.est_jerk_factor**2,
             self.hmin0,
             self.hmin1,
             self.dt,
             self.L,
         )
-        # window length in intervals: FEED_WINDOW_S of motion, four braking times
         t_brake = float(np.max(np.minimum(self.vmax, np.max(self.feed_values)) / self.amax + self.amax / self.jmax))
-        # window: a committed part of FEED_COMMIT_S of motion, then two braking times for
+        # window: a committed part of tuning.commit_s of motion, then two braking times for
         # the terminal rest to stay out of it
-        self.commit = max(8, int(np.ceil(FEED_COMMIT_S / self.knot_time_s)))
+        self.commit = max(8, int(np.ceil(self.tuning.commit_s / self.knot_time_s)))
         self.brake = int(np.ceil(2.0 * t_brake / self.knot_time_s)) + 8
         self.window = self.commit + self.brake
         # incremental knot placement state
@@ -369,10 +259,10 @@ class FeedProfileBuilder:
     def _knot_inputs(self):
         """``_feed_kernels.KnotInputs`` of this path."""
         return K.KnotInputs(
-            FEED_EST_ACC_FACTOR,
-            FEED_EST_JERK_FACTOR**2,
+            self.tuning.est_acc_factor,
+            self.tuning.est_jerk_factor**2,
             self.knot_time_s,
-            FEED_KNOT_GEO,
+            self.tuning.knot_geo,
             self.hmin0,
             self.hmin1,
             _KNOT_ROUNDS,
@@ -380,7 +270,7 @@ class FeedProfileBuilder:
         )
 
     def _knot_blocks(self):
-        """The knot placement, one block of FEED_KNOT_BLOCK table pieces after the other:
+        """The knot placement, one block of tuning.knot_block table pieces after the other:
         yields (breakpoints placed in the block (list), its probes x (K,), their enveloped
         speed² w (K,), last block?); ``_extend_knots`` takes them as the windows need.
         The probes of a block and the spacing wanted there are ``_feed_kernels.knot_probes``'s;
@@ -391,8 +281,8 @@ class FeedProfileBuilder:
         p0, cum0, carry = 0, 0.0, (np.inf, 0.0)
         known = (np.zeros(0), self._raw_estimate(np.zeros(0)))  # the last look-ahead's estimates
         while True:
-            p1 = min(p0 + FEED_KNOT_BLOCK, m)
-            p2 = min(p1 + FEED_KNOT_BLOCK, m)
+            p1 = min(p0 + self.tuning.knot_block, m)
+            p2 = min(p1 + self.tuning.knot_block, m)
             probe, w, h, *known = K.knot_probes(S, self.C, self._est_in, kin, p0, p1, p2, *carry, *known)
             carry = (float(probe[-1]), float(w[-1]))
             brk, cum0 = K.knot_breaks(probe, h, cum0, L)
@@ -441,13 +331,13 @@ class FeedProfileBuilder:
         fixed = np.zeros(0)  # coefficients b0 .. b0+2 (committed), global indices
         prev = None  # the previous window's whole solution (``_Window``)
         # when the caller holds the whole path (``whole``), one of at most
-        # FEED_WHOLE_KNOTS intervals is one window: windows overlap by their braking part
+        # tuning.whole_knots intervals is one window: windows overlap by their braking part
         # (about as long again as what they commit) and each costs a few LPs, so on a
         # short path one LP over everything is cheaper, and its optimum is the whole
         # path's (a streaming caller keeps the windows: bounded look-ahead)
         if self.whole:
-            self._breaks_upto(FEED_WHOLE_KNOTS + 1)
-            if self.knots_done and len(self._br) - 1 <= FEED_WHOLE_KNOTS:
+            self._breaks_upto(self.tuning.whole_knots + 1)
+            if self.knots_done and len(self._br) - 1 <= self.tuning.whole_knots:
                 self.window = max(self.window, len(self._br) - 1)
         while True:
             self._breaks_upto(b0 + self.window + 4)
@@ -482,19 +372,27 @@ class FeedProfileBuilder:
 
     def _collocation(self, b0, b1):
         """The collocation points of the window [b0, b1] and the joint derivatives there
-        (``_feed_kernels.collocation``): FEED_COLLOCATION per knot interval, the points
-        where q_sss peaks (FEED_PEAK_SHARE) and both sides of each segment join. Returns
+        (``_feed_kernels.collocation``): tuning.collocation per knot interval, the points
+        where q_sss peaks (tuning.peak_share) and both sides of each segment join. Returns
         x (K,) and q1, q2, q3 (K, n)."""
         br = np.asarray(self._br[b0 : b1 + 1])
         limits = K.AxisLimits(self.moving, self.amax, self.jmax)
         return K.collocation(
-            self.S, self.C, br, FEED_COLLOCATION, self.peaks, self.peak_g, 1.0 + FEED_PEAK_SHARE, self.joins, limits
+            self.S,
+            self.C,
+            br,
+            self.tuning.collocation,
+            self.peaks,
+            self.peak_g,
+            1.0 + self.tuning.peak_share,
+            self.joins,
+            limits,
         )
 
     def _ratio(self, tk, coef, b0, bc) -> float:
         """The median ratio of the solution (knots ``tk``, ``coef``) to the estimate at the
-        midpoints of the committed knot intervals b0..bc: at least FEED_EST_RATIO_MIN, 1
-        above FEED_EST_RATIO_KEEP."""
+        midpoints of the committed knot intervals b0..bc: at least tuning.est_ratio_min, 1
+        above tuning.est_ratio_keep."""
         xs = np.asarray(self._br[b0 : bc + 1])
         xs = 0.5 * (xs[1:] + xs[:-1])
         w = spline_values(tk, coef, np.clip(xs, tk[3], tk[-4]))
@@ -503,7 +401,7 @@ class FeedProfileBuilder:
         if not ok.any():
             return 1.0
         ratio = float(np.median(w[ok] / est[ok]))
-        return 1.0 if ratio > FEED_EST_RATIO_KEEP else max(ratio, FEED_EST_RATIO_MIN)
+        return 1.0 if ratio > self.tuning.est_ratio_keep else max(ratio, self.tuning.est_ratio_min)
 
     def _solve(self, b0, b1, at_end, fixed, prev):
         """The LPs of the window [b0, b1]: coefficients b0 .. b1+2, their knots, iterations.
@@ -517,12 +415,14 @@ class FeedProfileBuilder:
         """
         try:
             s_brake = None if prev is None else prev.s_brake
-            return self._solve_from(b0, b1, at_end, fixed, prev, s_brake, FEED_CCP_MAX, FEED_LP_FIRST_MAX_ITER)
+            return self._solve_from(
+                b0, b1, at_end, fixed, prev, s_brake, self.tuning.ccp_max, self.tuning.lp_first_max_iter
+            )
         except ProfileError:
             if prev is None:
                 raise
             self.restarts += 1
-            return self._solve_from(b0, b1, at_end, fixed, prev, prev.s_end, FEED_CCP_MAX_RESTART)
+            return self._solve_from(b0, b1, at_end, fixed, prev, prev.s_end, self.tuning.ccp_max_restart)
 
     def _feasible_hat(self, prev, x, q1, q2, q3, target, floor):
         """Linearisation points (K,) at the sorted x (K,) where the previous window brakes:
@@ -531,19 +431,24 @@ class FeedProfileBuilder:
         With E_i the jerk's linear part at p (``_feed_kernels``), p meets the row of axis i
         linearised at ŵ when h(ŵ) = e √ŵ + p / (3 ŵ) <= 1, e = max_i |E_i| / (3/2 J_i);
         h(p) <= 1 is p's own jerk bound, and h is convex in √ŵ, so the allowed ŵ form an
-        interval around p: the target where h(target) <= 1 - FEED_HAT_MARGIN, else its end
+        interval around p: the target where h(target) <= 1 - tuning.hat_margin, else its end
         towards the target (bisection in √ŵ), else p. ``q1``..``q3`` (K, n) are the joint
         derivatives at x; ``floor`` (mm²/s²) the least ŵ.
         """
         p, dp, ddp = spline_derivs(prev.knots, prev.coef, np.clip(x, prev.knots[3], prev.knots[-4]))
         out = np.empty(x.shape[0])
         limits = K.AxisLimits(self.moving, self.amax, self.jmax)
-        K.feasible_hat(p, dp, ddp, q1, q2, q3, limits, target, floor, 1.0 - FEED_HAT_MARGIN, _HAT_BISECTIONS, out)
+        K.feasible_hat(
+            p, dp, ddp, q1, q2, q3, limits, target, floor, 1.0 - self.tuning.hat_margin, _HAT_BISECTIONS, out
+        )
         return out
 
-    def _solve_from(self, b0, b1, at_end, fixed, prev, s_prev, ccp_max, first_max_iter=FEED_LP_MAX_ITER):
+    def _solve_from(self, b0, b1, at_end, fixed, prev, s_prev, ccp_max, first_max_iter: int | None = None):
         """``_solve`` with the rows linearised at ``prev`` up to ``s_prev``; the first LP
-        gets at most ``first_max_iter`` interior-point iterations."""
+        gets at most ``first_max_iter`` interior-point iterations (default
+        ``tuning.lp_max_iter``)."""
+        if first_max_iter is None:
+            first_max_iter = self.tuning.lp_max_iter
         tk = self._knot_slice(b0, b1 + 7)
         nc = b1 - b0 + 3
         x, q1, q2, q3 = self._collocation(b0, b1)
@@ -557,7 +462,7 @@ class FeedProfileBuilder:
         wmax = np.minimum(wmax, 1e3 * W0)
         w_est = np.minimum(np.maximum(self.estimate(x), 1e-12 * W0), wmax)
         # the first LP's linearisation: the estimate, lowered to the previous window's
-        # level (FEED_EST_RATIO_MIN)
+        # level (tuning.est_ratio_min)
         w_hat = np.maximum(w_est * (1.0 if prev is None else prev.ratio), 1e-9 * W0)
         if prev is not None:
             # linearise at the previous window's solution where it is not braking for its
@@ -619,9 +524,9 @@ class FeedProfileBuilder:
             )
             m = K.lp_gather(K.Rows(row_first, row_coef, row_b), r, end, free, fixed_vals, lp)
             # the weights in numpy: its power's last bits are not libm's (a kernel's)
-            wts = cell * np.maximum(w_hat, FEED_WEIGHT_FLOOR * w_est) ** -1.5
+            wts = cell * np.maximum(w_hat, self.tuning.weight_floor * w_est) ** -1.5
             K.lp_objective(first, B, scale, wts, free, c)
-            max_iter = first_max_iter if ccp == 0 else FEED_LP_MAX_ITER
+            max_iter = first_max_iter if ccp == 0 else self.tuning.lp_max_iter
             rows = K.Rows(lp.first[:m], lp.coef[:m], lp.b[:m])
             status, it, xv_new = self._lp(rows, c, xv, free, ccp > 0, max_iter)
             iters += it
@@ -632,26 +537,29 @@ class FeedProfileBuilder:
                 break  # keep the last solved iterate (feasible for the true limits)
             xv = xv_new
             best = coef.copy()
-            if abs(prev_T - T) <= FEED_CCP_TOL * T:
+            if abs(prev_T - T) <= self.tuning.ccp_tol * T:
                 break
             prev_T = T
         return best, tk, iters
 
-    def _lp(self, rows, c, xv, free, screen: bool, max_iter: int = FEED_LP_MAX_ITER):
+    def _lp(self, rows, c, xv, free, screen: bool, max_iter: int | None = None):
         """Solve the LP of ``rows`` (``Rows``: ``_feed_kernels.lp_gather``'s) in the free
         variables, from ``xv`` (nc,), with row screening when ``screen``; returns (status,
-        iterations, x)."""
+        iterations, x); at most ``max_iter`` iterations per solve (default
+        ``tuning.lp_max_iter``)."""
+        if max_iter is None:
+            max_iter = self.tuning.lp_max_iter
         nc = free.shape[0]
         m = rows.b.shape[0]
         x = np.where(free, xv, 0.0)
         active = np.ones(m, dtype=np.bool_)
         count = m
         if screen:
-            _, count = K.lp_screen(rows, x, FEED_ROW_SCREEN, active, True)
+            _, count = K.lp_screen(rows, x, self.tuning.row_screen, active, True)
         iters = 0
         attempt = 1
         while True:
-            if attempt >= FEED_SCREEN_ROUNDS:
+            if attempt >= self.tuning.screen_rounds:
                 active[:] = True  # the last solve takes every row: never a point outside one
                 count = m
             sub = rows
@@ -659,11 +567,11 @@ class FeedProfileBuilder:
                 sub = K.Rows(np.empty(count, dtype=np.int64), np.empty((count, 4)), np.empty(count))
                 K.lp_take(rows, active, count, sub)
             x_try = x.copy()
-            status, it, _, _ = lp_solve(nc, sub.first, sub.coef, sub.b, c, x_try, max_iter, FEED_LP_TOL)
+            status, it, _, _ = lp_solve(nc, sub.first, sub.coef, sub.b, c, x_try, max_iter, self.tuning.lp_tol)
             iters += it
             if status != LP_OK or count == m:  # every row solved: nothing left out to check
                 return status, iters, x_try
-            viol, count = K.lp_screen(rows, x_try, FEED_ROW_SCREEN, active, False)
+            viol, count = K.lp_screen(rows, x_try, self.tuning.row_screen, active, False)
             if not viol:
                 return status, iters, x_try
             attempt += 1
