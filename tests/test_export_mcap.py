@@ -5,6 +5,8 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
+from typing import NamedTuple
 
 import numpy as np
 import pytest
@@ -13,7 +15,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 import cnc_interp
 from cnc_interp.export.csv_io import read_csv, write_csv
-from cnc_interp.export.mcap_io import input_metadata, read_mcap, write_mcap
+from cnc_interp.export.mcap_io import decode_message, input_metadata, message_fields, read_mcap, write_mcap
 from cnc_interp.plan.trajectory import Trajectory
 from cnc_interp.plan.verify import verify
 
@@ -22,13 +24,11 @@ from ._export_synth import arc_trajectory, machine_for
 PROGRAM = b"G21 G90\nG1 X20 Y0 F600\nG2 X0 Y-20 I-20 J0\nM2\n"
 
 
-def _strict_json(data: bytes):
-    """json.loads that rejects NaN/Infinity (which are not JSON)."""
-
-    def bad(name):
-        raise ValueError(f"non-JSON constant {name}")
-
-    return json.loads(data, parse_constant=bad)
+class _Msg(NamedTuple):
+    log_time: int
+    publish_time: int
+    data: bytes
+    row: dict  # the message decoded by its schema
 
 
 def _read_all(path):
@@ -38,7 +38,8 @@ def _read_all(path):
         meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
         msgs = {}
         for schema, channel, msg in reader.iter_messages(log_time_order=True):
-            msgs.setdefault(channel.topic, []).append(msg)
+            row = decode_message(schema, msg.data)
+            msgs.setdefault(channel.topic, []).append(_Msg(msg.log_time, msg.publish_time, msg.data, row))
     return summary, meta, msgs
 
 
@@ -59,44 +60,58 @@ def test_channels_and_schemas(written):
     summary, _, msgs = _read_all(path)
     topics = {c.topic: c for c in summary.channels.values()}
     assert set(topics) == {"/setpoints", "/segments", "/limits"}
-    for ch in topics.values():
-        assert ch.message_encoding == "json"
+    fields = {}
+    for topic, ch in topics.items():
+        assert ch.message_encoding == "ros1"
         schema = summary.schemas[ch.schema_id]
-        assert schema.encoding == "jsonschema"
-        body = _strict_json(schema.data)
-        assert body["type"] == "object"
-        assert set(body["required"]) == set(body["properties"])
-    sp = _strict_json(summary.schemas[topics["/setpoints"].schema_id].data)
-    assert list(sp["properties"]) == ["t", "s", "feed", "line", "X", "Y", "Z", "C"]
-    lim = _strict_json(summary.schemas[topics["/limits"].schema_id].data)
-    assert set(lim["properties"]) == {"v", "a", "j", "worst"}
-    assert list(lim["properties"]["j"]["properties"]) == list("XYZC")
+        assert schema.encoding == "ros1msg"
+        fields[topic] = message_fields(schema.data.decode())
+    assert [f for f, _ in fields["/setpoints"]] == ["t", "s", "feed", "line", "X", "Y", "Z", "C"]
+    assert dict(fields["/setpoints"])["X"] == "<f8"  # the planned float64, exactly
+    lim = [f for f, _ in fields["/limits"]]
+    assert lim == [f"{k}.{a}" for k in "vaj" for a in "XYZC"] + ["worst"]
     assert topics["/setpoints"].metadata["axes"] == "XYZC"
-    # Every message is strict JSON, and the statistics agree with what is in the file.
+    # Every message has its schema's size, and the statistics agree with the file.
     counts = summary.statistics.channel_message_counts
     for topic, ch in topics.items():
         assert counts[ch.id] == len(msgs[topic])
-        for m in msgs[topic]:
-            _strict_json(m.data)
+        size = np.dtype(fields[topic]).itemsize
+        assert {len(m.data) for m in msgs[topic]} == {size}
     assert sum(counts.values()) == n == summary.statistics.message_count
 
 
-def _foxglove_fields(schema: dict, path: str = "") -> list[str]:
-    """Check a schema the way Foxglove's JSON-schema reader does (mcap-support
-    parseJsonSchema): objects all the way down, one type name per field, from the types
-    it knows. Returns the field paths."""
-    assert schema["type"] == "object", path
-    fields = []
-    for name, field in schema["properties"].items():
-        kind = field["type"]
-        assert kind in ("boolean", "string", "number", "integer", "object", "array"), (
-            f"{path}.{name}: Foxglove cannot read type {kind!r}"
-        )
-        if kind == "object":
-            fields += _foxglove_fields(field, f"{path}.{name}")
-        else:
-            fields.append(f"{path}.{name}")
-    return fields
+_ROS1_PRIMITIVES = {"bool", "int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64"}
+_ROS1_PRIMITIVES |= {"float32", "float64", "string", "time", "duration", "byte", "char"}
+
+
+def _foxglove_fields(definition: str) -> list[str]:
+    """Check a ros1msg definition the way Foxglove's parser (@foxglove/rosmsg, ros1
+    grammar) does: definitions split at lines starting "==", nested ones named by "MSG:",
+    each field "type name" with a name matching ^[a-zA-Z][a-zA-Z0-9_]*$ and a primitive
+    or defined type. Returns the field paths."""
+    blocks: list[list[str]] = [[]]
+    for line in definition.split("\n"):
+        line = line.strip()
+        if line.startswith("=="):
+            blocks.append([])
+        elif line and not line.startswith("#"):
+            blocks[-1].append(line)
+    named = {b[0].split()[1]: b[1:] for b in blocks[1:]}
+    assert all(b[0].startswith("MSG: ") for b in blocks[1:])
+
+    def walk(lines, path):
+        out = []
+        for line in lines:
+            kind, name = line.split("#")[0].split()
+            assert re.fullmatch(r"[a-zA-Z][a-zA-Z0-9_]*", name), f"Foxglove rejects the field name {name!r}"
+            if kind in _ROS1_PRIMITIVES:
+                out.append(f"{path}.{name}")
+            else:
+                assert kind in named, f"no definition of {kind}"
+                out += walk(named[kind], f"{path}.{name}")
+        return out
+
+    return walk(blocks[0], "")
 
 
 def test_schemas_readable_by_foxglove(written):
@@ -104,7 +119,7 @@ def test_schemas_readable_by_foxglove(written):
     summary, _, _ = _read_all(path)
     paths = {}
     for ch in summary.channels.values():
-        paths[ch.topic] = _foxglove_fields(_strict_json(summary.schemas[ch.schema_id].data))
+        paths[ch.topic] = _foxglove_fields(summary.schemas[ch.schema_id].data.decode())
     assert ".X" in paths["/setpoints"] and ".feed" in paths["/setpoints"]
     assert ".j.C" in paths["/limits"] and ".worst" in paths["/limits"]
     assert ".feed_max" in paths["/segments"]
@@ -116,7 +131,7 @@ def test_setpoints_match_csv(written):
     csv = read_csv(csv_path)
     sp = msgs["/setpoints"]
     assert len(sp) == traj.n_samples == csv.n_samples
-    rows = [_strict_json(m.data) for m in sp]
+    rows = [m.row for m in sp]
     for key, col in (("t", csv.t), ("s", csv.s), ("feed", csv.feed)):
         assert_array_equal(np.array([r[key] for r in rows]), col)  # repr round-trips exactly
     for i, a in enumerate(csv.axes):
@@ -128,30 +143,47 @@ def test_setpoints_match_csv(written):
     assert times[1] - times[0] == 1_000_000  # dt = 1 ms in ns
 
 
+def _extremes(a: np.ndarray, n: int) -> np.ndarray:
+    """The value of largest magnitude (signed) of each column of ``a`` (K, F) over each
+    run of ``n`` rows (the last one shorter), computed one window at a time."""
+    out = []
+    for w in range(0, a.shape[0], n):
+        part = a[w : w + n]
+        out.append(part[np.argmax(np.abs(part), axis=0), np.arange(a.shape[1])])
+    return np.array(out)
+
+
 def test_limits_channel_agrees_with_verify(written):
+    from cnc_interp.export.mcap_io import MCAP_LIMITS_EVERY as N
+
     traj, machine, path, _, _ = written
     _, _, msgs = _read_all(path)
-    rows = [_strict_json(m.data) for m in msgs["/limits"]]
-    assert len(rows) == traj.n_samples
+    rows = [m.row for m in msgs["/limits"]]
+    K = traj.n_samples
+    assert len(rows) == -(-K // N)  # one message per N samples, the last window shorter
+    # each at the time of its window's last sample
+    ends = np.minimum(np.arange(len(rows)) * N + N - 1, K - 1)
+    assert [m.log_time for m in msgs["/limits"]] == np.rint(traj.t[ends] * 1e9).astype(np.int64).tolist()
     report = verify(traj, machine)
     for k, kind in enumerate("vaj"):
         worst = np.array([[abs(r[kind][a]) for a in traj.axes] for r in rows]).max(axis=0)
         # The synthetic motion starts and ends smoothly, so the worst values are inside
-        # the plan and the per-sample ratios reach verify's worst ratio (to the 9
-        # significant digits the channel carries).
-        assert_allclose(worst, report.ratios[:, k], rtol=1e-8)
+        # the plan and the per-sample ratios reach verify's worst ratio (to the float32
+        # the channel carries).
+        assert_allclose(worst, report.ratios[:, k], rtol=1e-6)
     overall = max(r["worst"] for r in rows)
-    assert_allclose(overall, report.worst_ratio, rtol=1e-8)
-    assert overall == pytest.approx(0.8, rel=1e-8)  # machine_for(margin=1.25)
-    # Signed: the velocity ratio of X is v_X / vmax_X at each sample.
+    assert_allclose(overall, report.worst_ratio, rtol=1e-6)
+    assert overall == pytest.approx(0.8, rel=1e-6)  # machine_for(margin=1.25)
+    # Signed: the velocity ratio of X is the v_X / vmax_X of largest magnitude in the window.
     vx = np.diff(traj.q[:, 0], prepend=traj.q[0, 0]) / traj.dt_s / machine.vmax[0]
-    assert_allclose([r["v"]["X"] for r in rows], vx, rtol=1e-8, atol=1e-15)
+    assert_allclose([r["v"]["X"] for r in rows], _extremes(vx[:, None], N)[:, 0], rtol=1e-6, atol=1e-12)
+    assert (np.array([r["v"]["X"] for r in rows]) < 0).any()  # the sign is kept
 
 
 def test_segments_channel(written):
     traj, _, path, _, _ = written
     _, _, msgs = _read_all(path)
-    rows = [_strict_json(m.data) for m in msgs["/segments"]]
+    rows = [m.row for m in msgs["/segments"]]
     runs = np.flatnonzero(np.diff(traj.line)) + 1
     assert len(rows) == len(runs) + 1
     assert [r["line"] for r in rows] == [int(traj.line[0])] + traj.line[runs].tolist()
@@ -215,7 +247,7 @@ def test_many_chunks_valid(tmp_path, monkeypatch):
     assert_array_equal(read_mcap(path).q, traj.q)
 
 
-def test_nan_written_as_null(tmp_path):
+def test_nan_written_as_nan(tmp_path):
     traj = arc_trajectory(duration_s=0.2)
     q = traj.q.copy()
     q[50, 1] = np.nan
@@ -233,11 +265,11 @@ def test_nan_written_as_null(tmp_path):
     path = str(tmp_path / "n.mcap")
     write_mcap(bad, path, {"input": {"note": float("nan")}}, machine_for(traj, 1.5))
     _, meta, msgs = _read_all(path)
-    row = _strict_json(msgs["/setpoints"][50].data)
-    assert row["Y"] is None and row["X"] == q[50, 0]
-    lim = [_strict_json(m.data) for m in msgs["/limits"]]
-    assert lim[50]["v"]["Y"] is None and lim[50]["worst"] is None
-    assert lim[49]["v"]["Y"] is not None
+    row = msgs["/setpoints"][50].row
+    assert np.isnan(row["Y"]) and row["X"] == q[50, 0]
+    lim = [m.row for m in msgs["/limits"]]  # samples 50..59 are the sixth window
+    assert np.isnan(lim[5]["v"]["Y"]) and np.isnan(lim[5]["worst"])
+    assert np.isfinite(lim[4]["v"]["Y"]) and np.isfinite(lim[5]["v"]["X"])
     assert json.loads(meta["planner"]["settings"]) == {"w": None}
     assert meta["input"]["note"] == "null"
     assert np.isnan(read_mcap(path).q[50, 1])
@@ -251,7 +283,7 @@ def test_without_machine_and_explicit_segments(tmp_path):
     summary, meta, msgs = _read_all(path)
     assert {c.topic for c in summary.channels.values()} == {"/setpoints", "/segments"}
     assert "machine" not in meta
-    segs = [_strict_json(m.data) for m in msgs["/segments"]]
+    segs = [m.row for m in msgs["/segments"]]
     assert [s["line"] for s in segs] == [7, 9]
     assert segs[0]["s_start"] == 0.0 and segs[1]["s_end"] == L
     assert segs[0]["t_end"] == segs[1]["t_start"] > 0
@@ -286,12 +318,13 @@ def test_bad_mcap_is_usage_error(tmp_path):
     assert ei.value.exit_code == 2 and "junk.mcap" in ei.value.format()
 
 
+@pytest.mark.parametrize("message_indexes", [True, False])
 @pytest.mark.parametrize("chunk_size", [1, 300, 5000, 1 << 20])
-def test_bulk_writer_matches_mcap_writer(chunk_size):
+def test_bulk_writer_matches_mcap_writer(chunk_size, message_indexes):
     """The bulk writer produces exactly the bytes of mcap's own Writer for the same calls."""
     import io
 
-    from mcap.writer import CompressionType, Writer
+    from mcap.writer import CompressionType, IndexType, Writer
 
     from cnc_interp.export.mcap_bulk import BulkMcapWriter
 
@@ -314,14 +347,15 @@ def test_bulk_writer_matches_mcap_writer(chunk_size):
         w.add_metadata("m2", {"b": "2", "c": "3"})
 
     ref = io.BytesIO()
-    w = Writer(ref, chunk_size=chunk_size, compression=CompressionType.ZSTD)
+    kinds = IndexType.ALL if message_indexes else IndexType.ALL & ~IndexType.MESSAGE
+    w = Writer(ref, chunk_size=chunk_size, compression=CompressionType.ZSTD, index_types=kinds)
     calls(w)
     for c, t, d in zip(chans.tolist(), times.tolist(), datas):
         w.add_message(c, t, d, t)
     w.finish()
 
     out = io.BytesIO()
-    b = BulkMcapWriter(out, chunk_size=chunk_size)
+    b = BulkMcapWriter(out, chunk_size=chunk_size, message_indexes=message_indexes)
     calls(b)
     for lo, hi in ((0, 1), (1, 250), (250, 251), (251, 700)):  # uneven batches
         b.add_messages(chans[lo:hi], times[lo:hi], datas[lo:hi])
@@ -376,7 +410,7 @@ def test_fast_reader_matches_mcap_reader(tmp_path, monkeypatch):
     import cnc_interp.export.mcap_io as mio
     from cnc_interp.export.mcap_bulk import read_channel
 
-    monkeypatch.setattr(mio, "MCAP_CHUNK_BYTES", 20_000)
+    monkeypatch.setattr(mio, "MCAP_CHUNK_BYTES", 10_000)
     traj = arc_trajectory(duration_s=1.0)
     path = str(tmp_path / "f.mcap")
     write_mcap(traj, path, None, machine_for(traj, 1.1))
@@ -398,6 +432,30 @@ def test_unindexed_file_read_with_generic_reader(tmp_path):
     src, dst = str(tmp_path / "a.mcap"), str(tmp_path / "b.mcap")
     write_mcap(traj, src, None, machine_for(traj, 1.1))
     _copy_with_mcap_writer(src, dst, index_types=IndexType.NONE, chunk_size=5000)
+    back = read_mcap(dst)
+    assert_array_equal(back.q, traj.q)
+    assert_array_equal(back.line, traj.line)
+
+
+def test_file_without_message_indexes_read_by_walking_its_chunks(tmp_path):
+    """Chunk indexes but no message indexes: the fast reader walks each chunk's records
+    and finds what mcap's own reader finds."""
+    from mcap.writer import IndexType
+
+    from cnc_interp.export.mcap_bulk import read_channel
+
+    traj = arc_trajectory(duration_s=0.6)
+    src, dst = str(tmp_path / "a.mcap"), str(tmp_path / "b.mcap")
+    write_mcap(traj, src, None, machine_for(traj, 1.1))
+    _copy_with_mcap_writer(src, dst, index_types=IndexType.ALL & ~IndexType.MESSAGE, chunk_size=3000)
+    with open(dst, "rb") as fh:
+        reader = make_reader(fh, validate_crcs=True)
+        summary = reader.get_summary()
+        assert len(summary.chunk_indexes) > 5 and all(c.message_index_length == 0 for c in summary.chunk_indexes)
+        for ch in summary.channels.values():
+            times, datas = read_channel(fh, summary, ch.id)
+            ref = [(m.log_time, m.data) for _, _, m in reader.iter_messages(topics=[ch.topic], log_time_order=False)]
+            assert datas == [d for _, d in ref] and times.tolist() == [t for t, _ in ref]
     back = read_mcap(dst)
     assert_array_equal(back.q, traj.q)
     assert_array_equal(back.line, traj.line)
@@ -436,8 +494,9 @@ def test_plan_command_mcap_matches_its_csv(tmp_path):
     csv = read_csv(str(tmp_path / "p.csv"))
     summary, meta, msgs = _read_all(str(tmp_path / "p.mcap"))
     assert {c.topic for c in summary.channels.values()} == {"/setpoints", "/segments", "/limits"}
-    rows = [_strict_json(m.data) for m in msgs["/setpoints"]]
-    assert len(rows) == csv.n_samples == len(msgs["/limits"]) > 100
+    rows = [m.row for m in msgs["/setpoints"]]
+    assert len(rows) == csv.n_samples > 100
+    assert len(msgs["/limits"]) == -(-csv.n_samples // 10)
     for key, col in (("t", csv.t), ("s", csv.s), ("feed", csv.feed)):
         assert_array_equal([r[key] for r in rows], col)
     for i, a in enumerate(csv.axes):
@@ -460,7 +519,57 @@ def test_limits_batches_join_exactly(tmp_path, monkeypatch, batch):
     path = str(tmp_path / "b.mcap")
     write_mcap(traj, path, None, machine)
     _, _, msgs = _read_all(path)
-    got = np.array([[_strict_json(m.data)[k][a] for k in "vaj" for a in traj.axes] for m in msgs["/limits"]])
+    got = np.array([[m.row[k][a] for k in "vaj" for a in traj.axes] for m in msgs["/limits"]])
     want = limit_ratios(traj.q, traj.dt_s, machine.limits())  # (3, K, n)
-    want = np.concatenate(list(want), axis=1)
-    assert_allclose(got, want, rtol=1e-8, atol=1e-300)
+    want = _extremes(np.concatenate(list(want), axis=1), mio.MCAP_LIMITS_EVERY)
+    assert_allclose(got, want, rtol=1e-6, atol=1e-12)  # float32 ratios
+
+
+def test_file_does_not_depend_on_the_blocks(tmp_path, monkeypatch):
+    """Blocks of any size (splitting windows of /limits and segments anywhere) give the
+    same bytes, with and without given segments."""
+    import cnc_interp.export.mcap_io as mio
+
+    traj = arc_trajectory(duration_s=0.4)
+    machine = machine_for(traj, 1.3)
+    L = traj.s[-1]
+    outs = {}
+    for batch in (3, 7, 10, 64, 65536):
+        monkeypatch.setattr(mio, "_BATCH", batch)
+        for segs in (None, [(7, 0.0, L / 3), (9, L / 3, L)]):
+            path = tmp_path / f"{batch}-{segs is None}.mcap"
+            write_mcap(traj, str(path), None, machine, segments=segs)
+            outs.setdefault(segs is None, set()).add(path.read_bytes())
+    assert len(outs[True]) == 1 and len(outs[False]) == 1
+
+
+@pytest.mark.parametrize("case", ["short message", "field missing", "string field"])
+def test_bad_ros1_setpoints_are_one_usage_error(tmp_path, case):
+    """A /setpoints message of the wrong size, or a schema without an axis or with a
+    field that is no number, is bad input (exit 2), never a traceback."""
+    from mcap.writer import Writer
+
+    from cnc_interp.errors import CncInterpError
+    from cnc_interp.export.mcap_io import _setpoint_msg
+
+    text = _setpoint_msg("XYZ")
+    size = 3 * 8 + 4 + 3 * 8  # t, s, feed, line, X, Y, Z
+    if case == "field missing":
+        text = text.replace("float64 Z", "float64 W")
+    if case == "string field":
+        text = text.replace("float64 Z", "string Z")
+    path = tmp_path / "bad.mcap"
+    with open(path, "wb") as fh:
+        w = Writer(fh)
+        w.start()
+        sid = w.register_schema("cnc_interp/Setpoint", "ros1msg", text.encode())
+        cid = w.register_channel("/setpoints", "ros1", sid, {"axes": "XYZ"})
+        for k in range(5):
+            payload = np.array([k * 1e-3, 0, 0], "<f8").tobytes() + b"\0\0\0\0" + np.zeros(3, "<f8").tobytes()
+            assert len(payload) == size
+            w.add_message(cid, k * 1_000_000, payload[:-4] if case == "short message" else payload, k * 1_000_000)
+        w.finish()
+    with pytest.raises(CncInterpError) as ei:
+        read_mcap(str(path))
+    assert ei.value.exit_code == 2 and "\n" not in ei.value.format()
+    assert ei.value.format().startswith(f"{path}: error: ")

@@ -90,3 +90,44 @@ def test_closed_stream_never_fails():
     clock.now += 3
     bar(5)  # ValueError from the closed stream is swallowed
     assert not bar.active
+
+
+def test_progress_line_format():
+    from cnc_interp.export.progress import progress_line
+
+    line = progress_line("plan", "line 250/1.0k, 35 mm", 10.0, 0.25, 79)
+    assert line.startswith("plan [") and len(line) == 79
+    assert " 25% line 250/1.0k, 35 mm ETA 30s" in line  # 10 s for a quarter: 30 s to go
+    bar = line[line.index("[") + 1 : line.index("]")]
+    assert bar.count("#") == round(0.25 * len(bar))
+    # nothing done yet: no ETA; over 100 %: clipped, nothing left
+    assert line_end(progress_line("", "x", 5.0, 0.0, 60)) == "  0% x ETA ?"
+    assert line_end(progress_line("", "x", 5.0, 1.2, 60)) == "100% x ETA 0s"
+    assert progress_line("p", "x", 3725.0, 0.5, 60).endswith("ETA 1h02m")
+    # share unknown: the count and the elapsed time, no bar
+    assert progress_line("plan", "35.0 mm", 65.0, None, 79) == "plan 35.0 mm, 1m05s"
+    # a narrow terminal still gets a bar of 5
+    assert "[....." in progress_line("a long label", "line 1/1.0k", 1.0, 0.001, 20)
+
+
+def line_end(line: str) -> str:
+    return line[line.index("]") + 2 :]
+
+
+def test_share_measured_by_source_line():
+    """A streamed plan's total path length is unknown: the program's line count gives the
+    percentage and ETA, the count still shows the mm planned."""
+    stream, clock = FakeTTY(), Clock()
+    with progress(None, "plan", stream=stream, clock=clock, unit="mm") as tick:
+        tick.measure(1000, "line")
+        tick(350.0)
+        tick.reach(250)
+        tick.reach(100)  # a subroutine called from an earlier line: the furthest counts
+        clock.now += 10.0
+        tick(1.0)
+        text = stream.getvalue()
+    assert " 25% line 250/1.0k, 351 mm ETA 30s" in text
+    bar = ProgressBar(None, "plan", stream=FakeTTY(), clock=Clock(), unit="mm")
+    bar.measure(0, "line")  # an empty program: today's display
+    bar(12)
+    assert bar.line() == "plan 12 mm, 0s"

@@ -9,10 +9,15 @@ the same calls — same chunk boundaries, message indexes, statistics, summary a
 test checks the equality) — but packs message records and message indexes a batch at a
 time. Every record other than Message and MessageIndex is written by ``mcap.records``.
 
+``add_records`` takes message records already packed (by numpy, a block at a time, see
+``mcap_io``) as one buffer; with ``message_indexes=False`` no MessageIndex records are
+written (as ``Writer(..., index_types=IndexType.ALL & ~IndexType.MESSAGE)``).
+
 Reading has the same problem (``mcap``'s reader parses every record of every chunk in
-Python); ``read_channel`` uses the summary's chunk indexes and the per-channel message
-indexes to slice one channel's payloads straight out of each decompressed chunk, after
-checking the chunk CRC.
+Python); ``read_channel`` (``read_channel_fixed`` for fixed-size messages, as a numpy
+array) uses the summary's chunk indexes and the per-channel message indexes, or a walk
+over each chunk's record headers when there are none, to slice one channel's payloads
+straight out of each decompressed chunk, after checking the chunk CRC.
 """
 
 from __future__ import annotations
@@ -29,6 +34,10 @@ _MSG_HEAD_BYTES = _MSG_HEAD.size  # 31
 _MSG_FIXED = 22  # channel(2) + sequence(4) + log(8) + publish(8)
 _INDEX_HEAD = struct.Struct("<BQHI")  # opcode, record length, channel, entries length
 _OP_MESSAGE = 0x05
+#: the zstd level of ``mcap``'s Writer (``zstandard.compress``'s default)
+ZSTD_LEVEL = 3
+#: a Message record's header as a numpy record (the same layout as ``_MSG_HEAD``)
+MESSAGE_HEAD_FIELDS = [("op", "u1"), ("len", "<u8"), ("ch", "<u2"), ("seq", "<u4"), ("log", "<u8"), ("pub", "<u8")]
 _OP_MESSAGE_INDEX = 0x07
 
 
@@ -37,11 +46,24 @@ class BulkMcapWriter:
     ``start``, schemas/channels/metadata, ``add_messages`` (any number of batches),
     ``finish``."""
 
-    def __init__(self, stream: IO[bytes], chunk_size: int) -> None:
+    def __init__(
+        self,
+        stream: IO[bytes],
+        chunk_size: int,
+        message_indexes: bool = True,
+        level: int = ZSTD_LEVEL,
+    ) -> None:
+        """``message_indexes=False`` writes what ``Writer(..., index_types=IndexType.ALL &
+        ~IndexType.MESSAGE)`` writes: no MessageIndex records (16 uncompressed bytes a
+        message); readers find messages through the chunk indexes (not Foxglove's indexed
+        reader: it needs them). ``level``: the chunks' zstd level (``mcap``'s Writer: 3)."""
         from mcap.data_stream import RecordBuilder
+
+        self._level = level
 
         self._stream = stream
         self._chunk_size = chunk_size
+        self._message_indexes = message_indexes
         self._rb = RecordBuilder()
         self._schemas: list = []
         self._channels: list = []
@@ -53,7 +75,7 @@ class BulkMcapWriter:
         self._end_time = 0
         self._chunk_count = 0
         # the chunk being built
-        self._parts: list[bytes] = []
+        self._parts: list[bytes | memoryview] = []
         self._size = 0
         self._n_in_chunk = 0
         self._c_start = 0
@@ -127,6 +149,19 @@ class BulkMcapWriter:
             for c, t, d in zip(chans.tolist(), times.tolist(), datas)
         ]
         sizes = np.fromiter(map(len, recs), dtype=np.int64, count=n)
+        self.add_records(chans, times, sizes, b"".join(recs))
+
+    def add_records(self, chans: np.ndarray, times: np.ndarray, sizes: np.ndarray, buf) -> None:
+        """Append message records already packed (header and payload, see ``message_head``)
+        back to back in ``buf``, in file order: record i is ``sizes[i]`` bytes on channel
+        ``chans[i]`` at log time ``times[i]``."""
+        n = int(np.asarray(sizes).size)
+        if n == 0:
+            return
+        chans = np.asarray(chans, dtype=np.int64)
+        times = np.asarray(times, dtype=np.int64)
+        sizes = np.asarray(sizes, dtype=np.int64)
+        view = memoryview(buf).cast("B")
         ends = np.cumsum(sizes)  # chunk-relative end of each record, before the base size
         self._stats(chans, times)
         a = 0
@@ -138,17 +173,17 @@ class BulkMcapWriter:
             closes = b < n
             b = min(b + 1, n) if closes else n
             offsets = base + ends[a:b] - sizes[a:b]
-            self._add_to_chunk(recs[a:b], chans[a:b], times[a:b], offsets)
+            lo = int(ends[a - 1]) if a else 0
+            self._add_to_chunk(view[lo : int(ends[b - 1])], b - a, chans[a:b], times[a:b], offsets)
             self._size = int(base + ends[b - 1])
             if closes:
                 self._finalize_chunk()
             a = b
 
     def _stats(self, chans: np.ndarray, times: np.ndarray) -> None:
-        ids, first, counts = np.unique(chans, return_index=True, return_counts=True)
-        for i in np.argsort(first, kind="stable"):
-            cid = int(ids[i])
-            self._channel_counts[cid] = self._channel_counts.get(cid, 0) + int(counts[i])
+        counts = np.bincount(chans)  # channel ids are small (1, 2, ...)
+        for cid in _first_seen(chans, counts):
+            self._channel_counts[cid] = self._channel_counts.get(cid, 0) + int(counts[cid])
         t_min, t_max = int(times.min()), int(times.max())
         if self._message_count == 0:
             self._start_time = t_min
@@ -157,44 +192,48 @@ class BulkMcapWriter:
         self._end_time = max(self._end_time, t_max)
         self._message_count += int(chans.size)
 
-    def _add_to_chunk(self, recs, chans, times, offsets) -> None:
-        self._parts.extend(recs)
+    def _add_to_chunk(self, data, count: int, chans, times, offsets) -> None:
+        self._parts.append(data)
         t_min, t_max = int(times.min()), int(times.max())
         if self._n_in_chunk == 0:
             self._c_start = t_min
         else:
             self._c_start = min(self._c_start, t_min)
         self._c_end = max(self._c_end, t_max)
-        self._n_in_chunk += len(recs)
-        ids, first = np.unique(chans, return_index=True)
-        for i in np.argsort(first, kind="stable"):
-            cid = int(ids[i])
+        self._n_in_chunk += count
+        if not self._message_indexes:
+            return
+        for cid in _first_seen(chans, np.bincount(chans)):
             sel = chans == cid
             self._index.setdefault(cid, []).append((times[sel], offsets[sel]))
 
     def _finalize_chunk(self) -> None:
         if self._n_in_chunk == 0:
             return
-        import zstandard
-        from mcap.records import Chunk, ChunkIndex
-
         self._chunk_count += 1
         data = b"".join(self._parts)
-        compressed = zstandard.compress(data)
+        job = (data, self._c_start, self._c_end, self._index)
+        self._parts, self._size, self._n_in_chunk, self._index = [], 0, 0, {}
+        self._write_chunk(_compress(data, self._level), *job)
+
+    def _write_chunk(self, packed: tuple[bytes, int], data: bytes, c_start: int, c_end: int, index_of) -> None:
+        from mcap.records import Chunk, ChunkIndex
+
+        compressed, crc = packed
         chunk = Chunk(
             compression="zstd",
             data=compressed,
-            message_start_time=self._c_start,
-            message_end_time=self._c_end,
-            uncompressed_crc=zlib.crc32(data),
+            message_start_time=c_start,
+            message_end_time=c_end,
+            uncompressed_crc=crc,
             uncompressed_size=len(data),
         )
         self._flush()
         chunk_start = self._stream.tell()
         chunk.write(self._rb)
         index = ChunkIndex(
-            message_start_time=self._c_start,
-            message_end_time=self._c_end,
+            message_start_time=c_start,
+            message_end_time=c_end,
             chunk_start_offset=chunk_start,
             chunk_length=self._rb.count,
             message_index_offsets={},
@@ -206,7 +245,7 @@ class BulkMcapWriter:
         self._flush()
         index_start = self._stream.tell()
         written = 0
-        for cid, pieces in self._index.items():
+        for cid, pieces in index_of.items() if self._message_indexes else ():
             index.message_index_offsets[cid] = index_start + written
             entries = np.empty((sum(p[0].size for p in pieces), 2), dtype="<u8")
             entries[:, 0] = np.concatenate([p[0] for p in pieces])
@@ -217,7 +256,6 @@ class BulkMcapWriter:
             written += len(rec)
         index.message_index_length = written
         self._chunk_indexes.append(index)
-        self._parts, self._size, self._n_in_chunk, self._index = [], 0, 0, {}
 
     # -- summary ---------------------------------------------------------------------------
     def finish(self) -> None:
@@ -272,6 +310,22 @@ class BulkMcapWriter:
         self._stream.write(_MAGIC)
 
 
+def _first_seen(chans: np.ndarray, counts: np.ndarray) -> list[int]:
+    """The channel ids present in ``chans`` (counts: their ``bincount``), in the order of
+    their first message."""
+    present = np.flatnonzero(counts)
+    firsts = [int(np.argmax(chans == cid)) for cid in present.tolist()]
+    return [int(cid) for _, cid in sorted(zip(firsts, present.tolist()))]
+
+
+def _compress(data: bytes, level: int = ZSTD_LEVEL) -> tuple[bytes, int]:
+    """A chunk's records zstd-compressed (at ``mcap``'s Writer's level, 3, the same bytes
+    as it writes), and their CRC."""
+    import zstandard
+
+    return zstandard.compress(data, level), zlib.crc32(data)
+
+
 # -- reading -----------------------------------------------------------------------------------
 class McapReadError(ValueError):
     """The file's indexes or CRCs do not add up."""
@@ -285,14 +339,58 @@ def read_channel(fh, summary, channel_id: int) -> tuple[np.ndarray, list[bytes]]
     ``mcap``'s reader); raises ``McapReadError`` on a CRC mismatch or an index that points
     at something other than a message of the channel.
     """
+    found = _channel_spans(fh, summary, channel_id)
+    if found is None:
+        return None
+    times: list[np.ndarray] = []
+    datas: list[bytes] = []
+    for data, starts, ends, log in found:
+        datas.extend(data[a:b] for a, b in zip(starts.tolist(), ends.tolist()))
+        times.append(log)
+    all_times = np.concatenate(times) if times else np.zeros(0, dtype=np.uint64)
+    return all_times, datas
+
+
+def read_channel_fixed(fh, summary, channel_id: int, size: int) -> tuple[np.ndarray, np.ndarray] | None:
+    """(log times (n,) uint64, payloads (n, size) uint8) of a channel whose messages are
+    all ``size`` bytes long, in file order, CRCs checked; ``None`` as for ``read_channel``.
+    Raises ``McapReadError`` naming the first message of another length."""
+    found = _channel_spans(fh, summary, channel_id)
+    if found is None:
+        return None
+    times: list[np.ndarray] = []
+    rows: list[np.ndarray] = []
+    seen = 0
+    for data, starts, ends, log in found:
+        odd = np.flatnonzero(ends - starts != size)
+        if odd.size:
+            k = int(odd[0])
+            raise McapReadError(f"message {seen + k} of the channel is {int(ends[k] - starts[k])} bytes, not {size}")
+        raw = np.frombuffer(data, dtype=np.uint8)
+        rows.append(raw[starts[:, None] + np.arange(size)])
+        times.append(log)
+        seen += starts.size
+    if not rows:
+        return np.zeros(0, dtype=np.uint64), np.zeros((0, size), dtype=np.uint8)
+    return np.concatenate(times), np.concatenate(rows)
+
+
+def _channel_spans(fh, summary, channel_id: int):
+    """Per chunk holding messages of the channel: (decompressed chunk, payload starts,
+    payload ends, log times), or ``None`` when the indexes do not cover the channel."""
     if summary is None or not summary.chunk_indexes or summary.statistics is None:
         return None
     expected = summary.statistics.channel_message_counts.get(channel_id, 0)
-    times: list[np.ndarray] = []
-    datas: list[bytes] = []
+    out = []
+    count = 0
     for ci in sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
-        if ci.message_index_length == 0:
-            return None  # no message indexes written: cannot tell which chunks hold what
+        if ci.message_index_length == 0:  # no message indexes: walk the chunk's records
+            data = _chunk_data(fh, ci)
+            starts, ends, log = _walk_chunk(data, channel_id)
+            if starts.size:
+                out.append((data, starts, ends, log))
+                count += starts.size
+            continue
         off = ci.message_index_offsets.get(channel_id)
         if off is None:
             continue
@@ -308,26 +406,51 @@ def read_channel(fh, summary, channel_id: int) -> tuple[np.ndarray, list[bytes]]
             raise McapReadError("message index points outside its chunk")
         raw = np.frombuffer(data, dtype=np.uint8)
         span = offsets[:, None] + np.arange(_MSG_HEAD_BYTES)
-        heads = (
-            raw[span]
-            .copy()
-            .view(
-                np.dtype([("op", "u1"), ("len", "<u8"), ("ch", "<u2"), ("seq", "<u4"), ("log", "<u8"), ("pub", "<u8")])
-            )
-        )
-        heads = heads.reshape(-1)
+        heads = raw[span].copy().view(np.dtype(MESSAGE_HEAD_FIELDS)).reshape(-1)
         if (heads["op"] != _OP_MESSAGE).any() or (heads["ch"] != channel_id).any():
             raise McapReadError("message index points at a record of another kind or channel")
         starts = offsets + _MSG_HEAD_BYTES
         ends = offsets + 9 + heads["len"].astype(np.int64)
-        if ends.size and ends.max() > len(data):
+        if ends.size and (ends.max() > len(data) or (ends < starts).any()):
             raise McapReadError("message runs past the end of its chunk")
-        datas.extend(data[a:b] for a, b in zip(starts.tolist(), ends.tolist()))
-        times.append(heads["log"].astype(np.uint64))
-    if len(datas) != expected:
+        out.append((data, starts, ends, heads["log"].astype(np.uint64)))
+        count += starts.size
+    if count != expected:
         return None  # the indexes do not cover every message: let mcap's reader decide
-    all_times = np.concatenate(times) if times else np.zeros(0, dtype=np.uint64)
-    return all_times, datas
+    return out
+
+
+def _walk_chunk(data: bytes, channel_id: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(payload starts, payload ends, log times) of the channel's messages in the
+    decompressed chunk ``data``, record by record."""
+    unpack = _MSG_HEAD.unpack_from
+    head = struct.Struct("<BQ").unpack_from
+    n = len(data)
+    pos = 0
+    starts: list[int] = []
+    ends: list[int] = []
+    logs: list[int] = []
+    while pos < n:
+        if pos + 9 > n:
+            raise McapReadError("a record runs past the end of its chunk")
+        op, length = head(data, pos)
+        end = pos + 9 + length
+        if end > n:
+            raise McapReadError("a record runs past the end of its chunk")
+        if op == _OP_MESSAGE:
+            if length < _MSG_FIXED:
+                raise McapReadError("a message record too short for its header")
+            _, _, ch, _, log, _ = unpack(data, pos)
+            if ch == channel_id:
+                starts.append(pos + _MSG_HEAD_BYTES)
+                ends.append(end)
+                logs.append(log)
+        pos = end
+    return (
+        np.array(starts, dtype=np.int64),
+        np.array(ends, dtype=np.int64),
+        np.array(logs, dtype=np.uint64),
+    )
 
 
 def _chunk_data(fh, ci) -> bytes:

@@ -1,12 +1,15 @@
 """``cnc-interp plot``: a picture of a plan (matplotlib, imported only here, Agg backend).
 
-Left: the tool path in the plane of the two axes that move most, coloured by the planned
-feed (paper 001, figure 4). Right, against time: the feed, then every axis's velocity,
-acceleration and jerk divided by the machine's limit, with the ±1 bounds (paper 001,
-figures 6 and 8) when a machine is given.
+Left: the tool path in the plane of the two linear axes that move most, coloured by the
+planned feed (paper 001, figure 4); below it, against time, Z when the path view does not
+show it and the rotary axes (deg) when any turns. Right, against time: the feed, then
+every axis's velocity, acceleration and jerk divided by the machine's limit, with the ±1
+bounds (paper 001, figures 6 and 8) when a machine is given.
 
-Long plans are drawn decimated: the path keeps every n-th sample, the ratio curves keep
-each bin's minimum and maximum (so no peak disappears from the picture).
+A time window (``--from``/``--to``, s) restricts every panel to the samples in it.
+Long plans are drawn decimated: the path keeps every n-th sample, the curves against time
+keep each pixel column's minimum and maximum (so no peak disappears from the picture and
+the curve is a line, not a solid band, wherever it is smooth at that scale).
 """
 
 from __future__ import annotations
@@ -15,14 +18,20 @@ import os
 
 import numpy as np
 
-from ..constants import LINEAR_AXES
+from ..constants import LINEAR_AXES, ROTARY_AXES
 
 
 #: most tool-path points a plot draws (longer plans are decimated for the picture only)
 PLOT_MAX_PATH_POINTS = 100_000
 
-#: time bins of the min/max envelope a plot draws for long plans
+#: time bins of the min/max envelope a plot draws for long plans when the panel's width
+#: in pixels is not known (a panel uses one bin per pixel column)
 PLOT_ENVELOPE_BINS = 2000
+
+#: the path is drawn in X and Y (a mill's top view) while the less moving of the two
+#: moves at least this share of the other (else the view is a flat line); else in the
+#: two linear axes that move most (a lathe's or a rotary job's XZ)
+PLOT_TOP_VIEW_MIN_SHARE = 0.05
 
 #: the feed panel turns logarithmic when the fastest move is this many times the median
 #: moving feed (a mill's rapids against its cutting feeds)...
@@ -33,12 +42,16 @@ PLOT_FEED_LINEAR_BELOW = 1.0
 _KIND_LABELS = (("velocity", "v / vmax"), ("acceleration", "a / amax"), ("jerk", "j / jmax"))
 
 
-def plot_file(path: str, machine_spec: str | None, out: str | None = None) -> str:
-    """Plot the plan at ``path`` (CSV or MCAP) to ``out`` (default: ``path`` with ``.png``).
+def plot_file(
+    path: str, machine_spec: str | None, out: str | None = None, t_from: float | None = None, t_to: float | None = None
+) -> str:
+    """Plot the plan at ``path`` (CSV or MCAP) to ``out`` (default: ``path`` with ``.png``),
+    the samples from ``t_from`` to ``t_to`` s (default: the whole plan; see ``plot_window``).
 
-    Without ``machine_spec`` the machine an MCAP plan names gives the limits (see
-    ``verify_file.plan_machine``). The image format follows ``out``'s extension (png,
-    svg, pdf); ``out`` is never one of the inputs. Returns the file written.
+    Without ``machine_spec`` the machine an MCAP plan names gives the limits, else the
+    default preset (``verify_file.resolve_plan_machine``). The image format follows
+    ``out``'s ending (png, svg, pdf, ...: ``image_format``); ``out`` is never one of the
+    inputs. Returns the file written.
     """
     from ..outfile import check_writable
     from .verify_file import plan_machine, read_plan
@@ -46,16 +59,46 @@ def plot_file(path: str, machine_spec: str | None, out: str | None = None) -> st
     if out is None:
         out = os.path.splitext(os.fspath(path))[0] + ".png"
     check_writable(out, inputs=(os.fspath(path), machine_spec))
-    machine = plan_machine(path, machine_spec, required=False)
+    image_format(out)  # an unknown ending: exit 2 before the plan is read
+    machine = plan_machine(path, machine_spec)
     # a one-sample plan shows no period; any period draws its single point
     traj = read_plan(path, machine.dt_s if machine is not None else 1.0)
+    span = plot_window(traj, t_from, t_to, os.fspath(path))
     title = os.path.basename(os.fspath(path))
-    plot_trajectory(traj, machine, out, title=title)
+    plot_trajectory(traj, machine, out, title=title, span=span)
     return out
 
 
-def plot_trajectory(traj, machine, out: str, title: str = "") -> str:
-    """Draw ``traj`` (and its limit ratios when ``machine`` is given) into ``out``."""
+def plot_window(traj, t_from: float | None, t_to: float | None, path: str = "plot") -> tuple[int, int]:
+    """The samples ``[i0, i1)`` of ``traj`` whose time lies in ``[t_from, t_to]`` s (a
+    bound left ``None`` is the plan's start or end). A bound that is not finite, lies
+    outside the plan, or a ``t_from`` not before ``t_to`` is a ``UsageError`` on ``path``."""
+    from ..errors import SourceLocation, UsageError
+
+    loc = SourceLocation(file=path)
+    K = traj.n_samples
+    if t_from is None and t_to is None:
+        return 0, K
+    end = float(traj.t[-1]) if K else 0.0
+    for name, v in (("--from", t_from), ("--to", t_to)):
+        if v is not None and not np.isfinite(v):
+            raise UsageError(f"{name} must be a finite time in seconds, not {v}", loc)
+        if v is not None and not 0.0 <= v <= end:
+            raise UsageError(f"{name} {v:g} s lies outside the plan (0 to {end:g} s)", loc)
+    a = 0.0 if t_from is None else float(t_from)
+    b = end if t_to is None else float(t_to)
+    if not a < b:
+        raise UsageError(f"--from {a:g} s must come before --to {b:g} s", loc)
+    i0 = int(np.searchsorted(traj.t, a, side="left"))
+    i1 = int(np.searchsorted(traj.t, b, side="right"))
+    if i1 - i0 < 2:
+        raise UsageError(f"the window {a:g} to {b:g} s holds fewer than 2 samples (dt = {traj.dt_s:g} s)", loc)
+    return i0, i1
+
+
+def plot_trajectory(traj, machine, out: str, title: str = "", span: tuple[int, int] | None = None) -> str:
+    """Draw ``traj`` (and its limit ratios when ``machine`` is given) into ``out``; only
+    the samples ``span = (i0, i1)`` when given (``plot_window``)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -64,16 +107,9 @@ def plot_trajectory(traj, machine, out: str, title: str = "") -> str:
 
     from ..outfile import atomic_write
 
-    fmt = os.path.splitext(out)[1].lstrip(".").lower() or "png"
-    supported = FigureCanvasBase.get_supported_filetypes()
-    if fmt not in supported:
-        from ..errors import SourceLocation, UsageError
-
-        raise UsageError(
-            f"cannot write a .{fmt} image; use one of {', '.join(sorted(supported))}", SourceLocation(file=out)
-        )
+    fmt = image_format(out, FigureCanvasBase.get_supported_filetypes())
     with plt.rc_context(_STYLE):
-        fig = _figure(plt, traj, machine, title)
+        fig = _figure(plt, traj, machine, title, span)
         try:
             with atomic_write(out) as fh:
                 # No dates or versions in the file: the same plan gives the same image.
@@ -81,6 +117,23 @@ def plot_trajectory(traj, machine, out: str, title: str = "") -> str:
         finally:
             plt.close(fig)
     return out
+
+
+def image_format(out: str, supported=None) -> str:
+    """The image format of ``out`` by its ending (any case): one matplotlib writes (png
+    first, the format of a device or FIFO); another ending, or none, is a ``UsageError``
+    naming the accepted ones (``outfile.output_format``)."""
+    from ..outfile import output_format
+
+    if supported is None:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        from matplotlib.backend_bases import FigureCanvasBase
+
+        supported = FigureCanvasBase.get_supported_filetypes()
+    formats = {".png": "png"} | {"." + k: k for k in sorted(supported)}
+    return output_format(out, formats, "a plot")
 
 
 _DPI = 110
@@ -105,57 +158,102 @@ def _metadata(fmt: str) -> dict | None:
     return None
 
 
-def _figure(plt, traj, machine, title):
+def _figure(plt, full, machine, title, span: tuple[int, int] | None = None):
+    from dataclasses import replace
+
     from matplotlib.gridspec import GridSpec
 
+    i0, i1 = span if span is not None else (0, full.n_samples)
+    windowed = (i0, i1) != (0, full.n_samples)
+    traj = full
+    if windowed:
+        traj = replace(
+            full, t=full.t[i0:i1], s=full.s[i0:i1], feed=full.feed[i0:i1], q=full.q[i0:i1], line=full.line[i0:i1]
+        )
+    z_axis = _z_view_axis(traj)
+    rotary = _rotary_axes(traj)
+    left_extra = (z_axis is not None) + bool(rotary)
     n_right = 4 if machine is not None else 2
-    fig = plt.figure(figsize=(14, 7.5) if machine is not None else (13, 5.5))
+    rows = n_right if left_extra < n_right else 4  # the path keeps at least half the height
+    fig = plt.figure(figsize=(14, 7.5) if rows == 4 else (13, 5.5))
     gs = GridSpec(
-        n_right,
+        rows,
         2,
         figure=fig,
         width_ratios=(1.0, 1.15),
         wspace=0.3,
-        hspace=0.12,
+        hspace=0.2 if left_extra else 0.12,
         left=0.06,
         right=0.98,
         top=0.9,
         bottom=0.08,
     )
-    z_axis = _z_view_axis(traj)
-    ax_path = fig.add_subplot(gs[:-1, 0] if z_axis is not None else gs[:, 0])
+    ax_path = fig.add_subplot(gs[: rows - left_extra, 0])
     _draw_path(fig, ax_path, traj)
 
     ax_feed = fig.add_subplot(gs[0, 1] if machine is not None else gs[:, 1])
-    t_f, f_lo, f_hi = _envelope(traj.t, traj.feed[:, None])
+    t_f, f_lo, f_hi = _envelope(traj.t, traj.feed[:, None], _columns(fig, ax_feed))
     ax_feed.fill_between(t_f, f_lo[:, 0], f_hi[:, 0], color="tab:blue", lw=0.6, alpha=0.9)
     ax_feed.plot(t_f, f_hi[:, 0], color="tab:blue", lw=0.6)
     ax_feed.set_ylabel("feed (mm/s)")
-    t_end = float(traj.t[-1]) if traj.t.size > 1 else float(traj.dt_s)  # one sample: one period wide
-    ax_feed.set_xlim(float(traj.t[0]) if traj.t.size else 0.0, t_end)
+    t0 = float(traj.t[0]) if traj.t.size else 0.0
+    t_end = float(traj.t[-1]) if traj.t.size > 1 else t0 + float(traj.dt_s)  # one sample: one period wide
+    ax_feed.set_xlim(t0, t_end)
     _scale_to_cutting_feeds(ax_feed, traj.feed)
+    row = rows - left_extra
     if z_axis is not None:
-        ax_z = fig.add_subplot(gs[-1, 0])
-        t_z, z_lo, z_hi = _envelope(traj.t, traj.q[:, z_axis : z_axis + 1])
+        ax_z = fig.add_subplot(gs[row, 0])
+        row += 1
+        t_z, z_lo, z_hi = _envelope(traj.t, traj.q[:, z_axis : z_axis + 1], _columns(fig, ax_z))
         ax_z.fill_between(t_z, z_lo[:, 0], z_hi[:, 0], color="tab:green", lw=0.6)
+        ax_z.plot(t_z, z_hi[:, 0], color="tab:green", lw=0.6)
         ax_z.set_xlim(ax_feed.get_xlim())
         ax_z.set_ylabel(f"{traj.axes[z_axis]} (mm)")
         ax_z.set_xlabel("time (s)")
+    if rotary:
+        ax_r = fig.add_subplot(gs[row, 0])
+        t_r, r_lo, r_hi = _envelope(traj.t, traj.q[:, rotary], _columns(fig, ax_r))
+        for c, k in enumerate(rotary):
+            color = f"C{k % 10}"  # the colour of the axis in the ratio panels
+            ax_r.fill_between(t_r, r_lo[:, c], r_hi[:, c], color=color, lw=0.4, alpha=0.55)
+            ax_r.plot(t_r, r_hi[:, c], color=color, lw=0.7, label=traj.axes[k])
+        ax_r.set_xlim(ax_feed.get_xlim())
+        ax_r.set_ylabel("rotary (deg)")
+        ax_r.set_xlabel("time (s)")
+        ax_r.legend(loc="upper left", ncol=len(rotary), framealpha=0.8)
+        if z_axis is not None:
+            ax_z.set_xlabel("")
+            ax_z.tick_params(labelbottom=False)
     axes_right = [ax_feed]
     if machine is not None:
-        axes_right += _draw_ratios(fig, gs, traj, machine, ax_feed)
+        axes_right += _draw_ratios(fig, gs, full, machine, ax_feed, (i0, i1))
     for ax in axes_right[:-1]:
         ax.tick_params(labelbottom=False)
     axes_right[-1].set_xlabel("time (s)")
 
     who = "CSV plan" if traj.planner == "csv" else f"{traj.planner} planner"
-    sub = f"{who}, {traj.n_samples:,} samples at dt = {traj.dt_s * 1e3:g} ms, cycle time {traj.duration_s:.3f} s"
+    sub = f"{who}, {full.n_samples:,} samples at dt = {full.dt_s * 1e3:g} ms, cycle time {full.duration_s:.3f} s"
+    if windowed:
+        sub += f"; shown: {t0:.3f} to {t_end:.3f} s"
     if machine is not None:
         sub += f", machine: {machine.name}"
     if traj.status != "ok":
         sub += f" [{traj.status}]"
     fig.suptitle(f"{title}\n{sub}" if title else sub, fontsize=10)
     return fig
+
+
+def _columns(fig, ax) -> int:
+    """The width of ``ax`` in pixel columns (at the saved resolution)."""
+    return max(16, int(round(ax.get_position().width * fig.get_figwidth() * _DPI)))
+
+
+def _rotary_axes(traj) -> list[int]:
+    """The columns of the rotary axes (A, B, C) that turn."""
+    if traj.n_samples == 0:
+        return []
+    span = np.ptp(traj.q, axis=0)
+    return [i for i, a in enumerate(traj.axes) if a in ROTARY_AXES and np.isfinite(span[i]) and span[i] > 0]
 
 
 def _scale_to_cutting_feeds(ax, feed: np.ndarray) -> None:
@@ -193,19 +291,21 @@ def _z_view_axis(traj) -> int | None:
 
 def _plane_axes(traj) -> tuple[int, int]:
     """Indices of the axes to draw the path in, in machine order: X and Y when both move
-    (the top view of a mill, as in paper 001), else the two that move most (linear axes
-    first: X and Z on a lathe)."""
+    (the top view of a mill, as in paper 001) and the less moving of them moves at least
+    ``PLOT_TOP_VIEW_MIN_SHARE`` of the other; else the two linear axes that move most (X
+    and Z on a lathe or an XZA rotary job), then rotary ones."""
     q = traj.q
     n = q.shape[1]
     if n == 1:
         return 0, 0
     span = np.ptp(q, axis=0) if q.shape[0] else np.zeros(n)
     span = np.where(np.isfinite(span), span, 0.0)
+    linear = np.array([a in LINEAR_AXES for a in traj.axes])
     if "X" in traj.axes and "Y" in traj.axes:
         ix, iy = traj.axes.index("X"), traj.axes.index("Y")
-        if span[ix] > 0 and span[iy] > 0:
+        small, large = sorted((float(span[ix]), float(span[iy])))
+        if small > 0 and small >= PLOT_TOP_VIEW_MIN_SHARE * large:
             return ix, iy
-    linear = np.array([a in LINEAR_AXES for a in traj.axes])
     # Rank linear axes ahead of rotary ones, then by how far they move.
     order = sorted(range(n), key=lambda i: (not linear[i] or span[i] == 0, -span[i], i))
     i, j = sorted(order[:2])
@@ -250,23 +350,29 @@ def _draw_path(fig, ax, traj) -> None:
     cb.set_label("feed (mm/s)")
 
 
-def _draw_ratios(fig, gs, traj, machine, share):
+def _draw_ratios(fig, gs, full, machine, share, span: tuple[int, int]):
+    """The v, a, j ratio panels of the samples ``span`` of the plan ``full`` (the
+    differences reach back before the window, as in the whole plan)."""
     from .ratios import limit_ratios
 
-    axes = "".join(a for a in traj.axes if a in machine.axes)
-    it = [traj.axes.index(a) for a in axes]
+    i0, i1 = span
+    axes = "".join(a for a in full.axes if a in machine.axes)
+    it = [full.axes.index(a) for a in axes]
     im = [machine.axes.index(a) for a in axes]
-    ratios = limit_ratios(traj.q[:, it], traj.dt_s, machine.limits()[:, im])
+    back = min(i0, 3)  # the stencils' samples before the window
+    ratios = limit_ratios(full.q[i0 - back : i1][:, it], full.dt_s, machine.limits()[:, im])[:, back:]
+    t = full.t[i0:i1]
+    K = i1 - i0
     colors = [f"C{k}" for k in range(len(axes))]
     out = []
     for kind, (name, label) in enumerate(_KIND_LABELS):
         ax = fig.add_subplot(gs[kind + 1, 1], sharex=share)
-        t_e, lo, hi = _envelope(traj.t, ratios[kind])
-        moved = np.abs(ratios[kind]).max(axis=0) > 0 if traj.n_samples else np.zeros(0, bool)
+        t_e, lo, hi = _envelope(t, ratios[kind], _columns(fig, ax))
+        moved = np.abs(ratios[kind]).max(axis=0) > 0 if K else np.zeros(0, bool)
         for c, a in enumerate(axes):
             if not moved[c]:
                 continue
-            if t_e.size == traj.n_samples:
+            if t_e.size == K:
                 ax.plot(t_e, hi[:, c], lw=0.8, color=colors[c], label=a)
             else:
                 ax.fill_between(t_e, lo[:, c], hi[:, c], color=colors[c], lw=0.4, alpha=0.55, label=a)
@@ -293,12 +399,12 @@ def _draw_ratios(fig, gs, traj, machine, share):
     return out
 
 
-def _envelope(t: np.ndarray, y: np.ndarray):
-    """Per-bin (time, min, max) of ``y`` (K, m): the samples themselves when K is small."""
+def _envelope(t: np.ndarray, y: np.ndarray, bins: int = PLOT_ENVELOPE_BINS):
+    """Per-bin (time, min, max) of ``y`` (K, m) over ``bins`` equal bins (one per pixel
+    column): the samples themselves when K is small."""
     K = t.shape[0]
-    if K <= 2 * PLOT_ENVELOPE_BINS:
+    if K <= 2 * bins:
         return t, y, y
-    bins = PLOT_ENVELOPE_BINS
     edges = np.linspace(0, K, bins + 1).astype(int)
     lo = np.minimum.reduceat(y, edges[:-1], axis=0)
     hi = np.maximum.reduceat(y, edges[:-1], axis=0)

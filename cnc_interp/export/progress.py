@@ -7,6 +7,11 @@ Usage::
             ...
             tick(len(chunk))
 
+When the total of what is counted is not known up front (the path length of a streamed
+plan) but another measure of the way through is (the program's line count),
+``measure(total, unit)`` and ``reach(position)`` give the percentage and ETA from it,
+while the count still shows what ``tick`` counts.
+
 The bar is drawn only when it helps a person watching: ``enabled`` is true, the
 stream is a terminal, and the work has already run for ``PROGRESS_DELAY_S``.
 Otherwise ``tick`` only counts, so pipelines and logs see nothing. The line is
@@ -60,6 +65,9 @@ class ProgressBar:
         self.refresh_s = refresh_s
         self.clock = clock
         self.done = 0
+        self.reach_total: float | None = None  # the other measure of the way through
+        self.reach_unit = ""
+        self.reached = 0.0
         self.drawn = False
         self._start = clock()
         self._last_draw = -float("inf")
@@ -76,21 +84,34 @@ class ProgressBar:
         self._last_draw = now
         self._draw(now)
 
+    def measure(self, total: float, unit: str) -> None:
+        """Take the percentage and ETA from positions ``reach``ed out of ``total``
+        (``unit``: what a position counts, e.g. ``"line"``) while the total of what
+        ``tick`` counts is unknown; a ``total`` <= 0 is ignored."""
+        if total > 0:
+            self.reach_total = float(total)
+            self.reach_unit = unit
+
+    def reach(self, position: float) -> None:
+        """The work has reached ``position`` (of ``measure``'s total; the furthest counts)."""
+        self.reached = max(self.reached, float(position))
+
     def line(self, now: float | None = None) -> str:
         """The text of the bar as it would be drawn now (without ``\\r``)."""
         now = self.clock() if now is None else now
         elapsed = max(now - self._start, 0.0)
-        label = f"{self.label} " if self.label else ""
-        if self.total is None:
-            return f"{label}{_count(self.done)}{self.unit or ' done'}, {elapsed:.0f}s"
-        frac = min(max(self.done / self.total, 0.0), 1.0)
-        eta = elapsed * (1.0 - frac) / frac if frac > 0 else float("nan")
-        eta_txt = f"ETA {_duration(eta)}" if eta == eta else "ETA ?"
-        tail = f" {frac * 100:3.0f}% {_count(self.done)}/{_count(self.total)}{self.unit} {eta_txt}"
         width = min(_terminal_width(), PROGRESS_MAX_WIDTH) - 1
-        bar_w = max(width - len(label) - len(tail) - 2, 5)
-        filled = int(round(frac * bar_w))
-        return f"{label}[{'#' * filled}{'.' * (bar_w - filled)}]{tail}"
+        if self.total is not None:
+            frac = self.done / self.total
+            count = f"{_count(self.done)}/{_count(self.total)}{self.unit}"
+        elif self.reach_total is not None:
+            frac = self.reached / self.reach_total
+            where = f"{self.reach_unit} {_count(self.reached)}/{_count(self.reach_total)}"
+            count = f"{where}, {_count(self.done)}{self.unit or ' done'}"
+        else:
+            frac = None
+            count = f"{_count(self.done)}{self.unit or ' done'}"
+        return progress_line(self.label, count, elapsed, frac, width)
 
     def _draw(self, now: float) -> None:
         text = self.line(now)
@@ -126,6 +147,23 @@ def progress(
         yield bar
     finally:
         bar.close()
+
+
+def progress_line(label: str, count: str, elapsed_s: float, frac: float | None, width: int) -> str:
+    """One progress line: ``label``, then, with the share done ``frac`` known, a bar,
+    the percentage, ``count`` and the ETA (elapsed time × what is left / what is done),
+    fitted into ``width`` characters; with ``frac`` unknown (``None``), ``count`` and
+    the elapsed time."""
+    head = f"{label} " if label else ""
+    if frac is None:
+        return f"{head}{count}, {_duration(elapsed_s)}"
+    frac = min(max(frac, 0.0), 1.0)
+    eta = elapsed_s * (1.0 - frac) / frac if frac > 0 else float("nan")
+    eta_txt = f"ETA {_duration(eta)}" if eta == eta else "ETA ?"
+    tail = f" {frac * 100:3.0f}% {count} {eta_txt}"
+    bar_w = max(width - len(head) - len(tail) - 2, 5)
+    filled = int(round(frac * bar_w))
+    return f"{head}[{'#' * filled}{'.' * (bar_w - filled)}]{tail}"
 
 
 def _is_tty(stream) -> bool:
