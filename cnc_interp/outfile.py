@@ -346,3 +346,24 @@ def guard_standard_streams() -> None:
         sys.stdout = io.TextIOWrapper(io.BufferedWriter(raw), encoding="utf-8", write_through=True)
     if 2 in closed or sys.stderr is None:
         sys.stderr = open(2, "w", encoding="utf-8", errors="backslashreplace", closefd=False)
+
+
+def output_format(path: str, formats: dict[str, str], what: str, stdout: str | None = None) -> str:
+    """The format ``path`` is written in, chosen by its suffix (case-insensitive):
+    ``formats`` maps each accepted suffix (``".csv"``) to its format, the first being the
+    default. ``"-"`` (standard output) is accepted when ``stdout`` names its format, and a
+    device or FIFO that exists (``/dev/null``, a named pipe), whose name carries no format,
+    takes the default. Any other name is a ``UsageError`` (exit 2) naming the accepted
+    suffixes, raised before anything is written."""
+    if path == "-":
+        if stdout is not None:
+            return stdout
+    elif path.lower().endswith(tuple(formats)):
+        return next(f for s, f in formats.items() if path.lower().endswith(s))
+    elif _is_stream(_stat(path)):
+        return next(iter(formats.values()))
+    names = list(formats) + (["- (standard output)"] if stdout is not None else [])
+    listed = ", ".join(names[:-1]) + " or " + names[-1] if len(names) > 1 else names[0]
+    suffix = os.path.splitext(path)[1] if path != "-" else ""
+    said = f"'{suffix}'" if suffix else ("standard output" if path == "-" else "a name without a suffix")
+    raise UsageError(f"{what} cannot be written to {said}: use a name ending in {listed}", SourceLocation(file=path))

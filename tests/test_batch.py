@@ -78,11 +78,14 @@ def test_compare_rules():
     assert [s["key"] for s in out["status_changed"]] == ["d"]  # ok -> violation
     assert [v["key"] for v in out["violations"]] == ["d"]
     assert out["new"] == ["new"] and out["missing"] == ["gone"]
-    assert out["regressions"] == 3
-    # an already-broken program that stays broken is no regression
-    assert compare([rec("c", status="error")], {"c": rec("c", status="error")}, 0.01)["regressions"] == 0
-    # without a baseline violations and programs that did not plan count (issue 16)
-    assert compare(cur, None, 0.01)["regressions"] == 2
+    # a slowdown and a status change are regressions; the violation is a failure
+    assert (out["errors"], out["failures"], out["regressions"]) == (0, 1, 2)
+    # an already-broken program that stays broken is not counted again
+    known = compare([rec("c", status="error")], {"c": rec("c", status="error")}, 0.01)
+    assert known["errors"] == known["failures"] == known["regressions"] == 0
+    # without a baseline violations are failures, programs refused as bad input errors
+    out = compare(cur, None, 0.01)
+    assert (out["errors"], out["failures"], out["regressions"]) == (1, 1, 0)
     faster = compare([rec("b", cycle=1.0)], {"b": rec("b", cycle=2.0)}, 0.01)
     assert faster["regressions"] == 0 and faster["faster"][0]["key"] == "b"
 
@@ -101,7 +104,8 @@ def test_reports_round_trip(tmp_path):
     assert [r["key"] for r in rows] == ["x.ngc", "y.ngc"] and rows[1]["cycle_time_s"] == ""
     assert tuple(rows[0]) == FIELDS
     text = format_table(report)
-    assert "bad word" in text and "2 programs: 1 error, 1 ok" in text and "1 regression(s)" in text
+    assert "bad word" in text and "2 programs: 1 error, 1 ok" in text
+    assert "1 error(s), 0 failure(s), 0 regression(s)" in text
     assert set(VOLATILE_FIELDS) <= set(FIELDS)
 
 
@@ -193,7 +197,7 @@ def test_batch_with_broken_program_and_baseline_rules(tmp_path, folder):
     # same run against itself: no regression; CSV report too
     res2 = run_cli(["batch", str(folder), "-m", m, "--baseline", rep, "--report", str(tmp_path / "r.csv"), "-q"])
     assert res2.exit_code == 0, res2.output
-    assert "0 regression(s)" in res2.output
+    assert "0 error(s), 0 failure(s), 0 regression(s)" in res2.output
     assert open(tmp_path / "r.csv").readline().startswith("key,status,message")
     # the broken program fixed: its status changed -> regression by the baseline rules
     (folder / "sub" / "broken.ngc").write_text("G21 G90\nG1 X5 F1000\nM2\n")

@@ -351,13 +351,15 @@ def test_quiet_and_json_summary(plans, tmp_path):
 def test_mcap_output_matches_csv(plans, tmp_path):
     from mcap.reader import make_reader
 
+    from cnc_interp.export.mcap_io import decode_message
+
     _, _, csv = plans(MAIN_PART, MAIN_MACHINE)
     out = tmp_path / "plan.mcap"
     res = run_inproc("plan", MAIN_PART, "-m", MAIN_MACHINE, "-o", out, "--quiet")
     assert res.code == 0 and res.err == "" and res.out == b"", res.explain()
     with open(out, "rb") as fh:
         reader = make_reader(fh, validate_crcs=True)
-        rows = [json.loads(m.data) for _, ch, m in reader.iter_messages(topics=["/setpoints"])]
+        rows = [decode_message(sc, m.data) for sc, ch, m in reader.iter_messages(topics=["/setpoints"])]
     assert len(rows) == csv.data.shape[0]
     got = np.array([[r[c] for c in csv.header] for r in rows])
     assert np.array_equal(got, csv.data)

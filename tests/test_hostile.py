@@ -459,14 +459,14 @@ def test_a_crashed_program_fails_the_batch_without_a_baseline():
         {"key": "a", "status": "ok", "worst_ratio": 0.9, "cycle_time_s": 1.0, "message": ""},
         {"key": "b", "status": "crash", "worst_ratio": None, "cycle_time_s": None, "message": "signal 11"},
     ]
-    assert compare(recs, None, 0.01)["regressions"] == 1
-    assert compare(recs[:1], None, 0.01)["regressions"] == 0
+    assert compare(recs, None, 0.01)["failures"] == 1
+    assert compare(recs[:1], None, 0.01)["failures"] == 0
     base = {"a": recs[0], "b": dict(recs[1], status="ok")}
     assert compare(recs, base, 0.01)["regressions"] == 1  # status changed
-    assert compare(recs, {"a": recs[0], "b": recs[1]}, 0.01)["regressions"] == 0  # known crash
+    assert compare(recs, {"a": recs[0], "b": recs[1]}, 0.01)["failures"] == 0  # known crash
     err = [dict(recs[1], status="error", message="bad G-code")]
-    assert compare(err, None, 0.01)["regressions"] == 1  # a failure without a baseline
-    assert compare(err, {"b": err[0]}, 0.01)["regressions"] == 0
+    assert compare(err, None, 0.01)["errors"] == 1  # an input error without a baseline
+    assert compare(err, {"b": err[0]}, 0.01)["errors"] == 0
 
 
 def test_batch_has_a_default_timeout():

@@ -35,36 +35,56 @@ DT_REL_TOL = 1e-9
 
 def verify_file(path: str, machine_spec: str | None, start: str | None = None):
     """Read the plan at ``path`` and verify it against ``machine_spec`` (file or preset;
-    ``None``: the machine an MCAP plan names, see ``plan_machine``), starting at the
-    machine's start position or ``start`` (``--start`` syntax, ``"X=1,Y=2"``).
+    ``None``: the machine an MCAP plan names, else the default preset, see
+    ``plan_machine``), starting at the machine's start position or ``start`` (``--start``
+    syntax, ``"X=1,Y=2"``).
 
     Returns the ``VerifyReport`` (its ``ok`` is false when any ratio exceeds 1 + the
     documented slack, a setpoint is not finite, or the first sample is not the start
-    position). Before that, the plan itself must be checkable (``check_plan``). Raises
+    position; its ``machine`` ends in ``, default`` when the default preset was taken).
+    Before that, the plan itself must be checkable (``check_plan``). Raises
     ``MachineError`` for a bad machine, ``UsageError`` for an unreadable plan or one that
     cannot be checked against the machine.
     """
-    from ..machine.model import parse_start
-    from ..plan.verify import verify
+    from dataclasses import replace
 
-    machine = plan_machine(path, machine_spec)
+    from ..machine.model import parse_start
+    from ..plan.verify import machine_label, verify
+
+    machine, how = resolve_plan_machine(path, machine_spec)
     machine = machine.with_start(parse_start(start, machine.axes, machine.start))
     traj = read_plan(path, machine.dt_s)
     check_plan(traj, machine, str(path))
-    return verify(traj, machine)
+    report = verify(traj, machine)
+    if how == "default":
+        report = replace(report, machine=default_label(machine_label(machine)))
+    return report
 
 
-def plan_machine(path: str, machine_spec: str | None, required: bool = True):
-    """The machine a plan file is checked or drawn against: ``machine_spec`` when given;
-    else, for an MCAP plan, the preset or machine file its ``machine`` record names, loaded
-    from that file now (the limits copied into the plan are never trusted). ``None`` when
-    there is none and ``required`` is false; otherwise raises ``UsageError``."""
-    from ..machine.load import load_machine
+def default_label(label: str) -> str:
+    """``"NAME (SOURCE)"`` marked as the default machine: ``"NAME (SOURCE, default)"``."""
+    return label[:-1] + ", default)" if label.endswith(")") else label + " (default)"
+
+
+def plan_machine(path: str, machine_spec: str | None):
+    """The machine a plan file is checked or drawn against (``resolve_plan_machine``)."""
+    return resolve_plan_machine(path, machine_spec)[0]
+
+
+def resolve_plan_machine(path: str, machine_spec: str | None):
+    """``(machine, how)``: the machine a plan file is checked or drawn against, found the
+    same way for every command that reads a plan: ``machine_spec`` when given (``how =
+    "given"``); else, for an MCAP plan, the preset or machine file its ``machine`` record
+    names, loaded from that file now (the limits copied into the plan are never trusted;
+    ``"plan"``); else the default preset that ``cnc-interp plan`` uses without ``-m``
+    (``"default"``: a CSV names no machine, and one planned without ``-m`` is checked
+    against the machine it was planned for). An MCAP naming a machine file that is gone
+    is a ``UsageError`` asking for ``-m``."""
+    from ..machine.load import DEFAULT_PRESET, load_machine
 
     if machine_spec:
-        return load_machine(machine_spec)
+        return load_machine(machine_spec), "given"
     loc = SourceLocation(file=str(path))
-    source = None
     if os.fspath(path).lower().endswith(".mcap"):
         from .mcap_io import read_mcap_machine_record
 
@@ -73,14 +93,11 @@ def plan_machine(path: str, machine_spec: str | None, required: bool = True):
         if source:
             spec = source.removeprefix("preset:")
             if spec != source or os.path.isfile(spec):
-                return load_machine(spec)
-    if not required:
-        return None
-    if source:
-        raise UsageError(
-            f"the plan names machine file {source!r}, which is not found; give the machine with -m MACHINE", loc
-        )
-    raise UsageError("give the machine to check against with -m MACHINE (this plan names none)", loc)
+                return load_machine(spec), "plan"
+            raise UsageError(
+                f"the plan names machine file {source!r}, which is not found; give the machine with -m MACHINE", loc
+            )
+    return load_machine(DEFAULT_PRESET), "default"
 
 
 def check_plan(traj, machine, path: str) -> None:

@@ -9,6 +9,9 @@ import numpy as np
 
 from ..errors import SourceLocation, UsageError
 
+#: the name ending of a frame file (``stream --dry-run FRAMES.bin``, ``emulate FRAMES.bin``)
+FRAMES_SUFFIX = ".bin"
+
 
 @dataclass(frozen=True)
 class StreamOptions:
@@ -78,10 +81,11 @@ def trajectory_from_device(core, planner: str = "fpga-emulate"):
 
 def emulate_file(frames_path: str, out: str) -> None:
     """Replay a frame file through the bit-exact model and write its setpoints as plan CSV."""
-    from ..outfile import atomic_write, check_writable
+    from ..outfile import atomic_write, check_writable, output_format
     from .frames import read_frame_file
 
     check_writable(out, inputs=(frames_path,))
+    output_format(out, {".csv": "csv"}, "emulated setpoints", stdout="csv")
     frames = read_frame_file(frames_path)
     with atomic_write(out) as fh:  # nothing is left behind when a frame is refused
         sink = _CsvSink(fh, frames)
@@ -209,8 +213,9 @@ def summary_line(prog, frames) -> str:
 
 
 def run_stream(opts: StreamOptions, backend=None) -> None:
-    """``cnc-interp stream``: plan, quantize, then write frames (``--dry-run``) or send them over USB."""
-    from ..outfile import atomic_write, check_writable
+    """``cnc-interp stream``: plan, quantize, then write frames (``--dry-run``, a ``.bin``
+    file) or send them over USB."""
+    from ..outfile import atomic_write, check_writable, output_format
 
     if opts.dry_run and opts.resume_from is not None:
         raise UsageError("--resume-from applies to a device, not to --dry-run")
@@ -220,6 +225,7 @@ def run_stream(opts: StreamOptions, backend=None) -> None:
         # the machine's tool table (an INI's [EMCIO] TOOL_TABLE) is an input too
         table = load_machine(opts.machine_spec if opts.machine_spec is not None else DEFAULT_PRESET).tool_table
         check_writable(opts.dry_run, inputs=(opts.part, opts.machine_spec, table))
+        output_format(opts.dry_run, {FRAMES_SUFFIX: "frames"}, "frames")
     prog, frames, infos = build_stream(opts)
     _say(opts.quiet, summary_line(prog, frames))
     for why in prog.stats.get("fallback_paths", []):

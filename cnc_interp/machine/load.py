@@ -49,7 +49,17 @@ import numpy as np
 from ..constants import ALL_AXES, DEFAULT_DT_S, MM_PER_INCH, ROTARY_AXES
 from ..errors import MachineError, SourceLocation
 from .kinematics import KINEMATICS, normalise_params
-from .model import DT_MAX_S, DT_MIN_S, LIMIT_MAX, LIMIT_MIN, START_MAX, TOL_MAX_MM, Machine, ramp_problem
+from .model import (
+    DT_MAX_S,
+    DT_MIN_S,
+    LIMIT_MAX,
+    LIMIT_MIN,
+    START_MAX,
+    TOL_MAX_MM,
+    Machine,
+    noop_mcode_problem,
+    ramp_problem,
+)
 from .presets import DEFAULT_PRESET, PRESETS
 
 
@@ -67,7 +77,10 @@ __all__ = [
     "PRESETS",
 ]
 
-_TOP_KEYS = ("name", "dt", "kinematics", "tol", "start", "axes", "description")
+_TOP_KEYS = ("name", "dt", "kinematics", "tol", "start", "axes", "description", "gcode")
+_GCODE_KEYS = ("noop_mcodes",)
+#: LinuxCNC's user M-codes: a program file named M100 to M199 in the INI's search folders
+USER_MCODES = range(100, 200)
 _AXIS_KEYS = ("vmax", "amax", "jmax")
 _LIMIT_NAMES = {"vmax": "velocity", "amax": "acceleration", "jmax": "jerk"}
 #: longest sample period accepted (s); anything longer is certainly a unit mistake
@@ -389,6 +402,7 @@ def machine_from_data(
         tol_mm = _number(data["tol"], "tol (mm)", locate((), "tol"), most=TOL_MAX_MM)
     if "description" in data and not isinstance(data["description"], str):
         raise MachineError("description must be a string", locate((), "description"))
+    noop_mcodes = _toml_noop_mcodes(data.get("gcode"), locate)
 
     return Machine(
         name=name,
@@ -403,7 +417,29 @@ def machine_from_data(
         tol_mm=tol_mm,
         source=source,
         defaults=defaults,
+        noop_mcodes=noop_mcodes,
     )
+
+
+def _toml_noop_mcodes(table: object, locate: Callable[[tuple[str, ...], str | None], SourceLocation]) -> frozenset[int]:
+    """``[gcode] noop_mcodes = [29, 100]``: the M-codes the machine declares no-ops."""
+    if table is None:
+        return frozenset()
+    if not isinstance(table, dict):
+        raise MachineError("gcode must be a table, e.g. [gcode] noop_mcodes = [29, 100]", locate((), "gcode"))
+    for key in table:
+        if key not in _GCODE_KEYS:
+            raise MachineError(
+                f"unknown key '{key}' in [gcode] (allowed: {', '.join(_GCODE_KEYS)})", locate(("gcode",), key)
+            )
+    codes = table.get("noop_mcodes", [])
+    loc = locate(("gcode",), "noop_mcodes")
+    if not isinstance(codes, list) or any(isinstance(c, bool) or not isinstance(c, int) for c in codes):
+        raise MachineError("noop_mcodes must be a list of M-code numbers, e.g. [29, 100] for M29 and M100", loc)
+    problem = noop_mcode_problem(codes)
+    if problem:
+        raise MachineError(problem, loc)
+    return frozenset(codes)
 
 
 # --- LinuxCNC INI ------------------------------------------------------------
@@ -596,7 +632,32 @@ def _load_ini(text: str, path: str) -> Machine:
         source=path,
         tool_table=tool_table,
         defaults=defaults,
+        noop_mcodes=_ini_user_mcodes(ini, path),
     )
+
+
+def _ini_user_mcodes(ini: _Ini, path: str) -> frozenset[int]:
+    """The user M-codes LinuxCNC would run for this INI: M100 to M199 with a program file
+    of that name (``M101``) in ``[RS274NGC] USER_M_PATH`` (folders separated by ``:``) or
+    ``[DISPLAY] PROGRAM_PREFIX``, relative to the INI's folder. They move no axis the
+    planner knows of, so the reader takes them as no-ops."""
+    base = os.path.dirname(os.path.abspath(path))
+    folders: list[str] = []
+    for section, key in (("RS274NGC", "USER_M_PATH"), ("DISPLAY", "PROGRAM_PREFIX")):
+        item = ini.get(section, key)
+        if item is not None:
+            folders += [os.path.join(base, os.path.expanduser(f.strip())) for f in item[0].split(":") if f.strip()]
+    found = set()
+    for folder in folders:
+        try:
+            names = os.listdir(folder)
+        except OSError:
+            continue  # LinuxCNC skips a folder it cannot read too
+        for name in names:
+            m = re.fullmatch(r"M(\d{3})", name)
+            if m and int(m.group(1)) in USER_MCODES and os.path.isfile(os.path.join(folder, name)):
+                found.add(int(m.group(1)))
+    return frozenset(found)
 
 
 #: LinuxCNC kinematics module -> ours (pivot offsets are HAL pins, not INI keys: 0 here)
@@ -701,6 +762,8 @@ def format_machine(desc: dict[str, Any]) -> str:
     out.append("  start " + ", ".join(f"{a} {v:g} {units[a]}" for a, v in desc["start"].items()))
     if desc["tool_table"]:
         out.append(f"  tool table {desc['tool_table']}")
+    if desc["noop_mcodes"]:
+        out.append("  no-op M-codes " + " ".join(f"M{c}" for c in desc["noop_mcodes"]))
     out.extend(_limit_lines(desc["limits"]))
     if desc["defaults"]:
         out.append("  defaults applied (not given by the source):")

@@ -7,12 +7,13 @@ module holds only the type.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from collections.abc import Iterable
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..constants import ROTARY_AXES
+from ..constants import MCODE_MAX, MCODES_INTERPRETED, ROTARY_AXES
 from ..errors import MachineError, SourceLocation, UsageError
 
 #: accepted limit ranges (exclusive of 0), mm or deg per s, s², s³: far beyond any machine,
@@ -68,6 +69,9 @@ class Machine:
         tol_mm: default path tolerance for the fit, mm.
         source: where it was loaded from (file name or ``preset:NAME``).
         tool_table: path of the LinuxCNC tool table (an INI's ``[EMCIO] TOOL_TABLE``), or None.
+        noop_mcodes: M-codes (numbers) the machine declares no-ops for planning: its
+            user M-codes (LinuxCNC's M100-M199 programs) or a controller's own codes (a
+            Fanuc M29) that move no axis; the G-code reader accepts them and does nothing.
         defaults: what the reader filled in because the source did not give it, as
             ``{what: the value and why}`` (e.g. ``{"jmax.X": "10/s x amax ..."}``; keys
             ``name``, ``dt``, ``kinematics``, ``kinematics.<param>``, ``jmax.<axis>``,
@@ -89,6 +93,7 @@ class Machine:
     source: str = ""
     tool_table: str | None = None
     defaults: dict[str, str] = field(default_factory=dict)
+    noop_mcodes: frozenset[int] = frozenset()
 
     def __post_init__(self) -> None:
         n = len(self.axes)
@@ -97,6 +102,7 @@ class Machine:
             object.__setattr__(self, name, arr)
         start = np.zeros(n) if self.start is None else np.asarray(self.start, dtype=float).reshape(n)
         object.__setattr__(self, "start", start)
+        object.__setattr__(self, "noop_mcodes", frozenset(int(c) for c in self.noop_mcodes))
         self._check_ranges()
 
     def _check_ranges(self) -> None:
@@ -122,6 +128,9 @@ class Machine:
             raise MachineError(f"tol = {self.tol_mm:g} mm is out of range [0, {TOL_MAX_MM:g}] mm", loc)
         if not (np.abs(self.start) <= START_MAX).all():
             raise MachineError(f"start position out of range (|coordinate| > {START_MAX:g})", loc)
+        problem = noop_mcode_problem(self.noop_mcodes)
+        if problem:
+            raise MachineError(problem, loc)
 
     @property
     def n_axes(self) -> int:
@@ -158,12 +167,28 @@ class Machine:
             "kinematics": self.kinematics,
             "kinematics_params": {k: float(v) for k, v in self.kinematics_params.items()},
             "tol_mm": None if self.tol_mm is None else float(self.tol_mm),
+            "noop_mcodes": sorted(self.noop_mcodes),
             "start": {a: float(v) for a, v in zip(self.axes, self.start)},
             "limits": {
                 a: {"vmax": float(v), "amax": float(acc), "jmax": float(j), "unit": "deg" if a in ROTARY_AXES else "mm"}
                 for a, v, acc, j in zip(self.axes, self.vmax, self.amax, self.jmax)
             },
         }
+
+
+def noop_mcode_problem(codes: Iterable[int]) -> str:
+    """Why ``codes`` cannot be declared no-op M-codes ("" when they can): each must be a
+    whole number from 0 to ``MCODE_MAX`` that the interpreter gives no meaning of its own
+    (``MCODES_INTERPRETED``: an M2 or M6 keeps its meaning)."""
+    for c in sorted(codes):
+        if not 0 <= c <= MCODE_MAX:
+            return f"noop_mcodes: M{c} is out of range (0 to {MCODE_MAX})"
+        if c in MCODES_INTERPRETED:
+            return (
+                f"noop_mcodes: M{c} has a meaning of its own in the G-code reader; only M-codes "
+                "it does not know may be declared no-ops"
+            )
+    return ""
 
 
 def parse_start(spec: str | None, axes: str, base: np.ndarray | None = None) -> np.ndarray | None:
