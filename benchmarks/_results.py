@@ -36,6 +36,7 @@ ORDER = (
     "plan.py",
     "optimality.py",
     "e2e.py",
+    "estimate.py",
     "planners.py",
     "polyline_vs_exact.py",
     "parse.py",

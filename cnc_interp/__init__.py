@@ -30,6 +30,8 @@ _LAZY = {
     "verify": "api",
     "write": "api",
     "run": "api",
+    "estimate": "api",
+    "Estimate": "plan.breakdown",
     "PlanResult": "api",
     "DEFAULT_PLANNER": "api",
     "CncInterpError": "errors",

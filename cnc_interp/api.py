@@ -34,6 +34,7 @@ if TYPE_CHECKING:  # the stages are imported when called: ``import cnc_interp`` 
     from .plan.settings import PlanSettings
     from .plan.trajectory import Trajectory
     from .plan.verify import VerifyReport
+    from .plan.breakdown import Estimate
 
 __all__ = [
     "load_machine",
@@ -43,6 +44,7 @@ __all__ = [
     "verify",
     "write",
     "run",
+    "estimate",
     "PlanResult",
     "Progress",
     "DEFAULT_PLANNER",
@@ -102,7 +104,12 @@ def read_program(
         start = m.start if start is None else start
         tool_table = m.tool_table if tool_table is None else tool_table
     program: Program = _read(
-        data, source=name, axes=m.axes if m is not None else None, start=start, tool_table=tool_table
+        data,
+        source=name,
+        axes=m.axes if m is not None else None,
+        start=start,
+        tool_table=tool_table,
+        noop_mcodes=m.noop_mcodes if m is not None else frozenset(),
     )
     if m is not None:
         key = id(program)
@@ -276,15 +283,26 @@ def write(
     metadata: "dict[str, Any] | None" = None,
 ) -> None:
     """Write the samples to ``path``: MCAP when it ends in ``.mcap`` (with ``machine``'s
-    limits and ``metadata`` records), else CSV; ``"-"`` is standard output. The file
-    appears only complete (written to a temporary file, then renamed)."""
+    limits and ``metadata`` records), a LinuxCNC halstreamer file for ``.halstream``, CSV
+    for ``.csv`` (any case; another ending is a ``UsageError``, as for ``plan -o``);
+    ``"-"`` is standard output (CSV). The file appears only complete (written to a
+    temporary file, then renamed)."""
     from .plan.trajectory import Trajectory
 
     _expect(traj, Trajectory, "traj", "a Trajectory (from plan)", "write")
     _expect(path, (str, os.PathLike), "path", "a file name", "write")
     _expect(metadata, (dict, type(None)), "metadata", "a dict", "write")
     path = os.fspath(path)
-    if path.lower().endswith(".mcap"):
+    from .export.formats import plan_format
+
+    fmt = plan_format(path)
+    if fmt == "halstream":
+        from .export.halstream import write_halstream_to
+        from .outfile import atomic_write
+
+        with atomic_write(path) as fh:
+            write_halstream_to(traj, fh)
+    elif fmt == "mcap":
         from .export.mcap_io import write_mcap
 
         m = load_machine(machine) if machine is not None else None
@@ -392,6 +410,54 @@ def run(
         settings=settings,
         timings_s={"parse": t1 - t0, "fit": t2 - t1, "plan": t3 - t2, "verify": t4 - t3},
     )
+
+
+def estimate(
+    source: "str | bytes | os.PathLike[str]",
+    machine: "Machine | str",
+    *,
+    planner: str | None = None,
+    dt_s: float | None = None,
+    tol_mm: float | None = None,
+    fit_method: str | None = None,
+    effort: str | None = None,
+    start: "np.ndarray | None" = None,
+    tool_table: "str | ToolTable | None" = None,
+    name: str | None = None,
+) -> "Estimate":
+    """The cycle of ``source`` on ``machine`` and where it goes (``cnc-interp estimate``):
+    planned and verified as ``cnc-interp plan`` plans (one stream, memory bounded by a
+    window of the program, not its cycle), no setpoints kept. Returns an ``Estimate``
+    (``cnc_interp.plan.breakdown``): times by kind, tool, operation, source lines and
+    binding limit, each summing to ``cycle_time_s``. A plan that violates a limit raises
+    ``PlanError``; arguments as ``run`` takes them.
+    """
+    from .pipeline import PlanOptions, stream_plan
+
+    for what, value in (("dt_s", dt_s), ("tol_mm", tol_mm)):
+        _expect_number(value, what, "estimate")
+    m = load_machine(machine)
+    start = _position(start, "start", m)
+    if start is not None:
+        m = m.with_start(start)
+    data, display = _source_bytes(source, name)
+    opts = PlanOptions(
+        part=display,
+        planner=planner or DEFAULT_PLANNER,
+        dt_s=dt_s,
+        tol_mm=tol_mm,
+        fit_method=fit_method,
+        # a ToolTable passes through to the program stream as a file name does
+        tool_table=tool_table,  # type: ignore[arg-type]
+        out=None,
+        quiet=True,
+        effort=effort,
+    )
+    # text as the block reader takes it: one byte per character (latin-1)
+    data_bytes = data.encode("latin-1", "replace") if isinstance(data, str) else data
+    summary = stream_plan(opts, data=data_bytes, machine=m, breakdown=True)
+    result: Estimate = summary["estimate"]
+    return result
 
 
 def _source_bytes(source: "str | bytes | os.PathLike[str]", name: str | None) -> tuple[bytes | str, str]:

@@ -15,9 +15,15 @@ peak memory (MB), and the number of Python warnings the stages raised (with the
 first one; they are counted, not printed). Wall time and memory vary run to run; everything else is
 deterministic, so local and Dask runs give the same report apart from those.
 
-Exit status: 1 when there is a regression — a program violating a limit, or,
-against ``--baseline``, a program whose status changed or whose cycle time grew
-by more than ``--max-slowdown`` — otherwise 0; 2 for bad usage or machine.
+The summary counts three kinds of trouble apart: **errors**, programs the reader or a
+stage refused as bad input (status ``error``, what ``plan`` exits 2 for); **failures**,
+programs whose plan violates a limit, crashed or timed out; **regressions**, against
+``--baseline``, programs whose status changed or whose cycle time grew by more than
+``--max-slowdown``. With a baseline, an error, crash or timeout the baseline records for
+the same program is known, not counted again.
+
+Exit status: 1 when there is any error, failure or regression, otherwise 0; 2 for bad
+usage or machine.
 """
 
 from __future__ import annotations
@@ -37,7 +43,7 @@ from .plan.settings import DEFAULT_PLANNER
 #: file name endings taken as part programs when a directory is given
 GCODE_SUFFIXES = (".ngc", ".nc", ".gcode", ".gc", ".g", ".tap", ".cnc")
 #: report format version (bump on incompatible changes)
-REPORT_VERSION = 1
+REPORT_VERSION = 2
 #: result fields, in report / CSV column order
 FIELDS = (
     "key",
@@ -291,15 +297,21 @@ def _record(key: str, res: dict) -> dict:
     rec.update({k: _clean(v) for k, v in res.items() if k in FIELDS})
     rec["key"] = key
     rec["message"] = rec["message"] or ""
+    # where the cycle goes (JSON report only: nested, not a CSV column)
+    rec["estimate"] = res.get("estimate")
     rec["error_line"] = int(rec["error_line"] or 0)
     return rec
 
 
 # --- comparison and summary --------------------------------------------------
 def compare(records: list[dict], baseline: dict | None, max_slowdown: float) -> dict:
-    """Regressions of this run: violations, and against a baseline status changes
-    and cycle times grown by more than ``max_slowdown`` (a fraction)."""
-    out = {"violations": [], "status_changed": [], "slower": [], "faster": [], "new": [], "missing": []}
+    """What went wrong in this run, by kind: ``input_errors`` (status ``error``),
+    ``violations`` and ``failed`` (crash or timeout), and against a baseline
+    ``status_changed`` and ``slower`` (cycle time grown by more than ``max_slowdown``, a
+    fraction); with their counts ``errors`` (input errors), ``failures`` (violations,
+    crashes, timeouts) and ``regressions`` (status changes, slowdowns). A program the
+    baseline records with the same status is known, not counted again."""
+    out: dict = {"violations": [], "status_changed": [], "slower": [], "faster": [], "new": [], "missing": []}
     for r in records:
         if r["status"] in _BAD_STATUS:
             out["violations"].append({"key": r["key"], "worst_ratio": r["worst_ratio"]})
@@ -324,16 +336,28 @@ def compare(records: list[dict], baseline: dict | None, max_slowdown: float) -> 
                     out["slower"].append(item)
                 elif change < -max_slowdown:
                     out["faster"].append(item)
-    # a program that did not plan is a failure unless the baseline expects it: a crash or a
-    # timeout always, an input error when there is no baseline to say it is known
-    failing = ("crash", "timeout") if baseline is not None else ("crash", "timeout", "error")
+    # a program that did not plan counts unless the baseline knows it: a program the
+    # baseline has with another status is a status change instead
+    unknown = [r for r in records if baseline is None or r["key"] not in baseline]
+    out["input_errors"] = [
+        {"key": r["key"], "message": r["message"], "line": r.get("error_line") or 0}
+        for r in unknown
+        if r["status"] == "error"
+    ]
     out["failed"] = [
         {"key": r["key"], "status": r["status"], "message": r["message"]}
-        for r in records
-        if r["status"] in failing and (baseline is None or r["key"] not in baseline)
-    ]  # else: status_changed
-    out["regressions"] = len(out["violations"]) + len(out["status_changed"]) + len(out["slower"]) + len(out["failed"])
+        for r in unknown
+        if r["status"] in ("crash", "timeout")
+    ]
+    out["errors"] = len(out["input_errors"])
+    out["failures"] = len(out["violations"]) + len(out["failed"])
+    out["regressions"] = len(out["status_changed"]) + len(out["slower"])
     return out
+
+
+def exit_status(comparison: dict) -> int:
+    """The batch's exit status: 1 when there is any error, failure or regression, else 0."""
+    return 1 if comparison["errors"] or comparison["failures"] or comparison["regressions"] else 0
 
 
 def summarise(records: list[dict], wall_s: float) -> dict:
@@ -376,8 +400,12 @@ def format_table(report: dict) -> str:
         f"wall {s['wall_s']:.1f} s ({_fmt(ppm, '.1f')} programs/min)"
     )
     c = report["comparison"]
+    for v in c["input_errors"]:
+        rows.append(f"ERROR: {v['key']}: {v['message']}")
     for v in c["violations"]:
-        rows.append(f"REGRESSION violation: {v['key']} (worst ratio {_fmt(v['worst_ratio'], '.9f')})")
+        rows.append(f"FAILURE violation: {v['key']} (worst ratio {_fmt(v['worst_ratio'], '.9f')})")
+    for v in c["failed"]:
+        rows.append(f"FAILURE {v['status']}: {v['key']}: {v['message']}")
     for v in c["status_changed"]:
         rows.append(f"REGRESSION status {v['was']} -> {v['now']}: {v['key']}")
     for v in c["slower"]:
@@ -390,15 +418,27 @@ def format_table(report: dict) -> str:
         rows.append(f"new (not in baseline): {k}")
     for k in c["missing"]:
         rows.append(f"missing (in baseline only): {k}")
-    rows.append(f"{c['regressions']} regression(s)")
+    rows.append(f"{c['errors']} error(s), {c['failures']} failure(s), {c['regressions']} regression(s)")
     return "\n".join(rows)
 
 
+#: accepted endings of ``--report`` (any case) and their formats; the first is the default
+REPORT_FORMATS = {".json": "json", ".csv": "csv"}
+
+
+def report_format(path: str) -> str:
+    """``"json"`` or ``"csv"`` for the ``--report`` path; another ending is a
+    ``UsageError`` naming the accepted ones (``outfile.output_format``)."""
+    from .outfile import output_format
+
+    return output_format(path, REPORT_FORMATS, "a batch report")
+
+
 def write_report(report: dict, path: str) -> None:
-    """``.csv``: one row per program; anything else: the JSON report. Written atomically."""
+    """``.csv``: one row per program; ``.json``: the JSON report. Written atomically."""
     from .outfile import atomic_write
 
-    if path.lower().endswith(".csv"):
+    if report_format(path) == "csv":
         buf = io.StringIO()
         w = csv.writer(buf, lineterminator="\n")
         w.writerow(FIELDS)
@@ -432,6 +472,7 @@ def build_report(opts: BatchOptions) -> dict:
         # every file the batch reads is an input the report must not replace
         inputs = (opts.machine_spec, machine.tool_table, opts.baseline, *(path for _, path in programs))
         check_writable(opts.report, inputs=inputs)
+        report_format(opts.report)  # an unknown ending: exit 2 before any program runs
 
     from .export.progress import progress
 
@@ -466,4 +507,4 @@ def run_batch(opts: BatchOptions) -> int:
     else:
         sys.stdout.write(printable(format_table(report), lines=True) + "\n")
     sys.stdout.flush()
-    return 1 if report["comparison"]["regressions"] else 0
+    return exit_status(report["comparison"])

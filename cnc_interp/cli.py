@@ -197,12 +197,15 @@ def fit(part, machine_spec, tool_table, tol_mm, corner_deg, fit_method, out, as_
     from .pipeline import fit_loaded, load_program_for
 
     if out:
-        from .outfile import check_writable
+        from .outfile import check_writable, output_format
 
         check_writable(out, inputs=(part, machine_spec, tool_table))
-    program, machine = load_program_for(part, machine_spec, require_machine=False, tool_table=tool_table)
+    # without -m, the default machine, as `plan` (its axes, its tolerance)
+    program, machine = load_program_for(part, machine_spec, require_machine=True, tool_table=tool_table)
     if out and machine is not None and machine.tool_table is not None:
         check_writable(out, inputs=(machine.tool_table,))  # an INI's [EMCIO] TOOL_TABLE
+    if out:
+        output_format(out, {".json": "json"}, "fitted segments", stdout="json")
     settings = FitSettings.from_options(tol_mm=tol_mm, corner_deg=corner_deg, machine=machine, method=fit_method)
     result = fit_loaded(program, settings)
     if out:
@@ -235,7 +238,12 @@ _start_option = click.option(
 @_fit_method_option
 @_start_option
 @click.option(
-    "-o", "--output", "out", default="-", metavar="OUT", help="OUT.csv or OUT.mcap; - (default) writes CSV to stdout."
+    "-o",
+    "--output",
+    "out",
+    default="-",
+    metavar="OUT",
+    help="OUT.csv, OUT.mcap or OUT.halstream (LinuxCNC halstreamer); - (default) writes CSV to stdout.",
 )
 @click.option(
     "--quiet", "-q", is_flag=True, help="No progress bar and no summary line on stderr (--json is still written)."
@@ -268,6 +276,61 @@ def plan(part, machine_spec, tool_table, planner, effort, dt_s, tol_mm, fit_meth
         summary_json=as_json,
     )
     run_plan(opts)
+
+
+# -- estimate -----------------------------------------------------------------
+@main.command()
+@click.argument("part", type=click.Path(allow_dash=True, dir_okay=False))
+@_machine_option()
+@_tool_table_option
+@_planner_option
+@_effort_option
+@_dt_option
+@_tol_option
+@_fit_method_option
+@_start_option
+@click.option("--quiet", "-q", is_flag=True, help="No progress bar (the table or --json is still written).")
+@click.option("--json", "as_json", is_flag=True, help="The estimate as JSON on stdout instead of the table.")
+@click.option(
+    "--compare-tol",
+    "compare_tol",
+    type=float,
+    multiple=True,
+    metavar="MM",
+    help="Also plan at this --tol and report the cycle it gives (repeatable): what the tolerance costs.",
+)
+def estimate(
+    part, machine_spec, tool_table, planner, effort, dt_s, tol_mm, fit_method, start, quiet, as_json, compare_tol
+) -> None:
+    """Cycle time of PART and where it goes, planned as `plan` does, no setpoints written.
+
+    \b
+    Time by kind (rapid, feed, dwell, rest), tool (T.. M6), operation (comment
+    headers), source lines and binding limit, and the share at programmed feed;
+    with --compare-tol, the cycle at other tolerances.
+    """
+    from .outfile import watch_interrupts
+
+    watch_interrupts()
+    from .pipeline import PlanOptions, run_estimate
+
+    run_estimate(
+        PlanOptions(
+            part=part,
+            machine_spec=machine_spec,
+            planner=planner,
+            effort=effort,
+            dt_s=dt_s,
+            tol_mm=tol_mm,
+            fit_method=fit_method,
+            start=start,
+            tool_table=tool_table,
+            out=None,
+            quiet=quiet,
+            summary_json=as_json,
+        ),
+        compare_tol=compare_tol,
+    )
 
 
 # -- machines -----------------------------------------------------------------
@@ -304,8 +367,8 @@ def verify(plan_file, machine_spec, start, as_json) -> None:
     """Check a CSV or MCAP plan against MACHINE's limits and start position (exit 1 on a
     violation).
 
-    An MCAP plan names its machine (a preset or a file, loaded now), so -m is optional
-    there; a CSV needs -m."""
+    Without -m, an MCAP plan's own machine (a preset or a file, loaded now), else the
+    default preset, as `plan` uses without -m (a CSV names no machine)."""
     from .export.verify_file import verify_file
 
     report = verify_file(plan_file, machine_spec, start)
@@ -322,11 +385,13 @@ def verify(plan_file, machine_spec, start, as_json) -> None:
 @click.argument("plan_file", metavar="OUT", type=click.Path(exists=True, dir_okay=False))
 @_machine_option()
 @click.option("-o", "--output", "out", default=None, metavar="FIG.png", help="Image file (default: OUT with .png).")
-def plot(plan_file, machine_spec, out) -> None:
+@click.option("--from", "t_from", type=float, default=None, metavar="S", help="Show the plan from S seconds on.")
+@click.option("--to", "t_to", type=float, default=None, metavar="S", help="Show the plan up to S seconds.")
+def plot(plan_file, machine_spec, out, t_from, t_to) -> None:
     """Plot a plan: tool path coloured by feed, and axis limits against time."""
     from .export.plot import plot_file
 
-    written = plot_file(plan_file, machine_spec, out)
+    written = plot_file(plan_file, machine_spec, out, t_from=t_from, t_to=t_to)
     click.echo(written)
 
 

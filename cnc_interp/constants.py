@@ -13,6 +13,11 @@ SECONDS_PER_MINUTE = 60.0
 ALL_AXES = "XYZABCUVW"
 LINEAR_AXES = frozenset("XYZUVW")
 ROTARY_AXES = frozenset("ABC")
+#: a move whose linear axes travel no more than this (mm) while rotary axes move counts
+#: as rotary-only: its arc length is in degrees and an F or G93 feed applies to that. The
+#: reader's feeds and the fitter's metric must agree on it, or an inverse-time move's time
+#: is off by the ratio of the two lengths
+LINEAR_MOTION_MIN_MM = 1e-6
 
 # --- gcode -------------------------------------------------------------------
 #: upper bound on iterations of one while/do/repeat loop
@@ -28,10 +33,21 @@ PARAM_LOCAL_COUNT = 30
 #: a value used as an integer (parameter number, repeat count) may be this far from one
 EXPR_INTEGER_TOL = 0.0001
 #: most distance between sampled nodes and the exact arc/spline (sagitta), mm: a quarter
-#: of DEFAULT_TOL_MM, so a fit through the nodes stays close to the exact curve
+#: of a fine 1 µm tolerance, so a fit through the nodes stays close to the exact curve
 CURVE_CHORD_TOL_MM = 0.00025
 #: most nodes one arc or spline may be sampled into (a bigger one is an error, not a hang)
 CURVE_MAX_NODES = 1_000_000
+#: M-codes the interpreter gives a meaning (stops, tool change, spindle, coolant,
+#: overrides, I/O, modal state, subprograms; ``gcode.codes`` names each): a machine file
+#: may not declare them no-ops (``[gcode] noop_mcodes``); ``tests/test_mcodes.py`` keeps
+#: this set equal to the codes' tables
+MCODES_INTERPRETED = frozenset(
+    {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 19, 30, 48, 49, 50, 51, 52, 53, 60, 61, 62, 63, 64, 65, 66, 67, 68}
+    | {70, 71, 72, 73, 98, 99}
+)
+#: largest M-code number a machine file may declare a no-op (Fanuc and LinuxCNC codes
+#: stay far below)
+MCODE_MAX = 9999
 
 # --- fit ---------------------------------------------------------------------
 #: Gauss–Legendre order used on each arc-length sub-interval

@@ -34,13 +34,14 @@ def load_machine_spec(spec: str | None):
 def load_program_for(
     part: str,
     machine_spec: str | None,
-    require_machine: bool = False,
+    require_machine: bool = True,
     start: np.ndarray | None = None,
     tool_table: str | None = None,
 ):
     """Parse ``part`` for the machine named by ``machine_spec``: (Program, Machine | None).
 
-    Without a machine the program's own axes are used (at least XYZ). ``tool_table``
+    Without ``machine_spec`` the default preset, as ``plan`` (``require_machine=False``:
+    no machine, the program's own axes, at least XYZ). ``tool_table``
     (a LinuxCNC tool table file) overrides the machine's (``[EMCIO] TOOL_TABLE``).
     """
     from .api import read_program
@@ -57,19 +58,18 @@ def load_program_for(
 
 def summarise_part(part: str, machine_spec: str | None, tool_table: str | None = None) -> dict:
     """``cnc-interp parse``: the program summary (``gcode.summary``) of ``part`` for the
-    machine named by ``machine_spec`` (without one, the program's own axes), read as a
+    machine named by ``machine_spec`` (without one, the default preset, as ``plan``: an
+    axis word the machine lacks is the same error at the same place), read as a
     stream: each run is counted and dropped, so a 50-byte ``G81 ... L1000000`` (a million
     holes, 8 kB each in a ``Program``) is summarised in bounded memory."""
     from .gcode.stream import ProgramStream
     from .gcode.summary import stream_summary
+    from .machine.load import DEFAULT_PRESET
 
-    machine = load_machine_spec(machine_spec)
+    machine = load_machine_spec(machine_spec if machine_spec is not None else DEFAULT_PRESET)
     name, data = read_part(part)
-    if machine is not None:
-        table = tool_table if tool_table is not None else machine.tool_table
-        stream = ProgramStream(data, name, machine.axes, machine.start, table)
-    else:
-        stream = ProgramStream(data, name, None, None, tool_table)
+    table = tool_table if tool_table is not None else machine.tool_table
+    stream = ProgramStream(data, name, machine.axes, machine.start, table, noop_mcodes=machine.noop_mcodes)
     del data
     return stream_summary(stream)
 
@@ -99,7 +99,8 @@ def process_program(
     Raises ``CncInterpError`` for bad input (the batch records it as an error).
     Returns plain JSON-able values: ``status`` ("ok" or "violation"), ``lines``,
     ``nodes``, ``segments``, ``path_length_mm`` (rapids included), ``cycle_time_s``,
-    ``worst_ratio`` (verify), ``worst`` (axis/limit/sample of it), ``max_fit_dev_mm``.
+    ``worst_ratio`` (verify), ``worst`` (axis/limit/sample of it), ``max_fit_dev_mm``,
+    ``estimate`` (where the cycle goes: ``Estimate.to_dict``'s breakdowns).
     """
     from .api import load_machine
 
@@ -109,7 +110,7 @@ def process_program(
     opts = PlanOptions(
         part=name, planner=planner, dt_s=dt_s, tol_mm=tol_mm, fit_method=fit_method, out=None, effort=effort
     )
-    summary = stream_plan(opts, threads=1, data=data, machine=m, on_violation=lambda report: None)
+    summary = stream_plan(opts, threads=1, data=data, machine=m, on_violation=lambda report: None, breakdown=True)
     w = summary["worst"]
     ratio = summary["worst_ratio"]
     fit = summary["fit"]
@@ -128,7 +129,20 @@ def process_program(
         "worst": w,
         "max_fit_dev_mm": _max_fit_deviation(fit),
         "plan_status": summary["status"],
+        "estimate": _breakdowns(summary["estimate"]),
     }
+
+
+#: ``Estimate.to_dict``'s keys that a batch record has already
+_RECORD_KEYS = ("part", "machine", "planner", "dt_s", "samples", "cycle_time_s", "path_length_mm")
+
+
+def _breakdowns(estimate) -> dict:
+    """An ``Estimate``'s breakdowns, without what the batch record says already."""
+    out = estimate.to_dict()
+    for key in _RECORD_KEYS:
+        out.pop(key, None)
+    return out
 
 
 def _max_fit_deviation(stats: dict) -> float | None:
@@ -266,6 +280,7 @@ def stream_plan(
     data: bytes | None = None,
     machine=None,
     on_violation=None,
+    breakdown: bool = False,
 ) -> dict:
     """Parse, fit, plan, verify and write ``opts.out`` as one stream (``cnc-interp plan``).
 
@@ -290,6 +305,8 @@ def stream_plan(
     read from ``opts.part``; ``machine`` a loaded ``Machine`` instead of
     ``opts.machine_spec``; ``on_violation(report)`` replaces the ``PlanError`` (it may
     return: the plan then goes on and the summary says it is not ``ok``).
+    ``breakdown=True`` also counts where the cycle goes (``plan.breakdown``): the summary's
+    ``estimate`` is then an ``Estimate``, in the same bounded memory.
     """
     import sys
     import time
@@ -309,10 +326,15 @@ def stream_plan(
     _few_malloc_arenas()
     if machine is None:
         machine = load_machine(opts.machine_spec if opts.machine_spec is not None else DEFAULT_PRESET)
-    if machine.tool_table is not None:  # an INI's [EMCIO] TOOL_TABLE is an input too
+    if out is not None and machine.tool_table is not None:  # an INI's [EMCIO] TOOL_TABLE is an input too
         from .outfile import check_writable
 
         check_writable(out, inputs=(machine.tool_table,))
+    fmt = None
+    if out is not None:
+        from .export.formats import plan_format
+
+        fmt = plan_format(out)  # an unknown ending: exit 2 before any work
     start = opts.start
     if isinstance(start, str):
         start = parse_start(start, machine.axes, machine.start)
@@ -329,7 +351,9 @@ def stream_plan(
         name = opts.part
     input_meta = _input_meta(name, data)
     tool_table = opts.tool_table if opts.tool_table is not None else machine.tool_table
-    program = ProgramStream(data, name, machine.axes, machine.start, tool_table)
+    program = ProgramStream(
+        data, name, machine.axes, machine.start, tool_table, marks=breakdown, noop_mcodes=machine.noop_mcodes
+    )
     del data
     fit_settings = FitSettings.from_options(tol_mm=opts.tol_mm, machine=machine, method=opts.fit_method)
     fit_stats: dict = {}
@@ -340,9 +364,18 @@ def stream_plan(
     start_pos = np.zeros(n) if machine.start is None else np.asarray(machine.start, dtype=float)
     info = TimelineInfo()
     blocks = iter_timeline(
-        fitted, machine, settings, start_pos, window=window, info=info, progress=progress, source=name, threads=threads
+        fitted,
+        machine,
+        settings,
+        start_pos,
+        window=window,
+        info=info,
+        progress=progress,
+        source=name,
+        threads=threads,
+        events=breakdown,
     )
-    mcap = out is not None and out.lower().endswith(".mcap")
+    mcap = fmt == "mcap"
 
     def violation(report):
         if on_violation is not None:
@@ -350,14 +383,25 @@ def stream_plan(
         _violation(report, name, PlanError)
 
     sink = None
+    counter = None
     try:
         with atomic_write(out) if out is not None else contextlib.nullcontext() as fh:
             from .export.sink import PlanSink
 
-            sink = PlanSink(fh, machine, dt, mcap, violation)
+            sink = PlanSink(fh, machine, dt, mcap, violation, halstream=fmt == "halstream")
+            if breakdown:
+                from .plan.breakdown import Breakdown
+
+                counter = Breakdown(machine, dt, program.line_count)
+                sink.observe = counter.add
+            reach = getattr(progress, "reach", None)  # a bar: its share done by source line
+            if reach is not None:
+                progress.measure(program.line_count, "line")
             try:
                 for block in blocks:
                     sink.put(block)
+                    if reach is not None and block.n:
+                        reach(int(block.line.max()))
                 planner = None
                 meta = None
                 if mcap:
@@ -393,7 +437,7 @@ def stream_plan(
         "total": total,
     }
     axis, kind, ratio, idx = report.worst()
-    return {
+    summary = {
         "part": name,
         "machine": machine.name,
         "planner": settings.planner,
@@ -413,6 +457,9 @@ def stream_plan(
         "lines": int(program.line_count),
         "fit": {k: fit_stats.get(k) for k in ("nodes_in", "segments_out", "max_node_dev_mm")},
     }
+    if counter is not None:
+        summary["estimate"] = counter.result(name, machine.name, settings.planner, last_s)
+    return summary
 
 
 #: glibc malloc arenas for the streaming plan's threads (mallopt M_ARENA_MAX): the
@@ -499,11 +546,61 @@ def run_plan(opts: PlanOptions) -> None:
         return
     from .errors import printable
 
+    # the same words as `verify`'s report when the machine is the default preset
+    default = " (default)" if opts.machine_spec is None else ""
     sys.stderr.write(
-        f"{printable(summary['part'])}: {summary['planner']} on {printable(summary['machine'])}: "
+        f"{printable(summary['part'])}: {summary['planner']} on {printable(summary['machine'])}{default}: "
         f"cycle time {summary['cycle_time_s']:.6g} s, {summary['samples']} samples at "
         f"dt = {summary['dt_s']:g} s, path {summary['path_length_mm']:.6g} mm, "
         f"worst limit ratio {summary['worst_ratio']:.9f} "
         f"({summary['worst']['axis']} {summary['worst']['limit']})\n"
     )
     sys.stderr.flush()
+
+
+#: ``estimate`` suggests ``--compare-tol`` when less than this share of the feed time runs
+#: at programmed feed (a fine tolerance is one cause of the rest)
+ESTIMATE_HINT_AT_FEED_SHARE = 0.5
+
+
+def run_estimate(opts: PlanOptions, compare_tol: tuple[float, ...] = ()) -> None:
+    """``cnc-interp estimate``: the plan's cycle and where it goes (``plan.breakdown``),
+    planned and verified as ``plan`` does, no setpoints written (``opts.out`` is
+    ignored); a table on stdout, or the ``Estimate`` as JSON with ``opts.summary_json``.
+    Each of ``compare_tol`` (mm) plans the part again at that ``--tol``: its cycle shows
+    what the tolerance in effect costs."""
+    import json
+    import sys
+    from dataclasses import replace
+
+    from .export.progress import progress as progress_bar
+    from .plan.breakdown import format_estimate
+
+    with progress_bar(None, "estimate", enabled=not opts.quiet, unit="mm") as tick:
+        summary = stream_plan(replace(opts, out=None), progress=tick, breakdown=True)
+    est = summary["estimate"]
+    others = []
+    for tol in compare_tol:
+        with progress_bar(None, f"--tol {tol:g}", enabled=not opts.quiet, unit="mm") as tick:
+            other = stream_plan(replace(opts, out=None, tol_mm=tol), progress=tick)
+        others.append({"tol_mm": tol, "cycle_time_s": other["cycle_time_s"]})
+    if opts.summary_json:
+        out = est.to_dict()
+        out["worst_ratio"] = summary["worst_ratio"]
+        out["status"] = summary["status"]
+        out["compare_tol"] = others
+        text = json.dumps(out, indent=2, sort_keys=True, allow_nan=False)
+    else:
+        text = format_estimate(est)
+        cycle = est.cycle_time_s
+        for o in others:
+            change = f" ({100.0 * (o['cycle_time_s'] - cycle) / cycle:+.1f} %)" if cycle > 0 else ""
+            text += f"\ncycle at --tol {o['tol_mm']:g}: {o['cycle_time_s']:.3f} s{change}"
+        share = est.at_feed_share
+        if not others and share is not None and share < ESTIMATE_HINT_AT_FEED_SHARE:
+            text += (
+                f"\n{100.0 * (1.0 - share):.0f} % of the feed time is below programmed feed; "
+                "--compare-tol MM shows what a coarser tolerance would save"
+            )
+    sys.stdout.write(text + "\n")
+    sys.stdout.flush()

@@ -28,7 +28,7 @@ def _run(nodes, axes="XYZ", tol=np.nan, feed=20.0, kind="feed"):
     )
 
 
-NODES = FitSettings(method="nodes")
+NODES = FitSettings(method="nodes", tol_mm=1e-3)  # the tolerance these tests check against
 
 
 def test_line_sampled_as_nodes_is_one_straight_segment():

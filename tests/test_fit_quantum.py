@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from cnc_interp.fit import FitSettings, fit_program
+from cnc_interp.fit.settings import DEFAULT_TOL_MM
 from cnc_interp.fit.quantum import coordinate_quantum
 from cnc_interp.gcode import read_program
 
@@ -65,7 +66,7 @@ def test_coarse_or_computed_coordinates_are_exact():
 
 def test_fit_adds_half_the_quantum_and_reports_it():
     text = _circle(4, "G20", n=2000, r=1.0)  # 1 in circle in 0.0001 in coordinates
-    res = fit_program(read_program(text, source="c.ngc"), FitSettings())
+    res = fit_program(read_program(text, source="c.ngc"), FitSettings(tol_mm=0.001))
     st = res.stats
     assert st["quantum"]["quantum_mm"] == pytest.approx(0.00254)
     assert st["fit_tol_mm"] == pytest.approx(0.001 + 0.00127)
@@ -90,13 +91,14 @@ def test_fit_cli_reports_tolerance_and_quantum(tmp_path):
     assert "½ quantum 0.00127 mm (coordinates printed to 0.0001 in)" in r.output
     r = CliRunner().invoke(main, ["fit", str(f), "--json"])
     st = json.loads(r.output)
-    assert st["quantum"]["label_mm"] == "0.0001 in" and st["fit_tol_mm"] == pytest.approx(0.00227)
+    assert st["quantum"]["label_mm"] == "0.0001 in"
+    assert st["fit_tol_mm"] == pytest.approx(DEFAULT_TOL_MM + 0.00127)
 
 
 def test_g64_p_sets_the_tolerance_and_tol_caps_it():
     text = _circle(6, n=60, r=20.0).replace("G64", "G64 P0.05")
     prog = read_program(text, source="p.ngc")
-    wide = fit_program(prog, FitSettings())  # G64 P0.05 wins over the default 0.001
+    wide = fit_program(prog, FitSettings())  # G64 P0.05 wins over the default
     capped = fit_program(prog, FitSettings.from_options(tol_mm=0.01))  # --tol 0.01 caps it
     assert wide.stats["max_tol_mm"] == pytest.approx(0.05, rel=1e-4)  # (+ ½ of a 1e-6 quantum)
     assert capped.stats["max_tol_mm"] == pytest.approx(0.01, rel=1e-4)
@@ -105,7 +107,7 @@ def test_g64_p_sets_the_tolerance_and_tol_caps_it():
     assert wide.stats["segments_out"] < capped.stats["segments_out"]
     # plain G64 keeps the default; G61 is the exact path
     plain = fit_program(read_program(_circle(6, n=60, r=20.0), source="q.ngc"), FitSettings())
-    assert plain.stats["max_tol_mm"] == pytest.approx(0.001, rel=1e-3)
+    assert plain.stats["max_tol_mm"] == pytest.approx(DEFAULT_TOL_MM, rel=1e-3)
 
 
 @pytest.mark.corpus

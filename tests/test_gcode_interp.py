@@ -346,3 +346,18 @@ def test_rotation_with_arcs_and_g92():
     assert_allclose(p.metadata["final_position"], [-1, 1, 0], atol=1e-12)
     with pytest.raises(UnsupportedError, match="rotated"):
         prog("G10 L2 P1 R30\nG0 Z5\nG81 X1 Y1 Z-1 R1 F60\n")
+
+
+def test_inverse_time_feed_of_a_nearly_rotary_move_uses_the_fitters_metric():
+    # X moves 1e-7 mm (below LINEAR_MOTION_MIN_MM) while A turns 4.37 deg: the fitter
+    # measures the path in degrees, so the G93 feed must be degrees per second, or the
+    # 0.1 s move is planned 4.37e7 times too slowly
+    from cnc_interp.gcode import read_program
+
+    p = read_program("G0 X0 A0\nG93 G1 X0.0000001 A-4.37 F600\nM2\n", "t.ngc", axes="XYZA")
+    feed = [r for r in p.runs if r.kind == "feed"][0]
+    assert feed.feed_mm_s[-1] == pytest.approx(43.7)
+    # a real linear move keeps the linear length
+    p = read_program("G0 X0 A0\nG93 G1 X0.01 A-4.37 F600\nM2\n", "t.ngc", axes="XYZA")
+    feed = [r for r in p.runs if r.kind == "feed"][0]
+    assert feed.feed_mm_s[-1] == pytest.approx(0.1)

@@ -141,7 +141,7 @@ def test_errors_with_location(src, line, col, needle):
 
 
 def test_unsupported_constructs_named():
-    assert "polar" in err("G1 @1 ^90\n", UnsupportedError).message
+    assert "spindle selection" in err("G1 X1 $1\n", UnsupportedError).message
     assert "Fanuc" in err("O1000\nG0 X1\n", UnsupportedError).message
 
 

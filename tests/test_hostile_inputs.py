@@ -543,10 +543,10 @@ def test_a_million_picometre_steps_fit_in_little_memory():
 def test_a_g64_p_finer_than_the_finest_tolerance_works_to_it(tmp_path):
     """``G64 P0.0000000000000001`` (found beside ``--tol 1e-300``): killed for memory at
     23.6 GB after 328 s; a move's G64 P now works to ``FIT_TOL_MIN_MM`` at the finest."""
-    from cnc_interp.fit.settings import FIT_TOL_MIN_MM, FitSettings
+    from cnc_interp.fit.settings import DEFAULT_TOL_MM, FIT_TOL_MIN_MM, FitSettings
 
-    tol = FitSettings().node_tolerance(np.array([np.nan, 0.0, 1e-16, 5e-7, 0.01]))
-    assert tol.tolist() == [0.001, 0.0, FIT_TOL_MIN_MM, FIT_TOL_MIN_MM, 0.01]
+    tol = FitSettings().node_tolerance(np.array([np.nan, 0.0, 1e-16, 5e-7, 0.02]))
+    assert tol.tolist() == [DEFAULT_TOL_MM, 0.0, FIT_TOL_MIN_MM, FIT_TOL_MIN_MM, 0.02]
     prog = tmp_path / "p.ngc"
     prog.write_text("G21 G90 F600 G64 P0.0000000000000001\nG1 X10 Y5\nG1 X20\nM2\n")
     t0 = time.monotonic()

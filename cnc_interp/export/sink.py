@@ -23,18 +23,21 @@ _END = object()
 
 
 class PlanSink:
-    """Verify-then-write of a sample stream into ``fh`` as CSV or MCAP (``mcap``); with
-    ``fh = None``, verify only (the plan summarised, no setpoints written)."""
+    """Verify-then-write of a sample stream into ``fh`` as CSV, MCAP (``mcap``) or a
+    halstreamer file (``halstream``); with ``fh = None``, verify only (the plan
+    summarised, no setpoints written)."""
 
-    def __init__(self, fh, machine, dt_s: float, mcap: bool, on_violation):
+    def __init__(self, fh, machine, dt_s: float, mcap: bool, on_violation, halstream: bool = False):
         from ..plan.verify import StreamVerifier
 
         self.fh = fh
         self.machine = machine
         self.dt = float(dt_s)
         self.mcap = mcap
+        self.halstream = halstream
         self.on_violation = on_violation  # report -> raises
         self.verifier = StreamVerifier.for_machine(machine, dt_s)
+        self.observe = None  # called with every block verified, before it is written
         self.writer = None
         self.s_prev = None
         self.last_s = 0.0
@@ -55,6 +58,10 @@ class PlanSink:
             from .mcap_io import McapPlanWriter
 
             return McapPlanWriter(self.fh, self.machine.axes, self.dt, self.machine)
+        if self.halstream:
+            from .halstream import HalstreamPlanWriter
+
+            return HalstreamPlanWriter(self.fh, self.machine.axes, self.dt)
         from .csv_io import CsvPlanWriter
 
         return CsvPlanWriter(self.fh, self.machine.axes)
@@ -68,6 +75,8 @@ class PlanSink:
         self.verify_s += t1 - t0
         if not ok:
             self.on_violation(self.verifier.report())
+        if self.observe is not None:
+            self.observe(block)
         if self.fh is None:
             self.last_s = float(block.s[-1])
             if self.first_row_at is None:

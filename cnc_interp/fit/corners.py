@@ -23,7 +23,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numba import njit
 
-from ..constants import FIT_COLLINEAR_DEG, FIT_EXACT_CURVE_TOL_MM, LINEAR_AXES
+from ..constants import FIT_COLLINEAR_DEG, FIT_EXACT_CURVE_TOL_MM, LINEAR_AXES, LINEAR_MOTION_MIN_MM
 from ..gcode.program import CurvePiece, Run
 from ._npexact import pairwise_sum
 from .blends import BlendTable
@@ -35,9 +35,6 @@ from .blends import BlendTable
 #: lost. At 1e-9 mm, ``o1 repeat [1000000] G91 G1 X0.000000001`` kept its million nodes,
 #: one section of them: 2.25 GB to fit 0.001 mm of path
 FIT_DUPLICATE_NODE_MM = 5e-7
-
-#: a move whose linear axes travel less than this (mm) counts as rotary-only (zero speed in s)
-FIT_LINEAR_ZERO_MM = 1e-6
 
 
 @dataclass(frozen=True)
@@ -122,7 +119,7 @@ def prepare_run(run: Run, settings) -> PreparedRun:
             curves.append(CurvePiece(first, last, cp.curve))
     d = np.diff(nodes_k, axis=0)
     lin_len = np.sqrt((d[:, lin] ** 2).sum(axis=1)) if lin.any() else np.zeros(len(d))
-    rot_only = (lin_len <= FIT_LINEAR_ZERO_MM) & (~lin).any()
+    rot_only = (lin_len <= LINEAR_MOTION_MIN_MM) & (~lin).any()
     if not (~lin).any():
         rot_only = np.zeros(len(d), dtype=bool)
     return PreparedRun(

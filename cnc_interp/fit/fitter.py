@@ -34,7 +34,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..constants import ARC_LENGTH_MAX_SUB, ARC_LENGTH_REL_TOL
-from ..gcode.program import Dwell, Program, Run, Stop
+from ..gcode.program import Dwell, Mark, Program, Run, Stop
 from .deviation import path_deviation, polyline_deviation, rotary_path_deviation
 from .corners import PreparedRun, SubRun, add_blends, fit_tolerance, prepare_run, slice_run, split_run
 from .curves import arc_table
@@ -237,6 +237,8 @@ def iter_fit(
         elif isinstance(it, (Dwell, Stop)):
             yield it
             prev_end = None
+        elif isinstance(it, Mark):  # moves nothing: the next run still joins the last
+            yield it
         else:  # pragma: no cover - the item type is closed
             raise TypeError(type(it))
     out = dict(totals)

@@ -15,11 +15,14 @@ if TYPE_CHECKING:
     from ..machine.model import Machine
 
 
-#: default maximum permissible error of the fit (mm); `--tol` overrides
-DEFAULT_TOL_MM = 0.001
+#: default maximum permissible error of the fit (mm) where neither the program (G64 P), the
+#: machine (`tol`) nor `--tol` gives one: 10 µm, a contouring tolerance machinists set for
+#: finishing (a CAM finishing path is itself typically within 10 µm, and parts held to
+#: ±0.02 mm or coarser keep that budget); 1 µm doubles a router relief's cycle
+DEFAULT_TOL_MM = 0.01
 
-#: default tolerance for rotary axes (deg)
-DEFAULT_TOL_DEG = 0.001
+#: default tolerance for rotary axes (deg), the same figure in degrees
+DEFAULT_TOL_DEG = 0.01
 
 #: the finest tolerance a user may ask for other than 0 (the exact path), mm or deg: the
 #: tolerance the fit gives exact curves (``FIT_EXACT_CURVE_TOL_MM``, 1 nm), a thousandth of

@@ -26,6 +26,7 @@ def read_program(
     start: np.ndarray | None = None,
     params=None,
     tool_table=None,
+    noop_mcodes=frozenset(),
 ) -> Program:
     """Interpret a whole part program.
 
@@ -40,6 +41,8 @@ def read_program(
         params: an optional ``ParamStore`` (e.g. with preset work offsets).
         tool_table: a tool table file's path or a ``ToolTable`` (tool length offsets for
             ``G43 Hn``); ``None``: ``G43 Hn`` applies zero length with one warning.
+        noop_mcodes: M-code numbers the machine declares no-ops (``Machine.noop_mcodes``):
+            accepted and ignored; any other M-code the reader does not know is an error.
 
     Returns:
         The ``Program`` in machine coordinates, mm / deg / s.
@@ -64,6 +67,7 @@ def read_program(
     if live:
         params = _LiveParams()
     interp = Interpreter(source, params, axes, start9)
+    interp.noop_mcodes = frozenset(noop_mcodes)
     if isinstance(tool_table, (str, os.PathLike)):
         interp.tool_table_path = os.fspath(tool_table)  # read when a G43 first needs it
     elif tool_table is not None:

@@ -24,6 +24,8 @@ The moves run as exact path (tolerance 0), as LinuxCNC switches to G61 inside cy
 
 from __future__ import annotations
 
+import math
+
 from ..constants import LOOP_ITERATION_LIMIT
 from .codes import G17, G18, G19
 
@@ -42,6 +44,25 @@ class CycleError(Exception):
     def __init__(self, message: str, letter: str | None = None):
         super().__init__(message)
         self.letter = letter
+
+
+def polar_increment(x: float, y: float, dr: float | None, dtheta_deg: float | None) -> tuple[float, float]:
+    """Point (x, y) moved by a G91 polar distance ``dr`` and then turned by ``dtheta_deg``
+    degrees about the origin, one step after the other as LinuxCNC's ``find_ends`` and
+    ``CYCLE_MACRO`` do (``None``: no such word). Raises ``CycleError`` at the origin,
+    where the direction is undefined."""
+    for k, step in enumerate((dr, dtheta_deg)):
+        if step is None:
+            continue
+        if x == 0.0 and y == 0.0:
+            raise CycleError("incremental polar move (G91 @ ^) from the origin has no direction")
+        radius, theta = math.hypot(x, y), math.atan2(y, x)
+        if k == 0:
+            radius += step
+        else:
+            theta += math.radians(step)
+        x, y = radius * math.cos(theta), radius * math.sin(theta)
+    return x, y
 
 
 def expand_cycle(ip, code: int, words: dict, line: int, col: int) -> None:
@@ -106,6 +127,9 @@ def expand_cycle(ip, code: int, words: dict, line: int, col: int) -> None:
 
     pos = ip.pos
     u_aa, u_bb, u_cc = ip.unit_of(aa_i), ip.unit_of(bb_i), ip.unit_of(cc_i)
+    # polar words (G17 only, checked by the interpreter): program units and degrees
+    polar_r = words["@"][1] * u_aa if "@" in words else None
+    polar_a = words["^"][1] if "^" in words else None
     current_cc = pos[cc_i]
     if ip.cycle_il is None:
         ip.cycle_il = current_cc
@@ -116,6 +140,16 @@ def expand_cycle(ip, code: int, words: dict, line: int, col: int) -> None:
         r = r_num * u_cc + old_cc
         bottom = r + cc_num * u_cc
         aa, bb = pos[aa_i], pos[bb_i]
+    elif polar_r is not None or polar_a is not None:
+        d_aa = d_bb = 0.0
+        r = r_num * u_cc + ip.off[cc_i]
+        bottom = cc_num * u_cc + ip.off[cc_i]
+        x0, y0 = pos[0] - ip.off[0], pos[1] - ip.off[1]
+        radius = polar_r if polar_r is not None else math.hypot(x0, y0)
+        theta = math.radians(polar_a) if polar_a is not None else math.atan2(y0, x0)
+        aa = radius * math.cos(theta) + ip.off[0]
+        bb = radius * math.sin(theta) + ip.off[1]
+        polar_r = polar_a = None  # absolute: the hole is placed once, not stepped
     else:
         d_aa = d_bb = 0.0
         r = r_num * u_cc + ip.off[cc_i]
@@ -142,6 +176,9 @@ def expand_cycle(ip, code: int, words: dict, line: int, col: int) -> None:
     for rep in range(reps):
         aa += d_aa
         bb += d_bb
+        if polar_r is not None or polar_a is not None:  # G91: each repeat steps about the origin
+            x, y = polar_increment(aa - ip.off[0], bb - ip.off[1], polar_r, polar_a)
+            aa, bb = x + ip.off[0], y + ip.off[1]
         if rep == 0 and current_cc > r:
             goto("rapid", aa, bb, current_cc)
             goto("rapid", aa, bb, r)

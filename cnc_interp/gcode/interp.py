@@ -22,10 +22,18 @@ from operator import itemgetter
 
 import numpy as np
 
-from ..constants import ALL_AXES, CURVE_CHORD_TOL_MM, CURVE_MAX_NODES, LINEAR_AXES, MM_PER_INCH, SECONDS_PER_MINUTE
+from ..constants import (
+    ALL_AXES,
+    CURVE_CHORD_TOL_MM,
+    CURVE_MAX_NODES,
+    LINEAR_AXES,
+    LINEAR_MOTION_MIN_MM,
+    MM_PER_INCH,
+    SECONDS_PER_MINUTE,
+)
 from ..errors import GCodeError, SourceLocation, UnsupportedError
-from .arcs import GeometryError, arc_length_mm, centre_from_ijk, centre_from_r, segment_count
-from .canned import SUPPORTED as CYCLE_CODES, CycleError, expand_cycle
+from .arcs import GeometryError, arc_length_mm, centre_from_ijk, centre_from_r, fill_arc_nodes, segment_count
+from .canned import SUPPORTED as CYCLE_CODES, CycleError, expand_cycle, polar_increment
 from .codes import (
     COORDINATE_SYSTEM,
     G0,
@@ -82,7 +90,7 @@ from .codes import (
     M_USE_QE,
     gcode_name,
 )
-from .program import Dwell, Program, Stop
+from .program import Dwell, Mark, Program, Stop
 from .runs import RunBuilder, finish_run
 from .splines import bezier, bezier_cusps, make_nurbs, sample_nurbs, split_bezier
 
@@ -90,6 +98,16 @@ from .splines import bezier, bezier_cusps, make_nurbs, sample_nurbs, split_bezie
 #: closed items a streamed interpreter lets wait inside one block before it hands them on
 #: (``on_items``): ``G81 ... L1000000`` is two million runs from one block (8 kB each)
 ITEMS_WAITING_MAX = 4096
+
+#: comments that are messages (LinuxCNC's MSG, DEBUG, PRINT, LOG*, PROBE*), not
+#: operation headers (lower case, as the comment starts)
+_MESSAGE_COMMENTS = ("msg,", "debug,", "print,", "log", "probe")
+
+#: how an unknown M-code's error says it can be declared harmless
+_NOOP_HINT = (
+    " (if it moves no axis, declare it a no-op in the machine file: [gcode] noop_mcodes = [{code}];"
+    " a LinuxCNC INI declares M100-M199 by their files in [RS274NGC] USER_M_PATH)"
+)
 
 #: largest G2/G3 P (full turns) accepted; more is treated as a runaway expression
 ARC_MAX_TURNS = 10_000
@@ -124,7 +142,7 @@ USES_Q = frozenset({G83, G73, G5})
 NON_MODAL_USES_P = frozenset({G4, G10})
 #: the canned cycles: a repeat of one keeps its sticky state (initial level)
 CYCLE_MOTIONS = frozenset({G81, G82, G83, G73, G85, G89})
-VALID_LETTERS = frozenset("ABCDFGHIJKLMNPQRSTUVWXYZ")
+VALID_LETTERS = frozenset("ABCDFGHIJKLMNPQRSTUVWXYZ@^")
 
 #: letter -> axis index (>= 0) or a negative tag for the fast path (N, F, S, G, arc words)
 _FAST_KIND = {a: i for i, a in enumerate(ALL_AXES)}
@@ -173,6 +191,8 @@ class Interpreter:
         # tool length offset (G43/G43.1/G43.2, mm/deg, machine frame): added to every target
         self.tlo = [0.0] * 9
         self.tool_table = None  # ToolTable or None (then G43 Hn applies zero, with a warning)
+        #: M-codes the machine declares no-ops (``Machine.noop_mcodes``): accepted, no effect
+        self.noop_mcodes: frozenset[int] = frozenset()
         self.tool_table_path: str | None = None  # a table file, read at its first use
         self.tools_touched: set[int] = set()  # changed by G10 L10/L11 (not modelled)
         self.warnings: list[str] = []
@@ -198,6 +218,10 @@ class Interpreter:
         #: a stream's hook, called inside a block once ``ITEMS_WAITING_MAX`` items wait
         #: (it takes them from ``items``); between blocks the stream looks by itself
         self.on_items = None
+        #: a stream's option: hand on ``Mark`` items (tool changes, operation headers)
+        self.marks = False
+        self._mark_pending: Mark | None = None  # an operation header read while a run is open
+        self._header_block = -2  # block count of the last comment-only block
         self.rb: RunBuilder | None = None
         self.block_count = 0
         self.line_count = 0
@@ -327,6 +351,8 @@ class Interpreter:
         rb = self.rb
         if rb is not None:
             self._close_run(kind)  # a rapid run ends because feed follows, and vice versa
+        if self._mark_pending is not None:
+            self._flush_mark()
         rb = RunBuilder(kind, self.active, self.pos, line, col, self.tol, self.naive)
         self.rb = rb
         return rb
@@ -347,10 +373,8 @@ class Interpreter:
             return length_mm * self.f_block / SECONDS_PER_MINUTE
         if self.f_word <= 0.0:
             raise self.error("feed move with zero or missing feed rate (F)", col)
-        if self.len_unit != 1.0:
-            rotary_only = all(start9[k] == end9[k] for k in range(9) if IS_LINEAR9[k])
-            if rotary_only:
-                return self.f_word / SECONDS_PER_MINUTE
+        if self.len_unit != 1.0 and _move_length(start9, end9, rotary=True) > 0.0:
+            return self.f_word / SECONDS_PER_MINUTE  # a rotary-only move: F in deg/min
         return self.f_word * (self.len_unit * _PER_MIN)
 
     def straight(self, kind: str, new: list[float], line: int, col: int) -> None:
@@ -405,10 +429,14 @@ class Interpreter:
 
     def _dwell(self, seconds: float, line: int) -> None:
         self._close_run("dwell")
+        if self._mark_pending is not None:
+            self._flush_mark()
         self.items.append(("dwell", Dwell(line=line, seconds=float(seconds), position=None), list(self.pos)))
 
     def _stop(self, code: str, line: int, reason: str) -> None:
         self._close_run(reason)
+        if self._mark_pending is not None:
+            self._flush_mark()
         self.items.append(("stop", Stop(line=line, code=code, position=None), list(self.pos)))
 
     # -- the main loop ------------------------------------------------------------
@@ -487,6 +515,8 @@ class Interpreter:
                                 raise self.error("negative feed rate", fw[2])
                             self.f_word = fw[1]
                         if new is None:
+                            if not words and self.marks and blk.comment is not None:
+                                self._header(blk, nblocks)
                             continue
                         if gcode == G1:
                             kind = "feed"
@@ -527,6 +557,8 @@ class Interpreter:
             # ---- everything else ----
             self.blk = blk
             if not words:
+                if self.marks and blk.comment is not None:
+                    self._header(blk, nblocks)
                 continue
             gw, mw, d = self._split_words(words)
             if self._general(blk, gw, mw, d):
@@ -618,6 +650,9 @@ class Interpreter:
         axis_words = [(L, w) for L, w in d.items() if L in AXIS_INDEX]
         # G10, G28, G30, G92 and G43.1/G43.2 take their values from the axis words
         covets = g0code in AXIS_WORD_CODES or groups.get(8, (0,))[0] in TOOL_LENGTH_AXIS_CODES
+        polar = "@" in d or "^" in d
+        if polar:
+            self._check_polar(d, g0code, covets)
         mcode = groups[1][0] if 1 in groups else None
         self._check_unused_words(d, groups, mgroups, mcode, g0code, covets, axis_words)
 
@@ -649,7 +684,7 @@ class Interpreter:
             g53 = self._group0(g0code, g0[1], d, axis_words, line)
         if mcode is not None:  # 24. motion
             self._step_motion_code(mcode, groups[1][1], d, axis_words, line, g53)
-        elif axis_words and not covets:
+        elif (axis_words or polar) and not covets:
             self._step_modal_motion(d, axis_words, line, g53)
         if 4 in mgroups:  # 25.
             return self._step_stop(mgroups[4][0], line)
@@ -696,10 +731,15 @@ class Interpreter:
                 raise self.error(f"unknown M-code M{v:g}", w[2])
             if code in M_UNSUPPORTED:
                 raise self.error(f"{M_UNSUPPORTED[code]} is not supported", w[2], unsupported=True)
-            if 100 <= code <= 199:
-                raise self.error(f"user-defined M-code M{code} is not supported", w[2], unsupported=True)
-            if code not in M_NOOP and code not in M_STOPS and code != M6:
-                raise self.error(f"unknown M-code M{code}", w[2])
+            declared = code in self.noop_mcodes
+            if 100 <= code <= 199 and not declared:
+                raise self.error(
+                    f"user-defined M-code M{code} is not supported{_NOOP_HINT.format(code=code)}",
+                    w[2],
+                    unsupported=True,
+                )
+            if code not in M_NOOP and code not in M_STOPS and code != M6 and not declared:
+                raise self.error(f"unknown M-code M{code}{_NOOP_HINT.format(code=code)}", w[2])
             grp = M_GROUP.get(code, 100 + code)
             if grp in mgroups:
                 raise self.error(f"M{mgroups[grp][0]} and M{code} are in the same modal group", w[2])
@@ -734,6 +774,25 @@ class Interpreter:
         self.tool = self.tool_selected
         self._pset(5400, self.tool)
         self._stop("M6", line, "tool-change")
+        if self.marks:
+            self.items.append(("mark", Mark(line=line, tool=int(self.tool)), None))
+
+    def _header(self, blk, nblocks: int) -> None:
+        """A comment-only block: the first of a group of them names an operation (a
+        ``Mark``, handed on once no run is open); MSG, DEBUG, PRINT, LOG and PROBE
+        comments are messages, not headers."""
+        follows = nblocks == self._header_block + 1
+        self._header_block = nblocks
+        text = " ".join(blk.comment.split())
+        if follows or not text or text.lower().startswith(_MESSAGE_COMMENTS):
+            return
+        self._mark_pending = Mark(line=blk.line, operation=text)
+        if self.rb is None:
+            self._flush_mark()
+
+    def _flush_mark(self) -> None:
+        self.items.append(("mark", self._mark_pending, None))
+        self._mark_pending = None
 
     def _step_dwell(self, d: dict, col: int, line: int) -> None:
         """G4 P seconds."""
@@ -806,14 +865,16 @@ class Interpreter:
             self.motion = G80
         else:
             full_circle = mcode in ARCS and any(k in d for k in "IJK")
-            if not axis_words and mcode not in AXISLESS_MOTIONS and not full_circle:
+            polar = "@" in d or "^" in d
+            if not axis_words and not polar and mcode not in AXISLESS_MOTIONS and not full_circle:
                 raise self.error(f"{gcode_name(mcode)} without any axis word", col)
             self._motion(mcode, col, d, axis_words, line, g53)
 
     def _step_modal_motion(self, d: dict, axis_words: list, line: int, g53: bool) -> None:
         """Axis words alone: the motion mode in effect moves to them."""
         if self.motion == G80:
-            raise self.error("axis words without a motion mode (G0, G1, ...)", axis_words[0][1][2])
+            col = axis_words[0][1][2] if axis_words else _polar_col(d)
+            raise self.error("axis words without a motion mode (G0, G1, ...)", col)
         self._motion(self.motion, 0, d, axis_words, line, g53)
 
     def _step_stop(self, code: int, line: int) -> bool:
@@ -841,13 +902,14 @@ class Interpreter:
         cycle = motion is not None and motion // 10 in CYCLE_CODES
         path = groups.get(13, (None,))[0]
         ms = {c for c, _ in mgroups.values()}
+        user_m = bool(ms & self.noop_mcodes)  # a declared M-code takes P and Q, as LinuxCNC's M1nn
         use = {
             "I": motion in USES_IJ,
             "J": motion in USES_IJ,
             "K": motion in ARCS,
             "R": motion in ARCS or cycle or g0code == G10,
-            "P": (g0code in NON_MODAL_USES_P or path == G64 or motion in USES_P or bool(ms & M_USE_P)),
-            "Q": path == G64 or motion in USES_Q or bool(ms & M_USE_QE),
+            "P": (g0code in NON_MODAL_USES_P or path == G64 or motion in USES_P or bool(ms & M_USE_P) or user_m),
+            "Q": path == G64 or motion in USES_Q or bool(ms & M_USE_QE) or user_m,
             "L": g0code == G10 or cycle or motion == G5_2,
             "H": 8 in groups,
             "D": False,
@@ -1052,6 +1114,45 @@ class Interpreter:
                     self._set_rotation(rw[1])
         self._update_off()
 
+    # -- polar coordinates ----------------------------------------------------------
+    def _check_polar(self, d: dict, g0code, covets: bool) -> None:
+        """LinuxCNC's rules for @ (polar distance) and ^ (polar angle, degrees): never with
+        X or Y words, G53 or a code that takes axis values, on a machine with X and Y (the
+        XY plane is checked at the motion, after the block's own plane code)."""
+        col = _polar_col(d)
+        for L in "XY":
+            if L in d:
+                raise self.error(f"polar coordinates (@ ^) and a {L} word in one block", d[L][2])
+        if g0code == G53:
+            raise self.error("polar coordinates (@ ^) with G53", col)
+        if covets:
+            raise self.error("polar coordinates (@ ^) with a code that takes axis values (G10, G28, G30, G92)", col)
+        self._activate(0, col)
+        self._activate(1, col)
+
+    def _polar_words(self, d: dict) -> list:
+        """The X and Y words equivalent to the block's @ and ^ words (LinuxCNC's
+        ``find_ends``): the polar origin is the program origin; in G90, @ and ^ replace
+        the current distance and angle, in G91 they add to them."""
+        col = _polar_col(d)
+        cur = self.program_position()
+        x0, y0 = cur[0], cur[1]
+        r_word = d["@"][1] if "@" in d else None
+        a_word = d["^"][1] if "^" in d else None
+        if self.distance_incremental:
+            try:
+                x, y = polar_increment(x0, y0, r_word, a_word)
+            except CycleError as exc:
+                raise self.error(str(exc), col) from None
+            x, y = x - x0, y - y0
+        else:
+            if a_word is None and x0 == 0.0 and y0 == 0.0:
+                raise self.error("polar distance @ at the origin needs an angle ^", col)
+            radius = r_word if r_word is not None else math.hypot(x0, y0)
+            theta = math.radians(a_word) if a_word is not None else math.atan2(y0, x0)
+            x, y = radius * math.cos(theta), radius * math.sin(theta)
+        return [("X", ("X", x, col)), ("Y", ("Y", y, col))]
+
     # -- motion -------------------------------------------------------------------
     def _target(self, axis_words, machine: bool = False) -> list[float]:
         """Machine position after a move to ``axis_words`` (program values, current modes)."""
@@ -1086,7 +1187,12 @@ class Interpreter:
 
     def _motion(self, code: int, col: int, d: dict, axis_words: list, line: int, g53: bool) -> None:
         if col == 0:
-            col = axis_words[0][1][2] if axis_words else 0
+            col = axis_words[0][1][2] if axis_words else _polar_col(d)
+        if "@" in d or "^" in d:
+            if self.plane != G17:  # the block's own G17-G19 has taken effect by now
+                raise self.error("polar coordinates (@ ^) outside the G17 (XY) plane", _polar_col(d))
+            if code // 10 not in CYCLE_CODES:
+                axis_words = axis_words + self._polar_words(d)
         if g53 and code not in STRAIGHT:
             raise self.error("G53 needs G0 or G1", col)
         if self.rot_deg and code not in ROTATABLE:
@@ -1133,12 +1239,7 @@ class Interpreter:
 
     def _arc(self, code: int, col: int, d: dict, axis_words: list, line: int) -> None:
         self._feed_check(col)
-        if self.rot_deg and self.plane != G17:
-            raise self.error(
-                "arcs outside the XY plane with a rotated coordinate system (G10 L2 R) are not supported",
-                col,
-                unsupported=True,
-            )
+        rotated = bool(self.rot_deg) and self.plane != G17
         plane = PLANES[self.plane]
         a, b, _ = plane
         for k in (a, b):
@@ -1147,7 +1248,11 @@ class Interpreter:
         if bad in d:
             raise self.error(f"{bad} word in an arc in the {PLANE_NAME[self.plane]} plane", d[bad][2])
         start = self.pos
-        end = self._target(axis_words)
+        end_m = end = self._target(axis_words)
+        if rotated:
+            # G18/G19 under a rotation about Z: the arc lies in a plane of the program frame,
+            # not of the machine's; its geometry is worked out in the program frame
+            start, end = self._to_prog_mm(start), self._to_prog_mm(end)
         turns = 1
         pw = d.get("P")
         if pw is not None:
@@ -1174,7 +1279,9 @@ class Interpreter:
                     for ltr in (fl, sl):
                         if ltr not in d:
                             raise self.error(f"{ltr} word missing in absolute-centre arc (G90.1)", col)
-                    if self.rot_deg:
+                    if rotated:
+                        c1, c2 = d[fl][1] * ua, d[sl][1] * ub
+                    elif self.rot_deg:
                         q = self._to_prog_mm(start)
                         q[a], q[b] = d[fl][1] * ua, d[sl][1] * ub
                         cm = self._to_machine(q)
@@ -1185,7 +1292,7 @@ class Interpreter:
                 else:
                     o1 = d[fl][1] * ua if fl in d else 0.0
                     o2 = d[sl][1] * ub if sl in d else 0.0
-                    if self.rot_deg:  # the offset is a vector in the rotated program frame
+                    if self.rot_deg and not rotated:  # the offset is a vector in the rotated program frame
                         c, s_ = self.rot_cs
                         o1, o2 = c * o1 - s_ * o2, s_ * o1 + c * o2
                     c1 = start[a] + o1
@@ -1211,9 +1318,17 @@ class Interpreter:
         rb = self.rb
         if rb is None or rb.kind != "feed":
             rb = self._start_run("feed", line, col)
-        first, last = rb.reserve(n, line, col, feed, self.tol, self.naive)
-        rb.curves.append((first, last, (line, start, end, plane, c1, c2, r1, r2, sweep)))
-        self.pos = end
+        if rotated:
+            # nodes only (chord error as for every arc), mapped rigidly to the machine frame
+            prog = np.empty((n + 1, 9))
+            fill_arc_nodes(prog, tuple(range(9)), [(0, n, (line, start, end, plane, c1, c2, r1, r2, sweep))])
+            pts = np.array([self._to_machine(list(row)) for row in prog[1:]])
+            pts[-1] = end_m
+            rb.add_many(pts, line, col, feed, self.tol, self.naive)
+        else:
+            first, last = rb.reserve(n, line, col, feed, self.tol, self.naive)
+            rb.curves.append((first, last, (line, start, end, plane, c1, c2, r1, r2, sweep)))
+        self.pos = end_m
         if self.exact_stop:
             self._close_run("exact-stop")
 
@@ -1364,6 +1479,8 @@ class Interpreter:
         sel = list(order)
         items = []
         for kind, obj, extra in self.items:
+            if kind == "mark":
+                continue  # a stream's only
             if kind == "run":
                 items.append(finish_run(obj, order, axes, extra))
             elif kind == "dwell":
@@ -1387,8 +1504,14 @@ class Interpreter:
         )
 
 
-def _move_length(s, e) -> float:
-    """``program.move_lengths`` for one move of the 9 axes (scalar: the interpreter's hot path)."""
+def _polar_col(d: dict) -> int:
+    """Column of the block's first polar word (@ or ^)."""
+    return min(d[k][2] for k in "@^" if k in d)
+
+
+def _move_length(s, e, rotary: bool = False) -> float:
+    """``program.move_lengths`` for one move of the 9 axes (scalar: the interpreter's hot
+    path); ``rotary=True``: the rotary length if the move counts as rotary-only, else 0."""
     lin = 0.0
     rot = 0.0
     for k in range(9):
@@ -1397,7 +1520,10 @@ def _move_length(s, e) -> float:
             lin += dv * dv
         else:
             rot += dv * dv
-    return math.sqrt(lin) if lin > 0 else math.sqrt(rot)
+    linear = lin > LINEAR_MOTION_MIN_MM * LINEAR_MOTION_MIN_MM or rot == 0.0
+    if rotary:
+        return 0.0 if linear else math.sqrt(rot)
+    return math.sqrt(lin) if linear else math.sqrt(rot)
 
 
 def _word_text(blk, col: int) -> str:

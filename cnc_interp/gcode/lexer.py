@@ -29,8 +29,9 @@ from .expr import ExprSyntax, parse_value
 # line kinds
 EMPTY, WORDS, OWORD, PERCENT = 0, 1, 2, 3
 
-#: letters that start a word (N is the line number, O the O-word, E is not RS274NGC)
-WORD_LETTERS = frozenset("abcdfghijklmpqrstuvwxyz")
+#: letters that start a word (N is the line number, O the O-word, E is not RS274NGC; @ and ^
+#: are the polar distance and angle)
+WORD_LETTERS = frozenset("abcdfghijklmpqrstuvwxyz@^")
 
 #: O-word keyword -> (least, most) number of [bracketed] arguments
 O_KEYWORDS = {
@@ -56,7 +57,7 @@ _CHUNK = re.compile(r"[^ \t\r\f\v]+")
 _LINE_NUMBER = re.compile(r"n[0-9]+(?:\.[0-9]*)?")  # LinuxCNC ignores a fraction
 _KEYWORD = re.compile(r"[a-z]+")
 _OWORD_NUMBER = re.compile(r"[0-9]+")
-_SIMPLE_WORD = re.compile(r"[abcdfghijklmpqrstuvwxyz]([-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+))")
+_SIMPLE_WORD = re.compile(r"[abcdfghijklmpqrstuvwxyz@^]([-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+))")
 _INF = float("inf")
 
 
@@ -241,8 +242,6 @@ def _bad_char(s: str, pos: int, c: str, loc: SourceLocation) -> GCodeError:
         return GCodeError("expression without a word letter", loc)
     if c == "]":
         return GCodeError("']' without an opening '['", loc)
-    if c in "@^":
-        return UnsupportedError("polar coordinates (@ and ^ words) are not supported", loc)
     if c == "$":
         return UnsupportedError("'$' words (spindle selection) are not supported", loc)
     if c == "%":

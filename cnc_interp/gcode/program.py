@@ -167,6 +167,20 @@ class Stop:
     position: np.ndarray
 
 
+@dataclass(frozen=True)
+class Mark:
+    """A change of what the machine runs, in program order: the tool an M6 loads
+    (``tool``), or an operation header, the first comment of a group of comment-only
+    lines (``operation``, its text). Only a stream asked for them carries marks
+    (``ProgramStream(marks=True)``: ``estimate`` and ``batch`` use them to attribute
+    time); ``Program.items`` never holds one. A header read while a run is open takes
+    effect when that run ends (runs are not cut for a comment)."""
+
+    line: int
+    tool: int | None = None
+    operation: str | None = None
+
+
 Item = Run | Dwell | Stop
 
 
@@ -199,15 +213,16 @@ class Program:
 def move_lengths(points: np.ndarray, axes: str) -> np.ndarray:
     """Lengths (K-1,) of the moves between consecutive points (K, n_axes) by LinuxCNC's
     feed convention: the linear axes' distance (mm), or the rotary axes' (deg) where no
-    linear axis moves. The one definition: the feed of a move, the program summary, the
-    FPGA emulator's path length (``interp._move_length`` is its scalar form)."""
-    from ..constants import LINEAR_AXES
+    linear axis moves more than ``LINEAR_MOTION_MIN_MM`` (the fitter's arc-length metric).
+    The one definition: the feed of a move, the program summary, the FPGA emulator's path
+    length (``interp._move_length`` is its scalar form)."""
+    from ..constants import LINEAR_AXES, LINEAR_MOTION_MIN_MM
 
     d = np.diff(points, axis=0)
     lin = np.array([a in LINEAR_AXES for a in axes], dtype=bool)
     lin_len = np.sqrt((d[:, lin] ** 2).sum(axis=1)) if lin.any() else np.zeros(len(d))
     rot_len = np.sqrt((d[:, ~lin] ** 2).sum(axis=1)) if (~lin).any() else np.zeros(len(d))
-    lengths: np.ndarray = np.where(lin_len > 0, lin_len, rot_len)
+    lengths: np.ndarray = np.where((lin_len > LINEAR_MOTION_MIN_MM) | (rot_len == 0), lin_len, rot_len)
     return lengths
 
 

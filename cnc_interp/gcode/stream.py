@@ -91,7 +91,10 @@ class ProgramStream:
     ``axes=None`` reads the program for its own axes as ``read_program(axes=None)`` does,
     which are known only at its end: the items then come on all nine axes (XYZABCUVW, an
     axis the program never names held at its start) and ``program.axes`` says which the
-    program uses (``cnc-interp parse`` summarises a program so, in bounded memory)."""
+    program uses (``cnc-interp parse`` summarises a program so, in bounded memory).
+
+    ``marks=True`` also hands on a ``Mark`` at every tool change and operation header
+    (``estimate``'s attribution; no consumer without it sees one)."""
 
     def __init__(
         self,
@@ -101,6 +104,8 @@ class ProgramStream:
         start=None,
         tool_table=None,
         nodes_ahead: int = STREAM_NODES_AHEAD,
+        marks: bool = False,
+        noop_mcodes=frozenset(),
     ):
         from . import _LiveParams, _count_lines
         from .interp import Interpreter
@@ -124,6 +129,7 @@ class ProgramStream:
         self.source = source
         params = _LiveParams()
         self.interp = interp = Interpreter(source, params, axes, start9)
+        interp.noop_mcodes = frozenset(noop_mcodes)  # the machine's declared no-op M-codes
         if isinstance(tool_table, (str, os.PathLike)):
             interp.tool_table_path = os.fspath(tool_table)
         elif tool_table is not None:
@@ -133,6 +139,7 @@ class ProgramStream:
             interp.tool_table.source = getattr(tool_table, "source", "")
         params.interp = interp
         interp.on_items = self._hand_on
+        interp.marks = bool(marks)
         self.params = params
         self.line_count = _count_lines(data)
         self.channel = _Channel(nodes_ahead)
@@ -149,6 +156,8 @@ class ProgramStream:
         from .runs import finish_run
 
         kind, obj, extra = entry
+        if kind == "mark":
+            return obj
         if kind == "run":
             item = finish_run(obj, self._order, self._axes, extra)
         elif kind == "dwell":
@@ -233,7 +242,7 @@ class _Stopped(Exception):
     """The consumer went away: stop interpreting."""
 
 
-def iter_program(data: bytes | str, source: str, axes: str, start=None, tool_table=None):
+def iter_program(data: bytes | str, source: str, axes: str, start=None, tool_table=None, noop_mcodes=frozenset()):
     """The items of ``read_program(data, source, axes, start, tool_table=...)`` as a
     stream (see module docstring); ``axes`` (the machine's) is required here."""
-    return iter(ProgramStream(data, source, axes, start, tool_table))
+    return iter(ProgramStream(data, source, axes, start, tool_table, noop_mcodes=noop_mcodes))

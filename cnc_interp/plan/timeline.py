@@ -9,7 +9,9 @@ and yields the samples as ``SampleBlock``s, in bounded memory:
   straight in joint space;
 * ``Dwell``: the position held for ceil(seconds / dt) samples;
 * ``Stop`` (M0, M1, M6, ...): the machine is already at rest between paths; the
-  stop is marked by the held position (no extra time is modelled for the pause).
+  stop is marked by the held position (no extra time is modelled for the pause);
+* ``Mark`` (tool change, operation header; only from a stream asked for them): no
+  samples, noted in the blocks' ``events`` when the timeline gives them.
 
 The pieces are joined on t = k·dt. Between two motions there are always at least
 three equal samples, so every backward difference (up to jerk) across the joint
@@ -47,6 +49,12 @@ _REST_RUN = 3
 _JOIN_TOL = 1e-6
 #: samples in the first block handed out (then each block doubles up to the window's)
 _FIRST_BLOCK = 256
+
+#: ``SampleBlock.events`` codes: from sample k on, the samples are ...
+SPAN_REST = 0  #: held at rest between motions, at a stop and at the ends
+SPAN_DWELL = 1  #: held for a G4 dwell
+SPAN_PATH = 2  #: a path's (rapid or feed; ``obj`` is the ``Path``, ``s_off`` its start's s)
+EVENT_MARK = 3  #: a ``Mark`` (tool change, operation header) takes effect at sample k
 
 
 @dataclass(frozen=True)
@@ -90,13 +98,16 @@ class SampleBlock:
 
     Attributes (K samples, n machine axes): k0 index of the first sample (t = k·dt);
     s (K,) cumulative path length, mm; q (K, n) joint setpoints, mm / deg; line (K,)
-    int64 source line executing (0 = none).
+    int64 source line executing (0 = none); events: only when the timeline is asked for
+    them (``iter_timeline(events=True)``), (k, code, obj, s_off) in order, k absolute:
+    what the samples from k on are (``SPAN_*``) and the ``Mark``s (``EVENT_MARK``).
     """
 
     k0: int
     s: np.ndarray
     q: np.ndarray
     line: np.ndarray
+    events: tuple = ()
 
     @property
     def n(self) -> int:
@@ -326,7 +337,8 @@ def _job_results(pool, job: _Job):
 class _Blocks:
     """Collects samples into blocks of ``size`` (copies: the pieces may be views)."""
 
-    def __init__(self, size: int, n: int):
+    def __init__(self, size: int, n: int, events: bool = False):
+        self.events: list | None = [] if events else None
         self.full = max(1, int(size))
         # the first blocks are small (the first rows reach the consumer early), then double
         self.size = min(self.full, _FIRST_BLOCK)
@@ -347,7 +359,12 @@ class _Blocks:
             if self.count >= self.size:
                 yield self.flush()
 
-    def flush(self) -> SampleBlock | None:
+    def note(self, code: int, obj=None, s_off: float = 0.0) -> None:
+        """An event at the next sample (kept only when the blocks carry events)."""
+        if self.events is not None:
+            self.events.append((self.k + self.count, code, obj, s_off))
+
+    def flush(self, last: bool = False) -> SampleBlock | None:
         if not self.count:
             return None
         if len(self.parts) == 1:
@@ -356,7 +373,12 @@ class _Blocks:
             s = np.concatenate([p[0] for p in self.parts])
             q = np.concatenate([p[1] for p in self.parts], axis=0)
             line = np.concatenate([p[2] for p in self.parts])
-        block = SampleBlock(self.k, s, q, line)
+        events: tuple = ()
+        if self.events:
+            end = self.k + self.count
+            cut = len(self.events) if last else sum(1 for e in self.events if e[0] < end)
+            events, self.events = tuple(self.events[:cut]), self.events[cut:]
+        block = SampleBlock(self.k, s, q, line, events)
         self.k += self.count
         self.parts, self.count = [], 0
         self.size = min(self.full, 2 * self.size)
@@ -374,6 +396,7 @@ def iter_timeline(
     keep_profiles: bool = False,
     source: str = "",
     threads: int | None = None,
+    events: bool = False,
 ):
     """Plan fitted ``items`` (an iterable, consumed lazily) onto one sample clock.
 
@@ -388,11 +411,13 @@ def iter_timeline(
         keep_profiles: collect the planners' profiles in ``info.profiles``.
         source: the part program's name (for the memory check's message).
         threads: worker threads (default ``_plan_threads()``; 1 plans inline).
+        events: give every block its ``events`` (what each sample is, the ``Mark``s
+            among the items); the samples are the same either way.
     Yields:
         ``SampleBlock``s, from rest at the start to rest at the end.
     """
     from ..fit.path import Path
-    from ..gcode.program import Dwell, Stop
+    from ..gcode.program import Dwell, Mark, Stop
     from .budget import WindowBudget
     from ..machine.kinematics import make_kinematics
     from .planners import get_path_iterator
@@ -465,7 +490,7 @@ def iter_timeline(
                     yield "job", job
                     job, est = [], 0.0
                     limit = [2 * limit[0], 2.0 * max(limit[1], 64.0)]
-            elif isinstance(item, (Dwell, Stop)):
+            elif isinstance(item, (Dwell, Stop, Mark)):
                 if job:
                     yield "job", job
                     job, est = [], 0.0
@@ -481,7 +506,7 @@ def iter_timeline(
     source_units = units()
     in_flight = 0
     exhausted = False
-    blocks = _Blocks(window.block_samples, n)
+    blocks = _Blocks(window.block_samples, n, events)
     rest = _REST_RUN  # the machine is at rest before the first sample
     last_line = 0
     s_off = 0.0
@@ -505,13 +530,15 @@ def iter_timeline(
             else:
                 ahead.append(u)
 
-    def hold(count: int, line: int):
+    def hold(count: int, line: int, span: int = SPAN_REST):
         if count > 0:
+            blocks.note(span)
             yield from blocks.add(
                 np.full(count, s_off), np.repeat(q_now[None, :], count, axis=0), np.full(count, line, dtype=np.int64)
             )
 
     try:
+        blocks.note(SPAN_REST)
         yield from blocks.add(np.zeros(1), q_now[None, :].copy(), np.zeros(1, dtype=np.int64))
         while True:
             refill()
@@ -519,10 +546,13 @@ def iter_timeline(
                 break
             kind, unit = ahead.popleft()
             if kind == "item":
+                if isinstance(unit, Mark):
+                    blocks.note(EVENT_MARK, unit)
+                    continue
                 if isinstance(unit, Dwell):
                     count = int(math.ceil(unit.seconds / dt - 1e-9)) if unit.seconds > 0 else 0
                     last_line = int(unit.line)
-                    yield from hold(count, last_line)
+                    yield from hold(count, last_line, SPAN_DWELL)
                     rest += count
                     stats["dwells"] += 1
                 else:  # stop: come to rest (already at rest between paths)
@@ -533,11 +563,12 @@ def iter_timeline(
                 continue
             in_flight -= 1
             cur = -1
+            spanned = False
             first = False
             item = None
             for i, chunk in _job_results(pool, unit):
                 if i != cur:  # a new path's first chunk
-                    cur, item, first = i, unit.paths[i], True
+                    cur, item, first, spanned = i, unit.paths[i], True, False
                 s, q = chunk.s, chunk.q
                 if first:
                     q0 = q[0]
@@ -556,6 +587,9 @@ def iter_timeline(
                         rest = 1
                     first = False
                 if s.shape[0]:
+                    if not spanned:
+                        blocks.note(SPAN_PATH, item, s_off)
+                        spanned = True
                     seg = item.segment_of_s(s)
                     yield from blocks.add(s_off + s, q, item.line[seg])
                     q_now = q[-1].copy()
@@ -575,7 +609,7 @@ def iter_timeline(
                         progress(float(item.length))
         # the program ends at rest even without M2/M30: the held samples make it explicit
         yield from hold(_REST_RUN - rest, last_line)
-        last = blocks.flush()
+        last = blocks.flush(last=True)
         if last is not None:
             yield last
         info.samples = blocks.k
