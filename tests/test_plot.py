@@ -16,6 +16,7 @@ from cnc_interp.export.mcap_io import write_mcap
 from cnc_interp.export.plot import _envelope, _plane_axes, plot_file, plot_trajectory
 
 from ._export_synth import arc_trajectory, machine_for, machine_toml
+from .conftest import SAMPLES
 
 
 def _pixels(path):
@@ -347,5 +348,24 @@ def test_long_plan_decimated_per_pixel_column():
         for ax in fig.axes:
             for ln in ax.get_lines():
                 assert len(ln.get_xdata()) <= width_px or len(ln.get_xdata()) <= 2
+    finally:
+        plt.close(fig)
+
+
+def test_binding_panel_shows_the_classes_the_estimate_counts():
+    # the panel's rows are exactly the limit classes plan.breakdown finds in the samples
+    import cnc_interp as ci
+    from cnc_interp.plan.breakdown import CODE_TRANSITION, classify_limits, code_names
+
+    m = ci.load_machine("generic-mill")
+    traj = ci.plan(ci.fit(ci.read_program(os.path.join(SAMPLES, "mill-contour.ngc"), machine=m)), m)
+    codes = classify_limits(traj.q, traj.dt_s, m)
+    names = code_names(m.axes)
+    expected = {names[c] if c != CODE_TRANSITION else "below limits" for c in np.unique(codes).tolist()}
+    assert any(n.endswith(("jerk", "acceleration")) for n in expected)  # the plan meets its limits
+    plt, fig = _figure_of(traj, m)
+    try:
+        (ax,) = [ax for ax in fig.axes if ax.get_ylabel() == "binds"]
+        assert {t.get_text() for t in ax.get_yticklabels()} == expected
     finally:
         plt.close(fig)

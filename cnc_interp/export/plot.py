@@ -4,7 +4,9 @@ Left: the tool path in the plane of the two linear axes that move most, coloured
 planned feed (paper 001, figure 4); below it, against time, Z when the path view does not
 show it and the rotary axes (deg) when any turns. Right, against time: the feed, then
 every axis's velocity, acceleration and jerk divided by the machine's limit, with the ±1
-bounds (paper 001, figures 6 and 8) when a machine is given.
+bounds (paper 001, figures 6 and 8), and which limit binds over time
+(``plan.breakdown``'s classes: an axis's velocity, acceleration or jerk at 95 % or more
+of its limit, else below the limits, or at rest) when a machine is given.
 
 A time window (``--from``/``--to``, s) restricts every panel to the samples in it.
 Long plans are drawn decimated: the path keeps every n-th sample, the curves against time
@@ -173,9 +175,9 @@ def _figure(plt, full, machine, title, span: tuple[int, int] | None = None):
     z_axis = _z_view_axis(traj)
     rotary = _rotary_axes(traj)
     left_extra = (z_axis is not None) + bool(rotary)
-    n_right = 4 if machine is not None else 2
+    n_right = 5 if machine is not None else 2
     rows = n_right if left_extra < n_right else 4  # the path keeps at least half the height
-    fig = plt.figure(figsize=(14, 7.5) if rows == 4 else (13, 5.5))
+    fig = plt.figure(figsize=(14, 8.8) if rows == 5 else (13, 5.5))
     gs = GridSpec(
         rows,
         2,
@@ -227,6 +229,7 @@ def _figure(plt, full, machine, title, span: tuple[int, int] | None = None):
     axes_right = [ax_feed]
     if machine is not None:
         axes_right += _draw_ratios(fig, gs, full, machine, ax_feed, (i0, i1))
+        axes_right.append(_draw_binding(fig, fig.add_subplot(gs[4, 1], sharex=ax_feed), full, machine, (i0, i1)))
     for ax in axes_right[:-1]:
         ax.tick_params(labelbottom=False)
     axes_right[-1].set_xlabel("time (s)")
@@ -397,6 +400,52 @@ def _draw_ratios(fig, gs, full, machine, share, span: tuple[int, int]):
             ax.legend(loc="upper left", ncol=len(axes), framealpha=0.8)
         out.append(ax)
     return out
+
+
+def _draw_binding(fig, ax, full, machine, span: tuple[int, int]):
+    """Which limit binds at each sample of ``span`` (``plan.breakdown.codes_of``), one row
+    per class that occurs; long plans show every class met in each pixel column."""
+    from ..plan.breakdown import CODE_LIMIT0, CODE_REST, CODE_TRANSITION, code_names, codes_of
+    from .ratios import limit_ratios
+
+    i0, i1 = span
+    axes = "".join(a for a in full.axes if a in machine.axes)
+    it = [full.axes.index(a) for a in axes]
+    im = [machine.axes.index(a) for a in axes]
+    back = min(i0, 3)
+    q = full.q[i0 - back : i1][:, it]
+    ratios = np.abs(limit_ratios(q, full.dt_s, machine.limits()[:, im])[:, back:]).transpose(1, 0, 2)
+    moving = np.zeros(i1 - i0, dtype=bool)
+    if i1 > i0:
+        prev = q[back - 1] if back else q[0]
+        moving[0] = bool(np.any(q[back] != prev))
+        moving[1:] = np.any(q[back + 1 :] != q[back:-1], axis=1)
+    codes = codes_of(np.nan_to_num(ratios, nan=np.inf), moving).astype(np.int64)
+    names = code_names(axes)
+    K = codes.size
+    t = full.t[i0:i1]
+    bins = _columns(fig, ax)
+    if K > 2 * bins:  # the classes met in each pixel column
+        col = np.arange(K) * bins // K
+        pairs = np.unique(col * len(names) + codes)
+        col, codes = np.divmod(pairs, len(names))
+        t0, t1 = float(t[0]), float(t[-1])
+        x = t0 + (col + 0.5) * (t1 - t0) / bins
+    else:
+        x = t
+    present = np.unique(codes) if codes.size else np.zeros(0, dtype=np.int64)
+    row = {c: r for r, c in enumerate(present)}
+    y = np.array([row[c] for c in codes.tolist()]) if codes.size else np.zeros(0)
+    colors = [
+        f"C{(c - CODE_LIMIT0) // 3}" if c >= CODE_LIMIT0 else ("0.75" if c == CODE_REST else "0.45")
+        for c in codes.tolist()
+    ]
+    ax.scatter(x, y, c=colors, marker="|", s=40, linewidths=0.8)
+    ax.set_yticks(range(len(present)), [names[c] if c != CODE_TRANSITION else "below limits" for c in present.tolist()])
+    ax.tick_params(axis="y", labelsize=7)
+    ax.set_ylim(-0.7, max(len(present), 1) - 0.3)
+    ax.set_ylabel("binds")
+    return ax
 
 
 def _envelope(t: np.ndarray, y: np.ndarray, bins: int = PLOT_ENVELOPE_BINS):
