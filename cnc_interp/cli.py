@@ -227,16 +227,25 @@ _start_option = click.option(
 )
 
 
+def _plan_inputs(f):
+    """PART and the options that say how to plan it (``plan`` and ``estimate`` alike)."""
+    for option in (
+        _start_option,
+        _fit_method_option,
+        _tol_option,
+        _dt_option,
+        _effort_option,
+        _planner_option,
+        _tool_table_option,
+        _machine_option(),
+        click.argument("part", type=click.Path(allow_dash=True, dir_okay=False)),
+    ):
+        f = option(f)
+    return f
+
+
 @main.command()
-@click.argument("part", type=click.Path(allow_dash=True, dir_okay=False))
-@_machine_option()
-@_tool_table_option
-@_planner_option
-@_effort_option
-@_dt_option
-@_tol_option
-@_fit_method_option
-@_start_option
+@_plan_inputs
 @click.option(
     "-o",
     "--output",
@@ -280,15 +289,7 @@ def plan(part, machine_spec, tool_table, planner, effort, dt_s, tol_mm, fit_meth
 
 # -- estimate -----------------------------------------------------------------
 @main.command()
-@click.argument("part", type=click.Path(allow_dash=True, dir_okay=False))
-@_machine_option()
-@_tool_table_option
-@_planner_option
-@_effort_option
-@_dt_option
-@_tol_option
-@_fit_method_option
-@_start_option
+@_plan_inputs
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar (the table or --json is still written).")
 @click.option("--json", "as_json", is_flag=True, help="The estimate as JSON on stdout instead of the table.")
 @click.option(
