@@ -55,7 +55,7 @@ def test_curved_polyline_segments_never_straddle_a_feed_change(method):
         f = 3000 if (j - 1) // 25 % 2 == 0 else 600
         feeds.append(f / 60.0)
         lines.append(f"G1 X{20 * np.cos(a[j]):.6f} Y{20 * np.sin(a[j]):.6f} F{f}")
-    res = fitted_of("\n".join(lines) + "\nM2\n", method=method)
+    res = fitted_of("\n".join(lines) + "\nM2\n", method=method, tol_mm=0.001)
     (p,) = [q for q in res.paths if not q.rapid]
     assert set(np.unique(p.feed_mm_s)) == {50.0, 10.0}
     # every segment's end point lies on the programmed arc part of its own feed
