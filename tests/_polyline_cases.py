@@ -1,4 +1,4 @@
-"""Polyline vs exact (issue 14): smooth curves given exactly (G2/G3, G5.2) and the same
+"""Polyline vs exact: smooth curves given exactly (G2/G3, G5.2) and the same
 curves as CAM writes them — G1 moves sampled at a chord error, coordinates rounded to
 4 decimals — for ``benchmarks/polyline_vs_exact.py`` and the tests.
 

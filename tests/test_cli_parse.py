@@ -118,7 +118,7 @@ def test_binary_garbage_is_a_clean_error():
 
 
 def test_parse_fit_and_batch_count_nodes_and_segments_alike(tmp_path):
-    """One definition of node and segment across the commands (issue 16): rapids' end
+    """One definition of node and segment across the commands: rapids' end
     points are not nodes, and every command counts the same feed nodes and fitted segments."""
     from cnc_interp.pipeline import process_program
     from cnc_interp.machine.load import load_machine

@@ -1,6 +1,6 @@
 """Bad input to ``cnc-interp plan``: exactly one ``FILE:LINE:COL: error: ...`` line on
 stderr, exit 2, no traceback, nothing on stdout and no output file (DESIGN.md "Command-line
-contract", issue 2 item 5, issue 8 item 1). Exit 1 is for a plan that failed.
+contract"). Exit 1 is for a plan that failed.
 """
 
 from __future__ import annotations

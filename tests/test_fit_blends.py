@@ -1,4 +1,4 @@
-"""Corner blends (issue 14): sharp corners are rounded by G2 quintics within the tolerance
+"""Corner blends: sharp corners are rounded by G2 quintics within the tolerance
 instead of stopping the machine; stops remain where the tolerance cannot round a corner.
 """
 

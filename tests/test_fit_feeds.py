@@ -1,4 +1,4 @@
-"""Feed per move (issue 14): no fitted segment straddles a change of the programmed F.
+"""Feed per move: no fitted segment straddles a change of the programmed F.
 
 Each move keeps its own feed inside a merged path: the fit puts a segment boundary
 at every node where F changes (nodes fitter: a knot there; planar fit: a segment end;

@@ -1,4 +1,4 @@
-"""Fit status is an outcome (issue 14): a fit outside its tolerance is repaired (refit
+"""Fit status is an outcome: a fit outside its tolerance is repaired (refit
 tighter, blends or stops in the failing stretch, exact lines last) or the command fails
 with exit 1 naming the source line; rotary runs fit within both tolerances without
 multiplying their segments."""

@@ -1,4 +1,4 @@
-"""Printed precision and the program's tolerance (issue 14): the coordinates' quantum is
+"""Printed precision and the program's tolerance: the coordinates' quantum is
 detected and half of it added to the tolerance; G64 P sets a move's tolerance, --tol caps."""
 
 from __future__ import annotations
@@ -112,8 +112,8 @@ def test_g64_p_sets_the_tolerance_and_tol_caps_it():
 
 @pytest.mark.corpus
 def test_circle_small_segments_plans_near_its_limits_on_the_xyza_machine():
-    """The issue's case: 1-inch circle in 15 µm chords at 0.0001 in, plain G64, F9999, on the
-    corpus XYZA machine: 65.9 s before issue 14 (the fit traced the rounding); the circle's
+    """A 1-inch circle in 15 µm chords at 0.0001 in, plain G64, F9999, on the
+    corpus XYZA machine: 65.9 s when the fit traced the rounding; the circle's
     own limits allow about 2 s."""
     from cnc_interp.pipeline import plan_part
 

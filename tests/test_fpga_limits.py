@@ -100,8 +100,8 @@ def _trident_g1(tmp_path):
 
 
 def test_vpop_trident_of_g1_lines_holds_jerk_on_the_device(tmp_path):
-    # the issue's case: without the limit check the profile fit's few nm broke Y jerk by 3.4 %
-    # (on the planar fit, the default then; issue 14's N-axis fit happens to stay inside)
+    # without the limit check the profile fit's few nm broke Y jerk by 3.4 %
+    # (on the planar fit; the N-axis fit happens to stay inside)
     part = _trident_g1(tmp_path)
     opts = StreamOptions(part=str(part), machine_spec="mikron-ucp710", planner="vpop", quiet=True, fit_method="planar")
     fit, traj, m = plan_for_stream(opts, with_machine=True)

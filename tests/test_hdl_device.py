@@ -111,7 +111,7 @@ def test_setpoint_samples_through_the_verilog_device_at_the_byte_rate(tmp_path):
     # every sample of the program as setpoints: identical to the Python device, and the device
     # keeps up with bytes offered one per cycle — the parser's check of a frame and the decoder's
     # pass over the previous one overlap, so a 3-axis sample (24 bytes) costs about 24 cycles,
-    # not the 48 of two passes one after the other (issue 18b; a cycle count, not a wall time)
+    # not the 48 of two passes one after the other (a cycle count, not a wall time)
     import dataclasses
 
     from hdl import iverilog_sim

@@ -1,4 +1,4 @@
-"""Hostile input: every reproducer of the adversarial pass (issue 15) stays fixed.
+"""Hostile input: every reproducer of the adversarial passes stays fixed.
 
 Each test names the item it guards. The rule under test is always the same: a clean
 one-line error with the documented exit code (2 bad input, 1 the plan or the output

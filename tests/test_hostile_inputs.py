@@ -1,4 +1,4 @@
-"""Hostile inputs of issue 48: tiny inputs that destroyed files, raised internal errors or
+"""Hostile inputs: tiny inputs that destroyed files, raised internal errors or
 took unbounded memory. Each test names the reproducer it guards.
 
 The rule is ``test_hostile.py``'s: a clean one-line ``FILE:LINE:COL: error: ...`` with the

@@ -1,4 +1,4 @@
-"""The compiled kernels take few arguments: at most ``MAX_KERNEL_ARGS`` (issue 19).
+"""The compiled kernels take few arguments: at most ``MAX_KERNEL_ARGS``.
 
 Arguments that belong together travel as a module-level namedtuple (a joint table,
 per-axis limits, scratch buffers, settings), so a call reads like the concept and a

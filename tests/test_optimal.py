@@ -91,7 +91,7 @@ def _trident_like(u):
 
 def test_trident_like_curve_at_6ms_beats_vpop_by_far():
     # paper 001's machine at 6 ms on a curve whose curvature changes sign: jerk binds and
-    # VPOp's greedy steps lose (issue 13: ~20 % on the trident)
+    # VPOp's greedy steps lose (~20 % on the trident)
     p = hermite_path(_trident_like, 24, 60.0)
     opt = plan_path_optimal(p, None, UCP, UCP.dt_s)
     check(opt, UCP, p.start, p.end, UCP.dt_s)
@@ -916,7 +916,7 @@ def test_the_effort_trades_planning_time_for_cycle_time():
 
 
 def _zigzag_path(machine):
-    """corpus zigzag_0.002_0.001.ngc with ``G64 P0.001`` first (issue 13's LinuxCNC
+    """corpus zigzag_0.002_0.001.ngc with ``G64 P0.001`` first (the LinuxCNC
     comparison): its 4-inch zigzag of 2000 G1 lines, fitted for ``machine``."""
     from cnc_interp.fit import FitSettings, fit_program
     from cnc_interp.gcode import read_program
@@ -927,7 +927,7 @@ def _zigzag_path(machine):
     return max((p for p in fitted.items if hasattr(p, "coef") and not p.rapid), key=lambda p: p.length)
 
 
-#: issue 13's LinuxCNC machine: XYZ, 203.2 mm/s, 762 mm/s², the jerk out of the way
+#: the LinuxCNC comparison's machine: XYZ, 203.2 mm/s, 762 mm/s², the jerk out of the way
 LINUXCNC_XYZ = Machine(name="linuxcnc-xyz", axes="XYZ", vmax=[203.2] * 3, amax=[762.0] * 3, jmax=[1e6] * 3, dt_s=DT)
 
 

@@ -133,7 +133,7 @@ def test_fit_method_option_selects_the_fitter(tmp_path):
     part = tmp_path / "arc.ngc"
     part.write_text(_polygon_arc_program())
     planar = plan_part(str(part), "generic-mill", fit_method="planar")
-    nodes = plan_part(str(part), "generic-mill")  # the default (issue 14)
+    nodes = plan_part(str(part), "generic-mill")  # the default
     assert planar.report.ok and nodes.report.ok
     methods = lambda o: {m for r in o.fit_stats["runs"] for m in r.get("methods", [])}  # noqa: E731
     assert methods(planar) == {"planar-XY"} and methods(nodes) == {"nodes"}

@@ -1,4 +1,4 @@
-"""Polyline vs exact (issue 14): a CAM polyline sampled within the tolerance from a smooth
+"""Polyline vs exact: a CAM polyline sampled within the tolerance from a smooth
 curve (chord error = G64 P, 4 decimals) plans within 2 % of the same curve given exactly.
 
 The default run checks a few cases; ``CNC_POLYLINE_FULL=1`` runs the whole set of

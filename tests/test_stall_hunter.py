@@ -1,4 +1,4 @@
-"""Issue 48: no path ends in "VPOp made no progress" — a stall falls back to the safe
+"""No path ends in "VPOp made no progress" — a stall falls back to the safe
 planner, whole or (once samples are out) after a brake to rest; the stall hunter's
 seeded slices (``benchmarks/stall_hunter.py``) and the failures it found."""
 

@@ -1,4 +1,4 @@
-"""One status-code set for the compiled kernels (``plan.status``, issue 19)."""
+"""One status-code set for the compiled kernels (``plan.status``)."""
 
 from __future__ import annotations
 
