@@ -15,7 +15,7 @@ import numpy as np
 
 from ..settings import OptimalOptions
 from ..step_limits import position_scale, step_limits
-from .route import _RouteInputs
+from .route import Route, _RouteInputs
 
 
 def _options(settings) -> OptimalOptions:
@@ -86,8 +86,8 @@ class _Path(_RouteInputs):
         self.whole = False
         #: the profile's sampling as the decisions see it
         self.sampling = Sampling()
-        #: the route the path is planned on ("profile" or "vpop"; ``_iter``, ``_vpop_stage``)
-        self.planned_route: str | None = None
+        #: the route the path is planned on (``_iter``, ``_vpop_stage``)
+        self.planned_route: Route | None = None
         #: why the profile gave the path up to VPOp (``_Fallback``), once it has
         self.fallback: str | None = None
 

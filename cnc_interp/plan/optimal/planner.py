@@ -26,12 +26,12 @@ from ..prefetch import Prefetch
 from ..settings import OPTIMAL_CHUNK, OptimalOptions
 from .context import _Fallback, _options, _or, _Path
 from .refine import _refined
-from .route import _ROUTED, _route, _RouteInputs
+from .route import _ROUTED, Route, _route, _RouteInputs
 from .sampling import _sampled, _vpop_stage
 from .select import _better_of
 
 
-def _refine_passes(opts: OptimalOptions, dt: float, route: str) -> int:
+def _refine_passes(opts: OptimalOptions, dt: float, route: Route) -> int:
     """Passes of window refinement for a path on ``route`` at ``opts.effort``: every
     window at coarse periods or at the max effort; at fine ones only the profile's dips
     and ends, once (VPOp's plans there are within a few periods per path of the discrete
@@ -46,7 +46,7 @@ def _refine_passes(opts: OptimalOptions, dt: float, route: str) -> int:
         return 0 if dt < T.full_refine_dt else 1
     if opts.effort == "max" or dt >= T.full_refine_dt:
         return T.refine_passes
-    return 1 if route == "profile" else 0
+    return 1 if route == Route.PROFILE else 0
 
 
 def _targeted(opts: OptimalOptions, dt: float) -> bool:
@@ -103,13 +103,13 @@ def batched_optimal(paths, joint_map, machine, dt_s: float, settings=None) -> li
     compiled call for a job's short paths (the timeline's batch) instead of a VPOp run
     per path on this planner's own table (5-9x the planning time of flowsnake and
     zigzag_0.002_0.0005, whose every path goes to VPOp). Returns, per path, the stats it
-    adds to the batch's ({"route": "vpop"}), or ``None``: a path this planner streams."""
+    adds to the batch's ({"route": Route.VPOP}), or ``None``: a path this planner streams."""
     out: list = [None] * len(paths)
     opts = _options(settings)
     dt = float(dt_s)
     held: dict = {}
     _ROUTED.keep(held)
-    if joint_map is not None or opts.route == "profile" or _refine_passes(opts, dt, "vpop"):
+    if joint_map is not None or opts.route == Route.PROFILE or _refine_passes(opts, dt, Route.VPOP):
         return out
     for i, path in enumerate(paths):
         if path.rapid or not (np.isfinite(path.length) and np.all(np.isfinite(path.coef))):
@@ -118,11 +118,11 @@ def batched_optimal(paths, joint_map, machine, dt_s: float, settings=None) -> li
             continue
         try:
             inputs = _RouteInputs(path, None, machine, opts.tuning)
-            route = opts.route or _route(inputs)
+            route = Route(opts.route) if opts.route else _route(inputs)
         except PlanError:
             continue  # raised again in order when the path is streamed
-        if route == "vpop":
-            out[i] = {"route": "vpop"}
+        if route == Route.VPOP:
+            out[i] = {"route": Route.VPOP}
         else:
             held[id(path)] = (path, inputs)
     return out
@@ -150,15 +150,15 @@ def _iter(path, joint_map, machine, dt_s, settings, stats, window):
     ctx = _Path(path, joint_map, machine, dt, settings, _ROUTED.take(path, joint_map))
     ctx.window = window
     targeted = _targeted(opts, dt)
-    route = opts.route or _route(ctx)
+    route = Route(opts.route) if opts.route else _route(ctx)
     ctx.stats["route"] = ctx.planned_route = route
     passes = _refine_passes(opts, dt, route)
     limit_s = float(_or(opts.compare_s, T.compare_samples * dt))
-    ctx.whole = route == "profile" and ctx.rough_s <= limit_s
-    long_path = route == "profile" and ctx.duration_s >= (T.ahead_s if passes else T.feed_ahead_s)
+    ctx.whole = route == Route.PROFILE and ctx.rough_s <= limit_s
+    long_path = route == Route.PROFILE and ctx.duration_s >= (T.ahead_s if passes else T.feed_ahead_s)
     # a long path's second thread: the profile's windows ahead of the sampling without
     # refinement, else the profile and its sampling ahead of the refinement
-    stage = _sampled(ctx, ahead=long_path and not passes) if route == "profile" else _vpop_stage(ctx, window)
+    stage = _sampled(ctx, ahead=long_path and not passes) if route == Route.PROFILE else _vpop_stage(ctx, window)
     if long_path and passes:
         # the refinement of one stretch while the next is profiled
         stage = Prefetch(stage, ahead=T.ahead_blocks, name="cnc-interp-profile")
@@ -189,7 +189,7 @@ def _iter(path, joint_map, machine, dt_s, settings, stats, window):
             stats["samples_total"] = produced
             return
         ctx.stats["fallback"] = ctx.fallback = str(why)
-        passes = _refine_passes(opts, dt, "vpop")
+        passes = _refine_passes(opts, dt, Route.VPOP)
         stage = _vpop_stage(ctx, window)
         for _ in range(passes):
             stage = _refined(ctx, stage, targeted)

@@ -16,11 +16,21 @@ joint table and route are made once.
 from __future__ import annotations
 
 import threading
+from enum import StrEnum
 
 import numpy as np
 
 from ...constants import VPOP_LIMIT_SHRINK
 from ..tuning import OptimalTuning
+
+
+class Route(StrEnum):
+    """The route of a path (``_route``), and what the selection keeps (stat "kept")."""
+
+    #: the feed-profile LP, sampled by the time law (``profile``, ``sampling``)
+    PROFILE = "profile"
+    #: VPOp's step loop (``plan.vpop``)
+    VPOP = "vpop"
 
 
 class _RouteInputs:
@@ -85,7 +95,7 @@ class _Routed(threading.local):
 _ROUTED = _Routed()
 
 
-def _route(ctx) -> str:
+def _route(ctx) -> Route:
     """ "profile" where curvature or jerk limit the speed on a good part of a path that
     lasts long enough to gain from it, else "vpop" (see tuning.route_*); measured once per
     ``_RouteInputs`` (kept in ``ctx.route``)."""
@@ -94,11 +104,11 @@ def _route(ctx) -> str:
     return ctx.route
 
 
-def _measured_route(ctx) -> str:
+def _measured_route(ctx) -> Route:
     """``_route``'s measurement (``ctx.static_s`` and the stat "limited_share" with it)."""
     T = ctx.tuning
     if ctx.rough_s < T.route_tiny_s:
-        return "vpop"  # travel at the feed and ramps: far below the threshold anyway
+        return Route.VPOP  # travel at the feed and ramps: far below the threshold anyway
     from .. import _feed_kernels as K
 
     m = ctx.machine
@@ -116,4 +126,4 @@ def _measured_route(ctx) -> str:
     ctx.static_s = t_static
     ctx.stats["limited_share"] = round(share, 4)
     long_enough = t_static + ctx.ramp_s >= T.route_min_s
-    return "profile" if share >= T.route_share and long_enough else "vpop"
+    return Route.PROFILE if share >= T.route_share and long_enough else Route.VPOP

@@ -36,6 +36,7 @@ from .. import _feed_kernels as K
 from ..prefetch import Prefetch
 from ..tuning import OptimalTuning
 from .context import _Fallback, _probe_progress
+from .route import Route
 
 #: Gauss–Legendre points per node interval of the time integral (the quadrature's order:
 #: exact for the polynomial integrands it meets, not a tunable)
@@ -401,8 +402,8 @@ def _vpop_stage(ctx, window):
     # VPOp got stuck (a Vectric file's A+Z moves): the profile if this path did not come
     # from it, else the safe S-curve, which cannot fail
     ctx.stats["vpop_failed"] = True
-    if ctx.planned_route == "vpop" and ctx.fallback is None:
-        ctx.stats["route"] = ctx.planned_route = "profile"
+    if ctx.planned_route == Route.VPOP and ctx.fallback is None:
+        ctx.stats["route"] = ctx.planned_route = Route.PROFILE
         try:
             blocks = list(_sampled(ctx))  # whole: it may still give up
         except _Fallback:

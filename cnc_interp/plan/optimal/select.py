@@ -24,6 +24,7 @@ import numpy as np
 
 from .context import _Fallback, _probe_progress
 from .refine import _refined
+from .route import Route
 from .sampling import _sampled, _vpop_stage
 
 
@@ -43,7 +44,7 @@ def _better_of(ctx, stage, passes, targeted):
         blocks, failed, vpop_ahead = None, why, False
     if vpop_ahead:
         # VPOp's plan is kept without the profile's rest (tuning.probe_early)
-        ctx.stats["kept"] = "vpop"
+        ctx.stats["kept"] = Route.VPOP
         yield from _vpop_plan(ctx, passes, targeted)
         return
     # where the profile's tracking gave up early (VPOp took over before the last stop, or
@@ -85,16 +86,16 @@ def _better_of(ctx, stage, passes, targeted):
         # cost as much as 4.6 s of planning). Also where the reference had to be lowered
         # by a few dips (tuning.compare_dips): on the sweep (axis_mm.ini) VPOp won there by
         # 51 periods in all (LHchips4) for ~7 % of stellabee1's CPU
-        ctx.stats["kept"] = "profile"
+        ctx.stats["kept"] = Route.PROFILE
         yield s, q
         return
     alt = list(_vpop_plan(ctx, passes, targeted))
     sv = np.concatenate([b[0] for b in alt])
     if sv.shape[0] < s.shape[0]:
-        ctx.stats["kept"] = "vpop"
+        ctx.stats["kept"] = Route.VPOP
         yield sv, np.concatenate([b[1] for b in alt])
     else:
-        ctx.stats["kept"] = "profile"
+        ctx.stats["kept"] = Route.PROFILE
         yield s, q
 
 
