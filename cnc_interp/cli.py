@@ -260,7 +260,7 @@ def _plan_inputs(f):
 @click.option(
     "--json", "as_json", is_flag=True, help="Summary as JSON on stdout (on stderr when stdout carries the plan, -o -)."
 )
-def plan(part, machine_spec, tool_table, planner, effort, dt_s, tol_mm, fit_method, start, out, quiet, as_json) -> None:
+def plan(out, quiet, as_json, **inputs) -> None:
     """Plan PART into setpoints every dt for MACHINE's axes."""
     from .outfile import watch_interrupts
 
@@ -270,21 +270,8 @@ def plan(part, machine_spec, tool_table, planner, effort, dt_s, tol_mm, fit_meth
     watch_interrupts()
     from .pipeline import PlanOptions, run_plan
 
-    opts = PlanOptions(
-        part=part,
-        machine_spec=machine_spec,
-        planner=planner,
-        effort=effort,
-        dt_s=dt_s,
-        tol_mm=tol_mm,
-        fit_method=fit_method,
-        start=start,
-        tool_table=tool_table,
-        out=out,
-        quiet=quiet,
-        summary_json=as_json,
-    )
-    run_plan(opts)
+    # ``inputs``: PART and the planning options of ``_plan_inputs``, named as PlanOptions' fields
+    run_plan(PlanOptions(**inputs, out=out, quiet=quiet, summary_json=as_json))
 
 
 # -- estimate -----------------------------------------------------------------
@@ -300,9 +287,7 @@ def plan(part, machine_spec, tool_table, planner, effort, dt_s, tol_mm, fit_meth
     metavar="MM",
     help="Also plan at this --tol and report the cycle it gives (repeatable): what the tolerance costs.",
 )
-def estimate(
-    part, machine_spec, tool_table, planner, effort, dt_s, tol_mm, fit_method, start, quiet, as_json, compare_tol
-) -> None:
+def estimate(quiet, as_json, compare_tol, **inputs) -> None:
     """Cycle time of PART and where it goes, planned as `plan` does, no setpoints written.
 
     \b
@@ -315,23 +300,7 @@ def estimate(
     watch_interrupts()
     from .pipeline import PlanOptions, run_estimate
 
-    run_estimate(
-        PlanOptions(
-            part=part,
-            machine_spec=machine_spec,
-            planner=planner,
-            effort=effort,
-            dt_s=dt_s,
-            tol_mm=tol_mm,
-            fit_method=fit_method,
-            start=start,
-            tool_table=tool_table,
-            out=None,
-            quiet=quiet,
-            summary_json=as_json,
-        ),
-        compare_tol=compare_tol,
-    )
+    run_estimate(PlanOptions(**inputs, out=None, quiet=quiet, summary_json=as_json), compare_tol=compare_tol)
 
 
 # -- machines -----------------------------------------------------------------

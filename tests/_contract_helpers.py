@@ -111,3 +111,12 @@ def parse_plan_csv(raw: bytes) -> PlanCsv:
     assert not bad, f"row {bad[0] + 2} has {len(fields[bad[0]])} fields, header {len(header)}"
     data = np.array([[float(x) for x in f] for f in fields], dtype=np.float64)
     return PlanCsv(header, fields, data.reshape(len(fields), len(header)))
+
+
+def one_error_line(res, code: int = 2) -> str:
+    """The run failed with ``code`` and exactly one ``...: error: ...`` line, no traceback."""
+    assert res.code == code, res.explain()
+    lines = [ln for ln in res.err.splitlines() if ln.strip()]
+    assert len(lines) == 1 and ": error: " in lines[0], res.explain()
+    assert "Traceback" not in res.err and "internal error" not in res.err
+    return lines[0]

@@ -17,18 +17,10 @@ import os
 import numpy as np
 import pytest
 
-from tests._contract_helpers import SAMPLES, run_inproc
+from tests._contract_helpers import SAMPLES, one_error_line, run_inproc
 
 PART = os.path.join(SAMPLES, "mill-contour.ngc")
 SHORT = "G21 G90 F600\nG1 X10 Y5\nG1 X20\nM2\n"
-
-
-def one_error_line(res, code: int = 2) -> str:
-    assert res.code == code, res.explain()
-    lines = [ln for ln in res.err.splitlines() if ln.strip()]
-    assert len(lines) == 1 and ": error: " in lines[0], res.explain()
-    assert "Traceback" not in res.err and "internal error" not in res.err
-    return lines[0]
 
 
 @pytest.fixture

@@ -20,20 +20,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from tests._contract_helpers import SAMPLES, console_script, run_inproc, run_proc
+from tests._contract_helpers import SAMPLES, console_script, one_error_line, run_inproc, run_proc
 
 PART = os.path.join(SAMPLES, "mill-contour.ngc")
 LATHE = os.path.join(SAMPLES, "lathe-profile.ngc")
 SHORT = "G21 G90 F600\nG1 X10 Y5\nG1 X20\nM2\n"
-
-
-def one_error_line(res, code: int = 2) -> str:
-    """The run failed with ``code`` and exactly one ``...: error: ...`` line, no traceback."""
-    assert res.code == code, res.explain()
-    lines = [ln for ln in res.err.splitlines() if ln.strip()]
-    assert len(lines) == 1 and ": error: " in lines[0], res.explain()
-    assert "Traceback" not in res.err and "internal error" not in res.err
-    return lines[0]
 
 
 @pytest.fixture

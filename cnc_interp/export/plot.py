@@ -228,8 +228,10 @@ def _figure(plt, full, machine, title, span: tuple[int, int] | None = None):
             ax_z.tick_params(labelbottom=False)
     axes_right = [ax_feed]
     if machine is not None:
-        axes_right += _draw_ratios(fig, gs, full, machine, ax_feed, (i0, i1))
-        axes_right.append(_draw_binding(fig, fig.add_subplot(gs[4, 1], sharex=ax_feed), full, machine, (i0, i1)))
+        axes, q, ratios = _span_ratios(full, machine, (i0, i1))
+        t = full.t[i0:i1]
+        axes_right += _draw_ratios(fig, gs, t, axes, ratios, ax_feed)
+        axes_right.append(_draw_binding(fig, fig.add_subplot(gs[4, 1], sharex=ax_feed), t, axes, q, ratios))
     for ax in axes_right[:-1]:
         ax.tick_params(labelbottom=False)
     axes_right[-1].set_xlabel("time (s)")
@@ -353,19 +355,25 @@ def _draw_path(fig, ax, traj) -> None:
     cb.set_label("feed (mm/s)")
 
 
-def _draw_ratios(fig, gs, full, machine, share, span: tuple[int, int]):
-    """The v, a, j ratio panels of the samples ``span`` of the plan ``full`` (the
-    differences reach back before the window, as in the whole plan)."""
+def _span_ratios(full, machine, span: tuple[int, int]):
+    """``(axes, q, ratios)`` of the samples ``span`` of the plan ``full`` on the machine's
+    axes: ``q`` (back + K, n) the samples with up to 3 before the window (the stencils'),
+    ``ratios`` (3, K, n) the signed v, a, j ratios, which reach back before the window as
+    in the whole plan."""
     from .ratios import limit_ratios
 
     i0, i1 = span
     axes = "".join(a for a in full.axes if a in machine.axes)
     it = [full.axes.index(a) for a in axes]
     im = [machine.axes.index(a) for a in axes]
-    back = min(i0, 3)  # the stencils' samples before the window
-    ratios = limit_ratios(full.q[i0 - back : i1][:, it], full.dt_s, machine.limits()[:, im])[:, back:]
-    t = full.t[i0:i1]
-    K = i1 - i0
+    back = min(i0, 3)
+    q = full.q[i0 - back : i1][:, it]
+    return axes, q, limit_ratios(q, full.dt_s, machine.limits()[:, im])[:, back:]
+
+
+def _draw_ratios(fig, gs, t, axes, ratios, share):
+    """The v, a, j ratio panels of ``ratios`` (``_span_ratios``) against times ``t``."""
+    K = t.shape[0]
     colors = [f"C{k}" for k in range(len(axes))]
     out = []
     for kind, (name, label) in enumerate(_KIND_LABELS):
@@ -402,28 +410,22 @@ def _draw_ratios(fig, gs, full, machine, share, span: tuple[int, int]):
     return out
 
 
-def _draw_binding(fig, ax, full, machine, span: tuple[int, int]):
-    """Which limit binds at each sample of ``span`` (``plan.breakdown.codes_of``), one row
-    per class that occurs; long plans show every class met in each pixel column."""
+def _draw_binding(fig, ax, t, axes, q, signed):
+    """Which limit binds at each sample (``plan.breakdown.codes_of`` of the ratios
+    ``signed``, ``_span_ratios``'), one row per class that occurs; long plans show every
+    class met in each pixel column."""
     from ..plan.breakdown import CODE_LIMIT0, CODE_REST, CODE_TRANSITION, code_names, codes_of
-    from .ratios import limit_ratios
 
-    i0, i1 = span
-    axes = "".join(a for a in full.axes if a in machine.axes)
-    it = [full.axes.index(a) for a in axes]
-    im = [machine.axes.index(a) for a in axes]
-    back = min(i0, 3)
-    q = full.q[i0 - back : i1][:, it]
-    ratios = np.abs(limit_ratios(q, full.dt_s, machine.limits()[:, im])[:, back:]).transpose(1, 0, 2)
-    moving = np.zeros(i1 - i0, dtype=bool)
-    if i1 > i0:
+    K = t.shape[0]
+    back = q.shape[0] - K
+    ratios = np.abs(signed).transpose(1, 0, 2)
+    moving = np.zeros(K, dtype=bool)
+    if K:
         prev = q[back - 1] if back else q[0]
         moving[0] = bool(np.any(q[back] != prev))
         moving[1:] = np.any(q[back + 1 :] != q[back:-1], axis=1)
     codes = codes_of(np.nan_to_num(ratios, nan=np.inf), moving).astype(np.int64)
     names = code_names(axes)
-    K = codes.size
-    t = full.t[i0:i1]
     bins = _columns(fig, ax)
     if K > 2 * bins:  # the classes met in each pixel column
         col = np.arange(K) * bins // K
