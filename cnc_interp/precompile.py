@@ -480,7 +480,8 @@ def _warm_vpop_batch() -> None:
 
 
 def _warm_optimal() -> None:
-    """The optimal planner's feed profile, sampler and refinement, on ``WARM_ARC_PROGRAM``."""
+    """The optimal planner's feed profile, sampler, refinement and batch route, on
+    ``WARM_ARC_PROGRAM``."""
     from .fit import FitSettings, fit_program
     from .plan.optimal import plan_path_optimal
     from .plan.settings import PlanSettings
@@ -490,6 +491,10 @@ def _warm_optimal() -> None:
     plan = plan_path_optimal(arc, None, m, m.dt_s, PlanSettings.from_options(planner="optimal", machine=m))
     if plan.stats.get("route") != "profile":  # the warm-up would miss the profile's kernels
         raise RuntimeError(f"the warm-up arc took the {plan.stats.get('route')!r} route")
+    from .plan.optimal.route import route_many
+    from .plan.tuning import OptimalTuning
+
+    route_many([arc], m, OptimalTuning())  # a job's batch of short paths: their routes at once
 
 
 if __name__ == "__main__":

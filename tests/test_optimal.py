@@ -115,6 +115,25 @@ def test_random_curves_hold_limits_and_never_lose_to_vpop(seed):
         assert periods(opt) <= 1.01 * periods(vp) + 2, (periods(opt), periods(vp))
 
 
+def test_the_batch_route_is_each_paths_own():
+    """``route_many`` (one compiled call for a job's paths) routes every path as the
+    per-path test does, over paths of both routes and a tiny one."""
+    from cnc_interp.plan.optimal.route import Route, _route, _RouteInputs, route_many
+
+    rng = np.random.default_rng(7)
+    paths = [
+        hermite_path(random_curve(rng, scale=s), int(rng.integers(2, 12)), f)
+        for s, f in [(15.0, 250.0), (0.05, 30.0), (40.0, 2000.0), (2.0, 5.0), (25.0, 100.0)]
+    ]
+    paths += [line_path([0, 0, 0], [1e-4, 0, 0], 50.0), line_path([0, 0, 0], [80, 5, 0], 3000.0)]
+    paths.append(hermite_path(circle_fun(3.0, turns=4.0, z_per_turn=0.5), 32, 400.0))
+    for machine in (MILL, UCP):
+        got = route_many(paths, machine, OptimalTuning())
+        want = [_route(_RouteInputs(p, None, machine, OptimalTuning())) for p in paths]
+        assert got == want
+        assert {Route.PROFILE, Route.VPOP} <= set(got)
+
+
 def test_circle_at_the_acceleration_limit():
     # r = 10 mm, no feed limit: v²/r = 2000 mm/s² at v ~ 141 mm/s, the centripetal
     # acceleration takes the whole limit and VPOp's brake test (stop from here) keeps
@@ -251,7 +270,7 @@ def test_a_sample_does_not_depend_on_the_path_far_ahead():
 
 
 # -- nothing makes it fail --------------------------------------------------------------
-def test_the_issue_13_a_plus_z_moves_plan_with_both_planners(tmp_path):
+def test_a_plus_z_moves_plan_with_both_planners(tmp_path):
     from cnc_interp.pipeline import plan_part
 
     part = tmp_path / "az.ngc"

@@ -12,7 +12,9 @@
 * ``point_estimates`` and ``reach_envelope``: the knot placement's speed estimate, and
   ``knot_probes``: one block of the knot placement (its probes, their enveloped estimate
   and the knot spacing wanted there);
-* ``time_nodes``: the time law's node intervals (``optimal.sampling``).
+* ``time_nodes``: the time law's node intervals (``optimal.sampling``);
+* ``route_measures`` and ``route_batch``: the route test of one path's joint table, and
+  of many paths' at once (``optimal.route``).
 
 The profile is w(s) = ṡ² = Σ c_j B_j(s). Along the path, axis i has (Beudaert et al.
 2012, Eqs. 1-3, with ṡ = √w, s̈ = w'/2, s⃛ = √w w''/2)::
@@ -35,6 +37,8 @@ import numpy as np
 from numba import njit
 
 from ._ipm import _ax
+from ._table_kernels import build_identity
+from .status import OK
 
 #: the collocation points of ``lp_rows`` (K of them): each point's first basis index
 #: ``first`` (K,) int64, the basis B (K, 3, 4) of ``cubic_basis``, and the joint
@@ -1012,3 +1016,51 @@ def time_nodes(knots, coef, x, gx, gw, min_dip, dt, w, w1):
             acc += 2.0 * uu[g] / np.sqrt(max(wr[j], 1e-300)) * gw[g]
         dt[i] = 0.5 * ub * acc
     return True
+
+
+@njit(cache=True, nogil=True)
+def route_batch(
+    coef, breaks, s_breaks, weights, lengths, feed, seg_off, vmax, amax, jmax, ramp_s, tiny_s, speed_share, table
+):
+    """The route test of ``optimal.route._route`` on many paths whose joints are the
+    program axes, in one call (a CAM program of short moves between stops has 1e5 paths,
+    and a joint table plus the test cost more per path in Python than in here).
+
+    Path i is ``coef[seg_off[i]:seg_off[i+1]]`` with its ``breaks``/``s_breaks`` (n_seg+1
+    each, concatenated), ``weights[i]``, ``lengths[i]`` and per-segment ``feed`` (mm/s,
+    capped as ``route._RouteInputs.FV``); ``table`` = (tol, max_depth, max_piece, glx, glw,
+    max_tries) of ``JointTable``. Returns (route (P,) int: 0 VPOp, 1 the profile, -1 no
+    table (the path is left to its own planning, which raises the error), static_s (P,)
+    s, share (P,)), the same numbers as ``_RouteInputs`` and ``_measured_route``."""
+    tol, max_depth, max_piece, glx, glw, max_tries = table
+    P = lengths.shape[0]
+    route = np.full(P, -1, dtype=np.int64)
+    static_s = np.zeros(P)
+    share = np.zeros(P)
+    for i in range(P):
+        a = seg_off[i]
+        b = seg_off[i + 1]
+        # breaks and s_breaks carry n_seg + 1 entries per path: path i starts at a + i
+        br = breaks[a + i : b + i + 1]
+        sb = s_breaks[a + i : b + i + 1]
+        status, u, S, C, max_err, qend = build_identity(
+            coef[a:b], br, sb, weights[i], lengths[i], tol, max_depth, max_piece, glx, glw, max_tries
+        )
+        if status != OK:
+            continue
+        L = lengths[i]
+        fv = feed[a:b]
+        travel = 0.0
+        for k in range(vmax.shape[0]):
+            travel = max(travel, abs(qend[k] - C[0, 0, k]) / vmax[k])
+        rough = travel + L / fv.min() + ramp_s
+        if rough < tiny_s:
+            route[i] = 0
+            continue
+        fb = sb.copy()
+        fb[-1] = L
+        sh, ts = route_measures(S, C, fb, fv, vmax, amax, jmax, speed_share)
+        static_s[i] = ts
+        share[i] = sh
+        route[i] = 2  # decided by the caller's thresholds on share and duration
+    return route, static_s, share

@@ -26,7 +26,7 @@ from ..prefetch import Prefetch
 from ..settings import OPTIMAL_CHUNK, OptimalOptions
 from .context import _Fallback, _options, _or, _Path
 from .refine import _refined
-from .route import _ROUTED, Route, _route, _RouteInputs
+from .route import _ROUTED, Route, _route, _RouteInputs, route_many
 from .sampling import _sampled, _vpop_stage
 from .select import _better_of
 
@@ -111,20 +111,27 @@ def batched_optimal(paths, joint_map, machine, dt_s: float, settings=None) -> li
     _ROUTED.keep(held)
     if joint_map is not None or opts.route == Route.PROFILE or _refine_passes(opts, dt, Route.VPOP):
         return out
-    for i, path in enumerate(paths):
-        if path.rapid or not (np.isfinite(path.length) and np.all(np.isfinite(path.coef))):
-            continue
-        if path.length <= VPOP_MIN_LENGTH:
-            continue
-        try:
-            inputs = _RouteInputs(path, None, machine, opts.tuning)
-            route = Route(opts.route) if opts.route else _route(inputs)
-        except PlanError:
-            continue  # raised again in order when the path is streamed
+    eligible = [
+        i
+        for i, path in enumerate(paths)
+        if not path.rapid
+        and path.length > VPOP_MIN_LENGTH
+        and np.isfinite(path.length)
+        and np.all(np.isfinite(path.coef))
+    ]
+    routes = route_many([paths[i] for i in eligible], machine, opts.tuning)
+    for i, route in zip(eligible, routes):
+        if route is None:
+            continue  # no joint table: the error is raised in order when the path is streamed
+        if opts.route:
+            route = Route(opts.route)
         if route == Route.VPOP:
             out[i] = {"route": Route.VPOP}
         else:
-            held[id(path)] = (path, inputs)
+            # the few the profile plans: their inputs (joint table, route) made once, here
+            inputs = _RouteInputs(paths[i], None, machine, opts.tuning)
+            _route(inputs)
+            held[id(paths[i])] = (paths[i], inputs)
     return out
 
 

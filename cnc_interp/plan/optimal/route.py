@@ -8,9 +8,9 @@ is near the optimum where the feed or an axis speed binds. A path whose travel a
 feed plus ramps is under ``tuning.route_tiny_s`` takes VPOp without measuring.
 
 ``_RouteInputs`` holds what the route reads (the joint table, the feed caps, the rough
-and static durations); ``batched_optimal`` routes a job's paths before the timeline
-streams them and keeps the inputs of those it streams (``_ROUTED``), so each path's
-joint table and route are made once.
+and static durations). ``batched_optimal`` routes a job's paths in program space before the
+timeline streams them, all in one compiled call (``route_many``), and keeps the inputs of
+the few it streams (``_ROUTED``), so each path's joint table and route are made once.
 """
 
 from __future__ import annotations
@@ -70,12 +70,58 @@ class _RouteInputs:
         return max(self.rough_s, self.static_s)
 
 
+def route_many(paths, machine, tuning: OptimalTuning) -> list:
+    """``_route`` of each of ``paths`` (joints = program axes, not rapids) in one compiled
+    call (``_feed_kernels.route_batch``): a ``Route`` each, or ``None`` where the joint
+    table cannot be built (the path's own planning raises that error, in order)."""
+    from .. import _feed_kernels as K
+    from ..joint_table import _GL_X, _GL_W, VPOP_TABLE_MAX_PIECE, VPOP_TABLE_MAX_ROUNDS, VPOP_TABLE_MAX_TRIES
+    from ..joint_table import VPOP_TABLE_TOL
+
+    if not paths:
+        return []
+    n_seg = np.array([p.n_seg for p in paths], dtype=np.int64)
+    seg_off = np.zeros(len(paths) + 1, dtype=np.int64)
+    np.cumsum(n_seg, out=seg_off[1:])
+    feed = np.concatenate([p.feed_mm_s for p in paths])
+    caps = np.ascontiguousarray(np.where(np.isfinite(feed) & (feed > 0), feed * (1.0 - VPOP_LIMIT_SHRINK), 1e300))
+    ramp_s = 2.0 * float(np.max(machine.vmax / machine.amax + machine.amax / machine.jmax))
+    code, static_s, share = K.route_batch(
+        np.concatenate([p.coef for p in paths]),
+        np.concatenate([p.breaks for p in paths]),
+        np.concatenate([p.s_breaks for p in paths]),
+        np.array([p.weights for p in paths], dtype=float),
+        np.array([p.length for p in paths], dtype=float),
+        caps,
+        seg_off,
+        np.asarray(machine.vmax, dtype=float),
+        np.asarray(machine.amax, dtype=float),
+        np.asarray(machine.jmax, dtype=float),
+        ramp_s,
+        float(tuning.route_tiny_s),
+        float(tuning.route_speed),
+        (
+            float(VPOP_TABLE_TOL),
+            VPOP_TABLE_MAX_ROUNDS - 1,
+            float(VPOP_TABLE_MAX_PIECE),
+            _GL_X,
+            _GL_W,
+            VPOP_TABLE_MAX_TRIES,
+        ),
+    )
+    # _measured_route's thresholds on the measured paths (code 2)
+    profile = (share >= tuning.route_share) & (static_s + ramp_s >= tuning.route_min_s)
+    return [
+        None if c < 0 else Route.PROFILE if c == 2 and pr else Route.VPOP
+        for c, pr in zip(code.tolist(), profile.tolist())
+    ]
+
+
 class _Routed(threading.local):
     """The route inputs ``batched_optimal`` built for the paths it leaves to the stream,
     kept for their ``_Path`` in the same thread (the timeline plans a job's batch and then
     its streamed paths in one worker): each path's joint table and route are then made
-    once (on stellabee1's first 20k lines 1123 -> 710 tables; building them took 7.5 of
-    stellabee1's 142 planning CPU-s at --effort fast)."""
+    once."""
 
     def __init__(self):
         self.held: dict = {}
