@@ -103,7 +103,7 @@ def test_plan_and_fit_take_typed_settings():
 
 def test_plan_settings_record_their_knobs_by_the_flat_names():
     # the form stored with every plan (MCAP metadata): no knob set -> no option recorded
-    assert ci.PlanSettings().to_dict() == {"planner": "vpop", "dt_s": 0.001, "tol_mm": None, "options": {}}
+    assert ci.PlanSettings().to_dict() == {"planner": "optimal", "dt_s": 0.001, "tol_mm": None, "options": {}}
     s = ci.PlanSettings(
         planner="optimal", optimal=ci.OptimalOptions(route="vpop", compare_s=0.0), vpop=ci.VpopOptions(exact=True)
     )

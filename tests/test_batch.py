@@ -122,7 +122,7 @@ def test_bad_baseline(tmp_path):
 
 def test_options_defaults():
     o = BatchOptions(paths=("a",), machine_spec="generic-mill")
-    assert o.planner == "vpop" and o.max_slowdown == "1%" and o.dask_address is None
+    assert o.planner == "optimal" and o.max_slowdown == "1%" and o.dask_address is None
 
 
 # --- full runs through parse, fit, plan, verify --------------------------------
@@ -342,4 +342,4 @@ def test_effort_reaches_the_workers_and_needs_the_optimal_planner(tmp_path, fold
     # the refinement gains on the circle; fast leaves it out
     assert cycle[None][circle]["samples"] < cycle["fast"][circle]["samples"]
     with pytest.raises(UsageError, match="--effort"):
-        run_batch(BatchOptions(paths=(str(folder),), machine_spec=m, effort="fast", quiet=True))
+        run_batch(BatchOptions(paths=(str(folder),), machine_spec=m, planner="vpop", effort="fast", quiet=True))

@@ -345,7 +345,7 @@ def test_quiet_and_json_summary(plans, tmp_path):
     assert summary["samples"] == csv.data.shape[0]
     assert summary["cycle_time_s"] == csv.data[-1, 0]
     assert summary["worst_ratio"] <= 1 + 1e-9
-    assert summary["planner"] == "vpop"  # the default
+    assert summary["planner"] == "optimal"  # the default
 
 
 def test_mcap_output_matches_csv(plans, tmp_path):

@@ -77,7 +77,7 @@ def test_stdin_to_stdout_json_summary_and_start():
     assert summary["samples"] == rows.shape[0]
     assert summary["cycle_time_s"] == pytest.approx(rows[-1, 0])
     assert summary["worst_ratio"] <= 1 + 1e-9
-    assert summary["planner"] == "vpop"  # the default
+    assert summary["planner"] == "optimal"  # the default
 
 
 def test_bad_gcode_and_bad_start_exit_2(tmp_path):
@@ -175,7 +175,7 @@ def test_effort_is_the_optimal_planners_and_recorded(part, tmp_path):
     assert json.loads(normal.stdout.decode())["options"] == {}
     assert summary["worst_ratio"] <= 1.0 + 1e-9
     # another planner has no effort to set: a usage error, one line, nothing written
-    r = run([str(part), "--effort", "fast", "-o", str(tmp_path / "v.csv")])
+    r = run([str(part), "--planner", "vpop", "--effort", "fast", "-o", str(tmp_path / "v.csv")])
     assert r.returncode == 2
     lines = r.stderr.decode().strip().splitlines()
     assert lines == ["cnc-interp: error: --effort applies to --planner optimal, not vpop"]

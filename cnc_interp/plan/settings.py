@@ -14,12 +14,11 @@ from .tuning import OptimalTuning
 if TYPE_CHECKING:
     from ..machine.model import Machine
 
-#: the planner of ``plan`` and ``batch`` when none is named (``stream`` has its own).
-#: VPOp, not ``optimal``: over the corpus (``benchmarks/plan.py --sweep``, axis_mm.ini)
-#: optimal's cycles are 7.98 % shorter for 6.3x VPOp's planning time (285 s against 45 s),
-#: and at ``effort="fast"`` 5.82 % shorter for 1.96x, with 3 programs a few samples
-#: longer than VPOp's; its first run also compiles ~34 CPU-s more kernels
-DEFAULT_PLANNER = "vpop"
+#: the planner of ``plan``, ``estimate``, ``batch`` and the API when none is named
+#: (``stream`` has its own): the near-time-optimal one. Over the corpus its cycle is never
+#: longer than VPOp's (a path it cannot shorten keeps VPOp's plan) for at most twice
+#: VPOp's planning time (``benchmarks/plan.py --sweep``).
+DEFAULT_PLANNER = "optimal"
 
 
 @dataclass(frozen=True)
