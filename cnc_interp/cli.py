@@ -84,7 +84,8 @@ def _tol_option(f):
         "tol_mm",
         type=_Finite(min=0, max=10.0),
         default=None,
-        help="Maximum permissible fit error in mm: 0 (the exact path) or 1e-6 to 10 (default 0.001, or the machine's).",
+        help="Maximum permissible fit error in mm: 0 (the exact path) or 1e-6 to 10 "
+        "(default: the machine's tol, else 0.01).",
     )(f)
 
 
@@ -282,7 +283,7 @@ def plan(out, quiet, as_json, **inputs) -> None:
 @click.option(
     "--compare-tol",
     "compare_tol",
-    type=float,
+    type=_Finite(min=0, max=10.0),
     multiple=True,
     metavar="MM",
     help="Also plan at this --tol and report the cycle it gives (repeatable): what the tolerance costs.",

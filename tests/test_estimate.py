@@ -235,6 +235,9 @@ def test_compare_tol_replans_at_each_tolerance(cli):
     assert d["compare_tol"][1]["cycle_time_s"] == json.loads(finer.output)["cycle_time_s"]
     table = cli("estimate", part, "-q", "--tol", "0.02", "--compare-tol", "0.002")
     assert "cycle at --tol 0.002: " in table.output
+    # a tolerance out of --tol's range is a usage error before anything is planned
+    bad = cli("estimate", part, "-q", "--compare-tol", "-1")
+    assert bad.exit_code == 2 and "--compare-tol" in bad.output
 
 
 def test_bad_input_is_one_line_exit_2(tmp_path):
