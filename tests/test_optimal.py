@@ -952,12 +952,10 @@ LINUXCNC_XYZ = Machine(name="linuxcnc-xyz", axes="XYZ", vmax=[203.2] * 3, amax=[
 
 @needs_corpus
 def test_a_curvature_limited_path_gets_dips_for_its_whole_duration():
-    # the zigzag lasts ~1 s at its feed (F9999 in/min) but 33 s at its curvature limit: the
-    # dips of the reference were budgeted on the feed's duration, ran out after 40, and
-    # VPOp planned the last 42 % of the path (35.4 s for the program, slower than
-    # LinuxCNC's 34.3 s); budgeted on its static duration, the profile plans it all. With
-    # knots half a radius of curvature apart (the spacing then) it needs ~85 dips; 0.35
-    # needs 3
+    # the zigzag lasts ~1 s at its feed (F9999 in/min) but 33 s at its curvature limit:
+    # budgeted on the feed's duration, the dips of the reference run out after 40 and VPOp
+    # plans the rest of the path; budgeted on its static duration, the profile plans it all
+    # (with knots half a radius of curvature apart it needs ~85 dips)
     from cnc_interp.plan.optimal.route import _RouteInputs
 
     m = LINUXCNC_XYZ
@@ -970,11 +968,8 @@ def test_a_curvature_limited_path_gets_dips_for_its_whole_duration():
     assert plan.stats["route"] == "profile"
     assert not 0 <= plan.stats["handover"] < periods(plan) - 300  # VPOp finishes the last stop at most
     assert plan.stats["retries"] > feed_budget
-    # the program (this path and the rapid back, ~0.77 s) took 35.4 s with VPOp planning
-    # the last 42 %; LinuxCNC ran it in 34.3 s. (At this spacing the profile's plan is
-    # within 0.2 % of LinuxCNC's time less the rapid: 33.57 s against 33.53 s; at the
-    # default spacing the program takes 33.86 s: the README's LinuxCNC table)
-    assert periods(plan) * DT < 35.4 - 0.77 - 0.5
+    # and the profile's plan of it all is shorter than VPOp's of the path
+    assert periods(plan) < periods(plan_path_vpop(path, None, m, DT))
 
 
 @pytest.mark.slow
