@@ -369,21 +369,6 @@ def test_random_sweep_slow(seed):
             check(plan, machine, p.start, p.end, dt)
 
 
-def test_the_shorter_of_two_knot_spacings_is_kept():
-    # a path planned whole is planned with the profile's knots ``knot_time_s`` and
-    # ``alt_knot_share`` of that apart, and the shorter plan kept: never longer than either
-    # alone, every limit held
-    p = hermite_path(_trident_like, 24, 60.0)
-    dt = 0.001
-    hedged = plan_path_optimal(p, None, UCP, dt)
-    check(hedged, UCP, p.start, p.end, dt)
-    plain = plan_path_optimal(p, None, UCP, dt, tuned(alt_knot_share=1.0))  # the second plan is the first
-    alt_s = TUNING.knot_time_s * TUNING.alt_knot_share
-    halved = plan_path_optimal(p, None, UCP, dt, tuned(alt_knot_share=1.0, knot_time_s=alt_s))
-    assert periods(plain) != periods(halved)  # the case tells the two spacings apart
-    assert periods(hedged) == min(periods(plain), periods(halved)), (periods(plain), periods(halved))
-
-
 #: the fit tolerance (mm) the corpus scenarios below were found at: a coarser one fits
 #: other paths, which no longer make the planner take the branch a test is about
 SCENARIO_TOL_MM = 0.001
@@ -586,35 +571,6 @@ def test_a_screened_lp_that_keeps_finding_rows_takes_every_row_last(monkeypatch)
     check(plan, m, plan.q[0], plan.q[-1], m.dt_s)
     assert sum(n == 2 for screen, n, _ in calls if screen) >= 5
     assert max(e for _, _, e in calls) <= settings.optimal.tuning.lp_tol
-
-
-@needs_corpus
-def test_a_profile_that_only_dipped_is_planned_with_one_knot_spacing(monkeypatch):
-    # corpus stellabee-violation-spirals.ngc, the path ending at line 814: its profile dips
-    # once and reaches the end. The second knot spacing gained 0.2 % on such paths for 9 %
-    # of the CPU; it runs only where VPOp took the plan over early
-    # (test_the_shorter_of_two_knot_spacings_is_kept). Without the points where q_sss
-    # peaks (``peak_share``): with them this profile reaches the end without a dip
-    from cnc_interp.plan.optimal import profile
-
-    m, paths = _corpus_paths(os.path.join("violation_checks", "stellabee-violation-spirals.ngc"))
-    path = next(p for p in paths if int(p.line[-1]) == 814)
-    spacings = []
-    builder = profile.FeedProfileBuilder
-
-    class Recording(builder):
-        def __init__(self, *args, knot_time_s=None, **kwargs):
-            spacings.append(knot_time_s)
-            super().__init__(*args, knot_time_s=knot_time_s, **kwargs)
-
-    monkeypatch.setattr(profile, "FeedProfileBuilder", Recording)
-    settings = tuned(PlanSettings.from_options(planner="optimal", machine=m), peak_share=np.inf)
-    plan = plan_path_optimal(path, None, m, m.dt_s, settings)
-    check(plan, m, plan.q[0], plan.q[-1], m.dt_s)
-    assert plan.stats["route"] == "profile"
-    assert plan.stats["retries"] > 0  # the profile dipped ...
-    assert plan.stats["handover"] < 0  # ... and reached the end
-    assert spacings == [TUNING.knot_time_s]
 
 
 def test_vpop_plans_a_path_for_comparison_only_where_it_took_over_early():

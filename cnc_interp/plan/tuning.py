@@ -114,9 +114,6 @@ class OptimalTuning:
             share of the samples ...
         compare_after: 1; ... and after this share ...
         compare_dips: ... or when the profile needed at least this many dips.
-        alt_knot_share: 1; a troubled whole plan is planned again with knots this share
-            of ``knot_time_s`` apart ...
-        alt_knot_max_s: s; ... when the first plan lasts at most this long.
         probe_s: s; VPOp's first samples of a whole plan (the probe) ...
         probe_min_s: s; ... for a profile's plan of at least this long ...
         probe_ahead: 1; ... win when VPOp reaches the probe's arc length this share
@@ -190,8 +187,6 @@ class OptimalTuning:
     compare_before: float = 0.5
     compare_after: float = 0.05
     compare_dips: int = 50
-    alt_knot_share: float = 0.5
-    alt_knot_max_s: float = 2.5
     probe_s: float = 2.0
     probe_min_s: float = 20.0
     probe_ahead: float = 0.01

@@ -142,11 +142,10 @@ class FeedProfileBuilder:
         tuning: OptimalTuning | None = None,
         limit_share: float | None = None,
         whole: bool = False,
-        knot_time_s: float | None = None,
     ):
         #: the planner's tunables (``OptimalTuning``; default: the defaults)
         self.tuning = tuning = OptimalTuning() if tuning is None else tuning
-        self.knot_time_s = float(tuning.knot_time_s if knot_time_s is None else knot_time_s)
+        self.knot_time_s = float(tuning.knot_time_s)
         self.L = float(table.length)
         self.dt = float(dt_s)
         self.n = table.C.shape[2]

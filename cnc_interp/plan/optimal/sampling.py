@@ -196,18 +196,15 @@ class _Nodes:
         return True
 
 
-def _sampled(ctx, knot_time_s: float | None = None, ahead: bool = False):
-    """Yields (s, q) blocks of final samples (see module docstring); the profile's
-    knots ``knot_time_s`` of motion apart (default ``tuning.knot_time_s``).
+def _sampled(ctx, ahead: bool = False):
+    """Yields (s, q) blocks of final samples (see module docstring).
     ``ahead``: the profile's windows are solved by a thread of their own, ahead of the
     sampling, and a whole path's VPOp probe (``_probe_progress``) is made meanwhile (the
     samples do not depend on it)."""
     from .profile import FeedProfileBuilder
 
     T = ctx.tuning
-    builder = FeedProfileBuilder(
-        ctx.table, ctx.path, ctx.machine, ctx.dt, T, whole=ctx.whole, knot_time_s=knot_time_s or T.knot_time_s
-    )
+    builder = FeedProfileBuilder(ctx.table, ctx.path, ctx.machine, ctx.dt, T, whole=ctx.whole)
     if not ahead:
         yield from _sampled_from(ctx, builder, builder.windows())
         return

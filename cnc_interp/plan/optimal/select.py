@@ -5,10 +5,6 @@ A profile-routed path whose rough duration is at most ``tuning.compare_samples``
 ``_better_of`` keeps the shortest of:
 
 * the profile's plan (refined);
-* where the profile's sampling was troubled (VPOp took over before the last
-  ``tuning.compare_tail_s``, or the profile gave up) and the plan lasts at most
-  ``tuning.alt_knot_max_s``: the profile's plan with knots ``tuning.alt_knot_share`` as
-  far apart;
 * VPOp's own plan, made only where it may win: VPOp took over between
   ``tuning.compare_after`` and ``tuning.compare_before`` of the samples, the profile
   needed ``tuning.compare_dips`` dips or more, or VPOp's first ``tuning.probe_s`` (the
@@ -25,7 +21,7 @@ import numpy as np
 from .context import _Fallback, _probe_progress
 from .refine import _refined
 from .route import Route
-from .sampling import _sampled, _vpop_stage
+from .sampling import _vpop_stage
 
 
 def _samples(blocks) -> int:
@@ -33,10 +29,10 @@ def _samples(blocks) -> int:
 
 
 def _better_of(ctx, stage, passes, targeted):
-    """The shortest of the profile's plan, the profile's with knots tuning.alt_knot_share as
-    far apart, and VPOp's (all whole: bounded by ``tuning.compare_samples``); ``passes`` of
-    refinement for the profile's plans, and for VPOp's at coarse periods."""
-    T = ctx.tuning
+    """The shorter of the profile's plan and VPOp's (both whole: bounded by
+    ``tuning.compare_samples``); ``passes`` of refinement for the profile's plan, and for
+    VPOp's at coarse periods. Where the profile gives up, VPOp plans the path (the caller's
+    fallback)."""
     try:
         blocks, vpop_ahead = _profile_unless_vpop_ahead(ctx, stage)
         failed = None
@@ -47,36 +43,9 @@ def _better_of(ctx, stage, passes, targeted):
         ctx.stats["kept"] = Route.VPOP
         yield from _vpop_plan(ctx, passes, targeted)
         return
-    # where the profile's tracking gave up early (VPOp took over before the last stop, or
-    # nothing planned), its outcome moves by up to ±15 % with the knot spacing: a second
-    # spacing is the hedge (a profile that reached the end is kept: the second plan would
-    # double its cost). Dips of the reference alone are no trouble: the second spacing
-    # gained 0.2 % on such paths (stellabee1's, stellabee-kink-test) at 9 % of the CPU,
-    # against 2.7 % on paths handed over early (LHchips4, 3D_Chips, blur_torus)
-    planned_s = ctx.dt * _samples(blocks) if blocks is not None else 0.0
-    # (VPOp finishing the last stop is no trouble: arc_maxvel_xy's helix handed over one
-    # sample before its end and was planned twice)
-    troubled = blocks is None or _handed_over_early(ctx, _samples(blocks))
-    if troubled and planned_s <= T.alt_knot_max_s:
-        kept = dict(ctx.stats)  # the second run's stats stand only if its plan is kept
-        kept_sampling = ctx.sampling
-        try:
-            alt = _sampled(ctx, T.knot_time_s * T.alt_knot_share)
-            for _ in range(passes):
-                alt = _refined(ctx, alt, targeted)
-            alt_blocks: list | None = list(alt)
-        except _Fallback:
-            alt_blocks = None
-        if alt_blocks is not None and (blocks is None or _samples(alt_blocks) < _samples(blocks)):
-            blocks = alt_blocks
-            ctx.stats["knot_time_s"] = T.knot_time_s * T.alt_knot_share
-        else:
-            ctx.stats.clear()
-            ctx.stats.update(kept)
-            ctx.sampling = kept_sampling
     if blocks is None:
         assert failed is not None
-        raise failed  # neither spacing planned the path: VPOp does (the caller's fallback)
+        raise failed  # the profile did not plan the path: VPOp does (the caller's fallback)
     s = np.concatenate([b[0] for b in blocks])
     q = np.concatenate([b[1] for b in blocks])
     if ctx.fallback is None and not _vpop_may_win(ctx, s.shape[0]) and not _vpop_ahead(ctx, s):
