@@ -134,6 +134,32 @@ def test_the_batch_route_is_each_paths_own():
         assert {Route.PROFILE, Route.VPOP} <= set(got)
 
 
+@pytest.mark.parametrize(
+    "sample,preset",
+    [
+        ("mill-contour.ngc", "generic-mill"),
+        ("drilling-cycles.ngc", "generic-mill"),
+        ("nurbs-trident.ngc", "mikron-ucp710"),
+        ("lathe-profile.ngc", "xz-lathe"),
+        ("five-axis-xyzac.ngc", "mikron-ucp710"),
+    ],
+)
+def test_the_default_planner_never_loses_to_vpop_on_the_samples(sample, preset):
+    """Each bundled sample, whole, with the default planner: within every limit (plan_part
+    verifies, the machine at rest after the last sample), ending on the program's last point,
+    and no longer than VPOp's plan."""
+    from cnc_interp.pipeline import plan_part
+    from cnc_interp.plan.settings import DEFAULT_PLANNER
+
+    part = os.path.join(os.path.dirname(__file__), "..", "samples", "gcode", sample)
+    default = plan_part(part, preset, DEFAULT_PLANNER, None)
+    vpop = plan_part(part, preset, "vpop", None)
+    assert DEFAULT_PLANNER == "optimal"
+    assert default.report.worst_ratio <= 1.0 + 1e-9
+    assert np.array_equal(default.trajectory.q[-1], vpop.trajectory.q[-1])
+    assert default.trajectory.duration_s <= vpop.trajectory.duration_s
+
+
 def test_circle_at_the_acceleration_limit():
     # r = 10 mm, no feed limit: v²/r = 2000 mm/s² at v ~ 141 mm/s, the centripetal
     # acceleration takes the whole limit and VPOp's brake test (stop from here) keeps
