@@ -61,6 +61,11 @@ EstimateInputs = namedtuple("EstimateInputs", "vmax amax jmax feed_breaks feed_v
 #: acceleration and jerk limits (at, jt: least of amax/|q_s|, jmax/|q_s| over the axes
 #: with |q_s| > 1e-12; inf where none)
 Estimates = namedtuple("Estimates", "w w_jerk k2 k3 at jt")
+#: ``route_batch``'s paths: concatenated per-segment coef/feed, per-path breaks/s_breaks
+#: (n_seg + 1 each), weights (P, n), lengths (P,) and segment offsets (P + 1,)
+RoutePaths = namedtuple("RoutePaths", "coef breaks s_breaks weights lengths feed seg_off")
+#: ``route_batch``'s limits (per axis), ramp and tiny durations (s) and the route's speed share
+RouteLimits = namedtuple("RouteLimits", "vmax amax jmax ramp_s tiny_s speed_share")
 
 
 @njit(cache=True, nogil=True)
@@ -1019,20 +1024,21 @@ def time_nodes(knots, coef, x, gx, gw, min_dip, dt, w, w1):
 
 
 @njit(cache=True, nogil=True)
-def route_batch(
-    coef, breaks, s_breaks, weights, lengths, feed, seg_off, vmax, amax, jmax, ramp_s, tiny_s, speed_share, table
-):
+def route_batch(paths, lim, table):
     """The route test of ``optimal.route._route`` on many paths whose joints are the
     program axes, in one call (a CAM program of short moves between stops has 1e5 paths,
     and a joint table plus the test cost more per path in Python than in here).
 
-    Path i is ``coef[seg_off[i]:seg_off[i+1]]`` with its ``breaks``/``s_breaks`` (n_seg+1
-    each, concatenated), ``weights[i]``, ``lengths[i]`` and per-segment ``feed`` (mm/s,
-    capped as ``route._RouteInputs.FV``); ``table`` = (tol, max_depth, max_piece, glx, glw,
+    Path i of ``paths`` (``RoutePaths``) is ``coef[seg_off[i]:seg_off[i+1]]`` with its
+    ``breaks``/``s_breaks`` (n_seg+1 each, concatenated), ``weights[i]``, ``lengths[i]`` and
+    per-segment ``feed`` (mm/s, capped as ``route._RouteInputs.FV``); ``lim`` a
+    ``RouteLimits``; ``table`` = (tol, max_depth, max_piece, glx, glw,
     max_tries) of ``JointTable``. Returns (route (P,) int: 0 VPOp, 1 the profile, -1 no
     table (the path is left to its own planning, which raises the error), static_s (P,)
     s, share (P,)), the same numbers as ``_RouteInputs`` and ``_measured_route``."""
     tol, max_depth, max_piece, glx, glw, max_tries = table
+    coef, breaks, s_breaks, weights, lengths, feed, seg_off = paths
+    vmax, amax, jmax = lim.vmax, lim.amax, lim.jmax
     P = lengths.shape[0]
     route = np.full(P, -1, dtype=np.int64)
     static_s = np.zeros(P)
@@ -1053,13 +1059,13 @@ def route_batch(
         travel = 0.0
         for k in range(vmax.shape[0]):
             travel = max(travel, abs(qend[k] - C[0, 0, k]) / vmax[k])
-        rough = travel + L / fv.min() + ramp_s
-        if rough < tiny_s:
+        rough = travel + L / fv.min() + lim.ramp_s
+        if rough < lim.tiny_s:
             route[i] = 0
             continue
         fb = sb.copy()
         fb[-1] = L
-        sh, ts = route_measures(S, C, fb, fv, vmax, amax, jmax, speed_share)
+        sh, ts = route_measures(S, C, fb, fv, vmax, amax, jmax, lim.speed_share)
         static_s[i] = ts
         share[i] = sh
         route[i] = 2  # decided by the caller's thresholds on share and duration

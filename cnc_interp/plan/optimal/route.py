@@ -86,7 +86,7 @@ def route_many(paths, machine, tuning: OptimalTuning) -> list:
     feed = np.concatenate([p.feed_mm_s for p in paths])
     caps = np.ascontiguousarray(np.where(np.isfinite(feed) & (feed > 0), feed * (1.0 - VPOP_LIMIT_SHRINK), 1e300))
     ramp_s = 2.0 * float(np.max(machine.vmax / machine.amax + machine.amax / machine.jmax))
-    code, static_s, share = K.route_batch(
+    paths_in = K.RoutePaths(
         np.concatenate([p.coef for p in paths]),
         np.concatenate([p.breaks for p in paths]),
         np.concatenate([p.s_breaks for p in paths]),
@@ -94,21 +94,24 @@ def route_many(paths, machine, tuning: OptimalTuning) -> list:
         np.array([p.length for p in paths], dtype=float),
         caps,
         seg_off,
+    )
+    lim = K.RouteLimits(
         np.asarray(machine.vmax, dtype=float),
         np.asarray(machine.amax, dtype=float),
         np.asarray(machine.jmax, dtype=float),
         ramp_s,
         float(tuning.route_tiny_s),
         float(tuning.route_speed),
-        (
-            float(VPOP_TABLE_TOL),
-            VPOP_TABLE_MAX_ROUNDS - 1,
-            float(VPOP_TABLE_MAX_PIECE),
-            _GL_X,
-            _GL_W,
-            VPOP_TABLE_MAX_TRIES,
-        ),
     )
+    table = (
+        float(VPOP_TABLE_TOL),
+        VPOP_TABLE_MAX_ROUNDS - 1,
+        float(VPOP_TABLE_MAX_PIECE),
+        _GL_X,
+        _GL_W,
+        VPOP_TABLE_MAX_TRIES,
+    )
+    code, static_s, share = K.route_batch(paths_in, lim, table)
     # _measured_route's thresholds on the measured paths (code 2)
     profile = (share >= tuning.route_share) & (static_s + ramp_s >= tuning.route_min_s)
     return [
