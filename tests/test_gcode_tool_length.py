@@ -34,6 +34,13 @@ def test_offset_applies_from_the_next_move_and_g49_cancels():
     np.testing.assert_allclose(q[:, 2], [10.0, 17.5, 17.5, 5.0])
 
 
+def test_g43_axis_words_are_a_move_with_the_new_offset_not_an_offset():
+    # LinuxCNC: "G43 H1 Z3" applies tool 1's offset and moves the tip to Z3; the axis word
+    # is the block's motion (G0 modal), added to no offset (only G43.2 takes axis offsets)
+    q = nodes("G21 G90\nG0 X1\nG43 H1 Z3\nG1 Z-1 F100\nM2\n")
+    np.testing.assert_allclose(q[:, 2], [0.0, 15.5, 11.5])
+
+
 def test_g43_without_h_uses_the_tool_in_the_spindle():
     q = nodes("G21 G90 F600\nT2 M6\nG43\nG0 X1 Z0\nM2\n")
     np.testing.assert_allclose(q[-1], [1.5, 0.0, -3.25])

@@ -1029,9 +1029,10 @@ class Interpreter:
                     raise self.error("H must be a non-negative integer (a tool number)", hcol)
                 add = self._tool_offsets(int(tool), hcol)
                 tlo = [a + b for a, b in zip(tlo, add)]
-            for L, w in axis_words:
-                i = AXIS_INDEX[L]
-                tlo[i] += w[1] * self.units9[i]
+            if code == G43_2:  # G43's axis words are a motion in the same block, not offsets
+                for L, w in axis_words:
+                    i = AXIS_INDEX[L]
+                    tlo[i] += w[1] * self.units9[i]
         self.tlo = tlo
         self._update_off()
         for k in range(9):  # #5401-#5409: the offset in effect, program units
