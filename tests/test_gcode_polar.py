@@ -132,3 +132,21 @@ def test_xz_arc_under_rotation_keeps_its_length():
     )
     # G93 F60: the move takes 1 s, so the feed is the arc's length per second
     assert feed.feed_mm_s[-1] == pytest.approx(1.5 * math.pi, rel=1e-6)
+
+
+def test_a_rotated_arc_under_g61_does_not_stop_at_its_own_nodes():
+    # the arc's sampled nodes are no corners: G61 (exact path) keeps tolerance 0 at the
+    # block's end only, and the whole arc plans without a stop inside it
+    from cnc_interp import api
+
+    text = "G21 G90 G61\nG10 L2 P0 R60\nG0 X0 Y5 Z0\nG19 G3 Y-5 Z0 J-5 K0 F1200\nG1 X5\nM2\n"
+    feed = [r for r in prog(text).runs if r.kind == "feed"][0]
+    # node 0 is the start; the exact-path zeros are the arc's end and the G1's
+    zeros = np.flatnonzero(feed.tol_mm[1:] == 0.0) + 1
+    assert zeros.tolist() == [len(feed.tol_mm) - 2, len(feed.tol_mm) - 1]
+    res = api.run(text, machine="generic-mill")
+    speed = np.linalg.norm(np.diff(res.trajectory.q, axis=0), axis=1) / res.trajectory.dt_s
+    # the half circle (~15.7 mm at 20 mm/s) holds its feed after the start: no stop inside
+    moving = np.flatnonzero(speed > 0)
+    arc_run = speed[moving[0] : moving[0] + int(0.6 / res.trajectory.dt_s)]
+    assert arc_run[int(0.2 / res.trajectory.dt_s) :].min() > 0.5 * 20.0

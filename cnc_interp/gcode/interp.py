@@ -1325,7 +1325,12 @@ class Interpreter:
             fill_arc_nodes(prog, tuple(range(9)), [(0, n, (line, start, end, plane, c1, c2, r1, r2, sweep))])
             pts = np.array([self._to_machine(list(row)) for row in prog[1:]])
             pts[-1] = end_m
-            rb.add_many(pts, line, col, feed, self.tol, self.naive)
+            # the nodes inside the arc are samples of one smooth curve, already off it by up
+            # to the chord error: they are no corners, so G61's exact path (tol 0) does not
+            # stop at them (the block's end keeps the mode's tolerance)
+            inner = self.tol if math.isnan(self.tol) else max(self.tol, CURVE_CHORD_TOL_MM)
+            rb.add_many(pts[:-1], line, col, feed, inner, self.naive)
+            rb.add_many(pts[-1:], line, col, feed, self.tol, self.naive)
         else:
             first, last = rb.reserve(n, line, col, feed, self.tol, self.naive)
             rb.curves.append((first, last, (line, start, end, plane, c1, c2, r1, r2, sweep)))
