@@ -110,6 +110,8 @@ def read_program(
         start=start,
         tool_table=tool_table,
         noop_mcodes=m.noop_mcodes if m is not None else frozenset(),
+        program_units=m.program_units if m is not None else "mm",
+        max_path_mm_s=m.path_speed_cap_mm_s if m is not None else None,
     )
     if m is not None:
         key = id(program)

@@ -7,6 +7,9 @@ this file holds only what several modules must agree on.
 # --- units -------------------------------------------------------------------
 MM_PER_INCH = 25.4
 SECONDS_PER_MINUTE = 60.0
+#: the length units a machine starts a program in (as if it began with G21 or G20), mm
+#: per program unit: ``Machine.program_units`` names one, the G-code reader applies it
+PROGRAM_UNITS_MM = {"mm": 1.0, "inch": MM_PER_INCH}
 
 # --- axes --------------------------------------------------------------------
 #: every axis letter RS274NGC knows, in canonical machine order

@@ -69,7 +69,16 @@ def summarise_part(part: str, machine_spec: str | None, tool_table: str | None =
     machine = load_machine_spec(machine_spec if machine_spec is not None else DEFAULT_PRESET)
     name, data = read_part(part)
     table = tool_table if tool_table is not None else machine.tool_table
-    stream = ProgramStream(data, name, machine.axes, machine.start, table, noop_mcodes=machine.noop_mcodes)
+    stream = ProgramStream(
+        data,
+        name,
+        machine.axes,
+        machine.start,
+        table,
+        noop_mcodes=machine.noop_mcodes,
+        program_units=machine.program_units,
+        max_path_mm_s=machine.path_speed_cap_mm_s,
+    )
     del data
     return stream_summary(stream)
 
@@ -352,7 +361,15 @@ def stream_plan(
     input_meta = _input_meta(name, data)
     tool_table = opts.tool_table if opts.tool_table is not None else machine.tool_table
     program = ProgramStream(
-        data, name, machine.axes, machine.start, tool_table, marks=breakdown, noop_mcodes=machine.noop_mcodes
+        data,
+        name,
+        machine.axes,
+        machine.start,
+        tool_table,
+        marks=breakdown,
+        noop_mcodes=machine.noop_mcodes,
+        program_units=machine.program_units,
+        max_path_mm_s=machine.path_speed_cap_mm_s,
     )
     del data
     fit_settings = FitSettings.from_options(tol_mm=opts.tol_mm, machine=machine, method=opts.fit_method)

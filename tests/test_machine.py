@@ -262,3 +262,73 @@ def test_ini_without_coordinates_uses_axis_sections_or_axes(tmp_path):
     m = load_machine(write(tmp_path, joints, "joints.ini"))
     assert m.axes == "XY" and m.dt_s == 0.001
     assert_allclose(m.vmax, [25.4, 3 * 25.4])
+
+
+@pytest.mark.parametrize(
+    "units,expected",
+    [
+        ("inch", "inch"),
+        ("in", "inch"),
+        ("mm", "mm"),
+        ("0.03937", "inch"),  # the old form, machine units per mm: an inch
+        ("1", "mm"),
+        ("0.1", "mm"),  # a centimetre: nearer 1 mm than 1 inch
+        (None, "mm"),  # no LINEAR_UNITS: mm, as the limits
+    ],
+)
+def test_ini_program_units_follow_linear_units(tmp_path, units, expected):
+    old = "LINEAR_UNITS = mm\n"
+    text = INI.replace(old, "" if units is None else f"LINEAR_UNITS = {units}\n")
+    assert load_machine(write(tmp_path, text, "u.ini")).program_units == expected
+
+
+def test_toml_program_units_and_presets(tmp_path):
+    assert load_machine(write(tmp_path, GOOD)).program_units == "mm"  # no [gcode] table
+    m = load_machine(write(tmp_path, GOOD + '[gcode]\nprogram_units = "inch"\n', "inch.toml"))
+    assert m.program_units == "inch" and "program_units" not in m.defaults
+    for name in PRESETS:
+        assert load_machine(name).program_units == "mm"
+    with pytest.raises(MachineError, match='program_units must be "mm" or "inch"') as info:
+        load_machine(write(tmp_path, GOOD + '[gcode]\nprogram_units = "furlong"\n', "bad.toml"))
+    assert info.value.location.line == GOOD.count("\n") + 2
+
+
+def test_ini_max_linear_velocity_is_the_path_speed_limit(tmp_path):
+    assert load_machine(write(tmp_path, INI, "none.ini")).max_path_mm_s is None
+    cap = INI.replace("ANGULAR_UNITS", "MAX_LINEAR_VELOCITY = 7.5\nANGULAR_UNITS")
+    assert load_machine(write(tmp_path, cap, "cap.ini")).max_path_mm_s == 7.5
+    inch = cap.replace("LINEAR_UNITS = mm", "LINEAR_UNITS = inch")
+    assert_allclose(load_machine(write(tmp_path, inch, "inch.ini")).max_path_mm_s, 7.5 * MM_PER_INCH)
+    old = INI.replace("ANGULAR_UNITS", "MAX_VELOCITY = 6\nANGULAR_UNITS")  # its name before LinuxCNC 2.8
+    assert load_machine(write(tmp_path, old, "old.ini")).max_path_mm_s == 6.0
+    both = cap.replace("ANGULAR_UNITS", "MAX_VELOCITY = 6\nANGULAR_UNITS")
+    assert load_machine(write(tmp_path, both, "both.ini")).max_path_mm_s == 7.5  # the newer name wins
+    display = INI + "[DISPLAY]\nMAX_LINEAR_VELOCITY = 3\n"  # the GUI's slider, not the machine's limit
+    assert load_machine(write(tmp_path, display, "display.ini")).max_path_mm_s is None
+    with pytest.raises(MachineError, match="positive") as info:
+        load_machine(write(tmp_path, cap.replace("= 7.5", "= -1"), "bad.ini"))
+    assert info.value.location.line == 8
+    with pytest.raises(MachineError, match="out of range") as info:
+        load_machine(write(tmp_path, cap.replace("= 7.5", "= 1e-9"), "slow.ini"))
+    assert info.value.location.line == 8
+
+
+def test_machine_program_units_and_path_speed_checked():
+    m = load_machine("generic-mill")
+    assert m.program_units == "mm" and m.max_path_mm_s is None
+    assert m.to_dict()["program_units"] == "mm" and m.to_dict()["max_path_mm_s"] is None
+    from dataclasses import replace
+
+    with pytest.raises(MachineError, match="program units 'cm' are not known"):
+        replace(m, program_units="cm")
+    with pytest.raises(MachineError, match="path speed limit = 0 mm/s is out of range"):
+        replace(m, max_path_mm_s=0.0)
+
+
+@pytest.mark.corpus
+def test_corpus_ini_program_units_and_path_speed():
+    xyz = load_machine(os.path.join(CORPUS_CONFIGS, "XYZ.ini"))  # LINEAR_UNITS = inch
+    assert xyz.program_units == "inch"
+    assert_allclose(xyz.max_path_mm_s, 12 * MM_PER_INCH)  # [TRAJ], not [DISPLAY]'s
+    mm = load_machine(os.path.join(CORPUS_CONFIGS, "axis_mm.ini"))
+    assert mm.program_units == "mm" and mm.max_path_mm_s == 53.34

@@ -910,7 +910,8 @@ def _rapid_raws(run: Run, lin: np.ndarray) -> list[_Raw]:
         length = ll if not rotary else float(np.sqrt((d[~lin] ** 2).sum()))
         if not length > 0:
             continue
-        pf = straight_piece(nodes[j - 1], nodes[j], length, int(run.line[j]), np.inf)
+        # a rapid's feed is infinite (the axes' own limits) or the machine's path speed cap
+        pf = straight_piece(nodes[j - 1], nodes[j], length, int(run.line[j]), float(run.feed_mm_s[j]))
         out.append(_Raw(run.axes, pf.breaks, pf.coef, pf.line, pf.feed_mm_s, _weights(lin, rotary), rapid=True))
         _snap_end(out[-1], nodes[j])
     return out

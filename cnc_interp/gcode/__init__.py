@@ -12,7 +12,7 @@ import warnings
 
 import numpy as np
 
-from ..constants import ALL_AXES
+from ..constants import ALL_AXES, PROGRAM_UNITS_MM
 from ..errors import CncInterpWarning, UsageError
 from .program import Arc, CurvePiece, Dwell, Nurbs, Program, Run, Stop
 
@@ -27,6 +27,8 @@ def read_program(
     params=None,
     tool_table=None,
     noop_mcodes=frozenset(),
+    program_units: str = "mm",
+    max_path_mm_s: float | None = None,
 ) -> Program:
     """Interpret a whole part program.
 
@@ -43,6 +45,11 @@ def read_program(
             ``G43 Hn``); ``None``: ``G43 Hn`` applies zero length with one warning.
         noop_mcodes: M-code numbers the machine declares no-ops (``Machine.noop_mcodes``):
             accepted and ignored; any other M-code the reader does not know is an error.
+        program_units: the length units the program starts in (``Machine.program_units``:
+            ``"mm"`` or ``"inch"``), as if it began with G21 or G20.
+        max_path_mm_s: the machine's path speed limit over the linear axes, mm/s, where it
+            can bind (``Machine.path_speed_cap_mm_s``): every feed and rapid is capped at
+            it (``runs.cap_path_speed``); ``None``: no cap.
 
     Returns:
         The ``Program`` in machine coordinates, mm / deg / s.
@@ -66,7 +73,7 @@ def read_program(
     live = params is None
     if live:
         params = _LiveParams()
-    interp = Interpreter(source, params, axes, start9)
+    interp = Interpreter(source, params, axes, start9, len_unit=program_len_unit(program_units))
     interp.noop_mcodes = frozenset(noop_mcodes)
     if isinstance(tool_table, (str, os.PathLike)):
         interp.tool_table_path = os.fspath(tool_table)  # read when a G43 first needs it
@@ -87,10 +94,25 @@ def read_program(
         if gc_was_enabled:
             gc.enable()
     program = interp.program(_count_lines(data))
+    if max_path_mm_s is not None:
+        from dataclasses import replace
+
+        from .runs import cap_path_speed
+
+        items = tuple(cap_path_speed(it, max_path_mm_s) if isinstance(it, Run) else it for it in program.items)
+        program = replace(program, items=items)
     _check_ranges(program)
     for text in program.metadata.get("warnings", ()):
         warnings.warn(CncInterpWarning(text), stacklevel=2)
     return program
+
+
+def program_len_unit(program_units: str) -> float:
+    """mm per program length unit at the start of a program in ``program_units``
+    (``"mm"`` or ``"inch"``, ``PROGRAM_UNITS_MM``); another name is a ``UsageError``."""
+    if program_units not in PROGRAM_UNITS_MM:
+        raise UsageError(f"bad program units {program_units!r} (known: {', '.join(PROGRAM_UNITS_MM)})")
+    return PROGRAM_UNITS_MM[program_units]
 
 
 #: largest machine coordinate accepted, mm or deg (1000 km: far beyond any machine, far

@@ -155,7 +155,9 @@ _FAST_G = {0.0: G0, 1.0: G1, 2.0: G2, 3.0: G3}
 class Interpreter:
     """Modal state of one program run. Use ``run(blocks)`` once."""
 
-    def __init__(self, source: str, params, axes: str | None, start9: list[float]):
+    def __init__(self, source: str, params, axes: str | None, start9: list[float], len_unit: float = 1.0):
+        """``len_unit``: mm per program length unit at the start (``MM_PER_INCH``: the
+        program starts in G20, as LinuxCNC starts one in an inch machine's units)."""
         self.source = source
         self.params = params
         self.fixed_axes = axes is not None
@@ -228,7 +230,7 @@ class Interpreter:
         self.zero_length_moves = 0
         self.zero_length_lines: list[int] = []
         self.blk = None
-        self._set_units(1.0)
+        self._set_units(len_unit)
         self._refresh_layout()
         self._load_coordinate_system(1, write_current=True)
 

@@ -111,7 +111,8 @@ class Run:
 
     Attributes (N = number of nodes, n = number of machine axes):
         kind: ``"feed"`` (G1/G2/G3/G5.x, canned-cycle feeds) or ``"rapid"`` (G0,
-            straight in joint space, at the axes' speed limits).
+            straight in joint space, at the axes' speed limits and the machine's path
+            speed cap).
         axes: machine axis letters in machine order, e.g. ``"XYZ"``.
         nodes: (N, n) positions, mm / deg; ``nodes[0]`` is where the run starts.
         line: (N,) int, source line of the block that ends at node i
@@ -119,7 +120,8 @@ class Run:
         col: (N,) int, source column of that block's motion word (1-based).
         feed_mm_s: (N,) feed limit of the move ending at node i, mm/s (deg/s for a
             rotary-only move); G93 inverse time is already converted; ``inf`` for
-            rapids; ``feed_mm_s[0]`` repeats ``feed_mm_s[1]``.
+            rapids; both capped at the machine's path speed limit where it has one
+            (``runs.cap_path_speed``); ``feed_mm_s[0]`` repeats ``feed_mm_s[1]``.
         tol_mm: (N,) path tolerance of the move ending at node i: ``nan`` = G64
             without P (use the default/--tol), ``0`` = G61 exact path, > 0 = G64 P.
         naive_tol_mm: (N,) G64 Q value (naive CAM tolerance), ``nan`` if none.

@@ -98,7 +98,8 @@ class ProgramStream:
     program uses (``cnc-interp parse`` summarises a program so, in bounded memory).
 
     ``marks=True`` also hands on a ``Mark`` at every tool change and operation header
-    (``estimate``'s attribution; no consumer without it sees one)."""
+    (``estimate``'s attribution; no consumer without it sees one). ``noop_mcodes``,
+    ``program_units`` and ``max_path_mm_s`` are the machine's, as for ``read_program``."""
 
     def __init__(
         self,
@@ -110,8 +111,10 @@ class ProgramStream:
         nodes_ahead: int = STREAM_NODES_AHEAD,
         marks: bool = False,
         noop_mcodes=frozenset(),
+        program_units: str = "mm",
+        max_path_mm_s: float | None = None,
     ):
-        from . import _LiveParams, _count_lines
+        from . import _LiveParams, _count_lines, program_len_unit
         from .interp import Interpreter
 
         names = ALL_AXES
@@ -132,7 +135,8 @@ class ProgramStream:
         self.data = data
         self.source = source
         params = _LiveParams()
-        self.interp = interp = Interpreter(source, params, axes, start9)
+        self.interp = interp = Interpreter(source, params, axes, start9, len_unit=program_len_unit(program_units))
+        self.max_path_mm_s = max_path_mm_s  # the machine's path speed cap (runs.cap_path_speed)
         interp.noop_mcodes = frozenset(noop_mcodes)  # the machine's declared no-op M-codes
         if isinstance(tool_table, (str, os.PathLike)):
             interp.tool_table_path = os.fspath(tool_table)
@@ -157,13 +161,13 @@ class ProgramStream:
     # -- the parse thread --------------------------------------------------------------
     def _finish(self, entry):
         from . import _check_ranges
-        from .runs import finish_run
+        from .runs import cap_path_speed, finish_run
 
         kind, obj, extra = entry
         if kind == "mark":
             return obj
         if kind == "run":
-            item = finish_run(obj, self._order, self._axes, extra)
+            item = cap_path_speed(finish_run(obj, self._order, self._axes, extra), self.max_path_mm_s)
         elif kind == "dwell":
             item = Dwell(line=obj.line, seconds=obj.seconds, position=np.array(extra, dtype=float)[self._sel])
         else:
@@ -246,7 +250,26 @@ class _Stopped(Exception):
     """The consumer went away: stop interpreting."""
 
 
-def iter_program(data: bytes | str, source: str, axes: str, start=None, tool_table=None, noop_mcodes=frozenset()):
+def iter_program(
+    data: bytes | str,
+    source: str,
+    axes: str,
+    start=None,
+    tool_table=None,
+    noop_mcodes=frozenset(),
+    program_units: str = "mm",
+    max_path_mm_s: float | None = None,
+):
     """The items of ``read_program(data, source, axes, start, tool_table=...)`` as a
     stream (see module docstring); ``axes`` (the machine's) is required here."""
-    return iter(ProgramStream(data, source, axes, start, tool_table, noop_mcodes=noop_mcodes))
+    stream = ProgramStream(
+        data,
+        source,
+        axes,
+        start,
+        tool_table,
+        noop_mcodes=noop_mcodes,
+        program_units=program_units,
+        max_path_mm_s=max_path_mm_s,
+    )
+    return iter(stream)

@@ -20,7 +20,12 @@ old ``[AXIS_<n>]`` (n = index of the letter in XYZABCUVW), else ``[JOINT_<n>]``
 (n = position in COORDINATES): ``MAX_VELOCITY``, ``MAX_ACCELERATION`` and, if
 present, ``MAX_JERK`` in machine units per s, s^2, s^3. ``[TRAJ] LINEAR_UNITS``
 (mm / inch / a number of units per mm) and ``ANGULAR_UNITS`` (degree / radian /
-grad) are converted to mm and deg. ``[EMCMOT] SERVO_PERIOD`` (ns) gives dt.
+grad) are converted to mm and deg; ``LINEAR_UNITS`` also gives the units a program starts
+in (``Machine.program_units``: inch, or a unit nearer 1 inch than 1 mm, starts it in G20;
+anything else in G21), as LinuxCNC starts one in the machine's units. ``[TRAJ]
+MAX_LINEAR_VELOCITY`` (else ``MAX_VELOCITY``, its name before LinuxCNC 2.8), machine
+units per s, is the path speed limit over the linear axes (``Machine.max_path_mm_s``).
+``[EMCMOT] SERVO_PERIOD`` (ns) gives dt.
 Where the INI has no jerk limit the axis gets
 ``jmax = DEFAULT_JERK_PER_ACCEL_1_S * amax`` (10/s: full acceleration is reached in
 0.1 s, a common S-curve setting for small machines; LinuxCNC's own trajectory
@@ -46,7 +51,7 @@ from typing import Any
 
 import numpy as np
 
-from ..constants import ALL_AXES, DEFAULT_DT_S, MM_PER_INCH, ROTARY_AXES
+from ..constants import ALL_AXES, DEFAULT_DT_S, MM_PER_INCH, PROGRAM_UNITS_MM, ROTARY_AXES
 from ..errors import MachineError, SourceLocation
 from .kinematics import KINEMATICS, normalise_params
 from .model import (
@@ -65,6 +70,12 @@ from .presets import DEFAULT_PRESET, PRESETS
 
 #: default jerk (per axis, as a multiple of amax per second) when a LinuxCNC INI has none
 DEFAULT_JERK_PER_ACCEL_1_S = 10.0
+#: an INI's linear unit longer than this (mm) starts programs in inches, a shorter one in
+#: mm: the midpoint of 1 mm and 1 inch, so that the nearer of the two wins (LINEAR_UNITS
+#: = inch or 0.03937 units per mm: inch; mm, 1 or 0.1 (cm): mm)
+PROGRAM_INCH_ABOVE_MM = (1.0 + MM_PER_INCH) / 2
+#: [TRAJ] keys of the path speed limit, newest first (LinuxCNC 2.8 renamed MAX_VELOCITY)
+_PATH_SPEED_KEYS = ("MAX_LINEAR_VELOCITY", "MAX_VELOCITY")
 
 __all__ = [
     "load_machine",
@@ -78,7 +89,7 @@ __all__ = [
 ]
 
 _TOP_KEYS = ("name", "dt", "kinematics", "tol", "start", "axes", "description", "gcode")
-_GCODE_KEYS = ("noop_mcodes",)
+_GCODE_KEYS = ("noop_mcodes", "program_units")
 #: LinuxCNC's user M-codes: a program file named M100 to M199 in the INI's search folders
 USER_MCODES = range(100, 200)
 _AXIS_KEYS = ("vmax", "amax", "jmax")
@@ -403,6 +414,7 @@ def machine_from_data(
     if "description" in data and not isinstance(data["description"], str):
         raise MachineError("description must be a string", locate((), "description"))
     noop_mcodes = _toml_noop_mcodes(data.get("gcode"), locate)
+    program_units = _toml_program_units(data.get("gcode"), locate)
 
     return Machine(
         name=name,
@@ -418,7 +430,20 @@ def machine_from_data(
         source=source,
         defaults=defaults,
         noop_mcodes=noop_mcodes,
+        program_units=program_units,
     )
+
+
+def _toml_program_units(table: object, locate: Callable[[tuple[str, ...], str | None], SourceLocation]) -> str:
+    """``[gcode] program_units = "inch"``: the units a program starts in (default mm);
+    ``_toml_noop_mcodes`` has checked the table."""
+    if not isinstance(table, dict) or "program_units" not in table:
+        return "mm"
+    units = table["program_units"]
+    if not isinstance(units, str) or units not in PROGRAM_UNITS_MM:
+        known = " or ".join(f'"{u}"' for u in PROGRAM_UNITS_MM)
+        raise MachineError(f"program_units must be {known}", locate(("gcode",), "program_units"))
+    return str(units)
 
 
 def _toml_noop_mcodes(table: object, locate: Callable[[tuple[str, ...], str | None], SourceLocation]) -> frozenset[int]:
@@ -564,6 +589,7 @@ def _load_ini(text: str, path: str) -> Machine:
 
     lin = _units(ini, "LINEAR_UNITS", _LINEAR_UNITS)
     ang = _units(ini, "ANGULAR_UNITS", _ANGULAR_UNITS)
+    program_units = "inch" if lin > PROGRAM_INCH_ABOVE_MM else "mm"
     defaults: dict[str, str] = {}  # Machine.defaults: what the INI leaves out
     if ini.get("TRAJ", "LINEAR_UNITS") is None and any(a not in ROTARY_AXES for a in axes):
         defaults["linear_units"] = "mm (no [TRAJ] LINEAR_UNITS)"
@@ -633,7 +659,28 @@ def _load_ini(text: str, path: str) -> Machine:
         tool_table=tool_table,
         defaults=defaults,
         noop_mcodes=_ini_user_mcodes(ini, path),
+        program_units=program_units,
+        max_path_mm_s=_ini_path_speed(ini, lin),
     )
+
+
+def _ini_path_speed(ini: _Ini, mm_per_unit: float) -> float | None:
+    """``[TRAJ] MAX_LINEAR_VELOCITY`` (else the older ``MAX_VELOCITY``), machine units per
+    s, in mm/s: the tool's path speed limit over the linear axes; None without either."""
+    for key in _PATH_SPEED_KEYS:
+        v = ini.number("TRAJ", key)
+        if v is None:
+            continue
+        v_mm_s = v * mm_per_unit
+        if not LIMIT_MIN["vmax"] <= v_mm_s <= LIMIT_MAX["vmax"]:
+            item = ini.get("TRAJ", key)
+            line = item[1] if item is not None else 0
+            raise MachineError(
+                f"[TRAJ] {key} = {v_mm_s:g} mm/s is out of range [{LIMIT_MIN['vmax']:g}, {LIMIT_MAX['vmax']:g}]",
+                ini.loc(line),
+            )
+        return v_mm_s
+    return None
 
 
 def _ini_user_mcodes(ini: _Ini, path: str) -> frozenset[int]:
@@ -742,7 +789,31 @@ def describe_machine(spec: str) -> dict[str, Any]:
         "description": description,
         "tool_table": m.tool_table,
         "defaults": dict(m.defaults),
+        "max_path_binds": _path_speed_binds(m),
     }
+
+
+def _path_speed_binds(m: Machine) -> str | None:
+    """Where ``m.max_path_mm_s`` binds against the linear axes' own vmax, as a phrase (None
+    without a limit): on every linear move, on moves along some axes, only on diagonal
+    moves (the axes' vmax combined), or never."""
+    cap = m.max_path_mm_s
+    if cap is None:
+        return None
+    lin = ~m.rotary
+    if not lin.any():
+        return "never binds: the machine has no linear axis"
+    vmax = m.vmax[lin]
+    combined = float(np.sqrt((vmax**2).sum()))
+    if cap < float(vmax.min()):
+        return "binds on every linear move (below every linear axis's vmax)"
+    faster = [a for a, v in zip(m.axes, m.vmax) if a not in ROTARY_AXES and v > cap]
+    if faster:
+        return f"binds on moves along {', '.join(faster)} (below their vmax) and diagonal moves"
+    if m.path_speed_cap_mm_s is None:  # the one rule of where the reader applies it
+        return f"never binds (at or above the linear axes' combined vmax, {combined:g} mm/s)"
+    above = "at or above every linear axis's vmax"
+    return f"binds on diagonal moves only ({above}, below their combined {combined:g} mm/s)"
 
 
 _FORMAT_NAMES = {"preset": "built-in preset", "toml": "TOML machine file", "ini": "LinuxCNC INI file"}
@@ -764,6 +835,10 @@ def format_machine(desc: dict[str, Any]) -> str:
         out.append(f"  tool table {desc['tool_table']}")
     if desc["noop_mcodes"]:
         out.append("  no-op M-codes " + " ".join(f"M{c}" for c in desc["noop_mcodes"]))
+    read_in = "inches (G20)" if desc["program_units"] == "inch" else "mm (G21)"
+    out.append(f"  program units {desc['program_units']}: a program without G20/G21 is read in {read_in}")
+    if desc["max_path_mm_s"] is not None:
+        out.append(f"  path speed limit {desc['max_path_mm_s']:g} mm/s over the linear axes: {desc['max_path_binds']}")
     out.extend(_limit_lines(desc["limits"]))
     if desc["defaults"]:
         out.append("  defaults applied (not given by the source):")

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..constants import MCODE_MAX, MCODES_INTERPRETED, ROTARY_AXES
+from ..constants import MCODE_MAX, MCODES_INTERPRETED, PROGRAM_UNITS_MM, ROTARY_AXES
 from ..errors import MachineError, SourceLocation, UsageError
 
 #: accepted limit ranges (exclusive of 0), mm or deg per s, s², s³: far beyond any machine,
@@ -72,6 +72,13 @@ class Machine:
         noop_mcodes: M-codes (numbers) the machine declares no-ops for planning: its
             user M-codes (LinuxCNC's M100-M199 programs) or a controller's own codes (a
             Fanuc M29) that move no axis; the G-code reader accepts them and does nothing.
+        program_units: the length units a program starts in, ``"mm"`` or ``"inch"``
+            (as if it began with G21 or G20): a LinuxCNC machine's own units, its INI's
+            ``[TRAJ] LINEAR_UNITS``; a G20 or G21 in the program switches as usual.
+        max_path_mm_s: the tool's path speed limit over the linear axes, mm/s (LinuxCNC's
+            ``[TRAJ] MAX_LINEAR_VELOCITY``), or None: the G-code reader caps every feed
+            move's feed and every rapid's path speed at it where it can bind
+            (``path_speed_cap_mm_s``).
         defaults: what the reader filled in because the source did not give it, as
             ``{what: the value and why}`` (e.g. ``{"jmax.X": "10/s x amax ..."}``; keys
             ``name``, ``dt``, ``kinematics``, ``kinematics.<param>``, ``jmax.<axis>``,
@@ -94,6 +101,8 @@ class Machine:
     tool_table: str | None = None
     defaults: dict[str, str] = field(default_factory=dict)
     noop_mcodes: frozenset[int] = frozenset()
+    program_units: str = "mm"
+    max_path_mm_s: float | None = None
 
     def __post_init__(self) -> None:
         n = len(self.axes)
@@ -131,6 +140,15 @@ class Machine:
         problem = noop_mcode_problem(self.noop_mcodes)
         if problem:
             raise MachineError(problem, loc)
+        if self.program_units not in PROGRAM_UNITS_MM:
+            known = ", ".join(PROGRAM_UNITS_MM)
+            raise MachineError(f"program units '{self.program_units}' are not known (known: {known})", loc)
+        if self.max_path_mm_s is not None and not LIMIT_MIN["vmax"] <= self.max_path_mm_s <= LIMIT_MAX["vmax"]:
+            raise MachineError(
+                f"path speed limit = {self.max_path_mm_s:g} mm/s is out of range "
+                f"[{LIMIT_MIN['vmax']:g}, {LIMIT_MAX['vmax']:g}]",
+                loc,
+            )
 
     @property
     def n_axes(self) -> int:
@@ -140,6 +158,17 @@ class Machine:
     def rotary(self) -> np.ndarray:
         """(n,) bool: which axes are rotary (deg)."""
         return np.array([a in ROTARY_AXES for a in self.axes], dtype=bool)
+
+    @property
+    def path_speed_cap_mm_s(self) -> float | None:
+        """``max_path_mm_s`` where it can bind, else None: a limit at or above the linear
+        axes' vmax combined (the fastest any path can go, a diagonal with every linear axis
+        at its vmax) never binds, so the G-code reader leaves the feeds as programmed."""
+        cap = self.max_path_mm_s
+        lin = ~self.rotary
+        if cap is None or not lin.any() or cap >= float(np.sqrt((self.vmax[lin] ** 2).sum())):
+            return None
+        return cap
 
     def limits(self) -> np.ndarray:
         """(3, n) array of vmax, amax, jmax."""
@@ -168,6 +197,8 @@ class Machine:
             "kinematics_params": {k: float(v) for k, v in self.kinematics_params.items()},
             "tol_mm": None if self.tol_mm is None else float(self.tol_mm),
             "noop_mcodes": sorted(self.noop_mcodes),
+            "program_units": self.program_units,
+            "max_path_mm_s": None if self.max_path_mm_s is None else float(self.max_path_mm_s),
             "start": {a: float(v) for a, v in zip(self.axes, self.start)},
             "limits": {
                 a: {"vmax": float(v), "amax": float(acc), "jmax": float(j), "unit": "deg" if a in ROTARY_AXES else "mm"}

@@ -5,8 +5,9 @@ and yields the samples as ``SampleBlock``s, in bounded memory:
 
 * ``Path`` (cutting): the chosen per-path planner (``plan.planners``) through the
   machine's kinematics, from rest to rest, as the planner's stream of chunks;
-* ``Path(rapid=True)``: always VPOp with no feed limit (the axes' own limits),
-  straight in joint space;
+* ``Path(rapid=True)``: always VPOp, at the axes' own limits and the machine's path
+  speed cap if it has one (its feed; none on non-trivial kinematics, where the rapid is
+  re-made in joint space), straight in joint space;
 * ``Dwell``: the position held for ceil(seconds / dt) samples;
 * ``Stop`` (M0, M1, M6, ...): the machine is already at rest between paths; the
   stop is marked by the held position (no extra time is modelled for the pause);
