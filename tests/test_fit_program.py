@@ -219,3 +219,35 @@ def test_cli_fit_on_samples(tmp_path):
         assert json.loads(out.read_text())["format"] == "cnc-interp-segments"
     r = runner.invoke(main, ["fit", os.path.join(SAMPLES, files[0]), "--tol", "0.01"])
     assert r.exit_code == 0 and "segments out" in r.output
+
+
+def test_rapids_along_one_line_are_one_path_and_plan_without_stopping():
+    # G91 repeats of one G0 (and Z5 then Z10): one straight rapid path each chain, no
+    # stop between their moves; a turn or a reversal starts a new path
+    from cnc_interp.machine.load import load_machine
+    from cnc_interp.plan.settings import PlanSettings
+    from cnc_interp.plan.timeline import plan_program
+
+    steps = [[0.5 * k, 0.125 * k, 0.0] for k in range(21)]
+    nodes = steps + [[10.0, 2.5, 5.0], [10.0, 2.5, 7.0], [10.0, 2.5, 10.0], [10.0, 2.5, 2.0], [0.0, 0.0, 2.0]]
+    prog = Program("t.ngc", "XYZ", (_run(nodes, kind="rapid"),), np.zeros(3), len(nodes))
+    fitted = fit_program(prog, FitSettings())
+    paths = [it for it in fitted.items if isinstance(it, Path)]
+    # the 20 steps; Z0 -> Z5 -> Z7 -> Z10; Z down (a reversal); home
+    assert len(paths) == 4 and all(p.rapid for p in paths)
+    assert paths[0].length == pytest.approx(20 * np.hypot(0.5, 0.125), rel=1e-12)
+    assert paths[1].length == pytest.approx(10.0, rel=1e-12)
+    assert np.array_equal(paths[0].end, nodes[20]) and np.array_equal(paths[1].end, nodes[23])
+    for a, b in zip(paths[:-1], paths[1:]):
+        assert np.array_equal(a.end, b.start)
+    # planned: the chain of twenty moves takes as long as one move of its length
+    m = load_machine("generic-mill")
+    one = Program("t.ngc", "XYZ", (_run([nodes[0], nodes[20]], kind="rapid"),), np.zeros(3), 2)
+    settings = PlanSettings.from_options(machine=m)
+    single = plan_program(fit_program(one, FitSettings()), m, settings)
+    chained = plan_program(fitted, m, settings)
+
+    def arrival(traj):
+        return int(np.flatnonzero(np.all(traj.q == nodes[20], axis=1))[0])
+
+    assert arrival(chained) == arrival(single)

@@ -2,7 +2,8 @@
 
 Which fitter handles what:
 
-* rapid runs: one straight ``Path(rapid=True)`` per G0 move;
+* rapid runs: one straight ``Path(rapid=True)`` per G0 move, or per chain of G0 moves
+  along one line in one direction;
 * G61 stretches: exact straight lines, a stop at every non-collinear node (one
   segment per feed in a collinear chain: each move keeps its F);
 * with ``FitSettings.method`` = "planar"/"auto", feed paths without exact curves
@@ -46,6 +47,10 @@ from .settings import FitSettings
 
 #: path deviation: relative slack over the tolerance (float rounding of the projection)
 PATH_DEV_SLACK = 1e-6
+
+#: consecutive rapids whose unit directions differ by at most this (relative) are one
+#: straight chain: the same line, float rounding aside (G91 repeats, Z5 then Z10)
+RAPID_COLLINEAR_TOL = 1e-12
 
 #: a fit the measurement finds outside its tolerance is fitted again aiming at this share
 #: of it before the sub-run is split (the fitter checks sampled points; the measurement is
@@ -901,19 +906,52 @@ def _single_move_raw(pr: PreparedRun, a: int, b: int, weights: np.ndarray) -> _R
 
 
 def _rapid_raws(run: Run, lin: np.ndarray) -> list[_Raw]:
+    """One straight rapid path per G0 move, or per chain of consecutive G0 moves along the
+    same line in the same direction (each move of a chain keeps its feed: a rapid's feed
+    is infinite, the axes' own limits, or the machine's path speed cap). A chain does not
+    stop where one move ends and the next goes on straight."""
     out = []
     nodes = np.asarray(run.nodes, dtype=float)
+    feeds = np.asarray(run.feed_mm_s, dtype=float)
+    chain: list[int] = []  # the ends j of the chain's moves (nodes j-1 -> j)
+    chain_dir = None
+    chain_rotary = False
+
+    def flush() -> None:
+        if not chain:
+            return
+        a, b = chain[0] - 1, chain[-1]
+        scale = (~lin if chain_rotary else lin).astype(float)
+        if len(chain) == 1:
+            d = (nodes[b] - nodes[a]) * scale
+            pf = straight_piece(nodes[a], nodes[b], float(np.sqrt(d @ d)), int(run.line[b]), float(feeds[b]))
+            breaks, coef, seg_line, seg_feed = pf.breaks, pf.coef, pf.line, pf.feed_mm_s
+        else:
+            breaks, coef, seg_line, seg_feed = _straight_chain(
+                nodes[a : b + 1], run.line[a : b + 1], feeds[a : b + 1], scale
+            )
+        out.append(_Raw(run.axes, breaks, coef, seg_line, seg_feed, _weights(lin, chain_rotary), rapid=True))
+        _snap_end(out[-1], nodes[b])
+        chain.clear()
+
     for j in range(1, nodes.shape[0]):
         d = nodes[j] - nodes[j - 1]
         ll = float(np.sqrt((d[lin] ** 2).sum()))
         rotary = not ll > 0
         length = ll if not rotary else float(np.sqrt((d[~lin] ** 2).sum()))
         if not length > 0:
+            flush()
             continue
-        # a rapid's feed is infinite (the axes' own limits) or the machine's path speed cap
-        pf = straight_piece(nodes[j - 1], nodes[j], length, int(run.line[j]), float(run.feed_mm_s[j]))
-        out.append(_Raw(run.axes, pf.breaks, pf.coef, pf.line, pf.feed_mm_s, _weights(lin, rotary), rapid=True))
-        _snap_end(out[-1], nodes[j])
+        direction = d / length
+        if not (
+            chain
+            and rotary == chain_rotary
+            and np.abs(direction - chain_dir).max() <= RAPID_COLLINEAR_TOL * max(1.0, float(np.abs(direction).max()))
+        ):
+            flush()
+            chain_dir, chain_rotary = direction, rotary
+        chain.append(j)
+    flush()
     return out
 
 
