@@ -23,10 +23,6 @@ from .program import Dwell, Program, Run, Stop
 #: nodes read ahead of the consumer (about 100 bytes each); a longer run is read on only
 #: while the consumer waits for it, and passes whole (the fit needs all of a run)
 STREAM_NODES_AHEAD = 50_000
-#: what an item costs besides its nodes, in nodes: a run's arrays and records weigh ~4 kB
-#: (a canned cycle of many holes is many one-node runs: counted by nodes alone, all of them
-#: could wait in the channel)
-ITEM_WEIGHT_NODES = 40
 #: blocks interpreted between two looks for closed items
 _DRAIN_EVERY = 256
 
@@ -180,7 +176,7 @@ class ProgramStream:
         while pending:
             entry = pending.pop(0)
             item = self._finish(entry)
-            weight = (item.n_nodes if isinstance(item, Run) else 0) + ITEM_WEIGHT_NODES
+            weight = item.n_nodes if isinstance(item, Run) else 1
             if not self.channel.put(item, weight):
                 return False
         return True
