@@ -29,7 +29,7 @@ SETUP_TIMEOUT_S = 30.0
 #: motion may finish between two polls
 START_TIMEOUT_S = 5.0
 #: the samples file not growing this long while the program runs means the servo thread
-#: stopped (HAL is one per machine: another session's ``halrun -U`` unloads ours) (s)
+#: stopped (HAL is one per machine: another process's ``halrun -U`` unloads ours) (s)
 STALL_S = 3.0
 #: servo periods of rest recorded after the end, so the last move's end is in the samples (s)
 TAIL_S = 0.3

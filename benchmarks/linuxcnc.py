@@ -483,7 +483,7 @@ def measure(rec: dict, args, budget_left_s: float) -> dict:
         else:
             rec["linuxcnc"] = run_linuxcnc(cfg, work, timeout)
         if "servo thread stopped" in rec["linuxcnc"].get("message", "") and not earlier:
-            # another session unloaded HAL under the run: once more
+            # another process unloaded HAL under the run: once more
             first_try = rec["linuxcnc"]
             rec["linuxcnc"] = {**run_linuxcnc(cfg, work, timeout), "retried": first_try}
         if args.keep:
