@@ -97,7 +97,10 @@ def _program(part: str, machine):
     from cnc_interp.gcode import read_program
 
     with open(part, "rb") as fh:
-        return read_program(fh.read(), source=part, axes=machine.axes, start=machine.start)
+        # in the machine's program units, as ``plan`` reads it (an inch INI starts in G20)
+        return read_program(
+            fh.read(), source=part, axes=machine.axes, start=machine.start, program_units=machine.program_units
+        )
 
 
 def _to_joints(machine, p: np.ndarray) -> np.ndarray:
