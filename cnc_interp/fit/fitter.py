@@ -913,20 +913,19 @@ def _rapid_raws(run: Run, lin: np.ndarray) -> list[_Raw]:
     out = []
     nodes = np.asarray(run.nodes, dtype=float)
     feeds = np.asarray(run.feed_mm_s, dtype=float)
-    chain: list[int] = []  # the ends j of the chain's moves (nodes j-1 -> j)
+    chain: list[tuple[int, float]] = []  # the chain's moves: (end j of nodes j-1 -> j, length)
     chain_dir = None
     chain_rotary = False
 
     def flush() -> None:
         if not chain:
             return
-        a, b = chain[0] - 1, chain[-1]
-        scale = (~lin if chain_rotary else lin).astype(float)
+        a, b = chain[0][0] - 1, chain[-1][0]
         if len(chain) == 1:
-            d = (nodes[b] - nodes[a]) * scale
-            pf = straight_piece(nodes[a], nodes[b], float(np.sqrt(d @ d)), int(run.line[b]), float(feeds[b]))
+            pf = straight_piece(nodes[a], nodes[b], chain[0][1], int(run.line[b]), float(feeds[b]))
             breaks, coef, seg_line, seg_feed = pf.breaks, pf.coef, pf.line, pf.feed_mm_s
         else:
+            scale = (~lin if chain_rotary else lin).astype(float)
             breaks, coef, seg_line, seg_feed = _straight_chain(
                 nodes[a : b + 1], run.line[a : b + 1], feeds[a : b + 1], scale
             )
@@ -950,7 +949,7 @@ def _rapid_raws(run: Run, lin: np.ndarray) -> list[_Raw]:
         ):
             flush()
             chain_dir, chain_rotary = direction, rotary
-        chain.append(j)
+        chain.append((j, length))
     flush()
     return out
 

@@ -218,14 +218,29 @@ def move_lengths(points: np.ndarray, axes: str) -> np.ndarray:
     linear axis moves more than ``LINEAR_MOTION_MIN_MM`` (the fitter's arc-length metric).
     The one definition: the feed of a move, the program summary, the FPGA emulator's path
     length (``interp._move_length`` is its scalar form)."""
+    lin_len, rot_len, linear = _move_parts(points, axes)
+    lengths: np.ndarray = np.where(linear, lin_len, rot_len)
+    return lengths
+
+
+def linear_moves(points: np.ndarray, axes: str) -> np.ndarray:
+    """(K-1,) bool: which moves between consecutive points (K, n_axes) take their feed over
+    the linear axes (mm/s), as ``move_lengths`` measures them; the others are rotary-only
+    (deg/s)."""
+    linear: np.ndarray = _move_parts(points, axes)[2]
+    return linear
+
+
+def _move_parts(points: np.ndarray, axes: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per move: the linear axes' distance, the rotary axes' and whether the move is linear
+    (a linear axis moves more than ``LINEAR_MOTION_MIN_MM``, or no rotary axis moves)."""
     from ..constants import LINEAR_AXES, LINEAR_MOTION_MIN_MM
 
     d = np.diff(points, axis=0)
     lin = np.array([a in LINEAR_AXES for a in axes], dtype=bool)
     lin_len = np.sqrt((d[:, lin] ** 2).sum(axis=1)) if lin.any() else np.zeros(len(d))
     rot_len = np.sqrt((d[:, ~lin] ** 2).sum(axis=1)) if (~lin).any() else np.zeros(len(d))
-    lengths: np.ndarray = np.where((lin_len > LINEAR_MOTION_MIN_MM) | (rot_len == 0), lin_len, rot_len)
-    return lengths
+    return lin_len, rot_len, (lin_len > LINEAR_MOTION_MIN_MM) | (rot_len == 0)
 
 
 def polyline_length(nodes: np.ndarray, axes: str) -> float:

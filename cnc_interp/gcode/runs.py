@@ -16,9 +16,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..constants import LINEAR_AXES, LINEAR_MOTION_MIN_MM
 from .arcs import fill_arc_nodes
-from .program import Arc, CurvePiece, Nurbs, Run
+from .program import Arc, CurvePiece, Nurbs, Run, linear_moves
 
 
 class RunBuilder:
@@ -158,15 +157,11 @@ def cap_path_speed(run: Run, max_path_mm_s: float | None) -> Run:
     """``run`` with the feed of every move that moves a linear axis capped at
     ``max_path_mm_s`` (mm/s over the linear axes: ``Machine.path_speed_cap_mm_s``, LinuxCNC's
     ``[TRAJ] MAX_LINEAR_VELOCITY``): a feed move's programmed feed, and a rapid's, which is
-    otherwise infinite (the axes' own limits). A rotary-only move (its feed in deg/s, the
-    same rule as ``program.move_lengths``) keeps its feed. ``None``: ``run`` as it is."""
+    otherwise infinite (the axes' own limits). A rotary-only move (its feed in deg/s,
+    ``program.linear_moves``) keeps its feed. ``None``: ``run`` as it is."""
     if max_path_mm_s is None or run.n_nodes < 2:
         return run
-    lin = np.array([a in LINEAR_AXES for a in run.axes], dtype=bool)
-    d = np.diff(np.asarray(run.nodes, dtype=float), axis=0)
-    lin2 = (d[:, lin] ** 2).sum(axis=1)
-    rot2 = (d[:, ~lin] ** 2).sum(axis=1)
-    linear = (lin2 > LINEAR_MOTION_MIN_MM * LINEAR_MOTION_MIN_MM) | (rot2 == 0.0)
+    linear = linear_moves(np.asarray(run.nodes, dtype=float), run.axes)
     feed = np.array(run.feed_mm_s, dtype=float)
     feed[1:] = np.where(linear, np.minimum(feed[1:], max_path_mm_s), feed[1:])
     feed[0] = feed[1]

@@ -58,6 +58,31 @@ def _joint_derivs(path, u: np.ndarray, joint_map) -> tuple[np.ndarray, np.ndarra
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(VPOP_TABLE_GL_ORDER)
 
 
+def identity_table_settings(tol: float = VPOP_TABLE_TOL) -> tuple:
+    """The settings ``_table_kernels.build_identity`` takes after a path's arrays: (tol,
+    max_depth, max_piece, Gauss-Legendre points, weights, max_tries), as ``JointTable``
+    builds its tables."""
+    return (float(tol), VPOP_TABLE_MAX_ROUNDS - 1, float(VPOP_TABLE_MAX_PIECE), _GL_X, _GL_W, VPOP_TABLE_MAX_TRIES)
+
+
+def concat_paths(paths) -> tuple:
+    """The arrays of ``paths`` end to end, for one compiled call over all of them: (coef
+    (Σ n_seg, 6, n), breaks and s_breaks (n_seg + 1 per path), weights (P, n), lengths (P,),
+    feed (Σ n_seg,) mm/s, seg_off (P + 1,): path i's segments are seg_off[i]:seg_off[i+1])."""
+    n_seg = np.array([p.n_seg for p in paths], dtype=np.int64)
+    seg_off = np.zeros(len(paths) + 1, dtype=np.int64)
+    np.cumsum(n_seg, out=seg_off[1:])
+    return (
+        np.concatenate([p.coef for p in paths]),
+        np.concatenate([p.breaks for p in paths]),
+        np.concatenate([p.s_breaks for p in paths]),
+        np.array([p.weights for p in paths], dtype=float),
+        np.array([p.length for p in paths], dtype=float),
+        np.concatenate([p.feed_mm_s for p in paths]),
+        seg_off,
+    )
+
+
 def _kernels():
     from . import _table_kernels
 
@@ -183,17 +208,7 @@ class JointTable:
         if identity:  # one compiled call (per-path overhead matters: CAM has 1e5 paths)
             K = _kernels()
             status, u, S, C, max_err, qend = K.build_identity(
-                path.coef,
-                path.breaks,
-                path.s_breaks,
-                path.weights,
-                float(path.length),
-                float(tol),
-                max_depth,
-                float(VPOP_TABLE_MAX_PIECE),
-                _GL_X,
-                _GL_W,
-                VPOP_TABLE_MAX_TRIES,
+                path.coef, path.breaks, path.s_breaks, path.weights, float(path.length), *identity_table_settings(tol)
             )
             if status == K.NO_LENGTH:
                 _no_length(path)

@@ -47,14 +47,9 @@ class _RouteInputs:
         fb = np.ascontiguousarray(path.s_breaks, dtype=float).copy()
         fb[-1] = self.L
         self.FB = fb
-        self.FV = np.ascontiguousarray(
-            np.where(
-                np.isfinite(path.feed_mm_s) & (path.feed_mm_s > 0), path.feed_mm_s * (1.0 - VPOP_LIMIT_SHRINK), 1e300
-            )
-        )
+        self.FV = _feed_caps(path.feed_mm_s)
         dq = np.abs(table.qend - table.qstart)
-        ramp = float(np.max(machine.vmax / machine.amax + machine.amax / machine.jmax))
-        self.ramp_s = 2.0 * ramp
+        self.ramp_s = _ramp_s(machine)
         self.rough_s = float(np.max(dq / machine.vmax)) + self.L / float(np.min(self.FV)) + self.ramp_s
         self.stats: dict = {}
         #: the path's duration at its static speed limits (feed, axis speeds, curvature,
@@ -70,31 +65,35 @@ class _RouteInputs:
         return max(self.rough_s, self.static_s)
 
 
+def _feed_caps(feed_mm_s: np.ndarray) -> np.ndarray:
+    """Per segment, the feed as the planners bound it, mm/s (1e300 where none)."""
+    f = feed_mm_s
+    return np.ascontiguousarray(np.where(np.isfinite(f) & (f > 0), f * (1.0 - VPOP_LIMIT_SHRINK), 1e300))
+
+
+def _ramp_s(machine) -> float:
+    """Twice the longest rest-to-full-speed ramp of an axis (vmax/amax + amax/jmax), s."""
+    return 2.0 * float(np.max(machine.vmax / machine.amax + machine.amax / machine.jmax))
+
+
+def _takes_profile(share, static_s, ramp_s: float, tuning: OptimalTuning):
+    """The route's thresholds on a measured path (scalars or arrays): limited on at least
+    ``tuning.route_share`` of its length and lasting ``tuning.route_min_s`` with the ramps."""
+    return (share >= tuning.route_share) & (static_s + ramp_s >= tuning.route_min_s)
+
+
 def route_many(paths, machine, tuning: OptimalTuning) -> list:
     """``_route`` of each of ``paths`` (joints = program axes, not rapids) in one compiled
     call (``_feed_kernels.route_batch``): a ``Route`` each, or ``None`` where the joint
     table cannot be built (the path's own planning raises that error, in order)."""
     from .. import _feed_kernels as K
-    from ..joint_table import _GL_X, _GL_W, VPOP_TABLE_MAX_PIECE, VPOP_TABLE_MAX_ROUNDS, VPOP_TABLE_MAX_TRIES
-    from ..joint_table import VPOP_TABLE_TOL
+    from ..joint_table import concat_paths, identity_table_settings
 
     if not paths:
         return []
-    n_seg = np.array([p.n_seg for p in paths], dtype=np.int64)
-    seg_off = np.zeros(len(paths) + 1, dtype=np.int64)
-    np.cumsum(n_seg, out=seg_off[1:])
-    feed = np.concatenate([p.feed_mm_s for p in paths])
-    caps = np.ascontiguousarray(np.where(np.isfinite(feed) & (feed > 0), feed * (1.0 - VPOP_LIMIT_SHRINK), 1e300))
-    ramp_s = 2.0 * float(np.max(machine.vmax / machine.amax + machine.amax / machine.jmax))
-    paths_in = K.RoutePaths(
-        np.concatenate([p.coef for p in paths]),
-        np.concatenate([p.breaks for p in paths]),
-        np.concatenate([p.s_breaks for p in paths]),
-        np.array([p.weights for p in paths], dtype=float),
-        np.array([p.length for p in paths], dtype=float),
-        caps,
-        seg_off,
-    )
+    coef, breaks, s_breaks, weights, lengths, feed, seg_off = concat_paths(paths)
+    paths_in = K.RoutePaths(coef, breaks, s_breaks, weights, lengths, _feed_caps(feed), seg_off)
+    ramp_s = _ramp_s(machine)
     lim = K.RouteLimits(
         np.asarray(machine.vmax, dtype=float),
         np.asarray(machine.amax, dtype=float),
@@ -103,17 +102,8 @@ def route_many(paths, machine, tuning: OptimalTuning) -> list:
         float(tuning.route_tiny_s),
         float(tuning.route_speed),
     )
-    table = (
-        float(VPOP_TABLE_TOL),
-        VPOP_TABLE_MAX_ROUNDS - 1,
-        float(VPOP_TABLE_MAX_PIECE),
-        _GL_X,
-        _GL_W,
-        VPOP_TABLE_MAX_TRIES,
-    )
-    code, static_s, share = K.route_batch(paths_in, lim, table)
-    # _measured_route's thresholds on the measured paths (code 2)
-    profile = (share >= tuning.route_share) & (static_s + ramp_s >= tuning.route_min_s)
+    code, static_s, share = K.route_batch(paths_in, lim, identity_table_settings())
+    profile = _takes_profile(share, static_s, ramp_s, tuning)  # on the measured paths (code 2)
     return [
         None if c < 0 else Route.PROFILE if c == 2 and pr else Route.VPOP
         for c, pr in zip(code.tolist(), profile.tolist())
@@ -174,5 +164,4 @@ def _measured_route(ctx) -> Route:
     # duration at the static limits: a lower bound of the motion's, ramps aside
     ctx.static_s = t_static
     ctx.stats["limited_share"] = round(share, 4)
-    long_enough = t_static + ctx.ramp_s >= T.route_min_s
-    return Route.PROFILE if share >= T.route_share and long_enough else Route.VPOP
+    return Route.PROFILE if _takes_profile(share, t_static, ctx.ramp_s, T) else Route.VPOP

@@ -14,17 +14,7 @@ from ...constants import VPOP_LIMIT_SHRINK, VPOP_MIN_LENGTH, VPOP_ROUNDING_ULPS
 from ...errors import PlanError
 from ..base import PathPlan, collect_path_plan
 from ..step_limits import position_scale, step_limits
-from ..joint_table import (
-    _GL_W,
-    _GL_X,
-    VPOP_TABLE_MAX_PIECE,
-    VPOP_TABLE_MAX_ROUNDS,
-    VPOP_TABLE_MAX_TRIES,
-    VPOP_TABLE_TOL,
-    JointTable,
-    _no_length,
-    _positions,
-)
+from ..joint_table import JointTable, _no_length, _positions, concat_paths, identity_table_settings
 
 #: share of each axis's jerk step the brake policy assumes it can use to end a stop
 VPOP_BRAKE_JERK_FRACTION = 0.9
@@ -96,13 +86,8 @@ def _prep_settings():
     from .drive import PrepSettings
 
     return PrepSettings(
-        lookback=VPOP_LOOKBACK_BRAKE_RUNS,
-        table_tol=float(VPOP_TABLE_TOL),
-        max_depth=VPOP_TABLE_MAX_ROUNDS - 1,
-        max_piece=float(VPOP_TABLE_MAX_PIECE),
-        glx=_GL_X,
-        glw=_GL_W,
-        max_tries=VPOP_TABLE_MAX_TRIES,
+        VPOP_LOOKBACK_BRAKE_RUNS,
+        *identity_table_settings(),  # table_tol .. max_tries, as JointTable builds its tables
         rounding_ulps=float(VPOP_ROUNDING_ULPS),
         brake_jerk_fraction=float(VPOP_BRAKE_JERK_FRACTION),
         aim_gap_steps=float(VPOP_AIM_GAP_JERK_STEPS),
@@ -531,15 +516,7 @@ def plan_many_vpop(paths, machine, dt_s: float, settings=None, long_samples: int
         return []
     dt = float(dt_s)
     mc = _machine_consts(machine, dt)
-    n_seg = np.array([p.n_seg for p in paths], dtype=np.int64)
-    seg_off = np.zeros(len(paths) + 1, dtype=np.int64)
-    np.cumsum(n_seg, out=seg_off[1:])
-    coef = np.concatenate([p.coef for p in paths])
-    breaks = np.concatenate([p.breaks for p in paths])
-    s_breaks = np.concatenate([p.s_breaks for p in paths])
-    weights = np.array([p.weights for p in paths], dtype=float)
-    lengths = np.array([p.length for p in paths], dtype=float)
-    feed = np.concatenate([p.feed_mm_s for p in paths])
+    coef, breaks, s_breaks, weights, lengths, feed, seg_off = concat_paths(paths)
     ls = D.LoopSettings(
         easy_frac=float(VPOP_EASY_FRACTION),
         chain_seq=int(VPOP_CHAIN_SEQUENTIAL),
