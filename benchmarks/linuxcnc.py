@@ -70,11 +70,13 @@ import time
 
 import numpy as np
 from _results import command_line, md_table, write_section
+from plan import AXIS_FALLBACK_INIS, CORPUS, corpus_programs, standin_tool_table
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
+from cnc_interp.constants import MM_PER_INCH  # noqa: E402  (after the path above)
+
 HERE = os.path.dirname(os.path.abspath(__file__))
-CORPUS = os.environ.get("CNC_CORPUS", os.path.join(HERE, "..", "..", "shared", "corpus", "linuxcnc"))
 CONFIGS = os.path.join(CORPUS, "configs")
 DISPLAY = os.path.join(HERE, "_linuxcnc_display.py")
 #: the python that has LinuxCNC's ``linuxcnc`` module (Debian's linuxcnc-uspace)
@@ -87,7 +89,6 @@ DT_S = SERVO_PERIOD_NS * 1e-9
 JERK_UNITS_S3 = 1e6
 #: fit tolerance (mm) and the G64 P the program copy starts with (the same 1 µm)
 TOL_MM = 0.001
-MM_PER_INCH = 25.4
 #: halsampler prints floats with %f: positions are compared on this grid (machine units)
 POSITION_DECIMALS = 6
 #: skip programs whose cnc-interp vpop cycle is longer (s): LinuxCNC runs in real time
@@ -101,8 +102,6 @@ LINUXCNC_TIMEOUT_MARGIN_S = 60.0
 SAMPLER_DEPTH = 65536
 #: the programs the project knows are hard, run first (name substrings)
 HARD = ("zigzag_0.002_0.001", "tight-corner-tolerance", "bezel_ex_37tick")
-#: corpus INIs to fall back on, fewest axes first, for programs naming an axis the INI lacks
-AXIS_FALLBACK_INIS = ("XYZ.ini", "9axis.ini")
 #: left out by default: a 4.5-hour cycle whose plan at 1 µm alone takes minutes
 DEFAULT_EXCLUDE = ("stellabee1",)
 ALL_AXES = "XYZABCUVW"
@@ -161,9 +160,7 @@ def write_config(directory: str, corpus_ini: str, program: str, timeout_s: float
     ini = read_ini(corpus_ini)
     letters = coordinates(ini)
     unit_mm = linear_unit_mm(ini)
-    tbl = os.path.join(directory, "standin.tbl")
-    with open(tbl, "w") as fh:
-        fh.writelines(f"T{t} P{t} Z0 D0 ;stand-in\n" for t in range(1, 100))
+    standin_tool_table(directory)  # the INI names it: TOOL_TABLE = standin.tbl
     open(os.path.join(directory, "sim.var"), "w").close()
     # the display: LinuxCNC runs it as ``PROGRAM -ini INIFILE``
     wrapper = os.path.join(directory, "display.sh")
@@ -435,13 +432,6 @@ def linuxcnc_version() -> str:
 
 
 # --- the benchmark ------------------------------------------------------------------------
-def corpus_programs() -> list[str]:
-    files = []
-    for e in ("*.ngc", "*.nc", "*.gcode", "*.tap"):
-        files += glob.glob(os.path.join(CORPUS, "**", e), recursive=True)
-    return sorted(set(files))
-
-
 def plan_first(path: str, ini: str) -> dict:
     """cnc-interp vpop on ``ini``, or on the first fallback INI that has the program's axes."""
     rec: dict = {"program": os.path.relpath(path, CORPUS), "path": path}
