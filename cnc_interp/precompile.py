@@ -100,7 +100,7 @@ GROUPS = {
         # vpop-prep's 19): compiled after them, not a second time beside them
         KernelGroup(
             "optimal",
-            ("plan._feed_kernels", "plan._ipm", "plan._refine_kernels", "plan._track_kernels"),
+            ("plan._feed_kernels", "plan._ipm", "plan._refine_kernels", "plan._track_kernels", "plan._line_kernels"),
             "_warm_optimal",
             34.2,
             ("fit", "vpop-prep"),
@@ -481,7 +481,7 @@ def _warm_vpop_batch() -> None:
 
 def _warm_optimal() -> None:
     """The optimal planner's feed profile, sampler, refinement and batch route, on
-    ``WARM_ARC_PROGRAM``."""
+    ``WARM_ARC_PROGRAM``, and its line plan on a tiny line."""
     from .fit import FitSettings, fit_program
     from .plan.optimal import plan_path_optimal
     from .plan.settings import PlanSettings
@@ -495,6 +495,12 @@ def _warm_optimal() -> None:
     from .plan.tuning import OptimalTuning
 
     route_many([arc], m, OptimalTuning())  # a job's batch of short paths: their routes at once
+    from .plan.optimal.line import plan_lines
+
+    rapid, rm = _tiny_path()
+    (line,) = plan_lines([rapid], rm, rm.dt_s)  # straight paths' exact plans
+    if line is None:
+        raise RuntimeError("the warm-up line took no line plan")
 
 
 if __name__ == "__main__":

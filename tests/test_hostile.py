@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import errno
 import os
+import re
 import signal
 import stat
 import struct
@@ -535,9 +536,13 @@ def test_verify_fails_on_a_violation_just_past_the_documented_slack(tmp_path, pl
 
         return fn
 
-    within = _edit_csv(plan_csv, tmp_path / "in.csv", scale(1.0 + 1e-11))
+    # positions scale every derivative by k: scale the plan's own worst ratio to just inside and
+    # just past 1 + slack (a plan need not touch its limits exactly)
+    ok = run_inproc("verify", plan_csv, "-m", "generic-mill").out.decode()
+    worst = float(re.search(r"ok: worst ([0-9.]+)", ok).group(1))
+    within = _edit_csv(plan_csv, tmp_path / "in.csv", scale((1.0 + 0.1 * VERIFY_RATIO_SLACK) / worst))
     assert run_inproc("verify", within, "-m", "generic-mill").code == 0
-    past = _edit_csv(plan_csv, tmp_path / "past.csv", scale(1.0 + 10 * VERIFY_RATIO_SLACK))
+    past = _edit_csv(plan_csv, tmp_path / "past.csv", scale((1.0 + 10 * VERIFY_RATIO_SLACK) / worst))
     res = run_inproc("verify", past, "-m", "generic-mill")
     assert res.code == 1 and "FAIL" in res.out.decode()
     assert "1 + 1e-09" in run_inproc("verify", plan_csv, "-m", "generic-mill").out.decode()

@@ -793,39 +793,47 @@ def test_a_long_paths_windows_solved_in_a_thread_of_their_own_give_the_same_samp
 
 # -- the paths routed to VPOp go through VPOp's compiled batch ------------------------
 def _mixed_paths():
-    """Short lines (VPOp's route) around a curvature-limited circle (the profile's)."""
+    """Short arcs at low feeds (VPOp's route) around a curvature-limited circle (the
+    profile's), and a straight line (the exact line plan)."""
     return [
-        line_path([0, 0, 0], [2, 0, 0], 50.0),
-        line_path([2, 0, 0], [2, 3, 0], 50.0, line=2),
-        hermite_path(circle_fun(4.0, turns=1.5, z_per_turn=-0.5), 18, 180.0, line0=3),
-        line_path([0, 0, 0], [0, 0, -1], 20.0, line=30),
-        line_path([0, 0, 0], [40, 0, 0], 150.0, line=31),
+        hermite_path(circle_fun(2.0, turns=0.25, z_per_turn=0.0), 4, 50.0, line0=1),
+        hermite_path(circle_fun(3.0, turns=0.3, z_per_turn=0.6), 4, 20.0, line0=5),
+        hermite_path(circle_fun(4.0, turns=1.5, z_per_turn=-0.5), 18, 180.0, line0=10),
+        hermite_path(circle_fun(5.0, turns=0.2, z_per_turn=0.0), 4, 60.0, line0=30),
+        line_path([0, 0, 0], [40, 0, 0], 150.0, line=40),
     ]
 
 
 def test_the_paths_routed_to_vpop_are_planned_by_vpops_batch_byte_for_byte():
+    from cnc_interp.plan.base import PathPlan
     from cnc_interp.plan.vpop import plan_many_vpop
 
     paths = _mixed_paths()
     marks = batched_optimal(paths, None, MILL, DT)
     streamed = [plan_path_optimal(p, None, MILL, DT) for p in paths]
     routes = [s.stats["route"] for s in streamed]
-    assert routes.count("vpop") >= 3 and "profile" in routes
-    assert [m is not None for m in marks] == [r == "vpop" for r in routes]
-    assert all(m == {"route": "vpop"} for m in marks if m is not None)
-    sel = [i for i, m in enumerate(marks) if m is not None]
+    assert routes == ["vpop", "vpop", "profile", "vpop", "line"]
+    assert [m == {"route": "vpop"} for m in marks] == [r == "vpop" for r in routes]
+    # the line is planned in the batch, the same bytes as its own plan
+    line = marks[4]
+    assert isinstance(line, PathPlan) and line.stats["route"] == "line"
+    assert line.q.tobytes() == streamed[4].q.tobytes() and line.s.tobytes() == streamed[4].s.tobytes()
+    sel = [i for i, m in enumerate(marks) if m == {"route": "vpop"}]
     for i, got in zip(sel, plan_many_vpop([paths[i] for i in sel], MILL, DT)):
         assert got is not None
         assert got.s.tobytes() == streamed[i].s.tobytes() and got.q.tobytes() == streamed[i].q.tobytes()
-    # a path refined (coarse periods, or asked for), the profile asked for, or a joint
-    # map: this planner streams every path itself
-    assert batched_optimal(paths, None, UCP, 0.006) == [None] * len(paths)
-    for opts in (OptimalOptions(refine_passes=1), OptimalOptions(route="profile")):
-        assert batched_optimal(paths, None, MILL, DT, PlanSettings(optimal=opts)) == [None] * len(paths)
+    # a path refined (coarse periods, or asked for): this planner streams every path
+    # but the line itself; the profile asked for, or a joint map: every path
+    lines_only = [None, None, None, None, True]
+    assert [m if m is None else True for m in batched_optimal(paths, None, UCP, 0.006)] == lines_only
+    refined = PlanSettings(optimal=OptimalOptions(refine_passes=1))
+    assert [m if m is None else True for m in batched_optimal(paths, None, MILL, DT, refined)] == lines_only
+    profile = PlanSettings(optimal=OptimalOptions(route="profile"))
+    assert batched_optimal(paths, None, MILL, DT, profile) == [None] * len(paths)
     assert batched_optimal(paths, object(), MILL, DT) == [None] * len(paths)
-    # asked for VPOp's route everywhere, every path goes to the batch
+    # asked for VPOp's route everywhere, every path goes to VPOp's batch
     every = batched_optimal(paths, None, MILL, DT, PlanSettings(optimal=OptimalOptions(route="vpop")))
-    assert all(m is not None for m in every)
+    assert all(m == {"route": "vpop"} for m in every)
 
 
 def test_a_streamed_paths_joint_table_and_route_come_from_the_batchs_routing(monkeypatch):
@@ -867,14 +875,17 @@ def test_the_timeline_gives_the_same_plan_and_route_counts_with_the_batch(monkey
     from cnc_interp.plan import optimal
 
     m = ci.load_machine("generic-mill")
-    src = b"G21 G90 G17 G61\nG0 X0 Y0 Z0\nG1 X2 F3000\nG1 Y3\nG2 X2 Y3 I-4 J0 F10000\nG1 Z-1 F600\nG1 X40 F9000\nM2\n"
+    src = (
+        b"G21 G90 G17 G61\nG0 X0 Y0 Z0\nG1 X2 F3000\nG1 Y3\nG2 X2 Y3 I-4 J0 F10000\nG3 X2 Y5 I0 J1 F300\n"
+        b"G1 Z-1 F600\nG1 X40 F9000\nM2\n"
+    )
     fitted = ci.fit(ci.read_program(src, m, name="mixed.ngc"))
     batched = ci.plan(fitted, m, planner="optimal")
     monkeypatch.delattr(optimal.iter_path_plan_optimal, "batched")
     streamed = ci.plan(fitted, m, planner="optimal")
     routes = batched.settings["stats"]["routes"]
     assert routes == streamed.settings["stats"]["routes"]
-    assert routes.get("vpop", 0) >= 3 and routes.get("profile", 0) == 1, routes
+    assert routes.get("line", 0) == 4 and routes.get("vpop", 0) == 1 and routes.get("profile", 0) == 1, routes
     assert batched.q.tobytes() == streamed.q.tobytes()
     assert ci.verify(batched, m).ok
 
@@ -883,7 +894,8 @@ def test_the_timeline_gives_the_same_plan_and_route_counts_with_the_batch(monkey
 def test_the_effort_trades_planning_time_for_cycle_time():
     # fine periods: "fast" leaves the profile's plan unrefined and gives VPOp's paths to
     # the batch; "normal" refines the profile's dips and ends; "max" every window of every
-    # path, VPOp's lines included (their stops lose a few periods to VPOp's greedy steps)
+    # path, VPOp's included (their stops lose a few periods to VPOp's greedy steps). A
+    # line's plan is exact at every effort (and made in the batch)
     paths = _mixed_paths()
     plans = {}
     for effort in ("fast", "normal", "max"):
@@ -893,12 +905,15 @@ def test_the_effort_trades_planning_time_for_cycle_time():
             check(plan, MILL, p.start, p.end, DT)
         marks = batched_optimal(paths, None, MILL, DT, settings)
         assert [m is not None for m in marks] == [
-            effort != "max" and plan.stats["route"] == "vpop" for plan in plans[effort]
+            plan.stats["route"] == "line" or (effort != "max" and plan.stats["route"] == "vpop")
+            for plan in plans[effort]
         ]
-    refined = {e: [p.stats["refined_periods"] for p in plans[e]] for e in plans}
+    line = [p.stats["route"] for p in plans["normal"]].index("line")
+    assert len({periods(plans[e][line]) for e in plans}) == 1
+    refined = {e: [p.stats.get("refined_periods", 0) for i, p in enumerate(plans[e]) if i != line] for e in plans}
     n = {e: [periods(p) for p in plans[e]] for e in plans}
     helix = [p.stats["route"] for p in plans["normal"]].index("profile")
-    assert refined["fast"] == [0] * len(paths)
+    assert refined["fast"] == [0] * (len(paths) - 1)
     assert refined["normal"][helix] > 0 and sum(refined["normal"]) == refined["normal"][helix]
     assert all(r > 0 for r in refined["max"])
     assert n["normal"][helix] < n["fast"][helix]

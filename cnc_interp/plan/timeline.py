@@ -5,9 +5,10 @@ and yields the samples as ``SampleBlock``s, in bounded memory:
 
 * ``Path`` (cutting): the chosen per-path planner (``plan.planners``) through the
   machine's kinematics, from rest to rest, as the planner's stream of chunks;
-* ``Path(rapid=True)``: always VPOp, at the axes' own limits and the machine's path
-  speed cap if it has one (its feed; none on non-trivial kinematics, where the rapid is
-  re-made in joint space), straight in joint space;
+* ``Path(rapid=True)``: straight in joint space, at the axes' own limits and the
+  machine's path speed cap if it has one (its feed; none on non-trivial kinematics,
+  where the rapid is re-made in joint space); planned by VPOp, or by the planner's batch
+  where it plans rapids (the optimal planner's exact line plan, ``optimal.line``);
 * ``Dwell``: the position held for ceil(seconds / dt) samples;
 * ``Stop`` (M0, M1, M6, ...): the machine is already at rest between paths; the
   stop is marked by the held position (no extra time is modelled for the pause);
@@ -38,6 +39,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..errors import PlanError
+from .base import PathPlan
 from .trajectory import Trajectory
 
 
@@ -442,15 +444,17 @@ def iter_timeline(
     batched = getattr(planner, "batched", None)
 
     def plan_many(paths):
-        """VPOp's compiled batch for the rapids and for the paths the planner would plan
-        exactly as VPOp does in joint = program space (its ``batched``: every path without
-        kinematics when VPOp is the planner, the optimal planner's VPOp-routed ones): the
-        same samples, the planner's own stats for the path added."""
+        """The plans of a job's paths made in one call: those the planner's ``batched``
+        returns planned (the optimal planner's straight paths and rapids), and VPOp's
+        compiled batch for the other rapids and the paths the planner would plan exactly
+        as VPOp does in joint = program space (every path without kinematics when VPOp is
+        the planner, the optimal planner's VPOp-routed ones): the same samples, the
+        planner's own stats for the path added."""
         from .vpop import plan_many_vpop
 
         extra = batched(paths, joint_map, machine, dt, settings) if batched is not None else [None] * len(paths)
-        sel = [i for i, p in enumerate(paths) if p.rapid or extra[i] is not None]
-        out = [None] * len(paths)
+        out: list = [e if isinstance(e, PathPlan) else None for e in extra]  # planned by the planner's batch
+        sel = [i for i, p in enumerate(paths) if out[i] is None and (p.rapid or extra[i] is not None)]
         if sel:
             got = plan_many_vpop([paths[i] for i in sel], machine, dt, settings)
             for i, g in zip(sel, got):

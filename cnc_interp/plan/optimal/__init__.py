@@ -3,14 +3,16 @@
 ``plan_path_optimal(path, joint_map, machine, dt_s, settings)`` plans one path from rest
 to rest; ``iter_path_plan_optimal`` is the same plan as a stream of ``PathPlan`` chunks
 (``plan.base``'s contract: their concatenation is byte for byte the one-shot plan);
-``batched_optimal`` hands the paths VPOp plans unrefined to VPOp's compiled batch. The
+``batched_optimal`` plans a job's straight paths by ``line`` and hands the paths VPOp
+plans unrefined to VPOp's compiled batch. The
 knobs are ``OptimalOptions`` (``PlanSettings.optimal``); the internal tunables are its
 ``tuning`` (``plan.tuning.OptimalTuning``), passed down to every stage.
 
 One module per stage, each a generator that only ever looks a bounded distance ahead:
 
-1. ``route``: the feed profile where curvature or jerk limit the speed on a good part of
-   a path that lasts long enough, else VPOp.
+1. ``route``: a straight path takes ``line`` (the exact discrete minimum of a rest-to-rest
+   move, closed form); the feed profile where curvature or jerk limit the speed on a good
+   part of a path that lasts long enough; else VPOp.
 2. ``profile``: w(s) = ṡ², near-time-optimal under every axis's velocity, acceleration
    and jerk limit and the feed, as linear programs over a cubic B-spline, window by
    window (each window ends at rest and commits its first part); the LPs are solved by

@@ -25,6 +25,7 @@ from ..base import PathPlan, collect_path_plan
 from ..prefetch import Prefetch
 from ..settings import OPTIMAL_CHUNK, OptimalOptions
 from .context import _Fallback, _options, _or, _Path
+from .line import plan_lines
 from .refine import _refined
 from .route import _ROUTED, Route, _route, _RouteInputs, route_many
 from .sampling import _sampled, _vpop_stage
@@ -103,18 +104,25 @@ def batched_optimal(paths, joint_map, machine, dt_s: float, settings=None) -> li
     compiled call for a job's short paths (the timeline's batch) instead of a VPOp run
     per path on this planner's own table (5-9x the planning time of flowsnake and
     zigzag_0.002_0.0005, whose every path goes to VPOp). Returns, per path, the stats it
-    adds to the batch's ({"route": Route.VPOP}), or ``None``: a path this planner streams."""
+    adds to the batch's ({"route": Route.VPOP}), a ``PathPlan``: the plan of a straight
+    path (``line``, rapids included), or ``None``: a path this planner streams."""
     out: list = [None] * len(paths)
     opts = _options(settings)
     dt = float(dt_s)
     held: dict = {}
     _ROUTED.keep(held)
+    if opts.route is None:
+        # straight paths take their exact plan (rapids are in joint space already)
+        take = [i for i, p in enumerate(paths) if p.rapid or joint_map is None]
+        for i, plan in zip(take, plan_lines([paths[i] for i in take], machine, dt)):
+            out[i] = plan
     if joint_map is not None or opts.route == Route.PROFILE or _refine_passes(opts, dt, Route.VPOP):
         return out
     eligible = [
         i
         for i, path in enumerate(paths)
-        if not path.rapid
+        if out[i] is None
+        and not path.rapid
         and path.length > VPOP_MIN_LENGTH
         and np.isfinite(path.length)
         and np.all(np.isfinite(path.coef))
@@ -154,6 +162,13 @@ def _iter(path, joint_map, machine, dt_s, settings, stats, window):
         stats["samples_total"] = 1
         yield np.zeros(1), _positions(path, path.breaks[:1], joint_map)
         return
+    if opts.route is None and (joint_map is None or path.rapid):
+        (line,) = plan_lines([path], machine, dt)
+        if line is not None:
+            stats.update(line.stats)
+            stats["samples_total"] = line.s.shape[0]
+            yield from _rechunk([(line.s, line.q)], chunk)
+            return
     ctx = _Path(path, joint_map, machine, dt, settings, _ROUTED.take(path, joint_map))
     ctx.window = window
     targeted = _targeted(opts, dt)

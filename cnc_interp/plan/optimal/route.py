@@ -31,6 +31,8 @@ class Route(StrEnum):
     PROFILE = "profile"
     #: VPOp's step loop (``plan.vpop``)
     VPOP = "vpop"
+    #: the exact discrete plan of a straight path (``line``)
+    LINE = "line"
 
 
 class _RouteInputs:
