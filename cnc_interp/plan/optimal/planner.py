@@ -2,7 +2,8 @@
 
 ``iter_path_plan_optimal`` streams a path's plan as ``PathPlan`` chunks (``plan.base``'s
 contract: their concatenation is the one-shot plan, ``plan_path_optimal``);
-``batched_optimal`` gives the paths VPOp plans unrefined to VPOp's compiled batch.
+``batched_optimal`` plans a job's straight paths (``line``) and gives the VPOp-routed
+ones to VPOp's compiled batch (their end window refined, ``_end_window``).
 
 Per path: the route (``route``); the sampled plan of the profile (``sampling``) or
 VPOp's; ``_refine_passes`` passes of window refinement (``refine``) by the effort and the
@@ -26,7 +27,7 @@ from ..prefetch import Prefetch
 from ..settings import OPTIMAL_CHUNK, OptimalOptions
 from .context import _Fallback, _options, _or, _Path
 from .line import plan_lines
-from .refine import _refined
+from .refine import Refiner, _end_refined, _refined, path_refine_problem, refine_end
 from .route import _ROUTED, Route, _route, _RouteInputs, route_many
 from .sampling import _sampled, _vpop_stage
 from .select import _better_of
@@ -48,6 +49,17 @@ def _refine_passes(opts: OptimalOptions, dt: float, route: Route) -> int:
     if opts.effort == "max" or dt >= T.full_refine_dt:
         return T.refine_passes
     return 1 if route == Route.PROFILE else 0
+
+
+def _end_window(opts: OptimalOptions, dt: float, route: Route) -> bool:
+    """Is the window at the end of VPOp's plan refined once more, after the refinement
+    passes (``refine._end_refined``)? At every effort but fast, unless the passes are
+    asked for: VPOp's braking into the end loses a few periods a path against the
+    discrete optimum, which that window recovers (stellabee1's first 3000 lines: 2118
+    periods of 544 paths, for a few window solves a path; at fine periods the normal
+    effort refines no other window of VPOp's plans, which would cost more than
+    planning)."""
+    return route == Route.VPOP and opts.refine_passes is None and opts.effort != "fast"
 
 
 def _targeted(opts: OptimalOptions, dt: float) -> bool:
@@ -99,13 +111,15 @@ iter_path_plan_optimal.streams = True
 
 
 def batched_optimal(paths, joint_map, machine, dt_s: float, settings=None) -> list:
-    """Which of ``paths`` this planner gives to VPOp whole and leaves unrefined, where
-    the joints are the program axes: their plans are ``vpop.plan_many_vpop``'s, one
-    compiled call for a job's short paths (the timeline's batch) instead of a VPOp run
-    per path on this planner's own table (5-9x the planning time of flowsnake and
-    zigzag_0.002_0.0005, whose every path goes to VPOp). Returns, per path, the stats it
-    adds to the batch's ({"route": Route.VPOP}), a ``PathPlan``: the plan of a straight
-    path (``line``, rapids included), or ``None``: a path this planner streams."""
+    """The plans of a job's ``paths`` this planner makes in one call, where the joints
+    are the program axes: straight paths by ``line``, and the paths VPOp plans whole
+    by ``vpop.plan_many_vpop``, one compiled call for a job's short paths instead of a
+    VPOp run per path on this planner's own table (5-9x the planning time of flowsnake
+    and zigzag_0.002_0.0005, whose every path goes to VPOp), their end window refined
+    where ``_end_window`` says so. Returns, per path, a ``PathPlan`` (the same samples
+    as the path's streamed plan), the stats it adds to the timeline's VPOp batch
+    ({"route": Route.VPOP}: VPOp's plan unrefined, or a long path the batch leaves to
+    VPOp's stream), or ``None``: a path this planner streams."""
     out: list = [None] * len(paths)
     opts = _options(settings)
     dt = float(dt_s)
@@ -140,7 +154,25 @@ def batched_optimal(paths, joint_map, machine, dt_s: float, settings=None) -> li
             inputs = _RouteInputs(paths[i], None, machine, opts.tuning)
             _route(inputs)
             held[id(paths[i])] = (paths[i], inputs)
+    if _end_window(opts, dt, Route.VPOP):
+        _plan_vpop_ends(paths, out, machine, dt, settings, opts)
     return out
+
+
+def _plan_vpop_ends(paths, out, machine, dt: float, settings, opts: OptimalOptions) -> None:
+    """The VPOp-routed paths of ``out`` planned in VPOp's batch and their end window
+    refined (``_end_window``), in place: the same samples as their streamed plan. A path
+    the batch leaves (a long one, which streams) keeps its mark."""
+    from ..vpop import plan_many_vpop
+
+    sel = [i for i, m in enumerate(out) if isinstance(m, dict)]
+    for i, got in zip(sel, plan_many_vpop([paths[i] for i in sel], machine, dt, settings)):
+        if got is None:
+            continue
+        ref = Refiner(path_refine_problem(paths[i], None, machine, dt), opts.tuning)
+        s, q, dropped = refine_end(ref, got.s, got.q, 0)
+        stats = {**(got.stats or {}), "route": Route.VPOP, "refined_periods": dropped, "refine_solves": ref.solves}
+        out[i] = PathPlan(s=s, q=q, stats=stats)
 
 
 iter_path_plan_optimal.batched = batched_optimal
@@ -186,6 +218,8 @@ def _iter(path, joint_map, machine, dt_s, settings, stats, window):
         stage = Prefetch(stage, ahead=T.ahead_blocks, name="cnc-interp-profile")
     for _ in range(passes):
         stage = _refined(ctx, stage, targeted)
+    if _end_window(opts, dt, route):
+        stage = _end_refined(ctx, stage)
     if ctx.whole:
         stage = _better_of(ctx, stage, passes, targeted)
     produced = 0
@@ -215,6 +249,8 @@ def _iter(path, joint_map, machine, dt_s, settings, stats, window):
         stage = _vpop_stage(ctx, window)
         for _ in range(passes):
             stage = _refined(ctx, stage, targeted)
+        if _end_window(opts, dt, Route.VPOP):
+            stage = _end_refined(ctx, stage)
         for s, q in _rechunk(stage, chunk):
             produced += s.shape[0]
             yield s, q

@@ -157,3 +157,53 @@ def _refined(ctx, blocks, targeted: bool = False):
     ctx.stats["refine_solves"] = ctx.stats.get("refine_solves", 0) + ref.solves
     ctx.stats["refine_newton"] = ctx.stats.get("refine_newton", 0) + int(ref.counts[0])
     ctx.stats["refine_evals"] = ctx.stats.get("refine_evals", 0) + int(ref.counts[1])
+
+
+def path_refine_problem(path, joint_map, machine, dt: float) -> RK.RefineProblem:
+    """``refine_problem`` of a path planned outside a ``_Path`` (VPOp's batch): its joint
+    table and step limits made as ``_Path`` makes them."""
+    from ..joint_table import JointTable
+    from ..step_limits import position_scale, step_limits
+    from ..vpop.step import Limits, Table
+
+    table = JointTable(path, joint_map)
+    joints = Table(table.S, np.ascontiguousarray(table.C.transpose(0, 2, 1)), table.qend)
+    limits = Limits(*step_limits(machine, dt, position_scale(table.C)))
+    return refine_problem(table, path, joints, limits, dt)
+
+
+def refine_end(ref: Refiner, sh, qh, first: int):
+    """The window of ``ref.tuning.refine_window`` samples that ends at the path's end,
+    shortened where the discrete problem allows. (sh, qh) are the path's last samples,
+    ``first`` the global index of sh[0]; they hold at least the three samples before the
+    window (or start at the path's start). Returns (sh, qh, periods dropped)."""
+    N = sh.shape[0]
+    b = N - 1
+    la = max(1, first + N - 1 - ref.tuning.refine_window) - first
+    if b - la < 3 or not ref.loose(sh, qh, la, b):
+        return sh, qh, 0
+    return ref.window(sh, qh, la, b, max(1, (b - la) // 2))
+
+
+def _end_refined(ctx, blocks):
+    """Only the window at the path's end refined (``refine_end``), every other sample
+    passed through as it comes: VPOp's plan at fine periods, whose braking into the end
+    is where it loses most against the discrete optimum (a few periods a path, for a few
+    window solves)."""
+    keep = ctx.tuning.refine_window + 4  # the window, the three samples before it and one
+    sh = np.zeros(0)
+    qh = np.zeros((0, ctx.n))
+    first = 0  # global index of sh[0]
+    for bs, bq in blocks:
+        sh = np.concatenate((sh, bs))
+        qh = np.concatenate((qh, bq))
+        cut = sh.shape[0] - keep
+        if cut > 0:
+            yield sh[:cut].copy(), qh[:cut].copy()
+            sh, qh, first = sh[cut:], qh[cut:], first + cut
+    ref = Refiner(ctx.refine_problem(), ctx.tuning)
+    sh, qh, dropped = refine_end(ref, sh, qh, first)
+    ctx.stats["refined_periods"] += dropped
+    ctx.stats["refine_solves"] = ctx.stats.get("refine_solves", 0) + ref.solves
+    if sh.shape[0]:
+        yield sh, qh
