@@ -173,13 +173,13 @@ def path_refine_problem(path, joint_map, machine, dt: float) -> RK.RefineProblem
 
 
 def refine_end(ref: Refiner, sh, qh, first: int):
-    """The window of ``ref.tuning.refine_window`` samples that ends at the path's end,
+    """The window of ``ref.tuning.end_window`` samples that ends at the path's end,
     shortened where the discrete problem allows. (sh, qh) are the path's last samples,
     ``first`` the global index of sh[0]; they hold at least the three samples before the
     window (or start at the path's start). Returns (sh, qh, periods dropped)."""
     N = sh.shape[0]
     b = N - 1
-    la = max(1, first + N - 1 - ref.tuning.refine_window) - first
+    la = max(1, first + N - 1 - ref.tuning.end_window) - first
     if b - la < 3 or not ref.loose(sh, qh, la, b):
         return sh, qh, 0
     return ref.window(sh, qh, la, b, max(1, (b - la) // 2))
@@ -190,7 +190,7 @@ def _end_refined(ctx, blocks):
     passed through as it comes: VPOp's plan at fine periods, whose braking into the end
     is where it loses most against the discrete optimum (a few periods a path, for a few
     window solves)."""
-    keep = ctx.tuning.refine_window + 4  # the window, the three samples before it and one
+    keep = ctx.tuning.end_window + 4  # the window, the three samples before it and one
     sh = np.zeros(0)
     qh = np.zeros((0, ctx.n))
     first = 0  # global index of sh[0]
