@@ -102,7 +102,7 @@ GROUPS = {
             "optimal",
             ("plan._feed_kernels", "plan._ipm", "plan._refine_kernels", "plan._track_kernels", "plan._line_kernels"),
             "_warm_optimal",
-            34.2,
+            37.3,
             ("fit", "vpop-prep"),
         ),
     )
