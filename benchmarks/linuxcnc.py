@@ -5,6 +5,7 @@
     .venv/bin/python benchmarks/linuxcnc.py --max-cycle 60 --budget 900 --json out.json
     .venv/bin/python benchmarks/linuxcnc.py --no-write            # print only
     .venv/bin/python benchmarks/linuxcnc.py --linuxcnc-from old.json   # new cnc-interp, same LinuxCNC
+    .venv/bin/python benchmarks/linuxcnc.py --same-tolerance      # every G64 held to 1 µm
 
 Each corpus program (``CNC_CORPUS``) runs on a LinuxCNC configuration made from a corpus INI
 (``--ini``, default ``configs/axis_mm.ini``; ``XYZ.ini`` (XYZA), then ``9axis.ini``, for a
@@ -21,7 +22,9 @@ and the same 1 µm in inch, since LinuxCNC starts in the INI's units and cnc-int
 force; the program's own G64/G61 words then apply as written, on both sides, except that
 cnc-interp caps every move's tolerance at ``--tol``: a G64 P over 1 µm holds in LinuxCNC only,
 and a G64 without P is LinuxCNC's "no tolerance" but ``--tol`` in cnc-interp. The table names
-each program's own G64/G61 words.
+each program's own G64/G61 words. ``--same-tolerance`` compares the same path on both sides:
+every G64 of the program (with or without P and Q) is rewritten to ``G64 P<1 µm>`` in the
+units in force there (``at_tolerance``), and the table goes to a section of its own.
 
 LinuxCNC side: ``linuxcnc`` runs headless: the HAL is a simulation (``motmod`` on trivkins,
 each joint's position command looped to its feedback, E-stop and tool change looped back,
@@ -155,8 +158,9 @@ def axis_section(ini: dict, letter: str, joint: int) -> list[tuple[str, str]]:
     raise ValueError(f"axis {letter} has no section in the INI")
 
 
-def write_config(directory: str, corpus_ini: str, program: str, timeout_s: float) -> dict:
-    """The LinuxCNC 2.9 configuration (also cnc-interp's machine) and the program copy."""
+def write_config(directory: str, corpus_ini: str, program: str, timeout_s: float, same_tolerance: bool = False) -> dict:
+    """The LinuxCNC 2.9 configuration (also cnc-interp's machine) and the program copy
+    (``same_tolerance``: its G64 words rewritten, ``at_tolerance``)."""
     ini = read_ini(corpus_ini)
     letters = coordinates(ini)
     unit_mm = linear_unit_mm(ini)
@@ -237,23 +241,60 @@ def write_config(directory: str, corpus_ini: str, program: str, timeout_s: float
     path = os.path.join(directory, "machine.ini")
     with open(path, "w") as fh:
         fh.write("\n".join(out) + "\n")
-    write_program_copy(program, copy, unit_mm)
+    write_program_copy(program, copy, unit_mm, same_tolerance)
     return {"ini": path, "program": copy, "samples": samples, "result": result, "axes": letters, "unit_mm": unit_mm}
 
 
-def write_program_copy(program: str, copy: str, unit_mm: float) -> None:
-    """The program with ``G64 P<1 µm>`` in force from its first line (after a leading ``%``)."""
+def write_program_copy(program: str, copy: str, unit_mm: float, same_tolerance: bool = False) -> None:
+    """The program with ``G64 P<1 µm>`` in force from its first line (after a leading ``%``);
+    ``same_tolerance``: every G64 of its own held to the same 1 µm (``at_tolerance``)."""
     if unit_mm == 1.0:
         head = f"G64 P{TOL_MM:g}\n"
     else:  # LinuxCNC starts in the INI's units and cnc-interp in mm: G20 makes them agree
         head = f"G20 G64 P{TOL_MM / MM_PER_INCH:.10f}\n"
     with open(program, "rb") as fh:
         text = fh.read().decode("latin-1")
+    if same_tolerance:
+        text = at_tolerance(text, inch=unit_mm != 1.0)
     lines = text.splitlines(keepends=True)
     i = next((k for k, ln in enumerate(lines) if ln.strip()), len(lines))
     at = i + 1 if i < len(lines) and lines[i].strip() == "%" else 0
     with open(copy, "w", encoding="latin-1") as fh:
         fh.write("".join(lines[:at]) + head + "".join(lines[at:]))
+
+
+#: a comment of a block: parenthesised, or from ";" to the end of the line
+_COMMENT = re.compile(r"\([^)]*\)|;.*$")
+#: a G word of a block and its number
+_G_WORD = re.compile(r"G\s*([0-9]+(?:\.[0-9]*)?)", re.IGNORECASE)
+#: a P or Q word with a plain number (G64's tolerances)
+_PQ_WORD = re.compile(r"[PQ]\s*[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)", re.IGNORECASE)
+
+
+def at_tolerance(text: str, inch: bool) -> str:
+    """``text`` with every block's G64 (with or without P and Q) rewritten to ``G64 P<1 µm>``
+    in the units in force there (G20/G21 followed from ``inch``, the units the program starts
+    in): LinuxCNC then holds the tolerance cnc-interp's ``--tol`` holds, instead of blending
+    a plain G64 with none and honouring a larger P. The block's comments are dropped with it.
+    Raises ``ValueError`` on a G64 block whose P or Q is not a plain number."""
+    out = []
+    for line in text.splitlines(keepends=True):
+        code = _COMMENT.sub("", line.rstrip("\r\n"))
+        gs = [float(m.group(1)) for m in _G_WORD.finditer(code)]
+        if 20.0 in gs:
+            inch = True
+        if 21.0 in gs:
+            inch = False
+        if 64.0 not in gs:
+            out.append(line)
+            continue
+        rest = _PQ_WORD.sub("", _G_WORD.sub(lambda m: "" if float(m.group(1)) == 64.0 else m.group(0), code))
+        if re.search(r"[PQ]", rest, re.IGNORECASE):
+            raise ValueError(f"G64 with a P or Q that is not a number: {line.strip()!r}")
+        p = TOL_MM / MM_PER_INCH if inch else TOL_MM
+        end = line[len(line.rstrip("\r\n")) :] or "\n"
+        out.append(f"{rest.strip()} G64 P{p:.10f}".strip() + end)
+    return "".join(out)
 
 
 # --- the moving span ---------------------------------------------------------------------
@@ -432,13 +473,13 @@ def linuxcnc_version() -> str:
 
 
 # --- the benchmark ------------------------------------------------------------------------
-def plan_first(path: str, ini: str) -> dict:
+def plan_first(path: str, ini: str, same_tolerance: bool = False) -> dict:
     """cnc-interp vpop on ``ini``, or on the first fallback INI that has the program's axes."""
-    rec: dict = {"program": os.path.relpath(path, CORPUS), "path": path}
+    rec: dict = {"program": os.path.relpath(path, CORPUS), "path": path, "same_tolerance": same_tolerance}
     for candidate in [ini] + [os.path.join(CONFIGS, n) for n in AXIS_FALLBACK_INIS]:
         work = tempfile.mkdtemp(prefix="cnc-interp-lcnc-")
         try:
-            vpop = plan_cnc_interp(write_config(work, candidate, path, 0.0), "vpop")
+            vpop = plan_cnc_interp(write_config(work, candidate, path, 0.0, same_tolerance), "vpop")
         finally:
             shutil.rmtree(work, ignore_errors=True)
         if vpop["status"] == "ok" or "is not on this machine" not in vpop["message"]:
@@ -463,8 +504,17 @@ def measure(rec: dict, args, budget_left_s: float) -> dict:
     timeout = LINUXCNC_TIMEOUT_FACTOR * vpop["cycle_s"] + LINUXCNC_TIMEOUT_MARGIN_S
     work = tempfile.mkdtemp(prefix="cnc-interp-lcnc-")
     try:
-        cfg = write_config(work, rec["ini_path"], rec["path"], timeout)
-        facts = program_facts(cfg)
+        try:
+            cfg = write_config(work, rec["ini_path"], rec["path"], timeout, args.same_tolerance)
+        except ValueError as exc:  # a G64 at_tolerance cannot rewrite
+            rec["status"] = f"skipped: {exc}"
+            return rec
+        if args.same_tolerance:  # the G64 words as the program wrote them, not as rewritten
+            as_written = os.path.join(work, "as_written.ngc")
+            write_program_copy(rec["path"], as_written, cfg["unit_mm"])
+            facts = program_facts({**cfg, "program": as_written})
+        else:
+            facts = program_facts(cfg)
         rec.update(facts)
         if "optimal" in args.planners:
             rec["optimal"] = plan_cnc_interp(cfg, "optimal")
@@ -514,12 +564,22 @@ def main(argv=None) -> None:
         help="take LinuxCNC's result of a program (and INI) from an earlier run's --json instead of "
         "running LinuxCNC again: measures a new cnc-interp against the same LinuxCNC in minutes",
     )
+    ap.add_argument(
+        "--same-tolerance",
+        action="store_true",
+        help="hold every G64 of the program to the same 1 µm on both sides (at_tolerance); "
+        "the table goes to its own section",
+    )
     ap.add_argument("--no-write", action="store_true", help="print only; leave RESULTS.md alone")
     args = ap.parse_args(argv)
     args.reuse = {}
     if args.linuxcnc_from:
         with open(args.linuxcnc_from) as fh:
-            args.reuse = {(r["program"], r["ini"]): r["linuxcnc"] for r in json.load(fh) if r.get("linuxcnc")}
+            args.reuse = {
+                (r["program"], r["ini"]): r["linuxcnc"]
+                for r in json.load(fh)
+                if r.get("linuxcnc") and bool(r.get("same_tolerance")) == args.same_tolerance
+            }
     # Ctrl-C and kill end the run the same way (LinuxCNC shut down, the table so far written),
     # also when the shell started the script in the background with SIGINT ignored
     signal.signal(signal.SIGINT, signal.default_int_handler)
@@ -530,7 +590,7 @@ def main(argv=None) -> None:
     rows, spent = [], 0.0
     try:
         # vpop first on every program: after the hard ones, the short ones run on LinuxCNC first
-        planned = [plan_first(path, args.ini) for path in programs]
+        planned = [plan_first(path, args.ini, args.same_tolerance) for path in programs]
         hard = [r for r in planned if any(h in r["path"] for h in HARD)]
         for r in hard:
             r["hard"] = True  # run whatever their cycle: they are what the comparison is for
@@ -623,8 +683,15 @@ def _write(args, argv, rows: list, summary: str) -> None:
         f"sampler on the servo thread) and in 1 ms samples on cnc-interp's (--tol {TOL_MM:g}, "
         f"MAX_JERK = {JERK_UNITS_S3:g} units/s^3 on every axis). Dwells and stops between moves count; "
         f"M6 is looped back in HAL and cnc-interp models no time for it. Program copies start with "
-        f"G64 P0.001 (1 µm); the program's own G64/G61 words apply as written on both sides: "
-        f'"own G64/G61": "no P" marks a G64 without P, which LinuxCNC blends with no tolerance '
+        f"G64 P0.001 (1 µm); "
+        + (
+            "every G64 of the program's own is rewritten to G64 P0.001 in the units in force "
+            '(--same-tolerance), so both sides hold 1 µm throughout; "own G64/G61" names what the '
+            "program wrote: "
+            if args.same_tolerance
+            else "the program's own G64/G61 words apply as written on both sides: "
+        )
+        + f'"own G64/G61": "no P" marks a G64 without P, which LinuxCNC blends with no tolerance '
         f'(up to a quarter of the shorter move) and cnc-interp at --tol; "P x mm" the largest G64 P over '
         f'1 µm, which LinuxCNC honours and cnc-interp caps at --tol; "-": the first line\'s 1 µm holds '
         f'throughout, the same on both sides. "same end": both sides end '
@@ -645,9 +712,8 @@ def _write(args, argv, rows: list, summary: str) -> None:
             f"\n\nNot run on LinuxCNC (vpop cycle over --max-cycle {args.max_cycle:g} s, time budget "
             f"{args.budget:g} s spent, or refused by cnc-interp):\n\n" + "\n".join(not_run)
         )
-    write_section(
-        "Against LinuxCNC 2.9", "linuxcnc.py", command_line("linuxcnc.py", argv), md_table(header, table_rows), notes
-    )
+    title = "Against LinuxCNC 2.9, same tolerance" if args.same_tolerance else "Against LinuxCNC 2.9"
+    write_section(title, "linuxcnc.py", command_line("linuxcnc.py", argv), md_table(header, table_rows), notes)
 
 
 def _reason(message: str) -> str:
