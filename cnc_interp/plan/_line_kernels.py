@@ -202,8 +202,8 @@ def _holds(q, lim, dt):
 
 
 @njit(cache=True)
-def plan_lines(coef, breaks, lengths, feed, seg_off, take, lim, dt, settings):
-    """The exact plan of each straight path among ``take`` (concatenated as
+def plan_lines(coef, breaks, lengths, feed, seg_off, lim, dt, settings):
+    """The exact plan of each straight path of the paths (concatenated as
     ``joint_table.concat_paths`` gives them; ``coef`` is scaled in place, a copy is the
     caller's).
 
@@ -223,8 +223,6 @@ def plan_lines(coef, breaks, lengths, feed, seg_off, take, lim, dt, settings):
     scratch = np.empty(max_n)
     for p in range(n_p):
         a, b = seg_off[p], seg_off[p + 1]
-        if not take[p]:
-            continue
         same_feed = True
         for k in range(a + 1, b):
             if feed[k] != feed[a]:

@@ -18,6 +18,15 @@ from ..step_limits import position_scale, step_limits
 from .route import Route, _RouteInputs
 
 
+def exact_inputs(table, machine, dt: float):
+    """The exact sampler's and refinement's view of a ``JointTable``: the table axis-major
+    (``vpop.step.Table``) and the per-period step limits (``vpop.step.Limits``)."""
+    from ..vpop.step import Limits, Table
+
+    joints = Table(table.S, np.ascontiguousarray(table.C.transpose(0, 2, 1)), table.qend)
+    return joints, Limits(*step_limits(machine, dt, position_scale(table.C)))
+
+
 def _options(settings) -> OptimalOptions:
     """The planner's knobs (``PlanSettings.optimal``; ``None``: the defaults)."""
     return OptimalOptions() if settings is None else settings.optimal
@@ -48,7 +57,7 @@ class _Path(_RouteInputs):
     made, whose table and measures it takes over)."""
 
     def __init__(self, path, joint_map, machine, dt, settings, inputs: _RouteInputs | None = None):
-        from ..vpop.step import Feed, Limits, Table
+        from ..vpop.step import Feed
 
         if inputs is None:
             super().__init__(path, joint_map, machine, _options(settings).tuning)
@@ -59,11 +68,10 @@ class _Path(_RouteInputs):
         self.joint_map = joint_map
         self.dt = dt
         self.settings = settings
-        self.vl, self.al, self.jl = step_limits(machine, dt, position_scale(table.C))
         self.n = path.n_axes
         # the exact sampler's inputs (``_track_kernels.track``)
-        self.joints = Table(table.S, np.ascontiguousarray(table.C.transpose(0, 2, 1)), table.qend)
-        self.limits = Limits(self.vl, self.al, self.jl)
+        self.joints, self.limits = exact_inputs(table, machine, dt)
+        self.vl, self.al, self.jl = self.limits
         self.tol = max(4.0 * np.spacing(max(self.L, 1.0)), 1e-7 * float(np.min(self.jl)))
         self.feed_caps = Feed(float(dt), float(self.L), self.FB, self.FV)
         self.stats = {

@@ -42,8 +42,7 @@ def plan_lines(paths, machine, dt_s: float) -> list:
     coef, breaks, _s_breaks, _weights, lengths, feed, seg_off = concat_paths(sel)
     lim = np.ascontiguousarray(np.stack([machine.vmax, machine.amax, machine.jmax]), dtype=float)
     settings = np.array([LINE_STRAIGHT_TOL, VPOP_LIMIT_SHRINK, VPOP_ROUNDING_ULPS, float(LINE_MAX_PERIODS)])
-    take = np.ones(len(sel), dtype=np.bool_)
-    done, off, s, q = K.plan_lines(coef, breaks, lengths, feed, seg_off, take, lim, float(dt_s), settings)
+    done, off, s, q = K.plan_lines(coef, breaks, lengths, feed, seg_off, lim, float(dt_s), settings)
     offs = off.tolist()
     for j, ok in enumerate(done.tolist()):
         if ok:

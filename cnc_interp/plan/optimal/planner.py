@@ -194,14 +194,15 @@ def _iter(path, joint_map, machine, dt_s, settings, stats, window):
         stats["samples_total"] = 1
         yield np.zeros(1), _positions(path, path.breaks[:1], joint_map)
         return
-    if opts.route is None and (joint_map is None or path.rapid):
+    routed = _ROUTED.take(path, joint_map)  # a path the batch routed is no line
+    if routed is None and opts.route is None and (joint_map is None or path.rapid):
         (line,) = plan_lines([path], machine, dt)
         if line is not None:
             stats.update(line.stats)
             stats["samples_total"] = line.s.shape[0]
             yield from _rechunk([(line.s, line.q)], chunk)
             return
-    ctx = _Path(path, joint_map, machine, dt, settings, _ROUTED.take(path, joint_map))
+    ctx = _Path(path, joint_map, machine, dt, settings, routed)
     ctx.window = window
     targeted = _targeted(opts, dt)
     route = Route(opts.route) if opts.route else _route(ctx)
@@ -216,10 +217,7 @@ def _iter(path, joint_map, machine, dt_s, settings, stats, window):
     if long_path and passes:
         # the refinement of one stretch while the next is profiled
         stage = Prefetch(stage, ahead=T.ahead_blocks, name="cnc-interp-profile")
-    for _ in range(passes):
-        stage = _refined(ctx, stage, targeted)
-    if _end_window(opts, dt, route):
-        stage = _end_refined(ctx, stage)
+    stage = _refine_stages(ctx, stage, passes, targeted, _end_window(opts, dt, route))
     if ctx.whole:
         stage = _better_of(ctx, stage, passes, targeted)
     produced = 0
@@ -246,16 +244,19 @@ def _iter(path, joint_map, machine, dt_s, settings, stats, window):
             return
         ctx.stats["fallback"] = ctx.fallback = str(why)
         passes = _refine_passes(opts, dt, Route.VPOP)
-        stage = _vpop_stage(ctx, window)
-        for _ in range(passes):
-            stage = _refined(ctx, stage, targeted)
-        if _end_window(opts, dt, Route.VPOP):
-            stage = _end_refined(ctx, stage)
+        stage = _refine_stages(ctx, _vpop_stage(ctx, window), passes, targeted, _end_window(opts, dt, Route.VPOP))
         for s, q in _rechunk(stage, chunk):
             produced += s.shape[0]
             yield s, q
     stats.update(ctx.stats)
     stats["samples_total"] = produced
+
+
+def _refine_stages(ctx, stage, passes: int, targeted: bool, end_window: bool):
+    """``stage`` through ``passes`` of window refinement, then the end window if asked."""
+    for _ in range(passes):
+        stage = _refined(ctx, stage, targeted)
+    return _end_refined(ctx, stage) if end_window else stage
 
 
 def _tail(tail_s, tail_q, s, q):

@@ -163,13 +163,10 @@ def path_refine_problem(path, joint_map, machine, dt: float) -> RK.RefineProblem
     """``refine_problem`` of a path planned outside a ``_Path`` (VPOp's batch): its joint
     table and step limits made as ``_Path`` makes them."""
     from ..joint_table import JointTable
-    from ..step_limits import position_scale, step_limits
-    from ..vpop.step import Limits, Table
+    from .context import exact_inputs
 
     table = JointTable(path, joint_map)
-    joints = Table(table.S, np.ascontiguousarray(table.C.transpose(0, 2, 1)), table.qend)
-    limits = Limits(*step_limits(machine, dt, position_scale(table.C)))
-    return refine_problem(table, path, joints, limits, dt)
+    return refine_problem(table, path, *exact_inputs(table, machine, dt), dt)
 
 
 def refine_end(ref: Refiner, sh, qh, first: int):
