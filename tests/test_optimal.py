@@ -599,25 +599,6 @@ def test_a_screened_lp_that_keeps_finding_rows_takes_every_row_last(monkeypatch)
     assert max(e for _, _, e in calls) <= settings.optimal.tuning.lp_tol
 
 
-def test_vpop_plans_a_path_for_comparison_only_where_it_took_over_early():
-    # after VPOp takes the profile's plan over, the plan is VPOp's own: its whole plan
-    # can only win where the hand-over came early (``compare_before`` of the samples),
-    # but not so early that the profile's part is a mere start (``compare_after``)
-    from types import SimpleNamespace
-
-    from cnc_interp.plan.optimal import context, select
-
-    ctx = SimpleNamespace(dt=0.001, tuning=TUNING, sampling=context.Sampling())
-    n = 10_000
-    assert not select._vpop_may_win(ctx, n)  # the profile reached the end
-    share, least = TUNING.compare_before, TUNING.compare_after
-    assert 0.0 < least < share
-    cases = ((0, False), (int(least * n) - 1, False), (int(least * n), True), (int(share * n) - 1, True))
-    for handover, want in (*cases, (int(share * n) + 1, False), (n - 100, False)):
-        ctx.sampling = context.Sampling(handover=handover)
-        assert select._vpop_may_win(ctx, n) is want, handover
-
-
 def _trochoid_planned(**tuning):
     """generic-mill, corpus trochoidal.ngc's path to line 4766 (a G1 trochoid), default
     settings but for the tunables ``tuning``, and its plan (checked within every limit,
@@ -631,24 +612,24 @@ def _trochoid_planned(**tuning):
 
 
 @needs_corpus
-def test_vpop_is_kept_where_the_profile_dipped_often_and_vpop_plans_shorter():
-    # corpus trochoidal.ngc, the path ending at line 4766 on generic-mill: the profile
-    # reaches the end through ``compare_dips`` dips or more (44,471 periods with 124);
-    # VPOp's own plan of the whole path (42,864) is shorter and is kept. Before a
-    # window's first LP was held near the previous solution (``_feasible_hat``), the
-    # profile was handed over to VPOp 5,749 samples in: VPOp was compared for that.
-    # Without the points where q_sss peaks (``peak_share``): with them the profile
-    # reaches the end without a dip, and its 44,463 periods are kept without comparing
-    # (the continuous profile is slower than VPOp on this G1 trochoid: see the README)
-    m, path, settings, plan = _trochoid_planned(peak_share=np.inf)
+def test_a_path_planned_whole_is_never_longer_than_vpops_plan_of_it():
+    # corpus trochoidal.ngc, the path ending at line 4766 on generic-mill (a G1 trochoid):
+    # without the points where q_sss peaks (``peak_share``) the profile reaches the end
+    # through many dips, and without the probe nothing tells early that VPOp is ahead;
+    # VPOp's own plan of the whole path is shorter and is kept
+    m, path, settings, plan = _trochoid_planned(peak_share=np.inf, probe_ahead=np.inf)
     assert plan.stats["route"] == "profile" and plan.stats["kept"] == "vpop"
-    assert plan.stats["retries"] >= TUNING.compare_dips
+    assert plan.stats["retries"] > 0
     vpop = plan_path_vpop(path, None, m, m.dt_s)
     assert periods(plan) == periods(vpop)
-    # without the dips' rule (nor the probe of the next test) the profile's longer plan
-    # is kept
-    kept = plan_path_optimal(path, None, m, m.dt_s, tuned(settings, compare_dips=10**9, probe_ahead=np.inf))
-    assert kept.stats["kept"] == "profile" and periods(kept) > periods(vpop)
+    # with the comparison off (no path planned whole) the profile's longer plan stands
+    streamed = plan_path_optimal(path, None, m, m.dt_s, _compare_off(settings))
+    assert periods(streamed) > periods(vpop)
+
+
+def _compare_off(settings):
+    """``settings`` with no profile-routed path planned whole (``compare_s`` = 0)."""
+    return dataclasses.replace(settings, optimal=dataclasses.replace(settings.optimal, compare_s=0.0))
 
 
 def _profile_jerk_share(builder, pieces, end_mm=0.05):
@@ -708,14 +689,17 @@ def test_a_table_pieces_jerk_peaks_are_its_breaks_and_its_vertices_of_q_sss():
 
 @needs_corpus
 def test_vpop_is_kept_where_its_first_seconds_run_ahead_of_the_profile():
-    # the same trochoid, as planned: the profile reaches the end without a dip, and VPOp,
-    # faster over the first ``probe_s``, plans the whole path too; its shorter plan is kept
+    # the same trochoid, as planned: VPOp, faster over the first ``probe_s``, plans the
+    # whole path and its plan is kept without planning the profile's rest; without the
+    # probe the whole comparison keeps the same plan
     m, path, settings, plan = _trochoid_planned()
     assert plan.stats["probe"] == "vpop ahead" and plan.stats["kept"] == "vpop"
-    assert plan.stats["retries"] < TUNING.compare_dips and plan.stats["handover"] < 0
     assert periods(plan) == periods(plan_path_vpop(path, None, m, m.dt_s))
     kept = plan_path_optimal(path, None, m, m.dt_s, tuned(settings, probe_ahead=np.inf))  # no probe
-    assert kept.stats["kept"] == "profile" and periods(kept) > 1.03 * periods(plan)
+    assert kept.stats["kept"] == "vpop"
+    assert_allclose(kept.q, plan.q, rtol=0, atol=0)
+    streamed = plan_path_optimal(path, None, m, m.dt_s, _compare_off(settings))
+    assert periods(streamed) > 1.03 * periods(plan)
 
 
 @needs_corpus
@@ -735,35 +719,23 @@ def _fifty_turns():
     return hermite_path(circle_fun(10.0, turns=50.0), 800, 1000.0)
 
 
-def test_a_probe_that_finds_the_profile_ahead_stops_vpop_after_its_first_seconds(monkeypatch):
+def test_a_probe_that_finds_the_profile_ahead_keeps_the_profiles_shorter_plan():
     # fifty turns of a circle at the acceleration limit (22 s): the profile's plan is ahead
-    # of VPOp's from the start, so VPOp stops after its first samples handed out (its
-    # buffers of ``probe_s`` and the braking distance, twice)
-    from cnc_interp.plan import vpop
-
-    counted = []
-    iter_prepared = vpop.iter_prepared
-
-    def counting(*args, **kwargs):
-        for c in iter_prepared(*args, **kwargs):
-            counted.append(c.s.shape[0])
-            yield c
-
-    monkeypatch.setattr(vpop, "iter_prepared", counting)
+    # of VPOp's from the start (the probe says so) and at the end
     path = _fifty_turns()
     plan = plan_path_optimal(path, None, MILL, DT)
     check(plan, MILL, plan.q[0], plan.q[-1], DT)
     assert periods(plan) * DT >= TUNING.probe_min_s
     assert plan.stats["probe"] == "profile" and plan.stats["kept"] == "profile"
-    assert TUNING.probe_s / DT <= sum(counted) < 0.5 * periods(plan)
+    assert periods(plan) < periods(plan_path_vpop(path, None, MILL, DT))
 
 
 @pytest.mark.parametrize("turns", [50.0, 12.0])
 def test_a_long_paths_windows_solved_in_a_thread_of_their_own_give_the_same_samples(monkeypatch, turns):
     # at effort fast a path's windows are solved by a thread ahead of the sampling from
-    # ``feed_ahead_s`` on, and a whole path's VPOp probe runs meanwhile; the samples,
-    # stats and probe are those of one thread (the 50-turn circle of the probe test: 22 s,
-    # probed, the profile kept; 12 turns: ~5 s, under ``ahead_s``, not probed)
+    # ``feed_ahead_s`` on, and a whole path's VPOp plan by another; the samples, stats and
+    # probe are those of one thread (the 50-turn circle of the probe test: 22 s, probed,
+    # the profile kept; 12 turns: ~5 s, under ``ahead_s``, not probed)
     from cnc_interp.plan import prefetch
 
     threads = []
@@ -780,7 +752,7 @@ def test_a_long_paths_windows_solved_in_a_thread_of_their_own_give_the_same_samp
     least = TUNING.feed_ahead_s
     for ahead_s in (least, np.inf):
         plans[ahead_s] = plan_path_optimal(path, None, MILL, DT, tuned(fast, feed_ahead_s=ahead_s))
-    assert threads == ["cnc-interp-feed"]  # the first plan only
+    assert sorted(threads) == ["cnc-interp-feed", "cnc-interp-vpop", "cnc-interp-vpop"]  # the feed: the first plan only
     threaded, alone = plans[least], plans[np.inf]
     check(threaded, MILL, path.start, path.end, DT)
     assert threaded.s.tobytes() == alone.s.tobytes() and threaded.q.tobytes() == alone.q.tobytes()

@@ -111,12 +111,6 @@ class OptimalTuning:
     Selection (``optimal.select``):
         compare_samples: periods; a profile-routed path of at most this rough duration is
             planned whole before any sample leaves (``OptimalOptions.compare_s`` overrides).
-        compare_tail_s: s; the profile's plan is kept when VPOp took over within this
-            much motion of its end ...
-        compare_before: 1; ... VPOp's own plan is made when it took over before this
-            share of the samples ...
-        compare_after: 1; ... and after this share ...
-        compare_dips: ... or when the profile needed at least this many dips.
         probe_s: s; VPOp's first samples of a whole plan (the probe) ...
         probe_min_s: s; ... for a profile's plan of at least this long ...
         probe_ahead: 1; ... win when VPOp reaches the probe's arc length this share
@@ -187,10 +181,6 @@ class OptimalTuning:
     dip: float = 0.7
     # selection
     compare_samples: int = 1 << 18
-    compare_tail_s: float = 0.3
-    compare_before: float = 0.5
-    compare_after: float = 0.05
-    compare_dips: int = 50
     probe_s: float = 2.0
     probe_min_s: float = 20.0
     probe_ahead: float = 0.01

@@ -3,7 +3,8 @@
 ``_Path`` holds one path's joint table, step limits, the exact sampler's inputs, the
 tunables (``OptimalTuning``), the summary stats and the typed outcomes the decisions
 read: ``Sampling`` (dips and hand-over of the profile's sampling), the planned route,
-the fallback reason and VPOp's probe (``_probe_progress``). ``_Fallback`` is raised by a
+the fallback reason, VPOp's probe and its plan alongside the profile's
+(``select``). ``_Fallback`` is raised by a
 stage that cannot plan the path with the profile (VPOp plans it).
 """
 
@@ -87,8 +88,10 @@ class _Path(_RouteInputs):
             self.stats.update(inputs.stats)  # the route's measures, as ``_route`` left them
         self._vrun = None
         self._prep = None
-        #: ``_probe_progress``'s outcome, once made
+        #: ``select._probe_progress``'s outcome, once made
         self.probe = _NOT_PROBED
+        #: VPOp's plan of a path planned whole, made alongside (``select.VpopAlongside``)
+        self.alongside = None
         self._refine = None
         #: the whole path is held before any sample leaves (``select._better_of``)
         self.whole = False
@@ -126,28 +129,3 @@ class _Path(_RouteInputs):
 
 class _Fallback(Exception):
     """This path cannot be planned by the profile (VPOp plans it)."""
-
-
-def _probe_progress(ctx):
-    """VPOp's first samples of the path: (how many, the arc length of the last), at least
-    tuning.probe_s worth; None where VPOp fails. Made once per path (``ctx.probe``)."""
-    from ..vpop import VpopFailed, iter_prepared
-
-    if ctx.probe is not _NOT_PROBED:
-        return ctx.probe
-    n_probe = int(ctx.tuning.probe_s / ctx.dt)
-    got, s_at = 0, 0.0
-    try:
-        # checkpoints (hence samples handed out) every n_probe: only counted here
-        stream = iter_prepared(
-            ctx.prepared(), ctx.joint_map, ctx.machine, ctx.settings, n_probe, safe_fallback=False, checkpoint=n_probe
-        )
-        for c in stream:
-            got += c.s.shape[0]
-            s_at = float(c.s[-1])
-            if got >= n_probe:
-                break
-        ctx.probe = (got, s_at)
-    except VpopFailed:
-        ctx.probe = None
-    return ctx.probe

@@ -30,7 +30,7 @@ from .line import plan_lines
 from .refine import Refiner, _end_refined, _refined, path_refine_problem, refine_end
 from .route import _ROUTED, Route, _route, _RouteInputs, route_many
 from .sampling import _sampled, _vpop_stage
-from .select import _better_of
+from .select import VpopAlongside, _better_of
 
 
 def _refine_passes(opts: OptimalOptions, dt: float, route: Route) -> int:
@@ -219,7 +219,20 @@ def _iter(path, joint_map, machine, dt_s, settings, stats, window):
         stage = Prefetch(stage, ahead=T.ahead_blocks, name="cnc-interp-profile")
     stage = _refine_stages(ctx, stage, passes, targeted, _end_window(opts, dt, route))
     if ctx.whole:
+        ctx.alongside = VpopAlongside(ctx)  # VPOp's plan to compare, on a thread of its own
         stage = _better_of(ctx, stage, passes, targeted)
+    try:
+        yield from _drain(ctx, stage, chunk, window, opts, stats)
+    finally:
+        if ctx.alongside is not None:
+            ctx.alongside.close()
+
+
+def _drain(ctx, stage, chunk: int, window, opts: OptimalOptions, stats):
+    """``stage``'s samples in chunks of ``chunk``; where the profile gives up (``_Fallback``)
+    VPOp's plan, or after samples are out, the rescue (see ``_iter``)."""
+    path, machine, settings, dt = ctx.path, ctx.machine, ctx.settings, ctx.dt
+    targeted = _targeted(opts, dt)
     produced = 0
     tail_s = tail_q = None  # the last three samples out (a rescue brakes from them)
     try:
@@ -244,7 +257,8 @@ def _iter(path, joint_map, machine, dt_s, settings, stats, window):
             return
         ctx.stats["fallback"] = ctx.fallback = str(why)
         passes = _refine_passes(opts, dt, Route.VPOP)
-        stage = _refine_stages(ctx, _vpop_stage(ctx, window), passes, targeted, _end_window(opts, dt, Route.VPOP))
+        vpop = ctx.alongside.whole() if ctx.alongside is not None else _vpop_stage(ctx, window)
+        stage = _refine_stages(ctx, vpop, passes, targeted, _end_window(opts, dt, Route.VPOP))
         for s, q in _rechunk(stage, chunk):
             produced += s.shape[0]
             yield s, q

@@ -35,7 +35,7 @@ import numpy as np
 from .. import _feed_kernels as K
 from ..prefetch import Prefetch
 from ..tuning import OptimalTuning
-from .context import _Fallback, _probe_progress
+from .context import _Fallback
 from .route import Route
 
 #: Gauss–Legendre points per node interval of the time integral (the quadrature's order:
@@ -199,8 +199,7 @@ class _Nodes:
 def _sampled(ctx, ahead: bool = False):
     """Yields (s, q) blocks of final samples (see module docstring).
     ``ahead``: the profile's windows are solved by a thread of their own, ahead of the
-    sampling, and a whole path's VPOp probe (``_probe_progress``) is made meanwhile (the
-    samples do not depend on it)."""
+    sampling (the samples do not depend on it)."""
     from .profile import FeedProfileBuilder
 
     T = ctx.tuning
@@ -210,10 +209,6 @@ def _sampled(ctx, ahead: bool = False):
         return
     pieces = Prefetch(builder.windows(), ahead=T.ahead_pieces, name="cnc-interp-feed")
     try:
-        if ctx.whole and ctx.duration_s >= T.probe_min_s:
-            # a plan this long at least is probed at its end (``select._better_of``): VPOp's
-            # first samples while the thread solves the first windows, not after
-            _probe_progress(ctx)
         yield from _sampled_from(ctx, builder, iter(pieces))
     finally:
         pieces.close()  # the sampling may stop before the last piece (VPOp finishes)

@@ -5,23 +5,61 @@ A profile-routed path whose rough duration is at most ``tuning.compare_samples``
 ``_better_of`` keeps the shortest of:
 
 * the profile's plan (refined);
-* VPOp's own plan, made only where it may win: VPOp took over between
-  ``tuning.compare_after`` and ``tuning.compare_before`` of the samples, the profile
-  needed ``tuning.compare_dips`` dips or more, or VPOp's first ``tuning.probe_s`` (the
-  probe) reach their arc length ``tuning.probe_ahead`` sooner than the profile's on a
-  plan of at least ``tuning.probe_min_s``. With ``tuning.probe_early`` the probe is
-  decided as soon as the profile's plan passes it, and when VPOp is ahead its plan is
-  kept without planning the profile's rest.
+* VPOp's own plan (refined by the same passes where the refinement is not targeted),
+  made for every such path: the profile's plan is kept only where it is not longer, so
+  the optimal planner never plans such a path longer than VPOp does.
+
+On a plan of at least ``tuning.probe_min_s`` VPOp's first ``tuning.probe_s`` (the probe)
+are compared as soon as the profile's plan passes their arc length
+(``tuning.probe_early``): where VPOp reaches it ``tuning.probe_ahead`` sooner, VPOp's plan
+is kept without planning the profile's rest.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .context import _Fallback, _probe_progress
+from ..prefetch import Prefetch
+from .context import _NOT_PROBED, _Fallback
 from .refine import _refined
 from .route import Route
 from .sampling import _vpop_stage
+
+#: VPOp's blocks a path's comparison thread may hold ahead of the selection (it hands
+#: out one block per checkpoint: a path planned whole has a few)
+_ALONGSIDE_BLOCKS = 64
+
+
+class VpopAlongside:
+    """VPOp's whole plan of a path planned whole, made by a thread of its own while the
+    profile plans the path (the samples do not depend on the thread): the selection,
+    the probe and the fallback read it. ``close()`` stops the thread."""
+
+    def __init__(self, ctx):
+        ctx.prepared()  # built here, once, not by two threads
+        self._feed = Prefetch(_vpop_stage(ctx, None), ahead=_ALONGSIDE_BLOCKS, name="cnc-interp-vpop")
+        self._it = iter(self._feed)
+        self.blocks: list = []
+        self.samples = 0
+        self._done = False
+
+    def upto(self, n: int) -> list:
+        """VPOp's (s, q) blocks until they hold at least ``n`` samples (or all)."""
+        while not self._done and self.samples < n:
+            block = next(self._it, None)
+            if block is None:
+                self._done = True
+                break
+            self.blocks.append(block)
+            self.samples += block[0].shape[0]
+        return self.blocks
+
+    def whole(self) -> list:
+        """VPOp's whole plan: (s, q) blocks."""
+        return self.upto(np.iinfo(np.int64).max)
+
+    def close(self) -> None:
+        self._feed.close()
 
 
 def _samples(blocks) -> int:
@@ -48,33 +86,24 @@ def _better_of(ctx, stage, passes, targeted):
         raise failed  # the profile did not plan the path: VPOp does (the caller's fallback)
     s = np.concatenate([b[0] for b in blocks])
     q = np.concatenate([b[1] for b in blocks])
-    if ctx.fallback is None and not _vpop_may_win(ctx, s.shape[0]) and not _vpop_ahead(ctx, s):
-        # the profile ran to the end (VPOp at most finished its last stop), or far enough
-        # before VPOp took over: it is kept without running VPOp (over the corpus VPOp
-        # won on such paths by 351 periods in all against the profile's 22k; the runs
-        # cost as much as 4.6 s of planning). Also where the reference had to be lowered
-        # by a few dips (tuning.compare_dips): on the sweep (axis_mm.ini) VPOp won there by
-        # 51 periods in all (LHchips4) for ~7 % of stellabee1's CPU
-        ctx.stats["kept"] = Route.PROFILE
-        yield s, q
-        return
-    alt = list(_vpop_plan(ctx, passes, targeted))
-    sv = np.concatenate([b[0] for b in alt])
-    if sv.shape[0] < s.shape[0]:
+    # VPOp's own plan of every path planned whole: a profile plan longer than it is never
+    # kept (compiled, VPOp's plan costs a fraction of the profile's)
+    alt = _vpop_plan(ctx, passes, targeted)
+    if _samples(alt) < s.shape[0]:
         ctx.stats["kept"] = Route.VPOP
-        yield sv, np.concatenate([b[1] for b in alt])
+        yield np.concatenate([b[0] for b in alt]), np.concatenate([b[1] for b in alt])
     else:
         ctx.stats["kept"] = Route.PROFILE
         yield s, q
 
 
-def _vpop_plan(ctx, passes, targeted):
-    """VPOp's whole plan of the path to compare with the profile's: (s, q) blocks, refined
-    by ``passes`` where the refinement is not targeted."""
-    alt = _vpop_stage(ctx, None)
+def _vpop_plan(ctx, passes, targeted) -> list:
+    """VPOp's whole plan of the path (``ctx.alongside``): (s, q) blocks, refined by
+    ``passes`` where the refinement is not targeted."""
+    alt = ctx.alongside.whole()
     for _ in range(passes if not targeted else 0):
         alt = _refined(ctx, alt, targeted)
-    return alt
+    return list(alt)
 
 
 def _profile_unless_vpop_ahead(ctx, stage):
@@ -119,20 +148,17 @@ def _vpop_ahead(ctx, s) -> bool:
     return ahead
 
 
-def _vpop_may_win(ctx, n_samples: int) -> bool:
-    """Is VPOp's own plan worth making for comparison with the profile's plan of
-    ``n_samples``: did VPOp take it over early (``_handed_over_early``), after
-    tuning.compare_after and before tuning.compare_before of its samples, or did the profile
-    need tuning.compare_dips dips?"""
-    T = ctx.tuning
-    if ctx.sampling.retries >= T.compare_dips:
-        return True
-    ho = ctx.sampling.handover
-    return _handed_over_early(ctx, n_samples) and T.compare_after * n_samples <= ho < T.compare_before * n_samples
-
-
-def _handed_over_early(ctx, n_samples: int) -> bool:
-    """Did VPOp take over the profile's plan of ``n_samples`` before its last
-    tuning.compare_tail_s (more than finishing the last stop)?"""
-    ho = ctx.sampling.handover
-    return 0 <= ho < n_samples - int(ctx.tuning.compare_tail_s / ctx.dt)
+def _probe_progress(ctx):
+    """VPOp's first tuning.probe_s of the path (``ctx.alongside``): (how many samples, the
+    arc length of the last); None where VPOp fails. Read once per path (``ctx.probe``)."""
+    if ctx.probe is not _NOT_PROBED:
+        return ctx.probe
+    n_probe = int(ctx.tuning.probe_s / ctx.dt)
+    blocks = ctx.alongside.upto(n_probe)
+    if not blocks or ctx.stats.get("vpop_failed"):
+        ctx.probe = None
+    else:
+        s = np.concatenate([b[0] for b in blocks])
+        got = min(n_probe, s.shape[0])
+        ctx.probe = (got, float(s[got - 1]))
+    return ctx.probe
