@@ -7,7 +7,8 @@ ones to VPOp's compiled batch (their end window refined, ``_end_window``).
 
 Per path: the route (``route``); the sampled plan of the profile (``sampling``) or
 VPOp's; ``_refine_passes`` passes of window refinement (``refine``) by the effort and the
-period; for a path planned whole, the selection (``select``). Long profile-routed paths
+period; for a path planned whole, the selection (``select``) against VPOp's plan of it,
+made alongside on a thread of its own. Long profile-routed paths
 run a stage on a thread of its own (``prefetch.Prefetch``; the samples do not depend
 on it): the profile and its sampling ahead of the refinement from ``tuning.ahead_s`` of
 static duration, or, unrefined, the LP windows ahead of the sampling from

@@ -6,8 +6,9 @@ A profile-routed path whose rough duration is at most ``tuning.compare_samples``
 
 * the profile's plan (refined);
 * VPOp's own plan (refined by the same passes where the refinement is not targeted),
-  made for every such path: the profile's plan is kept only where it is not longer, so
-  the optimal planner never plans such a path longer than VPOp does.
+  made for every such path by a thread of its own while the profile plans it
+  (``VpopAlongside``): the profile's plan is kept only where it is not longer, so the
+  optimal planner never plans such a path longer than VPOp does.
 
 On a plan of at least ``tuning.probe_min_s`` VPOp's first ``tuning.probe_s`` (the probe)
 are compared as soon as the profile's plan passes their arc length
