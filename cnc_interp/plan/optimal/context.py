@@ -92,6 +92,8 @@ class _Path(_RouteInputs):
         self.probe = _NOT_PROBED
         #: VPOp's plan of a path planned whole, made alongside (``select.VpopAlongside``)
         self.alongside = None
+        #: VPOp could not plan this path (``sampling._vpop_stage`` planned it otherwise)
+        self.vpop_failed = False
         self._refine = None
         #: the whole path is held before any sample leaves (``select._better_of``)
         self.whole = False

@@ -223,17 +223,16 @@ def _iter(path, joint_map, machine, dt_s, settings, stats, window):
         ctx.alongside = VpopAlongside(ctx)  # VPOp's plan to compare, on a thread of its own
         stage = _better_of(ctx, stage, passes, targeted)
     try:
-        yield from _drain(ctx, stage, chunk, window, opts, stats)
+        yield from _drain(ctx, stage, chunk, window, opts, targeted, stats)
     finally:
         if ctx.alongside is not None:
             ctx.alongside.close()
 
 
-def _drain(ctx, stage, chunk: int, window, opts: OptimalOptions, stats):
+def _drain(ctx, stage, chunk: int, window, opts: OptimalOptions, targeted: bool, stats):
     """``stage``'s samples in chunks of ``chunk``; where the profile gives up (``_Fallback``)
     VPOp's plan, or after samples are out, the rescue (see ``_iter``)."""
     path, machine, settings, dt = ctx.path, ctx.machine, ctx.settings, ctx.dt
-    targeted = _targeted(opts, dt)
     produced = 0
     tail_s = tail_q = None  # the last three samples out (a rescue brakes from them)
     try:

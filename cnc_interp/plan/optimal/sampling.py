@@ -393,7 +393,7 @@ def _vpop_stage(ctx, window):
             raise
     # VPOp got stuck (a Vectric file's A+Z moves): the profile if this path did not come
     # from it, else the safe S-curve, which cannot fail
-    ctx.stats["vpop_failed"] = True
+    ctx.vpop_failed = ctx.stats["vpop_failed"] = True
     if ctx.planned_route == Route.VPOP and ctx.fallback is None:
         ctx.stats["route"] = ctx.planned_route = Route.PROFILE
         try:

@@ -156,7 +156,7 @@ def _probe_progress(ctx):
         return ctx.probe
     n_probe = int(ctx.tuning.probe_s / ctx.dt)
     blocks = ctx.alongside.upto(n_probe)
-    if not blocks or ctx.stats.get("vpop_failed"):
+    if not blocks or ctx.vpop_failed:
         ctx.probe = None
     else:
         s = np.concatenate([b[0] for b in blocks])
