@@ -155,12 +155,17 @@ def test_stops_remain_under_g61_and_at_near_reversals():
 
 
 def test_plan_blends_respects_room_and_crowding():
-    # two 90° corners 0.2 mm apart at a 0.05 mm tolerance: the blend the tolerance allows
-    # would need far more room than the 0.1 mm the short move leaves: stops
-    nodes = np.array([[0, 0], [10, 0], [10, 0.2], [0, 0.2]], float)
+    # two 90° corners 0.02 mm apart at a 0.05 mm tolerance: the blend the tolerance allows
+    # (about 45× the tolerance each side) would need over 100× the 0.01 mm the short move
+    # leaves: stops; 0.2 mm apart (about 20× the room) it is squeezed into the room
     cand = np.array([False, True, True, False])
-    ok, dist, _ = plan_blends(nodes, np.ones(2, bool), np.full(4, 0.05), cand)
-    assert not ok.any()
+    for gap, blended in ((0.02, False), (0.2, True)):
+        nodes = np.array([[0, 0], [10, 0], [10, gap], [0, gap]], float)
+        ok, dist, _ = plan_blends(nodes, np.ones(2, bool), np.full(4, 0.05), cand)
+        assert ok[1] == ok[2] == blended
+        if blended:  # within the room: half the short move on each side
+            assert np.all(dist[1:3] <= 0.5 * gap + 1e-15)
+    nodes = np.array([[0, 0], [10, 0], [10, 0.2], [0, 0.2]], float)
     ok, dist, _ = plan_blends(nodes, np.ones(2, bool), np.full(4, 0.001), cand)
     assert ok[1] and ok[2] and np.all(dist[1:3] <= 0.1 + 1e-15)
 

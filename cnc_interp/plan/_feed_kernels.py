@@ -2,6 +2,8 @@
 
 * ``table_derivs``: q_s, q_ss, q_sss of a joint table (``vpop.JointTable``: knots ``S``,
   power coefficients ``C`` (m, 6, n) in s - S[p]) at sorted arc lengths;
+* ``stencil_derivs``: q_ss and q_sss as verify's second and third differences see them
+  near the segment joins;
 * ``cubic_basis``: the four non-zero cubic B-spline basis functions and their first
   and second derivatives at sorted points (NURBS book, A2.3);
 * ``lp_rows``: the LP rows at the collocation points for one linearisation point;
@@ -92,6 +94,89 @@ def table_derivs(S, C, x, q1, q2, q3):
             q1[k, a] = c1 + t * (2.0 * c2 + t * (3.0 * c3 + t * (4.0 * c4 + t * 5.0 * c5)))
             q2[k, a] = 2.0 * c2 + t * (6.0 * c3 + t * (12.0 * c4 + t * 20.0 * c5))
             q3[k, a] = 6.0 * c3 + t * (24.0 * c4 + t * 60.0 * c5)
+
+
+#: below this spacing (mm) of verify's stencils, ``stencil_derivs`` keeps the pointwise
+#: q_ss and q_sss: a difference over it would be mostly round-off, and the speed whose
+#: powers scale them is ~0 there
+_STENCIL_MIN_MM = 1e-5
+#: the stencils' centres around each point, in half spacings either side (-1, -1/2, 0,
+#: 1/2, 1 spacings), the largest taken: an average peaks between collocation points. At
+#: the point alone the sampler got stuck 13× as often (stellabee1's first 10k lines at
+#: crowding 32: 3865 dips against 295)
+_STENCIL_OFFSETS = 2
+#: half-spacing nodes either side of a point that the centres' stencils reach (order 3
+#: at offset 1: 1 + 3/2 spacings = 5 half-spacings)
+_STENCIL_NODES = 5
+
+
+@njit(cache=True, nogil=True)
+def stencil_derivs(S, C, x, delta, joins, q2, q3, lim, q2_out, q3_out):
+    """q_ss and q_sss as ``verify``'s second and third differences see them at path spacing
+    delta (K,) (mm): at each sorted x (K,), the differences of the table's positions over
+    delta² and delta³ -- q_ss and q_sss averaged with the linear and quadratic B-splines
+    of widths 2 and 3 delta -- centred at x + o delta for o in -1, -1/2, 0, 1/2, 1, each
+    order the centre of its largest share of the limit (|q| / amax or / jmax over the
+    moving axes of ``lim``). Pointwise (q2, q3 (K, n)) where delta < _STENCIL_MIN_MM or
+    no segment join (sorted ``joins``) is within the stencils' reach: the geometry
+    there is one quintic, whose averages differ from the pointwise values by O(delta²) of
+    its fourth and fifth derivatives. Pieces are extended past the table's ends."""
+    m = S.shape[0] - 1
+    n = C.shape[2]
+    nn = 2 * _STENCIL_NODES + 1
+    pos = np.empty((nn, n))
+    v2 = np.empty(n)
+    v3 = np.empty(n)
+    p = -1
+    for k in range(x.shape[0]):
+        d = delta[k]
+        reach = (_STENCIL_NODES + 1) * 0.5 * d
+        f = np.searchsorted(joins, x[k] - reach)
+        if not d >= _STENCIL_MIN_MM or f >= joins.shape[0] or joins[f] > x[k] + reach:
+            for a in range(n):
+                q2_out[k, a] = q2[k, a]
+                q3_out[k, a] = q3[k, a]
+            continue
+        # the nodes x + (j - _STENCIL_NODES) d / 2, positions less the centre piece's start
+        # position (round-off of nearby values); pieces found by walking from the last
+        # (the first by bisection: far along a long table a walk from its start is slow)
+        if p < 0:
+            p = min(max(np.searchsorted(S, x[k], side="right") - 1, 0), m - 1)
+        while p > 0 and x[k] < S[p]:
+            p -= 1
+        while p < m - 1 and x[k] >= S[p + 1]:
+            p += 1
+        pc = p
+        q = pc
+        for j in range(nn):
+            xj = x[k] + (j - _STENCIL_NODES) * 0.5 * d
+            while q > 0 and xj < S[q]:
+                q -= 1
+            while q < m - 1 and xj >= S[q + 1]:
+                q += 1
+            t = xj - S[q]
+            for a in range(n):
+                pos[j, a] = (C[q, 0, a] - C[pc, 0, a]) + t * (
+                    C[q, 1, a] + t * (C[q, 2, a] + t * (C[q, 3, a] + t * (C[q, 4, a] + t * C[q, 5, a])))
+                )
+        best2 = -1.0
+        best3 = -1.0
+        for o in range(-_STENCIL_OFFSETS, _STENCIL_OFFSETS + 1):
+            c = _STENCIL_NODES + o  # the centre's node
+            g2 = 0.0
+            g3 = 0.0
+            for a in range(n):
+                v2[a] = (pos[c + 2, a] - 2.0 * pos[c, a] + pos[c - 2, a]) / (d * d)
+                v3[a] = (pos[c + 3, a] - 3.0 * pos[c + 1, a] + 3.0 * pos[c - 1, a] - pos[c - 3, a]) / (d * d * d)
+                if lim.moving[a]:
+                    g2 = max(g2, abs(v2[a]) / lim.amax[a])
+                    g3 = max(g3, abs(v3[a]) / lim.jmax[a])
+            if g2 > best2:
+                best2 = g2
+                q2_out[k] = v2
+            if g3 > best3:
+                best3 = g3
+                q3_out[k] = v3
 
 
 @njit(cache=True, nogil=True)

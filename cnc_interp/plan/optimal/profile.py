@@ -30,6 +30,15 @@ Collocation: ``tuning.collocation`` points per knot interval, plus the path's se
 joins, where q_sss jumps (paths are G2): there both one-sided values are imposed; plus
 the places between them where q_sss peaks (``jerk_peak_points``, ``tuning.peak_share``).
 
+Stencils: ``verify`` bounds second and third backward differences of the samples, which
+are q_ss and q_sss averaged over two and three periods of path (B-spline kernels), not
+their values at a point. Near a join, where q_sss jumps and a corner blend's q_sss peaks
+over less than a period of path, the rows take q_ss and q_sss as those differences see
+them at the linearisation's speed, the largest within a period either side
+(``_feed_kernels.stencil_derivs``); elsewhere the pointwise values, which differ from them
+by the square of a period's path. A plan that crowds through a dense run of blends is
+then not held to a jerk no sample sees.
+
 Sampled start and stop: a sampled plan may start with an acceleration of up to J dt
 (its first third difference is the jerk limit), so w'(0) <= 2 J_t dt and
 w'(L) >= -2 J_t dt with J_t the tangent's path jerk limit.
@@ -56,14 +65,17 @@ _HAT_BISECTIONS = 30
 class _Window(NamedTuple):
     """A window's whole solution, as the next window sees it: the B-spline of w
     (``knots`` (nc + 4,), ``coef`` (nc,)), where it starts braking for its terminal rest
-    and where that rest is (``s_brake``, ``s_end``, mm), and how far below the estimate
-    it ran (``ratio``: ``FeedProfileBuilder._ratio``)."""
+    and where that rest is (``s_brake``, ``s_end``, mm), how far below the estimate
+    it ran (``ratio``: ``FeedProfileBuilder._ratio``), and its collocation points ``x``
+    (K,) with the path spacing ``delta`` (K,, mm) its rows' stencils took there."""
 
     knots: np.ndarray
     coef: np.ndarray
     s_brake: float
     s_end: float
     ratio: float
+    x: np.ndarray
+    delta: np.ndarray
 
 
 class ProfileError(Exception):
@@ -345,7 +357,7 @@ class FeedProfileBuilder:
                 b1, at_end = nb, True
             else:
                 b1, at_end = b0 + self.window, False  # three breakpoints of look-ahead remain
-            coef, tk, it = self._solve(b0, b1, at_end, fixed, prev)
+            coef, tk, it, xs, delta = self._solve(b0, b1, at_end, fixed, prev)
             # coef / tk: coefficients b0 .. b1+2 and their knots t[b0 : b1+7]
             if at_end:
                 yield FeedPiece(tk, coef, self._br[b0], self.L, it, self.restarts, (self._ex, self._ew))
@@ -363,7 +375,8 @@ class FeedProfileBuilder:
                 (self._ex, self._ew),  # replaced, never changed in place: a snapshot
             )
             fixed = coef[commit : commit + 3].copy()
-            prev = _Window(tk, coef, self._br[max(b1 - self.brake, bc)], self._br[b1], self._ratio(tk, coef, b0, bc))
+            s_brake = self._br[max(b1 - self.brake, bc)]
+            prev = _Window(tk, coef, s_brake, self._br[b1], self._ratio(tk, coef, b0, bc), xs, delta)
             b0 = bc
             # forget the estimate's probes before the next window (bounded memory)
             i = max(int(np.searchsorted(self._ex, self._br[b0], side="right")) - 2, 0)
@@ -463,6 +476,19 @@ class FeedProfileBuilder:
         # the first LP's linearisation: the estimate, lowered to the previous window's
         # level (tuning.est_ratio_min)
         w_hat = np.maximum(w_est * (1.0 if prev is None else prev.ratio), 1e-9 * W0)
+        # q_ss and q_sss as verify's differences see them (``_feed_kernels.stencil_derivs``)
+        # at a spacing of one period of path at the linearisation's speed; where the
+        # previous window's rows held, at the spacing they took (its solution then meets
+        # the rows it met)
+        limits = K.AxisLimits(self.moving, self.amax, self.jmax)
+        q2_seen = np.empty_like(q2)
+        q3_seen = np.empty_like(q3)
+        held = np.zeros(npt, dtype=bool)
+        delta_held = np.zeros(npt)
+        if prev is not None:
+            held = x < prev.s_end
+            delta_held[held] = np.interp(x[held], prev.x, prev.delta)
+            K.stencil_derivs(self.S, self.C, x, delta_held, self.joins, q2, q3, limits, q2_seen, q3_seen)
         if prev is not None:
             # linearise at the previous window's solution where it is not braking for its
             # terminal rest: where fixed coefficients act its rows are then exactly those
@@ -474,7 +500,9 @@ class FeedProfileBuilder:
             # on to its rest: as near the estimate as keeps it a solution
             far = ~near & (x < prev.s_end)
             if far.any():
-                w_hat[far] = self._feasible_hat(prev, x[far], q1[far], q2[far], q3[far], w_hat[far], 1e-9 * W0)
+                w_hat[far] = self._feasible_hat(
+                    prev, x[far], q1[far], q2_seen[far], q3_seen[far], w_hat[far], 1e-9 * W0
+                )
         # fixed coefficients: the committed three (b0 > 0), w(0) = 0, w(L) = 0
         free = np.ones(nc, dtype=bool)
         cfix = np.zeros(nc)
@@ -511,9 +539,12 @@ class FeedProfileBuilder:
         prev_T = np.inf
         best = None
         iters = 0
+        kept_delta = np.zeros(npt)
         for ccp in range(ccp_max):
+            delta = np.where(held, delta_held, self.dt * np.sqrt(w_hat))
+            K.stencil_derivs(self.S, self.C, x, delta, self.joins, q2, q3, limits, q2_seen, q3_seen)
             r = K.lp_rows(
-                K.Collocation(first, B, q1, q2, q3),
+                K.Collocation(first, B, q1, q2_seen, q3_seen),
                 K.AxisLimits(self.moving, self.amax, self.jmax),
                 wmax,
                 w_hat,
@@ -536,10 +567,11 @@ class FeedProfileBuilder:
                 break  # keep the last solved iterate (feasible for the true limits)
             xv = xv_new
             best = coef.copy()
+            kept_delta = delta
             if abs(prev_T - T) <= self.tuning.ccp_tol * T:
                 break
             prev_T = T
-        return best, tk, iters
+        return best, tk, iters, x, kept_delta
 
     def _lp(self, rows, c, xv, free, screen: bool, max_iter: int | None = None):
         """Solve the LP of ``rows`` (``Rows``: ``_feed_kernels.lp_gather``'s) in the free
