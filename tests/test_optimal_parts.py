@@ -200,24 +200,21 @@ def test_cubic_basis_matches_scipy():
         assert_allclose(mine, sp(x, d), atol=1e-12 * (1 + np.abs(sp(x, d)).max()))
 
 
-def _stencil(S, C, x, delta, features, n_axes=1):
-    """``_feed_kernels.stencil_derivs`` at x with one spacing, on a table (S, C); limits
-    of one for every axis (the shares are the values)."""
+def _stencil(S, C, x, delta, joins, n_axes=1):
+    """``_feed_kernels.stencil_derivs`` at x with one spacing, on a table (S, C): the
+    pointwise q2, q3 and the stencils' ranges (q2_hi, q2_lo, q3_hi, q3_lo)."""
     x = np.asarray(x, dtype=float)
     q1 = np.empty((x.shape[0], n_axes))
     q2 = np.empty_like(q1)
     q3 = np.empty_like(q1)
     FK.table_derivs(S, C, x, q1, q2, q3)
-    out2 = np.empty_like(q2)
-    out3 = np.empty_like(q3)
-    lim = FK.AxisLimits(np.ones(n_axes, dtype=bool), np.ones(n_axes), np.ones(n_axes))
-    feats = np.asarray(features, dtype=float)
-    FK.stencil_derivs(S, C, x, np.full(x.shape[0], delta), feats, q2, q3, lim, out2, out3)
-    return q2, q3, out2, out3
+    out = [np.empty_like(q2) for _ in range(4)]
+    FK.stencil_derivs(S, C, x, np.full(x.shape[0], delta), np.asarray(joins, dtype=float), q2, q3, *out)
+    return (q2, q3, *out)
 
 
 def test_the_stencils_see_a_quintic_as_its_central_differences():
-    # one quintic piece, a feature in reach: the largest over the centres x + o d of the
+    # one quintic piece, a join in reach: the range over the centres x + o d of the
     # central differences, for a quintic q_ss + d²/12 q_ssss and q_sss + 15 d² c5
     rng = np.random.default_rng(3)
     c = rng.normal(size=6)
@@ -225,7 +222,7 @@ def test_the_stencils_see_a_quintic_as_its_central_differences():
     C = c.reshape(1, 6, 1).copy()
     x = np.array([4.5, 5.0, 5.8])
     d = 0.3
-    _, _, out2, out3 = _stencil(S, C, x, d, [5.0])
+    _, _, hi2, lo2, hi3, lo3 = _stencil(S, C, x, d, [5.0])
     for k, xk in enumerate(x):
         t = xk + np.array([-1.0, -0.5, 0.0, 0.5, 1.0]) * d
         q2 = 2 * c[2] + 6 * c[3] * t + 12 * c[4] * t**2 + 20 * c[5] * t**3
@@ -233,8 +230,8 @@ def test_the_stencils_see_a_quintic_as_its_central_differences():
         q3 = 6 * c[3] + 24 * c[4] * t + 60 * c[5] * t**2
         seen2 = q2 + d**2 / 12 * q4
         seen3 = q3 + 15 * d**2 * c[5]
-        assert_allclose(out2[k, 0], seen2[np.argmax(np.abs(seen2))], rtol=1e-9)
-        assert_allclose(out3[k, 0], seen3[np.argmax(np.abs(seen3))], rtol=1e-9)
+        assert_allclose([hi2[k, 0], lo2[k, 0]], [seen2.max(), seen2.min()], rtol=1e-9)
+        assert_allclose([hi3[k, 0], lo3[k, 0]], [seen3.max(), seen3.min()], rtol=1e-9)
 
 
 def test_away_from_joins_and_at_rest_the_stencils_are_the_pointwise_derivatives():
@@ -242,17 +239,17 @@ def test_away_from_joins_and_at_rest_the_stencils_are_the_pointwise_derivatives(
     S = np.array([0.0, 4.0, 10.0])
     C = rng.normal(size=(2, 6, 2))
     # the stencils reach 3 spacings (0.6 mm) from a point: 1, 2, 6 and 9 see no join
-    q2, q3, out2, out3 = _stencil(S, C, np.array([1.0, 2.0, 6.0, 9.0]), 0.2, [4.0], n_axes=2)
-    assert np.array_equal(out2, q2) and np.array_equal(out3, q3)
+    q2, q3, *seen = _stencil(S, C, np.array([1.0, 2.0, 6.0, 9.0]), 0.2, [4.0], n_axes=2)
+    assert all(np.array_equal(a, b) for a, b in zip(seen, (q2, q2, q3, q3)))
     # a spacing of a standstill
-    q2, q3, out2, out3 = _stencil(S, C, np.array([4.0]), 1e-7, [4.0], n_axes=2)
-    assert np.array_equal(out2, q2) and np.array_equal(out3, q3)
+    q2, q3, *seen = _stencil(S, C, np.array([4.0]), 1e-7, [4.0], n_axes=2)
+    assert all(np.array_equal(a, b) for a, b in zip(seen, (q2, q2, q3, q3)))
 
 
 def test_a_jump_of_q_sss_is_seen_as_the_third_differences_b_spline_average():
     # two cubic pieces joined C2 with q_sss = a then b: a third difference centred u
     # spacings past the join weighs b by the share of the quadratic B-spline past it; the
-    # stencils take the largest over the centres -1, -1/2, 0, 1/2, 1 spacings away
+    # stencils take the range over the centres -1, -1/2, 0, 1/2, 1 spacings away
     a, b, d = 6.0, -30.0, 0.1
     S = np.array([0.0, 1.0, 2.0])
     left = np.array([0.0, 1.0, 0.5, a / 6, 0.0, 0.0])
@@ -268,11 +265,11 @@ def test_a_jump_of_q_sss_is_seen_as_the_third_differences_b_spline_average():
         return np.where(z < 1, z**3 / 6, np.where(z < 2, mid, 1 - (3 - z) ** 3 / 6))
 
     x = np.array([0.9, 0.95, 1.0, 1.05, 1.1])
-    _, _, _, out3 = _stencil(S, C, x, d, [1.0])
+    *_, hi3, lo3 = _stencil(S, C, x, d, [1.0])
     for k, xk in enumerate(x):
         u = (xk - 1.0) / d + np.array([-1.0, -0.5, 0.0, 0.5, 1.0])
         seen = a + (b - a) * past(u)
-        assert_allclose(out3[k, 0], seen[np.argmax(np.abs(seen))], rtol=1e-9, atol=1e-9)
+        assert_allclose([hi3[k, 0], lo3[k, 0]], [seen.max(), seen.min()], rtol=1e-9, atol=1e-9)
     # centred on the join, the average is half of each side; a spacing past it, 47/48 of b
     assert_allclose(a + (b - a) * past(np.array(0.0)), (a + b) / 2)
     assert_allclose(past(np.array(1.0)), 1 - 1 / 48)
@@ -509,7 +506,7 @@ def test_a_windows_first_lp_is_linearised_where_the_previous_solution_meets_its_
         n, K = int(b.moving.sum()), x.shape[0]
         m = K * (1 + 4 * n)
         rows = FK.Rows(np.empty(m, dtype=np.int64), np.empty((m, 4)), np.empty(m))
-        pts = FK.Collocation(first, B, q1, q2, q3)
+        pts = FK.Collocation(first, B, q1, q2, q3, q2, q3)
         lim = FK.AxisLimits(b.moving, b.amax, b.jmax)
         r = FK.lp_rows(pts, lim, np.full(K, np.inf), w_hat, np.ones(K, dtype=np.bool_), np.ones(nc), rows)
         assert r == m
