@@ -200,81 +200,6 @@ def test_cubic_basis_matches_scipy():
         assert_allclose(mine, sp(x, d), atol=1e-12 * (1 + np.abs(sp(x, d)).max()))
 
 
-def _stencil(S, C, x, delta, joins, n_axes=1):
-    """``_feed_kernels.stencil_derivs`` at x with one spacing, on a table (S, C): the
-    pointwise q2, q3 and the stencils' ranges (q2_hi, q2_lo, q3_hi, q3_lo)."""
-    x = np.asarray(x, dtype=float)
-    q1 = np.empty((x.shape[0], n_axes))
-    q2 = np.empty_like(q1)
-    q3 = np.empty_like(q1)
-    FK.table_derivs(S, C, x, q1, q2, q3)
-    out = [np.empty_like(q2) for _ in range(4)]
-    FK.stencil_derivs(S, C, x, np.full(x.shape[0], delta), np.asarray(joins, dtype=float), q2, q3, *out)
-    return (q2, q3, *out)
-
-
-def test_the_stencils_see_a_quintic_as_its_central_differences():
-    # one quintic piece, a join in reach: the range over the centres x + o d of the
-    # central differences, for a quintic q_ss + d²/12 q_ssss and q_sss + 15 d² c5
-    rng = np.random.default_rng(3)
-    c = rng.normal(size=6)
-    S = np.array([0.0, 10.0])
-    C = c.reshape(1, 6, 1).copy()
-    x = np.array([4.5, 5.0, 5.8])
-    d = 0.3
-    _, _, hi2, lo2, hi3, lo3 = _stencil(S, C, x, d, [5.0])
-    for k, xk in enumerate(x):
-        t = xk + np.array([-1.0, -0.5, 0.0, 0.5, 1.0]) * d
-        q2 = 2 * c[2] + 6 * c[3] * t + 12 * c[4] * t**2 + 20 * c[5] * t**3
-        q4 = 24 * c[4] + 120 * c[5] * t
-        q3 = 6 * c[3] + 24 * c[4] * t + 60 * c[5] * t**2
-        seen2 = q2 + d**2 / 12 * q4
-        seen3 = q3 + 15 * d**2 * c[5]
-        assert_allclose([hi2[k, 0], lo2[k, 0]], [seen2.max(), seen2.min()], rtol=1e-9)
-        assert_allclose([hi3[k, 0], lo3[k, 0]], [seen3.max(), seen3.min()], rtol=1e-9)
-
-
-def test_away_from_joins_and_at_rest_the_stencils_are_the_pointwise_derivatives():
-    rng = np.random.default_rng(4)
-    S = np.array([0.0, 4.0, 10.0])
-    C = rng.normal(size=(2, 6, 2))
-    # the stencils reach 3 spacings (0.6 mm) from a point: 1, 2, 6 and 9 see no join
-    q2, q3, *seen = _stencil(S, C, np.array([1.0, 2.0, 6.0, 9.0]), 0.2, [4.0], n_axes=2)
-    assert all(np.array_equal(a, b) for a, b in zip(seen, (q2, q2, q3, q3)))
-    # a spacing of a standstill
-    q2, q3, *seen = _stencil(S, C, np.array([4.0]), 1e-7, [4.0], n_axes=2)
-    assert all(np.array_equal(a, b) for a, b in zip(seen, (q2, q2, q3, q3)))
-
-
-def test_a_jump_of_q_sss_is_seen_as_the_third_differences_b_spline_average():
-    # two cubic pieces joined C2 with q_sss = a then b: a third difference centred u
-    # spacings past the join weighs b by the share of the quadratic B-spline past it; the
-    # stencils take the range over the centres -1, -1/2, 0, 1/2, 1 spacings away
-    a, b, d = 6.0, -30.0, 0.1
-    S = np.array([0.0, 1.0, 2.0])
-    left = np.array([0.0, 1.0, 0.5, a / 6, 0.0, 0.0])
-    p1 = left[0] + left[1] + left[2] + left[3]
-    v1 = left[1] + 2 * left[2] + 3 * left[3]
-    k1 = 2 * left[2] + 6 * left[3]
-    right = np.array([p1, v1, k1 / 2, b / 6, 0.0, 0.0])
-    C = np.stack((left, right)).reshape(2, 6, 1)
-
-    def past(u):  # the share of the quadratic B-spline on [-3/2, 3/2] beyond -u
-        z = np.clip(u + 1.5, 0.0, 3.0)
-        mid = (-2 * z**3 + 9 * z**2 - 9 * z + 3) / 6
-        return np.where(z < 1, z**3 / 6, np.where(z < 2, mid, 1 - (3 - z) ** 3 / 6))
-
-    x = np.array([0.9, 0.95, 1.0, 1.05, 1.1])
-    *_, hi3, lo3 = _stencil(S, C, x, d, [1.0])
-    for k, xk in enumerate(x):
-        u = (xk - 1.0) / d + np.array([-1.0, -0.5, 0.0, 0.5, 1.0])
-        seen = a + (b - a) * past(u)
-        assert_allclose([hi3[k, 0], lo3[k, 0]], [seen.max(), seen.min()], rtol=1e-9, atol=1e-9)
-    # centred on the join, the average is half of each side; a spacing past it, 47/48 of b
-    assert_allclose(a + (b - a) * past(np.array(0.0)), (a + b) / 2)
-    assert_allclose(past(np.array(1.0)), 1 - 1 / 48)
-
-
 def _profile_time(path, machine, dt):
     from cnc_interp.plan.optimal.profile import FeedProfileBuilder, spline_values
     from cnc_interp.plan.vpop import JointTable
@@ -489,8 +414,8 @@ def test_a_windows_first_lp_is_linearised_where_the_previous_solution_meets_its_
     b = FeedProfileBuilder(JointTable(p, None), p, MILL, 0.001)
     b._breaks_upto(60)
     b1 = min(40, len(b._br) - 4)
-    coef, tk, _, xs, delta = b._solve(0, b1, False, np.zeros(0), None)
-    prev = _Window(tk, coef, b._br[b1 - 12], b._br[b1], 1.0, xs, delta)
+    coef, tk, _ = b._solve(0, b1, False, np.zeros(0), None)
+    prev = _Window(tk, coef, b._br[b1 - 12], b._br[b1], 1.0)
     x, q1, q2, q3 = b._collocation(b1 - 12, b1)
     x, q1, q2, q3 = x[:-1], q1[:-1], q2[:-1], q3[:-1]  # the rest itself has no jerk row
     target = b.estimate(x) * rng.uniform(0.5, 20.0, x.shape[0])
@@ -506,7 +431,7 @@ def test_a_windows_first_lp_is_linearised_where_the_previous_solution_meets_its_
         n, K = int(b.moving.sum()), x.shape[0]
         m = K * (1 + 4 * n)
         rows = FK.Rows(np.empty(m, dtype=np.int64), np.empty((m, 4)), np.empty(m))
-        pts = FK.Collocation(first, B, q1, q2, q3, q2, q3)
+        pts = FK.Collocation(first, B, q1, q2, q3)
         lim = FK.AxisLimits(b.moving, b.amax, b.jmax)
         r = FK.lp_rows(pts, lim, np.full(K, np.inf), w_hat, np.ones(K, dtype=np.bool_), np.ones(nc), rows)
         assert r == m

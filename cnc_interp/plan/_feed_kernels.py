@@ -2,8 +2,6 @@
 
 * ``table_derivs``: q_s, q_ss, q_sss of a joint table (``vpop.JointTable``: knots ``S``,
   power coefficients ``C`` (m, 6, n) in s - S[p]) at sorted arc lengths;
-* ``stencil_derivs``: q_ss and q_sss as verify's second and third differences see them
-  near the segment joins;
 * ``cubic_basis``: the four non-zero cubic B-spline basis functions and their first
   and second derivatives at sorted points (NURBS book, A2.3);
 * ``lp_rows``: the LP rows at the collocation points for one linearisation point;
@@ -44,10 +42,8 @@ from .status import OK
 
 #: the collocation points of ``lp_rows`` (K of them): each point's first basis index
 #: ``first`` (K,) int64, the basis B (K, 3, 4) of ``cubic_basis``, and the joint
-#: derivatives q_s, q_ss, q_sss (K, n) of ``table_derivs``; near a join q2/q3 are the
-#: largest and q2_lo/q3_lo the least of ``stencil_derivs`` (the rows' + and - sides),
-#: elsewhere q2_lo, q3_lo are q2, q3
-Collocation = namedtuple("Collocation", "first B q1 q2 q3 q2_lo q3_lo")
+#: derivatives q_s, q_ss, q_sss (K, n) of ``table_derivs``
+Collocation = namedtuple("Collocation", "first B q1 q2 q3")
 #: the LP's per-axis data (n,): which axes move, their acceleration (mm/s²) and jerk
 #: (mm/s³) limits
 AxisLimits = namedtuple("AxisLimits", "moving amax jmax")
@@ -96,81 +92,6 @@ def table_derivs(S, C, x, q1, q2, q3):
             q1[k, a] = c1 + t * (2.0 * c2 + t * (3.0 * c3 + t * (4.0 * c4 + t * 5.0 * c5)))
             q2[k, a] = 2.0 * c2 + t * (6.0 * c3 + t * (12.0 * c4 + t * 20.0 * c5))
             q3[k, a] = 6.0 * c3 + t * (24.0 * c4 + t * 60.0 * c5)
-
-
-#: below this spacing (mm) of verify's stencils, ``stencil_derivs`` keeps the pointwise
-#: q_ss and q_sss: a difference over it would be mostly round-off, and the speed whose
-#: powers scale them is ~0 there
-_STENCIL_MIN_MM = 1e-5
-#: the stencils' centres around each point, in half spacings either side (-1, -1/2, 0,
-#: 1/2, 1 spacings), their range taken: an average peaks between collocation points. At
-#: the point alone the sampler got stuck 13× as often (stellabee1's first 10k lines at
-#: crowding 32: 3865 dips against 295)
-_STENCIL_OFFSETS = 2
-#: half-spacing nodes either side of a point that the centres' stencils reach (order 3
-#: at offset 1: 1 + 3/2 spacings = 5 half-spacings)
-_STENCIL_NODES = 5
-
-
-@njit(cache=True, nogil=True)
-def stencil_derivs(S, C, x, delta, joins, q2, q3, q2_hi, q2_lo, q3_hi, q3_lo):
-    """q_ss and q_sss as ``verify``'s second and third differences see them at path spacing
-    delta (K,) (mm): at each sorted x (K,), the differences of the table's positions over
-    delta² and delta³ -- q_ss and q_sss averaged with the linear and quadratic B-splines
-    of widths 2 and 3 delta -- centred at x + o delta for o in -1, -1/2, 0, 1/2, 1: per
-    axis the largest (q2_hi, q3_hi) and the least (q2_lo, q3_lo), each (K, n), the range
-    the rows' two sides bound. Pointwise (q2, q3 (K, n)) where delta < _STENCIL_MIN_MM or
-    no segment join (sorted ``joins``) is within the stencils' reach: the geometry
-    there is one quintic, whose averages differ from the pointwise values by O(delta²) of
-    its fourth and fifth derivatives. Pieces are extended past the table's ends."""
-    m = S.shape[0] - 1
-    n = C.shape[2]
-    nn = 2 * _STENCIL_NODES + 1
-    pos = np.empty((nn, n))
-    p = -1
-    for k in range(x.shape[0]):
-        d = delta[k]
-        reach = (_STENCIL_NODES + 1) * 0.5 * d
-        f = np.searchsorted(joins, x[k] - reach)
-        if not d >= _STENCIL_MIN_MM or f >= joins.shape[0] or joins[f] > x[k] + reach:
-            for a in range(n):
-                q2_hi[k, a] = q2_lo[k, a] = q2[k, a]
-                q3_hi[k, a] = q3_lo[k, a] = q3[k, a]
-            continue
-        # the nodes x + (j - _STENCIL_NODES) d / 2, positions less the centre piece's start
-        # position (round-off of nearby values); pieces found by walking from the last
-        # (the first by bisection: far along a long table a walk from its start is slow)
-        if p < 0:
-            p = min(max(np.searchsorted(S, x[k], side="right") - 1, 0), m - 1)
-        while p > 0 and x[k] < S[p]:
-            p -= 1
-        while p < m - 1 and x[k] >= S[p + 1]:
-            p += 1
-        pc = p
-        q = pc
-        for j in range(nn):
-            xj = x[k] + (j - _STENCIL_NODES) * 0.5 * d
-            while q > 0 and xj < S[q]:
-                q -= 1
-            while q < m - 1 and xj >= S[q + 1]:
-                q += 1
-            t = xj - S[q]
-            for a in range(n):
-                pos[j, a] = (C[q, 0, a] - C[pc, 0, a]) + t * (
-                    C[q, 1, a] + t * (C[q, 2, a] + t * (C[q, 3, a] + t * (C[q, 4, a] + t * C[q, 5, a])))
-                )
-        for a in range(n):
-            q2_hi[k, a] = q3_hi[k, a] = -np.inf
-            q2_lo[k, a] = q3_lo[k, a] = np.inf
-        for o in range(-_STENCIL_OFFSETS, _STENCIL_OFFSETS + 1):
-            c = _STENCIL_NODES + o  # the centre's node
-            for a in range(n):
-                v2 = (pos[c + 2, a] - 2.0 * pos[c, a] + pos[c - 2, a]) / (d * d)
-                v3 = (pos[c + 3, a] - 3.0 * pos[c + 1, a] + 3.0 * pos[c - 1, a] - pos[c - 3, a]) / (d * d * d)
-                q2_hi[k, a] = max(q2_hi[k, a], v2)
-                q2_lo[k, a] = min(q2_lo[k, a], v2)
-                q3_hi[k, a] = max(q3_hi[k, a], v3)
-                q3_lo[k, a] = min(q3_lo[k, a], v3)
 
 
 @njit(cache=True, nogil=True)
@@ -242,8 +163,6 @@ def lp_rows(pts, lim, wmax, w_hat, inner, scale, rows):
     q1 = pts.q1
     q2 = pts.q2
     q3 = pts.q3
-    q2_lo = pts.q2_lo
-    q3_lo = pts.q3_lo
     moving = lim.moving
     amax = lim.amax
     jmax = lim.jmax
@@ -266,11 +185,10 @@ def lp_rows(pts, lim, wmax, w_hat, inner, scale, rows):
         for i in range(n):
             if not moving[i]:
                 continue
-            # w >= 0: the + row binds at the largest q_ss, the - row at the least
             for j in range(4):
-                sa = scale[f + j] / amax[i]
-                row_coef[r, j] = sa * (q2[k, i] * B[k, 0, j] + 0.5 * q1[k, i] * B[k, 1, j])
-                row_coef[r + 1, j] = -(sa * (q2_lo[k, i] * B[k, 0, j] + 0.5 * q1[k, i] * B[k, 1, j]))
+                v = scale[f + j] / amax[i] * (q2[k, i] * B[k, 0, j] + 0.5 * q1[k, i] * B[k, 1, j])
+                row_coef[r, j] = v
+                row_coef[r + 1, j] = -v
             row_first[r] = f
             row_first[r + 1] = f
             row_b[r] = 1.0
@@ -279,15 +197,12 @@ def lp_rows(pts, lim, wmax, w_hat, inner, scale, rows):
             if inner[k]:
                 gj = np.sqrt(wh) / (1.5 * jmax[i])
                 gt = 1.0 / (3.0 * wh)
-                # the same for q_sss; the q_ss term takes the middle of its range
-                q2m = 0.5 * (q2[k, i] + q2_lo[k, i])
                 for j in range(4):
                     sj = scale[f + j]
-                    e = sj * gj * (q3[k, i] * B[k, 0, j] + 1.5 * q2m * B[k, 1, j] + 0.5 * q1[k, i] * B[k, 2, j])
-                    e_lo = sj * gj * (q3_lo[k, i] * B[k, 0, j] + 1.5 * q2m * B[k, 1, j] + 0.5 * q1[k, i] * B[k, 2, j])
+                    e = sj * gj * (q3[k, i] * B[k, 0, j] + 1.5 * q2[k, i] * B[k, 1, j] + 0.5 * q1[k, i] * B[k, 2, j])
                     t = sj * gt * B[k, 0, j]
                     row_coef[r, j] = e + t
-                    row_coef[r + 1, j] = -e_lo + t
+                    row_coef[r + 1, j] = -e + t
                 row_first[r] = f
                 row_first[r + 1] = f
                 row_b[r] = 1.0
@@ -826,19 +741,17 @@ def knot_probes(S, C, inp, kin, p0, p1, p2, carry_x, carry_w, known_x, known_e):
 
 
 @njit(cache=True, nogil=True)
-def feasible_hat(p, dp, ddp, q1, q2, q3, q3_lo, lim, target, floor, bound, bisections, out):
+def feasible_hat(p, dp, ddp, q1, q2, q3, lim, target, floor, bound, bisections, out):
     """``optimal.profile.FeedProfileBuilder._feasible_hat`` at K points: the previous window's
     solution p and its first two derivatives (K,), the joint derivatives q1..q3 (K, n)
-    there (q3_lo: the least q_sss of ``lp_rows``' - side), the ``AxisLimits`` lim (jerk
-    limits as the LP uses them), the wanted linearisation points ``target`` (K,), the
-    least one ``floor``, the jerk rows' share ``bound`` p must keep and the bisection
-    steps; the points into ``out`` (K,).
+    there, the ``AxisLimits`` lim (jerk limits as the LP uses them), the wanted
+    linearisation points ``target`` (K,), the least one ``floor``, the jerk rows' share
+    ``bound`` p must keep and the bisection steps; the points into ``out`` (K,).
 
-    Per point: e = max over the moving axes of max(E_i, -E_lo_i) / (3/2 J_i), with E =
-    q_sss p + 3/2 q_ss p' + 1/2 q_s p'' (E_lo with q3_lo); the target where e √t + p / (3 t)
-    <= bound, else the end towards it of the interval around p where that holds
-    (bisection in √ŵ), else p (at least ``floor``). The float operations of the numpy
-    version it replaced, in its order."""
+    Per point: e = max over the moving axes of |E_i| / (3/2 J_i), E = q_sss p + 3/2 q_ss p'
+    + 1/2 q_s p''; the target where e √t + p / (3 t) <= bound, else the end towards it of
+    the interval around p where that holds (bisection in √ŵ), else p (at least ``floor``).
+    The float operations of the numpy version it replaced, in its order."""
     moving = lim.moving
     jmax = lim.jmax
     n = q1.shape[1]
@@ -851,8 +764,7 @@ def feasible_hat(p, dp, ddp, q1, q2, q3, q3_lo, lim, target, floor, bound, bisec
             if not moving[i]:
                 continue
             E = (q3[k, i] * pk + 1.5 * q2[k, i] * dp[k]) + 0.5 * q1[k, i] * ddp[k]
-            E_lo = (q3_lo[k, i] * pk + 1.5 * q2[k, i] * dp[k]) + 0.5 * q1[k, i] * ddp[k]
-            v = max(E, -E_lo) / (1.5 * jmax[i])
+            v = abs(E) / (1.5 * jmax[i])
             e = _nan_max(e, v)
         t = target[k]
         if not t >= floor:

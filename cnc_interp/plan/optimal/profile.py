@@ -30,16 +30,6 @@ Collocation: ``tuning.collocation`` points per knot interval, plus the path's se
 joins, where q_sss jumps (paths are G2): there both one-sided values are imposed; plus
 the places between them where q_sss peaks (``jerk_peak_points``, ``tuning.peak_share``).
 
-Stencils: ``verify`` bounds second and third backward differences of the samples, which
-are q_ss and q_sss averaged over two and three periods of path (B-spline kernels), not
-their values at a point. Near a join, where q_sss jumps and a corner blend's q_sss peaks
-over less than a period of path, the rows take q_ss and q_sss as such differences see
-them, at half a period's path at the linearisation's speed (``_STENCIL_SHARE``): their
-range over centres up to a spacing either side, the largest on the rows' + side and the
-least on their - side (``_feed_kernels.stencil_derivs``); elsewhere the pointwise
-values, which differ from them by the square of the spacing. A plan that crowds through
-a dense run of blends is then not held to a jerk no sample sees.
-
 Sampled start and stop: a sampled plan may start with an acceleration of up to J dt
 (its first third difference is the jerk limit), so w'(0) <= 2 J_t dt and
 w'(L) >= -2 J_t dt with J_t the tangent's path jerk limit.
@@ -61,28 +51,19 @@ _KNOT_ROUNDS = 3
 #: bisection steps of ``_feasible_hat`` (the interval shrinks 2^-30: far below what moves
 #: the LP's rows)
 _HAT_BISECTIONS = 30
-#: the stencils' path spacing as a share of a period's path at the linearisation's speed:
-#: the samples' spacing changes within a stencil as the speed does, and the solution's
-#: speed is not the linearisation's. At the whole period the sampler got stuck on
-#: spiral_lines' stretch of the optimality benchmark (VPOp took over 377 samples from the
-#: end: 1367 periods against 1323 at a half)
-_STENCIL_SHARE = 0.5
 
 
 class _Window(NamedTuple):
     """A window's whole solution, as the next window sees it: the B-spline of w
     (``knots`` (nc + 4,), ``coef`` (nc,)), where it starts braking for its terminal rest
-    and where that rest is (``s_brake``, ``s_end``, mm), how far below the estimate
-    it ran (``ratio``: ``FeedProfileBuilder._ratio``), and its collocation points ``x``
-    (K,) with the path spacing ``delta`` (K,, mm) its rows' stencils took there."""
+    and where that rest is (``s_brake``, ``s_end``, mm), and how far below the estimate
+    it ran (``ratio``: ``FeedProfileBuilder._ratio``)."""
 
     knots: np.ndarray
     coef: np.ndarray
     s_brake: float
     s_end: float
     ratio: float
-    x: np.ndarray
-    delta: np.ndarray
 
 
 class ProfileError(Exception):
@@ -364,7 +345,7 @@ class FeedProfileBuilder:
                 b1, at_end = nb, True
             else:
                 b1, at_end = b0 + self.window, False  # three breakpoints of look-ahead remain
-            coef, tk, it, xs, delta = self._solve(b0, b1, at_end, fixed, prev)
+            coef, tk, it = self._solve(b0, b1, at_end, fixed, prev)
             # coef / tk: coefficients b0 .. b1+2 and their knots t[b0 : b1+7]
             if at_end:
                 yield FeedPiece(tk, coef, self._br[b0], self.L, it, self.restarts, (self._ex, self._ew))
@@ -382,8 +363,7 @@ class FeedProfileBuilder:
                 (self._ex, self._ew),  # replaced, never changed in place: a snapshot
             )
             fixed = coef[commit : commit + 3].copy()
-            s_brake = self._br[max(b1 - self.brake, bc)]
-            prev = _Window(tk, coef, s_brake, self._br[b1], self._ratio(tk, coef, b0, bc), xs, delta)
+            prev = _Window(tk, coef, self._br[max(b1 - self.brake, bc)], self._br[b1], self._ratio(tk, coef, b0, bc))
             b0 = bc
             # forget the estimate's probes before the next window (bounded memory)
             i = max(int(np.searchsorted(self._ex, self._br[b0], side="right")) - 2, 0)
@@ -443,7 +423,7 @@ class FeedProfileBuilder:
             self.restarts += 1
             return self._solve_from(b0, b1, at_end, fixed, prev, prev.s_end, self.tuning.ccp_max_restart)
 
-    def _feasible_hat(self, prev, x, q1, q2, q3, target, floor, q3_lo=None):
+    def _feasible_hat(self, prev, x, q1, q2, q3, target, floor):
         """Linearisation points (K,) at the sorted x (K,) where the previous window brakes:
         each as near ``target`` (K,) as keeps its solution p within the jerk rows there.
 
@@ -452,26 +432,13 @@ class FeedProfileBuilder:
         h(p) <= 1 is p's own jerk bound, and h is convex in √ŵ, so the allowed ŵ form an
         interval around p: the target where h(target) <= 1 - tuning.hat_margin, else its end
         towards the target (bisection in √ŵ), else p. ``q1``..``q3`` (K, n) are the joint
-        derivatives at x (``q3_lo``: the least q_sss the rows' - side takes near a join,
-        default ``q3``); ``floor`` (mm²/s²) the least ŵ.
+        derivatives at x; ``floor`` (mm²/s²) the least ŵ.
         """
         p, dp, ddp = spline_derivs(prev.knots, prev.coef, np.clip(x, prev.knots[3], prev.knots[-4]))
         out = np.empty(x.shape[0])
         limits = K.AxisLimits(self.moving, self.amax, self.jmax)
         K.feasible_hat(
-            p,
-            dp,
-            ddp,
-            q1,
-            q2,
-            q3,
-            q3 if q3_lo is None else q3_lo,
-            limits,
-            target,
-            floor,
-            1.0 - self.tuning.hat_margin,
-            _HAT_BISECTIONS,
-            out,
+            p, dp, ddp, q1, q2, q3, limits, target, floor, 1.0 - self.tuning.hat_margin, _HAT_BISECTIONS, out
         )
         return out
 
@@ -496,17 +463,6 @@ class FeedProfileBuilder:
         # the first LP's linearisation: the estimate, lowered to the previous window's
         # level (tuning.est_ratio_min)
         w_hat = np.maximum(w_est * (1.0 if prev is None else prev.ratio), 1e-9 * W0)
-        # q_ss and q_sss as verify's differences see them (``_feed_kernels.stencil_derivs``)
-        # at _STENCIL_SHARE of a period's path at the linearisation's speed; where the
-        # previous window's rows held, at the spacing they took (its solution then meets
-        # the rows it met)
-        q2_hi, q2_lo, q3_hi, q3_lo = (np.empty_like(q2) for _ in range(4))
-        held = np.zeros(npt, dtype=bool)
-        delta_held = np.zeros(npt)
-        if prev is not None:
-            held = x < prev.s_end
-            delta_held[held] = np.interp(x[held], prev.x, prev.delta)
-            K.stencil_derivs(self.S, self.C, x, delta_held, self.joins, q2, q3, q2_hi, q2_lo, q3_hi, q3_lo)
         if prev is not None:
             # linearise at the previous window's solution where it is not braking for its
             # terminal rest: where fixed coefficients act its rows are then exactly those
@@ -518,10 +474,7 @@ class FeedProfileBuilder:
             # on to its rest: as near the estimate as keeps it a solution
             far = ~near & (x < prev.s_end)
             if far.any():
-                q2m = 0.5 * (q2_hi[far] + q2_lo[far])
-                w_hat[far] = self._feasible_hat(
-                    prev, x[far], q1[far], q2m, q3_hi[far], w_hat[far], 1e-9 * W0, q3_lo[far]
-                )
+                w_hat[far] = self._feasible_hat(prev, x[far], q1[far], q2[far], q3[far], w_hat[far], 1e-9 * W0)
         # fixed coefficients: the committed three (b0 > 0), w(0) = 0, w(L) = 0
         free = np.ones(nc, dtype=bool)
         cfix = np.zeros(nc)
@@ -558,12 +511,9 @@ class FeedProfileBuilder:
         prev_T = np.inf
         best = None
         iters = 0
-        kept_delta = np.zeros(npt)
         for ccp in range(ccp_max):
-            delta = np.where(held, delta_held, _STENCIL_SHARE * self.dt * np.sqrt(w_hat))
-            K.stencil_derivs(self.S, self.C, x, delta, self.joins, q2, q3, q2_hi, q2_lo, q3_hi, q3_lo)
             r = K.lp_rows(
-                K.Collocation(first, B, q1, q2_hi, q3_hi, q2_lo, q3_lo),
+                K.Collocation(first, B, q1, q2, q3),
                 K.AxisLimits(self.moving, self.amax, self.jmax),
                 wmax,
                 w_hat,
@@ -586,11 +536,10 @@ class FeedProfileBuilder:
                 break  # keep the last solved iterate (feasible for the true limits)
             xv = xv_new
             best = coef.copy()
-            kept_delta = delta
             if abs(prev_T - T) <= self.tuning.ccp_tol * T:
                 break
             prev_T = T
-        return best, tk, iters, x, kept_delta
+        return best, tk, iters
 
     def _lp(self, rows, c, xv, free, screen: bool, max_iter: int | None = None):
         """Solve the LP of ``rows`` (``Rows``: ``_feed_kernels.lp_gather``'s) in the free
