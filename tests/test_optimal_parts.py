@@ -19,6 +19,7 @@ from cnc_interp.plan._ipm import (
 from cnc_interp.machine.model import Machine
 from cnc_interp.plan.safe import scurve
 from cnc_interp.plan.verify import verify_arrays
+from cnc_interp.plan.vpop import plan_path_vpop
 
 from ._vpop_paths import circle_fun, hermite_path, line_path
 
@@ -200,11 +201,11 @@ def test_cubic_basis_matches_scipy():
         assert_allclose(mine, sp(x, d), atol=1e-12 * (1 + np.abs(sp(x, d)).max()))
 
 
-def _profile_time(path, machine, dt):
+def _profile_time(path, machine, dt, tuning=None):
     from cnc_interp.plan.optimal.profile import FeedProfileBuilder, spline_values
     from cnc_interp.plan.vpop import JointTable
 
-    b = FeedProfileBuilder(JointTable(path, None), path, machine, dt)
+    b = FeedProfileBuilder(JointTable(path, None), path, machine, dt, tuning)
     total = 0.0
     for piece in b.windows():
         s = np.linspace(piece.s0, piece.s1, 40001)
@@ -214,14 +215,19 @@ def _profile_time(path, machine, dt):
 
 
 def test_profile_of_a_line_is_the_s_curve():
-    # along a line the profile is the continuous time-optimal S-curve (the sampled start
-    # and stop may each start a period earlier: w'(0) <= 2 J dt)
+    # along a line the profile, its convex-concave iterations run to convergence, is the
+    # continuous time-optimal S-curve (the sampled start and stop may each start a period
+    # earlier: w'(0) <= 2 J dt)
+    import dataclasses
+
+    from cnc_interp.plan.tuning import OptimalTuning
+
     L, F = 100.0, 83.3
     p = line_path([0, 0, 0], [L, 0, 0], F)
-    share = 0.998  # the LP's own margin
-    ph = scurve(L, F * share, 2000.0 * share, 50000.0 * share)
+    share = 0.998  # the LP's own margin on acceleration and jerk
+    ph = scurve(L, F, 2000.0 * share, 50000.0 * share)
     t_cont = sum(d for d, _ in ph)
-    T = _profile_time(p, MILL, 0.001)
+    T = _profile_time(p, MILL, 0.001, dataclasses.replace(OptimalTuning(), ccp_max=12, ccp_tol=1e-6))
     assert t_cont - 0.004 <= T <= t_cont * 1.002, (T, t_cont)
 
 
@@ -533,6 +539,126 @@ def test_a_time_law_recomputed_where_coefficients_changed_is_the_full_one_bit_fo
             assert part.dt.tobytes() != old.dt.tobytes()
         t_full = full.nodes(0.25)[1]
         assert t_full.tobytes() == part.nodes(0.25)[1].tobytes()
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_ccp_line_search_takes_the_least_time_step(seed):
+    # the trapezoid time of w0 + alpha (w1 - w0) against a fine grid of alpha
+    from cnc_interp.plan.optimal.profile import _line_search
+
+    rng = np.random.default_rng(seed)
+    x = np.sort(rng.uniform(0.0, 10.0, 60))
+    w0 = rng.uniform(1.0, 100.0, 60)
+    w1 = np.maximum(w0 + rng.normal(0.0, 40.0, 60), 0.5)
+
+    def time(a):
+        v = np.sqrt(np.maximum(w0 + a * (w1 - w0), 0.0))
+        return np.sum(2.0 * np.diff(x) / (v[1:] + v[:-1]))
+
+    grid = np.linspace(0.0, 1.0, 20001)
+    times = np.array([time(a) for a in grid])
+    alpha, T = _line_search(x, w0, w1, 24)
+    assert 0.0 <= alpha <= 1.0
+    assert_allclose(T, time(alpha), rtol=1e-12)
+    assert T <= times.min() * (1 + 1e-9)
+
+
+def _spiral_polygon_path():
+    """A fitted spiral of 16 straight moves 5 mm long turning 9 degrees each (corners
+    blended at 0.01 mm), on which the profile's speed changes at every corner."""
+    from cnc_interp.fit import FitSettings, fit_program
+    from cnc_interp.gcode import read_program
+
+    pts, ang, r = [(0.0, 0.0)], 0.0, 5.0
+    for _ in range(16):
+        x, y = pts[-1]
+        pts.append((x + r * np.cos(ang), y + r * np.sin(ang)))
+        ang += np.radians(9.0)
+        r *= 0.97
+    text = "G21 G90 G64\n" + "".join(f"G1 X{x:.4f} Y{y:.4f} F20000\n" for x, y in pts[1:]) + "M2\n"
+    prog = read_program(text.encode(), "spiral.ngc", axes="XYZ", start=[0.0, 0.0, 0.0])
+    fitted = fit_program(prog, FitSettings.from_options(tol_mm=0.01, machine=MILL))
+    return [p for p in fitted.items if hasattr(p, "coef")][0]
+
+
+def test_more_ccp_iterations_never_lengthen_the_profile():
+    # each iteration's step takes the least time between the last iterate and the LP's
+    # solution, so the profile's time falls (a full step to the LP's vertex oscillates)
+    import dataclasses
+
+    from cnc_interp.plan.optimal.profile import FeedProfileBuilder, spline_values
+    from cnc_interp.plan.tuning import OptimalTuning
+    from cnc_interp.plan.vpop import JointTable
+
+    p = _spiral_polygon_path()
+    times = []
+    for k in range(1, 7):
+        tuning = dataclasses.replace(OptimalTuning(), ccp_max=k, ccp_tol=0.0)
+        b = FeedProfileBuilder(JointTable(p, None), p, MILL, 0.001, tuning)
+        total = 0.0
+        for piece in b.windows():
+            s = np.linspace(piece.s0, piece.s1, 40001)
+            v = np.sqrt(np.maximum(spline_values(piece.knots, piece.coef, s), 0.0))
+            total += np.sum(2.0 * np.diff(s) / np.maximum(v[1:] + v[:-1], 1e-300))
+        times.append(total)
+    assert all(b <= a * (1 + 1e-6) for a, b in zip(times, times[1:])), times
+    assert times[-1] < times[0]
+
+
+@pytest.mark.parametrize("cut", [10, 30])
+def test_land_brings_a_plan_cut_short_to_rest_exactly(cut):
+    # VPOp's plan of an acceleration-limited circle without its last samples: the window
+    # solver lands it at rest at the end, exact, in no more samples than VPOp's stop took
+    from cnc_interp.plan.optimal.context import _Path
+    from cnc_interp.plan.optimal.refine import land
+    from cnc_interp.plan.tuning import OptimalTuning
+
+    dt = 0.001
+    p = hermite_path(circle_fun(10.0, turns=1.0), 16, 1000.0)
+    plan = plan_path_vpop(p, None, MILL, dt)
+    s, q = plan.s, plan.q
+    N = s.shape[0]
+    ctx = _Path(p, None, MILL, dt, None)
+    k = N - cut  # samples kept: 0 .. k-1
+    a = k - 20
+    M = N - 1 - a  # VPOp's samples from a to the one before the end
+    s_a, L = float(s[a - 1]), float(p.length)
+
+    stop = np.concatenate(([s_a], s[a : N - 1], [L]))
+
+    def stretched(m):  # VPOp's stop on m samples (the sampler starts from its reference)
+        return np.interp(np.linspace(0.0, 1.0, m + 2)[1:-1], np.linspace(0.0, 1.0, M + 2), stop)
+
+    counts = np.zeros(2, dtype=np.int64)
+    got = land(ctx.refine_problem(), s[:k], q[:k], a, M - 2, stretched, OptimalTuning(), counts)
+    assert got is not None
+    x, qx = got
+    assert x.shape[0] <= M
+    s2 = np.concatenate((s[:a], x, [L]))
+    q2 = np.concatenate((q[:a], qx, q[-1:]))
+    rep = verify_arrays(q2, dt, MILL.vmax, MILL.amax, MILL.jmax)
+    assert rep.ok, rep.format()
+    assert np.all(np.diff(s2) >= 0)
+    from cnc_interp.plan.vpop import _eval_table
+
+    assert_allclose(qx, _eval_table(ctx.table.S, ctx.table.C, x), atol=1e-12)
+
+
+def test_a_profile_stuck_stopping_at_the_end_is_landed_not_handed_to_vpop():
+    # an acceleration-limited circle at 1 ms: the profile's exact samples cannot stop at
+    # the end; landed by the window solver the plan stays far below VPOp's
+    from cnc_interp.plan.optimal import plan_path_optimal
+
+    p = hermite_path(circle_fun(10.0, turns=1.0), 16, 1000.0)
+    plan = plan_path_optimal(p, None, MILL, 0.001)
+    vpop = plan_path_vpop(p, None, MILL, 0.001)
+    assert plan.stats.get("landed") is True and plan.stats["handover"] == -1
+    rep = verify_arrays(plan.q, 0.001, MILL.vmax, MILL.amax, MILL.jmax)
+    assert rep.ok, rep.format()
+    assert plan.s[-1] == p.length
+    assert_allclose(plan.q[-1], [10.0, 0.0, 0.0], atol=1e-9)  # the end, where it rests
+    # the continuous minimum: the circle at sqrt(A r) plus S-curve ramps
+    assert plan.s.shape[0] < 0.9 * vpop.s.shape[0]
 
 
 @pytest.mark.parametrize("machine", [MILL, UCP])

@@ -98,7 +98,9 @@ class OptimalTuning:
         refine_stride: samples; ... and the stride between windows.
         end_window: samples; the window at the end of VPOp's plans (``planner._end_window``):
             30 recovers 69 % of the periods 60 does for 35 % of its solve time
-            (stellabee1's first 3000 lines, 544 VPOp paths).
+            (stellabee1's first 3000 lines, 544 VPOp paths); also how far back, and
+            how many samples more, the sampler lands a plan stuck stopping at the
+            end (``sampling._land``).
         refine_newton: Newton steps per window solve at most.
         refine_skip: 1; a window none of whose samples keeps every limit ratio below
             this is skipped.
@@ -133,7 +135,7 @@ class OptimalTuning:
     route_min_s: float = 0.5
     route_tiny_s: float = 0.1
     # feed profile LP
-    knot_time_s: float = 0.006
+    knot_time_s: float = 0.0015
     knot_geo: float = 0.35
     knot_block: int = 256
     collocation: int = 3

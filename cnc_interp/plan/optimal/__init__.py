@@ -19,11 +19,11 @@ One module per stage, each a generator that only ever looks a bounded distance a
    ``plan._ipm``.
 3. ``sampling``: the profile's time law, one sample per period, each exact (``verify``'s
    float operations); where no position is allowed the reference dips and the stretch
-   is sampled again, or VPOp finishes the path.
+   is sampled again, the window solver lands a stop at the end, or VPOp finishes the
+   path.
 4. ``refine``: windows of samples shortened by whole periods where the discrete problem
    allows it (passes by effort and period: ``planner._refine_passes``).
-5. ``select``: for a path planned whole, the shortest of the profile's plan, the
-   profile's with closer knots, and VPOp's.
+5. ``select``: for a path planned whole, the shorter of the profile's plan and VPOp's.
 
 ``planner`` chains them per path; ``context`` holds the per-path context (``_Path``) and
 the typed outcomes the decisions read (``Sampling``). Every sample is exact at every

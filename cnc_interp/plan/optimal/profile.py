@@ -7,7 +7,10 @@ maximise the path speed — the first-order change of the traversal time ∫ ds/
 weights ŵ^-3/2 — under every axis's velocity, acceleration and jerk limit at
 collocation points, the segments' feeds, and w = 0 at the ends. The jerk bound is
 not convex; the convex-concave procedure of ``_feed_kernels`` makes it a few LPs,
-solved by the banded interior-point method of ``_ipm``.
+solved by the banded interior-point method of ``_ipm``. An LP's objective is the
+time's tangent at the last iterate, so its solution is a direction: the next iterate is
+the point of least traversal time between the two (``_line_search``), and the time
+falls at every iteration.
 
 Knots: a spacing of ``tuning.knot_time_s`` of motion at an estimated speed (static
 limits of velocity, curvature and jerk, and the sampled start and stop near the ends)
@@ -51,6 +54,38 @@ _KNOT_ROUNDS = 3
 #: bisection steps of ``_feasible_hat`` (the interval shrinks 2^-30: far below what moves
 #: the LP's rows)
 _HAT_BISECTIONS = 30
+#: golden-section steps of the CCP's line search (``_line_search``): the bracket shrinks
+#: 0.618^24 ~ 1e-5, far below what moves the time
+_LINE_STEPS = 24
+
+
+def _line_search(x, w0, w1, steps: int):
+    """The step alpha in [0, 1] from w0 (K,) towards w1 (K,) (w at the sorted x (K,))
+    that minimises the traversal time by the trapezoid rule in 1/√w, and that time.
+    The time is convex in alpha (1/√w is convex, w linear in alpha): golden-section
+    search, ``steps`` shrinks of the bracket."""
+    dx = np.diff(x)
+    dw = w1 - w0
+
+    def time(a):
+        v = np.sqrt(np.maximum(w0 + a * dw, 0.0))
+        return float(np.sum(2.0 * dx / np.maximum(v[1:] + v[:-1], 1e-300)))
+
+    g = 0.5 * (np.sqrt(5.0) - 1.0)
+    lo, hi = 0.0, 1.0
+    a, b = hi - g * (hi - lo), lo + g * (hi - lo)
+    ta, tb = time(a), time(b)
+    for _ in range(steps):
+        if ta <= tb:
+            hi, b, tb = b, a, ta
+            a = hi - g * (hi - lo)
+            ta = time(a)
+        else:
+            lo, a, ta = a, b, tb
+            b = lo + g * (hi - lo)
+            tb = time(b)
+    best = min(((time(1.0), 1.0), (ta, a), (tb, b), (time(0.0), 0.0)))
+    return best[1], best[0]
 
 
 class _Window(NamedTuple):
@@ -510,6 +545,7 @@ class FeedProfileBuilder:
         coef = np.empty(nc)
         prev_T = np.inf
         best = None
+        w_last = w_hat
         iters = 0
         for ccp in range(ccp_max):
             r = K.lp_rows(
@@ -534,6 +570,16 @@ class FeedProfileBuilder:
                 if best is None:
                     raise ProfileError(f"feed-profile LP failed (status {status})")
                 break  # keep the last solved iterate (feasible for the true limits)
+            if best is not None:
+                # the LP's objective is the time's tangent: its full step may lengthen
+                # the profile. Every point between the last iterate and the LP's
+                # solution meets the rows linearised at the last iterate (a convex set
+                # holding both): the step takes the least time on that segment
+                alpha, T = _line_search(x, w_last, w_hat, _LINE_STEPS)
+                coef[:] = best + alpha * (coef - best)
+                xv_new = xv + alpha * (xv_new - xv)
+                w_hat[:] = np.maximum(w_last + alpha * (w_hat - w_last), 1e-9 * W0)
+            w_last = w_hat.copy()
             xv = xv_new
             best = coef.copy()
             if abs(prev_T - T) <= self.tuning.ccp_tol * T:

@@ -15,11 +15,13 @@ per period, each checked with exactly the float operations of ``verify`` and mov
 the nearest allowed position where the reference would exceed a limit. Where no position
 is allowed (the LP holds its limits at collocation points only), the reference is
 lowered by a smooth dip around that place (depths ``tuning.retry_depths``, spanning
-``tuning.retry_span_s`` of motion) and the stretch is sampled again; near the end
-(``tuning.tail_s``), after a place's last dip, or past the path's dip budget
-(``tuning.retry_places`` places plus one dip per ``tuning.retry_per_s``), VPOp's step loop
-(``vpop.VpopRun``) finishes the path from a few samples back
-(``tuning.handover_back``). The sampler holds back ``tuning.hold_s`` of motion plus the
+``tuning.retry_span_s`` of motion) and the stretch is sampled again. Stuck stopping at
+the end (within ``tuning.end_window`` periods of the reference's end), the refinement's
+window solver lands the plan at rest from ``tuning.end_window`` samples back
+(``_land``, ``refine.land``). Otherwise near the end (``tuning.tail_s``), after a
+place's last dip, or past the path's dip budget (``tuning.retry_places`` places plus one
+dip per ``tuning.retry_per_s``), VPOp's step loop (``vpop.VpopRun``) finishes the path
+from a few samples back (``tuning.handover_back``). The sampler holds back ``tuning.hold_s`` of motion plus the
 longest hand-over; the rest is final and leaves.
 
 ``_vpop_stage`` is the other sampler: VPOp's plan of the path as a stream of blocks
@@ -328,6 +330,16 @@ def _sampled_from(ctx, builder, pieces):
                 kr = int(np.searchsorted(sh[:k], lo, side="left"))
                 k = max(kr, emitted - base + 1, 1)
                 continue
+        if final and nodes.t[-1] - t_here <= T.end_window * dt:
+            # stuck stopping at the end: the window solver lands the plan from a few
+            # samples back (VPOp's greedy stop needs many more)
+            landed = _land(ctx, nodes, sh, qh, k, emitted - base)
+            if landed is not None:
+                sh, qh, k = landed
+                ctx.stats["landed"] = True
+                ctx.stats["clamped"] = int(stats[0])
+                yield _final_chunk(sh, qh, k, L, emitted - base, ctx.table.qend)
+                return
         # VPOp finishes the path from a few samples back (within what is held)
         done = False
         for back in T.handover_back:
@@ -346,6 +358,40 @@ def _sampled_from(ctx, builder, pieces):
         ctx.stats["clamped"] = int(stats[0])
         yield _final_chunk(sh, qh, k, L, emitted - base, ctx.table.qend)
         return
+
+
+def _land(ctx, nodes, sh, qh, k: int, first: int):
+    """The buffer (sh, qh) brought to rest at the end from ``tuning.end_window`` samples
+    before k (not before ``first``, the first sample not yet emitted) by
+    ``refine.land``, its tries starting from the reference stretched over their
+    samples: (sh, qh, k) with k the new sample count, or None."""
+    from .. import _track_kernels as TK
+    from .refine import land
+
+    dt, L = ctx.dt, ctx.L
+    a = max(k - ctx.tuning.end_window, first + 1, 1)
+    s_a = float(sh[a - 1])
+    count = nodes.s.shape[0]
+    t_a, _ = TK.ref_t_of_s(nodes.s, nodes.t, nodes.v, nodes.a, count, s_a, 0)
+    rest = max(float(nodes.t[-1]) - t_a, dt)
+
+    def x_ref(M: int):
+        out = np.empty(M)
+        hint = 0
+        for j in range(M):
+            out[j], hint = TK.ref_s_of_t(
+                nodes.s, nodes.t, nodes.v, nodes.a, count, t_a + rest * (j + 1) / (M + 1), hint
+            )
+        return np.minimum(np.maximum.accumulate(np.maximum(out, s_a)), L)
+
+    m0 = max(int(np.ceil(rest / dt)) - 1, 1)
+    got = land(ctx.refine_problem(), sh[:k], qh[:k], a, m0, x_ref, ctx.tuning, np.zeros(2, dtype=np.int64))
+    if got is None:
+        return None
+    x, qx = got
+    sh = np.concatenate((sh[:a], x, [L]))
+    qh = np.concatenate((qh[:a], qx, ctx.table.qend[None, :]))
+    return sh, qh, a + x.shape[0] + 1
 
 
 def _append_piece(ctx, nodes, piece, builder) -> bool:
