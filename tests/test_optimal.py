@@ -623,9 +623,8 @@ def _trochoid_planned(**tuning):
 def test_a_path_planned_whole_is_never_longer_than_vpops_plan_of_it():
     # corpus trochoidal.ngc, the path ending at line 4766 on generic-mill (a G1 trochoid):
     # without the points where q_sss peaks (``peak_share``) the profile reaches the end
-    # through many dips, and without the probe nothing tells early that VPOp is ahead;
-    # VPOp's own plan of the whole path is shorter and is kept
-    m, path, settings, plan = _trochoid_planned(peak_share=np.inf, probe_ahead=np.inf)
+    # through many dips; VPOp's own plan of the whole path is shorter and is kept
+    m, path, settings, plan = _trochoid_planned(peak_share=np.inf)
     assert plan.stats["route"] == "profile" and plan.stats["kept"] == "vpop"
     assert plan.stats["retries"] > 0
     vpop = plan_path_vpop(path, None, m, m.dt_s)
@@ -697,55 +696,26 @@ def test_a_table_pieces_jerk_peaks_are_its_breaks_and_its_vertices_of_q_sss():
     assert_allclose(24.0 * C[0, 4, 0] + 120.0 * C[0, 5, 0] * tau, 0.0, atol=1e-12)  # d q_sss / ds = 0
 
 
-@needs_corpus
-def test_vpop_is_kept_where_its_first_seconds_run_ahead_of_the_profile():
-    # the same trochoid, as planned: VPOp, faster over the first ``probe_s``, plans the
-    # whole path and its plan is kept without planning the profile's rest; without the
-    # probe the whole comparison keeps the same plan
-    m, path, settings, plan = _trochoid_planned()
-    assert plan.stats["probe"] == "vpop ahead" and plan.stats["kept"] == "vpop"
-    assert periods(plan) == periods(plan_path_vpop(path, None, m, m.dt_s))
-    kept = plan_path_optimal(path, None, m, m.dt_s, tuned(settings, probe_ahead=np.inf))  # no probe
-    assert kept.stats["kept"] == "vpop"
-    assert_allclose(kept.q, plan.q, rtol=0, atol=0)
-    streamed = plan_path_optimal(path, None, m, m.dt_s, _compare_off(settings))
-    assert periods(streamed) > 1.03 * periods(plan)
-
-
-@needs_corpus
-def test_a_probe_decided_early_keeps_vpops_plan_without_the_profiles_rest():
-    # the same trochoid: VPOp's lead over its first ``probe_s`` is decided once the
-    # profile's plan is ``probe_min_s`` long (``probe_early``), and the profile's rest is
-    # not planned; the plan is the one kept after planning the profile to its end
-    m, path, settings, plan = _trochoid_planned()
-    late = plan_path_optimal(path, None, m, m.dt_s, tuned(settings, probe_early=False))
-    assert late.stats["kept"] == plan.stats["kept"] == "vpop"
-    assert late.s.tobytes() == plan.s.tobytes() and late.q.tobytes() == plan.q.tobytes()
-    assert plan.stats["lp_iterations"] < 0.9 * late.stats["lp_iterations"]  # 949 against 1,113
-
-
 def _fifty_turns():
     """Fifty turns of a circle of 10 mm at F1000: 22 s at MILL's acceleration limit."""
     return hermite_path(circle_fun(10.0, turns=50.0), 800, 1000.0)
 
 
-def test_a_probe_that_finds_the_profile_ahead_keeps_the_profiles_shorter_plan():
-    # fifty turns of a circle at the acceleration limit (22 s): the profile's plan is ahead
-    # of VPOp's from the start (the probe says so) and at the end
+def test_a_long_circle_keeps_the_profiles_shorter_plan():
+    # fifty turns of a circle at the acceleration limit (22 s), planned whole: the
+    # profile's plan is shorter than VPOp's and kept
     path = _fifty_turns()
     plan = plan_path_optimal(path, None, MILL, DT)
     check(plan, MILL, plan.q[0], plan.q[-1], DT)
-    assert periods(plan) * DT >= TUNING.probe_min_s
-    assert plan.stats["probe"] == "profile" and plan.stats["kept"] == "profile"
+    assert plan.stats["kept"] == "profile"
     assert periods(plan) < periods(plan_path_vpop(path, None, MILL, DT))
 
 
 @pytest.mark.parametrize("turns", [50.0, 12.0])
 def test_a_long_paths_windows_solved_in_a_thread_of_their_own_give_the_same_samples(monkeypatch, turns):
     # at effort fast a path's windows are solved by a thread ahead of the sampling from
-    # ``feed_ahead_s`` on, and a whole path's VPOp plan by another; the samples, stats and
-    # probe are those of one thread (the 50-turn circle of the probe test: 22 s, probed,
-    # the profile kept; 12 turns: ~5 s, under ``ahead_s``, not probed)
+    # ``feed_ahead_s`` on, and a whole path's VPOp plan by another; the samples and stats
+    # are those of one thread (the 50-turn circle: 22 s; 12 turns: ~5 s, under ``ahead_s``)
     from cnc_interp.plan import prefetch
 
     threads = []
@@ -766,11 +736,9 @@ def test_a_long_paths_windows_solved_in_a_thread_of_their_own_give_the_same_samp
     threaded, alone = plans[least], plans[np.inf]
     check(threaded, MILL, path.start, path.end, DT)
     assert threaded.s.tobytes() == alone.s.tobytes() and threaded.q.tobytes() == alone.q.tobytes()
-    assert threaded.stats == alone.stats
-    if turns == 50.0:
-        assert threaded.stats["probe"] == "profile"
-    else:
-        assert least * 1.2 < periods(threaded) * DT < TUNING.ahead_s and "probe" not in threaded.stats
+    assert threaded.stats == alone.stats and threaded.stats["kept"] == "profile"
+    if turns == 12.0:
+        assert least * 1.2 < periods(threaded) * DT < TUNING.ahead_s
 
 
 # -- the paths routed to VPOp go through VPOp's compiled batch ------------------------

@@ -113,12 +113,6 @@ class OptimalTuning:
     Selection (``optimal.select``):
         compare_samples: periods; a profile-routed path of at most this rough duration is
             planned whole before any sample leaves (``OptimalOptions.compare_s`` overrides).
-        probe_s: s; VPOp's first samples of a whole plan (the probe) ...
-        probe_min_s: s; ... for a profile's plan of at least this long ...
-        probe_ahead: 1; ... win when VPOp reaches the probe's arc length this share
-            sooner.
-        probe_early: decide the probe as soon as the profile's plan passes it, keeping
-            VPOp's plan without planning the profile's rest.
 
     Threads (the plan does not depend on them):
         ahead_s: s; a refined profile-routed path of at least this static duration is
@@ -183,10 +177,6 @@ class OptimalTuning:
     dip: float = 0.7
     # selection
     compare_samples: int = 1 << 18
-    probe_s: float = 2.0
-    probe_min_s: float = 20.0
-    probe_ahead: float = 0.01
-    probe_early: bool = True
     # threads
     ahead_s: float = 10.0
     ahead_blocks: int = 8

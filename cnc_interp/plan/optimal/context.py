@@ -3,8 +3,7 @@
 ``_Path`` holds one path's joint table, step limits, the exact sampler's inputs, the
 tunables (``OptimalTuning``), the summary stats and the typed outcomes the decisions
 read: ``Sampling`` (dips and hand-over of the profile's sampling), the planned route,
-the fallback reason, VPOp's probe and its plan alongside the profile's
-(``select``). ``_Fallback`` is raised by a
+the fallback reason and VPOp's plan alongside the profile's (``select``). ``_Fallback`` is raised by a
 stage that cannot plan the path with the profile (VPOp plans it).
 """
 
@@ -36,9 +35,6 @@ def _options(settings) -> OptimalOptions:
 def _or(value, default):
     """``value`` unless it is ``None`` (a knob left at its default)."""
     return default if value is None else value
-
-
-_NOT_PROBED = object()
 
 
 @dataclass(frozen=True)
@@ -88,8 +84,6 @@ class _Path(_RouteInputs):
             self.stats.update(inputs.stats)  # the route's measures, as ``_route`` left them
         self._vrun = None
         self._prep = None
-        #: ``select._probe_progress``'s outcome, once made
-        self.probe = _NOT_PROBED
         #: VPOp's plan of a path planned whole, made alongside (``select.VpopAlongside``)
         self.alongside = None
         #: VPOp could not plan this path (``sampling._vpop_stage`` planned it otherwise)
