@@ -850,20 +850,12 @@ def test_a_windows_knots_are_the_clamped_breakpoints():
         assert_allclose(b._knot_slice(j0, j1), full[j0:j1], rtol=0, atol=0)
 
 
-def _collocation_numpy(b, br, n_per, share):
+def _collocation_numpy(b, br, n_per):
     """``FeedProfileBuilder._collocation`` as numpy computed it before the kernel."""
     u = np.arange(n_per) / n_per
     x = np.concatenate(((br[:-1, None] + np.diff(br)[:, None] * u[None, :]).ravel(), br[-1:]))
     q1, q2, q3 = b.derivs(x)
     parts = [(x, q1, q2, q3)]
-    P = b.peaks
-    p0, p1 = int(np.searchsorted(P, x[0], side="right")), int(np.searchsorted(P, x[-1], side="left"))
-    if p1 > p0:
-        g = np.max(np.abs(q3[:, b.moving]) / b.jmax[b.moving], axis=1, initial=0.0)
-        xp = P[p0:p1]
-        i = np.searchsorted(x, xp)
-        xp = xp[b.peak_g[p0:p1] > share * np.maximum(g[i - 1], g[i])]
-        parts.append((xp, *b.derivs(xp)))
     J = b.joins
     xj = J[(J > x[0]) & (J < x[-1])]
     k = [np.empty((xj.shape[0], b.n)) for _ in range(4)]
@@ -876,8 +868,8 @@ def _collocation_numpy(b, br, n_per, share):
 
 @pytest.mark.parametrize("seed", range(3))
 def test_a_windows_compiled_bookkeeping_is_numpys_arithmetic(seed):
-    """The window's collocation points (``collocation``: the grid, the peaks of q_sss
-    above the points either side, both sides of each join, merged in order), the knot
+    """The window's collocation points (``collocation``: the grid and both sides of each
+    join, merged in order), the knot
     placement's breakpoints (``knot_breaks``), the bound on w (``wmax_of``), the LP's
     objective (``lp_objective``) and its solution's time (``lp_profile_time``), as numpy
     computes them (bit for bit but for sums numpy orders its own way), on curves of
@@ -891,12 +883,11 @@ def test_a_windows_compiled_bookkeeping_is_numpys_arithmetic(seed):
     p = hermite_path(random_curve(rng, scale=15.0), 6, float(rng.uniform(40, 300)))
     b = FeedProfileBuilder(JointTable(p, None), p, MILL, 0.001)
     b._breaks_upto(80)
-    assert b.joins.size >= 3 and b.peaks.size >= 3
+    assert b.joins.size >= 3
     br = np.asarray(b._br[: min(60, len(b._br))])
-    lim = FK.AxisLimits(b.moving, b.amax, b.jmax)
-    for n_per, share in ((3, 1.0), (2, 0.7), (4, 1.3)):
-        got = FK.collocation(b.S, b.C, br, n_per, b.peaks, b.peak_g, share, b.joins, lim)
-        want = _collocation_numpy(b, br, n_per, share)
+    for n_per in (3, 2, 4):
+        got = FK.collocation(b.S, b.C, br, n_per, b.joins)
+        want = _collocation_numpy(b, br, n_per)
         assert all(np.array_equal(g, w) for g, w in zip(got, want))
         assert np.sum(np.isin(got[0], b.joins)) == 2 * np.sum((b.joins > br[0]) & (b.joins < br[-1]))
     # the breakpoints where the integral of 1 / h crosses an integer
@@ -910,7 +901,7 @@ def test_a_windows_compiled_bookkeeping_is_numpys_arithmetic(seed):
         got, end = FK.knot_breaks(probe, h, cum0, 40.0)
         assert got.tolist() == want and end == cum[-1] and len(want) > 10
     # the bound on w: axis speeds and the feed's step function
-    x, q1, q2, q3 = _collocation_numpy(b, br, 3, 1.0)
+    x, q1, q2, q3 = _collocation_numpy(b, br, 3)
     q1[::7, 0] = 0.0  # an axis at rest at some points
     want = np.minimum(
         np.min(np.where(np.abs(q1) > 0, (b.vmax / np.where(q1 != 0, np.abs(q1), 1.0)) ** 2, np.inf), axis=1),
@@ -1004,9 +995,9 @@ def test_a_changed_tuning_is_recorded_with_the_settings_and_a_default_one_is_not
 
     plain = PlanSettings(planner="optimal")
     assert "tuning" not in plain.to_dict()["options"]
-    tuned = PlanSettings(planner="optimal", optimal=OptimalOptions(tuning=OptimalTuning(peak_share=np.inf, ccp_max=5)))
+    tuned = PlanSettings(planner="optimal", optimal=OptimalOptions(tuning=OptimalTuning(ccp_tol=0.5, ccp_max=5)))
     got = tuned.to_dict()["options"]["tuning"]
-    assert got == {"peak_share": np.inf, "ccp_max": 5}
+    assert got == {"ccp_tol": 0.5, "ccp_max": 5}
     json.dumps(tuned.to_dict())  # the record stays JSON-able
 
 

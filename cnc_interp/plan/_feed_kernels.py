@@ -232,23 +232,6 @@ def _feed_at(xk, feed_breaks, feed_values):
     return feed_values[min(max(i, 0), feed_values.shape[0] - 1)]
 
 
-@njit(cache=True, nogil=True, inline="always")
-def _jerk_share_at(q3, k, lim):
-    """max over the moving axes of |q_sss| / J at point k of q3 (K, n)."""
-    v = 0.0
-    for a in range(q3.shape[1]):
-        if lim.moving[a]:
-            v = _nan_max(v, abs(q3[k, a]) / lim.jmax[a])
-    return v
-
-
-@njit(cache=True, nogil=True)
-def jerk_shares(q3, lim, out):
-    """``_jerk_share_at`` at every point of q3 (K, n) into ``out`` (K,)."""
-    for k in range(q3.shape[0]):
-        out[k] = _jerk_share_at(q3, k, lim)
-
-
 @njit(cache=True, nogil=True)
 def wmax_of(x, q1, vmax, feed_breaks, feed_values, out):
     """The bound on w = ṡ² at sorted arc lengths x (K,) with joint tangents q1 (K, n):
@@ -280,14 +263,13 @@ def _copy_point(x, q1, q2, q3, k, xv, p1, p2, p3, i):
 
 
 @njit(cache=True, nogil=True)
-def collocation(S, C, br, n_per, peaks, peak_g, share, joins, lim):
+def collocation(S, C, br, n_per, joins):
     """A window's collocation points and the joint derivatives there (see
     ``optimal.profile.FeedProfileBuilder._collocation``): ``n_per`` points per interval of
-    the breakpoints br (K0,) and the last breakpoint; the path's q_sss peaks (sorted
-    ``peaks`` (P,), max_i |q_sss,i| / J_i there ``peak_g``) inside, where that exceeds
-    ``share`` times the points' either side; each segment join inside twice, with the
-    third derivative from the left and then from the right. Returns x (K,) sorted (equal
-    points in that order) and q_s, q_ss, q_sss (K, n)."""
+    the breakpoints br (K0,) and the last breakpoint; each segment join inside twice, with
+    the third derivative from the left and then from the right. Returns x (K,) sorted
+    (equal points: the grid's first, then the join's left and right) and q_s, q_ss,
+    q_sss (K, n)."""
     n = C.shape[2]
     kg = (br.shape[0] - 1) * n_per + 1
     xg = np.empty(kg)
@@ -297,21 +279,6 @@ def collocation(S, C, br, n_per, peaks, peak_g, share, joins, lim):
             xg[i * n_per + j] = br[i] + h * (j / n_per)
     xg[kg - 1] = br[br.shape[0] - 1]
     g1, g2, g3 = _derivs_at(S, C, xg)
-    # the peaks of q_sss above the points either side (x[i - 1] < xp <= x[i])
-    p0 = np.searchsorted(peaks, xg[0], side="right")
-    p1 = np.searchsorted(peaks, xg[kg - 1], side="left")
-    xp = np.empty(max(p1 - p0, 0))
-    npk = 0
-    if p1 > p0:
-        g = np.empty(kg)
-        jerk_shares(g3, lim, g)
-        for r in range(p0, p1):
-            i = np.searchsorted(xg, peaks[r], side="left")
-            if peak_g[r] > share * _nan_max(g[i - 1], g[i]):
-                xp[npk] = peaks[r]
-                npk += 1
-    xp = xp[:npk]
-    e1, e2, e3 = _derivs_at(S, C, xp)
     i0 = np.searchsorted(joins, xg[0], side="right")
     i1 = np.searchsorted(joins, xg[kg - 1], side="left")
     xj = joins[i0:i1] if i1 > i0 else joins[:0]
@@ -321,24 +288,19 @@ def collocation(S, C, br, n_per, peaks, peak_g, share, joins, lim):
     j3l = np.empty((nj, n))
     j3r = np.empty((nj, n))
     join_derivs(S, C, xj, j1, j2, j3l, j3r)
-    # merge the three sorted sets; equal points: grid, peak, join (left, right)
-    K = kg + npk + 2 * nj
+    # merge the two sorted sets; equal points: grid, join (left, right)
+    K = kg + 2 * nj
     x = np.empty(K)
     q1 = np.empty((K, n))
     q2 = np.empty((K, n))
     q3 = np.empty((K, n))
     k = 0
     a = 0
-    b = 0
     c = 0
     while k < K:
-        if a < kg and (b == npk or xg[a] <= xp[b]) and (c == nj or xg[a] <= xj[c]):
+        if a < kg and (c == nj or xg[a] <= xj[c]):
             _copy_point(x, q1, q2, q3, k, xg[a], g1, g2, g3, a)
             a += 1
-            k += 1
-        elif b < npk and (c == nj or xp[b] <= xj[c]):
-            _copy_point(x, q1, q2, q3, k, xp[b], e1, e2, e3, b)
-            b += 1
             k += 1
         else:
             _copy_point(x, q1, q2, q3, k, xj[c], j1, j2, j3l, c)

@@ -42,8 +42,6 @@ class OptimalTuning:
             (radius of curvature, that of q_sss).
         knot_block: table pieces; the knot placement runs block by block of this many.
         collocation: points per knot interval where the LP's limit rows are imposed.
-        peak_share: 1; a vertex of q_sss between collocation points gets its own point
-            when its jerk share exceeds its neighbours' by more than this.
         commit_s: s; motion a window commits (it looks two braking times further).
         whole_knots: knot intervals; a path of at most this many is one window.
         ccp_max: iterations of the convex-concave procedure per window ...
@@ -133,7 +131,6 @@ class OptimalTuning:
     knot_geo: float = 0.35
     knot_block: int = 256
     collocation: int = 3
-    peak_share: float = 0.0
     commit_s: float = 1.0
     whole_knots: int = 1500
     ccp_max: int = 3

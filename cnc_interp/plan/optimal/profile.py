@@ -30,8 +30,7 @@ rest, is a feasible point of the LP. Should it still have no solution (round-off
 window is solved again linearised at the previous window's whole solution (``_solve``).
 
 Collocation: ``tuning.collocation`` points per knot interval, plus the path's segment
-joins, where q_sss jumps (paths are G2): there both one-sided values are imposed; plus
-the places between them where q_sss peaks (``jerk_peak_points``, ``tuning.peak_share``).
+joins, where q_sss jumps (paths are G2): there both one-sided values are imposed.
 
 Sampled start and stop: a sampled plan may start with an acceleration of up to J dt
 (its first third difference is the jerk limit), so w'(0) <= 2 J_t dt and
@@ -129,20 +128,6 @@ class FeedPiece:
     envelope: tuple = (np.zeros(0), np.zeros(0))
 
 
-def jerk_peak_points(S, C, moving):
-    """Arc lengths (sorted, unique) where the path's q_sss may peak between collocation
-    points: the joint table's inner breaks (S (m+1,)) and, for each moving axis
-    (``moving`` (n,)), each piece's interior vertex of q_sss. A quintic piece's q_sss is
-    quadratic in τ = s - S[p] (C (m, 6, n): coefficients of τ^k): 6 c3 + 24 c4 τ +
-    60 c5 τ², with its vertex at τ = -c4 / (5 c5)."""
-    h = np.diff(S)[:, None]
-    c4, c5 = C[:, 4, :], C[:, 5, :]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        tau = -c4 / (5.0 * c5)
-    inside = (c5 != 0.0) & (tau > 0.0) & (tau < h) & moving[None, :]
-    return np.unique(np.concatenate((S[1:-1], (S[:-1, None] + np.where(inside, tau, 0.0))[inside])))
-
-
 def spline_values(knots, coef, x, nu: int = 0):
     """The nu-th derivative (nu <= 2) of the cubic B-spline (knots, coef) at sorted x."""
     B, at = _basis_at(knots, coef, x)
@@ -202,11 +187,6 @@ class FeedProfileBuilder:
             self.joins = np.unique(self.S[np.clip(near, 1, self.S.shape[0] - 2)])
         else:
             self.joins = np.zeros(0)
-        # where q_sss may peak between collocation points (tuning.peak_share; joins are
-        # collocated anyway), and max over the moving axes of |q_sss| / J there
-        self.peaks = np.setdiff1d(jerk_peak_points(self.S, self.C, self.moving), self.joins)
-        self.peak_g = np.empty(self.peaks.shape[0])
-        K.jerk_shares(self.derivs(self.peaks)[2], K.AxisLimits(self.moving, self.amax, self.jmax), self.peak_g)
         # segment feeds (path s) as a step function
         fb = np.asarray(path.s_breaks, dtype=float).copy()
         fb[-1] = self.L
@@ -406,22 +386,10 @@ class FeedProfileBuilder:
 
     def _collocation(self, b0, b1):
         """The collocation points of the window [b0, b1] and the joint derivatives there
-        (``_feed_kernels.collocation``): tuning.collocation per knot interval, the points
-        where q_sss peaks (tuning.peak_share) and both sides of each segment join. Returns
-        x (K,) and q1, q2, q3 (K, n)."""
+        (``_feed_kernels.collocation``): tuning.collocation per knot interval and both
+        sides of each segment join. Returns x (K,) and q1, q2, q3 (K, n)."""
         br = np.asarray(self._br[b0 : b1 + 1])
-        limits = K.AxisLimits(self.moving, self.amax, self.jmax)
-        return K.collocation(
-            self.S,
-            self.C,
-            br,
-            self.tuning.collocation,
-            self.peaks,
-            self.peak_g,
-            1.0 + self.tuning.peak_share,
-            self.joins,
-            limits,
-        )
+        return K.collocation(self.S, self.C, br, self.tuning.collocation, self.joins)
 
     def _ratio(self, tk, coef, b0, bc) -> float:
         """The median ratio of the solution (knots ``tk``, ``coef``) to the estimate at the
