@@ -1,7 +1,7 @@
 """Dense corners at high feed: a "bear-like" CAM program — thousands of short G1
 moves with sharp and gentle turns at F6000, coordinates to 4 decimals, as a relief
 carving's raster/contour passes come out of CAM (CAMotics' bear example: 15k lines at
-F6000) — for ``benchmarks/corners.py`` and the tests.
+F6000): the bear-like rows of the corner table in ``docs/fit-and-planning.md``.
 """
 
 from __future__ import annotations

@@ -21,8 +21,8 @@ window solver lands the plan at rest from ``tuning.end_window`` samples back
 (``_land``, ``refine.land``). Otherwise near the end (``tuning.tail_s``), after a
 place's last dip, or past the path's dip budget (``tuning.retry_places`` places plus one
 dip per ``tuning.retry_per_s``), VPOp's step loop (``vpop.VpopRun``) finishes the path
-from a few samples back (``tuning.handover_back``). The sampler holds back ``tuning.hold_s`` of motion plus the
-longest hand-over; the rest is final and leaves.
+from a few samples back (``tuning.handover_back``). The sampler holds back
+``tuning.hold_s`` of motion plus the longest hand-over; the rest is final and leaves.
 
 ``_vpop_stage`` is the other sampler: VPOp's plan of the path as a stream of blocks
 (where VPOp fails, the profile's if the path was VPOp's route, else the safe planner).
