@@ -563,13 +563,36 @@ def _start(cur, share, m):
 
 
 @njit(cache=True, nogil=True)
+def solve_checked(prob, pre, q_pre, post, post_exact, x0, max_newton, counts):
+    """``solve_window`` on the ``RefineProblem`` prob between ``pre`` (3,) and ``post`` (3,)
+    from x0 (m,), then ``exact_ok`` on its positions with the samples before (``pre``,
+    axis values ``q_pre`` (3, n)) and after (``post_exact`` (3,): ``post``, or the rest at
+    L past the path's end). Returns (ok, x (m,), their axis values (m, n))."""
+    m = x0.shape[0]
+    n = q_pre.shape[1]
+    st, x, _ = solve_window(
+        prob.S, prob.C, prob.QEND, pre, post, x0, prob.moving, prob.lim, prob.fdt, max_newton, counts
+    )
+    if st != OK:
+        return False, x, np.empty((0, n))
+    full = np.empty(m + 6)
+    full[:3] = pre
+    full[3 : 3 + m] = x
+    full[3 + m :] = post_exact
+    qb = np.empty((m + 6, n))
+    qb[:3] = q_pre
+    if not exact_ok(prob.joints, prob.limits, full, 3, m + 6, qb):
+        return False, x, np.empty((0, n))
+    return True, x, qb[3 : 3 + m].copy()
+
+
+@njit(cache=True, nogil=True)
 def shorten(prob, sh, qh, a, b, max_cut, max_newton, counts):
     """One window visit of ``optimal.refine.Refiner.window`` on the ``RefineProblem`` prob:
     samples a..b-1 of (sh, qh) (1 <= a, b < len(sh)) with one fewer at a time
-    (``solve_window``, then ``exact_ok`` with the three samples after the window, rest at L
-    past the end) while each try succeeds, at most ``max_cut``. Returns (dropped, solves, x, qx): the last
-    accepted positions and their axis values (empty when none was)."""
-    S, C, QEND, T, lim_exact = prob.S, prob.C, prob.QEND, prob.joints, prob.limits
+    (``solve_checked``, with the three samples after the window, rest at L past the end)
+    while each try succeeds, at most ``max_cut``. Returns (dropped, solves, x, qx): the
+    last accepted positions and their axis values (empty when none was)."""
     moving, lim, fdt, L = prob.moving, prob.lim, prob.fdt, prob.L
     N = sh.shape[0]
     n = qh.shape[1]
@@ -597,20 +620,12 @@ def shorten(prob, sh, qh, a, b, max_cut, max_newton, counts):
     while dropped < max_cut and M - 1 >= 2:
         m = M - 1
         x0 = _start(Pw[2 : M + 4], _room_shares(Pw, Qw, moving, lim, fdt), m)
-        st, x, z = solve_window(S, C, QEND, pre, post, x0, moving, lim, fdt, max_newton, counts)
+        ok, x, qx = solve_checked(prob, pre, q_pre, post, post_exact, x0, max_newton, counts)
         solves += 1
-        if st != OK:
-            break
-        full = np.empty(m + 6)
-        full[:3] = pre
-        full[3 : 3 + m] = x
-        full[3 + m :] = post_exact
-        qb = np.empty((m + 6, n))
-        qb[:3] = q_pre
-        if not exact_ok(T, lim_exact, full, 3, m + 6, qb):
+        if not ok:
             break
         kept_x = x
-        kept_q = qb[3 : 3 + m].copy()
+        kept_q = qx
         Pw = np.concatenate((Pw[:3], x, Pw[M + 3 :]))
         Qw = np.concatenate((Qw[:3], kept_q, Qw[M + 3 :]))
         M = m

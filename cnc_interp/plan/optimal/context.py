@@ -3,8 +3,8 @@
 ``_Path`` holds one path's joint table, step limits, the exact sampler's inputs, the
 tunables (``OptimalTuning``), the summary stats and the typed outcomes the decisions
 read: ``Sampling`` (dips and hand-over of the profile's sampling), the planned route,
-the fallback reason and VPOp's plan alongside the profile's (``select``). ``_Fallback`` is raised by a
-stage that cannot plan the path with the profile (VPOp plans it).
+the fallback reason and VPOp's plan alongside the profile's (``select``). ``_Fallback``
+is raised by a stage that cannot plan the path with the profile (VPOp plans it).
 """
 
 from __future__ import annotations

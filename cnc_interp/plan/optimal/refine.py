@@ -208,28 +208,20 @@ def _end_refined(ctx, blocks):
 
 def land(problem: RK.RefineProblem, sh, qh, a: int, m0: int, x_ref, tuning: OptimalTuning, counts):
     """Samples from ``a`` on that bring the plan to rest at the path's end: the window
-    solver (``_refine_kernels.solve_window``) between the three samples before ``a`` of
-    (sh, qh) and the rest at the end, then ``verify``'s exact checks, on as few samples
-    as it finds: ``m0`` first, then one, two, four, ... more, at most
-    ``tuning.end_window`` more. ``x_ref(M)``: M (>= 1) positions on to the end, the end
-    excluded (a try's start). Returns (x (M,), qx (M, n)) or None."""
-    S, C, QEND, T, lim_exact = problem.S, problem.C, problem.QEND, problem.joints, problem.limits
-    n = qh.shape[1]
+    solver between the three samples before ``a`` of (sh, qh) and the rest at the end,
+    checked exactly (``_refine_kernels.solve_checked``), on as few samples as it finds:
+    ``m0`` first, then one, two, four, ... more, at most ``tuning.end_window`` more.
+    ``x_ref(M)``: M (>= 1) positions on to the end, the end excluded (a try's start).
+    Returns (x (M,), qx (M, n)) or None."""
     idx = [max(a - 3 + i, 0) for i in range(3)]
     pre = np.ascontiguousarray(sh[idx])
-    post = np.full(3, problem.L)
+    q_pre = np.ascontiguousarray(qh[idx])
+    rest = np.full(3, problem.L)
     extra = 0
     while extra <= tuning.end_window:
-        M = m0 + extra
-        x0 = np.ascontiguousarray(x_ref(M))
-        st, x, _ = RK.solve_window(
-            S, C, QEND, pre, post, x0, problem.moving, problem.lim, problem.fdt, tuning.refine_newton, counts
-        )
-        if st == RK.OK:
-            full = np.concatenate((pre, x, post))
-            qb = np.empty((M + 6, n))
-            qb[:3] = qh[idx]
-            if RK.exact_ok(T, lim_exact, full, 3, M + 6, qb):
-                return x, qb[3 : 3 + M].copy()
+        x0 = np.ascontiguousarray(x_ref(m0 + extra))
+        ok, x, qx = RK.solve_checked(problem, pre, q_pre, rest, rest, x0, tuning.refine_newton, counts)
+        if ok:
+            return x, qx
         extra = 2 * extra if extra else 1
     return None

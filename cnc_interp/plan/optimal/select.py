@@ -20,8 +20,7 @@ from .refine import _refined
 from .route import Route
 from .sampling import _vpop_stage
 
-#: VPOp's blocks a path's comparison thread may hold ahead of the selection (it hands
-#: out one block per checkpoint: a path planned whole has a few)
+#: VPOp's blocks a path's comparison thread may hold ahead of the selection
 _ALONGSIDE_BLOCKS = 64
 
 
@@ -33,25 +32,13 @@ class VpopAlongside:
     def __init__(self, ctx):
         ctx.prepared()  # built here, once, not by two threads
         self._feed = Prefetch(_vpop_stage(ctx, None), ahead=_ALONGSIDE_BLOCKS, name="cnc-interp-vpop")
-        self._it = iter(self._feed)
-        self.blocks: list = []
-        self.samples = 0
-        self._done = False
-
-    def upto(self, n: int) -> list:
-        """VPOp's (s, q) blocks until they hold at least ``n`` samples (or all)."""
-        while not self._done and self.samples < n:
-            block = next(self._it, None)
-            if block is None:
-                self._done = True
-                break
-            self.blocks.append(block)
-            self.samples += block[0].shape[0]
-        return self.blocks
+        self._blocks: list | None = None
 
     def whole(self) -> list:
-        """VPOp's whole plan: (s, q) blocks."""
-        return self.upto(np.iinfo(np.int64).max)
+        """VPOp's whole plan: (s, q) blocks (drained from the thread once)."""
+        if self._blocks is None:
+            self._blocks = list(self._feed)
+        return self._blocks
 
     def close(self) -> None:
         self._feed.close()
