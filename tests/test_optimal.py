@@ -436,6 +436,32 @@ def _spiral_window_by_window(**tuning):
     return m, path, settings
 
 
+def _profile(path, machine, settings):
+    """The feed profile of ``path`` alone, planned whole or window by window as
+    ``settings`` say (no sampling): (pieces, windows solved again, LP iterations, its traversal time in s,
+    whether the sampler would refuse a piece as a crawl)."""
+    from cnc_interp.plan.optimal.profile import FeedProfileBuilder
+    from cnc_interp.plan.optimal.route import _RouteInputs
+    from cnc_interp.plan.optimal.sampling import _Nodes
+
+    T = settings.optimal.tuning
+    inputs = _RouteInputs(path, None, machine, T)
+    compare_s = settings.optimal.compare_s
+    whole = inputs.rough_s <= (T.compare_samples * machine.dt_s if compare_s is None else compare_s)
+    builder = FeedProfileBuilder(inputs.table, path, machine, machine.dt_s, T, whole=whole)
+    pieces = list(builder.windows())
+    nodes, crawled = _Nodes(T), False
+    for piece in pieces:
+        rest_s = inputs.duration_s * max(inputs.L - piece.s0, 0.0) / inputs.L
+
+        def estimate(x, piece=piece):
+            return builder.estimate(x, piece.envelope)
+
+        crawled |= not nodes.append(piece.knots, piece.coef, piece.s0, piece.s1, estimate, T.crawl_share * rest_s)
+    assert pieces[-1].s1 == inputs.L  # the profile reaches the end
+    return pieces, pieces[-1].restarts, sum(p.lp_iters for p in pieces), float(nodes.t[-1]), crawled
+
+
 def _linearise_at_the_estimate(monkeypatch, near_previous: bool = False) -> None:
     """Past where the previous window brakes, a window's first LP linearised at the speed
     estimate itself (not lowered to the previous window's level), and unless
@@ -474,11 +500,8 @@ def test_a_window_that_cannot_brake_under_the_estimate_is_solved_again(monkeypat
 
     _linearise_at_the_estimate(monkeypatch)
     m, path, settings = _spiral_window_by_window()
-    plan = plan_path_optimal(path, None, m, m.dt_s, settings)
-    check(plan, m, plan.q[0], plan.q[-1], m.dt_s)
-    assert plan.stats["route"] == "profile" and plan.stats.get("lp_restarts", 0) >= 1
-    # the profile reaches the last stop (VPOp finishes it at most)
-    assert not 0 <= plan.stats["handover"] < periods(plan) - 300 and "crawl" not in plan.stats
+    _, restarts, _, time_s, crawled = _profile(path, m, settings)
+    assert restarts >= 1 and not crawled
     # without the second solve the profile ends at the first such window
     solve_from = profile.FeedProfileBuilder._solve_from
 
@@ -488,9 +511,8 @@ def test_a_window_that_cannot_brake_under_the_estimate_is_solved_again(monkeypat
         return solve_from(self, b0, b1, at_end, fixed, prev, s_prev, ccp_max, *first_max_iter)
 
     monkeypatch.setattr(profile.FeedProfileBuilder, "_solve_from", no_restart)
-    without = plan_path_optimal(path, None, m, m.dt_s, settings)
-    assert 0 <= without.stats["handover"] < 0.5 * without.s.shape[0]
-    assert periods(plan) < periods(without)
+    with pytest.raises(profile.ProfileError):
+        _profile(path, m, settings)
 
 
 @needs_corpus
@@ -503,16 +525,14 @@ def test_a_windows_first_lp_is_linearised_at_the_estimate_lowered_to_the_previou
 
     ratios = _recorded(monkeypatch, profile.FeedProfileBuilder, "_ratio")
     m, path, settings = _spiral_window_by_window()
-    plan = plan_path_optimal(path, None, m, m.dt_s, settings)
-    check(plan, m, plan.q[0], plan.q[-1], m.dt_s)
+    _, restarts, iterations, time_s, crawled = _profile(path, m, settings)
     assert len(ratios) >= 5 and all(0.1 < r < 0.5 for r in ratios)
-    assert plan.stats.get("lp_restarts", 0) == 0 and "crawl" not in plan.stats
+    assert restarts == 0 and not crawled
     _linearise_at_the_estimate(monkeypatch)
-    m, path, settings = _spiral_window_by_window()
-    at_estimate = plan_path_optimal(path, None, m, m.dt_s, settings)
-    assert at_estimate.stats.get("lp_restarts", 0) >= 5
-    assert 3 * plan.stats["lp_iterations"] < at_estimate.stats["lp_iterations"]
-    assert periods(plan) <= periods(at_estimate)
+    _, restarts_at, iterations_at, time_at_s, _ = _profile(path, m, settings)
+    assert restarts_at >= 5
+    assert 3 * iterations < iterations_at
+    assert time_s <= time_at_s * (1 + 1e-3)
 
 
 @needs_corpus
@@ -525,14 +545,12 @@ def test_a_windows_first_lp_held_near_the_previous_solution_always_has_one(monke
     _linearise_at_the_estimate(monkeypatch, near_previous=True)
     m, path, settings = _spiral_window_by_window()
     held = _recorded(monkeypatch, profile.FeedProfileBuilder, "_feasible_hat")
-    plan = plan_path_optimal(path, None, m, m.dt_s, settings)
-    check(plan, m, plan.q[0], plan.q[-1], m.dt_s)
-    assert len(held) >= 5 and plan.stats.get("lp_restarts", 0) == 0 and "crawl" not in plan.stats
+    _, restarts, _, time_s, crawled = _profile(path, m, settings)
+    assert len(held) >= 5 and restarts == 0 and not crawled
     _linearise_at_the_estimate(monkeypatch)
-    m, path, settings = _spiral_window_by_window()
-    unheld = plan_path_optimal(path, None, m, m.dt_s, settings)
-    assert unheld.stats.get("lp_restarts", 0) >= 5
-    assert periods(plan) <= periods(unheld)
+    _, restarts_unheld, _, time_unheld_s, _ = _profile(path, m, settings)
+    assert restarts_unheld >= 5
+    assert time_s <= time_unheld_s * (1 + 1e-3)
 
 
 def _screened_lps(monkeypatch) -> list:
@@ -574,8 +592,7 @@ def test_a_screened_lp_finds_its_rows_in_about_one_solve(monkeypatch):
 
     calls = _screened_lps(monkeypatch)
     m, path, settings = _spiral_window_by_window()
-    plan = plan_path_optimal(path, None, m, m.dt_s, settings)
-    check(plan, m, plan.q[0], plan.q[-1], m.dt_s)
+    _profile(path, m, settings)
     screened = [n for screen, n, _ in calls if screen]
     assert len(screened) >= 20 and np.mean(screened) <= 1.5, screened
     assert max(e for _, _, e in calls) <= settings.optimal.tuning.lp_tol  # the solver's own
@@ -600,44 +617,29 @@ def test_a_screened_lp_that_keeps_finding_rows_takes_every_row_last(monkeypatch)
     monkeypatch.setattr(profile.K, "lp_screen", thinned)
     calls = _screened_lps(monkeypatch)
     m, path, settings = _spiral_window_by_window(screen_rounds=2)
-    plan = plan_path_optimal(path, None, m, m.dt_s, settings)
-    check(plan, m, plan.q[0], plan.q[-1], m.dt_s)
+    _profile(path, m, settings)
     assert sum(n == 2 for screen, n, _ in calls if screen) >= 5
     assert max(e for _, _, e in calls) <= settings.optimal.tuning.lp_tol
 
 
-def _trochoid_planned(**tuning):
-    """generic-mill, corpus trochoidal.ngc's path to line 4766 (a G1 trochoid), default
-    settings but for the tunables ``tuning``, and its plan (checked within every limit,
-    rest to rest)."""
-    m, paths = _corpus_paths(os.path.join("performance", "trochoidal.ngc"))
-    path = next(p for p in paths if int(p.line[-1]) == 4766)
-    settings = tuned(
-        PlanSettings.from_options(planner="optimal", machine=m), **{"knot_time_s": SCENARIO_KNOT_TIME_S, **tuning}
-    )
-    plan = plan_path_optimal(path, None, m, m.dt_s, settings)
-    check(plan, m, plan.q[0], plan.q[-1], m.dt_s)
-    return m, path, settings, plan
-
-
 @needs_corpus
 def test_a_path_planned_whole_is_never_longer_than_vpops_plan_of_it():
-    # corpus trochoidal.ngc, the path ending at line 4766 on generic-mill (a G1 trochoid):
-    # the profile reaches the end through many dips; VPOp's own plan of the whole path is
-    # shorter and is kept
-    m, path, settings, plan = _trochoid_planned()
+    # corpus sam_vel_violation.ngc, the path ending at line 14 on axis_mm.ini (lines and
+    # arcs at F100000): the profile's plan of the whole path is longer than VPOp's, whose
+    # plan is kept
+    from cnc_interp.fit import FitSettings, fit_program
+    from cnc_interp.gcode import read_program
+    from cnc_interp.machine.load import load_machine
+
+    m = load_machine(os.path.join(CORPUS, "configs", "axis_mm.ini"))
+    src = os.path.join(CORPUS, "violation_checks", "sam_vel_violation.ngc")
+    prog = read_program(open(src, "rb").read(), src, axes=m.axes, start=m.start)
+    fitted = fit_program(prog, FitSettings.from_options(tol_mm=0.01, machine=m))
+    path = next(p for p in fitted.items if hasattr(p, "coef") and int(p.line[-1]) == 14)
+    plan = plan_path_optimal(path, None, m, m.dt_s, PlanSettings.from_options(planner="optimal", machine=m))
+    check(plan, m, plan.q[0], plan.q[-1], m.dt_s)
     assert plan.stats["route"] == "profile" and plan.stats["kept"] == "vpop"
-    assert plan.stats["retries"] > 0
-    vpop = plan_path_vpop(path, None, m, m.dt_s)
-    assert periods(plan) == periods(vpop)
-    # with the comparison off (no path planned whole) the profile's longer plan stands
-    streamed = plan_path_optimal(path, None, m, m.dt_s, _compare_off(settings))
-    assert periods(streamed) > periods(vpop)
-
-
-def _compare_off(settings):
-    """``settings`` with no profile-routed path planned whole (``compare_s`` = 0)."""
-    return dataclasses.replace(settings, optimal=dataclasses.replace(settings.optimal, compare_s=0.0))
+    assert periods(plan) == periods(plan_path_vpop(path, None, m, m.dt_s))
 
 
 def _profile_jerk_share(builder, pieces, end_mm=0.05):
@@ -900,13 +902,9 @@ LINUXCNC_XYZ = Machine(name="linuxcnc-xyz", axes="XYZ", vmax=[203.2] * 3, amax=[
 
 
 @needs_corpus
-def test_a_curvature_limited_path_gets_dips_for_its_whole_duration():
-    # the zigzag lasts ~1 s at its feed (F9999 in/min) but 33 s at its curvature limit:
-    # budgeted on the feed's duration, the dips of the reference run out after 40 and VPOp
-    # plans the rest of the path; budgeted on its static duration, the profile plans it all
-    # (with knots half a radius of curvature apart it needs ~85 dips)
-    from cnc_interp.plan.optimal.route import _RouteInputs
-
+def test_a_curvature_limited_zigzag_is_planned_by_the_profile_shorter_than_by_vpop():
+    # the zigzag lasts ~1 s at its feed (F9999 in/min) but 33 s at its curvature limit;
+    # the profile plans it exactly, rest to rest, shorter than VPOp
     m = LINUXCNC_XYZ
     path = _zigzag_path(m)
     settings = tuned(
@@ -916,42 +914,9 @@ def test_a_curvature_limited_path_gets_dips_for_its_whole_duration():
     )
     plan = plan_path_optimal(path, None, m, DT, settings)
     check(plan, m, plan.q[0], plan.q[-1], DT)
-    T = settings.optimal.tuning
-    feed_budget = T.retry_places * len(T.retry_depths) + int(_RouteInputs(path, None, m, T).rough_s / T.retry_per_s)
     assert plan.stats["route"] == "profile"
-    assert not 0 <= plan.stats["handover"] < periods(plan) - 300  # VPOp finishes the last stop at most
-    assert plan.stats["retries"] > feed_budget
-    # and the profile's plan of it all is shorter than VPOp's of the path
+    assert plan.stats.get("kept") != "vpop"
     assert periods(plan) < periods(plan_path_vpop(path, None, m, DT))
-
-
-@pytest.mark.slow
-@needs_corpus
-def test_a_short_crawl_of_the_profile_is_kept_rather_than_handed_to_vpop(monkeypatch):
-    # axis_mm.ini: windows solved again from the previous window's terminal rest crawl
-    # there for a few hundredths of a second; refusing such a piece handed 96 % of the
-    # 150 s path to VPOp
-    from cnc_interp.machine.load import load_machine
-
-    from cnc_interp.plan.optimal import profile
-
-    # windows solved again happen only with the first LP not held near the previous
-    # solution (``_feasible_hat``), and windows committing 0.5 s each (``commit_s``; at
-    # 1.0 the crawl falls late in the path, where the rest's duration allows less of one,
-    # and it is refused)
-    monkeypatch.setattr(profile.FeedProfileBuilder, "_feasible_hat", lambda self, *a: a[-2])
-    m = load_machine(os.path.join(CORPUS, "configs", "axis_mm.ini"))
-    path = _zigzag_path(m)
-    settings = tuned(
-        PlanSettings.from_options(planner="optimal", machine=m, effort="fast"),
-        commit_s=0.5,
-        knot_time_s=SCENARIO_KNOT_TIME_S,
-    )
-    plan = plan_path_optimal(path, None, m, DT, settings)
-    check(plan, m, plan.q[0], plan.q[-1], DT)
-    assert plan.stats["handover"] < 0 and "crawl" not in plan.stats and plan.stats.get("lp_restarts", 0) > 0
-    vpop = plan_path_vpop(path, None, m, DT)
-    assert periods(plan) < 0.85 * periods(vpop), (periods(plan), periods(vpop))
 
 
 @needs_corpus
@@ -959,7 +924,7 @@ def test_a_windows_first_lp_without_a_solution_gives_up_early_for_the_same_plan(
     # the interior-point solver has no infeasibility test: a window's first LP without a
     # solution ran to ``lp_max_iter`` before the window was solved again. Capped at
     # ``lp_first_max_iter`` (below what the first LPs that solve take), the same
-    # samples for fewer iterations (corpus spiral_tangent_test.ngc linearised at the
+    # profile for fewer iterations (corpus spiral_tangent_test.ngc linearised at the
     # estimate itself: windows without a solution, see the tests above)
     from cnc_interp.plan.optimal import profile
 
@@ -974,12 +939,13 @@ def test_a_windows_first_lp_without_a_solution_gives_up_early_for_the_same_plan(
         return out
 
     monkeypatch.setattr(profile, "lp_solve", counting)
-    capped = plan_path_optimal(path, None, m, m.dt_s, settings)
+    capped, restarts, _, _, _ = _profile(path, m, settings)
     capped_spent, spent[:] = sum(spent), []
     T = settings.optimal.tuning
     saved = T.lp_max_iter - T.lp_first_max_iter
-    uncapped = plan_path_optimal(path, None, m, m.dt_s, tuned(settings, lp_first_max_iter=T.lp_max_iter))
-    assert capped.stats["lp_restarts"] >= 1
-    assert_array_equal(capped.s, uncapped.s)
-    assert_array_equal(capped.q, uncapped.q)
-    assert capped_spent <= sum(spent) - capped.stats["lp_restarts"] * saved, (capped_spent, sum(spent))
+    uncapped, _, _, _, _ = _profile(path, m, tuned(settings, lp_first_max_iter=T.lp_max_iter))
+    assert restarts >= 1
+    for a, b in zip(capped, uncapped, strict=True):
+        assert_array_equal(a.coef, b.coef)
+        assert_array_equal(a.knots, b.knots)
+    assert capped_spent <= sum(spent) - restarts * saved, (capped_spent, sum(spent))

@@ -7,7 +7,7 @@ exactly the float operations of ``verify`` (``vpop.step._feasible``). Where the
 reference would break a limit — it is the solution of a linear program imposed at
 collocation points, and sampled — the nearest allowed position is taken instead
 (``vpop.step._search`` on the per-axis intervals). An empty allowed set is reported
-to the caller (``STUCK``), which then lowers the reference locally and retries.
+to the caller (``STUCK``), which lands the plan at the end or hands the path to VPOp.
 
 Reference nodes (s, t, v, a) come from ``optimal.sampling.TimeLaw.nodes``; between nodes s(t) is the
 quintic Hermite interpolant of (s, v, a).
@@ -24,7 +24,7 @@ from .vpop.step import Scratch, _bounds, _eval, _feasible, _search, _seed
 
 # track's statuses (one set for every kernel: ``status``): OK, NEED_REF (the reference
 # ends before the next target), STUCK (no position satisfies every limit: the caller
-# lowers the reference), NEED_SPACE
+# lands the plan or hands it to VPOp), NEED_SPACE
 from .status import NEED_REF, NEED_SPACE, OK, STUCK
 
 #: the reference time law's nodes: s (mm), t (s), v (mm/s), a (mm/s²), each (>= n,), of

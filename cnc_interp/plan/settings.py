@@ -38,9 +38,8 @@ class OptimalOptions:
             ``effort``); it overrides the effort's number of passes, not which windows.
         compare_s: a profile-routed path whose rough duration is at most this long, s, is
             planned whole (one LP window when short), and also by VPOp, the shorter plan
-            kept, when the profile got stuck before its end or needed many dips (default
-            ``OptimalTuning.compare_samples`` periods); 0: neither (every sample then depends on at
-            most one profile window ahead).
+            kept (default ``OptimalTuning.compare_samples`` periods); 0: neither (every
+            sample then depends on at most one profile window ahead).
         chunk_samples: samples per streamed chunk (default ``OPTIMAL_CHUNK``; the plan
             does not depend on it).
         tuning: the planner's internal tunables (``OptimalTuning``; tests and benchmarks

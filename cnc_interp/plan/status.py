@@ -22,7 +22,7 @@ class Status(IntEnum):
     #: the caller's buffers are full: grow them (or hand samples out) and call again
     NEED_SPACE = 1
     #: the step loop made no progress (it would repeat a state), or the exact sampler
-    #: found no allowed position (its caller lowers the reference and retries)
+    #: found no allowed position (its caller lands the plan or hands it to VPOp)
     STUCK = 2
     #: no feasible step is left to back up to (or a refinement window has none)
     INFEASIBLE = 3

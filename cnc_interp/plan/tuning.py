@@ -76,17 +76,8 @@ class OptimalTuning:
             estimate's time is refused ...
         crawl_share: 1; ... unless those intervals take at most this share of the rest
             of the path's duration beyond the estimate.
-        retry_depths: 1 each; relative depths of the successive dips of w around a
-            place where the sampler got stuck.
-        retry_places: a path gets this many stuck places' worth of dips ...
-        retry_per_s: s; ... plus one dip per this much of its duration.
-        retry_span_s: s; a dip spans this much motion before the stuck place (half
-            after it).
-        tail_s: s; stuck within this much reference time of the end, VPOp finishes.
-        handover_back: samples; VPOp takes over from this many samples back (the first
-            that works).
-        hold_s: s; motion held back by the sampler for dips and hand-overs (plus the
-            longest hand-over).
+        handover_back: samples each; stuck (no allowed position) away from the end,
+            VPOp finishes the path from this many samples back (the first that works).
 
     Refinement (``optimal.refine``):
         refine_passes: passes over every window at coarse periods or effort max.
@@ -153,13 +144,7 @@ class OptimalTuning:
     timelaw_min_dip: float = 1e-3
     crawl: float = 50.0
     crawl_share: float = 0.02
-    retry_depths: tuple[float, ...] = (0.04, 0.1, 0.2, 0.4)
-    retry_places: int = 4
-    retry_per_s: float = 0.05
-    retry_span_s: float = 0.1
-    tail_s: float = 0.5
     handover_back: tuple[int, ...] = (2, 6, 16, 40, 100, 250)
-    hold_s: float = 0.25
     # refinement
     refine_passes: int = 2
     full_refine_dt: float = 0.002

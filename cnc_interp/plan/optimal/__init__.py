@@ -18,15 +18,14 @@ One module per stage, each a generator that only ever looks a bounded distance a
    window (each window ends at rest and commits its first part); the LPs are solved by
    ``plan._ipm``.
 3. ``sampling``: the profile's time law, one sample per period, each exact (``verify``'s
-   float operations); where no position is allowed the reference dips and the stretch
-   is sampled again, the window solver lands a stop at the end, or VPOp finishes the
-   path.
+   float operations); where no position is allowed, the window solver lands a stop at
+   the end, or VPOp finishes the path.
 4. ``refine``: windows of samples shortened by whole periods where the discrete problem
    allows it (passes by effort and period: ``planner._refine_passes``).
 5. ``select``: for a path planned whole, the shorter of the profile's plan and VPOp's.
 
 ``planner`` chains them per path; ``context`` holds the per-path context (``_Path``) and
-the typed outcomes the decisions read (``Sampling``). Every sample is exact at every
+the outcomes the decisions read. Every sample is exact at every
 stage. Memory: the samples held back are those a later stage may still change.
 """
 

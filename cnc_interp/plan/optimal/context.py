@@ -2,14 +2,12 @@
 
 ``_Path`` holds one path's joint table, step limits, the exact sampler's inputs, the
 tunables (``OptimalTuning``), the summary stats and the typed outcomes the decisions
-read: ``Sampling`` (dips and hand-over of the profile's sampling), the planned route,
-the fallback reason and VPOp's plan alongside the profile's (``select``). ``_Fallback``
+read: the planned route, the fallback reason and VPOp's plan alongside the profile's
+(``select``). ``_Fallback``
 is raised by a stage that cannot plan the path with the profile (VPOp plans it).
 """
 
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -35,18 +33,6 @@ def _options(settings) -> OptimalOptions:
 def _or(value, default):
     """``value`` unless it is ``None`` (a knob left at its default)."""
     return default if value is None else value
-
-
-@dataclass(frozen=True)
-class Sampling:
-    """What the decisions after the profile's sampling read of it (``_sampled_from``
-    replaces ``_Path.sampling`` as it goes; the stats mirror it for the summary)."""
-
-    #: dips of the reference on this path so far, every profile run of it counted (the
-    #: dip budget is the path's)
-    retries: int = 0
-    #: global index of the sample from which VPOp finished the last profile run; -1: none
-    handover: int = -1
 
 
 class _Path(_RouteInputs):
@@ -75,7 +61,6 @@ class _Path(_RouteInputs):
             "lp_iterations": 0,
             "knots": 0,
             "clamped": 0,
-            "retries": 0,
             "handover": -1,
             "refined_periods": 0,
             "table_pieces": int(table.C.shape[0]),
@@ -92,7 +77,6 @@ class _Path(_RouteInputs):
         #: the whole path is held before any sample leaves (``select._better_of``)
         self.whole = False
         #: the profile's sampling as the decisions see it
-        self.sampling = Sampling()
         #: the route the path is planned on (``_iter``, ``_vpop_stage``)
         self.planned_route: Route | None = None
         #: why the profile gave the path up to VPOp (``_Fallback``), once it has

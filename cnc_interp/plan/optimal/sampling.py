@@ -13,24 +13,18 @@ finishes the path from there.
 The sampler (``_sampled_from``, with ``_track_kernels.track``): the time law one sample
 per period, each checked with exactly the float operations of ``verify`` and moved to
 the nearest allowed position where the reference would exceed a limit. Where no position
-is allowed (the LP holds its limits at collocation points only), the reference is
-lowered by a smooth dip around that place (depths ``tuning.retry_depths``, spanning
-``tuning.retry_span_s`` of motion) and the stretch is sampled again. Stuck stopping at
-the end (within ``tuning.end_window`` periods of the reference's end), the refinement's
-window solver lands the plan at rest from ``tuning.end_window`` samples back
-(``_land``, ``refine.land``). Otherwise near the end (``tuning.tail_s``), after a
-place's last dip, or past the path's dip budget (``tuning.retry_places`` places plus one
-dip per ``tuning.retry_per_s``), VPOp's step loop (``vpop.VpopRun``) finishes the path
-from a few samples back (``tuning.handover_back``). The sampler holds back
-``tuning.hold_s`` of motion plus the longest hand-over; the rest is final and leaves.
+is allowed (the LP holds its limits at collocation points only): stuck stopping at the
+end (within ``tuning.end_window`` periods of the reference's end), the refinement's
+window solver lands the plan at rest from ``tuning.end_window`` samples back (``_land``,
+``refine.land``); elsewhere VPOp's step loop (``vpop.VpopRun``) finishes the path from a
+few samples back (``tuning.handover_back``). The sampler holds back the longest
+hand-over or landing; the rest is final and leaves.
 
 ``_vpop_stage`` is the other sampler: VPOp's plan of the path as a stream of blocks
 (where VPOp fails, the profile's if the path was VPOp's route, else the safe planner).
 """
 
 from __future__ import annotations
-
-from dataclasses import replace
 
 import numpy as np
 
@@ -64,40 +58,19 @@ class TimeLaw:
         return self.s, t0 + np.concatenate(([0.0], np.cumsum(self.dt))), self.v, self.a
 
 
-def time_law(knots, coef, s0: float, s1: float, tuning: OptimalTuning, old: TimeLaw | None = None, changed=None):
+def time_law(knots, coef, s0: float, s1: float, tuning: OptimalTuning):
     """The ``TimeLaw`` of the profile piece (knots, coef) on [s0, s1], ``tuning.timelaw_nodes``
     nodes per knot interval; None when w (nearly) reaches zero inside: it dips between two
     nodes below ``tuning.timelaw_min_dip`` of the smaller node value (the sampler would
-    crawl there; the planner hands over to VPOp instead). With ``old``, this function's result for the same knots and
-    interval, and ``changed`` = (j0, j1), the only coefficients that differ from old's:
-    the node intervals those coefficients cannot reach keep old's numbers, which are bit
-    for bit what a full computation gives (a point's w depends only on the four
-    coefficients of its knot span), and only the others are computed again."""
-    if old is None:
-        br = np.unique(knots)
-        br = br[(br > s0) & (br < s1)]
-        br = np.concatenate(([s0], br, [s1]))
-        u = np.arange(tuning.timelaw_nodes) / tuning.timelaw_nodes
-        x = (br[:-1, None] + np.diff(br)[:, None] * u[None, :]).ravel()
-        x = np.concatenate((x, [s1]))
-        got = _law(knots, coef, x, tuning.timelaw_min_dip)
-        return None if got is None else TimeLaw(x, *got)
-    x = old.s
-    j0, j1 = changed
-    # nodes a..b span every point whose knot span touches coefficients j0..j1 (their
-    # support is knots[j0] .. knots[j1 + 4]; one knot more each side)
-    lo = knots[max(j0 - 1, 0)]
-    hi = knots[min(j1 + 5, knots.shape[0] - 1)]
-    a = max(int(np.searchsorted(x, lo, side="right")) - 1, 0)
-    b = min(int(np.searchsorted(x, hi, side="left")), x.shape[0] - 1)
-    if b <= a:
-        return old
-    got = _law(knots, coef, x[a : b + 1], tuning.timelaw_min_dip)
-    if got is None:
-        return None
-    dt, w, w1 = old.dt.copy(), old.w.copy(), old.w1.copy()
-    dt[a:b], w[a : b + 1], w1[a : b + 1] = got
-    return TimeLaw(x, dt, w, w1)
+    crawl there; the planner hands over to VPOp instead)."""
+    br = np.unique(knots)
+    br = br[(br > s0) & (br < s1)]
+    br = np.concatenate(([s0], br, [s1]))
+    u = np.arange(tuning.timelaw_nodes) / tuning.timelaw_nodes
+    x = (br[:-1, None] + np.diff(br)[:, None] * u[None, :]).ravel()
+    x = np.concatenate((x, [s1]))
+    got = _law(knots, coef, x, tuning.timelaw_min_dip)
+    return None if got is None else TimeLaw(x, *got)
 
 
 def _law(knots, coef, x, min_dip: float):
@@ -120,7 +93,7 @@ class _Nodes:
 
     def __init__(self, tuning: OptimalTuning):
         self.tuning = tuning
-        self.parts = []  # [knots, coef, s0, s1, TimeLaw]
+        self.ends: list[float] = []  # each appended piece's end s1
         self.s = np.zeros(0)
         self.t = np.zeros(0)
         self.v = np.zeros(0)
@@ -132,11 +105,8 @@ class _Nodes:
         more than tuning.crawl times the estimate's time, more than ``crawl_s`` beyond it in
         all)."""
         law = time_law(knots, coef, s0, s1, self.tuning)
-        return law is not None and self._add(knots, coef, s0, s1, law, estimate, crawl_s)
-
-    def _add(self, knots, coef, s0, s1, law, estimate=None, crawl_s: float = 0.0) -> bool:
-        """``append`` with the piece's time law known."""
-        T = self.tuning
+        if law is None:
+            return False
         t0 = float(self.t[-1]) if self.t.size else 0.0
         ns, nt, nv, na = law.nodes(t0)
         if not (np.all(np.isfinite(nt)) and np.all(np.isfinite(nv)) and np.all(np.isfinite(na))):
@@ -146,10 +116,10 @@ class _Nodes:
             with np.errstate(divide="ignore"):
                 t_est = np.diff(ns) / np.maximum(ve[:-1], ve[1:])
             dt_law = np.diff(nt)
-            crawl = dt_law > T.crawl * t_est
+            crawl = dt_law > self.tuning.crawl * t_est
             if crawl.any() and np.sum(dt_law[crawl] - t_est[crawl]) > crawl_s:
                 return False
-        self.parts.append([knots, coef.copy(), s0, s1, law])
+        self.ends.append(s1)
         if self.s.size:
             ns, nt, nv, na = ns[1:], nt[1:], nv[1:], na[1:]
         self.s = np.concatenate((self.s, ns))
@@ -159,43 +129,11 @@ class _Nodes:
         return True
 
     def drop_before(self, s_keep: float):
-        """Forget parts (and nodes) that end before s_keep."""
-        while len(self.parts) > 1 and self.parts[0][3] < s_keep:
-            s1 = self.parts[0][3]
-            self.parts.pop(0)
+        """Forget the pieces (and their nodes) that end before s_keep, but the last."""
+        while len(self.ends) > 1 and self.ends[0] < s_keep:
+            s1 = self.ends.pop(0)
             i = int(np.searchsorted(self.s, s1, side="left"))
             self.s, self.t, self.v, self.a = self.s[i:], self.t[i:], self.v[i:], self.a[i:]
-
-    def dip(self, s_bad: float, depth: float, reach: float, s_floor: float) -> bool:
-        """Lower w by a smooth dip of the given depth on [s_bad - reach, s_bad + reach/2]
-        (not before s_floor) and recompute the nodes from there. False if impossible."""
-        lo = max(s_bad - reach, s_floor)
-        hi = min(s_bad + 0.5 * reach, self.parts[-1][3] if self.parts else s_bad)
-        if not lo < s_bad < hi:
-            return False
-        parts = []
-        for knots, coef, s0, s1, law in self.parts:
-            nc = coef.shape[0]
-            g = (knots[1 : nc + 1] + knots[2 : nc + 2] + knots[3 : nc + 3]) / 3.0
-            u = np.where(g < s_bad, (g - s_bad) / (s_bad - lo), (g - s_bad) / (hi - s_bad))
-            phi = np.where(np.abs(u) < 1.0, 0.5 * (1.0 + np.cos(np.pi * u)), 0.0)
-            hit = np.flatnonzero(phi > 0)
-            if hit.size:
-                parts.append((knots, coef * (1.0 - depth * phi), s0, s1, law, (int(hit[0]), int(hit[-1]))))
-            else:
-                parts.append((knots, coef, s0, s1, law, None))
-        if all(p[5] is None for p in parts):
-            return False
-        # the nodes again from the first part (their times change from the dip on); a
-        # part's time law is computed again only where its coefficients changed
-        self.parts = []
-        self.s = self.t = self.v = self.a = np.zeros(0)
-        for knots, coef, s0, s1, law, changed in parts:
-            if changed is not None:
-                law = time_law(knots, coef, s0, s1, self.tuning, old=law, changed=changed)
-            if law is None or not self._add(knots, coef, s0, s1, law):
-                return False
-        return True
 
 
 def _sampled(ctx, ahead: bool = False):
@@ -224,7 +162,8 @@ def _sampled_from(ctx, builder, pieces):
     dt, n, L, T = ctx.dt, ctx.n, ctx.L, ctx.tuning
     nodes = _Nodes(T)
     final = False
-    hold = int(T.hold_s / dt) + T.handover_back[-1] + 8
+    # what a hand-over or a landing may take back
+    hold = max(T.handover_back[-1], T.end_window) + 8
     cap = 4 * hold + 64
     sh = np.zeros(cap)
     qh = np.zeros((cap, n))
@@ -233,22 +172,15 @@ def _sampled_from(ctx, builder, pieces):
     base = 0  # global index of buffer[0]
     emitted = 0  # global index of the first sample not yet emitted
     stats = np.zeros(2, dtype=np.int64)
-    retries_here = 0
-    dip_hi = -1.0  # the end of the last dip: a stuck place beyond it is a new one
-    # dips per path at most (each re-samples a stretch): a path stuck that often goes to VPOp.
-    # Budgeted per second of its duration at the static limits, not at its feed: a
-    # curvature-limited zigzag lasts many times its duration at the feed
-    dip_budget = T.retry_places * len(T.retry_depths) + int(ctx.duration_s / T.retry_per_s)
-    final_handover = False
     # a sane bound on the samples: ten times the path's duration at its feed or static
     # limits, plus ramps (the profile is never that slow unless something went wrong)
     max_samples = int(10.0 * ctx.duration_s / dt) + 100_000
     while True:
-        if base + k > max_samples and not final_handover:
+        if base + k > max_samples:
             # the reference crawls (a bug, or a profile the crawl check let through):
             # VPOp finishes the path
             ctx.stats["sample_budget"] = True
-            status, final, retries_here, final_handover = TK.STUCK, True, len(T.retry_depths), True
+            status, final = TK.STUCK, True
         else:
             status, k = (
                 (TK.NEED_REF, k)
@@ -276,13 +208,11 @@ def _sampled_from(ctx, builder, pieces):
             if piece is None:  # VPOp finishes from here
                 status = TK.STUCK
                 final = True
-                retries_here, final_handover = len(T.retry_depths), True
             elif not _append_piece(ctx, nodes, piece, builder):
                 if nodes.s.size == 0:
                     raise _Fallback("reference")
                 status = TK.STUCK  # the profile stops inside a piece: VPOp finishes
                 final = True
-                retries_here, final_handover = len(T.retry_depths), True
             else:
                 final = piece.s1 >= L
                 continue
@@ -291,7 +221,7 @@ def _sampled_from(ctx, builder, pieces):
             yield _final_chunk(sh, qh, k, L, emitted - base, ctx.table.qend)
             return
         if status == TK.NEED_SPACE:
-            # emit what no retry can change, then compact the buffer
+            # emit what no hand-over or landing can change, then compact the buffer
             upto = base + k - hold
             if upto > emitted:
                 yield sh[emitted - base : upto - base].copy(), qh[emitted - base : upto - base].copy()
@@ -309,27 +239,6 @@ def _sampled_from(ctx, builder, pieces):
             continue
         # STUCK at buffer index k
         t_here, _ = TK.ref_t_of_s(nodes.s, nodes.t, nodes.v, nodes.a, nodes.s.shape[0], sh[k - 1], 0)
-        near_end = final and nodes.t[-1] - t_here <= T.tail_s
-        s_bad = float(sh[k - 1])
-        if s_bad > dip_hi and not final_handover and ctx.sampling.retries < dip_budget:
-            # stuck at a new place, past the last dip: it gets dips of its own (the
-            # budget was per path: after four places anywhere VPOp planned the rest)
-            retries_here = 0
-        if not near_end and retries_here < len(T.retry_depths):
-            i = min(int(np.searchsorted(nodes.s, s_bad)), nodes.v.shape[0] - 1)
-            v_here = max(float(np.max(nodes.v[max(i - 8, 0) : i + 8])), 1e-9)
-            reach = max(T.retry_span_s * v_here, 20.0 * dt * v_here, 1e-6)
-            s_floor = float(sh[emitted - base]) if emitted > base else float(sh[0])
-            if nodes.dip(s_bad, T.retry_depths[retries_here], reach, s_floor):
-                retries_here += 1
-                dip_hi = max(dip_hi, min(s_bad + 0.5 * reach, L))
-                ctx.sampling = replace(ctx.sampling, retries=ctx.sampling.retries + 1)
-                ctx.stats["retries"] = ctx.sampling.retries
-                # restart before the dip (every sample there is unchanged)
-                lo = max(s_bad - reach, s_floor)
-                kr = int(np.searchsorted(sh[:k], lo, side="left"))
-                k = max(kr, emitted - base + 1, 1)
-                continue
         if final and nodes.t[-1] - t_here <= T.end_window * dt:
             # stuck stopping at the end: the window solver lands the plan from a few
             # samples back (VPOp's greedy stop needs many more)
@@ -347,8 +256,7 @@ def _sampled_from(ctx, builder, pieces):
             st, kk, sh2, qh2 = ctx.vrun().run(sh.copy(), qh.copy(), k0, k0 - 1)
             if st == ctx.vrun().core.OK:
                 sh, qh, k, done = sh2, qh2, kk, True
-                ctx.sampling = replace(ctx.sampling, handover=int(base + k0))
-                ctx.stats["handover"] = ctx.sampling.handover
+                ctx.stats["handover"] = int(base + k0)  # global index of the first sample VPOp planned
                 break
             if k0 <= emitted - base + 1:
                 break
