@@ -61,7 +61,7 @@ def _effort_option(f):
         type=click.Choice(OPTIMAL_EFFORTS),
         default=None,
         help="--planner optimal only: fast (no window refinement below 2 ms periods: over "
-        "the corpus at 1 ms, 60 % of the planning time for cycles 2.4 % longer), normal "
+        "the corpus at 1 ms, about half the planning time for cycles 1.9 % longer), normal "
         "(default) or max (every window of every path refined: the shortest cycles, "
         "the longest planning).",
     )(f)

@@ -324,7 +324,7 @@ def test_a_profile_that_would_crawl_after_a_sharp_corner_plans(tmp_path, monkeyp
     # corpus stellabee1.ngc lines 29179-29184 on axis_mm.ini: knots placed at the static
     # speed estimate right after a sharp corner left one long knot interval where the
     # profile nearly stopped (the sampler crawled until its sample budget). The reach
-    # envelope of the estimate fixes the knots; the crawl check would hand over to VPOp.
+    # envelope of the estimate fixes the knots.
     from cnc_interp.pipeline import plan_part
 
     part = tmp_path / "sb1.ngc"
@@ -346,7 +346,7 @@ def test_a_profile_that_would_crawl_after_a_sharp_corner_plans(tmp_path, monkeyp
         cycles[planner] = out.trajectory.duration_s
     assert cycles["optimal"] <= cycles["vpop"]
     # without the envelope (no acceleration to reach with: ``reach_envelope`` returns w)
-    # the crawl check refuses the profile (VPOp plans the path)
+    # the profile crawls, and VPOp's plan of the path is kept
     from cnc_interp.plan.optimal.profile import FeedProfileBuilder
 
     inputs = FeedProfileBuilder._knot_inputs
@@ -438,8 +438,8 @@ def _spiral_window_by_window(**tuning):
 
 def _profile(path, machine, settings):
     """The feed profile of ``path`` alone, planned whole or window by window as
-    ``settings`` say (no sampling): (pieces, windows solved again, LP iterations, its traversal time in s,
-    whether the sampler would refuse a piece as a crawl)."""
+    ``settings`` say (no sampling): (pieces, windows solved again, LP iterations, its
+    traversal time in s)."""
     from cnc_interp.plan.optimal.profile import FeedProfileBuilder
     from cnc_interp.plan.optimal.route import _RouteInputs
     from cnc_interp.plan.optimal.sampling import _Nodes
@@ -450,16 +450,10 @@ def _profile(path, machine, settings):
     whole = inputs.rough_s <= (T.compare_samples * machine.dt_s if compare_s is None else compare_s)
     builder = FeedProfileBuilder(inputs.table, path, machine, machine.dt_s, T, whole=whole)
     pieces = list(builder.windows())
-    nodes, crawled = _Nodes(T), False
-    for piece in pieces:
-        rest_s = inputs.duration_s * max(inputs.L - piece.s0, 0.0) / inputs.L
-
-        def estimate(x, piece=piece):
-            return builder.estimate(x, piece.envelope)
-
-        crawled |= not nodes.append(piece.knots, piece.coef, piece.s0, piece.s1, estimate, T.crawl_share * rest_s)
+    nodes = _Nodes(T)
+    assert all(nodes.append(p.knots, p.coef, p.s0, p.s1) for p in pieces)
     assert pieces[-1].s1 == inputs.L  # the profile reaches the end
-    return pieces, pieces[-1].restarts, sum(p.lp_iters for p in pieces), float(nodes.t[-1]), crawled
+    return pieces, pieces[-1].restarts, sum(p.lp_iters for p in pieces), float(nodes.t[-1])
 
 
 def _linearise_at_the_estimate(monkeypatch, near_previous: bool = False) -> None:
@@ -500,8 +494,8 @@ def test_a_window_that_cannot_brake_under_the_estimate_is_solved_again(monkeypat
 
     _linearise_at_the_estimate(monkeypatch)
     m, path, settings = _spiral_window_by_window()
-    _, restarts, _, time_s, crawled = _profile(path, m, settings)
-    assert restarts >= 1 and not crawled
+    _, restarts, _, time_s = _profile(path, m, settings)
+    assert restarts >= 1
     # without the second solve the profile ends at the first such window
     solve_from = profile.FeedProfileBuilder._solve_from
 
@@ -525,11 +519,11 @@ def test_a_windows_first_lp_is_linearised_at_the_estimate_lowered_to_the_previou
 
     ratios = _recorded(monkeypatch, profile.FeedProfileBuilder, "_ratio")
     m, path, settings = _spiral_window_by_window()
-    _, restarts, iterations, time_s, crawled = _profile(path, m, settings)
+    _, restarts, iterations, time_s = _profile(path, m, settings)
     assert len(ratios) >= 5 and all(0.1 < r < 0.5 for r in ratios)
-    assert restarts == 0 and not crawled
+    assert restarts == 0
     _linearise_at_the_estimate(monkeypatch)
-    _, restarts_at, iterations_at, time_at_s, _ = _profile(path, m, settings)
+    _, restarts_at, iterations_at, time_at_s = _profile(path, m, settings)
     assert restarts_at >= 5
     assert 3 * iterations < iterations_at
     assert time_s <= time_at_s * (1 + 1e-3)
@@ -545,10 +539,10 @@ def test_a_windows_first_lp_held_near_the_previous_solution_always_has_one(monke
     _linearise_at_the_estimate(monkeypatch, near_previous=True)
     m, path, settings = _spiral_window_by_window()
     held = _recorded(monkeypatch, profile.FeedProfileBuilder, "_feasible_hat")
-    _, restarts, _, time_s, crawled = _profile(path, m, settings)
-    assert len(held) >= 5 and restarts == 0 and not crawled
+    _, restarts, _, time_s = _profile(path, m, settings)
+    assert len(held) >= 5 and restarts == 0
     _linearise_at_the_estimate(monkeypatch)
-    _, restarts_unheld, _, time_unheld_s, _ = _profile(path, m, settings)
+    _, restarts_unheld, _, time_unheld_s = _profile(path, m, settings)
     assert restarts_unheld >= 5
     assert time_s <= time_unheld_s * (1 + 1e-3)
 
@@ -939,11 +933,11 @@ def test_a_windows_first_lp_without_a_solution_gives_up_early_for_the_same_plan(
         return out
 
     monkeypatch.setattr(profile, "lp_solve", counting)
-    capped, restarts, _, _, _ = _profile(path, m, settings)
+    capped, restarts, _, _ = _profile(path, m, settings)
     capped_spent, spent[:] = sum(spent), []
     T = settings.optimal.tuning
     saved = T.lp_max_iter - T.lp_first_max_iter
-    uncapped, _, _, _, _ = _profile(path, m, tuned(settings, lp_first_max_iter=T.lp_max_iter))
+    uncapped, _, _, _ = _profile(path, m, tuned(settings, lp_first_max_iter=T.lp_max_iter))
     assert restarts >= 1
     for a, b in zip(capped, uncapped, strict=True):
         assert_array_equal(a.coef, b.coef)

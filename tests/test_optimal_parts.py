@@ -741,39 +741,6 @@ def test_refine_kernels_match_numpy_bit_for_bit():
     assert 40 < hits < 360, hits  # both answers occur
 
 
-@pytest.mark.parametrize("spacing_mm", [0.002, 2.0])
-def test_a_crawl_is_refused_only_when_it_costs_more_than_its_bound(spacing_mm):
-    # w = 1 (mm/s)² with a dip to ~1e-6 over one knot: node intervals there take far more
-    # than ``crawl`` times the estimate's time; the piece is kept unless those intervals
-    # cost more than the allowance beyond the estimate in all (zigzag_0.002_0.001 on
-    # axis_mm.ini: a refused short crawl handed 96 % of its path to VPOp)
-    from cnc_interp.plan.optimal.sampling import _Nodes
-    from cnc_interp.plan.optimal.sampling import time_law
-    from cnc_interp.plan.tuning import OptimalTuning
-
-    allow_s = 0.25
-    tuning = OptimalTuning()
-
-    br = spacing_mm * np.arange(21.0)
-    knots = np.concatenate(([0.0] * 3, br, [br[-1]] * 3))
-    coef = np.ones(knots.shape[0] - 4)
-    coef[10:13] = 1e-6
-    s1 = float(br[-1])
-    law = time_law(knots, coef, 0.0, s1, tuning)
-    assert law is not None
-    ns, nt, _, _ = law.nodes(0.0)
-    t_est = np.diff(ns)  # the estimate: 1 mm/s everywhere
-    crawl = np.diff(nt) > tuning.crawl * t_est
-    excess = float(np.sum(np.diff(nt)[crawl] - t_est[crawl]))
-    assert crawl.any()
-    nodes = _Nodes(tuning)
-    kept = nodes.append(knots, coef, 0.0, s1, estimate=lambda s: np.ones_like(s), crawl_s=allow_s)
-    assert kept == (excess <= allow_s), excess
-    assert kept == (spacing_mm < 1.0)  # both outcomes are met
-    assert (nodes.s.shape[0] > 0) == kept
-    assert not _Nodes(tuning).append(knots, coef, 0.0, s1, estimate=lambda s: np.ones_like(s))  # no allowance
-
-
 def test_the_chunks_of_a_stream_are_its_samples_cut_once_per_block():
     # _rechunk: chunks of exactly ``chunk`` samples (the last shorter) whose concatenation
     # is the stream; a block many chunks long is copied once, not once per chunk (a path
@@ -943,7 +910,7 @@ def test_a_tuning_is_checked_on_construction_and_frozen():
     from cnc_interp.plan.tuning import OptimalTuning
 
     t = OptimalTuning()
-    for bad in ({"knot_time_s": -0.1}, {"crawl": float("nan")}, {"handover_back": ()}, {"handover_back": (2, -6)}):
+    for bad in ({"knot_time_s": -0.1}, {"dip": float("nan")}, {"handover_back": ()}, {"handover_back": (2, -6)}):
         with pytest.raises(UsageError):
             OptimalTuning(**bad)
     with pytest.raises(dataclasses.FrozenInstanceError):

@@ -72,10 +72,6 @@ class OptimalTuning:
         timelaw_nodes: time-law nodes per knot interval of the profile.
         timelaw_min_dip: 1; a piece whose w dips between two nodes below this share of
             the smaller node value is refused.
-        crawl: 1; a piece whose node intervals take more than this many times the
-            estimate's time is refused ...
-        crawl_share: 1; ... unless those intervals take at most this share of the rest
-            of the path's duration beyond the estimate.
         handover_back: samples each; stuck (no allowed position) away from the end,
             VPOp finishes the path from this many samples back (the first that works).
 
@@ -142,8 +138,6 @@ class OptimalTuning:
     # time law and exact sampling
     timelaw_nodes: int = 4
     timelaw_min_dip: float = 1e-3
-    crawl: float = 50.0
-    crawl_share: float = 0.02
     handover_back: tuple[int, ...] = (2, 6, 16, 40, 100, 250)
     # refinement
     refine_passes: int = 2

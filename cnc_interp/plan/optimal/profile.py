@@ -114,9 +114,6 @@ class FeedPiece:
         s0, s1: the arc-length range this piece is final on, mm.
         lp_iters: interior-point iterations spent (statistics).
         restarts: windows solved again so far, this one included (statistics).
-        envelope: (x (K,), w (K,)) the estimate's reach-envelope probes when the piece
-            was committed (``FeedProfileBuilder.estimate``'s ``envelope``): the estimate
-            a consumer sees does not depend on how far ahead the builder has run.
     """
 
     knots: np.ndarray
@@ -125,7 +122,6 @@ class FeedPiece:
     s1: float
     lp_iters: int
     restarts: int = 0
-    envelope: tuple = (np.zeros(0), np.zeros(0))
 
 
 def spline_values(knots, coef, x, nu: int = 0):
@@ -256,14 +252,13 @@ class FeedProfileBuilder:
         inflated, sampled start and stop near the ends): ``_feed_kernels.Estimates``."""
         return K.estimates_of(self.S, self.C, np.ascontiguousarray(x, dtype=float), self._est_in)
 
-    def estimate(self, x, envelope=None):
+    def estimate(self, x):
         """Estimated speed² at sorted x (K,): ``_raw_estimate`` under the reach envelope
         of the knot placement's probes (a speed the tangent's acceleration and jerk can
-        reach from the slow points around, see ``_feed_kernels.knot_probes``): the current ones, or
-        ``envelope`` = (x, w) kept from earlier (``FeedPiece.envelope``)."""
+        reach from the slow points around, see ``_feed_kernels.knot_probes``)."""
         x = np.ascontiguousarray(x, dtype=float)
         w = self._raw_estimate(x).w
-        ex, ew = (self._ex, self._ew) if envelope is None else envelope
+        ex, ew = self._ex, self._ew
         if ex.shape[0] >= 2:
             inside = (x >= ex[0]) & (x <= ex[-1])
             w = np.where(inside, np.minimum(w, np.interp(x, ex, ew)), w)
@@ -363,7 +358,7 @@ class FeedProfileBuilder:
             coef, tk, it = self._solve(b0, b1, at_end, fixed, prev)
             # coef / tk: coefficients b0 .. b1+2 and their knots t[b0 : b1+7]
             if at_end:
-                yield FeedPiece(tk, coef, self._br[b0], self.L, it, self.restarts, (self._ex, self._ew))
+                yield FeedPiece(tk, coef, self._br[b0], self.L, it, self.restarts)
                 return
             commit = min(self.commit, max(b1 - b0 - self.brake, 1))
             bc = b0 + commit
@@ -375,7 +370,6 @@ class FeedProfileBuilder:
                 self._br[bc],
                 it,
                 self.restarts,
-                (self._ex, self._ew),  # replaced, never changed in place: a snapshot
             )
             fixed = coef[commit : commit + 3].copy()
             prev = _Window(tk, coef, self._br[max(b1 - self.brake, bc)], self._br[b1], self._ratio(tk, coef, b0, bc))

@@ -6,9 +6,8 @@ integrated with Gauss–Legendre (``TIMELAW_GL`` points; an interval that starts
 at rest, w = 0 with w' ≠ 0, is integrated in u with s = s_a + u² or s = s_b - u², where
 the integrand is smooth). Between nodes s(t) is the quintic Hermite interpolant of
 (s, v, a) at both ends: C² in time, so the sampled reference has bounded third
-differences. A piece whose w dips below ``tuning.timelaw_min_dip`` between nodes, or
-whose node intervals crawl (``tuning.crawl``, ``tuning.crawl_share``), is refused: VPOp
-finishes the path from there.
+differences. A piece whose w dips below ``tuning.timelaw_min_dip`` between nodes is
+refused: VPOp finishes the path from there.
 
 The sampler (``_sampled_from``, with ``_track_kernels.track``): the time law one sample
 per period, each checked with exactly the float operations of ``verify`` and moved to
@@ -99,11 +98,9 @@ class _Nodes:
         self.v = np.zeros(0)
         self.a = np.zeros(0)
 
-    def append(self, knots, coef, s0, s1, estimate=None, crawl_s: float = 0.0) -> bool:
+    def append(self, knots, coef, s0, s1) -> bool:
         """Append a profile piece's nodes; False (nothing appended) if its time law is
-        not finite or, given the profile's speed estimate, crawls (node intervals taking
-        more than tuning.crawl times the estimate's time, more than ``crawl_s`` beyond it in
-        all)."""
+        not finite."""
         law = time_law(knots, coef, s0, s1, self.tuning)
         if law is None:
             return False
@@ -111,14 +108,6 @@ class _Nodes:
         ns, nt, nv, na = law.nodes(t0)
         if not (np.all(np.isfinite(nt)) and np.all(np.isfinite(nv)) and np.all(np.isfinite(na))):
             return False
-        if estimate is not None and ns.shape[0] >= 2:
-            ve = np.sqrt(np.maximum(estimate(ns), 0.0))
-            with np.errstate(divide="ignore"):
-                t_est = np.diff(ns) / np.maximum(ve[:-1], ve[1:])
-            dt_law = np.diff(nt)
-            crawl = dt_law > self.tuning.crawl * t_est
-            if crawl.any() and np.sum(dt_law[crawl] - t_est[crawl]) > crawl_s:
-                return False
         self.ends.append(s1)
         if self.s.size:
             ns, nt, nv, na = ns[1:], nt[1:], nv[1:], na[1:]
@@ -145,16 +134,16 @@ def _sampled(ctx, ahead: bool = False):
     T = ctx.tuning
     builder = FeedProfileBuilder(ctx.table, ctx.path, ctx.machine, ctx.dt, T, whole=ctx.whole)
     if not ahead:
-        yield from _sampled_from(ctx, builder, builder.windows())
+        yield from _sampled_from(ctx, builder.windows())
         return
     pieces = Prefetch(builder.windows(), ahead=T.ahead_pieces, name="cnc-interp-feed")
     try:
-        yield from _sampled_from(ctx, builder, iter(pieces))
+        yield from _sampled_from(ctx, iter(pieces))
     finally:
         pieces.close()  # the sampling may stop before the last piece (VPOp finishes)
 
 
-def _sampled_from(ctx, builder, pieces):
+def _sampled_from(ctx, pieces):
     """``_sampled`` on the profile's ``FeedPiece``s from the iterator ``pieces``."""
     from .. import _track_kernels as TK
     from .profile import ProfileError
@@ -177,8 +166,8 @@ def _sampled_from(ctx, builder, pieces):
     max_samples = int(10.0 * ctx.duration_s / dt) + 100_000
     while True:
         if base + k > max_samples:
-            # the reference crawls (a bug, or a profile the crawl check let through):
-            # VPOp finishes the path
+            # the reference crawls (a bug, or a profile that nearly stops): VPOp
+            # finishes the path
             ctx.stats["sample_budget"] = True
             status, final = TK.STUCK, True
         else:
@@ -208,7 +197,7 @@ def _sampled_from(ctx, builder, pieces):
             if piece is None:  # VPOp finishes from here
                 status = TK.STUCK
                 final = True
-            elif not _append_piece(ctx, nodes, piece, builder):
+            elif not _append_piece(ctx, nodes, piece):
                 if nodes.s.size == 0:
                     raise _Fallback("reference")
                 status = TK.STUCK  # the profile stops inside a piece: VPOp finishes
@@ -302,19 +291,11 @@ def _land(ctx, nodes, sh, qh, k: int, first: int):
     return sh, qh, a + x.shape[0] + 1
 
 
-def _append_piece(ctx, nodes, piece, builder) -> bool:
+def _append_piece(ctx, nodes, piece) -> bool:
     ctx.stats["lp_iterations"] += piece.lp_iters
     if piece.restarts:
         ctx.stats["lp_restarts"] = piece.restarts
-
-    def estimate(x):  # the builder's estimate as it was when the piece was committed
-        return builder.estimate(x, piece.envelope)
-
-    rest_s = ctx.duration_s * max(ctx.L - piece.s0, 0.0) / ctx.L
-    if nodes.append(piece.knots, piece.coef, piece.s0, piece.s1, estimate, ctx.tuning.crawl_share * rest_s):
-        return True
-    ctx.stats["crawl"] = ctx.stats.get("crawl", 0) + 1
-    return False
+    return nodes.append(piece.knots, piece.coef, piece.s0, piece.s1)
 
 
 def _final_chunk(sh, qh, k: int, L: float, first: int, qend):
