@@ -25,8 +25,8 @@ One module per stage, each a generator that only ever looks a bounded distance a
 5. ``select``: for a path planned whole, the shorter of the profile's plan and VPOp's.
 
 ``planner`` chains them per path; ``context`` holds the per-path context (``_Path``) and
-the outcomes the decisions read. Every sample is exact at every
-stage. Memory: the samples held back are those a later stage may still change.
+the outcomes the decisions read. Every sample is exact at every stage. Memory: the
+samples held back are those a later stage may still change.
 """
 
 from __future__ import annotations

@@ -3,8 +3,8 @@
 ``_Path`` holds one path's joint table, step limits, the exact sampler's inputs, the
 tunables (``OptimalTuning``), the summary stats and the typed outcomes the decisions
 read: the planned route, the fallback reason and VPOp's plan alongside the profile's
-(``select``). ``_Fallback``
-is raised by a stage that cannot plan the path with the profile (VPOp plans it).
+(``select``). ``_Fallback`` is raised by a stage that cannot plan the path with the
+profile (VPOp plans it).
 """
 
 from __future__ import annotations
@@ -76,7 +76,6 @@ class _Path(_RouteInputs):
         self._refine = None
         #: the whole path is held before any sample leaves (``select._better_of``)
         self.whole = False
-        #: the profile's sampling as the decisions see it
         #: the route the path is planned on (``_iter``, ``_vpop_stage``)
         self.planned_route: Route | None = None
         #: why the profile gave the path up to VPOp (``_Fallback``), once it has
