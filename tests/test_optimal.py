@@ -494,7 +494,7 @@ def test_a_window_that_cannot_brake_under_the_estimate_is_solved_again(monkeypat
 
     _linearise_at_the_estimate(monkeypatch)
     m, path, settings = _spiral_window_by_window()
-    _, restarts, _, time_s = _profile(path, m, settings)
+    _, restarts, _, _ = _profile(path, m, settings)
     assert restarts >= 1
     # without the second solve the profile ends at the first such window
     solve_from = profile.FeedProfileBuilder._solve_from
