@@ -440,14 +440,14 @@ def _profile(path, machine, settings):
     """The feed profile of ``path`` alone, planned whole or window by window as
     ``settings`` say (no sampling): (pieces, windows solved again, LP iterations, its
     traversal time in s)."""
+    from cnc_interp.plan.optimal.planner import _planned_whole
     from cnc_interp.plan.optimal.profile import FeedProfileBuilder
     from cnc_interp.plan.optimal.route import _RouteInputs
     from cnc_interp.plan.optimal.sampling import _Nodes
 
     T = settings.optimal.tuning
     inputs = _RouteInputs(path, None, machine, T)
-    compare_s = settings.optimal.compare_s
-    whole = inputs.rough_s <= (T.compare_samples * machine.dt_s if compare_s is None else compare_s)
+    whole = _planned_whole(settings.optimal, machine.dt_s, inputs.rough_s)
     builder = FeedProfileBuilder(inputs.table, path, machine, machine.dt_s, T, whole=whole)
     pieces = list(builder.windows())
     nodes = _Nodes(T)

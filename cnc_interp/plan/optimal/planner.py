@@ -63,6 +63,13 @@ def _end_window(opts: OptimalOptions, dt: float, route: Route) -> bool:
     return route == Route.VPOP and opts.refine_passes is None and opts.effort != "fast"
 
 
+def _planned_whole(opts: OptimalOptions, dt: float, rough_s: float) -> bool:
+    """Is a profile-routed path of rough duration ``rough_s`` planned whole before any
+    sample leaves, and compared with VPOp's plan (``select``)? At most
+    ``opts.compare_s``, default ``tuning.compare_samples`` periods."""
+    return rough_s <= float(_or(opts.compare_s, opts.tuning.compare_samples * dt))
+
+
 def _targeted(opts: OptimalOptions, dt: float) -> bool:
     """Does the refinement visit only the dips and ends, under the pause rule (fine
     periods), rather than every window?"""
@@ -209,8 +216,7 @@ def _iter(path, joint_map, machine, dt_s, settings, stats, window):
     route = Route(opts.route) if opts.route else _route(ctx)
     ctx.stats["route"] = ctx.planned_route = route
     passes = _refine_passes(opts, dt, route)
-    limit_s = float(_or(opts.compare_s, T.compare_samples * dt))
-    ctx.whole = route == Route.PROFILE and ctx.rough_s <= limit_s
+    ctx.whole = route == Route.PROFILE and _planned_whole(opts, dt, ctx.rough_s)
     long_path = route == Route.PROFILE and ctx.duration_s >= (T.ahead_s if passes else T.feed_ahead_s)
     # a long path's second thread: the profile's windows ahead of the sampling without
     # refinement, else the profile and its sampling ahead of the refinement

@@ -175,6 +175,7 @@ class FeedProfileBuilder:
         self.S = np.ascontiguousarray(table.S)
         self.C = np.ascontiguousarray(table.C)
         self.moving = np.ascontiguousarray(np.any(np.abs(table.C[:, 1:, :]) > 0, axis=(0, 1)))
+        self.limits = K.AxisLimits(self.moving, self.amax, self.jmax)  # the LP's rows' limits
         # segment joins of the path, as table knots (the table keeps every path break)
         sb = np.asarray(path.s_breaks, dtype=float)[1:-1] * (self.L / float(path.length))
         if sb.size:
@@ -433,9 +434,8 @@ class FeedProfileBuilder:
         """
         p, dp, ddp = spline_derivs(prev.knots, prev.coef, np.clip(x, prev.knots[3], prev.knots[-4]))
         out = np.empty(x.shape[0])
-        limits = K.AxisLimits(self.moving, self.amax, self.jmax)
         K.feasible_hat(
-            p, dp, ddp, q1, q2, q3, limits, target, floor, 1.0 - self.tuning.hat_margin, _HAT_BISECTIONS, out
+            p, dp, ddp, q1, q2, q3, self.limits, target, floor, 1.0 - self.tuning.hat_margin, _HAT_BISECTIONS, out
         )
         return out
 
@@ -512,7 +512,7 @@ class FeedProfileBuilder:
         for ccp in range(ccp_max):
             r = K.lp_rows(
                 K.Collocation(first, B, q1, q2, q3),
-                K.AxisLimits(self.moving, self.amax, self.jmax),
+                self.limits,
                 wmax,
                 w_hat,
                 inner,
