@@ -154,8 +154,16 @@ def test_settings_validation_and_from_options():
 
     class M:
         tol_mm = 0.02
+        kinematics = "trivial"
+
+    class Trt(M):
+        kinematics = "xyzac-trt"
 
     assert FitSettings.from_options(machine=M()).tol_mm == 0.02
+    # rapids blend where they are straight in program space: no kinematics
+    assert FitSettings.from_options(machine=M()).blend_rapids
+    assert not FitSettings.from_options(machine=Trt()).blend_rapids
+    assert not FitSettings.from_options().blend_rapids and not FitSettings().blend_rapids
     assert FitSettings.from_options(machine=M()).tol_cap_mm is None  # a machine's tol is a default
     assert FitSettings.from_options(tol_mm=0.005, machine=M()).tol_mm == 0.005
     assert FitSettings.from_options(tol_mm=0.005, machine=M()).tol_cap_mm == 0.005
@@ -251,3 +259,73 @@ def test_rapids_along_one_line_are_one_path_and_plan_without_stopping():
         return int(np.flatnonzero(np.all(traj.q == nodes[20], axis=1))[0])
 
     assert arrival(chained) == arrival(single)
+
+
+def _kinked_rapids(tol=np.nan, turn_deg=None):
+    """long-kink.ngc in mm: G0 X25.4, G0 X25.654 Y0.0254 (a 5.7° turn), G0 X50.8; with
+    ``turn_deg``, G0 X25.4 and then 25.4 mm turned by that."""
+    nodes = [[0.0, 0.0, 0.0], [25.4, 0.0, 0.0], [25.654, 0.0254, 0.0], [50.8, 0.0254, 0.0]]
+    if turn_deg is not None:
+        a = np.radians(turn_deg)
+        nodes = [[0.0, 0.0, 0.0], [25.4, 0.0, 0.0], [25.4 * (1 + np.cos(a)), 25.4 * np.sin(a), 0.0]]
+    return Program("t.ngc", "XYZ", (_run(nodes, kind="rapid", tol=tol),), np.zeros(3), len(nodes)), np.array(nodes)
+
+
+def test_rapids_that_turn_gently_are_one_smooth_path_within_the_tolerance():
+    prog, nodes = _kinked_rapids()
+    blended = fit_program(prog, FitSettings(blend_rapids=True))
+    (path,) = blended.paths
+    assert path.rapid and np.all(np.isinf(path.feed_mm_s))
+    assert np.array_equal(path.start, nodes[0]) and np.array_equal(path.end, nodes[-1])
+    # the path passes the kinks within the tolerance, without a stop
+    tol = FitSettings().fit_tol_mm
+    assert distance_to_path(path, nodes).max() <= tol * (1 + 1e-6)
+    assert blended.stats["max_path_dev_mm"] <= tol * (1 + 1e-6)
+    stops = fit_program(prog, FitSettings(blend_rapids=False))
+    assert len(stops.paths) == 3 and all(p.rapid and p.coef.shape[0] == 1 for p in stops.paths)
+    # under G61 the rapids stop at each turn as before
+    exact, _ = _kinked_rapids(tol=0.0)
+    assert len(fit_program(exact, FitSettings(blend_rapids=True)).paths) == 3
+    # a corner sharper than corner_deg stops: Z up, then across
+    up = [[0.0, 0.0, 0.0], [0.0, 0.0, 5.0], [30.0, 0.0, 5.0]]
+    square = Program("t.ngc", "XYZ", (_run(up, kind="rapid"),), np.zeros(3), 3)
+    paths = fit_program(square, FitSettings(blend_rapids=True)).paths
+    assert len(paths) == 2 and all(p.rapid and p.coef.shape[0] == 1 for p in paths)
+
+
+def test_blended_rapids_plan_shorter_within_the_limits():
+    from cnc_interp.machine.load import load_machine
+    from cnc_interp.plan.settings import PlanSettings
+    from cnc_interp.plan.timeline import plan_program
+    from cnc_interp.plan.verify import verify
+
+    m = load_machine("generic-mill")
+    for deg in (5.7, 29.0):  # up to corner_deg, the smooth path beats two lines and a stop
+        prog, nodes = _kinked_rapids(turn_deg=deg)
+        periods = {}
+        for blend in (True, False):
+            fitted = fit_program(prog, FitSettings(blend_rapids=blend))
+            traj = plan_program(fitted, m, PlanSettings.from_options(machine=m))
+            rep = verify(traj, m)
+            assert rep.ok, rep.format()
+            assert np.array_equal(traj.q[-1], nodes[-1])
+            periods[blend] = traj.n_samples
+        assert periods[True] < periods[False], deg
+
+
+def test_blended_rapids_on_a_machine_with_kinematics_are_refused():
+    from cnc_interp.errors import PlanError
+    from cnc_interp.machine.model import Machine
+    from cnc_interp.plan.settings import PlanSettings
+    from cnc_interp.plan.timeline import plan_program
+
+    five = Machine(
+        name="t", axes="XYZAC", vmax=np.full(5, 100.0), amax=np.full(5, 1e3), jmax=np.full(5, 1e4),
+        dt_s=0.001, kinematics="xyzac-trt",
+    )  # fmt: skip
+    nodes = [[0.0, 0, 0, 0, 0], [25.4, 0, 0, 0, 0], [25.654, 0.0254, 0, 0, 0], [50.8, 0.0254, 0, 0, 0]]
+    prog = Program("t.ngc", "XYZAC", (_run(nodes, axes="XYZAC", kind="rapid"),), np.zeros(5), 4)
+    fitted = fit_program(prog, FitSettings(blend_rapids=True))
+    with pytest.raises(PlanError, match="fitted with blends"):
+        plan_program(fitted, five, PlanSettings(dt_s=0.001))
+    assert FitSettings.from_options(machine=five).blend_rapids is False

@@ -78,20 +78,61 @@ def test_program_with_rapids_dwell_and_stop():
     assert traj.planner == "vpop" and traj.settings["dt_s"] == DT
 
 
-def test_motions_are_separated_by_rest():
-    fit, _ = build()
-    traj = plan_program(fit, MILL, PlanSettings(dt_s=DT))
+def _rest_runs(traj):
+    """(start sample, length) of each run of periods in which no axis moves."""
     moving = np.any(np.diff(traj.q, axis=0) != 0, axis=1)
-    # wherever motion stops and restarts, at least two extra equal samples sit in between
-    idle = ~moving
     runs, count = [], 0
-    for flag in idle:
+    for k, flag in enumerate(~moving):
         if flag:
             count += 1
         elif count:
-            runs.append(count)
+            runs.append((k - count, count))
             count = 0
-    assert runs and min(runs) >= 2
+    return runs
+
+
+def test_motions_are_separated_by_rest():
+    fit, _ = build()
+    traj = plan_program(fit, MILL, PlanSettings(dt_s=DT))
+    assert verify(traj, MILL.with_start(fit.program.start)).ok
+    # wherever motion stops and restarts, at least one period at rest sits in between
+    runs = _rest_runs(traj)
+    assert runs and min(n for _, n in runs) >= 1
+
+
+def _joint_program(a, b, c):
+    """Two cuts a -> b -> c with the machine at rest at b (two paths)."""
+    first = line_path(a, b, 50.0, line=2)
+    second = line_path(b, c, 50.0, line=3)
+    items = (first, second)
+    return FitResult(program=program(a, items), items=items)
+
+
+@pytest.mark.parametrize("planner", ["vpop", "optimal"])
+def test_a_reversal_rests_one_period_between_paths(planner):
+    # back the way it came: the joint's jerk stencil adds two steps of opposite sign
+    fit = _joint_program([0.0, 0.0, 0.0], [5.0, 0.0, 0.0], [0.0, 0.0, 0.0])
+    traj = plan_program(fit, MILL, PlanSettings(planner=planner, dt_s=DT))
+    rep = verify(traj, MILL.with_start(fit.program.start))
+    assert rep.ok, rep.format()
+    middle = [n for k, n in _rest_runs(traj) if 0 < k < traj.n_samples - 4]
+    assert middle == [1]
+
+
+@pytest.mark.parametrize("planner", ["vpop", "optimal"])
+def test_going_on_the_same_way_keeps_two_periods_of_rest_where_jerk_needs_them(planner):
+    # a 10 degree kink: the last step in and the first step out add up on X, past the
+    # jerk limit of one period, so the joint keeps the longer rest and the limits hold
+    fit = _joint_program([0.0, 0.0, 0.0], [5.0, 0.0, 0.0], [10.0, 5.0 * math.tan(math.radians(10)), 0.0])
+    traj = plan_program(fit, MILL, PlanSettings(planner=planner, dt_s=DT))
+    rep = verify(traj, MILL.with_start(fit.program.start))
+    assert rep.ok, rep.format()
+    (k, n) = [(k, n) for k, n in _rest_runs(traj) if 0 < k < traj.n_samples - 4][0]
+    step_in = traj.q[k] - traj.q[k - 1]
+    step_out = traj.q[k + n + 1] - traj.q[k + n]
+    jerk_if_short = np.abs(step_in + step_out) / DT**3
+    assert np.any(jerk_if_short > MILL.jmax)  # one period at rest would break the limit
+    assert n == 2
 
 
 def test_empty_program_is_one_sample_at_the_start():

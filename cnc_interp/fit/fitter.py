@@ -232,6 +232,7 @@ def iter_fit(
                 totals["nodes_in"] += info["nodes_in"]
                 totals["segments_out"] += info["segments_out"]
                 totals["feed_paths"] += n_raws
+            if "max_tol_mm" in info:  # fitted as a feed run (a blended rapid chain too)
                 totals["max_node_dev_mm"] = max(totals["max_node_dev_mm"], info["max_node_dev_mm"])
                 totals["max_node_dev_deg"] = max(totals["max_node_dev_deg"], info["max_node_dev_deg"])
                 totals["max_path_dev_mm"] = max(totals["max_path_dev_mm"], info["max_path_dev_mm"])
@@ -424,10 +425,42 @@ def _iter_run_raws(run: Run, settings: FitSettings, info: dict, threads: int = 1
     this one, which builds the results in order (the same paths)."""
     lin = np.array([a in "XYZUVW" for a in run.axes], dtype=bool)
     if run.kind == "rapid":
-        raws = _rapid_raws(run, lin)
-        info["paths"] = len(raws)
-        yield from raws
+        if not (settings.blend_rapids and _rapid_turns(run, lin, settings)):
+            raws = _rapid_raws(run, lin)
+            info["paths"] = len(raws)
+            yield from raws
+            return
+        # a chain of rapids that turns gently under G64: fitted as a feed run is, its
+        # turns up to ``corner_deg`` smooth, its sharper corners stops (not blended: from
+        # rapid speed a small blend is slower than the exact plans of two lines); each
+        # of its paths still a rapid
+        for raw in _iter_feed_raws(run, replace(settings, blend_corners=False), info, threads):
+            raw.rapid = True
+            yield raw
         return
+    yield from _iter_feed_raws(run, settings, info, threads)
+
+
+def _rapid_turns(run: Run, lin: np.ndarray, settings: FitSettings) -> bool:
+    """Does a rapid run turn by at most ``corner_deg`` at a node where its tolerance is
+    not 0 (G64, ``--tol`` not 0), so that ``_rapid_raws`` would stop where the smooth fit
+    goes on?"""
+    if run.n_nodes < 3:
+        return False
+    d = np.diff(np.asarray(run.nodes, dtype=float), axis=0)
+    rotary = ~np.any(d[:, lin] != 0, axis=1)  # a move measured on its rotary axes (``_rapid_raws``)
+    d = np.where(rotary[:, None] != lin[None, :], d, 0.0)
+    norm = np.sqrt((d**2).sum(axis=1))
+    moving = norm > 0
+    u = d[moving] / norm[moving][:, None]
+    tol = settings.node_tolerance(run.tol_mm)[1:][moving]
+    turns = np.abs(u[1:] - u[:-1]).max(axis=1) > RAPID_COLLINEAR_TOL * np.maximum(1.0, np.abs(u[1:]).max(axis=1))
+    gentle = (u[1:] * u[:-1]).sum(axis=1) >= np.cos(np.radians(settings.corner_deg))
+    return bool(np.any(turns & gentle & ~(tol[1:] == 0) & ~(tol[:-1] == 0)))
+
+
+def _iter_feed_raws(run: Run, settings: FitSettings, info: dict, threads: int):
+    """``_iter_run_raws`` of a run fitted as a feed run: corners, blends, sections."""
     pr = prepare_run(run, settings)
     evals: dict = {}  # CurveEval per curve, shared by the corner split and the fit
     info["nodes_in"] = int(run.n_nodes)

@@ -59,6 +59,11 @@ class FitSettings:
         quantum_mm / quantum_deg: the grid the program's coordinates are printed on
             (``fit.quantum``), set by ``fit_program``; half of it is added to every
             tolerance, since a printed point is only known to ±½ of its last digit.
+        blend_rapids: a chain of G0 moves that turns by at most ``corner_deg`` under G64
+            is fitted like a feed run, smooth through those turns within the tolerance,
+            rather than stopping at every turn (sharper corners still stop). Only where
+            rapids are straight lines in program space, as on a machine without
+            kinematics: ``from_options`` sets it from the machine; off by default.
         method: ``"nodes"`` (default: the N-axis fit everywhere), ``"planar"``
             (paper 000's planar fit for runs of lines that move exactly two axes, the
             N-axis fit otherwise; what the FPGA stage streams as segments) or
@@ -74,6 +79,7 @@ class FitSettings:
     quantum_mm: float = 0.0
     quantum_deg: float = 0.0
     blend_corners: bool = True
+    blend_rapids: bool = False
 
     def __post_init__(self) -> None:
         from ..machine.model import TOL_MAX_MM
@@ -141,6 +147,8 @@ class FitSettings:
             kw["corner_deg"] = float(corner_deg)
         if method is not None:
             kw["method"] = method
+        if machine is not None and machine.kinematics == "trivial":
+            kw["blend_rapids"] = True  # rapids are straight in program space there
         return cls(**kw)
 
     @property

@@ -15,9 +15,13 @@ and yields the samples as ``SampleBlock``s, in bounded memory:
 * ``Mark`` (tool change, operation header; only from a stream asked for them): no
   samples, noted in the blocks' ``events`` when the timeline gives them.
 
-The pieces are joined on t = k·dt. Between two motions there are always at least
-three equal samples, so every backward difference (up to jerk) across the joint
-sees the machine at rest, as each per-path plan assumed. ``s`` is the cumulative
+The pieces are joined on t = k·dt. Between two paths the machine rests for one period
+(two equal samples) where the one jerk stencil that then spans the joint holds
+(``_short_rest``: the last step of the path before and the first step of the next, added,
+within one period's jerk limit), else for two (three equal samples); every other backward
+difference across the joint is then one the per-path plans already checked against
+rest. Before a stop, a dwell and at the ends the machine holds at least three equal
+samples. ``s`` is the cumulative
 path length (rapids included), ``feed`` its backward difference and ``line`` the
 source line executed at each sample.
 
@@ -48,6 +52,8 @@ PLAN_MAX_THREADS = 4
 
 #: samples at rest needed between motions (v, a, j stencils all at rest)
 _REST_RUN = 3
+#: equal samples between two paths where the jerk stencil spanning the joint allows it
+_SHORT_REST_RUN = 2
 #: the start of a path may differ from where the machine is by float rounding only
 _JOIN_TOL = 1e-6
 #: samples in the first block handed out (then each block doubles up to the window's)
@@ -141,9 +147,16 @@ def _plan_threads() -> int:
 
 
 def _joint_rapid(path, kin):
-    """The straight joint-space line between a rapid path's end points (one segment)."""
+    """The straight joint-space line between a rapid path's end points (one segment).
+    A rapid the fit blended (``FitSettings.blend_rapids``) is not straight: it was fitted
+    for a machine without kinematics, and planning it here would skip its turns."""
     from ..fit.path import Path
 
+    if not _straight(path):
+        raise PlanError(
+            f"the rapids ending at line {int(path.line[-1])} were fitted with blends, which a machine "
+            f"with kinematics ({kin.name}) cannot follow: fit the program for this machine"
+        )
     ends = kin.to_joints(np.stack([path.start, path.end]))
     coef = np.zeros((1, 6, ends.shape[1]))
     coef[0, 0] = ends[0]
@@ -151,6 +164,35 @@ def _joint_rapid(path, kin):
     if not np.any(coef[0, 1]):
         return path  # no joint moves: VPOp plans the (zero-length) item as it is
     return Path(path.axes, np.array([0.0, 1.0]), coef, line=path.line[-1:], feed_mm_s=np.array([np.inf]), rapid=True)
+
+
+def _straight(path) -> bool:
+    """Do a path's segment ends lie on the chord from its start to its end (within the
+    join tolerance; a fitted line's end snap moves them by rounding only)?"""
+    pts = np.concatenate((path.coef[:, 0, :], path.end[None, :]))
+    chord = pts[-1] - pts[0]
+    rel = pts - pts[0]
+    length2 = float(chord @ chord)
+    if length2 > 0:
+        rel = rel - np.outer(rel @ chord / length2, chord)
+    return bool(np.all(np.abs(rel) <= _JOIN_TOL * np.maximum(1.0, np.abs(pts).max(axis=0))))
+
+
+def _short_rest(last_step: np.ndarray, first_step: np.ndarray, q_now: np.ndarray, machine, dt: float) -> bool:
+    """May the next path start after one period at rest (two equal samples) rather than
+    two? Each path was planned from and to rest, so with samples ..., A, R, R, B1 (R the
+    joint) every backward difference but one is one a plan checked: the jerk at B1,
+    (B1 - R) + (A - R) over dt³ per joint, the first step of the next path plus the last
+    of the one before (``last_step``, ``first_step``: (n,) joint steps, mm or deg). It
+    is held to the step limits the planners keep (``step_limits``), at the scale of
+    ``q_now``: a reversal passes (the steps cancel), a path going on the same way may not."""
+    from .step_limits import step_limits
+
+    try:
+        _, _, jl = step_limits(machine, dt, 1.0 + float(np.max(np.abs(q_now))))
+    except PlanError:  # limits float64 cannot resolve here: the full rest
+        return False
+    return bool(np.all(np.abs(last_step + first_step) <= jl))
 
 
 def _count_planner_stats(stats: dict, path_stats) -> None:
@@ -442,11 +484,14 @@ def iter_timeline(
     pw = window.path_window
 
     batched = getattr(planner, "batched", None)
+    # the optimal planner plans the rapids its batch leaves (a rapid chain fitted smooth
+    # through gentle turns); VPOp plans them for the others
+    own_rapids = bool(getattr(planner, "plans_rapids", False))
 
     def plan_many(paths):
         """The plans of a job's paths made in one call: those the planner's ``batched``
         returns planned (the optimal planner's straight paths and rapids), and VPOp's
-        compiled batch for the other rapids and the paths the planner would plan exactly
+        compiled batch for the other rapids (but the optimal planner's) and the paths the planner would plan exactly
         as VPOp does in joint = program space (every path without kinematics when VPOp is
         the planner, the optimal planner's VPOp-routed ones): the same samples, the
         planner's own stats for the path added."""
@@ -454,7 +499,8 @@ def iter_timeline(
 
         extra = batched(paths, joint_map, machine, dt, settings) if batched is not None else [None] * len(paths)
         out: list = [e if isinstance(e, PathPlan) else None for e in extra]  # planned by the planner's batch
-        sel = [i for i, p in enumerate(paths) if out[i] is None and (p.rapid or extra[i] is not None)]
+        to_vpop = [(p.rapid and not own_rapids) or e is not None for p, e in zip(paths, extra)]
+        sel = [i for i, p in enumerate(paths) if out[i] is None and to_vpop[i]]
         if sel:
             got = plan_many_vpop([paths[i] for i in sel], machine, dt, settings)
             for i, g in zip(sel, got):
@@ -464,7 +510,7 @@ def iter_timeline(
         return out
 
     def plan_chunks(item):
-        if item.rapid:
+        if item.rapid and not own_rapids:
             return iter_path_plan_vpop(item, None, machine, dt, settings, window=pw)
         if streams:
             return planner(item, joint_map, machine, dt, settings, window=pw)
@@ -513,6 +559,7 @@ def iter_timeline(
     exhausted = False
     blocks = _Blocks(window.block_samples, n, events)
     rest = _REST_RUN  # the machine is at rest before the first sample
+    last_step = np.zeros(n)  # the last step of the motion before, for ``_short_rest``
     last_line = 0
     s_off = 0.0
     stats = info.stats
@@ -536,7 +583,9 @@ def iter_timeline(
                 ahead.append(u)
 
     def hold(count: int, line: int, span: int = SPAN_REST):
+        nonlocal last_step
         if count > 0:
+            last_step = np.zeros(n)
             blocks.note(span)
             yield from blocks.add(
                 np.full(count, s_off), np.repeat(q_now[None, :], count, axis=0), np.full(count, line, dtype=np.int64)
@@ -588,7 +637,10 @@ def iter_timeline(
                     else:
                         moving = False
                     if moving:
-                        yield from hold(_REST_RUN - rest, last_line)
+                        need = _REST_RUN
+                        if rest == 1 and s.shape[0] and _short_rest(last_step, q[0] - q_now, q_now, machine, dt):
+                            need = _SHORT_REST_RUN
+                        yield from hold(need - rest, last_line)
                         rest = 1
                     first = False
                 if s.shape[0]:
@@ -597,6 +649,7 @@ def iter_timeline(
                         spanned = True
                     seg = item.segment_of_s(s)
                     yield from blocks.add(s_off + s, q, item.line[seg])
+                    last_step = q[-1] - (q[-2] if q.shape[0] > 1 else q_now)
                     q_now = q[-1].copy()
                     last_line = int(item.line[-1])
                 if chunk.last:

@@ -116,6 +116,9 @@ def iter_path_plan_optimal(path, joint_map, machine, dt_s: float, settings=None,
 
 
 iter_path_plan_optimal.streams = True
+#: the timeline gives this planner the rapids too (a straight one takes ``line``'s plan,
+#: a rapid chain fitted smooth through gentle turns the planner's routes, in joint space)
+iter_path_plan_optimal.plans_rapids = True
 
 
 def batched_optimal(paths, joint_map, machine, dt_s: float, settings=None) -> list:
