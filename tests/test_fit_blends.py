@@ -170,6 +170,35 @@ def test_plan_blends_respects_room_and_crowding():
     assert ok[1] and ok[2] and np.all(dist[1:3] <= 0.1 + 1e-15)
 
 
+def test_a_crowded_blend_within_one_periods_step_still_blends():
+    # 90° corners 0.2 µm apart at a 1 µm tolerance: crowded past the cap, so they stop,
+    # unless the squeezed blend (0.1 µm) is within the machine's acceleration and jerk
+    # step of one period, where the sampled plan passes it as a straight move
+    cand = np.array([False, True, True, False])
+    nodes = np.array([[0, 0], [10, 0], [10, 2e-4], [0, 2e-4]], float)
+    tol = np.full(4, 1e-3)
+    for step_mm, blended in ((0.0, False), (5e-5, False), (2e-4, True)):
+        ok, dist, _ = plan_blends(nodes, np.ones(2, bool), tol, cand, step_mm=step_mm)
+        assert ok[1] == ok[2] == blended, step_mm
+        if blended:
+            assert np.all(dist[1:3] <= 1e-4 + 1e-15)  # within the room
+
+
+def test_fit_settings_take_the_period_step_from_the_linear_axes():
+    from cnc_interp.errors import UsageError
+    from cnc_interp.machine.model import Machine
+
+    m = Machine(
+        name="t", axes="XYZA", vmax=[100, 100, 50, 360], amax=[1000, 800, 900, 5],
+        jmax=[1e6, 2e6, 5e5, 1.0], dt_s=0.001,
+    )  # fmt: skip
+    # min(800 · 1e-6, 5e5 · 1e-9) mm: A's limits are not a linear step
+    assert FitSettings.from_options(machine=m).period_step_mm == pytest.approx(5e-4, rel=1e-12)
+    assert FitSettings().period_step_mm == 0.0
+    with pytest.raises(UsageError):
+        FitSettings(period_step_mm=-1.0)
+
+
 @pytest.mark.parametrize("n_axes", [2, 3, 5, 8, 9])
 def test_compiled_corner_turns_are_numpys(n_axes):
     # corner_turns' compiled pass must give numpy's numbers for the angle formula bit for

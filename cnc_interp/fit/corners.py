@@ -361,7 +361,9 @@ def add_blends(
         return replace(pr, stops=np.nonzero(no_blend)[0])
     scaled = pr.nodes * pr.scale
     tol_rot = settings.fit_tol_deg * float(pr.scale[~pr.lin].max()) if (~pr.lin).any() else np.inf
-    ok, dist, shape = plan_blends(scaled, pr.lin, pr.tol_mm, cand, force, tol_rot_scaled=tol_rot)
+    ok, dist, shape = plan_blends(
+        scaled, pr.lin, pr.tol_mm, cand, force, tol_rot_scaled=tol_rot, step_mm=settings.period_step_mm
+    )
     no_blend &= ~ok
     corners = np.nonzero(ok)[0]
     if corners.size == 0:

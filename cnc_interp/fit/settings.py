@@ -64,6 +64,11 @@ class FitSettings:
             rather than stopping at every turn (sharper corners still stop). Only where
             rapids are straight lines in program space, as on a machine without
             kinematics: ``from_options`` sets it from the machine; off by default.
+        period_step_mm: the smallest step of one sample period's acceleration and jerk
+            limits over the machine's linear axes, min(amax·dt², jmax·dt³), mm
+            (``from_options`` sets it from the machine): a corner whose moves leave a
+            blend far less room than its tolerance would give it stops, unless the
+            squeezed blend is no larger than this (``fit.blends``); 0: it stops.
         method: ``"nodes"`` (default: the N-axis fit everywhere), ``"planar"``
             (paper 000's planar fit for runs of lines that move exactly two axes, the
             N-axis fit otherwise; what the FPGA stage streams as segments) or
@@ -80,6 +85,7 @@ class FitSettings:
     quantum_deg: float = 0.0
     blend_corners: bool = True
     blend_rapids: bool = False
+    period_step_mm: float = 0.0
 
     def __post_init__(self) -> None:
         from ..machine.model import TOL_MAX_MM
@@ -92,6 +98,9 @@ class FitSettings:
                 raise UsageError(
                     f"fit tolerance {name} = {v!r} is below {FIT_TOL_MIN_MM:g}, the finest the fit works to"
                 )
+        step = self.period_step_mm
+        if not (_is_number(step) and math.isfinite(step) and step >= 0):
+            raise UsageError(f"fit period step must be a number of mm from 0, got {step!r}")
         if not (0.0 <= self.corner_deg <= 180.0):
             raise UsageError(f"corner angle must be within [0, 180] deg, got {self.corner_deg!r}")
         cap = self.tol_cap_mm
@@ -149,6 +158,8 @@ class FitSettings:
             kw["method"] = method
         if machine is not None and machine.kinematics == "trivial":
             kw["blend_rapids"] = True  # rapids are straight in program space there
+        if machine is not None:
+            kw["period_step_mm"] = _period_step_mm(machine)
         return cls(**kw)
 
     @property
@@ -184,6 +195,20 @@ class FitSettings:
         if self.quantum_mm > 0:
             out[out > 0] += 0.5 * self.quantum_mm
         return out
+
+
+def _period_step_mm(machine: Machine) -> float:
+    """min(amax·dt², jmax·dt³) over the machine's linear axes, mm (0 without linear axes)."""
+    import numpy as np
+
+    from ..constants import LINEAR_AXES
+
+    lin = [i for i, a in enumerate(machine.axes) if a in LINEAR_AXES]
+    if not lin:
+        return 0.0
+    dt = float(machine.dt_s)
+    amax, jmax = np.asarray(machine.amax, dtype=float)[lin], np.asarray(machine.jmax, dtype=float)[lin]
+    return float(min(np.min(amax) * dt**2, np.min(jmax) * dt**3))
 
 
 def _is_number(v: object) -> bool:
