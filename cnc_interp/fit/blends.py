@@ -63,13 +63,12 @@ FIT_BLEND_TOL_SHARE = 0.95
 #: far is a near-cusp that is slower to drive through than a stop. Up to this crowding a
 #: blend is faster than stopping on the corpus: at 32 the corpus sweep's VPOp cycle is
 #: 13.7 % below that at 4 (stellabee1 17.7 %), 12 of 138 programs at most 0.74 % longer
-#: (LHchips4); with no cap, 3D_Chips becomes one path and takes 6 % longer
+#: (LHchips4); with no cap, 3D_Chips becomes one path and takes 6 % longer. A blend
+#: squeezed past it but within one period's acceleration and jerk step
+#: (``FitSettings.period_step_mm``) still blends: on LinuxCNC's configuration of the corpus
+#: (jerk 1e6 mm/s³, 1 µm) random_lines_0.001in plans 18 % shorter; at axis_mm's own jerk
+#: the step, 5 nm, is below any blend
 FIT_BLEND_MAX_CROWDING = 32.0
-
-#: (a blend squeezed past this cap but within one period's acceleration and jerk step,
-#: ``FitSettings.period_step_mm``, still blends: on LinuxCNC's configurations of the
-#: corpus, jerk 1e6 mm/s³ and 1 µm, that makes random_lines_0.001in 18 % shorter; at
-#: axis_mm's own jerk the step, 5 nm, is below any blend)
 
 #: shortest blend (mm, scaled metric): below it (moves of nanometres) the path stops instead
 FIT_BLEND_MIN_MM = 1e-5

@@ -491,10 +491,10 @@ def iter_timeline(
     def plan_many(paths):
         """The plans of a job's paths made in one call: those the planner's ``batched``
         returns planned (the optimal planner's straight paths and rapids), and VPOp's
-        compiled batch for the other rapids (but the optimal planner's) and the paths the planner would plan exactly
-        as VPOp does in joint = program space (every path without kinematics when VPOp is
-        the planner, the optimal planner's VPOp-routed ones): the same samples, the
-        planner's own stats for the path added."""
+        compiled batch for the other rapids (unless the planner plans its own) and the
+        paths the planner would plan exactly as VPOp does in joint = program space (every
+        path without kinematics when VPOp is the planner, the optimal planner's
+        VPOp-routed ones): the same samples, the planner's own stats for the path added."""
         from .vpop import plan_many_vpop
 
         extra = batched(paths, joint_map, machine, dt, settings) if batched is not None else [None] * len(paths)
