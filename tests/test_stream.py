@@ -75,6 +75,18 @@ def test_window_size_does_not_change_the_bytes_optimal(tmp_path, name):
     _invariant(tmp_path, os.path.join(SAMPLES, name), SAMPLE_MACHINES.get(name, "generic-mill"), "optimal")
 
 
+@pytest.mark.parametrize("planner", ["vpop", "optimal"])
+def test_window_size_does_not_change_the_bytes_with_smooth_rapids_and_short_rests(tmp_path, planner):
+    # a rapid chain with gentle kinks (one smooth path, which the optimal planner plans
+    # itself), then cuts that stop and reverse: one period of rest at each joint
+    part = tmp_path / "kinks.ngc"
+    part.write_text(
+        "G21 G90 G64 P0.01\nG0 X25.4\nG0 X25.654 Y0.0254\nG0 X50.8 Z2\nG1 Z0 F600\n"
+        "G1 X40\nG1 X50.8\nG1 X40 Y1.9\nG1 X45 Y0\nG0 Z5\nM2\n"
+    )
+    _invariant(tmp_path, part, "generic-mill", planner)
+
+
 @pytest.mark.parametrize("planner", ["constant", "variable"])
 @pytest.mark.slow
 def test_window_size_does_not_change_the_bytes_paper000(tmp_path, planner):
