@@ -154,8 +154,8 @@ def test_settings_validation_and_from_options():
 
     class M:
         tol_mm = 0.02
-        kinematics = "trivial"
-        axes, amax, jmax, dt_s = "X", [1000.0], [1e6], 0.001
+        kinematics, kinematics_params = "trivial", {}
+        axes, amax, jmax, dt_s = "XYZAC", [1000.0] * 5, [1e6] * 5, 0.001
 
     class Trt(M):
         kinematics = "xyzac-trt"

@@ -447,16 +447,35 @@ def _rapid_turns(run: Run, lin: np.ndarray, settings: FitSettings) -> bool:
     goes on?"""
     if run.n_nodes < 3:
         return False
-    d = np.diff(np.asarray(run.nodes, dtype=float), axis=0)
-    rotary = ~np.any(d[:, lin] != 0, axis=1)  # a move measured on its rotary axes (``_rapid_raws``)
-    d = np.where(rotary[:, None] != lin[None, :], d, 0.0)
-    norm = np.sqrt((d**2).sum(axis=1))
-    moving = norm > 0
-    u = d[moving] / norm[moving][:, None]
-    tol = settings.node_tolerance(run.tol_mm)[1:][moving]
-    turns = np.abs(u[1:] - u[:-1]).max(axis=1) > RAPID_COLLINEAR_TOL * np.maximum(1.0, np.abs(u[1:]).max(axis=1))
-    gentle = (u[1:] * u[:-1]).sum(axis=1) >= np.cos(np.radians(settings.corner_deg))
-    return bool(np.any(turns & gentle & ~(tol[1:] == 0) & ~(tol[:-1] == 0)))
+    nodes = np.asarray(run.nodes, dtype=float)
+    tol = settings.node_tolerance(run.tol_mm)
+    cos_gentle = float(np.cos(np.radians(settings.corner_deg)))
+    prev = None  # the last move's direction in its metric and its tolerance
+    for j in range(1, nodes.shape[0]):
+        d = nodes[j] - nodes[j - 1]
+        length, rotary = _rapid_move(d, lin)
+        if not length > 0:
+            continue
+        u = np.where(lin != rotary, d, 0.0) / length  # on the axes its length is measured on
+        if prev is not None:
+            u0, tol0 = prev
+            if not _same_line(u, u0) and float(u @ u0) >= cos_gentle and tol[j] != 0 and tol0 != 0:
+                return True
+        prev = (u, tol[j])
+    return False
+
+
+def _rapid_move(d: np.ndarray, lin: np.ndarray) -> tuple[float, bool]:
+    """A rapid move's length and whether it is measured on its rotary axes (no linear
+    axis moves), for the move ``d`` (n,) between two nodes."""
+    ll = float(np.sqrt((d[lin] ** 2).sum()))
+    rotary = not ll > 0
+    return (ll if not rotary else float(np.sqrt((d[~lin] ** 2).sum()))), rotary
+
+
+def _same_line(direction: np.ndarray, other: np.ndarray) -> bool:
+    """Are two rapid directions the same, float rounding aside (``RAPID_COLLINEAR_TOL``)?"""
+    return bool(np.abs(direction - other).max() <= RAPID_COLLINEAR_TOL * max(1.0, float(np.abs(direction).max())))
 
 
 def _iter_feed_raws(run: Run, settings: FitSettings, info: dict, threads: int):
@@ -968,18 +987,12 @@ def _rapid_raws(run: Run, lin: np.ndarray) -> list[_Raw]:
 
     for j in range(1, nodes.shape[0]):
         d = nodes[j] - nodes[j - 1]
-        ll = float(np.sqrt((d[lin] ** 2).sum()))
-        rotary = not ll > 0
-        length = ll if not rotary else float(np.sqrt((d[~lin] ** 2).sum()))
+        length, rotary = _rapid_move(d, lin)
         if not length > 0:
             flush()
             continue
         direction = d / length
-        if not (
-            chain
-            and rotary == chain_rotary
-            and np.abs(direction - chain_dir).max() <= RAPID_COLLINEAR_TOL * max(1.0, float(np.abs(direction).max()))
-        ):
+        if not (chain and rotary == chain_rotary and _same_line(direction, chain_dir)):
             flush()
             chain_dir, chain_rotary = direction, rotary
         chain.append((j, length))

@@ -156,9 +156,11 @@ class FitSettings:
             kw["corner_deg"] = float(corner_deg)
         if method is not None:
             kw["method"] = method
-        if machine is not None and machine.kinematics == "trivial":
-            kw["blend_rapids"] = True  # rapids are straight in program space there
         if machine is not None:
+            from ..machine.kinematics import make_kinematics
+
+            # rapids are straight in program space where joints are program axes
+            kw["blend_rapids"] = make_kinematics(machine).is_identity
             kw["period_step_mm"] = _period_step_mm(machine)
         return cls(**kw)
 
